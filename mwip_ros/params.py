@@ -1,0 +1,332 @@
+"""The ROS 2 parameter file (SPEC section 6): schema, loading, validation, typed configs.
+
+One schema serves the offline tools (which read the YAML file directly) and the
+nodes (which declare every parameter from it, with its description and range,
+and validate start-up values and run-time updates with the same checks).
+
+Types follow ROS 2 exactly: a ``double`` parameter written as ``200`` is an
+integer to ROS and is refused (write ``200.0``).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Dict, Iterable, List, Mapping, Optional
+
+import yaml
+
+SHARED = "/**"
+
+
+class ParamError(ValueError):
+    """A bad parameter file, override or value; ``key`` names the offending parameter."""
+
+    def __init__(self, key: str, message: str, source: Optional[str] = None):
+        self.key = key
+        self.reason = message
+        self.source = source
+        where = f"{source}: " if source else ""
+        super().__init__(f"{where}parameter '{key}': {message}")
+
+
+# --- checks: each returns None when fine, else the reason -------------------------------------
+
+def _positive(v):
+    return None if v > 0 else f"must be > 0, got {v!r}"
+
+
+def _non_negative(v):
+    return None if v >= 0 else f"must be >= 0, got {v!r}"
+
+
+def _at_least_one(v):
+    return None if v >= 1 else f"must be >= 1, got {v!r}"
+
+
+def _one_of(*choices):
+    def check(v):
+        return None if v in choices else f"must be one of {', '.join(map(repr, choices))}, got {v!r}"
+    return check
+
+
+def _four_finite(v):
+    if len(v) != 4:
+        return f"must have 4 entries [c1, c2, c3, c4], got {len(v)}"
+    return None
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """One parameter: dotted name, ROS type, default, description, check, run-time changeable."""
+
+    name: str
+    type: str  # 'double' | 'integer' | 'bool' | 'string' | 'double_array' | 'string_array'
+    default: Any
+    description: str
+    check: Optional[Callable[[Any], Optional[str]]] = None
+    dynamic: bool = False
+    unit: str = ""
+
+    def validate(self, value: Any, key: Optional[str] = None, source: Optional[str] = None) -> Any:
+        """Return the value (arrays as lists) or raise ParamError naming ``key``."""
+        key = key or self.name
+        reason = _type_error(self.type, value)
+        if reason:
+            raise ParamError(key, reason, source)
+        if self.type in ("double", "double_array"):
+            vals = value if self.type == "double_array" else [value]
+            if not all(math.isfinite(x) for x in vals):
+                raise ParamError(key, f"must be finite, got {value!r}", source)
+        if self.type.endswith("_array"):
+            value = list(value)
+        if self.check is not None:
+            reason = self.check(value)
+            if reason:
+                raise ParamError(key, reason, source)
+        return value
+
+
+def _type_error(kind: str, v: Any) -> Optional[str]:
+    def is_int(x):
+        return isinstance(x, int) and not isinstance(x, bool)
+
+    if kind == "double":
+        if is_int(v):
+            return f"expected a floating-point number (write {v}.0 - ROS 2 reads {v} as an integer)"
+        return None if isinstance(v, float) else f"expected a floating-point number, got {type(v).__name__} {v!r}"
+    if kind == "integer":
+        return None if is_int(v) else f"expected an integer, got {type(v).__name__} {v!r}"
+    if kind == "bool":
+        return None if isinstance(v, bool) else f"expected true or false, got {type(v).__name__} {v!r}"
+    if kind == "string":
+        return None if isinstance(v, str) else f"expected a string, got {type(v).__name__} {v!r}"
+    if kind == "double_array":
+        if not isinstance(v, (list, tuple)) or not all(isinstance(x, float) for x in v):
+            return f"expected a list of floating-point numbers (e.g. [100.0, 0.0]), got {v!r}"
+        return None
+    if kind == "string_array":
+        if not isinstance(v, (list, tuple)) or not all(isinstance(x, str) for x in v):
+            return f"expected a list of strings, got {v!r}"
+        return None
+    raise AssertionError(kind)
+
+
+def _body(prefix: str, values: Mapping[str, float], what: str) -> List[ParamSpec]:
+    units = {"m_b": "kg", "m_w": "kg", "I_b": "kg m^2", "I_w": "kg m^2", "l": "m", "r": "m", "g": "m/s^2"}
+    text = {"m_b": "body mass", "m_w": "wheel mass", "I_b": "body moment of inertia",
+            "I_w": "wheel moment of inertia", "l": "axle to body centre of gravity",
+            "r": "wheel radius", "g": "gravitational acceleration"}
+    return [ParamSpec(f"{prefix}.{k}", "double", v, f"{what} {text[k]} [{units[k]}]", _positive, unit=units[k])
+            for k, v in values.items()]
+
+
+PAPER_NOMINAL = dict(m_b=210.6, m_w=29.0, I_b=55.0, I_w=0.6, l=0.267, r=0.254, g=9.81)
+PAPER_ACTUAL = dict(m_b=310.6, m_w=29.0, I_b=65.0, I_w=0.6, l=0.317, r=0.254, g=9.81)
+
+SHARED_SPECS: List[ParamSpec] = [
+    ParamSpec("control_rate_hz", "double", 200.0, "control rate 1/h [Hz] of plant, observer and controller",
+              _positive, unit="Hz"),
+    *_body("nominal", PAPER_NOMINAL, "nominal (hatted)"),
+]
+
+NODE_SPECS: Dict[str, List[ParamSpec]] = {
+    "plant_sim": [
+        ParamSpec("mode", "string", "lockstep", "lockstep (deterministic, waits for each command) or realtime "
+                  "(wall-clock timer, zero-order hold)", _one_of("lockstep", "realtime")),
+        ParamSpec("duration_s", "double", 10.0, "simulated time to run [s]; 0 = until stopped", _non_negative),
+        ParamSpec("substeps", "integer", 5, "RK4 sub-steps per control period", _at_least_one),
+        ParamSpec("seed", "integer", 0, "seed of the D_w friction noise", _non_negative),
+        *_body("actual", PAPER_ACTUAL, "true"),
+        ParamSpec("actual.D_b", "double", 0.1, "true drive viscous friction D_b [N m s/rad]", _non_negative),
+        ParamSpec("actual.D_w_mean", "double", 0.5, "mean of the ground friction D_w [N m s/rad]", _non_negative),
+        ParamSpec("actual.D_w_variance", "double", 0.2, "variance of D_w, drawn once per period; 0 = deterministic",
+                  _non_negative),
+        ParamSpec("initial.theta_w", "double", 0.0, "initial wheel angle [rad]"),
+        ParamSpec("initial.theta_b", "double", -0.1745, "initial body pitch [rad]"),
+        ParamSpec("initial.dtheta_w", "double", 0.0, "initial wheel rate [rad/s]"),
+        ParamSpec("initial.dtheta_b", "double", 0.0, "initial body pitch rate [rad/s]"),
+        ParamSpec("tau_ext1.amplitude", "double", 30.0, "tau_ext1 amplitude [N m] (wheel row)"),
+        ParamSpec("tau_ext1.omega", "double", 2.0, "tau_ext1 angular frequency [rad/s]"),
+        ParamSpec("tau_ext1.phase", "double", math.pi / 2, "tau_ext1 phase [rad]"),
+        ParamSpec("tau_ext2.amplitude", "double", 0.2, "tau_ext2 amplitude [N m] (sum of rows)"),
+        ParamSpec("tau_ext2.omega", "double", 1.0, "tau_ext2 angular frequency [rad/s]"),
+        ParamSpec("tau_ext2.phase", "double", 0.0, "tau_ext2 phase [rad]"),
+        ParamSpec("torque_limit", "double", 0.0, "|u| cap [N m]; 0 = none", _non_negative),
+        ParamSpec("fall_angle", "double", 1.0472, "|theta_b| beyond this ends the run as fallen [rad]", _positive),
+        ParamSpec("lockstep_timeout_s", "double", 10.0, "lockstep: give up when a command does not come "
+                  "within this wall time [s]", _positive),
+        ParamSpec("stale_command_periods", "integer", 4, "realtime: a command older than this many periods "
+                  "is replaced by zero torque", _at_least_one),
+        ParamSpec("csv", "string", "", "write the trajectory (mwip_sim CSV columns) to this file; '' = none"),
+        ParamSpec("expected_subscribers", "integer", 2, "lockstep: wait until joint_states has this many "
+                  "matched subscriptions before the first state (2 = observer + controller; +1 per recorder)",
+                  _non_negative),
+    ],
+    "disturbance_observer": [
+        ParamSpec("X", "double_array", [100.0, 0.0, 0.0, 100.0], "observer gain X = [c1, c2, c3, c4] (eq. 14)",
+                  _four_finite, dynamic=True),
+    ],
+    "dscndo_controller": [
+        ParamSpec("k1", "double", 6.0, "first surface gain k1 (eq. 24)", _positive, dynamic=True),
+        ParamSpec("k2", "double", 6.0, "second surface gain k2 (eq. 28)", _positive, dynamic=True),
+        ParamSpec("tau4", "double", 0.1, "filter time constant tau4 [s] (eq. 25)", _positive, dynamic=True),
+        ParamSpec("use_observer", "bool", True, "true = DSCNDO (eq. 19); false = plain DSC", dynamic=True),
+    ],
+    "mcap_recorder": [
+        ParamSpec("output", "string", "", "bag directory to create (refuses an existing one)"),
+        ParamSpec("topics", "string_array", [], "topics to record; empty = every topic of the graph"),
+        ParamSpec("compression", "string", "", "'' or 'zstd' (MCAP chunk compression)", _one_of("", "zstd")),
+        ParamSpec("chunk_size", "integer", 1 << 20, "MCAP chunk size [bytes]", _at_least_one),
+    ],
+    "bag_replay": [
+        ParamSpec("bag", "string", "", "bag directory to replay"),
+        ParamSpec("rate", "double", 1.0, "playback rate factor", _positive),
+        ParamSpec("loop", "bool", False, "start again at the end"),
+        ParamSpec("topics", "string_array", [], "topics to replay; empty = all"),
+        ParamSpec("publish_clock", "bool", False, "publish /clock from the bag's time"),
+        ParamSpec("mode", "string", "replay", "replay (republish) or resim (feed joint_states through a running "
+                  "observer and controller and compare)", _one_of("replay", "resim")),
+    ],
+}
+
+# Parameters ROS itself declares on every node; allowed anywhere in the file.
+ROS_OWN = {"use_sim_time": ParamSpec("use_sim_time", "bool", False, "use /clock"),
+           "start_type_description_service": ParamSpec("start_type_description_service", "bool", True, "ROS")}
+ROS_OWN_PREFIXES = ("qos_overrides.",)
+
+
+def specs_for(node: str) -> Dict[str, ParamSpec]:
+    """Every parameter ``node`` declares (the shared ones first)."""
+    if node not in NODE_SPECS:
+        raise KeyError(node)
+    return {s.name: s for s in (*SHARED_SPECS, *NODE_SPECS[node])}
+
+
+def defaults_for(node: str) -> Dict[str, Any]:
+    return {name: s.default for name, s in specs_for(node).items()}
+
+
+def _flatten(d: Mapping, prefix: str, key_path: str, source: str) -> Dict[str, Any]:
+    out: Dict[str, Any] = {}
+    for k, v in d.items():
+        if not isinstance(k, str):
+            raise ParamError(f"{key_path}{k}", "parameter names must be strings", source)
+        name = f"{prefix}{k}"
+        if isinstance(v, Mapping):
+            out.update(_flatten(v, name + ".", key_path, source))
+        else:
+            out[name] = v
+    return out
+
+
+def node_key(section: str) -> str:
+    """'plant_sim', '/plant_sim', '/robot1/plant_sim', '/**/plant_sim' -> 'plant_sim'; '/**' -> '/**'."""
+    s = section.strip()
+    if s in ("/**", "**"):
+        return SHARED
+    return s.rstrip("/").rsplit("/", 1)[-1]
+
+
+@dataclass
+class ParamFile:
+    """A validated parameter file: section -> {dotted name: value}."""
+
+    path: str
+    sections: Dict[str, Dict[str, Any]] = field(default_factory=dict)
+
+    def for_node(self, node: str, overrides: Optional[Mapping[str, Any]] = None) -> Dict[str, Any]:
+        """Defaults, then the shared section, then the node's section, then ``overrides`` (checked)."""
+        values = defaults_for(node)
+        for sec in (SHARED, node):
+            for k, v in self.sections.get(sec, {}).items():
+                if k in values:
+                    values[k] = v
+        specs = specs_for(node)
+        for k, v in (overrides or {}).items():
+            if k not in specs:
+                raise ParamError(k, f"unknown parameter for {node}", "override")
+            values[k] = specs[k].validate(v, k, "override")
+        return values
+
+
+def _check_entry(section: str, name: str, value: Any, source: str) -> Any:
+    key = name if section == SHARED else f"{section}.{name}"
+    if name in ROS_OWN:
+        return ROS_OWN[name].validate(value, key, source)
+    if name.startswith(ROS_OWN_PREFIXES):
+        return value
+    if section == SHARED:
+        shared = {s.name: s for s in SHARED_SPECS}
+        if name in shared:
+            return shared[name].validate(value, key, source)
+        owners = [n for n, specs in NODE_SPECS.items() if any(s.name == name for s in specs)]
+        hint = f" (it belongs under {owners[0]}:)" if owners else ""
+        raise ParamError(key, f"unknown parameter in the shared /** section{hint}", source)
+    specs = specs_for(section)
+    if name not in specs:
+        owners = [n for n, sp in NODE_SPECS.items() if n != section and any(s.name == name for s in sp)]
+        hint = f" (it belongs under {owners[0]}:)" if owners else _spelling_hint(name, specs)
+        raise ParamError(key, f"unknown parameter for {section}{hint}", source)
+    return specs[name].validate(value, key, source)
+
+
+def _spelling_hint(name: str, names: Iterable[str]) -> str:
+    import difflib
+    close = difflib.get_close_matches(name, list(names), n=1)
+    return f" (did you mean '{close[0]}'?)" if close else ""
+
+
+def parse_param_dict(doc: Any, source: str = "<params>") -> ParamFile:
+    """Validate a loaded ROS 2 parameter document (the whole file)."""
+    if not isinstance(doc, Mapping) or not doc:
+        raise ParamError("<file>", "expected a mapping of node names to {ros__parameters: ...}", source)
+    pf = ParamFile(path=source)
+    for section_raw, body in doc.items():
+        section = node_key(str(section_raw))
+        if section != SHARED and section not in NODE_SPECS:
+            hint = _spelling_hint(section, NODE_SPECS)
+            raise ParamError(str(section_raw), f"unknown node name{hint}; known: /**, {', '.join(NODE_SPECS)}",
+                             source)
+        if not isinstance(body, Mapping) or set(body) != {"ros__parameters"}:
+            raise ParamError(f"{section_raw}", "each node section must contain exactly 'ros__parameters:'", source)
+        params = body["ros__parameters"] or {}
+        if not isinstance(params, Mapping):
+            raise ParamError(f"{section_raw}.ros__parameters", "must be a mapping", source)
+        flat = _flatten(params, "", "", source)
+        checked = {name: _check_entry(section, name, v, source) for name, v in flat.items()}
+        pf.sections.setdefault(section, {}).update(checked)
+    return pf
+
+
+def load_param_file(path) -> ParamFile:
+    """Read and validate a ROS 2 parameter file; raises ParamError naming the key."""
+    p = Path(path)
+    if not p.is_file():
+        raise ParamError("--params-file", f"no such file: {p}")
+    try:
+        doc = yaml.safe_load(p.read_text())
+    except yaml.YAMLError as exc:
+        raise ParamError("<file>", f"not valid YAML: {exc}", str(p)) from None
+    return parse_param_dict(doc, str(p))
+
+
+# --- typed configs --------------------------------------------------------------------------
+
+def physical(values: Mapping[str, Any], prefix: str):
+    from mwip_ros.model import PhysicalParams
+    return PhysicalParams(**{k: values[f"{prefix}.{k}"] for k in PAPER_NOMINAL})
+
+
+def sinusoid(values: Mapping[str, Any], prefix: str):
+    from mwip_ros.model import Sinusoid
+    return Sinusoid(values[f"{prefix}.amplitude"], values[f"{prefix}.omega"], values[f"{prefix}.phase"])
+
+
+def gains(values: Mapping[str, Any]):
+    from mwip_ros.controller import DscGains
+    return DscGains(k1=values["k1"], k2=values["k2"], tau4=values["tau4"])
+
+
+def period(values: Mapping[str, Any]) -> float:
+    return 1.0 / values["control_rate_hz"]
