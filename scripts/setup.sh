@@ -1,0 +1,86 @@
+#!/usr/bin/env bash
+# Create/refresh the project venv (.venv) with the pinned dependencies and an
+# editable install of mwip_ros. Idempotent: skips work when nothing changed.
+set -euo pipefail
+
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+VENV="$ROOT/.venv"
+STAMP="$VENV/.mwip_setup_stamp"
+# pip >= 25.3 always does PEP 660 editable installs; older pip may fall back to
+# `setup.py develop`, which honours setup.cfg's [develop] script_dir and would
+# put the console scripts in .venv/lib/mwip_ros instead of .venv/bin.
+PIP_VERSION="26.3"
+CONSOLE_SCRIPTS=(plant_sim disturbance_observer dscndo_controller mcap_recorder
+                 bag_replay mwip_sim mwip_theorem mwip_report mwip_bag_repair)
+
+cd "$ROOT"
+
+pick_python() {
+    local cand
+    for cand in python3.11 python3; do
+        if command -v "$cand" >/dev/null 2>&1 &&
+           "$cand" -c 'import sys; sys.exit(0 if sys.version_info >= (3, 11) else 1)' 2>/dev/null; then
+            echo "$cand"
+            return 0
+        fi
+    done
+    return 1
+}
+
+if [ ! -x "$VENV/bin/python" ] || ! "$VENV/bin/python" -c 'import sys' >/dev/null 2>&1; then
+    PY="$(pick_python)" || { echo "setup: need python3.11 (or python3 >= 3.11) on PATH" >&2; exit 1; }
+    echo "setup: creating .venv with $PY ($("$PY" --version 2>&1))"
+    rm -rf "$VENV"
+    "$PY" -m venv "$VENV"
+fi
+
+hash_inputs() {
+    "$VENV/bin/python" - requirements.txt setup.py setup.cfg package.xml scripts/setup.sh <<'PY'
+import hashlib, sys
+h = hashlib.sha256()
+for name in sys.argv[1:]:
+    with open(name, 'rb') as f:
+        h.update(name.encode() + b'\0' + f.read() + b'\0')
+print(h.hexdigest())
+PY
+}
+WANT="$(hash_inputs)"
+
+if [ -f "$STAMP" ] && [ "$(cat "$STAMP")" = "$WANT" ]; then
+    echo "setup: .venv up to date"
+    exit 0
+fi
+
+rm -f "$STAMP"
+LOG="$VENV/.mwip_setup.log"
+: > "$LOG"
+
+# pip's own output (warnings included) goes to $LOG; shown only on failure.
+pip_install() {
+    if ! "$VENV/bin/python" -m pip --disable-pip-version-check install "$@" >>"$LOG" 2>&1; then
+        echo "setup: pip install $* failed; last lines of $LOG:" >&2
+        tail -n 40 "$LOG" >&2
+        exit 1
+    fi
+}
+
+echo "setup: installing pip==$PIP_VERSION"
+pip_install "pip==$PIP_VERSION"
+
+echo "setup: installing requirements.txt (log: .venv/.mwip_setup.log)"
+pip_install -r requirements.txt
+
+echo "setup: installing mwip_ros (editable)"
+pip_install --no-deps -e .
+
+missing=()
+for s in "${CONSOLE_SCRIPTS[@]}"; do
+    [ -x "$VENV/bin/$s" ] || missing+=("$s")
+done
+if [ "${#missing[@]}" -gt 0 ]; then
+    echo "setup: console scripts missing from .venv/bin: ${missing[*]}" >&2
+    exit 1
+fi
+
+echo "$WANT" > "$STAMP"
+echo "setup: done"

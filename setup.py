@@ -1,0 +1,48 @@
+from glob import glob
+
+from setuptools import find_packages
+from setuptools import setup
+
+package_name = 'mwip_ros'
+
+setup(
+    name=package_name,
+    version='0.1.0',
+    packages=find_packages(exclude=['test']),
+    data_files=[
+        ('share/ament_index/resource_index/packages',
+            ['resource/' + package_name]),
+        ('share/' + package_name, ['package.xml']),
+        ('share/' + package_name + '/config', sorted(glob('config/*.yaml'))),
+    ],
+    install_requires=['setuptools'],
+    zip_safe=True,
+    maintainer='mwip_ros maintainers',
+    maintainer_email='maintainers@example.com',
+    keywords=['ROS'],
+    classifiers=[
+        'Intended Audience :: Developers',
+        'License :: OSI Approved :: Apache Software License',
+        'Programming Language :: Python',
+        'Topic :: Software Development',
+    ],
+    description=(
+        'ROS 2 control stack for a mobile wheeled inverted pendulum: '
+        'DSC with a nonlinear disturbance observer (DSCNDO)'
+    ),
+    license='Apache-2.0',
+    tests_require=['pytest'],
+    entry_points={
+        'console_scripts': [
+            'plant_sim = mwip_ros.nodes.plant_sim:main',
+            'disturbance_observer = mwip_ros.nodes.disturbance_observer:main',
+            'dscndo_controller = mwip_ros.nodes.dscndo_controller:main',
+            'mcap_recorder = mwip_ros.nodes.mcap_recorder:main',
+            'bag_replay = mwip_ros.nodes.bag_replay:main',
+            'mwip_sim = mwip_ros.sim_cli:main',
+            'mwip_theorem = mwip_ros.theorem_cli:main',
+            'mwip_report = mwip_ros.report:main',
+            'mwip_bag_repair = mwip_ros.bag.repair:main',
+        ],
+    },
+)
