@@ -1,0 +1,114 @@
+"""``dscndo_controller``: DSC / DSCNDO (eq. 16-28, 19-21) as a node.
+
+Subscribes ``joint_states`` and (with ``use_observer``) ``disturbance_estimate``,
+pairs them by stamp, publishes ``wheel_torque_cmd`` once per state and the
+internal signals on ``controller_internals`` (a JointState whose ``name`` lists
+S1, S2, x4d, x4_bar, u_dsc, u_taud, u, x1 and whose ``position`` holds them).
+"""
+from __future__ import annotations
+
+import sys
+
+from geometry_msgs.msg import WrenchStamped
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64
+
+from mwip_ros import params as P
+from mwip_ros.controller import DscController
+from mwip_ros.nodes import _msgs as M
+from mwip_ros.nodes._params import declare
+from mwip_ros.nodes._runtime import GracefulNodeMixin, run_node
+from mwip_ros.theorem import theorem2
+
+NAME = "dscndo_controller"
+_MAX_PENDING = 64
+
+
+class DscndoController(Node, GracefulNodeMixin):
+    def __init__(self, context=None, argv=()):
+        super().__init__(NAME, context=context)
+        self.v = declare(self, NAME, argv, on_change=self._on_change)
+        self.ctrl = DscController(P.physical(self.v, "nominal"), P.gains(self.v), P.period(self.v),
+                                  use_observer=self.v["use_observer"])
+        self._warn_theorem()
+        self.states = {}      # stamp -> (q, dq) waiting for an estimate
+        self.estimates = {}   # stamp -> (tau_hat1, tau_hat2) waiting for a state
+        self.last_answered = None
+        self.count = 0
+        self.rejects = M.Rejects(self.get_logger())
+        self.cmd_pub = self.create_publisher(Float64, "wheel_torque_cmd", M.GRAPH_QOS)
+        self.int_pub = self.create_publisher(JointState, "controller_internals", M.GRAPH_QOS)
+        self.create_subscription(JointState, "joint_states", self._on_state, M.GRAPH_QOS)
+        self.create_subscription(WrenchStamped, "disturbance_estimate", self._on_estimate, M.GRAPH_QOS)
+        g = self.ctrl.gains
+        self.get_logger().info(f"{'DSCNDO' if self.ctrl.use_observer else 'DSC'} ready: k1 = {g.k1}, k2 = {g.k2}, "
+                               f"tau4 = {g.tau4}")
+
+    def _warn_theorem(self):
+        th = theorem2(self.ctrl.nominal, self.ctrl.gains, [[100.0, 0.0], [0.0, 100.0]])
+        if min(th.a1, th.a2, th.a3) <= 0:
+            self.get_logger().warning(f"gains break Theorem 2 (eq. 35): a1 = {th.a1:.4f}, a2 = {th.a2:.4f}, "
+                                      f"a3 = {th.a3:.4f} (all must be > 0); allowed, but stability is not "
+                                      "guaranteed. Run mwip_theorem for a1..a5")
+
+    def _on_change(self, changed):
+        if {"k1", "k2", "tau4"} & set(changed):
+            self.ctrl.gains = P.gains(self.v)
+            self._warn_theorem()
+        if "use_observer" in changed:
+            self.ctrl.use_observer = self.v["use_observer"]
+
+    def _on_state(self, msg: JointState) -> None:
+        try:
+            stamp, q, dq, _ = M.parse_joint_state(msg)
+        except M.BadMessage as exc:
+            self.rejects("joint_states", str(exc))
+            return
+        if self.last_answered is not None and stamp <= self.last_answered:
+            return  # already answered (a resent state): one command per state
+        self.states[stamp] = (q, dq)
+        self._try(stamp)
+
+    def _on_estimate(self, msg: WrenchStamped) -> None:
+        try:
+            stamp, t1, t2 = M.parse_wrench_stamped(msg)
+        except M.BadMessage as exc:
+            self.rejects("disturbance_estimate", str(exc))
+            return
+        if self.last_answered is not None and stamp <= self.last_answered:
+            return
+        self.estimates[stamp] = (t1, t2)
+        self._try(stamp)
+
+    def _try(self, stamp: int) -> None:
+        if stamp not in self.states:
+            return
+        tau_hat = self.estimates.get(stamp)
+        if self.ctrl.use_observer and tau_hat is None:
+            self._trim()
+            return  # wait for the estimate of this very state
+        q, dq = self.states.pop(stamp)
+        out = self.ctrl.step(q[1], dq[1], dq[0], tau_hat)
+        self.cmd_pub.publish(Float64(data=out.u))
+        self.int_pub.publish(M.internals(stamp, out))
+        self.last_answered = stamp
+        self.count += 1
+        self.states = {s: v for s, v in self.states.items() if s > stamp}
+        self.estimates = {s: v for s, v in self.estimates.items() if s > stamp}
+
+    def _trim(self):
+        for d in (self.states, self.estimates):
+            while len(d) > _MAX_PENDING:
+                d.pop(min(d))
+
+    def on_shutdown(self) -> None:
+        self.get_logger().info(f"answered {self.count} states; rejected: {self.rejects.summary()}")
+
+
+def main(argv=None) -> int:
+    return run_node(DscndoController, argv)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
