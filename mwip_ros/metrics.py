@@ -54,7 +54,7 @@ def compute(cols: Mapping[str, np.ndarray], window: Sequence[float] = WINDOW,
 
 
 HEADERS = [("run", "{}"), ("upright", "{}"), ("theta_b p2p [rad]", "{:.5f}"), ("theta_b RMS [rad]", "{:.5f}"),
-           ("max |theta_b| [rad]", "{:.5f}"), ("u RMS [N m]", "{:.2f}"), ("tau_hat1 err RMS [N m]", "{:.3f}"),
+           ("max abs theta_b [rad]", "{:.5f}"), ("u RMS [N m]", "{:.2f}"), ("tau_hat1 err RMS [N m]", "{:.3f}"),
            ("tau_hat2 err RMS [N m]", "{:.3f}")]
 
 

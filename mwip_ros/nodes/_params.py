@@ -25,7 +25,7 @@ _TYPES = {"double": ParameterType.PARAMETER_DOUBLE, "integer": ParameterType.PAR
           "bool": ParameterType.PARAMETER_BOOL, "string": ParameterType.PARAMETER_STRING,
           "double_array": ParameterType.PARAMETER_DOUBLE_ARRAY,
           "string_array": ParameterType.PARAMETER_STRING_ARRAY}
-_TYPE_NAMES = {v: k for k, v in _TYPES.items()}
+_ARRAY_TYPES = {"double_array": Parameter.Type.DOUBLE_ARRAY, "string_array": Parameter.Type.STRING_ARRAY}
 
 
 def params_files(argv: Sequence[str]) -> List[str]:
@@ -87,13 +87,18 @@ def declare(node, node_name: str, argv: Sequence[str],
                 raise P.ParamError(name, f"unsupported value {value!r} ({exc})", "command line") from None
     values: Dict[str, Any] = {}
     for name, spec in specs.items():
+        # an empty list carries no type for rclpy (it would become BYTE_ARRAY): declare by type
+        initial = _ARRAY_TYPES[spec.type] if spec.type in _ARRAY_TYPES and not spec.default else spec.default
         try:
-            p = node.declare_parameter(name, spec.default, _descriptor(spec))
+            p = node.declare_parameter(name, initial, _descriptor(spec))
         except InvalidParameterTypeException as exc:
             raise P.ParamError(name, f"wrong type: expected {spec.type} ({exc})") from None
         except InvalidParameterValueException as exc:
             raise P.ParamError(name, f"invalid value ({exc})") from None
-        values[name] = spec.validate(_py(p.value), name, "start-up value")
+        value = _py(p.value)
+        if value is None and spec.type in _ARRAY_TYPES:
+            value = []
+        values[name] = spec.validate(value, name, "start-up value")
     overrides = getattr(node, "_parameter_overrides", {}) or {}
     for name in overrides:
         if name in specs or name in P.ROS_OWN or name.startswith(P.ROS_OWN_PREFIXES):
@@ -109,13 +114,14 @@ def declare(node, node_name: str, argv: Sequence[str],
             if not spec.dynamic:
                 return SetParametersResult(successful=False, reason=f"{prm.name} is read-only (restart to change)")
             try:
-                spec.validate(_py(prm.value), prm.name)
+                value = _py(prm.value)
+                spec.validate([] if value is None and spec.type in _ARRAY_TYPES else value, prm.name)
             except P.ParamError as exc:
                 return SetParametersResult(successful=False, reason=str(exc))
         return SetParametersResult(successful=True)
 
     def apply(params: List[Parameter]) -> None:
-        changed = {p.name: _py(p.value) for p in params if p.name in specs}
+        changed = {p.name: ([] if p.value is None else _py(p.value)) for p in params if p.name in specs}
         if not changed:
             return
         old = {k: values[k] for k in changed}

@@ -58,6 +58,7 @@ class PlantSimNode(Node, GracefulNodeMixin):
         self.sent_at = self.resent_at = 0.0
         self.wait_since = time.monotonic()
         self.last_wait_log = 0.0
+        self.last_progress = time.monotonic()
         # realtime bookkeeping
         self.cmd: Optional[float] = None
         self.cmd_at = 0.0
@@ -177,6 +178,7 @@ class PlantSimNode(Node, GracefulNodeMixin):
     def spin_step(self, executor) -> None:
         if self.mode == "realtime":
             executor.spin_once(timeout_sec=0.05)
+            self._progress()
             return
         now = time.monotonic()
         timeout = self.v["lockstep_timeout_s"]
@@ -197,6 +199,7 @@ class PlantSimNode(Node, GracefulNodeMixin):
             executor.spin_once(timeout_sec=0.02)
             return
         executor.spin_once(timeout_sec=0.05)
+        self._progress()
         if self.awaiting is not None and not self.done:
             waited = time.monotonic() - self.sent_at
             if waited > timeout:
@@ -207,6 +210,16 @@ class PlantSimNode(Node, GracefulNodeMixin):
                 # (the observer answers a repeated stamp again, the controller answers each stamp once).
                 self.resent_at = time.monotonic()
                 self._publish_state()
+
+    def _progress(self) -> None:
+        now = time.monotonic()
+        if now - self.last_progress < 2.0 or self.t_wall0 is None:
+            return
+        self.last_progress = now
+        total = f" / {self.n_steps * self.h:g}" if self.n_steps is not None else ""
+        self.get_logger().info(f"t = {self.plant.t:.2f}{total} s simulated, "
+                               f"{self.plant.k / max(now - self.t_wall0, 1e-9):.0f} steps/s, "
+                               f"theta_b = {self.plant.x[1]:+.4f} rad")
 
     def _timeout(self, text: str) -> None:
         self.get_logger().error("lockstep timeout: " + text)

@@ -1,0 +1,214 @@
+"""``mcap_recorder``: record the graph's topics into a rosbag2-compatible MCAP bag.
+
+    python -m mwip_ros.nodes.mcap_recorder --ros-args -p output:=bags/run1 [-p compression:=zstd]
+
+Parameters: ``output`` (the bag directory to create; required, must not exist),
+``topics`` (names from :data:`mwip_ros.topics.GRAPH_TOPICS`; empty = all of them),
+``compression`` ('' or 'zstd', per MCAP chunk), ``chunk_size`` (bytes).
+
+Every message is stored as the exact CDR bytes received (raw subscriptions), with the
+node clock's receive time as log time (sim time under ``use_sim_time``, as rosbag2 does)
+and as publish time (rclpy's EventsExecutor gives raw subscriptions no MessageInfo).  The subscriptions are reliable,
+KEEP_LAST 1000, volatile.  A topic's channel is created at its first message, with the
+QoS the publishers offer and the type hash they announce (as ``ros2 bag record`` writes
+them).  SIGINT/SIGTERM: the queued messages are drained, the MCAP file is finished and
+``metadata.yaml`` written; exit code 0.  A recorder killed with SIGKILL leaves every
+finished chunk on disk: ``mwip_bag_repair <output>`` recovers them.
+"""
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+from typing import Dict, List, Optional, Tuple
+
+from rclpy.node import Node
+
+from mwip_ros.bag.schema import BagError, message_definition, type_hash as installed_type_hash
+from mwip_ros.bag.writer import BagWriter, qos_profiles_yaml
+from mwip_ros.nodes import _msgs as M
+from mwip_ros.nodes._params import declare
+from mwip_ros.nodes._runtime import EXIT_ERROR, GracefulNodeMixin, run_node
+from mwip_ros.params import ParamError
+from mwip_ros.topics import GRAPH_TOPICS, graph_type, msg_class
+
+NAME = "mcap_recorder"
+PROGRESS_PERIOD_S = 5.0
+DRAIN_IDLE_S = 0.3      # on shutdown: stop draining after this long without a message
+DRAIN_MAX_S = 5.0       # ... or after this long in all
+
+
+class McapRecorder(Node, GracefulNodeMixin):
+    def __init__(self, context=None, argv=()):
+        super().__init__(NAME, context=context)
+        self.v = declare(self, NAME, argv)
+        output = str(self.v["output"]).strip()
+        if not output:
+            raise ParamError("output", "required: the bag directory to create (e.g. -p output:=bags/run1)")
+        self.output = Path(output).expanduser()
+        if self.output.exists() or self.output.is_symlink():
+            raise ParamError("output", f"{self.output} already exists; refusing to overwrite it "
+                                       f"(choose a new bag directory)")
+        wanted = self._topics(self.v["topics"])
+
+        try:
+            self.writer = BagWriter(self.output, compression=self.v["compression"] or None,
+                                    chunk_size=self.v["chunk_size"])
+        except BagError as exc:
+            raise ParamError("output", str(exc)) from None
+        self.counts: Dict[str, int] = {}
+        self.types: Dict[str, str] = {}
+        self.received = 0
+        self.failed = False
+        self._executor = None
+        self._last_progress = time.monotonic()
+        self._last_progress_count = 0
+        self.subs = []
+        for name, resolved, type_name in wanted:
+            self.subs.append(self.create_subscription(
+                msg_class(type_name), name, self._callback(resolved, type_name), M.GRAPH_QOS, raw=True,
+                event_callbacks=self._events(resolved)))
+            self.types[resolved] = type_name
+            self.counts[resolved] = 0
+        self.get_logger().info(
+            f"recording {len(self.types)} topic(s) to {self.output} ({self.writer.relative_path}; compression "
+            f"{self.writer.compression or 'none'}, chunk size {self.writer.chunk_size} B): "
+            + ", ".join(sorted(self.types)))
+
+    # --- set-up ---------------------------------------------------------------------------------
+
+    def _topics(self, names: Optional[List[str]]) -> List[Tuple[str, str, str]]:
+        """[(name as given, fully resolved name, type)] of the topics to record."""
+        names = [n.strip() for n in (names or []) if n.strip()] or list(GRAPH_TOPICS)
+        out: List[Tuple[str, str, str]] = []
+        seen = set()
+        for name in names:
+            type_name = graph_type(name)
+            if type_name is None:
+                raise ParamError("topics", f"unknown topic {name!r}; the graph's topics are: "
+                                           + ", ".join(GRAPH_TOPICS))
+            try:
+                resolved = self.resolve_topic_name(name)
+            except Exception as exc:
+                raise ParamError("topics", f"invalid topic name {name!r}: {exc}") from None
+            if resolved in seen:
+                continue
+            seen.add(resolved)
+            try:
+                message_definition(type_name)  # fail now, not at the first message
+                msg_class(type_name)
+            except (BagError, ValueError) as exc:
+                raise ParamError("topics", f"cannot record {name!r}: {exc}") from None
+            out.append((name, resolved, type_name))
+        return out
+
+    def _events(self, name: str):
+        try:
+            from rclpy.event_handler import SubscriptionEventCallbacks
+        except ImportError:  # pragma: no cover
+            return None
+
+        def incompatible(event) -> None:
+            self.get_logger().warning(
+                f"a publisher on {name} offers a QoS incompatible with the recorder's (reliable, volatile; "
+                f"last policy kind {getattr(event, 'last_policy_kind', '?')}): its messages are NOT recorded")
+
+        return SubscriptionEventCallbacks(incompatible_qos=incompatible)
+
+    def _callback(self, topic: str, type_name: str):
+        # One argument: rclpy's EventsExecutor cannot hand a raw subscription its MessageInfo
+        # (SystemError), so the publish time is the receive time too.
+        def on_message(data) -> None:
+            self._on_message(topic, type_name, data)
+        return on_message
+
+    # --- recording -------------------------------------------------------------------------------
+
+    def _on_message(self, topic: str, type_name: str, data: bytes) -> None:
+        if self.failed or self.writer.closed:
+            return
+        log_time = self.get_clock().now().nanoseconds
+        try:
+            if not self.writer.has_topic(topic):
+                self._add_topic(topic, type_name)
+            self.writer.write(topic, data, log_time)
+        except (BagError, OSError) as exc:
+            self.failed = True
+            self.exit_code = EXIT_ERROR
+            self.done = True
+            self.get_logger().error(f"cannot write to {self.writer.mcap_path}: {exc}; stopping")
+            return
+        self.counts[topic] = self.counts.get(topic, 0) + 1
+        self.received += 1
+
+    def _add_topic(self, topic: str, type_name: str) -> None:
+        infos = []
+        try:
+            infos = self.get_publishers_info_by_topic(topic)
+        except Exception as exc:  # pragma: no cover - graph queries do not fail in practice
+            self.get_logger().warning(f"cannot query the publishers of {topic}: {exc}")
+        qos_yaml = qos_profiles_yaml([i.qos_profile for i in infos])
+        hashes = [str(i.topic_type_hash) for i in infos if str(i.topic_type_hash).startswith("RIHS")]
+        type_hash = hashes[0] if hashes else installed_type_hash(type_name)
+        self.writer.add_topic(topic, type_name, qos_yaml, type_hash)
+        self.get_logger().info(f"recording {topic} [{type_name}] from {len(infos)} publisher(s)")
+
+    # --- loop and shutdown --------------------------------------------------------------------------
+
+    def spin_step(self, executor) -> None:
+        self._executor = executor
+        try:
+            executor.spin_once(timeout_sec=0.1)
+        except Exception as exc:  # keep the bag: on_shutdown still finishes it
+            self.get_logger().error(f"recorder error: {type(exc).__name__}: {exc}; stopping")
+            self.failed = True
+            self.exit_code = EXIT_ERROR
+            self.done = True
+            return
+        now = time.monotonic()
+        if now - self._last_progress >= PROGRESS_PERIOD_S:
+            self._last_progress = now
+            if self.received != self._last_progress_count:
+                self._last_progress_count = self.received
+                self.get_logger().info(f"{self.received} messages written: {self._per_topic()}")
+
+    def _per_topic(self) -> str:
+        return ", ".join(f"{t} {n}" for t, n in sorted(self.counts.items()))
+
+    def _drain(self) -> None:
+        """Run the callbacks of messages already received but not yet handled."""
+        ex = self._executor
+        if ex is None or self.failed:
+            return
+        start = last = time.monotonic()
+        seen = self.received
+        while True:
+            now = time.monotonic()
+            if now - last > DRAIN_IDLE_S or now - start > DRAIN_MAX_S:
+                break
+            try:
+                ex.spin_once(timeout_sec=0.02)
+            except Exception as exc:  # pragma: no cover - context already shut down
+                self.get_logger().warning(f"stopped draining: {exc}")
+                break
+            if self.received != seen:
+                seen, last = self.received, time.monotonic()
+
+    def on_shutdown(self) -> None:
+        log = self.get_logger()
+        self._drain()
+        try:
+            self.writer.close()
+        except (BagError, OSError) as exc:
+            self.exit_code = EXIT_ERROR
+            log.error(f"cannot finish the bag {self.output}: {exc}; run mwip_bag_repair {self.output}")
+            return
+        log.info(f"bag {self.output}: {self.writer.message_count} messages: {self._per_topic()}")
+
+
+def main(argv=None) -> int:
+    return run_node(McapRecorder, argv)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

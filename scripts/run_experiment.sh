@@ -1,0 +1,114 @@
+#!/usr/bin/env bash
+# The main job: run the ROS graph for DSC and then DSCNDO, record both runs, write the report.
+#
+#   scripts/run_experiment.sh [--params FILE] [--mode lockstep|realtime] [--duration S] [--no-record]
+#
+# Each node is its own process (plant_sim, disturbance_observer, dscndo_controller,
+# mcap_recorder), on a private ROS domain with localhost-only discovery. Every process
+# started here is stopped by PID when the run ends, fails, or is interrupted (Ctrl-C).
+set -euo pipefail
+
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+PARAMS="$ROOT/config/paper.yaml"
+MODE=lockstep
+DURATION=""
+RECORD=1
+
+usage() { sed -n '2,9p' "$0" | sed 's/^# \{0,1\}//'; }
+while [ $# -gt 0 ]; do
+    case "$1" in
+        --params) PARAMS="$(cd "$(dirname "$2")" && pwd)/$(basename "$2")"; shift 2 ;;
+        --mode) MODE="$2"; shift 2 ;;
+        --duration) DURATION="$2"; shift 2 ;;
+        --no-record) RECORD=0; shift ;;
+        -h|--help) usage; exit 0 ;;
+        *) echo "run_experiment: unknown argument '$1'" >&2; usage >&2; exit 2 ;;
+    esac
+done
+case "$MODE" in lockstep|realtime) ;; *) echo "run_experiment: --mode must be lockstep or realtime" >&2; exit 2 ;; esac
+[ -f "$PARAMS" ] || { echo "run_experiment: no such parameter file: $PARAMS" >&2; exit 2; }
+
+bash "$ROOT/scripts/setup.sh"
+# shellcheck disable=SC1091
+source "$ROOT/scripts/env.sh"
+cd "$ROOT"
+
+PIDS=()
+stop_all() {
+    local pid
+    for pid in "${PIDS[@]}"; do kill -INT "$pid" 2>/dev/null || true; done
+    for pid in "${PIDS[@]}"; do
+        for _ in $(seq 1 100); do kill -0 "$pid" 2>/dev/null || break; sleep 0.1; done
+        if kill -0 "$pid" 2>/dev/null; then
+            echo "run_experiment: pid $pid did not stop on SIGINT; killing it" >&2
+            kill -KILL "$pid" 2>/dev/null || true
+        fi
+        wait "$pid" 2>/dev/null || true
+    done
+    PIDS=()
+}
+trap 'stop_all' EXIT
+trap 'echo; echo "run_experiment: interrupted, stopping every node" >&2; exit 130' INT TERM
+
+mwip_theorem --params "$PARAMS" || echo "run_experiment: warning: the gains break Theorem 2 (see above)" >&2
+
+STAMP="$(date +%Y-%m-%d_%H%M%S)"
+LOGS="$ROOT/bags/${STAMP}_logs"
+mkdir -p "$LOGS"
+SIMTIME=()
+[ "$MODE" = lockstep ] && SIMTIME=(-p use_sim_time:=true)
+PLANT_EXTRA=(-p "mode:=$MODE")
+[ -n "$DURATION" ] && PLANT_EXTRA+=(-p "duration_s:=$DURATION")
+
+RUNS=()
+for CTRL in dsc dscndo; do
+    export ROS_DOMAIN_ID=$(( (RANDOM % 200) + 1 ))
+    USE_OBS=false; [ "$CTRL" = dscndo ] && USE_OBS=true
+    echo "=== $CTRL: $MODE run, ROS_DOMAIN_ID=$ROS_DOMAIN_ID, logs in ${LOGS#$ROOT/}/ ==="
+    SUBS=2
+    if [ "$RECORD" = 1 ]; then
+        BAG="$ROOT/bags/${STAMP}_${CTRL}"
+        mcap_recorder --ros-args --params-file "$PARAMS" -p "output:=$BAG" "${SIMTIME[@]}" \
+            > "$LOGS/${CTRL}_mcap_recorder.log" 2>&1 &
+        PIDS+=($!)
+        SUBS=3
+        RUNS+=("$BAG")
+    else
+        RUNS+=("$LOGS/${CTRL}.csv")
+    fi
+    disturbance_observer --ros-args --params-file "$PARAMS" "${SIMTIME[@]}" \
+        > "$LOGS/${CTRL}_disturbance_observer.log" 2>&1 &
+    PIDS+=($!)
+    dscndo_controller --ros-args --params-file "$PARAMS" "${SIMTIME[@]}" -p "use_observer:=$USE_OBS" \
+        > "$LOGS/${CTRL}_dscndo_controller.log" 2>&1 &
+    PIDS+=($!)
+    plant_sim --ros-args --params-file "$PARAMS" "${PLANT_EXTRA[@]}" -p "expected_subscribers:=$SUBS" \
+        -p "csv:=$LOGS/${CTRL}.csv" > "$LOGS/${CTRL}_plant_sim.log" 2>&1 &
+    PLANT=$!
+    PIDS+=("$PLANT")
+    tail --pid="$PLANT" -n +1 -f "$LOGS/${CTRL}_plant_sim.log" &   # show the plant's progress live
+    TAIL=$!
+    code=0
+    wait "$PLANT" || code=$?
+    wait "$TAIL" 2>/dev/null || true
+    stop_all
+    case "$code" in
+        0) ;;
+        3) echo "run_experiment: the robot FELL in the $CTRL run (report still written)" >&2 ;;
+        *) echo "run_experiment: plant_sim failed in the $CTRL run (exit $code); see ${LOGS#$ROOT/}/" >&2
+           exit 1 ;;
+    esac
+    if [ "$RECORD" = 1 ]; then
+        tail -n 1 "$LOGS/${CTRL}_mcap_recorder.log"
+    fi
+done
+
+REPORT="$ROOT/bags/${STAMP}_report"
+echo "=== report ==="
+mwip_report "${RUNS[@]}" --labels dsc dscndo --out "$REPORT"
+echo
+if [ "$RECORD" = 1 ]; then
+    echo "bags:   ${RUNS[0]#$ROOT/}  ${RUNS[1]#$ROOT/}"
+fi
+echo "report: ${REPORT#$ROOT/}/metrics.md (figures fig3.png, observer.png)"
+echo "logs:   ${LOGS#$ROOT/}/"

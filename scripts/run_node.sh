@@ -1,0 +1,31 @@
+#!/usr/bin/env bash
+# Start one mwip_ros node by hand with the project's parameter file, e.g. one per terminal:
+#
+#   scripts/run_node.sh disturbance_observer
+#   scripts/run_node.sh dscndo_controller -p use_observer:=false
+#   scripts/run_node.sh mcap_recorder -p output:=bags/my_run
+#   scripts/run_node.sh plant_sim                      # start the plant last in lockstep
+#
+# Same as `ros2 run mwip_ros NODE --ros-args --params-file config/paper.yaml [ARGS]`.
+# Every terminal uses ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-42} and localhost-only discovery, so they find
+# each other and nobody else. MWIP_PARAMS=FILE picks another parameter file; MWIP_MODE=realtime
+# runs the observer/controller/recorder on wall-clock time (default: lockstep, on /clock).
+set -euo pipefail
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+NODES="plant_sim disturbance_observer dscndo_controller mcap_recorder bag_replay"
+if [ $# -lt 1 ] || [ "$1" = -h ] || [ "$1" = --help ]; then
+    sed -n '2,13p' "$0" | sed 's/^# \{0,1\}//'; echo "nodes: $NODES"; exit 0
+fi
+NODE="$1"; shift
+case " $NODES " in *" $NODE "*) ;; *) echo "run_node: unknown node '$NODE' (nodes: $NODES)" >&2; exit 2 ;; esac
+export ROS_DOMAIN_ID="${ROS_DOMAIN_ID:-42}"
+bash "$ROOT/scripts/setup.sh" >&2
+# shellcheck disable=SC1091
+source "$ROOT/scripts/env.sh"
+PARAMS="${MWIP_PARAMS:-$ROOT/config/paper.yaml}"
+EXTRA=()
+if [ "${MWIP_MODE:-lockstep}" = lockstep ] && [ "$NODE" != plant_sim ]; then
+    EXTRA=(-p use_sim_time:=true)
+fi
+echo "run_node: $NODE on ROS_DOMAIN_ID=$ROS_DOMAIN_ID with $PARAMS" >&2
+exec "$NODE" --ros-args --params-file "$PARAMS" "${EXTRA[@]}" "$@"
