@@ -2,7 +2,9 @@
 # The main job: run the ROS graph for DSC and then DSCNDO, record both runs, write the report.
 #
 #   scripts/run_experiment.sh [--params FILE] [--mode lockstep|realtime] [--duration S] [--no-record]
+#                             [--out DIR]
 #
+# Bags, logs and the report go to DIR (default: bags/), named by date and controller.
 # Each node is its own process (plant_sim, disturbance_observer, dscndo_controller,
 # mcap_recorder), on a private ROS domain with localhost-only discovery. Every process
 # started here is stopped by PID when the run ends, fails, or is interrupted (Ctrl-C).
@@ -13,19 +15,25 @@ PARAMS="$ROOT/config/paper.yaml"
 MODE=lockstep
 DURATION=""
 RECORD=1
+OUT="$ROOT/bags"
 
-usage() { sed -n '2,9p' "$0" | sed 's/^# \{0,1\}//'; }
+usage() { awk 'NR > 1 && /^#/ { sub(/^# ?/, ""); print; next } NR > 1 { exit }' "$0"; }
 while [ $# -gt 0 ]; do
     case "$1" in
         --params) PARAMS="$(cd "$(dirname "$2")" && pwd)/$(basename "$2")"; shift 2 ;;
         --mode) MODE="$2"; shift 2 ;;
         --duration) DURATION="$2"; shift 2 ;;
         --no-record) RECORD=0; shift ;;
+        --out) mkdir -p "$2"; OUT="$(cd "$2" && pwd)"; shift 2 ;;
         -h|--help) usage; exit 0 ;;
         *) echo "run_experiment: unknown argument '$1'" >&2; usage >&2; exit 2 ;;
     esac
 done
 case "$MODE" in lockstep|realtime) ;; *) echo "run_experiment: --mode must be lockstep or realtime" >&2; exit 2 ;; esac
+if [ -n "$DURATION" ]; then
+    [[ "$DURATION" =~ ^[0-9]+([.][0-9]*)?$ ]] || { echo "run_experiment: --duration must be seconds >= 0, got '$DURATION'" >&2; exit 2; }
+    [[ "$DURATION" == *.* ]] || DURATION="$DURATION.0"   # ROS 2 reads 60 as an integer
+fi
 [ -f "$PARAMS" ] || { echo "run_experiment: no such parameter file: $PARAMS" >&2; exit 2; }
 
 bash "$ROOT/scripts/setup.sh"
@@ -34,8 +42,10 @@ source "$ROOT/scripts/env.sh"
 cd "$ROOT"
 
 PIDS=()
+TAIL=""
 stop_all() {
     local pid
+    if [ -n "$TAIL" ]; then kill -TERM "$TAIL" 2>/dev/null || true; wait "$TAIL" 2>/dev/null || true; TAIL=""; fi
     for pid in "${PIDS[@]}"; do kill -INT "$pid" 2>/dev/null || true; done
     for pid in "${PIDS[@]}"; do
         for _ in $(seq 1 100); do kill -0 "$pid" 2>/dev/null || break; sleep 0.1; done
@@ -53,7 +63,7 @@ trap 'echo; echo "run_experiment: interrupted, stopping every node" >&2; exit 13
 mwip_theorem --params "$PARAMS" || echo "run_experiment: warning: the gains break Theorem 2 (see above)" >&2
 
 STAMP="$(date +%Y-%m-%d_%H%M%S)"
-LOGS="$ROOT/bags/${STAMP}_logs"
+LOGS="$OUT/${STAMP}_logs"
 mkdir -p "$LOGS"
 SIMTIME=()
 [ "$MODE" = lockstep ] && SIMTIME=(-p use_sim_time:=true)
@@ -67,7 +77,7 @@ for CTRL in dsc dscndo; do
     echo "=== $CTRL: $MODE run, ROS_DOMAIN_ID=$ROS_DOMAIN_ID, logs in ${LOGS#$ROOT/}/ ==="
     SUBS=2
     if [ "$RECORD" = 1 ]; then
-        BAG="$ROOT/bags/${STAMP}_${CTRL}"
+        BAG="$OUT/${STAMP}_${CTRL}"
         mcap_recorder --ros-args --params-file "$PARAMS" -p "output:=$BAG" "${SIMTIME[@]}" \
             > "$LOGS/${CTRL}_mcap_recorder.log" 2>&1 &
         PIDS+=($!)
@@ -90,7 +100,8 @@ for CTRL in dsc dscndo; do
     TAIL=$!
     code=0
     wait "$PLANT" || code=$?
-    wait "$TAIL" 2>/dev/null || true
+    wait "$TAIL" 2>/dev/null || true   # tail --pid ends by itself within a second of the plant
+    TAIL=""
     stop_all
     case "$code" in
         0) ;;
@@ -103,7 +114,7 @@ for CTRL in dsc dscndo; do
     fi
 done
 
-REPORT="$ROOT/bags/${STAMP}_report"
+REPORT="$OUT/${STAMP}_report"
 echo "=== report ==="
 mwip_report "${RUNS[@]}" --labels dsc dscndo --out "$REPORT"
 echo
