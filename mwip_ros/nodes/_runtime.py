@@ -7,6 +7,7 @@ report before ``rclpy.shutdown()``.
 """
 from __future__ import annotations
 
+import os
 import signal
 import sys
 from typing import Callable, Optional, Sequence
@@ -46,10 +47,16 @@ class GracefulNodeMixin:
 
 
 def _make_executor(context):
-    try:  # measured ~2.3x the round trips/s of SingleThreadedExecutor on this machine
+    """EventsExecutor by default (faster lockstep, see scripts/benchmark.py); MWIP_EXECUTOR=single to compare.
+
+    Its ``spin()`` never returns on SIGINT, which is why ``run_node`` drives a ``spin_once`` loop.
+    """
+    if os.environ.get("MWIP_EXECUTOR", "events") == "single":
+        return SingleThreadedExecutor(context=context)
+    try:
         from rclpy.experimental import EventsExecutor
         return EventsExecutor(context=context)
-    except Exception:  # pragma: no cover - older rclpy
+    except ImportError:  # pragma: no cover - older rclpy
         return SingleThreadedExecutor(context=context)
 
 
