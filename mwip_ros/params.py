@@ -187,6 +187,14 @@ NODE_SPECS: Dict[str, List[ParamSpec]] = {
         ParamSpec("publish_clock", "bool", False, "publish /clock from the bag's time"),
         ParamSpec("mode", "string", "replay", "replay (republish) or resim (feed joint_states through a running "
                   "observer and controller and compare)", _one_of("replay", "resim")),
+        ParamSpec("tolerance", "double", 1e-9, "resim: largest absolute difference still counted as equal",
+                  _non_negative),
+        ParamSpec("timeout_s", "double", 10.0, "resim: give up when the graph is not ready or a command does "
+                  "not come within this wall time [s]; replay: how long to wait for subscribers", _positive),
+        ParamSpec("wait_for_subscribers", "integer", 0, "matched subscriptions to wait for before the first "
+                  "message: replay: on every replayed topic (0 = start at once); resim: on joint_states "
+                  "(0 = automatic: the controller, plus the observer when the bag has disturbance_estimate)",
+                  _non_negative),
     ],
 }
 

@@ -32,6 +32,7 @@ from mwip_ros.plant import PlantSim, config_from_values, saturate
 
 NAME = "plant_sim"
 CSV_COLUMNS = ["t", "theta_w", "theta_b", "dtheta_w", "dtheta_b", "u", "tau_hat1", "tau_hat2", "tau_d1", "tau_d2"]
+SETTLE_S = 0.3  # lockstep: after our own subscriptions matched, let the other nodes (e.g. a recorder) match too
 RESEND_S = 0.5  # lockstep: resend a state nobody answered (only lost before the graph was matched)
 
 
@@ -58,6 +59,7 @@ class PlantSimNode(Node, GracefulNodeMixin):
         self.sent_at = self.resent_at = 0.0
         self.wait_since = time.monotonic()
         self.last_wait_log = 0.0
+        self.ready_at = None
         self.last_progress = time.monotonic()
         # realtime bookkeeping
         self.cmd: Optional[float] = None
@@ -185,7 +187,11 @@ class PlantSimNode(Node, GracefulNodeMixin):
         if not self.started:
             ready = (self.cmd_sub.get_publisher_count() >= 1
                      and self.state_pub.get_subscription_count() >= self.v["expected_subscribers"])
-            if ready:
+            if ready and self.ready_at is None:
+                self.ready_at = now
+            if not ready:
+                self.ready_at = None
+            if ready and now - self.ready_at >= SETTLE_S:
                 self.started = True
                 self.t_wall0 = now
                 self.get_logger().info("graph matched; starting lockstep run")
