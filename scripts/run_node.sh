@@ -14,7 +14,7 @@ set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 NODES="plant_sim disturbance_observer dscndo_controller mcap_recorder bag_replay"
 if [ $# -lt 1 ] || [ "$1" = -h ] || [ "$1" = --help ]; then
-    sed -n '2,13p' "$0" | sed 's/^# \{0,1\}//'; echo "nodes: $NODES"; exit 0
+    awk 'NR > 1 && /^#/ { sub(/^# ?/, ""); print; next } NR > 1 { exit }' "$0"; echo "nodes: $NODES"; exit 0
 fi
 NODE="$1"; shift
 case " $NODES " in *" $NODE "*) ;; *) echo "run_node: unknown node '$NODE' (nodes: $NODES)" >&2; exit 2 ;; esac
