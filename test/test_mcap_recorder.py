@@ -91,7 +91,8 @@ def read_bag(bag):
     return msgs, counts
 
 
-def test_records_exactly_what_was_published(graph, tmp_path):
+@pytest.mark.parametrize("stop_signal", [signal.SIGINT, signal.SIGTERM])
+def test_records_exactly_what_was_published(graph, tmp_path, stop_signal):
     from geometry_msgs.msg import WrenchStamped
     from rosgraph_msgs.msg import Clock
     from std_msgs.msg import Float64
@@ -114,7 +115,7 @@ def test_records_exactly_what_was_published(graph, tmp_path):
         pubs["/clock"].publish(c)
     wait_acked(pubs)
     time.sleep(0.3)
-    assert rec.stop(signal.SIGINT, timeout=20) == 0, rec.output()
+    assert rec.stop(stop_signal, timeout=20) == 0, rec.output()
     out = rec.output()
     assert f"bag {bag}: {4 * N} messages" in out, out
 
