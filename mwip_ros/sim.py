@@ -59,8 +59,7 @@ def read_csv(path, label: Optional[str] = None) -> SimResult:
     data = np.array([[float(x) for x in r] for r in rows[1:]], dtype=float).reshape(-1, len(header))
     cols = {name: data[:, i] for i, name in enumerate(header)}
     h = float(cols["t"][1] - cols["t"][0]) if len(data) > 1 else float("nan")
-    fallen = bool(len(data)) and False
-    return SimResult(label or str(path), cols, fallen, h)
+    return SimResult(label or str(path), cols, False, h)  # a CSV does not say; metrics.compute judges |theta_b|
 
 
 def simulate(values: Mapping, use_observer: Optional[bool] = None, duration: Optional[float] = None,

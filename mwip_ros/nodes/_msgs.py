@@ -84,6 +84,20 @@ def internals(stamp: int, out) -> JointState:
     return msg
 
 
+def lockstep_missing(node, state_pub, need_subs: int) -> list:
+    """What a lockstep driver (plant_sim, bag_replay resim) is waiting for, in words naming the nodes."""
+    what = []
+    if node.count_publishers("wheel_torque_cmd") == 0:
+        what.append("dscndo_controller (nothing publishes wheel_torque_cmd)")
+    if node.count_publishers("disturbance_estimate") == 0:
+        what.append("disturbance_observer (nothing publishes disturbance_estimate; the controller waits for "
+                    "it when use_observer is true)")
+    matched = state_pub.get_subscription_count()
+    if matched < need_subs:
+        what.append(f"{need_subs} subscribers on joint_states (matched: {matched})")
+    return what
+
+
 class Rejects:
     """Counts rejected messages per topic and logs them (first few, then every 100th)."""
 

@@ -428,15 +428,7 @@ class BagReplay(Node, GracefulNodeMixin):
         self.sent_at = self.resent_at = time.monotonic()
 
     def _missing(self) -> str:
-        what = []
-        if self.count_publishers("wheel_torque_cmd") == 0:
-            what.append("dscndo_controller (nothing publishes wheel_torque_cmd)")
-        if self.count_publishers("disturbance_estimate") == 0:
-            what.append("disturbance_observer (nothing publishes disturbance_estimate; the controller waits for "
-                        "it when use_observer is true)")
-        if self.state_pub.get_subscription_count() < self.need_subs:
-            what.append(f"{self.need_subs} subscribers on joint_states "
-                        f"(matched: {self.state_pub.get_subscription_count()})")
+        what = M.lockstep_missing(self, self.state_pub, self.need_subs)
         return "; ".join(what) or ("an answer from the running dscndo_controller: it and the disturbance_observer "
                                    "answer each stamp once, so restart both before every resim")
 

@@ -166,15 +166,7 @@ class PlantSimNode(Node, GracefulNodeMixin):
         self.sent_at = self.resent_at = time.monotonic()
 
     def _missing(self) -> str:
-        what = []
-        if self.count_publishers("wheel_torque_cmd") == 0:
-            what.append("dscndo_controller (nothing publishes wheel_torque_cmd)")
-        if self.count_publishers("disturbance_estimate") == 0:
-            what.append("disturbance_observer (nothing publishes disturbance_estimate; the controller waits for "
-                        "it when use_observer is true)")
-        if self.state_pub.get_subscription_count() < self.v["expected_subscribers"]:
-            what.append(f"{self.v['expected_subscribers']} subscribers on joint_states "
-                        f"(matched: {self.state_pub.get_subscription_count()})")
+        what = M.lockstep_missing(self, self.state_pub, self.v["expected_subscribers"])
         return "; ".join(what) or "a wheel_torque_cmd (the controller is running but did not answer)"
 
     def spin_step(self, executor) -> None:
