@@ -19,9 +19,11 @@ from mwip_ros.controller import DscController
 from mwip_ros.observer import DiscreteObserver, gain_matrix
 from mwip_ros.plant import PlantSim, config_from_values, saturate
 
-# Column order of the CSV (and of SimResult.columns).
-COLUMNS = ["t", "theta_w", "theta_b", "dtheta_w", "dtheta_b", "u", "tau_hat1", "tau_hat2",
-           "tau_d1", "tau_d2", "u_dsc", "u_taud", "S1", "S2", "x4_bar", "x4d"]
+# Column order of the CSV (and of SimResult.columns). The first ten are the trajectory every
+# source has (simulator, plant_sim's CSV, a bag); the rest are the controller's internals.
+TRAJECTORY_COLUMNS = ["t", "theta_w", "theta_b", "dtheta_w", "dtheta_b", "u", "tau_hat1", "tau_hat2",
+                      "tau_d1", "tau_d2"]
+COLUMNS = TRAJECTORY_COLUMNS + ["u_dsc", "u_taud", "S1", "S2", "x4_bar", "x4d"]
 
 
 @dataclass
@@ -42,10 +44,12 @@ class SimResult:
         return len(self.columns["t"])
 
     def write_csv(self, path) -> None:
+        """The columns this run has, in ``COLUMNS`` order, floats written exactly (repr)."""
+        names = [c for c in COLUMNS if c in self.columns]
         with open(path, "w", newline="") as f:
-            w = csv.writer(f)
-            w.writerow(COLUMNS)
-            for row in zip(*(self.columns[c] for c in COLUMNS)):
+            w = csv.writer(f, lineterminator="\n")
+            w.writerow(names)
+            for row in zip(*(self.columns[c] for c in names)):
                 w.writerow([repr(float(x)) for x in row])
 
 

@@ -29,9 +29,9 @@ from mwip_ros.nodes import _msgs as M
 from mwip_ros.nodes._params import declare
 from mwip_ros.nodes._runtime import EXIT_ERROR, EXIT_FALLEN, GracefulNodeMixin, run_node
 from mwip_ros.plant import PlantSim, config_from_values, saturate
+from mwip_ros.sim import TRAJECTORY_COLUMNS, SimResult
 
 NAME = "plant_sim"
-CSV_COLUMNS = ["t", "theta_w", "theta_b", "dtheta_w", "dtheta_b", "u", "tau_hat1", "tau_hat2", "tau_d1", "tau_d2"]
 SETTLE_S = 0.3  # lockstep: after our own subscriptions matched, let the other nodes (e.g. a recorder) match too
 RESEND_S = 0.5  # lockstep: resend a state nobody answered (only lost before the graph was matched)
 
@@ -48,8 +48,7 @@ class PlantSimNode(Node, GracefulNodeMixin):
         self.n_steps = int(round(self.v["duration_s"] / self.h)) if self.v["duration_s"] > 0 else None
         self.extra = (0.0, 0.0)
         self.rows: List[list] = []
-        self.estimates = {}
-        self.row_of = {}
+        self.estimates = {}  # tau_hat that came before its row was written, by stamp
         self.rejects = M.Rejects(self.get_logger())
         self.fallen = False
         self.t_wall0 = None
@@ -95,9 +94,9 @@ class PlantSimNode(Node, GracefulNodeMixin):
             stamp, t1, t2 = M.parse_wrench_stamped(msg)
         except M.BadMessage:
             return  # only monitored for the CSV/metrics; the controller logs rejects
-        row = self.row_of.get(stamp)
-        if row is not None:  # the row was written before the estimate came (plain DSC does not wait for it)
-            self.rows[row][6:8] = [t1, t2]
+        k, off = divmod(stamp, self.period_ns)  # row k holds state k, stamped k * period_ns
+        if off == 0 and 0 <= k < len(self.rows):  # written before the estimate came (plain DSC does not wait)
+            self.rows[k][6:8] = [t1, t2]
         else:
             self.estimates[stamp] = (t1, t2)
 
@@ -131,7 +130,6 @@ class PlantSimNode(Node, GracefulNodeMixin):
         tau_d = p.lumped_disturbance(u, self.extra)
         self.truth_pub.publish(M.wrench_stamped(stamp, tau_d[0], tau_d[1]))
         th = self.estimates.pop(stamp, (math.nan, math.nan))
-        self.row_of[stamp] = len(self.rows)
         self.rows.append([p.t, *p.x, u, th[0], th[1], tau_d[0], tau_d[1]])
         if p.fallen:
             self.fallen = True
@@ -265,7 +263,7 @@ class PlantSimNode(Node, GracefulNodeMixin):
                      f"stale-command substitutions = {self.stale}")
         log.info(f"rejected messages: {self.rejects.summary()}")
         if n:
-            cols = {c: np.array([r[i] for r in self.rows]) for i, c in enumerate(CSV_COLUMNS)}
+            cols = {c: np.array([r[i] for r in self.rows]) for i, c in enumerate(TRAJECTORY_COLUMNS)}
             t_end = cols["t"][-1]
             win = metrics.WINDOW if t_end >= metrics.WINDOW[1] - 1e-9 else (t_end / 2, t_end)
             m = metrics.compute(cols, win, self.cfg.fall_angle)
@@ -273,10 +271,7 @@ class PlantSimNode(Node, GracefulNodeMixin):
                      f"{m.theta_b_rms:.5f} rad, max|theta_b| = {m.theta_b_max_abs:.5f} rad, u RMS = {m.u_rms:.3f} "
                      f"N m, tau_hat err RMS = ({m.tau_err1_rms:.3f}, {m.tau_err2_rms:.3f}) N m")
         if self.v["csv"] and n:
-            with open(self.v["csv"], "w") as f:
-                f.write(",".join(CSV_COLUMNS) + "\n")
-                for r in self.rows:
-                    f.write(",".join(repr(float(x)) for x in r) + "\n")
+            SimResult(NAME, cols, self.fallen, self.h).write_csv(self.v["csv"])
             log.info(f"wrote {self.v['csv']}")
 
 
