@@ -18,13 +18,10 @@ from typing import Dict, List, Optional
 import numpy as np
 
 from mwip_ros import metrics, plotting
-from mwip_ros.sim import SimResult, read_csv
+from mwip_ros.sim import TRAJECTORY_COLUMNS, SimResult, read_csv
+from mwip_ros.topics import leaf
 
 NAN = math.nan
-
-
-def _base(topic: str) -> str:
-    return topic.rstrip("/").rsplit("/", 1)[-1]
 
 
 def _ns(stamp) -> int:
@@ -44,7 +41,7 @@ def read_bag_run(bag, label: Optional[str] = None) -> SimResult:
     truth: Dict[int, tuple] = {}
     cmds: List[float] = []
     for topic, _type, _t, msg in read_messages(bag):
-        b = _base(topic)
+        b = leaf(topic)
         if b == "joint_states":
             names = list(msg.name)
             try:
@@ -72,8 +69,7 @@ def read_bag_run(bag, label: Optional[str] = None) -> SimResult:
             u = cmds[-1] if cmds else NAN
         rows.append([(s - t0) * 1e-9, *x[:4], u, *est.get(s, (NAN, NAN)), *truth.get(s, (NAN, NAN))])
     data = np.array(rows, dtype=float)
-    names = ["t", "theta_w", "theta_b", "dtheta_w", "dtheta_b", "u", "tau_hat1", "tau_hat2", "tau_d1", "tau_d2"]
-    cols = {n: data[:, i] for i, n in enumerate(names)}
+    cols = {n: data[:, i] for i, n in enumerate(TRAJECTORY_COLUMNS)}
     h = float(np.median(np.diff(cols["t"]))) if len(data) > 1 else NAN
     return SimResult(label or Path(bag).name, cols, False, h)
 

@@ -42,6 +42,11 @@ def msg_class(type_string: str):
         raise ValueError(f"cannot import message type {type_string!r}: {pkg}.{ns} has no {name}") from None
 
 
+def leaf(topic: str) -> str:
+    """'/robot1/joint_states' -> 'joint_states': a topic's name without its namespace."""
+    return topic.rstrip("/").rsplit("/", 1)[-1]
+
+
 def graph_type(topic: str) -> Optional[str]:
     """The message type of a graph topic given as 'joint_states', '/joint_states',
     '/robot1/joint_states' or '/clock'; None if it is not one of the graph's topics."""

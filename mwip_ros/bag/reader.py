@@ -64,28 +64,49 @@ def mcap_files(bag: PathLike) -> List[Path]:
     return files
 
 
-def _decoded(path: Path, stack: ExitStack, topics: Optional[List[str]]):
-    from mcap_ros2.decoder import DecoderFactory
+def _merged(bag: PathLike, per_file) -> Iterator:
+    """Merge per-file streams of ``(log_time, ...)`` tuples into one log-time ordered stream."""
+    with ExitStack() as stack:
+        streams = [per_file(f, stack) for f in mcap_files(bag)]
+        yield from streams[0] if len(streams) == 1 else heapq.merge(*streams, key=lambda x: x[0])
 
-    fh = stack.enter_context(open(path, "rb"))
-    reader = make_reader(fh, decoder_factories=[DecoderFactory()])
-    try:
-        for schema, channel, message, decoded in reader.iter_decoded_messages(topics=topics, log_time_order=True):
-            yield (message.log_time, channel.topic, schema.name if schema else "", decoded)
-    except (McapError, struct.error, EOFError) as exc:
-        raise BagError(f"cannot read {path}: {exc} (a recording cut short? try mwip_bag_repair)") from None
+
+def _cut_short(path: Path, exc: Exception) -> BagError:
+    return BagError(f"cannot read {path}: {exc} (a recording cut short? try mwip_bag_repair)")
 
 
 def read_messages(bag_dir: PathLike, topics: Optional[Iterable[str]] = None
                   ) -> Iterator[Tuple[str, str, int, Any]]:
     """Yield ``(topic, type_name, log_time_ns, message)`` for every message, in log-time order."""
+    from mcap_ros2.decoder import DecoderFactory
+
     wanted = None if topics is None else list(topics)
-    files = mcap_files(bag_dir)
-    with ExitStack() as stack:
-        streams = [_decoded(f, stack, wanted) for f in files]
-        merged = streams[0] if len(streams) == 1 else heapq.merge(*streams, key=lambda x: x[0])
-        for log_time, topic, type_name, msg in merged:
-            yield topic, type_name, log_time, msg
+
+    def decoded(path: Path, stack: ExitStack):
+        reader = make_reader(stack.enter_context(open(path, "rb")), decoder_factories=[DecoderFactory()])
+        try:
+            for schema, channel, message, msg in reader.iter_decoded_messages(topics=wanted, log_time_order=True):
+                yield message.log_time, channel.topic, schema.name if schema else "", msg
+        except McapError as exc:
+            raise _cut_short(path, exc) from None
+
+    for log_time, topic, type_name, msg in _merged(bag_dir, decoded):
+        yield topic, type_name, log_time, msg
+
+
+def raw_messages(bag: PathLike, topics: Optional[Iterable[str]] = None) -> Iterator[Tuple[int, str, bytes]]:
+    """``(log_time_ns, topic, cdr_bytes)`` of every message in log-time order: the exact recorded bytes."""
+    wanted = None if topics is None else list(topics)
+
+    def raw(path: Path, stack: ExitStack):
+        reader = make_reader(stack.enter_context(open(path, "rb")))
+        try:
+            for _schema, channel, message in reader.iter_messages(topics=wanted, log_time_order=True):
+                yield message.log_time, channel.topic, bytes(message.data)
+        except McapError as exc:
+            raise _cut_short(path, exc) from None
+
+    yield from _merged(bag, raw)
 
 
 def topic_counts(bag_dir: PathLike) -> Dict[str, int]:

@@ -38,11 +38,9 @@ exit codes:
 """
 from __future__ import annotations
 
-import heapq
 import math
 import sys
 import time
-from contextlib import ExitStack
 from pathlib import Path
 from typing import Dict, Iterator, List, Optional, Tuple
 
@@ -54,13 +52,13 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 
-from mwip_ros.bag.reader import mcap_files, topic_counts, topic_types
+from mwip_ros.bag.reader import raw_messages, topic_counts, topic_types
 from mwip_ros.bag.schema import BagError
 from mwip_ros.nodes import _msgs as M
 from mwip_ros.nodes._params import declare
 from mwip_ros.nodes._runtime import EXIT_ERROR, EXIT_OK, GracefulNodeMixin, run_node
 from mwip_ros.params import ParamError
-from mwip_ros.topics import msg_class
+from mwip_ros.topics import leaf, msg_class
 
 NAME = "bag_replay"
 EXIT_DIFFERENT = 4          # resim: outputs differ from the recording
@@ -69,29 +67,6 @@ RESEND_S = 0.5              # resim: resend a state nobody answered (lost before
 COLLECT_IDLE_S = 1.0        # resim: after the last command, wait this long without news for stragglers
 COLLECT_MAX_S = 5.0
 ESTIMATE_FIELDS = ("tau_hat1", "tau_hat2")  # wrench.torque.x, wrench.torque.y
-
-
-def _leaf(topic: str) -> str:
-    return topic.rstrip("/").rsplit("/", 1)[-1]
-
-
-def _raw_messages(bag: str, topics: Optional[List[str]] = None) -> Iterator[Tuple[int, str, bytes]]:
-    """``(log_time_ns, topic, cdr_bytes)`` of every message in log-time order (all files merged)."""
-    from mcap.exceptions import McapError
-    from mcap.reader import make_reader
-
-    def one(path: Path, stack: ExitStack):
-        fh = stack.enter_context(open(path, "rb"))
-        try:
-            for _schema, channel, message in make_reader(fh).iter_messages(topics=topics, log_time_order=True):
-                yield message.log_time, channel.topic, bytes(message.data)
-        except McapError as exc:
-            raise BagError(f"cannot read {path}: {exc} (a recording cut short? try mwip_bag_repair)") from None
-
-    with ExitStack() as stack:
-        streams = [one(f, stack) for f in mcap_files(bag)]
-        merged = streams[0] if len(streams) == 1 else heapq.merge(*streams, key=lambda x: x[0])
-        yield from merged
 
 
 def _diff(a: float, b: float) -> float:
@@ -117,6 +92,38 @@ class Stat:
 
     def ok(self, tol: float) -> bool:
         return self.missing == 0 and self.max_diff <= tol
+
+
+def _estimate(msg) -> Dict[str, float]:
+    return {"tau_hat1": float(msg.wrench.torque.x), "tau_hat2": float(msg.wrench.torque.y)}
+
+
+def _compare_stamped(rec: Dict[int, Dict[str, float]], new: Dict[int, Dict[str, float]], fed, names):
+    """Compare recorded and new stamped outputs field by field, for the stamps that were fed.
+
+    Returns the topic's Stat and {field: Stat}; a recorded stamp with no new output counts as missing,
+    a recorded field the new output lacks as an infinite difference.
+    """
+    st = Stat()
+    names = list(names)
+    for fields in rec.values():
+        names += [n for n in fields if n not in names]
+    fs = {n: Stat() for n in names}
+    for stamp, r in rec.items():
+        if stamp not in fed:
+            continue
+        n_new = new.get(stamp)
+        if n_new is None:
+            st.missing += 1
+            continue
+        st.compared += 1
+        for n, a in r.items():
+            d = _diff(a, n_new[n]) if n in n_new else math.inf
+            fs[n].add(d)
+            fs[n].compared += 1
+            st.add(d)
+    st.extra = sum(1 for s in new if s not in rec)
+    return st, fs
 
 
 class BagReplay(Node, GracefulNodeMixin):
@@ -154,7 +161,7 @@ class BagReplay(Node, GracefulNodeMixin):
         for name in names:
             name = name.strip()
             cands = [t for t in bag_topics if t == name] or [t for t in bag_topics if t == "/" + name.lstrip("/")] \
-                or [t for t in bag_topics if _leaf(t) == _leaf(name)]
+                or [t for t in bag_topics if leaf(t) == leaf(name)]
             if len(cands) != 1:
                 what = "is not in the bag" if not cands else f"is ambiguous ({', '.join(cands)})"
                 raise ParamError("topics", f"{name!r} {what}; the bag's topics are: {', '.join(bag_topics)}")
@@ -215,7 +222,7 @@ class BagReplay(Node, GracefulNodeMixin):
         return False
 
     def _start_pass(self) -> None:
-        self.stream = _raw_messages(self.bag, list(self.pubs))
+        self.stream = raw_messages(self.bag, list(self.pubs))
         self.pending = None
         self.first_log = None
         self.t_pass0 = time.monotonic()
@@ -294,7 +301,7 @@ class BagReplay(Node, GracefulNodeMixin):
 
     # ================================================================================= resim
     def _bag_topic(self, name: str, required: bool) -> Optional[str]:
-        cands = [t for t in self.types if _leaf(t) == name]
+        cands = [t for t in self.types if leaf(t) == name]
         if len(cands) > 1:
             exact = [t for t in cands if t == "/" + name]
             if len(exact) != 1:
@@ -322,13 +329,13 @@ class BagReplay(Node, GracefulNodeMixin):
         t_int = self._bag_topic("controller_internals", False)
         self.states: List[Tuple[int, bytes]] = []
         self.rec_cmds: List[float] = []
-        self.rec_est: Dict[int, Tuple[float, float]] = {}
+        self.rec_est: Dict[int, Dict[str, float]] = {}
         self.rec_int: Dict[int, Dict[str, float]] = {}
         seen = set()
         dropped = 0
         try:
             wanted = [t for t in (t_state, t_cmd, t_est, t_int) if t]
-            for _lt, topic, data in _raw_messages(self.bag, wanted):
+            for _lt, topic, data in raw_messages(self.bag, wanted):
                 if topic == t_state:
                     stamp = M.stamp_ns(deserialize_message(data, JointState).header.stamp)
                     if stamp in seen:
@@ -342,8 +349,7 @@ class BagReplay(Node, GracefulNodeMixin):
                     self.rec_cmds.append(float(deserialize_message(data, Float64).data))
                 elif topic == t_est:
                     m = deserialize_message(data, WrenchStamped)
-                    self.rec_est.setdefault(M.stamp_ns(m.header.stamp),
-                                            (float(m.wrench.torque.x), float(m.wrench.torque.y)))
+                    self.rec_est.setdefault(M.stamp_ns(m.header.stamp), _estimate(m))
                 elif topic == t_int:
                     m = deserialize_message(data, JointState)
                     self.rec_int.setdefault(M.stamp_ns(m.header.stamp),
@@ -364,7 +370,7 @@ class BagReplay(Node, GracefulNodeMixin):
                     "controller_internals": t_int is not None}
         self.stamp_set = set(seen)
         self.new_cmds: List[float] = []
-        self.new_est: Dict[int, Tuple[float, float]] = {}
+        self.new_est: Dict[int, Dict[str, float]] = {}
         self.new_int: Dict[int, Dict[str, float]] = {}
         self.extra_cmds = 0
         self.k = 0
@@ -408,7 +414,7 @@ class BagReplay(Node, GracefulNodeMixin):
 
     def _on_est(self, msg: WrenchStamped) -> None:
         stamp = M.stamp_ns(msg.header.stamp)
-        self.new_est.setdefault(stamp, (float(msg.wrench.torque.x), float(msg.wrench.torque.y)))
+        self.new_est.setdefault(stamp, _estimate(msg))
         self.last_news = time.monotonic()
 
     def _on_int(self, msg: JointState) -> None:
@@ -502,45 +508,12 @@ class BagReplay(Node, GracefulNodeMixin):
             st.missing = max(0, min(len(self.rec_cmds), self.k) - n)
             st.extra = len(self.new_cmds) - n + self.extra_cmds
         if self.has["disturbance_estimate"]:
-            st = topics["disturbance_estimate"] = Stat()
-            fs = fields["disturbance_estimate"] = {f: Stat() for f in ESTIMATE_FIELDS}
-            for stamp, rec in self.rec_est.items():
-                if stamp not in fed:
-                    continue
-                new = self.new_est.get(stamp)
-                if new is None:
-                    st.missing += 1
-                    continue
-                st.compared += 1
-                for f, a, b in zip(ESTIMATE_FIELDS, rec, new):
-                    d = _diff(a, b)
-                    fs[f].add(d)
-                    fs[f].compared += 1
-                    st.add(d)
-            st.extra = sum(1 for s in self.new_est if s not in self.rec_est)
+            topics["disturbance_estimate"], fields["disturbance_estimate"] = _compare_stamped(
+                self.rec_est, self.new_est, fed, ESTIMATE_FIELDS)
         if self.has["controller_internals"]:
-            st = topics["controller_internals"] = Stat()
-            fs = fields["controller_internals"] = {}
-            names = list(M.INTERNAL_NAMES)
-            for rec in self.rec_int.values():
-                names += [n for n in rec if n not in names]
-            for n in names:
-                fs[n] = Stat()
-            for stamp, rec in self.rec_int.items():
-                if stamp not in fed:
-                    continue
-                new = self.new_int.get(stamp)
-                if new is None:
-                    st.missing += 1
-                    continue
-                st.compared += 1
-                for n, a in rec.items():
-                    d = _diff(a, new[n]) if n in new else math.inf
-                    fs[n].add(d)
-                    fs[n].compared += 1
-                    st.add(d)
-            fields["controller_internals"] = {n: s for n, s in fs.items() if s.compared}
-            st.extra = sum(1 for s in self.new_int if s not in self.rec_int)
+            st, fs = _compare_stamped(self.rec_int, self.new_int, fed, M.INTERNAL_NAMES)
+            topics["controller_internals"] = st
+            fields["controller_internals"] = {n: f for n, f in fs.items() if f.compared}
         return topics, fields
 
     def _resim_report(self) -> None:
