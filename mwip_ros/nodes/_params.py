@@ -11,9 +11,9 @@
 from __future__ import annotations
 
 import math
+from typing import Any, Callable, Dict, List, Sequence
 
 import yaml
-from typing import Any, Callable, Dict, List, Sequence
 
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType, SetParametersResult
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
@@ -78,7 +78,7 @@ def declare(node, node_name: str, argv: Sequence[str],
     specs = P.specs_for(node_name)
     # rclpy files a -p rule under /**, so a node's own section in the file would win over it;
     # a user expects the command line to win, so re-apply the -p rules last.
-    overrides = getattr(node, "_parameter_overrides", None)
+    overrides = getattr(node, "_parameter_overrides", None)  # rclpy's {name: Parameter} from file and -p
     if overrides is not None:
         for name, value in cli_overrides(argv):
             try:
@@ -95,12 +95,8 @@ def declare(node, node_name: str, argv: Sequence[str],
             raise P.ParamError(name, f"wrong type: expected {spec.type} ({exc})") from None
         except InvalidParameterValueException as exc:
             raise P.ParamError(name, f"invalid value ({exc})") from None
-        value = _py(p.value)
-        if value is None and spec.type in _ARRAY_TYPES:
-            value = []
-        values[name] = spec.validate(value, name, "start-up value")
-    overrides = getattr(node, "_parameter_overrides", {}) or {}
-    for name in overrides:
+        values[name] = spec.validate(_py(p.value, spec), name, "start-up value")
+    for name in overrides or {}:
         if name in specs or name in P.ROS_OWN or name.startswith(P.ROS_OWN_PREFIXES):
             continue
         raise P.ParamError(name, f"unknown parameter for {node_name}{P._spelling_hint(name, specs)}",
@@ -114,14 +110,13 @@ def declare(node, node_name: str, argv: Sequence[str],
             if not spec.dynamic:
                 return SetParametersResult(successful=False, reason=f"{prm.name} is read-only (restart to change)")
             try:
-                value = _py(prm.value)
-                spec.validate([] if value is None and spec.type in _ARRAY_TYPES else value, prm.name)
+                spec.validate(_py(prm.value, spec), prm.name)
             except P.ParamError as exc:
                 return SetParametersResult(successful=False, reason=str(exc))
         return SetParametersResult(successful=True)
 
     def apply(params: List[Parameter]) -> None:
-        changed = {p.name: ([] if p.value is None else _py(p.value)) for p in params if p.name in specs}
+        changed = {p.name: _py(p.value, specs[p.name]) for p in params if p.name in specs}
         if not changed:
             return
         old = {k: values[k] for k in changed}
@@ -136,8 +131,10 @@ def declare(node, node_name: str, argv: Sequence[str],
     return values
 
 
-def _py(v: Any) -> Any:
-    """rclpy returns arrays as array.array / numpy; make them plain lists."""
+def _py(v: Any, spec: P.ParamSpec) -> Any:
+    """A parameter value as plain Python: arrays (array.array / numpy) as lists, an unset array as []."""
+    if v is None and spec.type in _ARRAY_TYPES:
+        return []
     if isinstance(v, (str, bool, int, float)) or v is None:
         return v
     return [x for x in v]
