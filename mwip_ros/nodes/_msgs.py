@@ -51,7 +51,7 @@ def parse_joint_state(msg: JointState) -> Tuple[int, Tuple[float, float], Tuple[
         raise BadMessage(f"joint names {names}, expected {list(JOINT_NAMES)}")
     if len(msg.position) != 2 or len(msg.velocity) != 2 or len(msg.effort) not in (1, 2):
         raise BadMessage(f"array lengths position={len(msg.position)} velocity={len(msg.velocity)} "
-                         f"effort={len(msg.effort)}, expected 2, 2, 2")
+                         f"effort={len(msg.effort)}, expected 2, 2, 1 or 2")
     iw, ib = names.index("wheel"), names.index("body_pitch")
     q = (float(msg.position[iw]), float(msg.position[ib]))
     dq = (float(msg.velocity[iw]), float(msg.velocity[ib]))
