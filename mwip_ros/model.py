@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -29,23 +30,23 @@ class PhysicalParams:
     r: float    # wheel radius [m]
     g: float = G_DEFAULT
 
-    @property
+    @cached_property
     def m11(self) -> float:
         return (self.m_b + self.m_w) * self.r ** 2 + self.I_w  # eq. (2)
 
-    @property
+    @cached_property
     def m12(self) -> float:
         return self.m_b * self.l * self.r  # eq. (2)
 
-    @property
+    @cached_property
     def m22(self) -> float:
         return self.m_b * self.l ** 2 + self.I_b  # eq. (2)
 
-    @property
+    @cached_property
     def G_b(self) -> float:
         return self.m_b * self.g * self.l  # eq. (2)
 
-    @property
+    @cached_property
     def A_bar(self) -> float:
         """m11 m22 - m12^2 > 0 (eq. 38)."""
         return self.m11 * self.m22 - self.m12 ** 2
@@ -84,26 +85,36 @@ def coriolis_gravity(p: PhysicalParams, q, dq) -> np.ndarray:
     return np.array([-cent, -p.G_b * s - cent])
 
 
-def plant_accel(p: PhysicalParams, fr: Friction, q, dq, u: float,
-                tau_ext1: float, tau_ext2: float) -> np.ndarray:
-    """True accelerations [theta_w'', theta_b''] from eq. (1) with eq. (3)'s disturbances.
+def accel(p: PhysicalParams, D_w: float, D_b: float, theta_b: float, dtheta_w: float, dtheta_b: float,
+          u: float, tau_ext1: float, tau_ext2: float) -> tuple[float, float]:
+    """True accelerations (theta_w'', theta_b'') of eq. (1) with eq. (3)'s disturbances, as floats.
 
     *fix*: the left sides of eq. (1) are accelerations; tau_ext1 enters the wheel
     row and tau_ext2 the sum of both rows, so the body row gets tau_ext2 - tau_ext1.
+    Scalar on purpose: the plant calls it 4 x ``substeps`` times per period.
     """
-    s, c = math.sin(q[1]), math.cos(q[1])
-    mc = p.m12 * c
-    rhs_w = u - (fr.D_w + fr.D_b) * dq[0] + fr.D_b * dq[1] + p.m12 * dq[1] ** 2 * s + tau_ext1
-    rhs_b = -u - fr.D_b * (dq[1] - dq[0]) + p.G_b * s + (tau_ext2 - tau_ext1)
-    det = p.m11 * p.m22 - mc * mc
-    return np.array([(p.m22 * rhs_w - mc * rhs_b) / det,
-                     (p.m11 * rhs_b - mc * rhs_w) / det])
+    s = math.sin(theta_b)
+    mc = p.m12 * math.cos(theta_b)
+    m11, m22 = p.m11, p.m22
+    rhs_w = u - (D_w + D_b) * dtheta_w + D_b * dtheta_b + p.m12 * dtheta_b * dtheta_b * s + tau_ext1  # eq. (1), row 1
+    rhs_b = -u - D_b * (dtheta_b - dtheta_w) + p.G_b * s + (tau_ext2 - tau_ext1)                     # eq. (1), row 2
+    det = m11 * m22 - mc * mc
+    return (m22 * rhs_w - mc * rhs_b) / det, (m11 * rhs_b - mc * rhs_w) / det
 
 
-def lumped_disturbance(nominal: PhysicalParams, q, dq, ddq, u: float) -> np.ndarray:
-    """True tau_d = M_hat(q) q'' + N_hat(q, q') - [u, 0]^T (eq. 6-7)."""
-    return mass_matrix(nominal, q) @ np.asarray(ddq) + coriolis_gravity(nominal, q, dq) \
-        - np.array([u, 0.0])
+def plant_accel(p: PhysicalParams, fr: Friction, q, dq, u: float,
+                tau_ext1: float, tau_ext2: float) -> np.ndarray:
+    """``accel`` for vectors ``q``, ``dq`` and a ``Friction``: [theta_w'', theta_b'']."""
+    return np.array(accel(p, fr.D_w, fr.D_b, q[1], dq[0], dq[1], u, tau_ext1, tau_ext2))
+
+
+def lumped_disturbance(nominal: PhysicalParams, q, dq, ddq, u: float) -> tuple[float, float]:
+    """True tau_d = M_hat(q) q'' + N_hat(q, q') - [u, 0]^T (eq. 6-7), written out for the 2x2 case."""
+    s = math.sin(q[1])
+    mc = nominal.m12 * math.cos(q[1])
+    cent = nominal.m12 * dq[1] * dq[1] * s
+    return (nominal.m11 * ddq[0] + mc * ddq[1] - cent - u,
+            (nominal.m11 + mc) * ddq[0] + (nominal.m22 + mc) * ddq[1] - nominal.G_b * s - cent)
 
 
 def nominal_accel(nominal: PhysicalParams, q, dq, u: float, tau_d) -> np.ndarray:

@@ -33,18 +33,28 @@ def z_dot(nominal: PhysicalParams, X: np.ndarray, q, dq, u: float, z) -> np.ndar
     return L @ (coriolis_gravity(nominal, q, dq) - np.array([u, 0.0]) - X @ np.asarray(dq) - np.asarray(z))
 
 
-def z_dot_explicit(nominal: PhysicalParams, X: np.ndarray, q, dq, u: float, z) -> np.ndarray:
-    """Eq. (15): the observer written out for the 2x2 case (kept to check eq. 12 against)."""
-    (c1, c2), (c3, c4) = X
+def z_dot_explicit(nominal: PhysicalParams, X, q, dq, u: float, z) -> tuple[float, float]:
+    """Eq. (15): the observer written out for the 2x2 case, as floats (what ``DiscreteObserver`` steps).
+
+    ``X`` is the 2x2 gain matrix or the flat (c1, c2, c3, c4).
+    """
+    c1, c2, c3, c4 = _flat(X)
     p = nominal
     th_b, dth_w, dth_b = q[1], dq[0], dq[1]
     s, mc = math.sin(th_b), p.m12 * math.cos(th_b)
-    A = p.m11 * p.m22 - mc ** 2
+    A = p.m11 * p.m22 - mc * mc
     D1, D2 = p.m22 + mc, p.m11 + mc
-    w1 = p.m12 * dth_b ** 2 * s + u + c1 * dth_w + c2 * dth_b + z[0]
-    w2 = p.G_b * s + p.m12 * dth_b ** 2 * s + c3 * dth_w + c4 * dth_b + z[1]
-    return np.array([((c2 * D2 - c1 * D1) * w1 - (c2 * p.m11 - c1 * mc) * w2) / A,
-                     ((c4 * D2 - c3 * D1) * w1 - (c4 * p.m11 - c3 * mc) * w2) / A])
+    cent = p.m12 * dth_b * dth_b * s
+    w1 = cent + u + c1 * dth_w + c2 * dth_b + z[0]
+    w2 = p.G_b * s + cent + c3 * dth_w + c4 * dth_b + z[1]
+    return (((c2 * D2 - c1 * D1) * w1 - (c2 * p.m11 - c1 * mc) * w2) / A,   # eq. (15), z1'
+            ((c4 * D2 - c3 * D1) * w1 - (c4 * p.m11 - c3 * mc) * w2) / A)   # eq. (15), z2'
+
+
+def _flat(X) -> tuple[float, float, float, float]:
+    if isinstance(X, tuple) and len(X) == 4:
+        return X
+    return tuple(float(v) for v in np.asarray(X, dtype=float).ravel())
 
 
 def tau_hat_of(X: np.ndarray, z, dq) -> np.ndarray:
@@ -64,20 +74,26 @@ class DiscreteObserver:
     ``update(q_k, dq_k, u_{k-1})`` is called once per state k and returns tau_hat_k:
     at k = 0 it sets z_0 = -X q'_0 (so tau_hat_0 = 0); for k >= 1 it advances
     z_k = z_{k-1} + h z'(q_{k-1}, q'_{k-1}, u_{k-1}, z_{k-1}).
+    ``z`` and the returned tau_hat are tuples of two floats.
     """
 
     nominal: PhysicalParams
     X: np.ndarray
     h: float
-    z: Optional[np.ndarray] = None
+    z: Optional[tuple] = None
     _prev: Optional[tuple] = field(default=None, repr=False)
+    _gains: tuple = field(default=(None, None), repr=False)  # (X object, its flat floats)
 
-    def update(self, q, dq, u_prev: float) -> np.ndarray:
-        q, dq = np.asarray(q, float), np.asarray(dq, float)
+    def update(self, q, dq, u_prev: float) -> tuple[float, float]:
+        if self._gains[0] is not self.X:  # X was (re)assigned, e.g. a parameter update
+            self._gains = (self.X, _flat(self.X))
+        c1, c2, c3, c4 = c = self._gains[1]
+        dq = (float(dq[0]), float(dq[1]))
         if self.z is None:
-            self.z = -self.X @ dq  # tau_hat(0) = 0
+            self.z = (-(c1 * dq[0] + c2 * dq[1]), -(c3 * dq[0] + c4 * dq[1]))  # tau_hat(0) = 0
         else:
             q0, dq0 = self._prev
-            self.z = self.z + self.h * z_dot(self.nominal, self.X, q0, dq0, u_prev, self.z)  # Euler of eq. (12)
+            d1, d2 = z_dot_explicit(self.nominal, c, q0, dq0, u_prev, self.z)
+            self.z = (self.z[0] + self.h * d1, self.z[1] + self.h * d2)  # explicit Euler of eq. (12)
         self._prev = (q, dq)
-        return tau_hat_of(self.X, self.z, dq)
+        return (self.z[0] + c1 * dq[0] + c2 * dq[1], self.z[1] + c3 * dq[0] + c4 * dq[1])  # tau_hat = z + X q'

@@ -81,17 +81,16 @@ def simulate(values: Mapping, use_observer: Optional[bool] = None, duration: Opt
     plant = PlantSim(pc)
     obs = DiscreteObserver(pc.nominal, gain_matrix(values["X"]), h)
     ctrl = DscController(pc.nominal, P.gains(values), h, use_observer=use_obs)
-    rows: List[List[float]] = []
+    rows: List[tuple] = []
     fallen = False
     every = max(1, n_steps // 10)
     for k in range(n_steps + 1):
-        q, dq = plant.q.copy(), plant.dq.copy()
-        tau_hat = obs.update(q, dq, plant.u_prev)
-        out = ctrl.step(q[1], dq[1], dq[0], tau_hat)
+        x = plant.x
+        tau_hat = obs.update(x[:2], x[2:], plant.u_prev)
+        out = ctrl.step(x[1], x[3], x[2], tau_hat)
         u = saturate(out.u, pc.torque_limit)
         tau_d = plant.lumped_disturbance(u)
-        rows.append([plant.t, q[0], q[1], dq[0], dq[1], u, tau_hat[0], tau_hat[1], tau_d[0], tau_d[1],
-                     out.u_dsc, out.u_taud, out.S1, out.S2, out.x4_bar, out.x4d])
+        rows.append((plant.t, *x, u, *tau_hat, *tau_d, out.u_dsc, out.u_taud, out.S1, out.S2, out.x4_bar, out.x4d))
         if plant.fallen:
             fallen = True
             break

@@ -85,6 +85,50 @@ def test_observer_eq15_equals_eq12(trial):
                                rtol=1e-10, atol=1e-9)
 
 
+def test_plant_step_is_classic_rk4_of_eq1():
+    """The unrolled scalar RK4 of PlantSim.step equals a textbook vector RK4 over plant_accel."""
+    cfg = PlantConfig(actual=TRUE, nominal=NOM, D_b=0.1, D_w_mean=0.5, D_w_variance=0.2,
+                      tau_ext1=Sinusoid(30.0, 2.0, math.pi / 2), tau_ext2=Sinusoid(0.2, 1.0, 0.0),
+                      h=0.005, substeps=5, seed=3, initial=(0.1, -0.3, 0.4, 0.8))
+    plant = PlantSim(cfg)
+    extra = (1.5, -0.25)
+    for k in range(40):
+        u = 80.0 * math.sin(0.3 * k)
+        x, fr, t0 = np.array(plant.x), Friction(cfg.D_b, plant.D_w), plant.t
+        dt = cfg.h / cfg.substeps
+
+        def f(t, x):
+            e1, e2 = cfg.tau_ext1(t) + extra[0], cfg.tau_ext2(t) + extra[1]
+            return np.concatenate([x[2:], plant_accel(TRUE, fr, x[:2], x[2:], u, e1, e2)])
+
+        for i in range(cfg.substeps):
+            t = t0 + i * dt
+            k1 = f(t, x); k2 = f(t + dt / 2, x + dt / 2 * k1); k3 = f(t + dt / 2, x + dt / 2 * k2)
+            k4 = f(t + dt, x + dt * k3)
+            x = x + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        plant.step(u, extra)
+        np.testing.assert_allclose(plant.x, x, rtol=1e-12, atol=1e-12)
+    # D_w is redrawn every period, from the seeded generator, clipped at 0
+    rng = np.random.default_rng(3)
+    expected = [max(0.0, 0.5 + math.sqrt(0.2) * rng.standard_normal()) for _ in range(41)]
+    assert plant.D_w == pytest.approx(expected[-1], rel=1e-15)
+
+
+def test_discrete_observer_is_euler_of_eq12():
+    X = gain_matrix([100.0, 5.0, -3.0, 80.0])
+    h = 0.005
+    obs = DiscreteObserver(NOM, X, h)
+    z = None
+    prev = None
+    for k in range(30):
+        q, dq = random_state(RNG)
+        u_prev = RNG.uniform(-100, 100)
+        tau_hat = obs.update(q, dq, u_prev)
+        z = -X @ np.array(dq) if z is None else z + h * z_dot(NOM, X, prev[0], prev[1], u_prev, z)
+        prev = (q, dq)
+        np.testing.assert_allclose(tau_hat, z + X @ np.array(dq), rtol=1e-10, atol=1e-9)
+
+
 def _exact_model_plant(tau_ext=(0.0, 0.0), theta_b0=-0.1745, h=0.005):
     return PlantConfig(actual=NOM, nominal=NOM, D_b=0.0, D_w_mean=0.0, D_w_variance=0.0,
                        tau_ext1=Sinusoid(tau_ext[0], 0.0, math.pi / 2), tau_ext2=Sinusoid(tau_ext[1], 0.0, math.pi / 2),
