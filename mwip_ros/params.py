@@ -154,11 +154,14 @@ NODE_SPECS: Dict[str, List[ParamSpec]] = {
         ParamSpec("tau_ext2.phase", "double", 0.0, "tau_ext2 phase [rad]"),
         ParamSpec("torque_limit", "double", 0.0, "|u| cap [N m]; 0 = none", _non_negative),
         ParamSpec("fall_angle", "double", 1.0472, "|theta_b| beyond this ends the run as fallen [rad]", _positive),
-        ParamSpec("lockstep_timeout_s", "double", 10.0, "lockstep: give up when a command does not come "
-                  "within this wall time [s]", _positive),
+        ParamSpec("lockstep_timeout_s", "double", 10.0, "wall time [s] to wait for the graph (the controller and "
+                  "expected_subscribers) before the first state, and in lockstep for each command; lockstep gives "
+                  "up after it, realtime starts without the missing nodes", _positive),
         ParamSpec("stale_command_periods", "integer", 4, "realtime: a command older than this many periods "
                   "is replaced by zero torque", _at_least_one),
         ParamSpec("csv", "string", "", "write the trajectory (mwip_sim CSV columns) to this file; '' = none"),
+        ParamSpec("summary_json", "string", "", "write the run's summary (steps/s, realtime loop periods, missed "
+                  "deadlines, stale commands, metrics) to this JSON file; '' = none"),
         ParamSpec("expected_subscribers", "integer", 2, "lockstep: wait until joint_states has this many "
                   "matched subscriptions before the first state (2 = observer + controller; +1 per recorder)",
                   _non_negative),

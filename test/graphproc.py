@@ -44,8 +44,31 @@ class Proc:
     def pid(self) -> int:
         return self.popen.pid
 
+    peak_rss_kib: Optional[int] = None  # the process's peak resident memory, known once it has been reaped
+
     def wait(self, timeout: float) -> int:
-        return self.popen.wait(timeout=timeout)
+        """Wait for the process to exit (subprocess.TimeoutExpired after ``timeout``); reap it with wait4
+        to learn its peak resident memory (``ru_maxrss``; the wheels' re-exec keeps the PID)."""
+        end = time.monotonic() + timeout
+        while self.popen.returncode is None:
+            try:
+                pid, status, usage = os.wait4(self.pid, os.WNOHANG)
+            except ChildProcessError:  # reaped elsewhere
+                return self.popen.wait(timeout=max(0.0, end - time.monotonic()))
+            if pid:
+                self.popen.returncode = os.waitstatus_to_exitcode(status)
+                self.peak_rss_kib = usage.ru_maxrss
+                break
+            if time.monotonic() > end:
+                raise subprocess.TimeoutExpired(self.popen.args, timeout)
+            time.sleep(0.005)
+        return self.popen.returncode
+
+    def poll(self) -> Optional[int]:
+        try:
+            return self.wait(0.0)
+        except subprocess.TimeoutExpired:
+            return None
 
     def output(self) -> str:
         return self.log.read_text(errors="replace") if self.log.exists() else ""
@@ -55,27 +78,27 @@ class Proc:
         while time.monotonic() < end:
             if text in self.output():
                 return True
-            if self.popen.poll() is not None:
+            if self.poll() is not None:
                 return text in self.output()
             time.sleep(0.05)
         return False
 
     def stop(self, sig=signal.SIGINT, timeout: float = 10.0) -> Optional[int]:
         """Signal the process by PID and wait; escalate to SIGKILL. Returns the exit code."""
-        if self.popen.poll() is None:
+        if self.poll() is None:
             try:
                 os.kill(self.pid, sig)
-                return self.popen.wait(timeout=timeout)
+                return self.wait(timeout)
             except subprocess.TimeoutExpired:
                 try:
                     os.kill(self.pid, signal.SIGKILL)
                 except ProcessLookupError:
                     pass
-                self.popen.wait(timeout=5)
+                self.wait(5)
                 return None
             except ProcessLookupError:
                 pass
-        return self.popen.poll()
+        return self.poll()
 
 
 class Graph:
@@ -88,9 +111,10 @@ class Graph:
         self.procs: List[Proc] = []
 
     def start(self, node: str, *ros_args: str, params: Optional[Path] = PARAMS, label: Optional[str] = None,
-              module: Optional[str] = None) -> Proc:
+              module: Optional[str] = None, cmd: Optional[List[str]] = None) -> Proc:
+        """Start ``python -m mwip_ros.nodes.<node>`` (or ``module``, or the command ``cmd``) --ros-args ..."""
         label = label or node
-        cmd = [sys.executable, "-m", module or f"mwip_ros.nodes.{node}", "--ros-args"]
+        cmd = list(cmd or [sys.executable, "-m", module or f"mwip_ros.nodes.{node}"]) + ["--ros-args"]
         if params is not None:
             cmd += ["--params-file", str(params)]
         cmd += list(ros_args)

@@ -1,6 +1,8 @@
 """The ROS graph: three node processes in lockstep and realtime, faults and bad input."""
+import json
 import math
 import signal
+import sys
 import time
 
 import numpy as np
@@ -58,12 +60,17 @@ def test_lockstep_without_observer_times_out_naming_it(tmp_path):
 def test_realtime_without_controller_substitutes_zero_torque_and_reports_jitter(tmp_path):
     with Graph(tmp_path) as g:
         plant = g.start("plant_sim", "-p", "mode:=realtime", "-p", "duration_s:=1.0",
-                        "-p", "initial.theta_b:=0.0")
+                        "-p", "initial.theta_b:=0.0", "-p", "lockstep_timeout_s:=1.0",
+                        "-p", f"summary_json:={tmp_path / 'summary.json'}")
         code = plant.wait(60)
     out = plant.output()
     assert code in (0, 3), out
+    assert "graph not ready after 1 s" in out and "starting the realtime run anyway" in out
     assert "applying zero torque" in out
-    assert "period jitter p50" in out and "p99" in out and "missed deadlines" in out
+    assert "loop period p50" in out and "p99" in out and "missed deadlines" in out
+    rt = json.loads((tmp_path / "summary.json").read_text())["realtime"]
+    assert rt["ticks"] >= 150 and rt["stale_command_substitutions"] >= rt["ticks"] - 2
+    assert 4.0 < rt["period_ms_p50"] < 6.0 and rt["period_ms_max"] >= rt["period_ms_p99"] >= rt["period_ms_p50"]
     n = int(out.split("stale-command substitutions = ")[1].split()[0])
     assert n >= 150  # every period of the 1 s run had no command (200 periods)
 
@@ -130,8 +137,11 @@ def test_bad_messages_are_rejected_and_counted(tmp_path):
             m = M.joint_state(10**12 + 3, (0.0, 0.0), (0.0, 0.0), 0.0); m.position = [0.0]; bad_states.append(m)
             for m in bad_states:
                 js.publish(m)
+            js.publish(b"\x00\x01\x00\x00" + bytes(10))  # bytes that are no JointState (cut off)
             cmd.publish(Float64(data=float("nan")))
+            cmd.publish(b"\x00\x01")                        # no Float64
             est.publish(M.wrench_stamped(10**12 + 4, float("nan"), 0.0))
+            est.publish(b"\x07\x07\x00\x00" + bytes(60))   # an unknown encapsulation
             wr.publish(Wrench())  # a valid zero wrench ...
             w = Wrench(); w.torque.x = float("inf"); wr.publish(w)  # ... and a bad one
             t_end = time.monotonic() + 3
@@ -144,14 +154,17 @@ def test_bad_messages_are_rejected_and_counted(tmp_path):
         o, c, p = obs.output(), ctl.output(), plant.output()
     assert "rejected message #1 on joint_states: non-finite" in o
     assert "joint names ['left', 'right']" in o and "array lengths" in o
-    assert "rejected: joint_states: 4" in o
-    assert "rejected: " in c and "joint_states: 4" in c and "disturbance_estimate: 1" in c
-    assert "wheel_torque_cmd: 1" in p.split("rejected messages:")[1] and "external_wrench: 1" in p
+    assert "not a sensor_msgs/JointState: string of length 0" in o
+    assert "rejected: joint_states: 5" in o
+    assert "rejected: " in c and "joint_states: 5" in c and "disturbance_estimate: 2" in c
+    assert "is not CDR_LE" in c
+    assert "wheel_torque_cmd: 2" in p.split("rejected messages:")[1] and "external_wrench: 1" in p
+    assert "not a std_msgs/Float64" in p
     # nothing non-finite came out, and no estimate or command answered a bad state
     # (the test hears its own injected NaN estimate and NaN command: leave those out)
     est = [(s, v) for s, v in got["est"] if s != 10**12 + 4]
     cmds = [u for u in got["cmd"] if not math.isnan(u)]
-    assert est and len(cmds) == len(got["cmd"]) - 1
+    assert est and len(cmds) == len(got["cmd"]) - 1  # the test's own listeners drop its undecodable bytes
     assert all(np.isfinite(v).all() for _, v in est) and np.isfinite(cmds).all()
     assert not [s for s, _ in est if 10**12 <= s < 10**12 + 10]
 
@@ -239,3 +252,37 @@ def test_nodes_exit_promptly_on_signals(tmp_path, sig):
             assert code in (0, 3), (p.name, code, p.output())  # 3: the robot fell before the signal
             assert time.monotonic() - t0 < 3.0
             assert "shutting down" in p.output()
+
+
+HANGING_NODE = '''
+import sys, time
+from rclpy.node import Node
+from mwip_ros.nodes import _runtime
+
+class Hangs(Node, _runtime.GracefulNodeMixin):
+    def __init__(self, context=None, argv=()):
+        super().__init__("hangs", context=context)
+        self.done = True                      # nothing to do: straight to shutdown
+
+    def on_shutdown(self):
+        print("on_shutdown ran", flush=True)
+
+    def destroy_node(self):                  # stands in for the middleware's clean-up deadlock
+        time.sleep(120)
+
+_runtime.SHUTDOWN_GRACE_S = 1.0
+sys.exit(_runtime.run_node(Hangs))
+'''
+
+
+def test_a_hang_in_middleware_clean_up_ends_the_process(tmp_path):
+    """After on_shutdown, a node stuck in the middleware's clean-up is ended by the watchdog (exit 1)."""
+    script = tmp_path / "hangs.py"
+    script.write_text(HANGING_NODE)
+    with Graph(tmp_path) as g:
+        p = g.start("hangs", params=None, cmd=[sys.executable, str(script)])
+        t0 = time.monotonic()
+        code = p.wait(60)
+    assert code == 1 and time.monotonic() - t0 < 30
+    out = p.output()
+    assert "on_shutdown ran" in out and "Timeout" in out and "destroy_node" in out

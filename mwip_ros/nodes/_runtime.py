@@ -7,6 +7,7 @@ report before ``rclpy.shutdown()``.
 """
 from __future__ import annotations
 
+import faulthandler
 import os
 import signal
 import sys
@@ -23,6 +24,8 @@ EXIT_OK = 0
 EXIT_ERROR = 1          # a runtime error (e.g. lockstep timeout)
 EXIT_BAD_PARAMS = 2     # a bad parameter file, override or value
 EXIT_FALLEN = 3         # plant_sim: the robot fell
+
+SHUTDOWN_GRACE_S = 10.0  # after the node's own shutdown work, the middleware gets this long to clean up
 
 
 class StopRequested(Exception):
@@ -90,6 +93,11 @@ def run_node(factory: Callable[..., object], argv: Optional[Sequence[str]] = Non
             node.get_logger().info(f"received {signal.Signals(stop['signal']).name}, shutting down")
         node.on_shutdown()
         code = node.exit_code
+        # Everything is written; what is left is the middleware's own clean-up.  Fast DDS 2.14 can
+        # deadlock there (rmw destroy_participant spins in set_listener, holding the GIL, while a
+        # discovery thread waits for its lock; seen when several nodes exit at once).  faulthandler's
+        # watchdog needs no GIL: it prints where the process is stuck and ends it with exit code 1.
+        faulthandler.dump_traceback_later(SHUTDOWN_GRACE_S, exit=True)
         executor.remove_node(node)
         try:
             executor.shutdown(timeout_sec=1.0)
@@ -100,6 +108,7 @@ def run_node(factory: Callable[..., object], argv: Optional[Sequence[str]] = Non
             node.destroy_node()
         if context.ok():
             rclpy.shutdown(context=context)
+        faulthandler.cancel_dump_traceback_later()
         for s, h in old.items():
             signal.signal(s, h)
     return code

@@ -35,7 +35,7 @@ class DisturbanceObserver(Node, GracefulNodeMixin):
         self.count = 0
         self.rejects = M.Rejects(self.get_logger())
         self.pub = self.create_publisher(WrenchStamped, "disturbance_estimate", M.GRAPH_QOS)
-        self.create_subscription(JointState, "joint_states", self._on_state, M.GRAPH_QOS)
+        self.create_subscription(JointState, "joint_states", self._on_state, M.GRAPH_QOS, raw=True)
         self.get_logger().info(f"NDO ready: X = {self.v['X']}, h = {self.h * 1e3:.3f} ms")
 
     def _warn_theorem(self):
@@ -49,9 +49,9 @@ class DisturbanceObserver(Node, GracefulNodeMixin):
             self.obs.X = gain_matrix(changed["X"])
             self._warn_theorem()
 
-    def _on_state(self, msg: JointState) -> None:
+    def _on_state(self, data: bytes) -> None:
         try:
-            stamp, q, dq, u_prev = M.parse_joint_state(msg)
+            stamp, q, dq, u_prev = M.parse_joint_state(data)
         except M.BadMessage as exc:
             self.rejects("joint_states", str(exc))
             return
@@ -68,7 +68,7 @@ class DisturbanceObserver(Node, GracefulNodeMixin):
         tau_hat = self.obs.update(q, dq, u_prev)
         self.obs.h = self.h
         self.last_stamp = stamp
-        self.last_msg = M.wrench_stamped(stamp, tau_hat[0], tau_hat[1])
+        self.last_msg = M.encode_wrench(stamp, tau_hat[0], tau_hat[1])
         self.pub.publish(self.last_msg)
         self.count += 1
 

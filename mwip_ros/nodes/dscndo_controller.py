@@ -39,8 +39,8 @@ class DscndoController(Node, GracefulNodeMixin):
         self.rejects = M.Rejects(self.get_logger())
         self.cmd_pub = self.create_publisher(Float64, "wheel_torque_cmd", M.GRAPH_QOS)
         self.int_pub = self.create_publisher(JointState, "controller_internals", M.GRAPH_QOS)
-        self.create_subscription(JointState, "joint_states", self._on_state, M.GRAPH_QOS)
-        self.create_subscription(WrenchStamped, "disturbance_estimate", self._on_estimate, M.GRAPH_QOS)
+        self.create_subscription(JointState, "joint_states", self._on_state, M.GRAPH_QOS, raw=True)
+        self.create_subscription(WrenchStamped, "disturbance_estimate", self._on_estimate, M.GRAPH_QOS, raw=True)
         g = self.ctrl.gains
         self.get_logger().info(f"{'DSCNDO' if self.ctrl.use_observer else 'DSC'} ready: k1 = {g.k1}, k2 = {g.k2}, "
                                f"tau4 = {g.tau4}")
@@ -59,9 +59,9 @@ class DscndoController(Node, GracefulNodeMixin):
         if "use_observer" in changed:
             self.ctrl.use_observer = self.v["use_observer"]
 
-    def _on_state(self, msg: JointState) -> None:
+    def _on_state(self, data: bytes) -> None:
         try:
-            stamp, q, dq, _ = M.parse_joint_state(msg)
+            stamp, q, dq, _ = M.parse_joint_state(data)
         except M.BadMessage as exc:
             self.rejects("joint_states", str(exc))
             return
@@ -70,9 +70,9 @@ class DscndoController(Node, GracefulNodeMixin):
         self.states[stamp] = (q, dq)
         self._try(stamp)
 
-    def _on_estimate(self, msg: WrenchStamped) -> None:
+    def _on_estimate(self, data: bytes) -> None:
         try:
-            stamp, t1, t2 = M.parse_wrench_stamped(msg)
+            stamp, t1, t2 = M.parse_wrench(data)
         except M.BadMessage as exc:
             self.rejects("disturbance_estimate", str(exc))
             return
@@ -90,8 +90,8 @@ class DscndoController(Node, GracefulNodeMixin):
             return  # wait for the estimate of this very state
         q, dq = self.states.pop(stamp)
         out = self.ctrl.step(q[1], dq[1], dq[0], tau_hat)
-        self.cmd_pub.publish(Float64(data=out.u))
-        self.int_pub.publish(M.internals(stamp, out))
+        self.cmd_pub.publish(M.encode_command(out.u))
+        self.int_pub.publish(M.encode_internals(stamp, out))
         self.last_answered = stamp
         self.count += 1
         self.states = {s: v for s, v in self.states.items() if s > stamp}

@@ -11,6 +11,7 @@ timeout, 2 on bad parameters.
 """
 from __future__ import annotations
 
+import json
 import math
 import sys
 import time
@@ -24,7 +25,7 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 
-from mwip_ros import metrics, params as P
+from mwip_ros import metrics
 from mwip_ros.nodes import _msgs as M
 from mwip_ros.nodes._params import declare
 from mwip_ros.nodes._runtime import EXIT_ERROR, EXIT_FALLEN, GracefulNodeMixin, run_node
@@ -70,11 +71,9 @@ class PlantSimNode(Node, GracefulNodeMixin):
         self.state_pub = self.create_publisher(JointState, "joint_states", M.GRAPH_QOS)
         self.truth_pub = self.create_publisher(WrenchStamped, "lumped_disturbance", M.GRAPH_QOS)
         self.clock_pub = self.create_publisher(Clock, "/clock", M.GRAPH_QOS) if self.mode == "lockstep" else None
-        self.cmd_sub = self.create_subscription(Float64, "wheel_torque_cmd", self._on_cmd, M.GRAPH_QOS)
+        self.cmd_sub = self.create_subscription(Float64, "wheel_torque_cmd", self._on_cmd, M.GRAPH_QOS, raw=True)
         self.create_subscription(Wrench, "external_wrench", self._on_wrench, M.GRAPH_QOS)
-        self.create_subscription(WrenchStamped, "disturbance_estimate", self._on_estimate, M.GRAPH_QOS)
-        if self.mode == "realtime":
-            self.create_timer(self.h, self._tick)
+        self.create_subscription(WrenchStamped, "disturbance_estimate", self._on_estimate, M.GRAPH_QOS, raw=True)
         dur = f"{self.v['duration_s']:g} s" if self.n_steps is not None else "until stopped"
         self.get_logger().info(f"{self.mode} plant: h = {self.h * 1e3:.3f} ms, {self.cfg.substeps} RK4 sub-steps, "
                                f"{dur}, seed {self.cfg.seed}")
@@ -89,9 +88,9 @@ class PlantSimNode(Node, GracefulNodeMixin):
         self.get_logger().info(f"external wrench: tau_ext1 += {e[0]:g}, tau_ext2 += {e[1]:g} N m"
                                if any(e) else "external wrench cleared")
 
-    def _on_estimate(self, msg: WrenchStamped) -> None:
+    def _on_estimate(self, data: bytes) -> None:
         try:
-            stamp, t1, t2 = M.parse_wrench_stamped(msg)
+            stamp, t1, t2 = M.parse_wrench(data)
         except M.BadMessage:
             return  # only monitored for the CSV/metrics; the controller logs rejects
         k, off = divmod(stamp, self.period_ns)  # row k holds state k, stamped k * period_ns
@@ -100,10 +99,11 @@ class PlantSimNode(Node, GracefulNodeMixin):
         else:
             self.estimates[stamp] = (t1, t2)
 
-    def _on_cmd(self, msg: Float64) -> None:
-        u = float(msg.data)
-        if not math.isfinite(u):
-            self.rejects("wheel_torque_cmd", f"non-finite command {u}")
+    def _on_cmd(self, data: bytes) -> None:
+        try:
+            u = M.parse_command(data)
+        except M.BadMessage as exc:
+            self.rejects("wheel_torque_cmd", str(exc))
             return
         if self.mode == "realtime":
             self.cmd, self.cmd_at = u, time.monotonic()
@@ -120,15 +120,16 @@ class PlantSimNode(Node, GracefulNodeMixin):
     def _publish_state(self) -> None:
         stamp = self._stamp()
         if self.clock_pub is not None:
-            self.clock_pub.publish(Clock(clock=M.to_time(stamp)))
-        self.state_pub.publish(M.joint_state(stamp, self.plant.q, self.plant.dq, self.plant.u_prev))
+            self.clock_pub.publish(M.encode_clock(stamp))
+        x = self.plant.x
+        self.state_pub.publish(M.encode_state(stamp, x[:2], x[2:], self.plant.u_prev))
 
     def _finish_period(self, u: float) -> bool:
         """Record row k with u_k, publish tau_d at t_k; integrate unless the run ends. True = ended."""
         p = self.plant
         stamp = self._stamp()
         tau_d = p.lumped_disturbance(u, self.extra)
-        self.truth_pub.publish(M.wrench_stamped(stamp, tau_d[0], tau_d[1]))
+        self.truth_pub.publish(M.encode_wrench(stamp, tau_d[0], tau_d[1]))
         th = self.estimates.pop(stamp, (math.nan, math.nan))
         self.rows.append([p.t, *p.x, u, th[0], th[1], tau_d[0], tau_d[1]])
         if p.fallen:
@@ -167,35 +168,51 @@ class PlantSimNode(Node, GracefulNodeMixin):
         what = M.lockstep_missing(self, self.state_pub, self.v["expected_subscribers"])
         return "; ".join(what) or "a wheel_torque_cmd (the controller is running but did not answer)"
 
+    def _wait_for_graph(self) -> None:
+        """Both modes start once the controller and ``expected_subscribers`` subscribers are matched (and
+        SETTLE_S later).  After ``lockstep_timeout_s`` lockstep gives up; realtime starts without them."""
+        now = time.monotonic()
+        timeout = self.v["lockstep_timeout_s"]
+        ready = (self.cmd_sub.get_publisher_count() >= 1
+                 and self.state_pub.get_subscription_count() >= self.v["expected_subscribers"])
+        if ready and self.ready_at is None:
+            self.ready_at = now
+        if not ready:
+            self.ready_at = None
+        if ready and now - self.ready_at >= SETTLE_S:
+            self._start(now, "graph matched")
+        elif now - self.wait_since > timeout:
+            if self.mode == "lockstep":
+                self._timeout(f"graph not ready after {timeout:g} s; waiting for: {self._missing()}")
+            else:
+                self.get_logger().warning(f"graph not ready after {timeout:g} s (missing: {self._missing()}); "
+                                          f"starting the realtime run anyway")
+                self._start(now, "realtime without the whole graph")
+        elif now - self.last_wait_log > 2.0:
+            self.last_wait_log = now
+            self.get_logger().info(f"waiting for: {self._missing()}")
+
+    def _start(self, now: float, why: str) -> None:
+        self.started = True
+        self.t_wall0 = now
+        self.get_logger().info(f"{why}; starting {self.mode} run")
+        if self.mode == "realtime":
+            self.create_timer(self.h, self._tick)
+        else:
+            self._send()
+
     def spin_step(self, executor) -> None:
+        if not self.started:
+            self._wait_for_graph()
+            executor.spin_once(timeout_sec=0.02)
+            return
         if self.mode == "realtime":
             executor.spin_once(timeout_sec=0.05)
             self._progress()
             return
-        now = time.monotonic()
-        timeout = self.v["lockstep_timeout_s"]
-        if not self.started:
-            ready = (self.cmd_sub.get_publisher_count() >= 1
-                     and self.state_pub.get_subscription_count() >= self.v["expected_subscribers"])
-            if ready and self.ready_at is None:
-                self.ready_at = now
-            if not ready:
-                self.ready_at = None
-            if ready and now - self.ready_at >= SETTLE_S:
-                self.started = True
-                self.t_wall0 = now
-                self.get_logger().info("graph matched; starting lockstep run")
-                self._send()
-            elif now - self.wait_since > timeout:
-                self._timeout(f"graph not ready after {timeout:g} s; waiting for: {self._missing()}")
-                return
-            elif now - self.last_wait_log > 2.0:
-                self.last_wait_log = now
-                self.get_logger().info(f"waiting for: {self._missing()}")
-            executor.spin_once(timeout_sec=0.02)
-            return
         executor.spin_once(timeout_sec=0.05)
         self._progress()
+        timeout = self.v["lockstep_timeout_s"]
         if self.awaiting is not None and not self.done:
             waited = time.monotonic() - self.sent_at
             if waited > timeout:
@@ -252,27 +269,50 @@ class PlantSimNode(Node, GracefulNodeMixin):
         for pub in (self.state_pub, self.truth_pub, self.clock_pub):
             if pub is not None:  # let a recorder receive the last states before this process exits
                 pub.wait_for_all_acked(Duration(seconds=2.0))
+        summary = {"mode": self.mode, "control_rate_hz": 1.0 / self.h, "periods": n, "wall_s": wall,
+                   "steps_per_s": n / wall if wall > 0 else None, "fallen": self.fallen,
+                   "exit_code": self.exit_code, "rejected": dict(self.rejects.counts)}
         if n:
             log.info(f"{self.mode} run: {n} periods, {self.rows[-1][0]:.3f} s simulated in {wall:.2f} s wall "
                      f"({n / max(wall, 1e-9):.0f} steps/s); {'FALLEN' if self.fallen else 'upright'}")
         if self.mode == "realtime" and len(self.tick_times) > 2:
-            per = np.diff(self.tick_times)
-            jit = np.abs(per - self.h) * 1e3
-            log.info(f"realtime: period jitter p50 = {np.percentile(jit, 50):.3f} ms, p99 = "
-                     f"{np.percentile(jit, 99):.3f} ms, max = {jit.max():.3f} ms; missed deadlines = {self.missed}; "
-                     f"stale-command substitutions = {self.stale}")
+            per = np.diff(self.tick_times) * 1e3
+            rt = {"period_ms_p50": float(np.percentile(per, 50)), "period_ms_p99": float(np.percentile(per, 99)),
+                  "period_ms_max": float(per.max()), "ticks": len(self.tick_times),
+                  "missed_deadlines": self.missed, "stale_command_substitutions": self.stale}
+            summary["realtime"] = rt
+            log.info(f"realtime: loop period p50 = {rt['period_ms_p50']:.3f} ms, p99 = {rt['period_ms_p99']:.3f} ms, "
+                     f"max = {rt['period_ms_max']:.3f} ms (nominal {self.h * 1e3:g} ms); missed deadlines = "
+                     f"{self.missed}; stale-command substitutions = {self.stale}")
         log.info(f"rejected messages: {self.rejects.summary()}")
         if n:
             cols = {c: np.array([r[i] for r in self.rows]) for i, c in enumerate(TRAJECTORY_COLUMNS)}
             t_end = cols["t"][-1]
             win = metrics.WINDOW if t_end >= metrics.WINDOW[1] - 1e-9 else (t_end / 2, t_end)
             m = metrics.compute(cols, win, self.cfg.fall_angle)
+            summary["metrics"] = {"window_s": list(win), **m.as_dict()}
             log.info(f"metrics t in [{win[0]:g}, {win[1]:g}] s: theta_b p2p = {m.theta_b_p2p:.5f} rad, RMS = "
                      f"{m.theta_b_rms:.5f} rad, max|theta_b| = {m.theta_b_max_abs:.5f} rad, u RMS = {m.u_rms:.3f} "
                      f"N m, tau_hat err RMS = ({m.tau_err1_rms:.3f}, {m.tau_err2_rms:.3f}) N m")
         if self.v["csv"] and n:
             SimResult(NAME, cols, self.fallen, self.h).write_csv(self.v["csv"])
             log.info(f"wrote {self.v['csv']}")
+        if self.v["summary_json"]:
+            with open(self.v["summary_json"], "w") as f:
+                json.dump(_jsonable(summary), f, indent=1, allow_nan=False)
+            log.info(f"wrote {self.v['summary_json']}")
+
+
+def _jsonable(x):
+    """Plain JSON values: numpy numbers -> float, NaN/inf -> None (JSON has neither)."""
+    if isinstance(x, dict):
+        return {k: _jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_jsonable(v) for v in x]
+    if isinstance(x, (bool, int, str)) or x is None:
+        return x
+    x = float(x)
+    return x if math.isfinite(x) else None
 
 
 def main(argv=None) -> int:

@@ -1,0 +1,231 @@
+#!/usr/bin/env python3
+"""Benchmarks of mwip_ros, every figure measured in this one invocation on this machine.
+
+    scripts/bench.sh [--quick] [--repeat N] [--markdown FILE]
+
+1. DDS floor: two-process ping-pong of std_msgs/Float64 (reliable, depth 1) with the
+   nodes' executor: round trips/s.
+2. Lockstep graph: plant_sim, disturbance_observer, dscndo_controller and mcap_recorder
+   as four processes, the paper's scenario (DSCNDO, 10 s at 200 Hz): control steps per
+   wall-clock second, and that rate divided by the floor.
+3. Real time: the same four processes, plant_sim in realtime mode, 30 s at 200 Hz and
+   at 1 kHz: loop period p50/p99/max, missed deadlines, stale-command substitutions.
+4. Offline simulator: control steps/s of mwip_sim's closed loop, 10 s scenario.
+5. Memory: peak resident memory (ru_maxrss) of each node in the lockstep run.
+
+``--quick`` shortens every run (a smoke test: the tests run it); its numbers are rougher.
+The table goes to stdout; progress goes to stderr.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import dataclass
+from importlib import metadata
+from pathlib import Path
+from typing import Dict, List, Optional
+
+REPO = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(REPO / "test"))
+from graphproc import PARAMS, Graph  # noqa: E402
+
+NODES = ("plant_sim", "disturbance_observer", "dscndo_controller", "mcap_recorder")
+MSGS_PER_STEP = 1.5  # round trips of messages on a lockstep step's critical path (SPEC section 4)
+
+
+@dataclass
+class Plan:
+    pings: int
+    lockstep_s: float
+    realtime_s: float
+    repeat: int
+
+
+FULL = Plan(pings=20000, lockstep_s=10.0, realtime_s=30.0, repeat=3)
+QUICK = Plan(pings=1000, lockstep_s=1.0, realtime_s=2.0, repeat=1)
+
+
+def progress(text: str) -> None:
+    print(f"bench: {text}", file=sys.stderr, flush=True)
+
+
+def machine() -> Dict[str, str]:
+    cpu = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    try:
+        rclpy_version = metadata.version("ros-jazzy-rclpy")
+    except metadata.PackageNotFoundError:
+        rclpy_version = "?"
+    return {"cpu": cpu, "cores": str(os.cpu_count()), "kernel": platform.release(),
+            "python": platform.python_version(), "rclpy": f"ros-jazzy-rclpy {rclpy_version}",
+            "rmw": os.environ.get("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp (default)"),
+            "executor": os.environ.get("MWIP_EXECUTOR", "events"),
+            "load average at start": " ".join(f"{x:.2f}" for x in os.getloadavg())}
+
+
+# --- 1. DDS floor --------------------------------------------------------------------------------
+
+def dds_floor(plan: Plan, work: Path) -> dict:
+    runs = []
+    script = str(REPO / "scripts" / "bench_pingpong.py")
+    work.mkdir(parents=True, exist_ok=True)
+    for i in range(plan.repeat):
+        with Graph(work) as g:
+            g.start("pong", params=None, label=f"pong{i}", cmd=[sys.executable, script, "pong"])
+            out = work / f"ping{i}.json"
+            ping = g.start("ping", params=None, label=f"ping{i}",
+                           cmd=[sys.executable, script, "ping", "--count", str(plan.pings), "--json", str(out)])
+            code = ping.wait(120)
+            if code != 0 or not out.exists():
+                raise SystemExit(f"bench: ping-pong failed (exit {code}):\n{ping.output()}")
+            runs.append(json.loads(out.read_text()))
+        progress(f"DDS floor run {i + 1}/{plan.repeat}: {runs[-1]['round_trips_per_s']:.0f} round trips/s")
+    best = sorted(runs, key=lambda r: r["round_trips_per_s"])[len(runs) // 2]
+    return {"per_s": best["round_trips_per_s"], "runs": [r["round_trips_per_s"] for r in runs],
+            "rtt_us_p50": best["rtt_us_p50"], "rtt_us_p99": best["rtt_us_p99"]}
+
+
+# --- 2./3./5. the graph --------------------------------------------------------------------------
+
+def run_graph(work: Path, label: str, plant_args: List[str], shared: List[str], timeout: float) -> dict:
+    """Observer, controller, recorder and plant; returns the plant's summary and each node's peak RSS."""
+    work.mkdir(parents=True, exist_ok=True)
+    summary = work / "summary.json"
+    with Graph(work) as g:
+        procs = {
+            "mcap_recorder": g.start("mcap_recorder", "-p", f"output:={work / 'bag'}", *shared),
+            "disturbance_observer": g.start("disturbance_observer", *shared),
+            "dscndo_controller": g.start("dscndo_controller", *shared),
+        }
+        procs["plant_sim"] = g.start("plant_sim", "-p", "expected_subscribers:=3", "-p", f"summary_json:={summary}",
+                                     *plant_args, *shared)
+        code = procs["plant_sim"].wait(timeout)
+        for name in ("dscndo_controller", "disturbance_observer", "mcap_recorder"):
+            procs[name].stop()
+    if code != 0 or not summary.exists():
+        raise SystemExit(f"bench: {label}: plant_sim exit {code}; logs in {work}:\n{procs['plant_sim'].output()}")
+    result = json.loads(summary.read_text())
+    result["peak_rss_mib"] = {n: (p.peak_rss_kib or 0) / 1024 for n, p in procs.items()}
+    return result
+
+
+def lockstep(plan: Plan, work: Path) -> dict:
+    runs = []
+    for i in range(plan.repeat):
+        r = run_graph(work / f"lockstep{i}", "lockstep", ["-p", "mode:=lockstep", "-p",
+                      f"duration_s:={plan.lockstep_s}"], ["-p", "use_sim_time:=true"], timeout=300)
+        runs.append(r)
+        progress(f"lockstep run {i + 1}/{plan.repeat}: {r['periods']} steps, {r['steps_per_s']:.0f} steps/s")
+    best = sorted(runs, key=lambda r: r["steps_per_s"])[len(runs) // 2]
+    rss = {n: max(r["peak_rss_mib"][n] for r in runs) for n in NODES}
+    return {"per_s": best["steps_per_s"], "runs": [r["steps_per_s"] for r in runs], "wall_s": best["wall_s"],
+            "periods": best["periods"], "peak_rss_mib": rss}
+
+
+def realtime(plan: Plan, rate_hz: float, work: Path) -> dict:
+    progress(f"realtime {rate_hz:g} Hz for {plan.realtime_s:g} s ...")
+    rate = ["-p", f"control_rate_hz:={rate_hz:.1f}"]
+    r = run_graph(work / f"realtime{rate_hz:g}", f"realtime {rate_hz:g} Hz",
+                  ["-p", "mode:=realtime", "-p", f"duration_s:={plan.realtime_s}"], rate,
+                  timeout=plan.realtime_s + 120)
+    rt = r["realtime"]
+    progress(f"realtime {rate_hz:g} Hz: period p99 {rt['period_ms_p99']:.3f} ms, missed {rt['missed_deadlines']}, "
+             f"stale {rt['stale_command_substitutions']}")
+    return rt
+
+
+# --- 4. offline ----------------------------------------------------------------------------------
+
+def offline(plan: Plan) -> dict:
+    from mwip_ros import params as P, sim
+    values = sim.merged_values(P.load_param_file(PARAMS))
+    runs = []
+    for _ in range(max(plan.repeat, 3)):
+        t0 = time.perf_counter()
+        r = sim.simulate(values, use_observer=True, duration=10.0)
+        runs.append(len(r) / (time.perf_counter() - t0))
+    progress(f"offline: {statistics.median(runs):.0f} steps/s")
+    return {"per_s": statistics.median(runs), "runs": runs, "steps": len(r)}
+
+
+# --- the table ------------------------------------------------------------------------------------
+
+def table(plan: Plan, quick: bool, m: Dict[str, str], floor: dict, ls: dict, rts: Dict[float, dict],
+          off: dict) -> str:
+    rows = []
+
+    def row(item, measured, target="", met=None):
+        rows.append(f"| {item} | {measured} | {target} | {'' if met is None else ('yes' if met else 'NO')} |")
+
+    row("1. DDS floor: Float64 ping-pong, 2 processes",
+        f"{floor['per_s']:,.0f} round trips/s (RTT p50 {floor['rtt_us_p50']:.0f} us, p99 {floor['rtt_us_p99']:.0f} us)")
+    ratio = ls["per_s"] / floor["per_s"]
+    row("2. lockstep graph, 4 processes (with recorder)",
+        f"{ls['per_s']:,.0f} steps/s ({ls['periods']} steps in {ls['wall_s']:.2f} s wall)", ">= 1,000 steps/s",
+        ls["per_s"] >= 1000)
+    row("2. lockstep rate / DDS floor",
+        f"{ratio:.2f} steps per round trip (ideal ~{1 / MSGS_PER_STEP:.2f}: a step is ~{MSGS_PER_STEP} round trips)")
+    for hz, rt in rts.items():
+        target = "0 missed" if hz == 200 else ""
+        row(f"3. realtime {hz:g} Hz, {plan.realtime_s:g} s, 4 processes: loop period p50 / p99 / max",
+            f"{rt['period_ms_p50']:.3f} / {rt['period_ms_p99']:.3f} / {rt['period_ms_max']:.3f} ms "
+            f"(nominal {1e3 / hz:g} ms)")
+        row(f"3. realtime {hz:g} Hz: missed deadlines / stale-command substitutions",
+            f"{rt['missed_deadlines']} / {rt['stale_command_substitutions']} of {rt['ticks']} periods", target,
+            (rt["missed_deadlines"] == 0) if hz == 200 else None)
+    row("4. offline simulator (mwip_sim loop, DSCNDO, 10 s)", f"{off['per_s']:,.0f} steps/s", ">= 20,000 steps/s",
+        off["per_s"] >= 20000)
+    for n in NODES:
+        row(f"5. peak resident memory: {n}", f"{ls['peak_rss_mib'][n]:.1f} MiB")
+    head = [f"mwip_ros benchmarks{' (--quick: short runs, rough numbers)' if quick else ''}", ""]
+    head += [f"- {k}: {v}" for k, v in m.items()]
+    head += ["", "| measurement | result | target | met |", "|---|---|---|---|"]
+    return "\n".join(head + rows) + "\n"
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--quick", action="store_true", help="short runs (smoke test, about a minute)")
+    ap.add_argument("--repeat", type=int, help="runs of the floor and the lockstep graph; the median is shown "
+                                               "(default 3, --quick 1)")
+    ap.add_argument("--markdown", metavar="FILE", help="also write the table to FILE")
+    ap.add_argument("--keep", metavar="DIR", help="keep the runs' logs and bags in DIR (default: a temporary "
+                                                  "directory, removed)")
+    args = ap.parse_args()
+    plan = QUICK if args.quick else FULL
+    if args.repeat is not None:
+        if args.repeat < 1:
+            ap.error("--repeat must be at least 1")
+        plan = Plan(plan.pings, plan.lockstep_s, plan.realtime_s, args.repeat)
+    m = machine()
+    with tempfile.TemporaryDirectory(prefix="mwip_bench_") as tmp:
+        work = Path(args.keep).resolve() if args.keep else Path(tmp)
+        work.mkdir(parents=True, exist_ok=True)
+        progress(f"DDS floor: {plan.repeat} x {plan.pings} round trips ...")
+        floor = dds_floor(plan, work / "floor")
+        progress(f"lockstep graph: {plan.repeat} x {plan.lockstep_s:g} s ...")
+        ls = lockstep(plan, work)
+        rts = {hz: realtime(plan, hz, work) for hz in (200.0, 1000.0)}
+        off = offline(plan)
+    text = table(plan, args.quick, m, floor, ls, rts, off)
+    print(text, end="")
+    if args.markdown:
+        Path(args.markdown).write_text(text)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
