@@ -4,7 +4,8 @@
     scripts/bench.sh [--quick] [--repeat N] [--markdown FILE]
 
 1. DDS floor: two-process ping-pong of std_msgs/Float64 (reliable, depth 1) with the
-   nodes' executor: round trips/s.
+   nodes' executor and, like the nodes, serialized messages: round trips/s; and the same
+   with rclpy message objects, for comparison.
 2. Lockstep graph: plant_sim, disturbance_observer, dscndo_controller and mcap_recorder
    as four processes, the paper's scenario (DSCNDO, 10 s at 200 Hz): control steps per
    wall-clock second, and that rate divided by the floor.
@@ -78,21 +79,23 @@ def machine() -> Dict[str, str]:
 
 # --- 1. DDS floor --------------------------------------------------------------------------------
 
-def dds_floor(plan: Plan, work: Path) -> dict:
+def dds_floor(plan: Plan, work: Path, typed: bool = False) -> dict:
     runs = []
     script = str(REPO / "scripts" / "bench_pingpong.py")
+    flag = ["--typed"] if typed else []
+    kind = "typed" if typed else "serialized"
     work.mkdir(parents=True, exist_ok=True)
     for i in range(plan.repeat):
         with Graph(work) as g:
-            g.start("pong", params=None, label=f"pong{i}", cmd=[sys.executable, script, "pong"])
-            out = work / f"ping{i}.json"
-            ping = g.start("ping", params=None, label=f"ping{i}",
-                           cmd=[sys.executable, script, "ping", "--count", str(plan.pings), "--json", str(out)])
+            g.start("pong", params=None, label=f"pong_{kind}{i}", cmd=[sys.executable, script, "pong", *flag])
+            out = work / f"ping_{kind}{i}.json"
+            ping = g.start("ping", params=None, label=f"ping_{kind}{i}",
+                           cmd=[sys.executable, script, "ping", *flag, "--count", str(plan.pings), "--json", str(out)])
             code = ping.wait(120)
             if code != 0 or not out.exists():
                 raise SystemExit(f"bench: ping-pong failed (exit {code}):\n{ping.output()}")
             runs.append(json.loads(out.read_text()))
-        progress(f"DDS floor run {i + 1}/{plan.repeat}: {runs[-1]['round_trips_per_s']:.0f} round trips/s")
+        progress(f"DDS floor ({kind}) run {i + 1}/{plan.repeat}: {runs[-1]['round_trips_per_s']:.0f} round trips/s")
     best = sorted(runs, key=lambda r: r["round_trips_per_s"])[len(runs) // 2]
     return {"per_s": best["round_trips_per_s"], "runs": [r["round_trips_per_s"] for r in runs],
             "rtt_us_p50": best["rtt_us_p50"], "rtt_us_p99": best["rtt_us_p99"]}
@@ -100,13 +103,15 @@ def dds_floor(plan: Plan, work: Path) -> dict:
 
 # --- 2./3./5. the graph --------------------------------------------------------------------------
 
-def run_graph(work: Path, label: str, plant_args: List[str], shared: List[str], timeout: float) -> dict:
-    """Observer, controller, recorder and plant; returns the plant's summary and each node's peak RSS."""
+def run_graph(work: Path, label: str, plant_args: List[str], shared: List[str], timeout: float,
+              recorder_args: List[str] = ()) -> dict:
+    """Observer, controller, recorder and plant, started as scripts/run_experiment.sh starts them;
+    returns the plant's summary and each node's peak RSS."""
     work.mkdir(parents=True, exist_ok=True)
     summary = work / "summary.json"
     with Graph(work) as g:
         procs = {
-            "mcap_recorder": g.start("mcap_recorder", "-p", f"output:={work / 'bag'}", *shared),
+            "mcap_recorder": g.start("mcap_recorder", "-p", f"output:={work / 'bag'}", *recorder_args, *shared),
             "disturbance_observer": g.start("disturbance_observer", *shared),
             "dscndo_controller": g.start("dscndo_controller", *shared),
         }
@@ -126,7 +131,7 @@ def lockstep(plan: Plan, work: Path) -> dict:
     runs = []
     for i in range(plan.repeat):
         r = run_graph(work / f"lockstep{i}", "lockstep", ["-p", "mode:=lockstep", "-p",
-                      f"duration_s:={plan.lockstep_s}"], ["-p", "use_sim_time:=true"], timeout=300)
+                      f"duration_s:={plan.lockstep_s}"], [], timeout=300, recorder_args=["-p", "use_sim_time:=true"])
         runs.append(r)
         progress(f"lockstep run {i + 1}/{plan.repeat}: {r['periods']} steps, {r['steps_per_s']:.0f} steps/s")
     best = sorted(runs, key=lambda r: r["steps_per_s"])[len(runs) // 2]
@@ -163,15 +168,17 @@ def offline(plan: Plan) -> dict:
 
 # --- the table ------------------------------------------------------------------------------------
 
-def table(plan: Plan, quick: bool, m: Dict[str, str], floor: dict, ls: dict, rts: Dict[float, dict],
-          off: dict) -> str:
+def table(plan: Plan, quick: bool, m: Dict[str, str], floor: dict, typed: dict, ls: dict,
+          rts: Dict[float, dict], off: dict) -> str:
     rows = []
 
     def row(item, measured, target="", met=None):
         rows.append(f"| {item} | {measured} | {target} | {'' if met is None else ('yes' if met else 'NO')} |")
 
-    row("1. DDS floor: Float64 ping-pong, 2 processes",
+    row("1. DDS floor: Float64 ping-pong, 2 processes, serialized (as the nodes publish)",
         f"{floor['per_s']:,.0f} round trips/s (RTT p50 {floor['rtt_us_p50']:.0f} us, p99 {floor['rtt_us_p99']:.0f} us)")
+    row("1. the same with rclpy message objects (typed)",
+        f"{typed['per_s']:,.0f} round trips/s (RTT p50 {typed['rtt_us_p50']:.0f} us, p99 {typed['rtt_us_p99']:.0f} us)")
     ratio = ls["per_s"] / floor["per_s"]
     row("2. lockstep graph, 4 processes (with recorder)",
         f"{ls['per_s']:,.0f} steps/s ({ls['periods']} steps in {ls['wall_s']:.2f} s wall)", ">= 1,000 steps/s",
@@ -216,11 +223,12 @@ def main() -> int:
         work.mkdir(parents=True, exist_ok=True)
         progress(f"DDS floor: {plan.repeat} x {plan.pings} round trips ...")
         floor = dds_floor(plan, work / "floor")
+        typed = dds_floor(plan, work / "floor", typed=True)
         progress(f"lockstep graph: {plan.repeat} x {plan.lockstep_s:g} s ...")
         ls = lockstep(plan, work)
         rts = {hz: realtime(plan, hz, work) for hz in (200.0, 1000.0)}
         off = offline(plan)
-    text = table(plan, args.quick, m, floor, ls, rts, off)
+    text = table(plan, args.quick, m, floor, typed, ls, rts, off)
     print(text, end="")
     if args.markdown:
         Path(args.markdown).write_text(text)

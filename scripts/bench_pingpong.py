@@ -1,14 +1,16 @@
 #!/usr/bin/env python3
 """The DDS floor for ``scripts/bench.sh``: a two-process ping-pong of std_msgs/Float64.
 
-    python scripts/bench_pingpong.py pong                       # echo bench_ping -> bench_pong until SIGINT
-    python scripts/bench_pingpong.py ping --count N [--json F]  # N timed round trips, then exit
+    python scripts/bench_pingpong.py pong [--typed]                       # echo until SIGINT
+    python scripts/bench_pingpong.py ping [--typed] --count N [--json F]  # N timed round trips
 
 Both processes are built like the mwip_ros nodes: ``run_node`` (the same executor,
 EventsExecutor unless MWIP_EXECUTOR=single, driven by the same ``spin_once`` loop),
-reliable, KEEP_LAST 1, volatile QoS.  ``ping`` sends the next message only when the
-previous one came back, so round trips/s is the most a strictly sequential exchange
-of messages between two Python processes can reach on this machine.
+reliable, KEEP_LAST 1, volatile QoS, and like the nodes they publish serialized
+messages and take them with ``raw=True`` subscriptions (``--typed``: rclpy message
+objects instead, to show what rclpy's conversion costs).  ``ping`` sends the next
+message only when the previous one came back, so round trips/s is the most a strictly
+sequential exchange of messages between two Python processes reaches on this machine.
 """
 from __future__ import annotations
 
@@ -21,6 +23,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Float64
 
+from mwip_ros import cdr
 from mwip_ros.nodes._runtime import EXIT_ERROR, GracefulNodeMixin, run_node
 
 QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
@@ -30,18 +33,18 @@ MATCH_TIMEOUT_S = 30.0
 
 
 class Pong(Node, GracefulNodeMixin):
-    def __init__(self, context=None, argv=()):
+    def __init__(self, typed: bool, context=None, argv=()):
         super().__init__("bench_pong", context=context)
         self.pub = self.create_publisher(Float64, "bench_pong", QOS)
-        self.create_subscription(Float64, "bench_ping", self.pub.publish, QOS)
+        self.create_subscription(Float64, "bench_ping", self.pub.publish, QOS, raw=not typed)
 
 
 class Ping(Node, GracefulNodeMixin):
-    def __init__(self, count: int, json_path: str, context=None, argv=()):
+    def __init__(self, typed: bool, count: int, json_path: str, context=None, argv=()):
         super().__init__("bench_ping", context=context)
-        self.count, self.json_path = count, json_path
+        self.typed, self.count, self.json_path = typed, count, json_path
         self.pub = self.create_publisher(Float64, "bench_ping", QOS)
-        self.sub = self.create_subscription(Float64, "bench_pong", self._on_pong, QOS)
+        self.sub = self.create_subscription(Float64, "bench_pong", self._on_pong, QOS, raw=not typed)
         self.msg = Float64()
         self.i = -1
         self.sent_ns = 0
@@ -51,13 +54,16 @@ class Ping(Node, GracefulNodeMixin):
 
     def _send(self) -> None:
         self.i += 1
-        self.msg.data = float(self.i)
         self.sent_ns = time.perf_counter_ns()
-        self.pub.publish(self.msg)
+        if self.typed:
+            self.msg.data = float(self.i)
+            self.pub.publish(self.msg)
+        else:
+            self.pub.publish(cdr.encode_float64(float(self.i)))
 
-    def _on_pong(self, msg: Float64) -> None:
+    def _on_pong(self, msg) -> None:
         now = time.perf_counter_ns()
-        if msg.data != float(self.i):
+        if (msg.data if self.typed else cdr.decode_float64(msg)) != float(self.i):
             return  # not the answer to the message in flight
         k = self.i - WARMUP        # the clock starts at the answer to message WARMUP (k = 0) ...
         if k == 0:
@@ -101,12 +107,14 @@ def main(argv=None) -> int:
     ap.add_argument("role", choices=("ping", "pong"))
     ap.add_argument("--count", type=int, default=10000, help="timed round trips (ping; default 10000)")
     ap.add_argument("--json", default="", help="also write ping's result to this JSON file")
+    ap.add_argument("--typed", action="store_true", help="rclpy message objects instead of serialized messages "
+                                                         "(both processes must agree)")
     args = ap.parse_args(argv[1:ros_at])
     if args.count < 2:
         ap.error("--count must be at least 2")
     if args.role == "pong":
-        return run_node(Pong, argv)
-    return run_node(lambda context, argv: Ping(args.count, args.json, context=context, argv=argv), argv)
+        return run_node(lambda context, argv: Pong(args.typed, context=context, argv=argv), argv)
+    return run_node(lambda context, argv: Ping(args.typed, args.count, args.json, context=context, argv=argv), argv)
 
 
 if __name__ == "__main__":

@@ -65,6 +65,9 @@ mwip_theorem --params "$PARAMS" || echo "run_experiment: warning: the gains brea
 STAMP="$(date +%Y-%m-%d_%H%M%S)"
 LOGS="$OUT/${STAMP}_logs"
 mkdir -p "$LOGS"
+# Lockstep: the recorder logs in sim time (the plant publishes /clock). The observer and the
+# controller never read a clock (each output carries the stamp of the state it answers), so
+# they run without use_sim_time: that spares each a /clock message per step (BENCHMARKS.md).
 SIMTIME=()
 [ "$MODE" = lockstep ] && SIMTIME=(-p use_sim_time:=true)
 PLANT_EXTRA=(-p "mode:=$MODE")
@@ -86,10 +89,10 @@ for CTRL in dsc dscndo; do
     else
         RUNS+=("$LOGS/${CTRL}.csv")
     fi
-    disturbance_observer --ros-args --params-file "$PARAMS" "${SIMTIME[@]}" \
+    disturbance_observer --ros-args --params-file "$PARAMS" \
         > "$LOGS/${CTRL}_disturbance_observer.log" 2>&1 &
     PIDS+=($!)
-    dscndo_controller --ros-args --params-file "$PARAMS" "${SIMTIME[@]}" -p "use_observer:=$USE_OBS" \
+    dscndo_controller --ros-args --params-file "$PARAMS" -p "use_observer:=$USE_OBS" \
         > "$LOGS/${CTRL}_dscndo_controller.log" 2>&1 &
     PIDS+=($!)
     plant_sim --ros-args --params-file "$PARAMS" "${PLANT_EXTRA[@]}" -p "expected_subscribers:=$SUBS" \
@@ -106,6 +109,7 @@ for CTRL in dsc dscndo; do
     case "$code" in
         0) ;;
         3) echo "run_experiment: the robot FELL in the $CTRL run (report still written)" >&2 ;;
+        130|143) echo "run_experiment: interrupted, stopping every node" >&2; exit 130 ;;
         *) echo "run_experiment: plant_sim failed in the $CTRL run (exit $code); see ${LOGS#$ROOT/}/" >&2
            exit 1 ;;
     esac

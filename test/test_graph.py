@@ -254,6 +254,18 @@ def test_nodes_exit_promptly_on_signals(tmp_path, sig):
             assert "shutting down" in p.output()
 
 
+
+@pytest.mark.parametrize("sig,code", [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
+def test_plant_stopped_before_its_duration_says_so_in_its_exit_code(tmp_path, sig, code):
+    with Graph(tmp_path) as g:
+        plant = g.start("plant_sim", "-p", "mode:=realtime", "-p", "duration_s:=60.0", "-p", "lockstep_timeout_s:=0.5",
+                        "-p", "initial.theta_b:=0.0", "-p", f"csv:={tmp_path / 'cut.csv'}")
+        assert plant.wait_for_output("starting realtime run", 30)
+        time.sleep(0.5)
+        assert plant.stop(sig, timeout=10) == code, plant.output()
+    assert "interrupted at t = " in plant.output()
+    assert len(sim.read_csv(tmp_path / "cut.csv")) > 10  # what ran is still written
+
 HANGING_NODE = '''
 import sys, time
 from rclpy.node import Node

@@ -24,6 +24,7 @@ EXIT_OK = 0
 EXIT_ERROR = 1          # a runtime error (e.g. lockstep timeout)
 EXIT_BAD_PARAMS = 2     # a bad parameter file, override or value
 EXIT_FALLEN = 3         # plant_sim: the robot fell
+# plant_sim stopped by a signal before its duration_s was done: 128 + the signal (130 SIGINT, 143 SIGTERM)
 
 SHUTDOWN_GRACE_S = 10.0  # after the node's own shutdown work, the middleware gets this long to clean up
 
@@ -41,6 +42,7 @@ class GracefulNodeMixin:
 
     done: bool = False
     exit_code: int = EXIT_OK
+    stop_signal: Optional[int] = None  # set by run_node before on_shutdown when SIGINT/SIGTERM ended the loop
 
     def spin_step(self, executor) -> None:  # pragma: no cover - overridden where needed
         executor.spin_once(timeout_sec=0.1)
@@ -90,6 +92,7 @@ def run_node(factory: Callable[..., object], argv: Optional[Sequence[str]] = Non
         except StopRequested:
             pass
         if stop["signal"] is not None:
+            node.stop_signal = stop["signal"]
             node.get_logger().info(f"received {signal.Signals(stop['signal']).name}, shutting down")
         node.on_shutdown()
         code = node.exit_code

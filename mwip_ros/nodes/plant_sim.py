@@ -6,8 +6,9 @@ graph then reproduces ``mwip_sim`` sample by sample.
 realtime: a wall-clock timer at ``control_rate_hz``; the last command is held; a
 command older than ``stale_command_periods`` periods is replaced by zero torque.
 
-Exit code 0 when the run completed, 3 when the robot fell, 1 on a lockstep
-timeout, 2 on bad parameters.
+Exit code 0 when the run completed (or, with ``duration_s: 0``, was stopped), 3 when
+the robot fell, 1 on a lockstep timeout, 2 on bad parameters, 128 + the signal (130,
+143) when SIGINT/SIGTERM stopped it before ``duration_s``.
 """
 from __future__ import annotations
 
@@ -264,6 +265,9 @@ class PlantSimNode(Node, GracefulNodeMixin):
     # --- end of run --------------------------------------------------------------------------------
     def on_shutdown(self) -> None:
         log = self.get_logger()
+        if self.stop_signal is not None and self.n_steps is not None and not self.done:
+            self.exit_code = 128 + self.stop_signal  # interrupted: the run did not reach duration_s
+            log.warning(f"interrupted at t = {self.plant.t:.3f} s of {self.n_steps * self.h:g} s")
         wall = (time.monotonic() - self.t_wall0) if self.t_wall0 else 0.0
         n = len(self.rows)
         for pub in (self.state_pub, self.truth_pub, self.clock_pub):

@@ -1,0 +1,42 @@
+"""scripts/bench.sh --quick runs and prints every row (numbers are not judged here: BENCHMARKS.md)."""
+import re
+import subprocess
+
+from graphproc import REPO, ros_env, fresh_domain_id
+
+ROWS = [
+    r"1\. DDS floor: Float64 ping-pong, 2 processes, serialized .* \| [\d,]+ round trips/s \(RTT p50 \d+ us, p99 \d+ us\)",
+    r"1\. the same with rclpy message objects \(typed\) \| [\d,]+ round trips/s",
+    r"2\. lockstep graph, 4 processes \(with recorder\) \| [\d,]+ steps/s \(201 steps in [\d.]+ s wall\)",
+    r"2\. lockstep rate / DDS floor \| [\d.]+ steps per round trip",
+    r"3\. realtime 200 Hz, 2 s, 4 processes: loop period p50 / p99 / max \| [\d.]+ / [\d.]+ / [\d.]+ ms",
+    r"3\. realtime 200 Hz: missed deadlines / stale-command substitutions \| \d+ / \d+ of \d+ periods",
+    r"3\. realtime 1000 Hz, 2 s, 4 processes: loop period p50 / p99 / max \| [\d.]+ / [\d.]+ / [\d.]+ ms",
+    r"3\. realtime 1000 Hz: missed deadlines / stale-command substitutions \| \d+ / \d+ of \d+ periods",
+    r"4\. offline simulator \(mwip_sim loop, DSCNDO, 10 s\) \| [\d,]+ steps/s",
+] + [rf"5\. peak resident memory: {n} \| [\d.]+ MiB" for n in
+     ("plant_sim", "disturbance_observer", "dscndo_controller", "mcap_recorder")]
+
+
+def test_bench_quick_prints_every_row(tmp_path):
+    md = tmp_path / "bench.md"
+    r = subprocess.run(["bash", str(REPO / "scripts" / "bench.sh"), "--quick", "--markdown", str(md)],
+                       env=ros_env(fresh_domain_id()), capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stdout + r.stderr
+    for row in ROWS:
+        assert re.search(row, r.stdout), f"missing row /{row}/ in:\n{r.stdout}"
+    assert re.search(r"- cpu: .+\n- cores: \d+", r.stdout)
+    assert md.read_text() == r.stdout
+    # the realtime rows come from 2 s runs of 400 and 2000 periods (+1: the first state)
+    ticks = [int(x) for x in re.findall(r"of (\d+) periods", r.stdout)]
+    assert 380 <= ticks[0] <= 402 and 1800 <= ticks[1] <= 2002, ticks
+    assert "bench: lockstep run 1/1" in r.stderr  # progress goes to stderr
+
+
+def test_bench_help_and_bad_arguments():
+    r = subprocess.run(["bash", str(REPO / "scripts" / "bench.sh"), "--help"], capture_output=True, text=True,
+                       timeout=120)
+    assert r.returncode == 0 and "--quick" in r.stdout and "DDS floor" in r.stdout
+    r = subprocess.run(["bash", str(REPO / "scripts" / "bench.sh"), "--repeat", "0"], capture_output=True,
+                       text=True, timeout=300)
+    assert r.returncode == 2 and "--repeat must be at least 1" in r.stderr
