@@ -44,6 +44,10 @@ def _at_least_one(v):
     return None if v >= 1 else f"must be >= 1, got {v!r}"
 
 
+def _priority(v):
+    return None if 0 <= v <= 99 else f"must be 0 (normal scheduling) or a SCHED_FIFO priority 1..99, got {v!r}"
+
+
 def _one_of(*choices):
     def check(v):
         return None if v in choices else f"must be one of {', '.join(map(repr, choices))}, got {v!r}"
@@ -128,6 +132,8 @@ SHARED_SPECS: List[ParamSpec] = [
     ParamSpec("control_rate_hz", "double", 200.0, "control rate 1/h [Hz] of plant, observer and controller",
               _positive, unit="Hz"),
     *_body("nominal", PAPER_NOMINAL, "nominal (hatted)"),
+    ParamSpec("realtime_priority", "integer", 0, "SCHED_FIFO priority 1..99 of the node's threads, for realtime "
+              "runs (needs root or CAP_SYS_NICE; else a warning); 0 = normal scheduling", _priority),
 ]
 
 NODE_SPECS: Dict[str, List[ParamSpec]] = {

@@ -8,8 +8,9 @@
 #
 # Same as `ros2 run mwip_ros NODE --ros-args --params-file config/paper.yaml [ARGS]`.
 # Every terminal uses ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-42} and localhost-only discovery, so they find
-# each other and nobody else. MWIP_PARAMS=FILE picks another parameter file; MWIP_MODE=realtime
-# runs the observer/controller/recorder on wall-clock time (default: lockstep, on /clock).
+# each other and nobody else. MWIP_PARAMS=FILE picks another parameter file. In lockstep (the
+# default) the recorder logs on /clock (use_sim_time); MWIP_MODE=realtime: on wall-clock time.
+# The observer and the controller read no clock (their outputs carry the state's stamp).
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 NODES="plant_sim disturbance_observer dscndo_controller mcap_recorder bag_replay"
@@ -24,7 +25,7 @@ bash "$ROOT/scripts/setup.sh" >&2
 source "$ROOT/scripts/env.sh"
 PARAMS="${MWIP_PARAMS:-$ROOT/config/paper.yaml}"
 EXTRA=()
-if [ "${MWIP_MODE:-lockstep}" = lockstep ] && [ "$NODE" != plant_sim ]; then
+if [ "${MWIP_MODE:-lockstep}" = lockstep ] && [ "$NODE" = mcap_recorder ]; then
     EXTRA=(-p use_sim_time:=true)
 fi
 echo "run_node: $NODE on ROS_DOMAIN_ID=$ROS_DOMAIN_ID with $PARAMS" >&2

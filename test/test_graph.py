@@ -1,6 +1,7 @@
 """The ROS graph: three node processes in lockstep and realtime, faults and bad input."""
 import json
 import math
+import os
 import signal
 import sys
 import time
@@ -176,6 +177,7 @@ def test_bad_messages_are_rejected_and_counted(tmp_path):
     ("disturbance_observer", ["-p", "X:=[1.0, 2.0]"], "X"),
     ("plant_sim", ["-p", "mode:=fast"], "mode"),
     ("plant_sim", ["-p", "actual.m_b:=0.0"], "actual.m_b"),
+    ("disturbance_observer", ["-p", "realtime_priority:=100"], "realtime_priority"),
 ])
 def test_bad_overrides_stop_the_node_naming_the_parameter(tmp_path, node, args, key):
     with Graph(tmp_path) as g:
@@ -265,6 +267,20 @@ def test_plant_stopped_before_its_duration_says_so_in_its_exit_code(tmp_path, si
         assert plant.stop(sig, timeout=10) == code, plant.output()
     assert "interrupted at t = " in plant.output()
     assert len(sim.read_csv(tmp_path / "cut.csv")) > 10  # what ran is still written
+
+
+def test_realtime_priority_puts_every_thread_under_sched_fifo(tmp_path):
+    with Graph(tmp_path) as g:
+        p = g.start("disturbance_observer", "-p", "realtime_priority:=7")
+        assert p.wait_for_output("SCHED_FIFO", 30), p.output()
+        out = p.output()
+        if "cannot switch to SCHED_FIFO" in out:  # not root and no CAP_SYS_NICE: warned, runs normally
+            assert "running with normal scheduling" in out
+            return
+        tids = [int(t) for t in os.listdir(f"/proc/{p.pid}/task")]
+        assert len(tids) > 3  # rclpy and Fast DDS threads too
+        assert {os.sched_getscheduler(t) for t in tids} == {os.SCHED_FIFO}
+        assert {os.sched_getparam(t).sched_priority for t in tids} == {7}
 
 HANGING_NODE = '''
 import sys, time

@@ -58,9 +58,10 @@ def _descriptor(spec: P.ParamSpec) -> ParameterDescriptor:
     if spec.type == "double" and check in ("_positive", "_non_negative"):
         d.floating_point_range = [FloatingPointRange(from_value=0.0, to_value=math.inf, step=0.0)]
         d.additional_constraints = "> 0" if check == "_positive" else ">= 0"
-    elif spec.type == "integer" and check in ("_at_least_one", "_non_negative"):
+    elif spec.type == "integer" and check in ("_at_least_one", "_non_negative", "_priority"):
         lo = 1 if check == "_at_least_one" else 0
-        d.integer_range = [IntegerRange(from_value=lo, to_value=2 ** 31 - 1, step=1)]
+        hi = 99 if check == "_priority" else 2 ** 31 - 1
+        d.integer_range = [IntegerRange(from_value=lo, to_value=hi, step=1)]
     elif spec.check is not None and check == "check":  # _one_of(...)
         d.additional_constraints = spec.check(object()).split(", got", 1)[0]
     return d

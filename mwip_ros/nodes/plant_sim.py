@@ -16,7 +16,8 @@ import json
 import math
 import sys
 import time
-from typing import List, Optional
+from array import array
+from typing import Optional
 
 import numpy as np
 from geometry_msgs.msg import Wrench, WrenchStamped
@@ -34,6 +35,7 @@ from mwip_ros.plant import PlantSim, config_from_values, saturate
 from mwip_ros.sim import TRAJECTORY_COLUMNS, SimResult
 
 NAME = "plant_sim"
+NCOL = len(TRAJECTORY_COLUMNS)
 SETTLE_S = 0.3  # lockstep: after our own subscriptions matched, let the other nodes (e.g. a recorder) match too
 RESEND_S = 0.5  # lockstep: resend a state nobody answered (only lost before the graph was matched)
 
@@ -49,7 +51,10 @@ class PlantSimNode(Node, GracefulNodeMixin):
         self.period_ns = round(self.h * 1e9)
         self.n_steps = int(round(self.v["duration_s"] / self.h)) if self.v["duration_s"] > 0 else None
         self.extra = (0.0, 0.0)
-        self.rows: List[list] = []
+        # Row k = TRAJECTORY_COLUMNS of state k, flat in one array of doubles: no Python object per
+        # row for the garbage collector to scan (a full collection over lists of rows took ~6 ms, a
+        # missed realtime deadline), and 80 bytes per period.
+        self.rows = array("d")
         self.estimates = {}  # tau_hat that came before its row was written, by stamp
         self.rejects = M.Rejects(self.get_logger())
         self.fallen = False
@@ -65,7 +70,7 @@ class PlantSimNode(Node, GracefulNodeMixin):
         # realtime bookkeeping
         self.cmd: Optional[float] = None
         self.cmd_at = 0.0
-        self.tick_times: List[float] = []
+        self.tick_times = array("d")
         self.stale = 0
         self.missed = 0
 
@@ -95,8 +100,9 @@ class PlantSimNode(Node, GracefulNodeMixin):
         except M.BadMessage:
             return  # only monitored for the CSV/metrics; the controller logs rejects
         k, off = divmod(stamp, self.period_ns)  # row k holds state k, stamped k * period_ns
-        if off == 0 and 0 <= k < len(self.rows):  # written before the estimate came (plain DSC does not wait)
-            self.rows[k][6:8] = [t1, t2]
+        if off == 0 and 0 <= k < len(self.rows) // NCOL:  # row written before the estimate came (plain DSC)
+            self.rows[k * NCOL + 6] = t1
+            self.rows[k * NCOL + 7] = t2
         else:
             self.estimates[stamp] = (t1, t2)
 
@@ -132,7 +138,7 @@ class PlantSimNode(Node, GracefulNodeMixin):
         tau_d = p.lumped_disturbance(u, self.extra)
         self.truth_pub.publish(M.encode_wrench(stamp, tau_d[0], tau_d[1]))
         th = self.estimates.pop(stamp, (math.nan, math.nan))
-        self.rows.append([p.t, *p.x, u, th[0], th[1], tau_d[0], tau_d[1]])
+        self.rows.extend((p.t, *p.x, u, th[0], th[1], tau_d[0], tau_d[1]))
         if p.fallen:
             self.fallen = True
             self.get_logger().error(f"FALLEN at t = {p.t:.3f} s: |theta_b| = {abs(p.x[1]):.4f} > fall_angle "
@@ -269,7 +275,7 @@ class PlantSimNode(Node, GracefulNodeMixin):
             self.exit_code = 128 + self.stop_signal  # interrupted: the run did not reach duration_s
             log.warning(f"interrupted at t = {self.plant.t:.3f} s of {self.n_steps * self.h:g} s")
         wall = (time.monotonic() - self.t_wall0) if self.t_wall0 else 0.0
-        n = len(self.rows)
+        n = len(self.rows) // NCOL
         for pub in (self.state_pub, self.truth_pub, self.clock_pub):
             if pub is not None:  # let a recorder receive the last states before this process exits
                 pub.wait_for_all_acked(Duration(seconds=2.0))
@@ -277,12 +283,13 @@ class PlantSimNode(Node, GracefulNodeMixin):
                    "steps_per_s": n / wall if wall > 0 else None, "fallen": self.fallen,
                    "exit_code": self.exit_code, "rejected": dict(self.rejects.counts)}
         if n:
-            log.info(f"{self.mode} run: {n} periods, {self.rows[-1][0]:.3f} s simulated in {wall:.2f} s wall "
+            log.info(f"{self.mode} run: {n} periods, {self.rows[-NCOL]:.3f} s simulated in {wall:.2f} s wall "
                      f"({n / max(wall, 1e-9):.0f} steps/s); {'FALLEN' if self.fallen else 'upright'}")
         if self.mode == "realtime" and len(self.tick_times) > 2:
             per = np.diff(self.tick_times) * 1e3
             rt = {"period_ms_p50": float(np.percentile(per, 50)), "period_ms_p99": float(np.percentile(per, 99)),
                   "period_ms_max": float(per.max()), "ticks": len(self.tick_times),
+                  "period_max_at_s": float(np.argmax(per) + 1) * self.h,  # sim time of the tick that ended it
                   "missed_deadlines": self.missed, "stale_command_substitutions": self.stale}
             summary["realtime"] = rt
             log.info(f"realtime: loop period p50 = {rt['period_ms_p50']:.3f} ms, p99 = {rt['period_ms_p99']:.3f} ms, "
@@ -290,7 +297,8 @@ class PlantSimNode(Node, GracefulNodeMixin):
                      f"{self.missed}; stale-command substitutions = {self.stale}")
         log.info(f"rejected messages: {self.rejects.summary()}")
         if n:
-            cols = {c: np.array([r[i] for r in self.rows]) for i, c in enumerate(TRAJECTORY_COLUMNS)}
+            table = np.array(self.rows).reshape(n, NCOL)
+            cols = {c: table[:, i] for i, c in enumerate(TRAJECTORY_COLUMNS)}
             t_end = cols["t"][-1]
             win = metrics.WINDOW if t_end >= metrics.WINDOW[1] - 1e-9 else (t_end / 2, t_end)
             m = metrics.compute(cols, win, self.cfg.fall_angle)
