@@ -12,7 +12,8 @@
 3. Real time: the same four processes, plant_sim in realtime mode, 30 s at 200 Hz and
    at 1 kHz, with normal scheduling and with realtime_priority 50 (SCHED_FIFO; needs root
    or CAP_SYS_NICE): loop period p50/p99/max, missed deadlines (a period longer than 1.5 h),
-   stale-command substitutions.
+   stale-command substitutions; beside them, the wake-up latency of two bare Python sleep
+   loops (no ROS), the machine's own limit without SCHED_FIFO.
 4. Offline simulator: control steps/s of mwip_sim's closed loop, 10 s scenario.
 5. Memory: peak resident memory (ru_maxrss) of each node in the lockstep run.
 
@@ -159,6 +160,41 @@ def realtime(plan: Plan, rate_hz: float, priority: int, work: Path) -> dict:
     return rt
 
 
+SLEEP_LOOP = """
+import json, sys, time
+h, T = float(sys.argv[1]), float(sys.argv[2])
+t0 = time.monotonic(); k = 0; worst = 0.0; late = 0
+while (k + 1) * h <= T:
+    k += 1
+    target = t0 + k * h
+    d = target - time.monotonic()
+    if d > 0:
+        time.sleep(d)
+    lag = time.monotonic() - target
+    worst = max(worst, lag)
+    late += lag > h / 2
+print(json.dumps({"h_ms": h * 1e3, "periods": k, "worst_ms": worst * 1e3, "late": late}))
+"""
+
+
+def os_floor(plan: Plan) -> List[dict]:
+    """The machine's own wake-up latency: two bare Python loops (5 ms and 1 ms) sleeping to fixed deadlines
+    side by side, no ROS.  What the realtime graph cannot beat without SCHED_FIFO."""
+    progress(f"wake-up latency of bare sleep loops for {plan.realtime_s:g} s ...")
+    procs = [subprocess.Popen([sys.executable, "-c", SLEEP_LOOP, str(h), str(plan.realtime_s)],
+                              stdout=subprocess.PIPE, text=True) for h in (0.005, 0.001)]
+    out = []
+    for p in procs:
+        try:
+            text, _ = p.communicate(timeout=plan.realtime_s + 60)
+        finally:
+            if p.poll() is None:
+                p.kill()
+                p.wait(5)
+        out.append(json.loads(text))
+    return out
+
+
 # --- 4. offline ----------------------------------------------------------------------------------
 
 def offline(plan: Plan) -> dict:
@@ -176,7 +212,7 @@ def offline(plan: Plan) -> dict:
 # --- the table ------------------------------------------------------------------------------------
 
 def table(plan: Plan, quick: bool, m: Dict[str, str], floor: dict, typed: dict, ls: dict,
-          rts: Dict[float, dict], off: dict) -> str:
+          rts: Dict[tuple, dict], sleep: List[dict], off: dict) -> str:
     rows = []
 
     def row(item, measured, target="", met=None):
@@ -200,6 +236,10 @@ def table(plan: Plan, quick: bool, m: Dict[str, str], floor: dict, typed: dict, 
         row(f"3. realtime {hz:g} Hz, {rt['sched']}: missed deadlines / stale-command substitutions",
             f"{rt['missed_deadlines']} / {rt['stale_command_substitutions']} of {rt['ticks']} periods", target,
             (rt["missed_deadlines"] == 0) if hz == 200 else None)
+    for f in sleep:
+        row(f"3. for comparison: a bare Python loop sleeping to {f['h_ms']:g} ms deadlines beside a second one, "
+            f"no ROS: worst wake-up lateness / periods > h/2 late",
+            f"{f['worst_ms']:.3f} ms / {f['late']} of {f['periods']}")
     row("4. offline simulator (mwip_sim loop, DSCNDO, 10 s)", f"{off['per_s']:,.0f} steps/s", ">= 20,000 steps/s",
         off["per_s"] >= 20000)
     for n in NODES:
@@ -234,8 +274,9 @@ def main() -> int:
         progress(f"lockstep graph: {plan.repeat} x {plan.lockstep_s:g} s ...")
         ls = lockstep(plan, work)
         rts = {(hz, prio): realtime(plan, hz, prio, work) for hz in (200.0, 1000.0) for prio in (0, RT_PRIORITY)}
+        sleep = os_floor(plan)
         off = offline(plan)
-    text = table(plan, args.quick, m, floor, typed, ls, rts, off)
+    text = table(plan, args.quick, m, floor, typed, ls, rts, sleep, off)
     print(text, end="")
     if args.markdown:
         Path(args.markdown).write_text(text)

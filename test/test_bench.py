@@ -13,6 +13,8 @@ ROWS = [
       for hz in (200, 1000) for sched in ("normal scheduling", "SCHED_FIFO 50")],
     *[rf"3\. realtime {hz} Hz, {sched}[^|]*: missed deadlines / stale-command substitutions \| \d+ / \d+ of \d+ "
       "periods" for hz in (200, 1000) for sched in ("normal scheduling", "SCHED_FIFO 50")],
+    *[rf"3\. for comparison: a bare Python loop sleeping to {h} ms deadlines .* \| [\d.]+ ms / \d+ of \d+"
+      for h in (5, 1)],
     r"4\. offline simulator \(mwip_sim loop, DSCNDO, 10 s\) \| [\d,]+ steps/s",
 ] + [rf"5\. peak resident memory: {n} \| [\d.]+ MiB" for n in
      ("plant_sim", "disturbance_observer", "dscndo_controller", "mcap_recorder")]
