@@ -290,7 +290,9 @@ class PlantSimNode(Node, GracefulNodeMixin):
             rt = {"period_ms_p50": float(np.percentile(per, 50)), "period_ms_p99": float(np.percentile(per, 99)),
                   "period_ms_max": float(per.max()), "ticks": len(self.tick_times),
                   "period_max_at_s": float(np.argmax(per) + 1) * self.h,  # sim time of the tick that ended it
-                  "missed_deadlines": self.missed, "stale_command_substitutions": self.stale}
+                  "missed_deadlines": self.missed, "stale_command_substitutions": self.stale,
+                  "missed_at_s": [round(float(i + 1) * self.h, 6)  # sim time of the ticks that came late (first 50)
+                                  for i in np.flatnonzero(per > 1.5 * self.h * 1e3)[:50]]}
             summary["realtime"] = rt
             log.info(f"realtime: loop period p50 = {rt['period_ms_p50']:.3f} ms, p99 = {rt['period_ms_p99']:.3f} ms, "
                      f"max = {rt['period_ms_max']:.3f} ms (nominal {self.h * 1e3:g} ms); missed deadlines = "
