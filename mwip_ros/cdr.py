@@ -19,13 +19,14 @@ Layouts (alignment counts from the first byte after the 4-byte encapsulation hea
     rosgraph_msgs/Clock          Time clock
 
 Decoding raises :class:`CdrError` (a ``ValueError``) on anything that is not such a
-message: short buffers, unknown encapsulation, strings without their NUL or not UTF-8,
-sequence lengths past the end.  Bytes after the message are ignored, as other CDR readers
+message: short buffers, unknown encapsulation, strings cut off or not UTF-8, sequence
+lengths past the end.  Bytes after the message are ignored, as other CDR readers
 do (rclpy's ``serialize_message`` leaves a few).  Values are not judged (NaN is the
 caller's business).  Nothing here imports ROS.
 """
 from __future__ import annotations
 
+import functools
 import struct
 from typing import Dict, List, Sequence, Tuple
 
@@ -38,14 +39,8 @@ class CdrError(ValueError):
     """Bytes that are not the expected message; the text says what is wrong."""
 
 
-_structs: Dict[str, struct.Struct] = {}
-
-
-def _st(fmt: str) -> struct.Struct:
-    s = _structs.get(fmt)
-    if s is None:
-        s = _structs[fmt] = struct.Struct(fmt)
-    return s
+# Compiled formats; bounded, since a foreign publisher can send any sequence length.
+_st = functools.lru_cache(maxsize=256)(struct.Struct)
 
 
 def split_ns(stamp_ns: int) -> Tuple[int, int]:
@@ -89,10 +84,12 @@ class _Reader:
     def string(self) -> str:
         n = self.u32()
         end = self.pos + n
-        if n == 0 or end > len(self.buf) or self.buf[end - 1] != 0:
-            raise CdrError(f"string of length {n} at byte {self.pos} is cut off or not NUL-terminated")
+        if end > len(self.buf):
+            raise CdrError(f"string of length {n} at byte {self.pos} is cut off at byte {len(self.buf)}")
+        # Length includes the NUL; like Fast CDR, also take a length of 0 or a missing NUL.
+        stop = end - 1 if n and self.buf[end - 1] == 0 else end
         try:
-            s = bytes(self.buf[self.pos:end - 1]).decode("utf-8")
+            s = bytes(self.buf[self.pos:stop]).decode("utf-8")
         except UnicodeDecodeError as exc:
             raise CdrError(f"string at byte {self.pos} is not UTF-8: {exc}") from None
         self.pos = end
@@ -153,7 +150,7 @@ def decode_joint_state(data) -> Tuple[int, str, List[str], Tuple[float, ...], Tu
     stamp = r.time_ns()
     frame = r.string()
     n = r.u32()
-    if 5 * n > len(data):
+    if 4 * n > len(data):
         raise CdrError(f"JointState: {n} names cannot fit in {len(data)} bytes")
     names = [r.string() for _ in range(n)]
     body_at = r.pos
@@ -237,7 +234,7 @@ class JointStateEncoder:
         self.names = list(names)
         self._tail, self._pos = _header_tail(frame_id, self.names)
         self._stamp = _st("<iI")
-        self._cache: Dict[Tuple[int, int, int], Tuple[struct.Struct, int]] = {}
+        self._cache: Dict[Tuple[int, int, int], struct.Struct] = {}
 
     def _layout(self, n_pos: int, n_vel: int, n_eff: int) -> struct.Struct:
         """One struct for the three sequences: count (align 4), doubles (align 8), for each."""

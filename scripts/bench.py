@@ -95,7 +95,7 @@ def dds_floor(plan: Plan, work: Path, typed: bool = False) -> dict:
             out = work / f"ping_{kind}{i}.json"
             ping = g.start("ping", params=None, label=f"ping_{kind}{i}",
                            cmd=[sys.executable, script, "ping", *flag, "--count", str(plan.pings), "--json", str(out)])
-            code = ping.wait(120)
+            code = _wait(ping, 120)
             if code != 0 or not out.exists():
                 raise SystemExit(f"bench: ping-pong failed (exit {code}):\n{ping.output()}")
             runs.append(json.loads(out.read_text()))
@@ -106,6 +106,14 @@ def dds_floor(plan: Plan, work: Path, typed: bool = False) -> dict:
 
 
 # --- 2./3./5. the graph --------------------------------------------------------------------------
+
+def _wait(proc, timeout: float) -> Optional[int]:
+    """The exit code, or None when the process did not end within ``timeout`` (the caller reports it)."""
+    try:
+        return proc.wait(timeout)
+    except subprocess.TimeoutExpired:
+        return None
+
 
 def run_graph(work: Path, label: str, plant_args: List[str], shared: List[str], timeout: float,
               recorder_args: List[str] = ()) -> dict:
@@ -121,12 +129,14 @@ def run_graph(work: Path, label: str, plant_args: List[str], shared: List[str], 
         }
         procs["plant_sim"] = g.start("plant_sim", "-p", "expected_subscribers:=3", "-p", f"summary_json:={summary}",
                                      *plant_args, *shared)
-        code = procs["plant_sim"].wait(timeout)
+        code = _wait(procs["plant_sim"], timeout)
         for name in ("dscndo_controller", "disturbance_observer", "mcap_recorder"):
             procs[name].stop()
-    if code != 0 or not summary.exists():
+    if code not in (0, 3) or not summary.exists():  # 3: the robot fell; the summary says so
         raise SystemExit(f"bench: {label}: plant_sim exit {code}; logs in {work}:\n{procs['plant_sim'].output()}")
     result = json.loads(summary.read_text())
+    if result["fallen"]:
+        progress(f"{label}: the robot FELL after {result['periods']} periods; the numbers are for that shorter run")
     result["peak_rss_mib"] = {n: (p.peak_rss_kib or 0) / 1024 for n, p in procs.items()}
     result["fifo_refused"] = any("cannot switch to SCHED_FIFO" in p.output() for p in procs.values())
     return result
@@ -152,7 +162,9 @@ def realtime(plan: Plan, rate_hz: float, priority: int, work: Path) -> dict:
     r = run_graph(work / f"realtime{rate_hz:g}_{priority}", f"realtime {rate_hz:g} Hz",
                   ["-p", "mode:=realtime", "-p", f"duration_s:={plan.realtime_s}"], shared,
                   timeout=plan.realtime_s + 120)
-    rt = r["realtime"]
+    rt = r.get("realtime")
+    if rt is None:
+        raise SystemExit(f"bench: realtime {rate_hz:g} Hz: the plant ran too few periods to time ({r['periods']})")
     rt["sched"] = sched if not r["fifo_refused"] else f"{sched} refused (needs root or CAP_SYS_NICE): normal"
     progress(f"realtime {rate_hz:g} Hz, {rt['sched']}: period p99 {rt['period_ms_p99']:.3f} ms, "
              f"max {rt['period_ms_max']:.3f} ms, missed {rt['missed_deadlines']}, "
@@ -187,10 +199,14 @@ def os_floor(plan: Plan) -> List[dict]:
     for p in procs:
         try:
             text, _ = p.communicate(timeout=plan.realtime_s + 60)
+        except subprocess.TimeoutExpired:
+            text = ""
         finally:
             if p.poll() is None:
                 p.kill()
                 p.wait(5)
+        if not text.strip():
+            raise SystemExit(f"bench: the bare sleep loop (pid {p.pid}) gave no result (exit {p.returncode})")
         out.append(json.loads(text))
     return out
 

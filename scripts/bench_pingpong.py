@@ -30,6 +30,7 @@ QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=Reliabili
                  durability=DurabilityPolicy.VOLATILE)
 WARMUP = 200          # round trips before the clock starts
 MATCH_TIMEOUT_S = 30.0
+RESEND_NS = 500_000_000  # a round trip takes ~0.2 ms; one not back after 0.5 s was lost at start-up
 
 
 class Pong(Node, GracefulNodeMixin):
@@ -77,6 +78,9 @@ class Ping(Node, GracefulNodeMixin):
         self._send()
 
     def spin_step(self, executor) -> None:
+        if self.i >= 0 and not self.done and time.perf_counter_ns() - self.sent_ns > RESEND_NS:
+            self.i -= 1
+            self._send()  # lost before both directions had matched (volatile QoS): send it again
         if self.i < 0:
             if self.pub.get_subscription_count() >= 1 and self.sub.get_publisher_count() >= 1:
                 time.sleep(0.2)  # let both directions finish matching

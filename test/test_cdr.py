@@ -85,11 +85,15 @@ def test_bad_bytes_are_rejected_with_a_reason():
         "is not CDR_LE": b"\x00\x02\x00\x00" + good[4:],
         "message ends": good[:70],
         "cannot fit": good[:20] + struct.pack("<I", 10 ** 6) + good[24:],
-        "not NUL-terminated": good[:33] + b"x" + good[34:],   # the NUL after "wheel"
+        "is cut off": good[:36] + struct.pack("<I", 200) + good[40:],  # the length of "body_pitch"
     }
     for reason, data in cases.items():
         with pytest.raises(cdr.CdrError, match=reason):
             cdr.decode_joint_state(data)
+    # like Fast CDR: a string without its NUL, or of length 0, is still read
+    assert cdr.decode_joint_state(good[:33] + b"x" + good[34:])[2] == ["wheelx", "body_pitch"]
+    zero_len_frame = cdr.CDR_LE + struct.pack("<iI", 1, 2) + struct.pack("<IIIII", 0, 0, 0, 0, 0)
+    assert cdr.decode_joint_state(zero_len_frame) == (1_000_000_002, "", [], (), (), ())
     with pytest.raises(cdr.CdrError, match="longer than the message"):
         cdr.decode_joint_state(good[:100] + struct.pack("<I", 10 ** 6) + good[104:])  # effort's count
     with pytest.raises(cdr.CdrError, match="not UTF-8"):

@@ -124,7 +124,8 @@ def run_node(factory: Callable[..., object], argv: Optional[Sequence[str]] = Non
         # Everything is written; what is left is the middleware's own clean-up.  Fast DDS 2.14 can
         # deadlock there (rmw destroy_participant spins in set_listener, holding the GIL, while a
         # discovery thread waits for its lock; seen when several nodes exit at once).  faulthandler's
-        # watchdog needs no GIL: it prints where the process is stuck and ends it with exit code 1.
+        # watchdog needs no GIL: it prints where the process is stuck and ends it with exit code 1
+        # (whatever the node's own code was: its files are written, but a script sees a failure).
         faulthandler.dump_traceback_later(SHUTDOWN_GRACE_S, exit=True)
         executor.remove_node(node)
         try:
@@ -132,6 +133,7 @@ def run_node(factory: Callable[..., object], argv: Optional[Sequence[str]] = Non
         except TypeError:  # pragma: no cover
             executor.shutdown()
     finally:
+        faulthandler.dump_traceback_later(SHUTDOWN_GRACE_S, exit=True)  # also when the loop or on_shutdown raised
         if node is not None:
             node.destroy_node()
         if context.ok():
