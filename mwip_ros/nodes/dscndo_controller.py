@@ -89,13 +89,16 @@ class DscndoController(Node, GracefulNodeMixin):
             self._trim()
             return  # wait for the estimate of this very state
         q, dq = self.states.pop(stamp)
+        self.estimates.pop(stamp, None)
         out = self.ctrl.step(q[1], dq[1], dq[0], tau_hat)
         self.cmd_pub.publish(M.encode_command(out.u))
         self.int_pub.publish(M.encode_internals(stamp, out))
         self.last_answered = stamp
         self.count += 1
-        self.states = {s: v for s, v in self.states.items() if s > stamp}
-        self.estimates = {s: v for s, v in self.estimates.items() if s > stamp}
+        for d in (self.states, self.estimates):  # usually empty by now: drop what is older than this state
+            if d:
+                for s in [s for s in d if s < stamp]:
+                    del d[s]
 
     def _trim(self):
         for d in (self.states, self.estimates):
