@@ -96,7 +96,7 @@ def run_node(factory: Callable[..., object], argv: Optional[Sequence[str]] = Non
     context = rclpy.Context()
     rclpy.init(args=argv, context=context, signal_handler_options=SignalHandlerOptions.NO)
     old = {s: signal.signal(s, _on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
-    node = None
+    node = executor = None
     code = EXIT_OK
     try:
         try:
@@ -121,19 +121,20 @@ def run_node(factory: Callable[..., object], argv: Optional[Sequence[str]] = Non
             node.get_logger().info(f"received {signal.Signals(stop['signal']).name}, shutting down")
         node.on_shutdown()
         code = node.exit_code
+    finally:
         # Everything is written; what is left is the middleware's own clean-up.  Fast DDS 2.14 can
         # deadlock there (rmw destroy_participant spins in set_listener, holding the GIL, while a
         # discovery thread waits for its lock; seen when several nodes exit at once).  faulthandler's
         # watchdog needs no GIL: it prints where the process is stuck and ends it with exit code 1
         # (whatever the node's own code was: its files are written, but a script sees a failure).
+        # Armed here, so it also covers a loop or an on_shutdown that raised.
         faulthandler.dump_traceback_later(SHUTDOWN_GRACE_S, exit=True)
-        executor.remove_node(node)
-        try:
-            executor.shutdown(timeout_sec=1.0)
-        except TypeError:  # pragma: no cover
-            executor.shutdown()
-    finally:
-        faulthandler.dump_traceback_later(SHUTDOWN_GRACE_S, exit=True)  # also when the loop or on_shutdown raised
+        if executor is not None:
+            executor.remove_node(node)
+            try:
+                executor.shutdown(timeout_sec=1.0)
+            except TypeError:  # pragma: no cover
+                executor.shutdown()
         if node is not None:
             node.destroy_node()
         if context.ok():
