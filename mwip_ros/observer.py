@@ -57,11 +57,6 @@ def _flat(X) -> tuple[float, float, float, float]:
     return tuple(float(v) for v in np.asarray(X, dtype=float).ravel())
 
 
-def tau_hat_of(X: np.ndarray, z, dq) -> np.ndarray:
-    """tau_hat = z + p(q') = z + X q' (eq. 12)."""
-    return np.asarray(z) + X @ np.asarray(dq)
-
-
 def error_rates(nominal: PhysicalParams, X: np.ndarray, q) -> np.ndarray:
     """Eigenvalues of X M_hat(q)^-1: the decay rates (1/s) of the estimation error."""
     return np.linalg.eigvals(X @ np.linalg.inv(mass_matrix(nominal, q)))

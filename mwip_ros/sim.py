@@ -8,7 +8,6 @@ the same order, so a lockstep graph reproduces these numbers.
 from __future__ import annotations
 
 import csv
-import math
 from dataclasses import dataclass, field
 from typing import Callable, Dict, List, Mapping, Optional
 
