@@ -42,7 +42,7 @@ from graphproc import PARAMS, Graph  # noqa: E402
 
 NODES = ("plant_sim", "disturbance_observer", "dscndo_controller", "mcap_recorder")
 RT_PRIORITY = 50     # the realtime runs are made with normal scheduling and with this SCHED_FIFO priority
-MSGS_PER_STEP = 1.5  # round trips of messages on a lockstep step's critical path (SPEC section 4)
+MSGS_PER_STEP = 1.5  # round trips of messages on a lockstep step's critical path (docs/theory.md, discrete time)
 
 
 @dataclass
@@ -214,12 +214,13 @@ def os_floor(plan: Plan) -> List[dict]:
 # --- 4. offline ----------------------------------------------------------------------------------
 
 def offline(plan: Plan) -> dict:
-    from mwip_ros import params as P, sim
-    values = sim.merged_values(P.load_param_file(PARAMS))
+    from mwip_ros import params as P
+    from mwip_ros.core.sim import simulate
+    loop = P.closed_loop(P.merged_values(P.load_param_file(PARAMS)), use_observer=True, duration=10.0)
     runs = []
     for _ in range(max(plan.repeat, 3)):
         t0 = time.perf_counter()
-        r = sim.simulate(values, use_observer=True, duration=10.0)
+        r = simulate(loop)
         runs.append(len(r) / (time.perf_counter() - t0))
     progress(f"offline: {statistics.median(runs):.0f} steps/s")
     return {"per_s": statistics.median(runs), "runs": runs, "steps": len(r)}

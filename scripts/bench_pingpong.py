@@ -23,8 +23,8 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Float64
 
-from mwip_ros import cdr
-from mwip_ros.nodes._runtime import EXIT_ERROR, GracefulNodeMixin, run_node
+from mwip_ros.msgs import cdr
+from mwip_ros.nodes.runtime import EXIT_ERROR, GracefulNodeMixin, run_node
 
 QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
                  durability=DurabilityPolicy.VOLATILE)
@@ -73,7 +73,7 @@ class Ping(Node, GracefulNodeMixin):
             self.rtt_ns[k - 1] = now - self.sent_ns
         if k == self.count:        # ... and stops at the answer to message WARMUP + count
             self.t1 = now
-            self.done = True
+            self.finish()
             return
         self._send()
 

@@ -74,6 +74,7 @@ PLANT_EXTRA=(-p "mode:=$MODE")
 [ -n "$DURATION" ] && PLANT_EXTRA+=(-p "duration_s:=$DURATION")
 
 RUNS=()
+ESTIMATES=()   # the observer's estimates (CSV), for a report from the plant's CSVs (--no-record)
 for CTRL in dsc dscndo; do
     export ROS_DOMAIN_ID=$(( (RANDOM % 200) + 1 ))
     USE_OBS=false; [ "$CTRL" = dscndo ] && USE_OBS=true
@@ -89,7 +90,8 @@ for CTRL in dsc dscndo; do
     else
         RUNS+=("$LOGS/${CTRL}.csv")
     fi
-    disturbance_observer --ros-args --params-file "$PARAMS" \
+    ESTIMATES+=("$LOGS/${CTRL}_estimates.csv")
+    disturbance_observer --ros-args --params-file "$PARAMS" -p "csv:=$LOGS/${CTRL}_estimates.csv" \
         > "$LOGS/${CTRL}_disturbance_observer.log" 2>&1 &
     PIDS+=($!)
     dscndo_controller --ros-args --params-file "$PARAMS" -p "use_observer:=$USE_OBS" \
@@ -120,7 +122,11 @@ done
 
 REPORT="$OUT/${STAMP}_report"
 echo "=== report ==="
-mwip_report "${RUNS[@]}" --labels dsc dscndo --out "$REPORT"
+if [ "$RECORD" = 1 ]; then
+    mwip_report "${RUNS[@]}" --labels dsc dscndo --out "$REPORT"
+else
+    mwip_report "${RUNS[@]}" --estimates "${ESTIMATES[@]}" --labels dsc dscndo --out "$REPORT"
+fi
 echo
 if [ "$RECORD" = 1 ]; then
     echo "bags:   ${RUNS[0]#$ROOT/}  ${RUNS[1]#$ROOT/}"

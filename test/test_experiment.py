@@ -49,13 +49,13 @@ def test_main_job_records_two_bags_and_writes_the_report(tmp_path):
         for topic in ("/joint_states", "/wheel_torque_cmd", "/disturbance_estimate", "/lumped_disturbance",
                       "/controller_internals", "/clock"):
             assert counts[topic] == 2001, (bag.name, topic)
-    # the report's reading of a bag equals the plant's own CSV of the same run (u, estimate, truth by stamp)
-    from mwip_ros.report import load_run
-    from mwip_ros.sim import read_csv
+    # the report's reading of a bag equals the plant's own CSV of the same run joined with the observer's
+    # estimates by stamp (u, estimate, truth)
+    from mwip_ros.runs import load_run
     logs = next(p for p in tmp_path.iterdir() if p.name.endswith("_logs"))
     for bag in bags:
         ctrl = bag.name.rsplit("_", 1)[1]
-        from_bag, from_csv = load_run(bag), read_csv(logs / f"{ctrl}.csv")
+        from_bag, from_csv = load_run(bag), load_run(logs / f"{ctrl}.csv", estimates=logs / f"{ctrl}_estimates.csv")
         for c in ("t", "theta_w", "theta_b", "dtheta_w", "dtheta_b", "u", "tau_hat1", "tau_hat2", "tau_d1", "tau_d2"):
             b, v = from_bag[c], from_csv[c]
             assert np.isfinite(b).all(), (ctrl, c)  # the bag has every estimate, also the last one

@@ -1,0 +1,17 @@
+"""The ROS 2 nodes, one per file, and what they share.
+
+========================  ==============================================================
+:mod:`.plant_sim`          the true robot: lockstep or realtime
+:mod:`.disturbance_observer`  the NDO
+:mod:`.dscndo_controller`  DSC / DSCNDO
+:mod:`.mcap_recorder`      records the graph into a rosbag2 MCAP bag
+:mod:`.bag_replay`         replays a bag (:mod:`.replay`) or re-simulates it (:mod:`.resim`)
+:mod:`.lockstep`           the one lockstep driver (plant_sim and resim)
+:mod:`.params`             declares a node's parameters from the schema, validates updates
+:mod:`.runtime`            process plumbing, exit codes, ``finish``, rejected-message counts
+========================  ==============================================================
+
+A node parses parameters, subscribes, calls the core (:mod:`mwip_ros.core`) and publishes
+through the message layer (:mod:`mwip_ros.msgs`); docs/architecture.md follows one state
+sample through them.
+"""

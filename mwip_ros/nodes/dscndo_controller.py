@@ -15,11 +15,13 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 
 from mwip_ros import params as P
-from mwip_ros.controller import DscController
-from mwip_ros.nodes import _msgs as M
-from mwip_ros.nodes._params import declare
-from mwip_ros.nodes._runtime import GracefulNodeMixin, run_node
-from mwip_ros.theorem import theorem2
+from mwip_ros.core.controller import DscController
+from mwip_ros.core.theorem import controller_conditions
+from mwip_ros.msgs import BadMessage
+from mwip_ros.msgs import layouts as L
+from mwip_ros.msgs.qos import GRAPH_QOS
+from mwip_ros.nodes.params import declare
+from mwip_ros.nodes.runtime import GracefulNodeMixin, Rejects, run_node
 
 NAME = "dscndo_controller"
 _MAX_PENDING = 64
@@ -32,22 +34,22 @@ class DscndoController(Node, GracefulNodeMixin):
         self.ctrl = DscController(P.physical(self.v, "nominal"), P.gains(self.v), P.period(self.v),
                                   use_observer=self.v["use_observer"])
         self._warn_theorem()
-        self.states = {}      # stamp -> (q, dq) waiting for an estimate
+        self.states = {}      # stamp -> State waiting for an estimate
         self.estimates = {}   # stamp -> (tau_hat1, tau_hat2) waiting for a state
         self.last_answered = None
         self.count = 0
-        self.rejects = M.Rejects(self.get_logger())
-        self.cmd_pub = self.create_publisher(Float64, "wheel_torque_cmd", M.GRAPH_QOS)
-        self.int_pub = self.create_publisher(JointState, "controller_internals", M.GRAPH_QOS)
-        self.create_subscription(JointState, "joint_states", self._on_state, M.GRAPH_QOS, raw=True)
-        self.create_subscription(WrenchStamped, "disturbance_estimate", self._on_estimate, M.GRAPH_QOS, raw=True)
+        self.rejects = Rejects(self.get_logger())
+        self.cmd_pub = self.create_publisher(Float64, "wheel_torque_cmd", GRAPH_QOS)
+        self.int_pub = self.create_publisher(JointState, "controller_internals", GRAPH_QOS)
+        self.create_subscription(JointState, "joint_states", self._on_state, GRAPH_QOS, raw=True)
+        self.create_subscription(WrenchStamped, "disturbance_estimate", self._on_estimate, GRAPH_QOS, raw=True)
         g = self.ctrl.gains
         self.get_logger().info(f"{'DSCNDO' if self.ctrl.use_observer else 'DSC'} ready: k1 = {g.k1}, k2 = {g.k2}, "
                                f"tau4 = {g.tau4}")
 
     def _warn_theorem(self):
-        th = theorem2(self.ctrl.nominal, self.ctrl.gains, [[100.0, 0.0], [0.0, 100.0]])
-        if min(th.a1, th.a2, th.a3) <= 0:
+        th = controller_conditions(self.ctrl.nominal, self.ctrl.gains)
+        if not th.satisfied:
             self.get_logger().warning(f"gains break Theorem 2 (eq. 35): a1 = {th.a1:.4f}, a2 = {th.a2:.4f}, "
                                       f"a3 = {th.a3:.4f} (all must be > 0); allowed, but stability is not "
                                       "guaranteed. Run mwip_theorem for a1..a5")
@@ -61,19 +63,19 @@ class DscndoController(Node, GracefulNodeMixin):
 
     def _on_state(self, data: bytes) -> None:
         try:
-            stamp, q, dq, _ = M.parse_joint_state(data)
-        except M.BadMessage as exc:
+            stamp, x, _ = L.parse_joint_state(data)
+        except BadMessage as exc:
             self.rejects("joint_states", str(exc))
             return
         if self.last_answered is not None and stamp <= self.last_answered:
             return  # already answered (a resent state): one command per state
-        self.states[stamp] = (q, dq)
+        self.states[stamp] = x
         self._try(stamp)
 
     def _on_estimate(self, data: bytes) -> None:
         try:
-            stamp, t1, t2 = M.parse_wrench(data)
-        except M.BadMessage as exc:
+            stamp, t1, t2 = L.parse_wrench(data)
+        except BadMessage as exc:
             self.rejects("disturbance_estimate", str(exc))
             return
         if self.last_answered is not None and stamp <= self.last_answered:
@@ -88,11 +90,11 @@ class DscndoController(Node, GracefulNodeMixin):
         if self.ctrl.use_observer and tau_hat is None:
             self._trim()
             return  # wait for the estimate of this very state
-        q, dq = self.states.pop(stamp)
+        x = self.states.pop(stamp)
         self.estimates.pop(stamp, None)
-        out = self.ctrl.step(q[1], dq[1], dq[0], tau_hat)
-        self.cmd_pub.publish(M.encode_command(out.u))
-        self.int_pub.publish(M.encode_internals(stamp, out))
+        out = self.ctrl.step(x, tau_hat)
+        self.cmd_pub.publish(L.encode_command(out.u))
+        self.int_pub.publish(L.encode_internals(stamp, out))
         self.last_answered = stamp
         self.count += 1
         for d in (self.states, self.estimates):  # usually empty by now: drop what is older than this state

@@ -3,7 +3,7 @@
     python -m mwip_ros.nodes.mcap_recorder --ros-args -p output:=bags/run1 [-p compression:=zstd]
 
 Parameters: ``output`` (the bag directory to create; required, must not exist),
-``topics`` (names from :data:`mwip_ros.topics.GRAPH_TOPICS`; empty = all of them),
+``topics`` (names from :data:`mwip_ros.msgs.topics.GRAPH_TOPICS`; empty = all of them),
 ``compression`` ('' or 'zstd', per MCAP chunk), ``chunk_size`` (bytes).
 
 Every message is stored as the exact CDR bytes received (raw subscriptions), with the
@@ -24,13 +24,13 @@ from typing import Dict, List, Optional, Tuple
 
 from rclpy.node import Node
 
-from mwip_ros.bag.schema import BagError, message_definition, type_hash as installed_type_hash
-from mwip_ros.bag.writer import BagWriter, qos_profiles_yaml
-from mwip_ros.nodes import _msgs as M
-from mwip_ros.nodes._params import declare
-from mwip_ros.nodes._runtime import EXIT_ERROR, GracefulNodeMixin, run_node
+from mwip_ros.bag import BagError, BagWriter, message_definition, qos_profiles_yaml
+from mwip_ros.bag import type_hash as installed_type_hash
+from mwip_ros.msgs.qos import GRAPH_QOS
+from mwip_ros.msgs.topics import GRAPH_TOPICS, graph_type, msg_class
+from mwip_ros.nodes.params import declare
+from mwip_ros.nodes.runtime import EXIT_ERROR, GracefulNodeMixin, run_node
 from mwip_ros.params import ParamError
-from mwip_ros.topics import GRAPH_TOPICS, graph_type, msg_class
 
 NAME = "mcap_recorder"
 PROGRESS_PERIOD_S = 5.0
@@ -66,7 +66,7 @@ class McapRecorder(Node, GracefulNodeMixin):
         self.subs = []
         for name, resolved, type_name in wanted:
             self.subs.append(self.create_subscription(
-                msg_class(type_name), name, self._callback(resolved, type_name), M.GRAPH_QOS, raw=True,
+                msg_class(type_name), name, self._callback(resolved, type_name), GRAPH_QOS, raw=True,
                 event_callbacks=self._events(resolved)))
             self.types[resolved] = type_name
             self.counts[resolved] = 0
@@ -134,9 +134,7 @@ class McapRecorder(Node, GracefulNodeMixin):
             self.writer.write(topic, data, log_time)
         except (BagError, OSError) as exc:
             self.failed = True
-            self.exit_code = EXIT_ERROR
-            self.done = True
-            self.get_logger().error(f"cannot write to {self.writer.mcap_path}: {exc}; stopping")
+            self.finish(EXIT_ERROR, f"cannot write to {self.writer.mcap_path}: {exc}; stopping")
             return
         self.counts[topic] = self.counts.get(topic, 0) + 1
         self.received += 1
@@ -160,10 +158,8 @@ class McapRecorder(Node, GracefulNodeMixin):
         try:
             executor.spin_once(timeout_sec=0.1)
         except Exception as exc:  # keep the bag: on_shutdown still finishes it
-            self.get_logger().error(f"recorder error: {type(exc).__name__}: {exc}; stopping")
             self.failed = True
-            self.exit_code = EXIT_ERROR
-            self.done = True
+            self.finish(EXIT_ERROR, f"recorder error: {type(exc).__name__}: {exc}; stopping")
             return
         now = time.monotonic()
         if now - self._last_progress >= PROGRESS_PERIOD_S:
@@ -200,8 +196,7 @@ class McapRecorder(Node, GracefulNodeMixin):
         try:
             self.writer.close()
         except (BagError, OSError) as exc:
-            self.exit_code = EXIT_ERROR
-            log.error(f"cannot finish the bag {self.output}: {exc}; run mwip_bag_repair {self.output}")
+            self.finish(EXIT_ERROR, f"cannot finish the bag {self.output}: {exc}; run mwip_bag_repair {self.output}")
             return
         log.info(f"bag {self.output}: {self.writer.message_count} messages: {self._per_topic()}")
 

@@ -1,0 +1,92 @@
+"""Dynamic surface controller (eq. 16-28) and the DSCNDO law (eq. 19-21).
+
+All model terms use the *nominal* parameters.  ``dsc_law`` is a pure function of
+one :class:`~mwip_ros.core.model.State`; ``DscController`` adds the first-order
+filter (eq. 25) advanced exactly once per control period (docs/theory.md).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Optional
+
+from .model import PhysicalParams
+
+__all__ = ["DscGains", "ControlOutput", "x4_bar_of", "dsc_law", "filter_step", "DscController"]
+
+
+@dataclass(frozen=True)
+class DscGains:
+    """The DSC gains; their values (the paper's 6, 6, 0.1) live in the parameter schema."""
+
+    k1: float     # first surface gain, eq. (24)
+    k2: float     # second surface gain, eq. (28)
+    tau4: float   # filter time constant [s], eq. (25)
+
+
+@dataclass(frozen=True)
+class ControlOutput:
+    """Everything the law computed for one state (published as controller internals)."""
+
+    u: float        # applied command, eq. (19)
+    u_dsc: float    # eq. (28)
+    u_taud: float   # observer compensation, eq. (20)-(21); 0 for plain DSC
+    S1: float       # eq. (22)
+    S2: float       # eq. (26)
+    x1: float       # eq. (16)
+    x4_bar: float   # virtual control, eq. (24)
+    x4d: float      # filtered virtual control used at this step, eq. (25)
+
+
+def x4_bar_of(nominal: PhysicalParams, k1: float, theta_b: float, x1: float) -> float:
+    """Virtual control x4_bar (eq. 24) with S1 = x2 = theta_b (eq. 22)."""
+    mc = nominal.m12 * math.cos(theta_b)
+    return (nominal.m22 + mc) / (nominal.m11 + mc) * (x1 / (nominal.m22 + mc) + k1 * theta_b)
+
+
+def dsc_law(nominal: PhysicalParams, gains: DscGains, x, x4d: Optional[float], tau_hat=None) -> ControlOutput:
+    """u = u_DSC - u_taud for the state ``x``; ``x4d=None`` means the first step (x4d(0) = x4_bar(0)).
+
+    ``tau_hat=None`` is plain DSC (observer term off).
+    """
+    p = nominal
+    _, x2, x4, x3 = x                            # x2 = theta_b, x3 = theta_b', x4 = theta_w' (eq. 16)
+    mc = p.m12 * math.cos(x2)                    # M_C12
+    gs = p.G_b * math.sin(x2)                    # G_S2
+    A = p.m11 * p.m22 - mc ** 2
+    x1 = (p.m11 + mc) * x4 + (p.m22 + mc) * x3   # eq. (16)
+    S1 = x2                                      # eq. (22)
+    x4_bar = x4_bar_of(p, gains.k1, x2, x1)      # eq. (24)
+    if x4d is None:
+        x4d = x4_bar                             # eq. (25) initial condition
+    S2 = x4 - x4d                                # eq. (26)
+    u_dsc = (A / (p.m22 + mc) * ((x4_bar - x4d) / gains.tau4 - gains.k2 * S2)
+             - p.m12 * p.m22 * math.sin(x2) * (x1 - (p.m11 + mc) * x4) ** 2 / (p.m22 + mc) ** 3
+             + mc * gs / (p.m22 + mc))           # eq. (28)
+    if tau_hat is None:
+        u_taud = 0.0
+    else:
+        u_taud = tau_hat[0] - mc / (p.m22 + mc) * tau_hat[1]  # eq. (20)-(21), fix: uses tau_hat1
+    return ControlOutput(u=u_dsc - u_taud, u_dsc=u_dsc, u_taud=u_taud, S1=S1, S2=S2,
+                         x1=x1, x4_bar=x4_bar, x4d=x4d)     # eq. (19)
+
+
+def filter_step(x4d: float, x4_bar: float, h: float, tau4: float) -> float:
+    """Exact discretisation of tau4 x4d' + x4d = x4_bar over one period with x4_bar held."""
+    return x4_bar + (x4d - x4_bar) * math.exp(-h / tau4)
+
+
+@dataclass
+class DscController:
+    """DSC (``use_observer=False``) or DSCNDO, stepping the filter once per call."""
+
+    nominal: PhysicalParams
+    gains: DscGains
+    h: float
+    use_observer: bool = True
+    x4d: Optional[float] = None
+
+    def step(self, x, tau_hat=None) -> ControlOutput:
+        out = dsc_law(self.nominal, self.gains, x, self.x4d, tau_hat if self.use_observer else None)
+        self.x4d = filter_step(out.x4d, out.x4_bar, self.h, self.gains.tau4)
+        return out

@@ -1,0 +1,99 @@
+"""Nonlinear disturbance observer (eq. 8-15) and its discrete form (docs/theory.md, discrete time).
+
+    z'      = L(q) (N_hat(q, q') - [u, 0]^T - p(q') - z),  L = X M_hat^-1,  p = X q'   (eq. 12-13)
+    tau_hat = z + X q'
+
+With a constant tau_d the error tau_d - tau_hat obeys e' = -X M_hat^-1 e
+(*fix*: eq. 11 of the recovered text reads "tau_tilde' = -L tau_tilde").
+Every function takes the whole :class:`~mwip_ros.core.model.State` ``x``.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Optional, Tuple
+
+import numpy as np
+
+from .model import PhysicalParams, coriolis_gravity, mass_matrix
+
+__all__ = ["gain_matrix", "z_dot", "z_dot_explicit", "error_rates", "DiscreteObserver"]
+
+
+def gain_matrix(c) -> np.ndarray:
+    """X = [[c1, c2], [c3, c4]] from the flat list (c1, c2, c3, c4) (eq. 14)."""
+    c = np.asarray(c, dtype=float)
+    if c.shape == (2, 2):
+        return c.copy()
+    if c.shape != (4,):
+        raise ValueError(f"X must have 4 entries (c1, c2, c3, c4), got shape {c.shape}")
+    return c.reshape(2, 2)
+
+
+def z_dot(nominal: PhysicalParams, X: np.ndarray, x, u: float, z) -> np.ndarray:
+    """Matrix form of the observer, eq. (12) with eq. (13)."""
+    L = X @ np.linalg.inv(mass_matrix(nominal, x))
+    return L @ (coriolis_gravity(nominal, x) - np.array([u, 0.0]) - X @ np.asarray(x[2:]) - np.asarray(z))
+
+
+def z_dot_explicit(nominal: PhysicalParams, X, x, u: float, z) -> Tuple[float, float]:
+    """Eq. (15): the observer written out for the 2x2 case, as floats (what ``DiscreteObserver`` steps).
+
+    ``X`` is the 2x2 gain matrix or the flat (c1, c2, c3, c4).
+    """
+    c1, c2, c3, c4 = _flat(X)
+    p = nominal
+    _, th_b, dth_w, dth_b = x
+    s, mc = math.sin(th_b), p.m12 * math.cos(th_b)
+    A = p.m11 * p.m22 - mc * mc
+    D1, D2 = p.m22 + mc, p.m11 + mc
+    cent = p.m12 * dth_b * dth_b * s
+    w1 = cent + u + c1 * dth_w + c2 * dth_b + z[0]
+    w2 = p.G_b * s + cent + c3 * dth_w + c4 * dth_b + z[1]
+    return (((c2 * D2 - c1 * D1) * w1 - (c2 * p.m11 - c1 * mc) * w2) / A,   # eq. (15), z1'
+            ((c4 * D2 - c3 * D1) * w1 - (c4 * p.m11 - c3 * mc) * w2) / A)   # eq. (15), z2'
+
+
+def _flat(X) -> Tuple[float, float, float, float]:
+    if isinstance(X, tuple) and len(X) == 4:
+        return X
+    return tuple(float(v) for v in np.asarray(X, dtype=float).ravel())
+
+
+def error_rates(nominal: PhysicalParams, X: np.ndarray, x) -> np.ndarray:
+    """Eigenvalues of X M_hat(q)^-1: the decay rates (1/s) of the estimation error."""
+    return np.linalg.eigvals(X @ np.linalg.inv(mass_matrix(nominal, x)))
+
+
+@dataclass
+class DiscreteObserver:
+    """Explicit-Euler observer (docs/theory.md, discrete time).
+
+    ``update(x_k, u_{k-1})`` is called once per state k and returns tau_hat_k: at k = 0
+    it sets z_0 = -X q'_0 (so tau_hat_0 = 0); for k >= 1 it advances
+    z_k = z_{k-1} + h z'(x_{k-1}, u_{k-1}, z_{k-1}).  ``h`` is the step length since the
+    previous state: the control period unless the caller passes another (a realtime
+    node that lost a state integrates over the whole gap).  ``z`` and the returned
+    tau_hat are tuples of two floats.  Assign ``X`` to change the gains.
+    """
+
+    nominal: PhysicalParams
+    X: np.ndarray
+    h: float
+    z: Optional[tuple] = None
+    _prev: Optional[tuple] = field(default=None, repr=False)
+    _gains: tuple = field(default=(None, None), repr=False)  # (X object, its flat floats)
+
+    def update(self, x, u_prev: float, h: Optional[float] = None) -> Tuple[float, float]:
+        if self._gains[0] is not self.X:  # X was (re)assigned, e.g. a parameter update
+            self._gains = (self.X, _flat(self.X))
+        c1, c2, c3, c4 = c = self._gains[1]
+        dw, db = float(x[2]), float(x[3])
+        if self.z is None:
+            self.z = (-(c1 * dw + c2 * db), -(c3 * dw + c4 * db))  # tau_hat(0) = 0
+        else:
+            step = self.h if h is None else h
+            d1, d2 = z_dot_explicit(self.nominal, c, self._prev, u_prev, self.z)
+            self.z = (self.z[0] + step * d1, self.z[1] + step * d2)  # explicit Euler of eq. (12)
+        self._prev = x
+        return (self.z[0] + c1 * dw + c2 * db, self.z[1] + c3 * dw + c4 * db)  # tau_hat = z + X q'

@@ -1,0 +1,132 @@
+"""The true plant as a discrete-time stepper (docs/theory.md: the plant and discrete time).
+
+``PlantSim`` integrates eq. (1) with classic RK4 in ``substeps`` equal sub-steps
+per control period, holding ``u`` and ``D_w`` over the period and evaluating
+tau_ext at each stage time.  ``D_w`` is drawn once per period from a seeded
+generator (Gaussian, clipped at 0).  The offline simulator and the
+``plant_sim`` node both drive this class, so they integrate the same numbers.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Optional, Tuple
+
+import numpy as np
+
+from .model import PhysicalParams, Sinusoid, State, accel, lumped_disturbance
+
+__all__ = ["PlantConfig", "PlantSim", "saturate"]
+
+
+@dataclass(frozen=True)
+class PlantConfig:
+    """Everything the true plant needs; built from the parameter file by ``mwip_ros.params.plant_config``."""
+
+    actual: PhysicalParams
+    nominal: PhysicalParams          # only to report the true lumped disturbance
+    D_b: float
+    D_w_mean: float
+    D_w_variance: float
+    tau_ext1: Sinusoid
+    tau_ext2: Sinusoid
+    h: float                         # control period [s]
+    substeps: int                    # RK4 sub-steps per period
+    seed: int                        # of the D_w noise
+    initial: State
+    torque_limit: float              # 0 = none
+    fall_angle: float                # |theta_b| beyond this is a fall [rad]
+
+
+def saturate(u: float, limit: float) -> float:
+    """Apply ``torque_limit`` (0 = no limit)."""
+    if limit > 0.0:
+        return max(-limit, min(limit, u))
+    return u
+
+
+@dataclass
+class PlantSim:
+    """The true state ``x`` (a :class:`State`) at t_k = k h.
+
+    The state is four Python floats: the plant evaluates eq. (1) 4 x ``substeps``
+    times per period, and scalar float arithmetic is several times faster than
+    4-element numpy arrays.
+    """
+
+    cfg: PlantConfig
+    k: int = 0
+    x: Optional[State] = None
+    D_w: float = 0.0                 # ground friction over the current period
+    u_prev: float = 0.0              # torque applied over the previous period (0 at k = 0)
+    _rng: np.random.Generator = field(default=None, repr=False)
+    _noise: list = field(default_factory=list, repr=False)
+
+    def __post_init__(self):
+        self.x = State(*(float(v) for v in (self.cfg.initial if self.x is None else self.x)))
+        self._rng = np.random.default_rng(self.cfg.seed)
+        self.D_w = self._draw_D_w()
+
+    @property
+    def t(self) -> float:
+        return self.k * self.cfg.h
+
+    @property
+    def fallen(self) -> bool:
+        return abs(self.x[1]) > self.cfg.fall_angle
+
+    def _draw_D_w(self) -> float:
+        c = self.cfg
+        if c.D_w_variance == 0.0:
+            return c.D_w_mean
+        if not self._noise:  # draw in blocks: the same sequence as one standard_normal() per period
+            self._noise = self._rng.standard_normal(256).tolist()[::-1]
+        return max(0.0, c.D_w_mean + math.sqrt(c.D_w_variance) * self._noise.pop())
+
+    def tau_ext(self, t: float, extra: Tuple[float, float] = (0.0, 0.0)) -> Tuple[float, float]:
+        return self.cfg.tau_ext1(t) + extra[0], self.cfg.tau_ext2(t) + extra[1]
+
+    def accel(self, t: float, x, u: float, extra=(0.0, 0.0)) -> Tuple[float, float]:
+        """True (theta_w'', theta_b'') at time t, state x, torque u, this period's D_w."""
+        e1, e2 = self.tau_ext(t, extra)
+        return accel(self.cfg.actual, self.D_w, self.cfg.D_b, x, u, e1, e2)
+
+    def lumped_disturbance(self, u: float, extra=(0.0, 0.0)) -> Tuple[float, float]:
+        """True tau_d at t_k with u_k applied (what the observer should estimate)."""
+        ddq = self.accel(self.t, self.x, u, extra)
+        return lumped_disturbance(self.cfg.nominal, self.x, ddq, u)
+
+    def step(self, u: float, extra=(0.0, 0.0)) -> None:
+        """Integrate t_k -> t_{k+1} with u (already saturated) and D_w held; RK4, ``substeps`` steps."""
+        c = self.cfg
+        n = c.substeps
+        dt = c.h / n
+        half, sixth = dt / 2, dt / 6
+        p, D_w, D_b = c.actual, self.D_w, c.D_b
+        f1, f2 = c.tau_ext1, c.tau_ext2
+        x1, x2 = extra
+        t0 = self.t
+        w, b, dw, db = self.x
+        e1, e2 = f1(t0) + x1, f2(t0) + x2
+        for i in range(n):
+            tm = t0 + (i + 0.5) * dt                        # stage times t, t + dt/2 (twice), t + dt
+            te = t0 + (i + 1) * dt
+            m1, m2 = f1(tm) + x1, f2(tm) + x2
+            n1, n2 = f1(te) + x1, f2(te) + x2
+            # accel ignores theta_w (the dynamics do not depend on it): the stages pass w unchanged
+            a1w, a1b = accel(p, D_w, D_b, (w, b, dw, db), u, e1, e2)               # k1
+            b2, dw2, db2 = b + half * db, dw + half * a1w, db + half * a1b
+            a2w, a2b = accel(p, D_w, D_b, (w, b2, dw2, db2), u, m1, m2)            # k2
+            b3, dw3, db3 = b + half * db2, dw + half * a2w, db + half * a2b
+            a3w, a3b = accel(p, D_w, D_b, (w, b3, dw3, db3), u, m1, m2)            # k3
+            b4, dw4, db4 = b + dt * db3, dw + dt * a3w, db + dt * a3b
+            a4w, a4b = accel(p, D_w, D_b, (w, b4, dw4, db4), u, n1, n2)            # k4
+            w += sixth * (dw + 2 * dw2 + 2 * dw3 + dw4)
+            b += sixth * (db + 2 * db2 + 2 * db3 + db4)
+            dw += sixth * (a1w + 2 * a2w + 2 * a3w + a4w)
+            db += sixth * (a1b + 2 * a2b + 2 * a3b + a4b)
+            e1, e2 = n1, n2
+        self.x = State(w, b, dw, db)
+        self.k += 1
+        self.u_prev = u
+        self.D_w = self._draw_D_w()

@@ -1,0 +1,71 @@
+"""The topics of the mwip_ros graph and their message types: the one table every module uses.
+
+Names are relative (so ``--ros-args -r __ns:=/robot1`` moves them), except ``/clock``,
+which ROS always reads from the root namespace.
+"""
+from __future__ import annotations
+
+import importlib
+import re
+from typing import Dict, Optional, Tuple
+
+__all__ = ["GRAPH_TOPICS", "split_type", "msg_class", "leaf", "graph_type"]
+
+GRAPH_TOPICS: Dict[str, str] = {
+    "joint_states": "sensor_msgs/msg/JointState",
+    "wheel_torque_cmd": "std_msgs/msg/Float64",
+    "disturbance_estimate": "geometry_msgs/msg/WrenchStamped",
+    "lumped_disturbance": "geometry_msgs/msg/WrenchStamped",
+    "external_wrench": "geometry_msgs/msg/Wrench",
+    "controller_internals": "sensor_msgs/msg/JointState",
+    "/clock": "rosgraph_msgs/msg/Clock",
+}
+
+
+_NAME = re.compile(r"^[a-zA-Z][a-zA-Z0-9_]*$")
+
+
+def split_type(type_string: str) -> Tuple[str, str, str]:
+    """'sensor_msgs/msg/JointState' -> ('sensor_msgs', 'msg', 'JointState'); 'pkg/Type' -> (pkg, 'msg', Type).
+
+    Raises ValueError for anything that is not a ROS message type name."""
+    parts = str(type_string).split("/")
+    if len(parts) == 2:
+        parts = [parts[0], "msg", parts[1]]
+    if len(parts) != 3 or not all(_NAME.match(p) for p in parts):
+        raise ValueError(f"not a ROS message type name: {type_string!r} (expected e.g. 'sensor_msgs/msg/JointState')")
+    return parts[0], parts[1], parts[2]
+
+
+def msg_class(type_string: str):
+    """Import and return the Python message class for e.g. ``'sensor_msgs/msg/JointState'``."""
+    pkg, ns, name = split_type(type_string)
+    try:
+        module = importlib.import_module(f"{pkg}.{ns}")
+    except ImportError as exc:
+        raise ValueError(f"cannot import message type {type_string!r}: {exc}") from None
+    try:
+        return getattr(module, name)
+    except AttributeError:
+        raise ValueError(f"cannot import message type {type_string!r}: {pkg}.{ns} has no {name}") from None
+
+
+def leaf(topic: str) -> str:
+    """'/robot1/joint_states' -> 'joint_states': a topic's name without its namespace."""
+    return topic.rstrip("/").rsplit("/", 1)[-1]
+
+
+def graph_type(topic: str) -> Optional[str]:
+    """The message type of a graph topic given as 'joint_states', '/joint_states',
+    '/robot1/joint_states' or '/clock'; None if it is not one of the graph's topics."""
+    if topic in GRAPH_TOPICS:
+        return GRAPH_TOPICS[topic]
+    stripped = topic.lstrip("/")
+    if stripped in GRAPH_TOPICS:
+        return GRAPH_TOPICS[stripped]
+    if "/" + stripped in GRAPH_TOPICS:
+        return GRAPH_TOPICS["/" + stripped]
+    last = stripped.rsplit("/", 1)[-1]
+    if last in GRAPH_TOPICS:
+        return GRAPH_TOPICS[last]
+    return None

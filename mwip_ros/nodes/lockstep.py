@@ -1,0 +1,135 @@
+"""The one lockstep driver: publish a state, wait for the command that answers it, and say who is missing.
+
+Used by ``plant_sim`` (both modes wait for the graph; lockstep also steps with it) and by
+``bag_replay``'s re-simulation, which drives the observer and controller with recorded
+states the way the plant drives them with simulated ones.
+
+1. **Wait for the graph** (:meth:`LockstepDriver.wait_for_graph`): until the controller
+   publishes ``wheel_torque_cmd``, any further required publishers are there and
+   ``joint_states`` has ``need_subs`` matched subscriptions, then ``settle_s`` more (so
+   that other subscribers, a recorder, match too).  While waiting it logs what is missing
+   every 2 s; after ``timeout_s`` it reports the wait as failed.
+2. **Step** (:meth:`send`, :meth:`take_answer`): publish ``/clock`` and the state, then
+   exactly one ``wheel_torque_cmd`` answers it.  A command while no state waits is the
+   caller's to reject.
+3. **Watch** (:meth:`check`): a state nobody answered within ``RESEND_S`` is published
+   again (only states sent before every subscription matched are lost; the observer
+   answers a repeated stamp again and the controller answers each stamp once, so a
+   resend is harmless).  After ``timeout_s`` without an answer the step has failed; the
+   text names the node that is missing.
+"""
+from __future__ import annotations
+
+import time
+from typing import Optional, Sequence, Tuple
+
+from mwip_ros.msgs.layouts import encode_clock
+
+__all__ = ["LockstepDriver", "RESEND_S", "graph_missing"]
+
+RESEND_S = 0.5          # resend a state nobody answered after this long [s]
+WAIT_LOG_PERIOD_S = 2.0
+
+
+def graph_missing(node, state_pub, need_subs: int) -> list:
+    """What a lockstep driver is waiting for, in words naming the nodes."""
+    what = []
+    if node.count_publishers("wheel_torque_cmd") == 0:
+        what.append("dscndo_controller (nothing publishes wheel_torque_cmd)")
+    if node.count_publishers("disturbance_estimate") == 0:
+        what.append("disturbance_observer (nothing publishes disturbance_estimate; the controller waits for "
+                    "it when use_observer is true)")
+    matched = state_pub.get_subscription_count()
+    if matched < need_subs:
+        what.append(f"{need_subs} subscribers on joint_states (matched: {matched})")
+    return what
+
+
+class LockstepDriver:
+    """Graph wait, one state in flight, resend and timeout, for a node that publishes states.
+
+    ``needed`` are further subscriptions of the caller whose topics must have a publisher
+    before the start (e.g. ``controller_internals`` for a re-simulation); ``idle_hint`` is
+    what to say when the graph is complete but no answer comes.
+    """
+
+    def __init__(self, node, state_pub, clock_pub, cmd_sub, *, need_subs: int, timeout_s: float,
+                 timeout_param: str, settle_s: float = 0.0, needed: Sequence = (), idle_hint: str = ""):
+        self.node = node
+        self.state_pub, self.clock_pub, self.cmd_sub = state_pub, clock_pub, cmd_sub
+        self.need_subs = need_subs
+        self.timeout_s = timeout_s
+        self.timeout_param = timeout_param
+        self.settle_s = settle_s
+        self.needed = tuple(needed)
+        self.idle_hint = idle_hint
+        self.awaiting: Optional[Tuple[int, int]] = None   # (k, stamp) of the state waiting for its command
+        self._last: Optional[Tuple[int, bytes]] = None     # (stamp, bytes) of the last state sent
+        self.sent_at = self.resent_at = 0.0
+        self.wait_since = time.monotonic()
+        self._ready_at: Optional[float] = None
+        self._last_wait_log = 0.0
+
+    # --- the graph -----------------------------------------------------------------------------
+    def ready(self) -> bool:
+        return (self.cmd_sub.get_publisher_count() >= 1
+                and all(s.get_publisher_count() >= 1 for s in self.needed)
+                and self.state_pub.get_subscription_count() >= self.need_subs)
+
+    def missing(self) -> str:
+        return "; ".join(graph_missing(self.node, self.state_pub, self.need_subs)) or self.idle_hint
+
+    def wait_for_graph(self) -> Optional[bool]:
+        """True once the graph is ready (and settled), False when ``timeout_s`` passed, else None."""
+        now = time.monotonic()
+        if self.ready():
+            if self._ready_at is None:
+                self._ready_at = now
+            if now - self._ready_at >= self.settle_s:
+                return True
+        else:
+            self._ready_at = None
+        if now - self.wait_since > self.timeout_s:
+            return False
+        if now - self._last_wait_log > WAIT_LOG_PERIOD_S:
+            self._last_wait_log = now
+            self.node.get_logger().info(f"waiting for: {self.missing()}")
+        return None
+
+    def graph_timeout_text(self) -> str:
+        return f"graph not ready after {self.timeout_s:g} s; waiting for: {self.missing()}"
+
+    # --- steps ---------------------------------------------------------------------------------
+    def _publish(self) -> None:
+        stamp, data = self._last
+        if self.clock_pub is not None:
+            self.clock_pub.publish(encode_clock(stamp))
+        self.state_pub.publish(data)
+
+    def send(self, k: int, stamp: int, state: bytes) -> None:
+        """Publish ``/clock`` and state k (serialized) and wait for its command."""
+        self._last = (stamp, state)
+        self._publish()
+        self.awaiting = (k, stamp)
+        self.sent_at = self.resent_at = time.monotonic()
+
+    def take_answer(self) -> bool:
+        """A command came: True (and no state waits any more) if a state was waiting for it."""
+        if self.awaiting is None:
+            return False
+        self.awaiting = None
+        return True
+
+    def check(self) -> Optional[str]:
+        """Resend a state nobody answered; the failure text once ``timeout_s`` passed without an answer."""
+        if self.awaiting is None:
+            return None
+        now = time.monotonic()
+        if now - self.sent_at > self.timeout_s:
+            k, stamp = self.awaiting
+            return (f"lockstep timeout: no wheel_torque_cmd answered state k = {k} (t = {stamp * 1e-9:.3f} s) "
+                    f"within {self.timeout_param} = {self.timeout_s:g} s; missing: {self.missing()}")
+        if now - self.resent_at > RESEND_S:
+            self.resent_at = now
+            self._publish()
+        return None

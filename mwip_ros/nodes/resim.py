@@ -1,0 +1,284 @@
+"""``bag_replay`` mode ``resim``: drive a running observer and controller with a bag's states, compare.
+
+It acts as the lockstep plant (:mod:`.lockstep`, the same driver ``plant_sim`` uses) with the
+recorded states: for every recorded ``joint_states`` (in order; a resent duplicate stamp
+once) it publishes ``/clock`` and the recorded bytes and waits for the one
+``wheel_torque_cmd`` that answers it, and collects the new ``disturbance_estimate`` and
+``controller_internals`` by stamp.  Then it compares them with the recorded outputs (the
+k-th recorded command answers the k-th state; estimates and internals by stamp) and prints
+the largest absolute difference per topic and field, the compared and not reproduced
+samples, and whether everything is within ``tolerance``.  Every message is decoded by the
+message layer (:mod:`mwip_ros.msgs.layouts`).
+"""
+from __future__ import annotations
+
+import time
+from typing import Dict, List, Optional, Tuple
+
+from geometry_msgs.msg import WrenchStamped
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64
+
+from mwip_ros.bag import BagError, raw_messages
+from mwip_ros.msgs import BadMessage
+from mwip_ros.msgs import layouts as L
+from mwip_ros.msgs.qos import GRAPH_QOS
+from mwip_ros.msgs.topics import leaf
+from mwip_ros.nodes.comparison import Stat, compare_stamped, diff
+from mwip_ros.nodes.lockstep import LockstepDriver
+from mwip_ros.nodes.runtime import EXIT_ERROR, EXIT_OK, Rejects
+from mwip_ros.params import ParamError
+
+__all__ = ["Resim", "EXIT_DIFFERENT"]
+
+EXIT_DIFFERENT = 4          # outputs differ from the recording
+COLLECT_IDLE_S = 1.0        # after the last command, wait this long without news for stragglers
+COLLECT_MAX_S = 5.0
+OUTPUTS = ("wheel_torque_cmd", "disturbance_estimate", "controller_internals")
+
+
+def _estimate(data) -> Tuple[int, Dict[str, float]]:
+    stamp, t1, t2 = L.parse_wrench(data)
+    return stamp, {"tau_hat1": t1, "tau_hat2": t2}
+
+
+class Resim:
+    """The resim mode of the ``bag_replay`` node ``node`` (its parameters ``v``, ``bag``, ``types``)."""
+
+    def __init__(self, node):
+        self.node = node
+        self.v = v = node.v
+        self.log = node.get_logger()
+        if v["loop"]:
+            raise ParamError("loop", "loop is for mode replay; resim feeds every recorded state once")
+        ignored = [k for k, d in (("rate", 1.0), ("publish_clock", False)) if v[k] != d]
+        if v["topics"]:
+            ignored.append("topics")
+        if ignored:
+            self.log.info(f"resim: ignoring {', '.join(ignored)} (lockstep, /clock from each state's stamp)")
+        self.rejects = Rejects(self.log)
+        self._read_bag()
+        self.new_cmds: List[float] = []
+        self.new = {"disturbance_estimate": {}, "controller_internals": {}}
+        self.extra_cmds = 0
+        self.k = 0
+        self.started = False
+        self.t_wall0: Optional[float] = None
+        self.collecting_since: Optional[float] = None
+        self.last_news = 0.0
+        self.finished = False
+        self.failed = False
+
+        clock_pub = node.create_publisher(Clock, "/clock", GRAPH_QOS)
+        state_pub = node.create_publisher(JointState, "joint_states", GRAPH_QOS)
+        cmd_sub = node.create_subscription(Float64, "wheel_torque_cmd", self._on_cmd, GRAPH_QOS, raw=True)
+        est_sub = node.create_subscription(WrenchStamped, "disturbance_estimate", self._on_est, GRAPH_QOS, raw=True)
+        int_sub = node.create_subscription(JointState, "controller_internals", self._on_int, GRAPH_QOS, raw=True)
+        need = v["wait_for_subscribers"]
+        needed = [int_sub] if self.has["controller_internals"] else []
+        if self.has["disturbance_estimate"] and need == 0:
+            needed.append(est_sub)
+        self.lockstep = LockstepDriver(
+            node, state_pub, clock_pub, cmd_sub, need_subs=need if need > 0 else
+            (2 if self.has["disturbance_estimate"] else 1), timeout_s=v["timeout_s"], timeout_param="timeout_s",
+            needed=needed, idle_hint="an answer from the running dscndo_controller: it and the "
+                                     "disturbance_observer answer each stamp once, so restart both before every resim")
+        t0, t1 = self.states[0][0] * 1e-9, self.states[-1][0] * 1e-9
+        self.log.info(f"resim of {node.bag}: {len(self.states)} states (t = {t0:.3f} .. {t1:.3f} s), recorded "
+                      f"{len(self.rec_cmds)} commands, {len(self.rec['disturbance_estimate'])} estimates, "
+                      f"{len(self.rec['controller_internals'])} internals; tolerance {v['tolerance']:g}")
+
+    # --- the recording
+    def _bag_topic(self, name: str, required: bool) -> Optional[str]:
+        types = self.node.types
+        cands = [t for t in types if leaf(t) == name]
+        if len(cands) > 1:
+            exact = [t for t in cands if t == "/" + name]
+            if len(exact) != 1:
+                raise ParamError("bag", f"several {name} topics in the bag ({', '.join(sorted(cands))}); "
+                                        f"resim needs one")
+            cands = exact
+        if not cands:
+            if required:
+                raise ParamError("bag", f"{self.node.bag} has no {name} topic (it has: {', '.join(sorted(types))}); "
+                                        f"resim needs the recorded states")
+            return None
+        return cands[0]
+
+    def _read_bag(self) -> None:
+        bag = self.node.bag
+        topics = {"joint_states": self._bag_topic("joint_states", True)}
+        topics.update({name: self._bag_topic(name, False) for name in OUTPUTS})
+        by_topic = {t: name for name, t in topics.items() if t}
+        self.has = {name: topics[name] is not None for name in OUTPUTS}
+        self.states: List[Tuple[int, bytes]] = []
+        self.rec_cmds: List[float] = []
+        self.rec = {"disturbance_estimate": {}, "controller_internals": {}}
+        seen = set()
+        dropped = bad = 0
+        try:
+            for _lt, topic, data in raw_messages(bag, list(by_topic)):
+                name = by_topic[topic]
+                try:
+                    if name == "joint_states":
+                        stamp = L.parse_joint_state(data)[0]
+                        if stamp in seen:
+                            continue  # a state the plant resent: fed (and answered) once
+                        if self.states and stamp < self.states[-1][0]:
+                            dropped += 1
+                            continue
+                        seen.add(stamp)
+                        self.states.append((stamp, data))
+                    elif name == "wheel_torque_cmd":
+                        self.rec_cmds.append(L.parse_command(data))
+                    else:
+                        stamp, fields = _estimate(data) if name == "disturbance_estimate" else L.parse_internals(data)
+                        self.rec[name].setdefault(stamp, fields)
+                except BadMessage:
+                    bad += 1
+        except BagError as exc:
+            raise ParamError("bag", f"cannot read the bag: {exc}") from None
+        if not self.states:
+            raise ParamError("bag", f"{bag} has no joint_states messages to re-simulate")
+        if dropped:
+            self.log.warning(f"skipped {dropped} recorded state(s) older than the one before them")
+        if bad:
+            self.log.warning(f"skipped {bad} recorded message(s) that are not valid graph messages")
+        if self.has["wheel_torque_cmd"] and len(self.rec_cmds) != len(self.states):
+            self.log.warning(f"the bag has {len(self.rec_cmds)} wheel_torque_cmd for {len(self.states)} states; "
+                             f"commands are compared in order (k-th command = answer to the k-th state)")
+        self.stamp_set = seen
+
+    # --- inputs
+    def _on_cmd(self, data) -> None:
+        try:
+            u = L.parse_command(data)
+        except BadMessage as exc:
+            self.rejects("wheel_torque_cmd", str(exc))
+            return
+        if not self.lockstep.take_answer():
+            self.extra_cmds += 1
+            if self.extra_cmds <= 3:
+                self.log.warning("a wheel_torque_cmd while no state was waiting for one (ignored)")
+            return
+        self.new_cmds.append(u)
+        self.k += 1
+        self.last_news = time.monotonic()
+        if self.k < len(self.states):
+            self._send()
+        else:
+            self.collecting_since = time.monotonic()
+            self.log.info(f"all {len(self.states)} states answered in {time.monotonic() - self.t_wall0:.2f} s; "
+                          f"collecting the last estimates and internals")
+
+    def _collect(self, name: str, parse, data) -> None:
+        try:
+            stamp, fields = parse(data)
+        except BadMessage as exc:
+            self.rejects(name, str(exc))
+            return
+        self.new[name].setdefault(stamp, fields)
+        self.last_news = time.monotonic()
+
+    def _on_est(self, data) -> None:
+        self._collect("disturbance_estimate", _estimate, data)
+
+    def _on_int(self, data) -> None:
+        self._collect("controller_internals", L.parse_internals, data)
+
+    # --- lockstep
+    def _send(self) -> None:
+        stamp, data = self.states[self.k]
+        self.lockstep.send(self.k, stamp, data)
+
+    def _fail(self, text: str) -> None:
+        self.failed = True
+        self.node.finish(EXIT_ERROR, text)
+
+    def step(self, executor) -> None:
+        if not self.started:
+            ready = self.lockstep.wait_for_graph()
+            if ready:
+                self.started = True
+                self.t_wall0 = time.monotonic()
+                self.log.info("graph matched; starting the lockstep re-simulation")
+                self._send()
+            elif ready is False:
+                self._fail("resim timeout: " + self.lockstep.graph_timeout_text())
+                return
+            executor.spin_once(timeout_sec=0.02)
+            return
+        executor.spin_once(timeout_sec=0.05)
+        now = time.monotonic()
+        if self.collecting_since is not None:
+            if self._all_collected() or now - self.last_news > COLLECT_IDLE_S \
+                    or now - self.collecting_since > COLLECT_MAX_S:
+                self.finished = True
+                self.node.finish(EXIT_OK)
+            return
+        failure = self.lockstep.check()
+        if failure:
+            self._fail(failure)
+
+    def _all_collected(self) -> bool:
+        return all(s in self.new[name] for name in self.rec for s in self.rec[name] if s in self.stamp_set)
+
+    # --- comparison
+    def compare(self):
+        """{topic: Stat}, {topic: {field: Stat}}."""
+        fed = set(s for s, _ in self.states[:self.k])
+        topics: Dict[str, Stat] = {}
+        fields: Dict[str, Dict[str, Stat]] = {}
+        if self.has["wheel_torque_cmd"]:
+            st = topics["wheel_torque_cmd"] = Stat()
+            n = min(len(self.rec_cmds), len(self.new_cmds))
+            for a, b in zip(self.rec_cmds[:n], self.new_cmds[:n]):
+                st.add(diff(a, b))
+            st.compared = n
+            st.missing = max(0, min(len(self.rec_cmds), self.k) - n)
+            st.extra = len(self.new_cmds) - n + self.extra_cmds
+        for name, names in (("disturbance_estimate", ("tau_hat1", "tau_hat2")),
+                            ("controller_internals", L.INTERNAL_NAMES)):
+            if self.has[name]:
+                st, fs = compare_stamped(self.rec[name], self.new[name], fed, names)
+                topics[name] = st
+                fields[name] = {n: f for n, f in fs.items() if f.compared}
+        return topics, fields
+
+    def report(self) -> None:
+        tol = self.v["tolerance"]
+        topics, fields = self.compare()
+        wall = (time.monotonic() - self.t_wall0) if self.t_wall0 else 0.0
+        lines = [f"bag_replay resim of {self.node.bag}",
+                 f"  states fed: {self.k} of {len(self.states)} in {wall:.2f} s wall; tolerance {tol:g}",
+                 f"  {'topic / field':<28}{'compared':>9}{'missing':>9}{'max |diff|':>14}  within",
+                 "  " + "-" * 68]
+        for topic, st in topics.items():
+            lines.append(f"  {topic:<28}{st.compared:>9}{st.missing:>9}{st.max_diff:>14.3e}  "
+                         f"{'yes' if st.ok(tol) else 'NO'}")
+            for f, fst in fields.get(topic, {}).items():
+                lines.append(f"    {f:<26}{fst.compared:>9}{'':>9}{fst.max_diff:>14.3e}  "
+                             f"{'yes' if fst.max_diff <= tol else 'NO'}")
+        extras = {t: st.extra for t, st in topics.items() if st.extra}
+        if extras:
+            lines.append("  not in the recording (not compared): " + ", ".join(f"{t} {n}" for t, n in extras.items()))
+        absent = [t for t, h in self.has.items() if not h]
+        if absent:
+            lines.append("  not recorded (not compared): " + ", ".join(absent))
+        bad = [t for t, st in topics.items() if not st.ok(tol)]
+        if not self.finished:
+            why = "failed" if self.failed else "interrupted"
+            lines.append(f"  RESULT: INCOMPLETE - the re-simulation {why} after {self.k} of {len(self.states)} "
+                         f"states; the table compares those (exit {EXIT_ERROR})")
+            self.node.exit_code = EXIT_ERROR
+        elif bad:
+            self.node.exit_code = EXIT_DIFFERENT
+            lines.append(f"  RESULT: DIFFERENT - {', '.join(bad)} not within tolerance {tol:g} "
+                         f"(exit {EXIT_DIFFERENT})")
+        else:
+            self.node.exit_code = EXIT_OK
+            lines.append(f"  RESULT: REPRODUCED - every compared output within tolerance {tol:g} (exit {EXIT_OK})")
+        if self.rejects.counts:
+            lines.append(f"  rejected messages: {self.rejects.summary()}")
+        print("\n".join(lines), flush=True)

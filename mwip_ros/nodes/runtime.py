@@ -1,0 +1,173 @@
+"""Process plumbing shared by every node: init, signals, a spin loop that exits, one way to end.
+
+Every node's ``main()`` is ``return run_node(MyNode, argv)``.  The loop is a
+``spin_once`` loop (an ``EventsExecutor.spin()`` never returns on SIGINT), and
+SIGINT/SIGTERM only set a flag, so a node gets to flush its files and print its
+report before ``rclpy.shutdown()``.  A node ends its run with
+:meth:`GracefulNodeMixin.finish` (an exit code and, for a failure, the reason logged
+as an error); nothing else sets ``done`` or ``exit_code``.
+"""
+from __future__ import annotations
+
+import faulthandler
+import gc
+import os
+import signal
+import sys
+from typing import Callable, Dict, Optional, Sequence
+
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.signals import SignalHandlerOptions
+
+from mwip_ros.params import ParamError
+
+__all__ = ["EXIT_OK", "EXIT_ERROR", "EXIT_BAD_PARAMS", "EXIT_FALLEN", "GracefulNodeMixin", "Rejects",
+           "StopRequested", "run_node"]
+
+# Exit codes of every mwip_ros executable.
+EXIT_OK = 0
+EXIT_ERROR = 1          # a runtime error (e.g. lockstep timeout)
+EXIT_BAD_PARAMS = 2     # a bad parameter file, override or value
+EXIT_FALLEN = 3         # plant_sim: the robot fell
+# plant_sim stopped by a signal before its duration_s was done: 128 + the signal (130 SIGINT, 143 SIGTERM)
+
+SHUTDOWN_GRACE_S = 10.0  # after the node's own shutdown work, the middleware gets this long to clean up
+
+
+class StopRequested(Exception):
+    """Raised by a node (or set by a signal) to leave the spin loop."""
+
+
+class GracefulNodeMixin:
+    """Hooks ``run_node`` calls: ``spin_step`` and ``on_shutdown``; and ``finish``, the one way to end a run.
+
+    ``done`` tells ``run_node`` to leave the loop; ``exit_code`` is returned by the process.
+    """
+
+    done: bool = False
+    exit_code: int = EXIT_OK
+    stop_signal: Optional[int] = None  # set by run_node before on_shutdown when SIGINT/SIGTERM ended the loop
+
+    def finish(self, code: int = EXIT_OK, reason: Optional[str] = None) -> None:
+        """End the run with exit ``code``; ``reason`` (a failure) is logged as an error first."""
+        if reason:
+            self.get_logger().error(reason)
+        self.exit_code = code
+        self.done = True
+
+    def spin_step(self, executor) -> None:  # pragma: no cover - overridden where needed
+        executor.spin_once(timeout_sec=0.1)
+
+    def on_shutdown(self) -> None:
+        """Flush files, print reports. Called once, before the node is destroyed."""
+
+
+def _make_executor(context):
+    """EventsExecutor by default (faster lockstep, see scripts/bench.sh); MWIP_EXECUTOR=single to compare.
+
+    Its ``spin()`` never returns on SIGINT, which is why ``run_node`` drives a ``spin_once`` loop.
+    """
+    if os.environ.get("MWIP_EXECUTOR", "events") == "single":
+        return SingleThreadedExecutor(context=context)
+    try:
+        from rclpy.experimental import EventsExecutor
+        return EventsExecutor(context=context)
+    except ImportError:  # pragma: no cover - older rclpy
+        return SingleThreadedExecutor(context=context)
+
+
+def _realtime_priority(node) -> None:
+    """Put every thread of this process (rclpy's, Fast DDS's, the executor's timers) under SCHED_FIFO at the
+    node's ``realtime_priority``; threads started later inherit it.  0 leaves normal scheduling."""
+    prio = getattr(node, "v", {}).get("realtime_priority", 0)
+    if not prio:
+        return
+    try:
+        for tid in os.listdir("/proc/self/task"):
+            try:
+                os.sched_setscheduler(int(tid), os.SCHED_FIFO, os.sched_param(prio))
+            except ProcessLookupError:  # the thread ended meanwhile
+                pass
+    except (OSError, AttributeError) as exc:
+        node.get_logger().warning(f"realtime_priority {prio}: cannot switch to SCHED_FIFO ({exc}); running with "
+                                  "normal scheduling (needs root or CAP_SYS_NICE, e.g. an rtprio limit)")
+        return
+    node.get_logger().info(f"SCHED_FIFO priority {prio}")
+
+
+def run_node(factory: Callable[..., object], argv: Optional[Sequence[str]] = None) -> int:
+    """Create the node, spin until done/SIGINT/SIGTERM, shut down cleanly, return an exit code."""
+    argv = list(sys.argv if argv is None else argv)
+    stop = {"signal": None}
+
+    def _on_signal(signum, _frame):
+        stop["signal"] = signum
+
+    context = rclpy.Context()
+    rclpy.init(args=argv, context=context, signal_handler_options=SignalHandlerOptions.NO)
+    old = {s: signal.signal(s, _on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+    node = executor = None
+    code = EXIT_OK
+    try:
+        try:
+            node = factory(context=context, argv=argv)
+        except ParamError as exc:
+            print(f"[ERROR] {argv[0].rsplit('/', 1)[-1]}: {exc}", file=sys.stderr, flush=True)
+            return EXIT_BAD_PARAMS
+        # Start-up made tens of thousands of long-lived objects (rclpy, numpy, parameters); a full
+        # garbage collection over them takes ~9 ms, more than a realtime period.  Freeze them: later
+        # collections scan only what the node allocates while it runs.
+        gc.freeze()
+        executor = _make_executor(context)
+        executor.add_node(node)
+        _realtime_priority(node)
+        try:
+            while stop["signal"] is None and not node.done and context.ok():
+                node.spin_step(executor)
+        except StopRequested:
+            pass
+        if stop["signal"] is not None:
+            node.stop_signal = stop["signal"]
+            node.get_logger().info(f"received {signal.Signals(stop['signal']).name}, shutting down")
+        node.on_shutdown()
+        code = node.exit_code
+    finally:
+        # Everything is written; what is left is the middleware's own clean-up.  Fast DDS 2.14 can
+        # deadlock there (rmw destroy_participant spins in set_listener, holding the GIL, while a
+        # discovery thread waits for its lock; seen when several nodes exit at once).  faulthandler's
+        # watchdog needs no GIL: it prints where the process is stuck and ends it with exit code 1
+        # (whatever the node's own code was: its files are written, but a script sees a failure).
+        # Armed here, so it also covers a loop or an on_shutdown that raised.
+        faulthandler.dump_traceback_later(SHUTDOWN_GRACE_S, exit=True)
+        if executor is not None:
+            executor.remove_node(node)
+            try:
+                executor.shutdown(timeout_sec=1.0)
+            except TypeError:  # pragma: no cover
+                executor.shutdown()
+        if node is not None:
+            node.destroy_node()
+        if context.ok():
+            rclpy.shutdown(context=context)
+        faulthandler.cancel_dump_traceback_later()
+        for s, h in old.items():
+            signal.signal(s, h)
+    return code
+
+
+class Rejects:
+    """Counts rejected messages per topic and logs them (first few, then every 100th)."""
+
+    def __init__(self, logger):
+        self.logger = logger
+        self.counts: Dict[str, int] = {}
+
+    def __call__(self, topic: str, reason: str) -> None:
+        n = self.counts.get(topic, 0) + 1
+        self.counts[topic] = n
+        if n <= 5 or n % 100 == 0:
+            self.logger.warning(f"rejected message #{n} on {topic}: {reason}")
+
+    def summary(self) -> str:
+        return ", ".join(f"{k}: {v}" for k, v in sorted(self.counts.items())) or "none"

@@ -1,0 +1,125 @@
+"""Parameter files: read and validate a ROS 2 parameter file as a whole; one node's values from it."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Dict, Mapping, Optional
+
+import yaml
+
+from .errors import ParamError
+from .schema import (NODE_SPECS, ROS_OWN, ROS_OWN_PREFIXES, SHARED, SHARED_SPECS, defaults_for, spelling_hint,
+                     specs_for)
+
+__all__ = ["ParamFile", "parse_param_dict", "load_param_file", "merged_values", "node_key"]
+
+
+def _flatten(d: Mapping, prefix: str, key_path: str, source: str) -> Dict[str, Any]:
+    out: Dict[str, Any] = {}
+    for k, v in d.items():
+        if not isinstance(k, str):
+            raise ParamError(f"{key_path}{k}", "parameter names must be strings", source)
+        name = f"{prefix}{k}"
+        if isinstance(v, Mapping):
+            out.update(_flatten(v, name + ".", key_path, source))
+        else:
+            out[name] = v
+    return out
+
+
+def node_key(section: str) -> str:
+    """'plant_sim', '/plant_sim', '/robot1/plant_sim', '/**/plant_sim' -> 'plant_sim'; '/**' -> '/**'."""
+    s = section.strip()
+    if s in ("/**", "**"):
+        return SHARED
+    return s.rstrip("/").rsplit("/", 1)[-1]
+
+
+@dataclass
+class ParamFile:
+    """A validated parameter file: section -> {dotted name: value}."""
+
+    path: str
+    sections: Dict[str, Dict[str, Any]] = field(default_factory=dict)
+
+    def for_node(self, node: str, overrides: Optional[Mapping[str, Any]] = None) -> Dict[str, Any]:
+        """Defaults, then the shared section, then the node's section, then ``overrides`` (checked)."""
+        values = defaults_for(node)
+        for sec in (SHARED, node):
+            for k, v in self.sections.get(sec, {}).items():
+                if k in values:
+                    values[k] = v
+        specs = specs_for(node)
+        for k, v in (overrides or {}).items():
+            if k not in specs:
+                raise ParamError(k, f"unknown parameter for {node}", "override")
+            values[k] = specs[k].validate(v, k, "override")
+        return values
+
+
+def _check_entry(section: str, name: str, value: Any, source: str) -> Any:
+    key = name if section == SHARED else f"{section}.{name}"
+    if name in ROS_OWN:
+        return ROS_OWN[name].validate(value, key, source)
+    if name.startswith(ROS_OWN_PREFIXES):
+        return value
+    if section == SHARED:
+        shared = {s.name: s for s in SHARED_SPECS}
+        if name in shared:
+            return shared[name].validate(value, key, source)
+        owners = [n for n, specs in NODE_SPECS.items() if any(s.name == name for s in specs)]
+        hint = f" (it belongs under {owners[0]}:)" if owners else ""
+        raise ParamError(key, f"unknown parameter in the shared /** section{hint}", source)
+    specs = specs_for(section)
+    if name not in specs:
+        owners = [n for n, sp in NODE_SPECS.items() if n != section and any(s.name == name for s in sp)]
+        hint = f" (it belongs under {owners[0]}:)" if owners else spelling_hint(name, specs)
+        raise ParamError(key, f"unknown parameter for {section}{hint}", source)
+    return specs[name].validate(value, key, source)
+
+
+def parse_param_dict(doc: Any, source: str = "<params>") -> ParamFile:
+    """Validate a loaded ROS 2 parameter document (the whole file)."""
+    if not isinstance(doc, Mapping) or not doc:
+        raise ParamError("<file>", "expected a mapping of node names to {ros__parameters: ...}", source)
+    pf = ParamFile(path=source)
+    for section_raw, body in doc.items():
+        section = node_key(str(section_raw))
+        if section != SHARED and section not in NODE_SPECS:
+            hint = spelling_hint(section, NODE_SPECS)
+            raise ParamError(str(section_raw), f"unknown node name{hint}; known: /**, {', '.join(NODE_SPECS)}",
+                             source)
+        if not isinstance(body, Mapping) or set(body) != {"ros__parameters"}:
+            raise ParamError(f"{section_raw}", "each node section must contain exactly 'ros__parameters:'", source)
+        params = body["ros__parameters"] or {}
+        if not isinstance(params, Mapping):
+            raise ParamError(f"{section_raw}.ros__parameters", "must be a mapping", source)
+        flat = _flatten(params, "", "", source)
+        checked = {name: _check_entry(section, name, v, source) for name, v in flat.items()}
+        pf.sections.setdefault(section, {}).update(checked)
+    return pf
+
+
+def load_param_file(path) -> ParamFile:
+    """Read and validate a ROS 2 parameter file; raises ParamError naming the key or the file."""
+    p = Path(path)
+    if not p.is_file():
+        raise ParamError("--params-file", f"no such file: {p}")
+    try:
+        doc = yaml.safe_load(p.read_text())
+    except yaml.YAMLError as exc:
+        raise ParamError("<file>", f"not valid YAML: {exc}", str(p)) from None
+    return parse_param_dict(doc, str(p))
+
+
+NODES_OF_THE_LOOP = ("dscndo_controller", "disturbance_observer", "plant_sim")
+
+
+def merged_values(pf: ParamFile, overrides: Optional[Mapping] = None) -> Dict[str, Any]:
+    """One dict with the plant's, observer's and controller's values from one parameter file
+    (what the offline tools simulate)."""
+    v: Dict[str, Any] = {}
+    for node in NODES_OF_THE_LOOP:
+        v.update(pf.for_node(node))
+    v.update(overrides or {})
+    return v

@@ -1,0 +1,225 @@
+"""The parameter schema: every parameter of every node, its type, default, range and description.
+
+This is the one place the paper's values live (the defaults below; ``config/paper.yaml``
+repeats them as a file a user copies and edits).  One schema serves the offline tools
+(which read the YAML file directly) and the nodes (which declare every parameter from
+it, with its description and range, and validate start-up values and run-time updates
+with the same checks).
+
+Types follow ROS 2 exactly: a ``double`` parameter written as ``200`` is an integer to
+ROS and is refused (write ``200.0``).
+"""
+from __future__ import annotations
+
+import difflib
+import math
+from dataclasses import dataclass
+from typing import Any, Callable, Dict, Iterable, List, Mapping, Optional
+
+from .errors import ParamError
+
+__all__ = ["SHARED", "ParamSpec", "PAPER_NOMINAL", "PAPER_ACTUAL", "SHARED_SPECS", "NODE_SPECS", "ROS_OWN",
+           "ROS_OWN_PREFIXES", "specs_for", "defaults_for", "spelling_hint"]
+
+SHARED = "/**"
+
+# --- checks: each returns None when fine, else the reason -------------------------------------
+
+def _positive(v):
+    return None if v > 0 else f"must be > 0, got {v!r}"
+
+
+def _non_negative(v):
+    return None if v >= 0 else f"must be >= 0, got {v!r}"
+
+
+def _at_least_one(v):
+    return None if v >= 1 else f"must be >= 1, got {v!r}"
+
+
+def _priority(v):
+    return None if 0 <= v <= 99 else f"must be 0 (normal scheduling) or a SCHED_FIFO priority 1..99, got {v!r}"
+
+
+def _one_of(*choices):
+    def check(v):
+        return None if v in choices else f"must be one of {', '.join(map(repr, choices))}, got {v!r}"
+    return check
+
+
+def _four_finite(v):
+    if len(v) != 4:
+        return f"must have 4 entries [c1, c2, c3, c4], got {len(v)}"
+    return None
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """One parameter: dotted name, ROS type, default, description, check, run-time changeable."""
+
+    name: str
+    type: str  # 'double' | 'integer' | 'bool' | 'string' | 'double_array' | 'string_array'
+    default: Any
+    description: str
+    check: Optional[Callable[[Any], Optional[str]]] = None
+    dynamic: bool = False
+    unit: str = ""
+
+    def validate(self, value: Any, key: Optional[str] = None, source: Optional[str] = None) -> Any:
+        """Return the value (arrays as lists) or raise ParamError naming ``key``."""
+        key = key or self.name
+        reason = _type_error(self.type, value)
+        if reason:
+            raise ParamError(key, reason, source)
+        if self.type in ("double", "double_array"):
+            vals = value if self.type == "double_array" else [value]
+            if not all(math.isfinite(x) for x in vals):
+                raise ParamError(key, f"must be finite, got {value!r}", source)
+        if self.type.endswith("_array"):
+            value = list(value)
+        if self.check is not None:
+            reason = self.check(value)
+            if reason:
+                raise ParamError(key, reason, source)
+        return value
+
+
+def _type_error(kind: str, v: Any) -> Optional[str]:
+    def is_int(x):
+        return isinstance(x, int) and not isinstance(x, bool)
+
+    if kind == "double":
+        if is_int(v):
+            return f"expected a floating-point number (write {v}.0 - ROS 2 reads {v} as an integer)"
+        return None if isinstance(v, float) else f"expected a floating-point number, got {type(v).__name__} {v!r}"
+    if kind == "integer":
+        return None if is_int(v) else f"expected an integer, got {type(v).__name__} {v!r}"
+    if kind == "bool":
+        return None if isinstance(v, bool) else f"expected true or false, got {type(v).__name__} {v!r}"
+    if kind == "string":
+        return None if isinstance(v, str) else f"expected a string, got {type(v).__name__} {v!r}"
+    if kind == "double_array":
+        if not isinstance(v, (list, tuple)) or not all(isinstance(x, float) for x in v):
+            return f"expected a list of floating-point numbers (e.g. [100.0, 0.0]), got {v!r}"
+        return None
+    if kind == "string_array":
+        if not isinstance(v, (list, tuple)) or not all(isinstance(x, str) for x in v):
+            return f"expected a list of strings, got {v!r}"
+        return None
+    raise AssertionError(kind)
+
+
+def _body(prefix: str, values: Mapping[str, float], what: str) -> List[ParamSpec]:
+    units = {"m_b": "kg", "m_w": "kg", "I_b": "kg m^2", "I_w": "kg m^2", "l": "m", "r": "m", "g": "m/s^2"}
+    text = {"m_b": "body mass", "m_w": "wheel mass", "I_b": "body moment of inertia",
+            "I_w": "wheel moment of inertia", "l": "axle to body centre of gravity",
+            "r": "wheel radius", "g": "gravitational acceleration"}
+    return [ParamSpec(f"{prefix}.{k}", "double", v, f"{what} {text[k]} [{units[k]}]", _positive, unit=units[k])
+            for k, v in values.items()]
+
+
+PAPER_NOMINAL = dict(m_b=210.6, m_w=29.0, I_b=55.0, I_w=0.6, l=0.267, r=0.254, g=9.81)
+PAPER_ACTUAL = dict(m_b=310.6, m_w=29.0, I_b=65.0, I_w=0.6, l=0.317, r=0.254, g=9.81)
+
+SHARED_SPECS: List[ParamSpec] = [
+    ParamSpec("control_rate_hz", "double", 200.0, "control rate 1/h [Hz] of plant, observer and controller",
+              _positive, unit="Hz"),
+    *_body("nominal", PAPER_NOMINAL, "nominal (hatted)"),
+    ParamSpec("realtime_priority", "integer", 0, "SCHED_FIFO priority 1..99 of the node's threads, for realtime "
+              "runs (needs root or CAP_SYS_NICE; else a warning); 0 = normal scheduling", _priority),
+]
+
+NODE_SPECS: Dict[str, List[ParamSpec]] = {
+    "plant_sim": [
+        ParamSpec("mode", "string", "lockstep", "lockstep (deterministic, waits for each command) or realtime "
+                  "(wall-clock timer, zero-order hold)", _one_of("lockstep", "realtime")),
+        ParamSpec("duration_s", "double", 10.0, "simulated time to run [s]; 0 = until stopped", _non_negative),
+        ParamSpec("substeps", "integer", 5, "RK4 sub-steps per control period", _at_least_one),
+        ParamSpec("seed", "integer", 0, "seed of the D_w friction noise", _non_negative),
+        *_body("actual", PAPER_ACTUAL, "true"),
+        ParamSpec("actual.D_b", "double", 0.1, "true drive viscous friction D_b [N m s/rad]", _non_negative),
+        ParamSpec("actual.D_w_mean", "double", 0.5, "mean of the ground friction D_w [N m s/rad]", _non_negative),
+        ParamSpec("actual.D_w_variance", "double", 0.2, "variance of D_w, drawn once per period; 0 = deterministic",
+                  _non_negative),
+        ParamSpec("initial.theta_w", "double", 0.0, "initial wheel angle [rad]"),
+        ParamSpec("initial.theta_b", "double", -0.1745, "initial body pitch [rad]"),
+        ParamSpec("initial.dtheta_w", "double", 0.0, "initial wheel rate [rad/s]"),
+        ParamSpec("initial.dtheta_b", "double", 0.0, "initial body pitch rate [rad/s]"),
+        ParamSpec("tau_ext1.amplitude", "double", 30.0, "tau_ext1 amplitude [N m] (wheel row)"),
+        ParamSpec("tau_ext1.omega", "double", 2.0, "tau_ext1 angular frequency [rad/s]"),
+        ParamSpec("tau_ext1.phase", "double", math.pi / 2, "tau_ext1 phase [rad]"),
+        ParamSpec("tau_ext2.amplitude", "double", 0.2, "tau_ext2 amplitude [N m] (sum of rows)"),
+        ParamSpec("tau_ext2.omega", "double", 1.0, "tau_ext2 angular frequency [rad/s]"),
+        ParamSpec("tau_ext2.phase", "double", 0.0, "tau_ext2 phase [rad]"),
+        ParamSpec("torque_limit", "double", 0.0, "|u| cap [N m]; 0 = none", _non_negative),
+        ParamSpec("fall_angle", "double", 1.0472, "|theta_b| beyond this ends the run as fallen [rad]", _positive),
+        ParamSpec("lockstep_timeout_s", "double", 10.0, "wall time [s] to wait for the graph (the controller and "
+                  "expected_subscribers) before the first state, and in lockstep for each command; lockstep gives "
+                  "up after it, realtime starts without the missing nodes", _positive),
+        ParamSpec("stale_command_periods", "integer", 4, "realtime: a command older than this many periods "
+                  "is replaced by zero torque", _at_least_one),
+        ParamSpec("csv", "string", "", "write the trajectory (mwip_sim CSV columns) to this file; '' = none"),
+        ParamSpec("summary_json", "string", "", "write the run's summary (steps/s, realtime loop periods, missed "
+                  "deadlines, stale commands, metrics) to this JSON file; '' = none"),
+        ParamSpec("expected_subscribers", "integer", 2, "lockstep: wait until joint_states has this many "
+                  "matched subscriptions before the first state (2 = observer + controller; +1 per recorder)",
+                  _non_negative),
+    ],
+    "disturbance_observer": [
+        ParamSpec("X", "double_array", [100.0, 0.0, 0.0, 100.0], "observer gain X = [c1, c2, c3, c4] (eq. 14)",
+                  _four_finite, dynamic=True),
+        ParamSpec("csv", "string", "", "write the estimates (t, tau_hat1, tau_hat2) to this file at the end; "
+                  "'' = none"),
+    ],
+    "dscndo_controller": [
+        ParamSpec("k1", "double", 6.0, "first surface gain k1 (eq. 24)", _positive, dynamic=True),
+        ParamSpec("k2", "double", 6.0, "second surface gain k2 (eq. 28)", _positive, dynamic=True),
+        ParamSpec("tau4", "double", 0.1, "filter time constant tau4 [s] (eq. 25)", _positive, dynamic=True),
+        ParamSpec("use_observer", "bool", True, "true = DSCNDO (eq. 19); false = plain DSC", dynamic=True),
+    ],
+    "mcap_recorder": [
+        ParamSpec("output", "string", "", "bag directory to create (refuses an existing one)"),
+        ParamSpec("topics", "string_array", [], "topics to record; empty = every topic of the graph"),
+        ParamSpec("compression", "string", "", "'' or 'zstd' (MCAP chunk compression)", _one_of("", "zstd")),
+        ParamSpec("chunk_size", "integer", 1 << 20, "MCAP chunk size [bytes]", _at_least_one),
+    ],
+    "bag_replay": [
+        ParamSpec("bag", "string", "", "bag directory to replay"),
+        ParamSpec("rate", "double", 1.0, "playback rate factor", _positive),
+        ParamSpec("loop", "bool", False, "start again at the end"),
+        ParamSpec("topics", "string_array", [], "topics to replay; empty = all"),
+        ParamSpec("publish_clock", "bool", False, "publish /clock from the bag's time"),
+        ParamSpec("mode", "string", "replay", "replay (republish) or resim (feed joint_states through a running "
+                  "observer and controller and compare)", _one_of("replay", "resim")),
+        ParamSpec("tolerance", "double", 1e-9, "resim: largest absolute difference still counted as equal",
+                  _non_negative),
+        ParamSpec("timeout_s", "double", 10.0, "resim: give up when the graph is not ready or a command does "
+                  "not come within this wall time [s]; replay: how long to wait for subscribers", _positive),
+        ParamSpec("wait_for_subscribers", "integer", 0, "matched subscriptions to wait for before the first "
+                  "message: replay: on every replayed topic (0 = start at once); resim: on joint_states "
+                  "(0 = automatic: the controller, plus the observer when the bag has disturbance_estimate)",
+                  _non_negative),
+    ],
+}
+
+# Parameters ROS itself declares on every node; allowed anywhere in the file.
+ROS_OWN = {"use_sim_time": ParamSpec("use_sim_time", "bool", False, "use /clock"),
+           "start_type_description_service": ParamSpec("start_type_description_service", "bool", True, "ROS")}
+ROS_OWN_PREFIXES = ("qos_overrides.",)
+
+
+def specs_for(node: str) -> Dict[str, ParamSpec]:
+    """Every parameter ``node`` declares (the shared ones first)."""
+    if node not in NODE_SPECS:
+        raise KeyError(node)
+    return {s.name: s for s in (*SHARED_SPECS, *NODE_SPECS[node])}
+
+
+def defaults_for(node: str) -> Dict[str, Any]:
+    return {name: s.default for name, s in specs_for(node).items()}
+
+
+def spelling_hint(name: str, names: Iterable[str]) -> str:
+    """' (did you mean 'x'?)' for the closest of ``names``, else ''."""
+    close = difflib.get_close_matches(name, list(names), n=1)
+    return f" (did you mean '{close[0]}'?)" if close else ""

@@ -1,0 +1,57 @@
+"""Typed configurations of the core, built from a node's (or a merged) parameter dict."""
+from __future__ import annotations
+
+from typing import Any, Mapping, Optional
+
+from mwip_ros.core.controller import DscGains
+from mwip_ros.core.model import PhysicalParams, Sinusoid, State
+from mwip_ros.core.plant import PlantConfig
+from mwip_ros.core.sim import ClosedLoop
+
+from .schema import PAPER_NOMINAL
+
+__all__ = ["physical", "sinusoid", "gains", "period", "observer_gain", "plant_config", "closed_loop"]
+
+
+def physical(values: Mapping[str, Any], prefix: str) -> PhysicalParams:
+    """``nominal.*`` or ``actual.*`` as PhysicalParams."""
+    return PhysicalParams(**{k: values[f"{prefix}.{k}"] for k in PAPER_NOMINAL})
+
+
+def sinusoid(values: Mapping[str, Any], prefix: str) -> Sinusoid:
+    return Sinusoid(values[f"{prefix}.amplitude"], values[f"{prefix}.omega"], values[f"{prefix}.phase"])
+
+
+def gains(values: Mapping[str, Any]) -> DscGains:
+    return DscGains(k1=values["k1"], k2=values["k2"], tau4=values["tau4"])
+
+
+def period(values: Mapping[str, Any]) -> float:
+    """The control period h = 1 / control_rate_hz [s]."""
+    return 1.0 / values["control_rate_hz"]
+
+
+def observer_gain(values: Mapping[str, Any]):
+    """X as the 2x2 matrix (eq. 14)."""
+    from mwip_ros.core.observer import gain_matrix
+    return gain_matrix(values["X"])
+
+
+def plant_config(v: Mapping[str, Any]) -> PlantConfig:
+    """PlantConfig from a plant_sim parameter dict."""
+    return PlantConfig(
+        actual=physical(v, "actual"), nominal=physical(v, "nominal"),
+        D_b=v["actual.D_b"], D_w_mean=v["actual.D_w_mean"], D_w_variance=v["actual.D_w_variance"],
+        tau_ext1=sinusoid(v, "tau_ext1"), tau_ext2=sinusoid(v, "tau_ext2"),
+        h=period(v), substeps=v["substeps"], seed=v["seed"],
+        initial=State(v["initial.theta_w"], v["initial.theta_b"], v["initial.dtheta_w"], v["initial.dtheta_b"]),
+        torque_limit=v["torque_limit"], fall_angle=v["fall_angle"])
+
+
+def closed_loop(v: Mapping[str, Any], use_observer: Optional[bool] = None,
+                duration: Optional[float] = None) -> ClosedLoop:
+    """The offline scenario of a merged parameter dict (``merged_values``); ``use_observer`` and
+    ``duration`` override the file's ``use_observer`` and ``duration_s``."""
+    return ClosedLoop(plant=plant_config(v), X=tuple(float(c) for c in v["X"]), gains=gains(v),
+                      use_observer=v["use_observer"] if use_observer is None else use_observer,
+                      duration_s=v["duration_s"] if duration is None else duration)

@@ -1,0 +1,112 @@
+"""Runs on disk: a trajectory's CSV, and a recorded bag rebuilt into the same trajectory table.
+
+* :func:`write_csv` / :func:`read_csv`: the columns of :mod:`mwip_ros.core.trajectory`
+  (whichever a run has, in that order), floats written exactly.  ``mwip_sim`` and
+  ``plant_sim`` write whole trajectories; the ``disturbance_observer`` node writes
+  ``t, tau_hat1, tau_hat2``, which :func:`load_run` joins to a plant CSV by stamp.
+* :func:`read_bag_run`: states, applied torque, estimates and the true disturbance of a
+  bag, matched by stamp and decoded by the message layer (:mod:`mwip_ros.msgs.layouts`).
+"""
+from __future__ import annotations
+
+import csv
+import math
+from pathlib import Path
+from typing import Dict, List, Optional
+
+import numpy as np
+
+from mwip_ros.core.trajectory import COLUMNS, Trajectory, TrajectoryTable, join_estimates
+from mwip_ros.msgs import BadMessage
+from mwip_ros.msgs import layouts as L
+from mwip_ros.msgs.topics import leaf
+
+__all__ = ["write_csv", "read_csv", "read_bag_run", "load_run"]
+
+NAN = math.nan
+
+
+def write_csv(run: Trajectory, path) -> None:
+    """The columns ``run`` has, in the trajectory table's order, floats written exactly (repr)."""
+    names = [c for c in COLUMNS if c in run.columns]
+    with open(path, "w", newline="") as f:
+        w = csv.writer(f, lineterminator="\n")
+        w.writerow(names)
+        for row in zip(*(run.columns[c] for c in names)):
+            w.writerow([repr(float(x)) for x in row])
+
+
+def read_csv(path, label: Optional[str] = None) -> Trajectory:
+    """Read a CSV written by :func:`write_csv` (``mwip_sim --csv``, ``plant_sim``'s or the observer's ``csv``)."""
+    with open(path, newline="") as f:
+        rows = list(csv.reader(f))
+    if not rows or "t" not in rows[0]:
+        raise ValueError(f"{path}: not an mwip_ros CSV (no header with a 't' column)")
+    header = rows[0]
+    try:
+        data = np.array([[float(x) for x in r] for r in rows[1:]], dtype=float).reshape(-1, len(header))
+    except ValueError as exc:
+        raise ValueError(f"{path}: not an mwip_ros CSV ({exc})") from None
+    cols = {name: data[:, i] for i, name in enumerate(header)}
+    h = float(cols["t"][1] - cols["t"][0]) if len(data) > 1 else NAN
+    return Trajectory(label or str(path), cols, False, h)  # a CSV does not say; metrics.compute judges |theta_b|
+
+
+def read_bag_run(bag, label: Optional[str] = None) -> Trajectory:
+    """Rebuild the run's trajectory from a bag: states, applied torque, estimate, truth (matched by stamp).
+
+    u_k is the torque the plant applied over period k, i.e. the effort reported with
+    state k+1; the last row takes the last recorded wheel_torque_cmd.  A state resent
+    with the same stamp counts once.
+    """
+    from mwip_ros.bag import raw_messages
+
+    states: Dict[int, tuple] = {}
+    est: Dict[int, tuple] = {}
+    truth: Dict[int, tuple] = {}
+    cmds: List[float] = []
+    for _log_time, topic, data in raw_messages(bag):
+        name = leaf(topic)
+        try:
+            if name == "joint_states":
+                stamp, x, u_prev = L.parse_joint_state(data)
+                states[stamp] = (x, u_prev)
+            elif name == "disturbance_estimate":
+                stamp, a, b = L.parse_wrench(data)
+                est[stamp] = (a, b)
+            elif name == "lumped_disturbance":
+                stamp, a, b = L.parse_wrench(data)
+                truth[stamp] = (a, b)
+            elif name == "wheel_torque_cmd":
+                cmds.append(L.parse_command(data))
+        except BadMessage:
+            continue  # not the graph's message (a foreign publisher): not part of the run
+    if not states:
+        raise ValueError(f"{bag}: no joint_states messages (is this an mwip_ros bag?)")
+    stamps = sorted(states)
+    t0 = stamps[0]
+    table = TrajectoryTable()
+    for i, s in enumerate(stamps):
+        u = states[stamps[i + 1]][1] if i + 1 < len(stamps) else (cmds[-1] if cmds else NAN)
+        table.append((s - t0) * 1e-9, states[s][0], u, est.get(s, (NAN, NAN)), truth.get(s, (NAN, NAN)))
+    run = table.trajectory(label or Path(bag).name, False, NAN)
+    run.h = float(np.median(np.diff(run.t))) if len(run) > 1 else NAN
+    return run
+
+
+def load_run(path, label: Optional[str] = None, estimates=None) -> Trajectory:
+    """A bag directory, an .mcap file or a CSV; ``estimates`` is an optional CSV of the observer's
+    output (``t, tau_hat1, tau_hat2``) whose values join the run's rows by stamp."""
+    p = Path(path)
+    if p.is_file() and p.suffix == ".csv":
+        run = read_csv(p, label or p.stem)
+    elif p.is_dir() or p.suffix == ".mcap":
+        run = read_bag_run(p, label)
+    else:
+        raise ValueError(f"{path}: not a bag directory, .mcap file or .csv file")
+    if estimates is not None:
+        e = read_csv(estimates)
+        if "tau_hat1" not in e.columns or "tau_hat2" not in e.columns:
+            raise ValueError(f"{estimates}: no tau_hat1, tau_hat2 columns (not the observer's CSV)")
+        run = join_estimates(run, zip(e.t, e["tau_hat1"], e["tau_hat2"]))
+    return run

@@ -1,0 +1,37 @@
+"""The trajectory table: rows in column order, internals optional, estimates joined by stamp."""
+import math
+
+import numpy as np
+
+from mwip_ros.core.controller import ControlOutput
+from mwip_ros.core.model import State
+from mwip_ros.core.trajectory import COLUMNS, TRAJECTORY_COLUMNS, TrajectoryTable, join_estimates
+
+
+def test_rows_hold_the_state_command_estimate_truth_and_internals_in_column_order():
+    table = TrajectoryTable(internals=True)
+    out = ControlOutput(u=1.0, u_dsc=2.0, u_taud=3.0, S1=4.0, S2=5.0, x1=6.0, x4_bar=7.0, x4d=8.0)
+    table.append(0.005, State(0.1, 0.2, 0.3, 0.4), 1.5, (9.0, 10.0), (11.0, 12.0), out)
+    run = table.trajectory("r", False, 0.005)
+    assert list(run.columns) == COLUMNS
+    row = [run[c][0] for c in COLUMNS]
+    assert row == [0.005, 0.1, 0.2, 0.3, 0.4, 1.5, 9.0, 10.0, 11.0, 12.0, 2.0, 3.0, 4.0, 5.0, 7.0, 8.0]
+    assert len(run) == len(table) == 1 and table.last("u") == 1.5
+
+
+def test_a_source_without_estimates_writes_nan_and_the_join_fills_them_by_stamp():
+    table = TrajectoryTable()
+    h = 0.005
+    for k in range(5):
+        table.append(k * h, State(0.0, 0.01 * k, 0.0, 0.0), float(k), tau_d=(1.0, 2.0))
+    run = table.trajectory("plant", False, h)
+    assert list(run.columns) == TRAJECTORY_COLUMNS
+    assert np.isnan(run["tau_hat1"]).all() and np.isnan(run["tau_hat2"]).all()
+    # the observer's stamps, in seconds computed another way (k * 5e6 ns * 1e-9); one missing, one foreign
+    est = [(k * 5_000_000 * 1e-9, 10.0 + k, -float(k)) for k in (0, 1, 3, 4)] + [(0.0123, 99.0, 99.0)]
+    joined = join_estimates(run, est)
+    np.testing.assert_array_equal(joined["tau_hat1"][[0, 1, 3, 4]], [10.0, 11.0, 13.0, 14.0])
+    np.testing.assert_array_equal(joined["tau_hat2"][[0, 1, 3, 4]], [0.0, -1.0, -3.0, -4.0])
+    assert math.isnan(joined["tau_hat1"][2]) and 99.0 not in joined["tau_hat1"]
+    assert np.isnan(run["tau_hat1"]).all()  # the original is unchanged
+    np.testing.assert_array_equal(joined["u"], run["u"])

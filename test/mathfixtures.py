@@ -1,0 +1,29 @@
+"""Shared values of the core tests: the paper's nominal and true models, random states, simple plants."""
+import math
+
+import numpy as np
+
+from mwip_ros import params as P
+from mwip_ros.core.model import PhysicalParams, Sinusoid, State
+from mwip_ros.core.plant import PlantConfig
+from mwip_ros.params.paths import default_params_file
+
+NOM = PhysicalParams(**P.PAPER_NOMINAL)
+TRUE = PhysicalParams(**P.PAPER_ACTUAL)
+PAPER_GAINS = P.gains(P.defaults_for("dscndo_controller"))
+FALL_ANGLE = P.defaults_for("plant_sim")["fall_angle"]
+UPRIGHT = State(0.0, 0.0, 0.0, 0.0)
+RNG = np.random.default_rng(12345)
+P_FILE = default_params_file()
+
+
+def random_state(rng) -> State:
+    return State(rng.uniform(-5, 5), rng.uniform(-0.8, 0.8), rng.uniform(-3, 3), rng.uniform(-2, 2))
+
+
+def exact_model_plant(tau_ext=(0.0, 0.0), theta_b0=-0.1745, h=0.005) -> PlantConfig:
+    """The nominal model as the plant: no friction, no noise, constant external torques."""
+    return PlantConfig(actual=NOM, nominal=NOM, D_b=0.0, D_w_mean=0.0, D_w_variance=0.0,
+                       tau_ext1=Sinusoid(tau_ext[0], 0.0, math.pi / 2), tau_ext2=Sinusoid(tau_ext[1], 0.0, math.pi / 2),
+                       h=h, substeps=5, seed=0, initial=State(0.0, theta_b0, 0.0, 0.0), torque_limit=0.0,
+                       fall_angle=FALL_ANGLE)

@@ -1,0 +1,148 @@
+"""bag_replay as a process: resim of a recorded lockstep DSCNDO run, timed replay, bad parameters."""
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+from graphproc import Graph
+
+MODULE = "mwip_ros.nodes.bag_replay"
+STATES = 401  # duration_s 2.0 at 200 Hz: states k = 0 .. 400
+
+
+@pytest.fixture(scope="module")
+def bag(tmp_path_factory):
+    """A short lockstep DSCNDO run recorded by mcap_recorder (the plant waits for the recorder)."""
+    from mwip_ros.bag import topic_counts
+
+    work = tmp_path_factory.mktemp("record")
+    out = work / "bag"
+    with Graph(work) as g:
+        rec = g.start("mcap_recorder", "-p", f"output:={out}", params=None)
+        obs = g.start("disturbance_observer", "-p", "use_sim_time:=true")
+        ctl = g.start("dscndo_controller", "-p", "use_sim_time:=true")
+        for p, text in ((rec, "recording "), (obs, "NDO ready"), (ctl, "DSCNDO ready")):
+            assert p.wait_for_output(text, timeout=30), p.output()
+        time.sleep(1.0)  # let the recorder match the controller's and observer's publishers too
+        plant = g.start("plant_sim", "-p", "duration_s:=2.0", "-p", "expected_subscribers:=3")
+        assert plant.wait(120) == 0, plant.output()
+        time.sleep(0.3)
+        for p in (obs, ctl, rec):
+            assert p.stop(signal.SIGINT, timeout=20) == 0, p.output()
+    counts = topic_counts(out)
+    for topic in ("/joint_states", "/wheel_torque_cmd", "/disturbance_estimate", "/controller_internals"):
+        assert counts.get(topic) == STATES, (counts, rec.output())
+    return out
+
+
+def parse_table(text):
+    """{row name: (compared, missing or None, max diff)} from the resim table."""
+    rows, on = {}, False
+    for line in text.splitlines():
+        if line.strip().startswith("---"):
+            on = True
+            continue
+        if on and line.strip().startswith("RESULT"):
+            break
+        parts = line.split()
+        if on and len(parts) in (4, 5) and parts[1].isdigit():
+            if len(parts) == 5:
+                rows[parts[0]] = (int(parts[1]), int(parts[2]), float(parts[3]))
+            else:
+                rows[parts[0]] = (int(parts[1]), None, float(parts[2]))
+    return rows
+
+
+def resim(tmp_path, bag, *controller_args):
+    with Graph(tmp_path) as g:
+        g.start("disturbance_observer", "-p", "use_sim_time:=true")
+        g.start("dscndo_controller", "-p", "use_sim_time:=true", *controller_args)
+        br = g.start("bag_replay", "-p", f"bag:={bag}", "-p", "mode:=resim", params=None, module=MODULE)
+        code = br.wait(120)
+    return code, br.output()
+
+
+def test_resim_with_the_same_parameters_reproduces_the_recording_exactly(tmp_path, bag):
+    code, out = resim(tmp_path, bag)
+    assert code == 0, out
+    rows = parse_table(out)
+    for name in ("wheel_torque_cmd", "disturbance_estimate", "controller_internals", "u", "u_dsc", "u_taud",
+                 "tau_hat1", "tau_hat2"):
+        compared, missing, diff = rows[name]
+        assert compared == STATES and missing in (0, None) and diff == 0.0, (name, out)
+    assert "RESULT: REPRODUCED" in out
+
+
+def test_resim_with_a_changed_gain_reports_the_difference(tmp_path, bag):
+    code, out = resim(tmp_path, bag, "-p", "k1:=7.0")
+    assert code == 4, out
+    rows = parse_table(out)
+    assert rows["wheel_torque_cmd"][0] == STATES and rows["wheel_torque_cmd"][2] > 1e-6, out
+    assert rows["u"][2] > 1e-6 and rows["u_dsc"][2] > 1e-6, out
+    assert rows["disturbance_estimate"][2] == 0.0, out  # the observer sees the same recorded states
+    assert "RESULT: DIFFERENT" in out and "wheel_torque_cmd" in out.split("RESULT:")[1]
+
+
+def test_replay_at_rate_4_republishes_every_message_in_a_quarter_of_the_time(tmp_path, bag):
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+
+    from bagcheck import decoded_messages
+    from mwip_ros.bag import topic_counts, topic_types
+    from mwip_ros.msgs.qos import GRAPH_QOS
+    from mwip_ros.msgs.topics import msg_class
+
+    counts = {t: n for t, n in topic_counts(bag).items() if n}
+    types = topic_types(bag)
+    log_times = [t for _, _, t, _ in decoded_messages(bag, ["/joint_states"])]
+    span = (log_times[-1] - log_times[0]) * 1e-9
+    g = Graph(tmp_path)
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=g.domain_id)
+    node = rclpy.create_node("replay_test_listener", context=ctx)
+    received = {t: [] for t in counts}
+    for topic in counts:
+        node.create_subscription(msg_class(types[topic]), topic,
+                                 lambda _data, t=topic: received[t].append(time.monotonic()), GRAPH_QOS, raw=True)
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(node)
+    try:
+        with g:
+            br = g.start("bag_replay", "-p", f"bag:={bag}", "-p", "rate:=4.0", "-p", "wait_for_subscribers:=1",
+                         params=None, module=MODULE)
+            end = time.monotonic() + 60
+            while br.popen.poll() is None and time.monotonic() < end:
+                ex.spin_once(timeout_sec=0.01)
+            settle = time.monotonic() + 0.5
+            while time.monotonic() < settle:
+                ex.spin_once(timeout_sec=0.01)
+            assert br.wait(5) == 0, br.output()
+    finally:
+        ex.shutdown()
+        node.destroy_node()
+        rclpy.shutdown(context=ctx)
+    got = {t: len(v) for t, v in received.items()}
+    assert got["/joint_states"] == counts["/joint_states"] == STATES, (got, counts, br.output())
+    assert got == counts, (got, counts)
+    js = received["/joint_states"]
+    wall = js[-1] - js[0]
+    print(f"bag span {span:.3f} s; replay at rate 4 took {wall:.3f} s (expected ~{span / 4:.3f} s)")
+    assert wall < span, (wall, span)
+    assert wall > span / 4 * 0.5, (wall, span)  # the recorded timing is kept, not a burst
+    assert f"replayed {sum(counts.values())} of {sum(counts.values())} messages" in br.output(), br.output()
+
+
+def test_bad_parameters_exit_2_naming_the_key(tmp_path, bag):
+    env = Graph(tmp_path).env
+    missing = tmp_path / "no_such_bag"
+    r = subprocess.run([sys.executable, "-m", MODULE, "--ros-args", "-p", f"bag:={missing}"],
+                       env=env, capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2, r.stdout + r.stderr
+    assert "'bag'" in r.stderr and str(missing) in r.stderr, r.stderr
+    r = subprocess.run([sys.executable, "-m", MODULE, "--ros-args", "-p", f"bag:={bag}", "-p", "topics:=[nope]"],
+                       env=env, capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and "'topics'" in r.stderr and "/joint_states" in r.stderr, r.stdout + r.stderr
+    r = subprocess.run([sys.executable, "-m", MODULE, "--help"], env=env, capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0 and "exit codes" in r.stdout and "resim" in r.stdout, r.stdout + r.stderr

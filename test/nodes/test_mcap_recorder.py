@@ -1,0 +1,200 @@
+"""The mcap_recorder node as a separate process, fed from this test over an isolated ROS domain."""
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+import yaml
+from rosbags.highlevel import AnyReader
+from rosbags.typesys import Stores, get_typestore
+
+from graphproc import Graph
+from mwip_ros.bag import type_hash
+
+TS = get_typestore(Stores.ROS2_JAZZY)
+MODULE = "mwip_ros.nodes.mcap_recorder"
+N = 60
+
+
+@pytest.fixture
+def graph(tmp_path, monkeypatch):
+    """A private ROS domain: the recorder process and this test's own rclpy context."""
+    import rclpy
+    g = Graph(tmp_path)
+    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    monkeypatch.setenv("ROS_DOMAIN_ID", str(g.domain_id))
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=g.domain_id)
+    node = rclpy.create_node("recorder_test_publisher", context=ctx)
+    g.ctx, g.node = ctx, node
+    try:
+        yield g
+    finally:
+        g.close()
+        node.destroy_node()
+        rclpy.shutdown(context=ctx)
+
+
+def start_recorder(g, *params):
+    args = []
+    for p in params:
+        args += ["-p", p]
+    proc = g.start("mcap_recorder", *args, params=None, module=MODULE)
+    assert proc.wait_for_output("recording ", timeout=30), proc.output()
+    return proc
+
+
+def publishers(g, topics):
+    from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+    from mwip_ros.msgs.topics import msg_class
+    qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000, reliability=ReliabilityPolicy.RELIABLE,
+                     durability=DurabilityPolicy.VOLATILE)
+    return {name: g.node.create_publisher(msg_class(t), name, qos) for name, t in topics.items()}
+
+
+def wait_matched(g, pubs, timeout=20.0):
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if all(p.get_subscription_count() >= 1 for p in pubs.values()):
+            return
+        time.sleep(0.05)
+    raise AssertionError("the recorder's subscriptions did not match: "
+                         + str({n: p.get_subscription_count() for n, p in pubs.items()}))
+
+
+def wait_acked(pubs):
+    from rclpy.duration import Duration
+    for name, p in pubs.items():
+        assert p.wait_for_all_acked(Duration(seconds=10)), name
+
+
+def joint_state(i, empty_effort):
+    from sensor_msgs.msg import JointState
+    m = JointState()
+    m.header.stamp.sec, m.header.stamp.nanosec = i, 7
+    m.header.frame_id = "base_link"
+    m.name = ["wheel", "body_pitch"]
+    m.position = [0.5 * i, -0.25 * i]
+    m.velocity = [float(i), 2.0]
+    m.effort = [] if empty_effort else [1.5 * i, 0.0]
+    return m
+
+
+def read_bag(bag):
+    with AnyReader([bag], default_typestore=TS) as reader:
+        msgs = {}
+        for c, t, raw in reader.messages():
+            msgs.setdefault(c.topic, []).append((t, reader.deserialize(raw, c.msgtype)))
+        counts = {c.topic: c.msgcount for c in reader.connections}
+    return msgs, counts
+
+
+@pytest.mark.parametrize("stop_signal", [signal.SIGINT, signal.SIGTERM])
+def test_records_exactly_what_was_published(graph, tmp_path, stop_signal):
+    from geometry_msgs.msg import WrenchStamped
+    from rosgraph_msgs.msg import Clock
+    from std_msgs.msg import Float64
+
+    bag = tmp_path / "bags" / "run1"
+    rec = start_recorder(graph, f"output:={bag}", "chunk_size:=4096", "compression:=zstd")
+    topics = {"joint_states": "sensor_msgs/msg/JointState", "wheel_torque_cmd": "std_msgs/msg/Float64",
+              "disturbance_estimate": "geometry_msgs/msg/WrenchStamped", "/clock": "rosgraph_msgs/msg/Clock"}
+    pubs = publishers(graph, topics)
+    wait_matched(graph, pubs)
+    for i in range(N):
+        pubs["joint_states"].publish(joint_state(i, empty_effort=(i % 3 == 0)))
+        pubs["wheel_torque_cmd"].publish(Float64(data=0.125 * i))
+        w = WrenchStamped()
+        w.header.stamp.sec = i
+        w.wrench.force.x, w.wrench.torque.y = float(i), -float(i)
+        pubs["disturbance_estimate"].publish(w)
+        c = Clock()
+        c.clock.sec, c.clock.nanosec = i, 5
+        pubs["/clock"].publish(c)
+    wait_acked(pubs)
+    time.sleep(0.3)
+    assert rec.stop(stop_signal, timeout=20) == 0, rec.output()
+    out = rec.output()
+    assert f"bag {bag}: {4 * N} messages" in out, out
+
+    msgs, counts = read_bag(bag)
+    assert counts == {"/joint_states": N, "/wheel_torque_cmd": N, "/disturbance_estimate": N, "/clock": N}
+    for i, (_, m) in enumerate(msgs["/joint_states"]):
+        assert (m.header.stamp.sec, m.header.stamp.nanosec, m.header.frame_id) == (i, 7, "base_link")
+        assert list(m.name) == ["wheel", "body_pitch"]
+        assert list(m.position) == [0.5 * i, -0.25 * i] and list(m.velocity) == [float(i), 2.0]
+        assert list(m.effort) == ([] if i % 3 == 0 else [1.5 * i, 0.0])
+    assert [m.data for _, m in msgs["/wheel_torque_cmd"]] == [0.125 * i for i in range(N)]
+    assert [(m.header.stamp.sec, m.wrench.force.x, m.wrench.torque.y) for _, m in msgs["/disturbance_estimate"]] \
+        == [(i, float(i), -float(i)) for i in range(N)]
+    assert [(m.clock.sec, m.clock.nanosec) for _, m in msgs["/clock"]] == [(i, 5) for i in range(N)]
+    times = [t for _, t_msgs in msgs.items() for t, _ in t_msgs]
+    assert all(t > 1_000_000_000 * 1_000_000_000 for t in times)  # receive time (wall clock)
+
+    meta = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    assert meta["version"] == 9 and meta["message_count"] == 4 * N
+    for e in meta["topics_with_message_count"]:
+        tm = e["topic_metadata"]
+        assert e["message_count"] == N
+        assert tm["type_description_hash"] == type_hash(tm["type"])
+        assert [q["reliability"] for q in tm["offered_qos_profiles"]] == ["reliable"]
+
+
+def test_refuses_existing_output(graph, tmp_path):
+    out = tmp_path / "exists"
+    out.mkdir()
+    cmd = [sys.executable, "-m", MODULE, "--ros-args", "-p", f"output:={out}"]
+    r = subprocess.run(cmd, env=graph.env, capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2, r.stdout + r.stderr
+    assert "output" in r.stderr and str(out) in r.stderr and "exists" in r.stderr
+    assert os.listdir(out) == []
+    r = subprocess.run(cmd[:-2], env=graph.env, capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and "output" in r.stderr, r.stdout + r.stderr
+
+
+def test_topics_parameter_selects_topics(graph, tmp_path):
+    from std_msgs.msg import Float64
+    bag = tmp_path / "sel"
+    rec = start_recorder(graph, f"output:={bag}", "topics:=[wheel_torque_cmd]")
+    pubs = publishers(graph, {"wheel_torque_cmd": "std_msgs/msg/Float64"})
+    wait_matched(graph, pubs)
+    for i in range(5):
+        pubs["wheel_torque_cmd"].publish(Float64(data=float(i)))
+    wait_acked(pubs)
+    time.sleep(0.2)
+    assert rec.stop(signal.SIGINT, timeout=20) == 0, rec.output()
+    assert "recording 1 topic(s)" in rec.output()
+    assert read_bag(bag)[1] == {"/wheel_torque_cmd": 5}
+
+
+def test_kill_9_then_repair(graph, tmp_path):
+    bag = tmp_path / "killed"
+    rec = start_recorder(graph, f"output:={bag}", "chunk_size:=2048")
+    pubs = publishers(graph, {"joint_states": "sensor_msgs/msg/JointState"})
+    wait_matched(graph, pubs)
+    n = 400
+    for i in range(n):
+        pubs["joint_states"].publish(joint_state(i, empty_effort=False))
+    wait_acked(pubs)
+    time.sleep(1.0)  # let the recorder write what it received
+    os.kill(rec.pid, signal.SIGKILL)
+    rec.popen.wait(timeout=10)
+    assert not (bag / "metadata.yaml").exists()
+    with pytest.raises(Exception):
+        read_bag(bag)
+
+    r = subprocess.run([sys.executable, "-m", "mwip_ros.bag.repair", str(bag)], env=graph.env,
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "killed_0.mcap.broken" in r.stdout and "total:" in r.stdout
+    msgs, counts = read_bag(bag)
+    saved = counts["/joint_states"]
+    assert n - 50 <= saved < n  # everything but the unfinished last chunk
+    assert [m.position[0] for _, m in msgs["/joint_states"]] == [0.5 * i for i in range(saved)]
+    meta = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    assert meta["message_count"] == saved
+    tm = meta["topics_with_message_count"][0]["topic_metadata"]
+    assert tm["type_description_hash"] == type_hash("sensor_msgs/msg/JointState")
+    assert tm["offered_qos_profiles"][0]["reliability"] == "reliable"

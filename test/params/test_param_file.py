@@ -1,0 +1,119 @@
+"""The parameter file loader refuses each kind of bad input with a message naming the key."""
+import copy
+
+import pytest
+import yaml
+
+from mwip_ros import params as P
+from mwip_ros.params.paths import default_params_file
+
+BASE = yaml.safe_load(default_params_file().read_text())
+
+
+def _load(tmp_path, doc):
+    f = tmp_path / "p.yaml"
+    f.write_text(yaml.safe_dump(doc))
+    return P.load_param_file(f)
+
+
+def _mutate(path, value):
+    doc = copy.deepcopy(BASE)
+    node = doc
+    for k in path[:-1]:
+        node = node[k]
+    node[path[-1]] = value
+    return doc
+
+
+def test_paper_file_loads_with_spec_values(tmp_path):
+    pf = P.load_param_file(default_params_file())
+    v = pf.for_node("plant_sim")
+    assert v["actual.m_b"] == 310.6 and v["nominal.m_b"] == 210.6 and v["control_rate_hz"] == 200.0
+    assert pf.for_node("disturbance_observer")["X"] == [100.0, 0.0, 0.0, 100.0]
+    c = pf.for_node("dscndo_controller")
+    assert (c["k1"], c["k2"], c["tau4"], c["use_observer"]) == (6.0, 6.0, 0.1, True)
+
+
+@pytest.mark.parametrize("path,value,key,words", [
+    (("plant_sim", "ros__parameters", "actual", "m_b"), -310.6, "plant_sim.actual.m_b", "> 0"),
+    (("plant_sim", "ros__parameters", "actual", "m_b"), 0.0, "plant_sim.actual.m_b", "> 0"),
+    (("/**", "ros__parameters", "nominal", "I_b"), -1.0, "nominal.I_b", "> 0"),
+    (("/**", "ros__parameters", "nominal", "l"), 0.0, "nominal.l", "> 0"),
+    (("/**", "ros__parameters", "control_rate_hz"), 0.0, "control_rate_hz", "> 0"),
+    (("/**", "ros__parameters", "control_rate_hz"), 200, "control_rate_hz", "200.0"),
+    (("dscndo_controller", "ros__parameters", "tau4"), 0.0, "dscndo_controller.tau4", "> 0"),
+    (("dscndo_controller", "ros__parameters", "k1"), "six", "dscndo_controller.k1", "floating-point"),
+    (("dscndo_controller", "ros__parameters", "use_observer"), "yes please", "dscndo_controller.use_observer", "true or false"),
+    (("plant_sim", "ros__parameters", "actual", "D_w_variance"), -0.2, "plant_sim.actual.D_w_variance", ">= 0"),
+    (("plant_sim", "ros__parameters", "substeps"), 5.0, "plant_sim.substeps", "integer"),
+    (("plant_sim", "ros__parameters", "substeps"), 0, "plant_sim.substeps", ">= 1"),
+    (("plant_sim", "ros__parameters", "mode"), "fast", "plant_sim.mode", "lockstep"),
+    (("disturbance_observer", "ros__parameters", "X"), [100.0, 0.0, 100.0], "disturbance_observer.X", "4 entries"),
+    (("disturbance_observer", "ros__parameters", "X"), [100, 0, 0, 100], "disturbance_observer.X", "floating-point"),
+    (("plant_sim", "ros__parameters", "fall_angle"), float("nan"), "plant_sim.fall_angle", "finite"),
+])
+def test_bad_values_are_refused_naming_the_key(tmp_path, path, value, key, words):
+    with pytest.raises(P.ParamError) as ei:
+        _load(tmp_path, _mutate(path, value))
+    assert ei.value.key == key
+    assert f"'{key}'" in str(ei.value) and words in str(ei.value)
+    assert "p.yaml" in str(ei.value)
+
+
+def test_unknown_and_misspelled_keys(tmp_path):
+    doc = _mutate(("dscndo_controller", "ros__parameters", "k3"), 1.0)
+    with pytest.raises(P.ParamError, match="'dscndo_controller.k3'.*unknown parameter"):
+        _load(tmp_path, doc)
+    doc = copy.deepcopy(BASE)
+    doc["plant_sim"]["ros__parameters"]["actual"]["m_bb"] = doc["plant_sim"]["ros__parameters"]["actual"].pop("m_b")
+    with pytest.raises(P.ParamError, match="plant_sim.actual.m_bb.*did you mean 'actual.m_b'"):
+        _load(tmp_path, doc)
+    # a key in the wrong node's section says where it belongs
+    doc = _mutate(("plant_sim", "ros__parameters", "k1"), 6.0)
+    with pytest.raises(P.ParamError, match="'plant_sim.k1'.*belongs under dscndo_controller"):
+        _load(tmp_path, doc)
+    doc = copy.deepcopy(BASE)
+    doc["dscndo_controler"] = doc.pop("dscndo_controller")
+    with pytest.raises(P.ParamError, match="dscndo_controler.*unknown node name.*did you mean 'dscndo_controller'"):
+        _load(tmp_path, doc)
+    doc = copy.deepcopy(BASE)
+    doc["plant_sim"] = {"ros_parameters": {}}
+    with pytest.raises(P.ParamError, match="ros__parameters"):
+        _load(tmp_path, doc)
+
+
+def test_ros_own_parameters_and_namespaced_sections_are_accepted(tmp_path):
+    doc = copy.deepcopy(BASE)
+    doc["/**"]["ros__parameters"]["use_sim_time"] = True
+    doc["/robot1/plant_sim"] = doc.pop("plant_sim")
+    pf = _load(tmp_path, doc)
+    assert pf.for_node("plant_sim")["actual.m_b"] == 310.6
+    doc["/**"]["ros__parameters"]["use_sim_time"] = "yes"
+    with pytest.raises(P.ParamError, match="use_sim_time"):
+        _load(tmp_path, doc)
+
+
+def test_missing_file_and_bad_yaml(tmp_path):
+    with pytest.raises(P.ParamError, match="no such file"):
+        P.load_param_file(tmp_path / "nope.yaml")
+    f = tmp_path / "bad.yaml"
+    f.write_text("plant_sim: [unclosed\n")
+    with pytest.raises(P.ParamError, match="not valid YAML"):
+        P.load_param_file(f)
+
+
+def test_overrides_are_checked_the_same_way():
+    pf = P.load_param_file(default_params_file())
+    assert pf.for_node("dscndo_controller", {"k1": 7.0})["k1"] == 7.0
+    with pytest.raises(P.ParamError, match="'k1'.*> 0"):
+        pf.for_node("dscndo_controller", {"k1": -7.0})
+    with pytest.raises(P.ParamError, match="'k1'.*7.0"):
+        pf.for_node("dscndo_controller", {"k1": 7})
+    with pytest.raises(P.ParamError, match="'k9'.*unknown"):
+        pf.for_node("dscndo_controller", {"k9": 1.0})
+
+
+def test_every_spec_default_passes_its_own_check():
+    for node in P.NODE_SPECS:
+        for name, spec in P.specs_for(node).items():
+            spec.validate(spec.default)
