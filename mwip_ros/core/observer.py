@@ -84,6 +84,17 @@ class DiscreteObserver:
     _prev: Optional[tuple] = field(default=None, repr=False)
     _gains: tuple = field(default=(None, None), repr=False)  # (X object, its flat floats)
 
+    def snapshot(self) -> tuple:
+        """The observer's state, for :meth:`restore` (a caller that must not keep a bad update)."""
+        return self.z, self._prev
+
+    def restore(self, snap: tuple) -> None:
+        self.z, self._prev = snap
+
+    def reset(self) -> None:
+        """Forget the past: the next update starts again with tau_hat = 0."""
+        self.z = self._prev = None
+
     def update(self, x, u_prev: float, h: Optional[float] = None) -> Tuple[float, float]:
         if self._gains[0] is not self.X:  # X was (re)assigned, e.g. a parameter update
             self._gains = (self.X, _flat(self.X))

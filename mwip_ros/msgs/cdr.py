@@ -31,10 +31,10 @@ import struct
 from typing import Dict, List, Sequence, Tuple
 
 from .errors import CdrError
-from .stamps import NS_PER_S as _NS, split_ns
+from .stamps import NS_PER_S as _NS, join_ns, split_ns
 
 __all__ = ["CDR_LE", "CdrError", "JointStateEncoder", "WrenchStampedEncoder", "decode_clock", "decode_float64",
-           "decode_joint_state", "decode_wrench_stamped", "encode_clock", "encode_float64", "split_ns"]
+           "decode_joint_state", "decode_wrench", "decode_wrench_stamped", "encode_clock", "encode_float64", "encode_wrench", "split_ns"]
 
 CDR_LE = b"\x00\x01\x00\x00"
 
@@ -46,7 +46,7 @@ _st = functools.lru_cache(maxsize=256)(struct.Struct)
 # --- decoding --------------------------------------------------------------------------------------
 
 class _Reader:
-    __slots__ = ("buf", "pos", "e")
+    __slots__ = ("buf", "pos", "e", "end")
 
     def __init__(self, data, what: str):
         if len(data) < 4:
@@ -56,11 +56,14 @@ class _Reader:
         self.buf = data
         self.pos = 4
         self.e = "<" if data[1] == 1 else ">"
+        # The last two bits of the options say how many padding bytes end the payload (XCDR): they are
+        # not part of the message, so a payload cut short and padded up is still found short.
+        self.end = len(data) - (data[3] & 3)
 
     def _take(self, fmt: str, size: int, align: int):
         pos = self.pos + (-(self.pos - 4) % align)
-        if pos + size > len(self.buf):
-            raise CdrError(f"message ends at byte {len(self.buf)}, needs {pos + size}")
+        if pos + size > self.end:
+            raise CdrError(f"message ends at byte {self.end}, needs {pos + size}")
         self.pos = pos + size
         return _st(self.e + fmt).unpack_from(self.buf, pos)
 
@@ -71,13 +74,13 @@ class _Reader:
         sec, nsec = self._take("iI", 8, 4)
         if nsec >= _NS:
             raise CdrError(f"nanosec {nsec} >= 1e9")
-        return sec * _NS + nsec
+        return join_ns(sec, nsec)
 
     def string(self) -> str:
         n = self.u32()
         end = self.pos + n
-        if end > len(self.buf):
-            raise CdrError(f"string of length {n} at byte {self.pos} is cut off at byte {len(self.buf)}")
+        if end > self.end:
+            raise CdrError(f"string of length {n} at byte {self.pos} is cut off at byte {self.end}")
         # Length includes the NUL; like Fast CDR, also take a length of 0 or a missing NUL.
         stop = end - 1 if n and self.buf[end - 1] == 0 else end
         try:
@@ -92,16 +95,20 @@ class _Reader:
 
     def double_seq(self) -> Tuple[float, ...]:
         n = self.u32()
-        if 8 * n > len(self.buf):
+        if 8 * n > self.end:
             raise CdrError(f"sequence of {n} doubles is longer than the message")
         return self.doubles(n)
 
 
 # Messages of one publisher share their layout (frame_id, names, sequence lengths); the first
 # one of each length is parsed field by field and leaves a template, the rest are checked
-# against it (the bytes before the numbers must be equal) and read with one struct.
+# against it (the bytes before the numbers must be equal) and read with one struct.  The
+# cache is bounded in entries and in bytes, and a layout with a long prefix (long names,
+# whatever a foreign publisher sends) is never kept: it is parsed field by field each time.
 _templates: Dict[Tuple[str, int, bytes], Tuple[int, bytes, struct.Struct, tuple, tuple]] = {}
 _MAX_TEMPLATES = 64
+_MAX_PREFIX = 1024                # bytes of frame_id and names a template may hold
+_template_bytes = [0]             # bytes held by the cache now (prefixes, counted twice: bytes and strings)
 
 
 def _fast(kind: str, data):
@@ -120,14 +127,19 @@ def _fast(kind: str, data):
     sec, nsec = _st(body.format[0] + "iI").unpack_from(data, 4)
     if nsec >= _NS:
         return None
-    return sec * _NS + nsec, result_prefix, vals
+    return join_ns(sec, nsec), result_prefix, vals
 
 
 def _learn(kind: str, data, body_at: int, fmt: str, counts_at: tuple, result_prefix: tuple) -> None:
-    if len(_templates) >= _MAX_TEMPLATES:
+    size = body_at - 12
+    if size > _MAX_PREFIX or len(fmt) > _MAX_PREFIX:
+        return
+    if len(_templates) >= _MAX_TEMPLATES or _template_bytes[0] + 2 * size > _MAX_TEMPLATES * _MAX_PREFIX:
         _templates.clear()
+        _template_bytes[0] = 0
     _templates[(kind, len(data), bytes(data[:4]))] = (body_at, bytes(data[12:body_at]), _st(fmt), counts_at,
                                                       result_prefix)
+    _template_bytes[0] += 2 * size
 
 
 def decode_joint_state(data) -> Tuple[int, str, List[str], Tuple[float, ...], Tuple[float, ...], Tuple[float, ...]]:
@@ -177,6 +189,12 @@ def decode_wrench_stamped(data) -> Tuple[int, str, Tuple[float, float, float], T
     v = r.doubles(6)
     _learn("WrenchStamped", data, body_at, f"{r.e}{-(body_at - 4) % 8}x6d", (), (frame,))
     return stamp, frame, v[:3], v[3:]
+
+
+def decode_wrench(data) -> Tuple[Tuple[float, float, float], Tuple[float, float, float]]:
+    """geometry_msgs/Wrench -> (force xyz, torque xyz)."""
+    v = _Reader(data, "Wrench").doubles(6)
+    return v[:3], v[3:]
 
 
 def decode_float64(data) -> float:
@@ -264,11 +282,17 @@ class WrenchStampedEncoder:
 
 
 _F64 = struct.Struct("<4sd")
+_WRENCH6 = struct.Struct("<4s6d")
 _CLOCK = struct.Struct("<4siI")
 
 
 def encode_float64(x: float) -> bytes:
     return _F64.pack(CDR_LE, x)
+
+
+def encode_wrench(force: Sequence[float], torque: Sequence[float]) -> bytes:
+    """geometry_msgs/Wrench (no header)."""
+    return _WRENCH6.pack(CDR_LE, *force, *torque)
 
 
 def encode_clock(stamp_ns: int) -> bytes:

@@ -8,10 +8,12 @@
     controller_internals  sensor_msgs/JointState    name = INTERNAL_NAMES, values in position
     /clock                rosgraph_msgs/Clock       simulation time
 
+    external_wrench       geometry_msgs/Wrench      torque.x, torque.y added to tau_ext1, tau_ext2
+
 The nodes publish these as bytes and parse the bytes they receive (:mod:`.cdr`), and the
 bag readers use the same parsers.  ``parse_*`` raise :class:`~.errors.BadMessage` for
 anything that must not be used: bytes that are not the type, joints missing, non-finite
-values.
+values, and values no robot of this kind can have (:data:`LIMITS`).
 """
 from __future__ import annotations
 
@@ -23,12 +25,23 @@ from mwip_ros.core.model import State
 from . import cdr
 from .errors import BadMessage, CdrError
 
-__all__ = ["JOINT_NAMES", "INTERNAL_NAMES", "encode_state", "encode_wrench", "encode_internals",
-           "encode_command", "encode_clock", "parse_joint_state", "parse_wrench", "parse_command",
-           "parse_clock", "parse_internals"]
+__all__ = ["JOINT_NAMES", "INTERNAL_NAMES", "LIMITS", "encode_state", "encode_wrench", "encode_internals",
+           "encode_command", "encode_clock", "encode_external_wrench", "parse_joint_state", "parse_wrench",
+           "parse_command", "parse_clock", "parse_internals", "parse_external_wrench"]
 
 JOINT_NAMES = ("wheel", "body_pitch")
 INTERNAL_NAMES = ("S1", "S2", "x4d", "x4_bar", "u_dsc", "u_taud", "u", "x1")
+
+# Plausible values, far beyond anything the robot reaches (in the paper's scenario |theta_b| stays
+# below 0.2 rad, the rates below 5 rad/s and the torques below 150 N m; a fall ends a run at
+# fall_angle, at most pi/2 in practice) and far inside what the arithmetic survives (a rate of
+# 1e160 overflows the law).  A message outside them is rejected like a NaN.
+LIMITS = {
+    "theta_b": math.pi,        # body pitch [rad]: beyond it the body is upside down
+    "theta_w": 1e9,            # wheel angle [rad]: 250,000 km of travel
+    "rate": 1e3,               # theta_w', theta_b' [rad/s]
+    "torque": 1e6,             # u, tau_hat, tau_d, tau_ext [N m]
+}
 
 _STATE = cdr.JointStateEncoder(JOINT_NAMES)
 _INTERNALS = cdr.JointStateEncoder(INTERNAL_NAMES)
@@ -41,6 +54,17 @@ encode_clock = cdr.encode_clock       # rosgraph_msgs/Clock
 def _finite(values: Sequence[float], what: str) -> None:
     if not all(math.isfinite(v) for v in values):
         raise BadMessage(f"non-finite {what}: {list(values)}")
+
+
+def _within(value: float, limit: str, what: str) -> None:
+    if abs(value) > LIMITS[limit]:
+        raise BadMessage(f"implausible {what} {value:g} (|{what}| must be <= {LIMITS[limit]:g})")
+
+
+def _torques(values: Sequence[float], what: str) -> None:
+    _finite(values, what)
+    for v in values:
+        _within(v, "torque", what)
 
 
 def _decoded(decode, data, type_name: str):
@@ -84,13 +108,18 @@ def parse_joint_state(data) -> Tuple[int, State, float]:
     x = State(position[iw], position[ib], velocity[iw], velocity[ib])
     u_prev = effort[iw]
     _finite((*x, u_prev), "joint state")
+    _within(x[1], "theta_b", "theta_b")
+    _within(x[0], "theta_w", "theta_w")
+    _within(x[2], "rate", "theta_w'")
+    _within(x[3], "rate", "theta_b'")
+    _within(u_prev, "torque", "effort")
     return stamp, x, u_prev
 
 
 def parse_wrench(data) -> Tuple[int, float, float]:
     """(stamp_ns, torque.x, torque.y) of a WrenchStamped, or BadMessage."""
     stamp, _frame, _force, torque = _decoded(cdr.decode_wrench_stamped, data, "geometry_msgs/WrenchStamped")
-    _finite(torque[:2], "torque")
+    _torques(torque[:2], "torque")
     return stamp, torque[0], torque[1]
 
 
@@ -99,7 +128,20 @@ def parse_command(data) -> float:
     u = _decoded(cdr.decode_float64, data, "std_msgs/Float64")
     if not math.isfinite(u):
         raise BadMessage(f"non-finite command {u}")
+    _within(u, "torque", "command")
     return u
+
+
+def encode_external_wrench(t1: float, t2: float) -> bytes:
+    """external_wrench: torque.x adds to tau_ext1, torque.y to tau_ext2."""
+    return cdr.encode_wrench(_ZERO3, (float(t1), float(t2), 0.0))
+
+
+def parse_external_wrench(data) -> Tuple[float, float]:
+    """(torque.x, torque.y) of an external_wrench message, or BadMessage."""
+    _force, torque = _decoded(cdr.decode_wrench, data, "geometry_msgs/Wrench")
+    _torques(torque[:2], "torque")
+    return torque[0], torque[1]
 
 
 def parse_clock(data) -> int:

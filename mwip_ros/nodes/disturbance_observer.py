@@ -3,11 +3,15 @@
 Subscribes ``joint_states``; for each new state k publishes ``disturbance_estimate``
 (tau_hat_k, stamped with state k's stamp).  A repeated state (same stamp, e.g. the
 plant resending at start-up) gets the same estimate again and is not integrated twice.
-With ``csv`` set it writes its estimates (``t, tau_hat1, tau_hat2``) at the end, which
+A state it cannot use (malformed, non-finite, implausible, a stamp outside the stream's
+window; :mod:`.guards`) is rejected, counted and logged, and changes nothing; a stream
+that restarted (a new plant, a reset) re-initialises the observer.  With ``csv`` set it
+writes its estimates (``t, tau_hat1, tau_hat2``) at the end, which
 ``mwip_report --estimates`` joins to the plant's CSV by stamp.
 """
 from __future__ import annotations
 
+import math
 import sys
 from array import array
 
@@ -22,8 +26,9 @@ from mwip_ros.core.trajectory import Trajectory
 from mwip_ros.msgs import BadMessage
 from mwip_ros.msgs import layouts as L
 from mwip_ros.msgs.qos import GRAPH_QOS
+from mwip_ros.nodes.guards import NEW, REPEAT, RESTART, STAMP_WINDOW_PERIODS, PublisherWatch, Rejects, StampGuard
 from mwip_ros.nodes.params import declare
-from mwip_ros.nodes.runtime import GracefulNodeMixin, Rejects, run_node
+from mwip_ros.nodes.runtime import GracefulNodeMixin, run_node
 from mwip_ros.runs import write_csv
 
 NAME = "disturbance_observer"
@@ -34,15 +39,17 @@ class DisturbanceObserver(Node, GracefulNodeMixin):
         super().__init__(NAME, context=context)
         self.v = declare(self, NAME, argv, on_change=self._on_change)
         self.h = P.period(self.v)
+        self.period_ns = round(self.h * 1e9)
         self.obs = DiscreteObserver(P.physical(self.v, "nominal"), P.observer_gain(self.v), self.h)
         self._warn_theorem()
-        self.last_stamp = None
+        self.guard = StampGuard(STAMP_WINDOW_PERIODS * self.period_ns, "joint_states stamp")
         self.last_msg = None
         self.count = 0
         self.written = array("d") if self.v["csv"] else None  # t, tau_hat1, tau_hat2 per estimate
         self.rejects = Rejects(self.get_logger())
         self.pub = self.create_publisher(WrenchStamped, "disturbance_estimate", GRAPH_QOS)
         self.create_subscription(JointState, "joint_states", self._on_state, GRAPH_QOS, raw=True)
+        self.watch = PublisherWatch(self, ["joint_states"])
         self.get_logger().info(f"NDO ready: X = {self.v['X']}, h = {self.h * 1e3:.3f} ms")
 
     def _warn_theorem(self):
@@ -62,24 +69,46 @@ class DisturbanceObserver(Node, GracefulNodeMixin):
         except BadMessage as exc:
             self.rejects("joint_states", str(exc))
             return
+        last = self.guard.last
+        verdict = self.guard.check(stamp)
+        if verdict == REPEAT:
+            if self.last_msg is not None:
+                self.pub.publish(self.last_msg)  # a resent state: answer it again, integrate nothing
+            return
         h = None
-        if self.last_stamp is not None:
-            if stamp <= self.last_stamp:
-                if stamp == self.last_stamp and self.last_msg is not None:
-                    self.pub.publish(self.last_msg)  # a resent state: answer it again, integrate nothing
-                else:
-                    self.rejects("joint_states", f"stamp {stamp} ns older than the last state {self.last_stamp} ns")
-                return
-            n = max(1, round((stamp - self.last_stamp) * 1e-9 / self.h))
-            if n != 1:  # realtime: a state was lost; integrate over the whole gap
+        if verdict == RESTART:
+            self.get_logger().warning(f"joint_states restarted at t = {stamp * 1e-9:.3f} s (the last state was "
+                                      f"t = {last * 1e-9:.3f} s): re-initialising the observer")
+            snap = self.obs.snapshot()
+            self.obs.reset()
+        elif verdict != NEW:
+            self.rejects("joint_states", verdict)
+            return
+        else:
+            snap = self.obs.snapshot()
+            n = round((stamp - last) / self.period_ns) if last is not None else 1
+            if n > 1:  # realtime: a state was lost; integrate over the whole gap (at most the window)
                 h = n * self.h
-        tau_hat = self.obs.update(x, u_prev, h)
-        self.last_stamp = stamp
+        try:
+            tau_hat = self.obs.update(x, u_prev, h)
+            ok = math.isfinite(tau_hat[0]) and math.isfinite(tau_hat[1])
+        except (ArithmeticError, ValueError):
+            ok = False
+        if not ok:
+            self.obs.restore(snap)
+            self.guard.last = last
+            self.rejects("joint_states", f"the estimate for t = {stamp * 1e-9:.3f} s is not finite; the state is "
+                                         "not integrated")
+            return
         self.last_msg = L.encode_wrench(stamp, tau_hat[0], tau_hat[1])
         self.pub.publish(self.last_msg)
         self.count += 1
         if self.written is not None:
             self.written.extend((stamp * 1e-9, tau_hat[0], tau_hat[1]))
+
+    def spin_step(self, executor) -> None:
+        executor.spin_once(timeout_sec=0.1)
+        self.watch.check()
 
     def on_shutdown(self) -> None:
         self.get_logger().info(f"estimated {self.count} states; rejected: {self.rejects.summary()}")

@@ -4,9 +4,15 @@ Subscribes ``joint_states`` and (with ``use_observer``) ``disturbance_estimate``
 pairs them by stamp, publishes ``wheel_torque_cmd`` once per state and the
 internal signals on ``controller_internals`` (a JointState whose ``name`` lists
 S1, S2, x4d, x4_bar, u_dsc, u_taud, u, x1 and whose ``position`` holds them).
+A message it cannot use (malformed, non-finite, implausible, a stamp outside the
+stream's window; :mod:`.guards`) is rejected, counted and logged and changes nothing;
+so is a state for which the law gives a non-finite command (nothing is published).
+A stream that restarted re-initialises the filter.  At most ``_MAX_PENDING`` states
+and estimates wait for their partner.
 """
 from __future__ import annotations
 
+import math
 import sys
 
 from geometry_msgs.msg import WrenchStamped
@@ -20,8 +26,9 @@ from mwip_ros.core.theorem import controller_conditions
 from mwip_ros.msgs import BadMessage
 from mwip_ros.msgs import layouts as L
 from mwip_ros.msgs.qos import GRAPH_QOS
+from mwip_ros.nodes.guards import NEW, REPEAT, RESTART, STAMP_WINDOW_PERIODS, PublisherWatch, Rejects, StampGuard
 from mwip_ros.nodes.params import declare
-from mwip_ros.nodes.runtime import GracefulNodeMixin, Rejects, run_node
+from mwip_ros.nodes.runtime import GracefulNodeMixin, run_node
 
 NAME = "dscndo_controller"
 _MAX_PENDING = 64
@@ -43,6 +50,9 @@ class DscndoController(Node, GracefulNodeMixin):
         self.int_pub = self.create_publisher(JointState, "controller_internals", GRAPH_QOS)
         self.create_subscription(JointState, "joint_states", self._on_state, GRAPH_QOS, raw=True)
         self.create_subscription(WrenchStamped, "disturbance_estimate", self._on_estimate, GRAPH_QOS, raw=True)
+        self.window_ns = STAMP_WINDOW_PERIODS * round(P.period(self.v) * 1e9)
+        self.guard = StampGuard(self.window_ns, "joint_states stamp")
+        self.watch = PublisherWatch(self, ["joint_states", "disturbance_estimate"])
         g = self.ctrl.gains
         self.get_logger().info(f"{'DSCNDO' if self.ctrl.use_observer else 'DSC'} ready: k1 = {g.k1}, k2 = {g.k2}, "
                                f"tau4 = {g.tau4}")
@@ -67,8 +77,20 @@ class DscndoController(Node, GracefulNodeMixin):
         except BadMessage as exc:
             self.rejects("joint_states", str(exc))
             return
-        if self.last_answered is not None and stamp <= self.last_answered:
-            return  # already answered (a resent state): one command per state
+        last = self.guard.last
+        verdict = self.guard.check(stamp)
+        if verdict == REPEAT:
+            return  # a resent state: one command per state
+        if verdict == RESTART:
+            self.get_logger().warning(f"joint_states restarted at t = {stamp * 1e-9:.3f} s (the last state was "
+                                      f"t = {last * 1e-9:.3f} s): re-initialising the controller")
+            self.ctrl.x4d = None
+            self.states.clear()
+            self.estimates = {s: e for s, e in self.estimates.items() if s >= stamp}
+            self.last_answered = None
+        elif verdict != NEW:
+            self.rejects("joint_states", verdict)
+            return
         self.states[stamp] = x
         self._try(stamp)
 
@@ -79,8 +101,14 @@ class DscndoController(Node, GracefulNodeMixin):
             self.rejects("disturbance_estimate", str(exc))
             return
         if self.last_answered is not None and stamp <= self.last_answered:
+            return  # an estimate answering a resent state: its state is answered already
+        last = self.guard.last
+        if last is not None and stamp > last + self.window_ns:
+            self.rejects("disturbance_estimate", f"stamp {stamp * 1e-9:.6f} s is ahead of the states "
+                                                 f"({last * 1e-9:.6f} s) by more than {self.window_ns * 1e-9:g} s")
             return
         self.estimates[stamp] = (t1, t2)
+        self._trim()
         self._try(stamp)
 
     def _try(self, stamp: int) -> None:
@@ -92,7 +120,18 @@ class DscndoController(Node, GracefulNodeMixin):
             return  # wait for the estimate of this very state
         x = self.states.pop(stamp)
         self.estimates.pop(stamp, None)
-        out = self.ctrl.step(x, tau_hat)
+        x4d = self.ctrl.x4d
+        try:
+            out = self.ctrl.step(x, tau_hat)
+            ok = all(math.isfinite(v) for v in (out.u, self.ctrl.x4d))
+        except (ArithmeticError, ValueError):
+            ok = False
+        if not ok:
+            self.ctrl.x4d = x4d  # keep the filter as it was: setting a bad gain back repairs the loop
+            self.rejects("joint_states", f"the law gives no finite command for t = {stamp * 1e-9:.3f} s "
+                                         f"(gains k1 = {self.ctrl.gains.k1:g}, k2 = {self.ctrl.gains.k2:g}, "
+                                         f"tau4 = {self.ctrl.gains.tau4:g}); nothing published")
+            return
         self.cmd_pub.publish(L.encode_command(out.u))
         self.int_pub.publish(L.encode_internals(stamp, out))
         self.last_answered = stamp
@@ -106,6 +145,10 @@ class DscndoController(Node, GracefulNodeMixin):
         for d in (self.states, self.estimates):
             while len(d) > _MAX_PENDING:
                 d.pop(min(d))
+
+    def spin_step(self, executor) -> None:
+        executor.spin_once(timeout_sec=0.1)
+        self.watch.check()
 
     def on_shutdown(self) -> None:
         self.get_logger().info(f"answered {self.count} states; rejected: {self.rejects.summary()}")

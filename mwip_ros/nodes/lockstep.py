@@ -16,14 +16,17 @@ states the way the plant drives them with simulated ones.
    again (only states sent before every subscription matched are lost; the observer
    answers a repeated stamp again and the controller answers each stamp once, so a
    resend is harmless).  After ``timeout_s`` without an answer the step has failed; the
-   text names the node that is missing.
+   text names the node that is missing.  A node that died keeps its place in the graph for
+   a while, so from the first resend on the driver also listens to ``disturbance_estimate``:
+   the observer answers a resent state again, and if it does not, it is the one to name.
 """
 from __future__ import annotations
 
 import time
 from typing import Optional, Sequence, Tuple
 
-from mwip_ros.msgs.layouts import encode_clock
+from mwip_ros.msgs import BadMessage
+from mwip_ros.msgs.layouts import encode_clock, parse_wrench
 
 __all__ = ["LockstepDriver", "RESEND_S", "graph_missing"]
 
@@ -69,6 +72,8 @@ class LockstepDriver:
         self.wait_since = time.monotonic()
         self._ready_at: Optional[float] = None
         self._last_wait_log = 0.0
+        self._estimate_sub = None                          # created at the first resend
+        self._last_estimate: Optional[int] = None          # stamp of the newest estimate heard since
 
     # --- the graph -----------------------------------------------------------------------------
     def ready(self) -> bool:
@@ -77,7 +82,30 @@ class LockstepDriver:
                 and self.state_pub.get_subscription_count() >= self.need_subs)
 
     def missing(self) -> str:
-        return "; ".join(graph_missing(self.node, self.state_pub, self.need_subs)) or self.idle_hint
+        what = graph_missing(self.node, self.state_pub, self.need_subs)
+        if self.awaiting is not None and self._estimate_sub is not None and not any("observer" in w for w in what):
+            k, stamp = self.awaiting
+            if self._last_estimate is None or self._last_estimate < stamp:
+                heard = ("none since" if self._last_estimate is None
+                         else f"the last for t = {self._last_estimate * 1e-9:.3f} s, before")
+                what.append(f"disturbance_observer (it did not answer state k = {k}: no disturbance_estimate "
+                            f"for it, {heard} the state was resent; stopped, or killed?)")
+        return "; ".join(what) or self.idle_hint
+
+    def _listen_to_observer(self) -> None:
+        from geometry_msgs.msg import WrenchStamped
+        from mwip_ros.msgs.qos import GRAPH_QOS
+
+        def on_estimate(data) -> None:
+            try:
+                stamp = parse_wrench(data)[0]
+            except BadMessage:
+                return
+            if self._last_estimate is None or stamp > self._last_estimate:
+                self._last_estimate = stamp
+
+        self._estimate_sub = self.node.create_subscription(WrenchStamped, "disturbance_estimate", on_estimate,
+                                                           GRAPH_QOS, raw=True)
 
     def wait_for_graph(self) -> Optional[bool]:
         """True once the graph is ready (and settled), False when ``timeout_s`` passed, else None."""
@@ -131,5 +159,7 @@ class LockstepDriver:
                     f"within {self.timeout_param} = {self.timeout_s:g} s; missing: {self.missing()}")
         if now - self.resent_at > RESEND_S:
             self.resent_at = now
+            if self._estimate_sub is None:
+                self._listen_to_observer()
             self._publish()
         return None

@@ -37,9 +37,10 @@ from mwip_ros.core.trajectory import TrajectoryTable
 from mwip_ros.msgs import BadMessage
 from mwip_ros.msgs import layouts as L
 from mwip_ros.msgs.qos import GRAPH_QOS
+from mwip_ros.nodes.guards import PublisherWatch, Rejects
 from mwip_ros.nodes.lockstep import LockstepDriver
 from mwip_ros.nodes.params import declare
-from mwip_ros.nodes.runtime import EXIT_ERROR, EXIT_FALLEN, GracefulNodeMixin, Rejects, run_node
+from mwip_ros.nodes.runtime import EXIT_ERROR, EXIT_FALLEN, GracefulNodeMixin, run_node
 from mwip_ros.params import plant_config
 from mwip_ros.runs import write_csv
 
@@ -75,7 +76,9 @@ class PlantSimNode(Node, GracefulNodeMixin):
         self.truth_pub = self.create_publisher(WrenchStamped, "lumped_disturbance", GRAPH_QOS)
         self.clock_pub = self.create_publisher(Clock, "/clock", GRAPH_QOS) if self.mode == "lockstep" else None
         cmd_sub = self.create_subscription(Float64, "wheel_torque_cmd", self._on_cmd, GRAPH_QOS, raw=True)
-        self.create_subscription(Wrench, "external_wrench", self._on_wrench, GRAPH_QOS)
+        self.create_subscription(Wrench, "external_wrench", self._on_wrench, GRAPH_QOS, raw=True)
+        # one graph, one controller: a second publisher of commands or states means mixed streams
+        self.watch = PublisherWatch(self, ["wheel_torque_cmd", "joint_states"])
         self.lockstep = LockstepDriver(
             self, self.state_pub, self.clock_pub, cmd_sub, need_subs=self.v["expected_subscribers"],
             timeout_s=self.v["lockstep_timeout_s"], timeout_param="lockstep_timeout_s", settle_s=SETTLE_S,
@@ -85,10 +88,11 @@ class PlantSimNode(Node, GracefulNodeMixin):
                                f"{dur}, seed {self.cfg.seed}")
 
     # --- inputs ---------------------------------------------------------------------------
-    def _on_wrench(self, msg: Wrench) -> None:
-        e = (float(msg.torque.x), float(msg.torque.y))
-        if not all(math.isfinite(x) for x in e):
-            self.rejects("external_wrench", f"non-finite torque {e}")
+    def _on_wrench(self, data: bytes) -> None:
+        try:
+            e = L.parse_external_wrench(data)
+        except BadMessage as exc:
+            self.rejects("external_wrench", str(exc))
             return
         self.extra = e
         self.get_logger().info(f"external wrench: tau_ext1 += {e[0]:g}, tau_ext2 += {e[1]:g} N m"
@@ -130,8 +134,12 @@ class PlantSimNode(Node, GracefulNodeMixin):
         if self.n_steps is not None and p.k >= self.n_steps:
             self.finish()
             return True
-        p.step(u, self.extra)
-        if not all(map(math.isfinite, p.x)):
+        try:
+            p.step(u, self.extra)
+            finite = all(map(math.isfinite, p.x))
+        except (ArithmeticError, ValueError):  # e.g. sin of an infinite angle
+            finite = False
+        if not finite:
             self.finish(EXIT_ERROR, f"state became non-finite at t = {p.t:.3f} s; stopping")
             return True
         return False
@@ -165,8 +173,13 @@ class PlantSimNode(Node, GracefulNodeMixin):
             return
         executor.spin_once(timeout_sec=0.05)
         self._progress()
+        crowded = self.watch.check()
         if self.mode == "lockstep" and not self.done:
             failure = self.lockstep.check()
+            if crowded:
+                failure = ("lockstep refuses mixed streams: " + "; ".join(
+                    f"{len(names)} publishers on {topic} ({', '.join(names)})" for topic, names in crowded.items())
+                    + "; run each graph in its own ROS_DOMAIN_ID or namespace")
             if failure:
                 self.finish(EXIT_ERROR, failure)
 
@@ -206,7 +219,7 @@ class PlantSimNode(Node, GracefulNodeMixin):
     def on_shutdown(self) -> None:
         log = self.get_logger()
         if self.stop_signal is not None and self.n_steps is not None and not self.done:
-            self.exit_code = 128 + self.stop_signal  # interrupted: the run did not reach duration_s
+            self.finish(128 + self.stop_signal)  # interrupted: the run did not reach duration_s
             log.warning(f"interrupted at t = {self.plant.t:.3f} s of {self.n_steps * self.h:g} s")
         wall = (time.monotonic() - self.t_wall0) if self.t_wall0 else 0.0
         n = len(self.table)

@@ -26,8 +26,9 @@ from mwip_ros.msgs import layouts as L
 from mwip_ros.msgs.qos import GRAPH_QOS
 from mwip_ros.msgs.topics import leaf
 from mwip_ros.nodes.comparison import Stat, compare_stamped, diff
+from mwip_ros.nodes.guards import Rejects
 from mwip_ros.nodes.lockstep import LockstepDriver
-from mwip_ros.nodes.runtime import EXIT_ERROR, EXIT_OK, Rejects
+from mwip_ros.nodes.runtime import EXIT_ERROR, EXIT_OK
 from mwip_ros.params import ParamError
 
 __all__ = ["Resim", "EXIT_DIFFERENT"]
@@ -271,13 +272,13 @@ class Resim:
             why = "failed" if self.failed else "interrupted"
             lines.append(f"  RESULT: INCOMPLETE - the re-simulation {why} after {self.k} of {len(self.states)} "
                          f"states; the table compares those (exit {EXIT_ERROR})")
-            self.node.exit_code = EXIT_ERROR
+            self.node.finish(EXIT_ERROR)
         elif bad:
-            self.node.exit_code = EXIT_DIFFERENT
+            self.node.finish(EXIT_DIFFERENT)
             lines.append(f"  RESULT: DIFFERENT - {', '.join(bad)} not within tolerance {tol:g} "
                          f"(exit {EXIT_DIFFERENT})")
         else:
-            self.node.exit_code = EXIT_OK
+            self.node.finish(EXIT_OK)
             lines.append(f"  RESULT: REPRODUCED - every compared output within tolerance {tol:g} (exit {EXIT_OK})")
         if self.rejects.counts:
             lines.append(f"  rejected messages: {self.rejects.summary()}")

@@ -1,0 +1,53 @@
+"""A test's own rclpy node on a Graph's domain: raw publishers and recording subscribers.
+
+    with Injector(graph.domain_id) as inj:
+        js = inj.publisher("joint_states", JointState)
+        got = inj.record("disturbance_estimate", WrenchStamped)   # list of raw payloads, appended as they come
+        inj.wait(lambda: js.get_subscription_count() >= 2, 20)
+        js.publish(data)
+"""
+import time
+from typing import Callable, List
+
+from mwip_ros.msgs.qos import GRAPH_QOS
+
+
+class Injector:
+    def __init__(self, domain_id: int, name: str = "test_injector"):
+        import rclpy
+        from rclpy.executors import SingleThreadedExecutor
+        self.ctx = rclpy.Context()
+        rclpy.init(context=self.ctx, domain_id=domain_id)
+        self.node = rclpy.create_node(name, context=self.ctx)
+        self.ex = SingleThreadedExecutor(context=self.ctx)
+        self.ex.add_node(self.node)
+
+    def publisher(self, topic: str, msg_type, qos=GRAPH_QOS):
+        return self.node.create_publisher(msg_type, topic, qos)
+
+    def record(self, topic: str, msg_type) -> List[bytes]:
+        got: List[bytes] = []
+        self.node.create_subscription(msg_type, topic, lambda data: got.append(bytes(data)), GRAPH_QOS, raw=True)
+        return got
+
+    def wait(self, cond: Callable[[], bool], timeout: float) -> bool:
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            if cond():
+                return True
+            self.ex.spin_once(timeout_sec=0.01)
+        return cond()
+
+    def spin(self, seconds: float) -> None:
+        self.wait(lambda: False, seconds)
+
+    def close(self) -> None:
+        import rclpy
+        self.node.destroy_node()
+        rclpy.shutdown(context=self.ctx)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()

@@ -1,0 +1,196 @@
+"""Fault injection: hostile messages, stamps and neighbours never crash, poison, stall or hijack a node.
+
+The observer and the controller are driven state by state from the test (as the lockstep
+plant would), with hostile messages between the good ones; what they answer must equal
+the core's observer and controller run on the good states alone, to the last bit.
+"""
+import math
+
+from geometry_msgs.msg import WrenchStamped
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64
+
+from graphproc import Graph
+from injector import Injector
+from mwip_ros import params as P
+from mwip_ros.core.controller import DscController
+from mwip_ros.core.model import State
+from mwip_ros.core.observer import DiscreteObserver
+from mwip_ros.msgs import BadMessage, cdr
+from mwip_ros.msgs import layouts as L
+
+PERIOD_NS = 5_000_000
+DEFAULTS = {**P.defaults_for("dscndo_controller"), **P.defaults_for("disturbance_observer")}
+
+
+def _good_state(k: int, stamp: int = None) -> tuple:
+    x = State(0.01 * k, -0.17 + 0.002 * k, 0.3 * math.sin(0.1 * k), 0.5 * math.cos(0.07 * k))
+    return (k * PERIOD_NS if stamp is None else stamp), x, 10.0 * math.sin(0.05 * k)
+
+
+def _hostile_states(stamp_now: int) -> list:
+    """Messages on joint_states that must all be rejected (stamp_now: the stream's last stamp)."""
+    good = L.encode_state(stamp_now + PERIOD_NS, State(0.1, 0.1, 0.1, 0.1), 1.0)
+    long_names = cdr.JointStateEncoder(("wheel" + "x" * 5000, "body_pitch"))
+    return [
+        L.encode_state(stamp_now + PERIOD_NS, State(0.0, math.nan, 0.0, 0.0), 0.0),      # NaN
+        L.encode_state(stamp_now + PERIOD_NS, State(0.0, 0.0, 1e160, 0.0), 0.0),         # absurd but finite
+        L.encode_state(stamp_now + PERIOD_NS, State(0.0, 4.0, 0.0, 0.0), 0.0),           # upside down
+        L.encode_state(stamp_now + PERIOD_NS, State(0.0, 0.0, 0.0, 0.0), 1e300),         # absurd effort
+        L.encode_state(stamp_now + 10 ** 15, State(0.0, 0.0, 0.0, 0.0), 0.0),            # far in the future
+        L.encode_state(stamp_now + 10 * 10 ** 9, State(0.0, 0.0, 0.0, 0.0), 0.0),        # 10 s ahead
+        L.encode_state(max(0, stamp_now - 7 * PERIOD_NS), State(0.0, 0.0, 0.0, 0.0), 0.0),  # from the past
+        good[:-5],  # cut short (DDS pads a payload to 4 bytes with zeros: a cut of 1-3 bytes is not visible)
+        b"\x00\x07" + good[2:],                                                           # bad encapsulation
+        bytes(range(256)) * 4,                                                            # noise
+        long_names(stamp_now + PERIOD_NS, (0.0, 0.0), (0.0, 0.0), (0.0, 0.0)),          # long unknown names
+    ]
+
+
+def _offline(fed):
+    """The core's observer and controller on the good states alone: (estimates, commands) in order."""
+    nom = P.physical(P.defaults_for("plant_sim"), "nominal")
+    h = PERIOD_NS * 1e-9
+    obs = DiscreteObserver(nom, P.observer_gain(DEFAULTS), h)
+    ctrl = DscController(nom, P.gains(DEFAULTS), h)
+    est_seq, cmd_seq = [], []
+    for stamp, x, u_prev in fed:
+        if stamp is None:  # the stream restarts here
+            obs.reset()
+            ctrl.x4d = None
+            continue
+        e = obs.update(x, u_prev)
+        est_seq.append(e)
+        cmd_seq.append(ctrl.step(x, e).u)
+    return est_seq, cmd_seq
+
+
+def test_hostile_states_and_estimates_change_nothing(tmp_path):
+    with Graph(tmp_path) as g:
+        obs = g.start("disturbance_observer")
+        ctl = g.start("dscndo_controller")
+        with Injector(g.domain_id) as inj:
+            js = inj.publisher("joint_states", JointState)
+            bad_est = inj.publisher("disturbance_estimate", WrenchStamped)
+            est_raw = inj.record("disturbance_estimate", WrenchStamped)
+            int_raw = inj.record("controller_internals", JointState)
+            cmd_raw = inj.record("wheel_torque_cmd", Float64)
+            assert inj.wait(lambda: js.get_subscription_count() >= 2 and bad_est.get_subscription_count() >= 1
+                            and len(inj.node.get_publishers_info_by_topic("/wheel_torque_cmd")) >= 1, 30)
+
+            def answered(stamp):
+                return any(L.parse_internals(d)[0] == stamp for d in int_raw[-3:])
+
+            fed = []
+            for k in range(120):
+                stamp, x, u_prev = _good_state(k)
+                js.publish(L.encode_state(stamp, x, u_prev))
+                fed.append((stamp, x, u_prev))
+                assert inj.wait(lambda: answered(stamp), 20), (k, ctl.output()[-2000:])
+                if k % 10 == 5:
+                    for data in _hostile_states(stamp):
+                        js.publish(data)
+                    for t1 in (math.nan, 1e300):  # estimates for the next state that must not be used
+                        bad_est.publish(L.encode_wrench(stamp + PERIOD_NS, t1, 0.0))
+                    bad_est.publish(L.encode_wrench(stamp + 10 ** 12, 1.0, 1.0))   # far ahead of the states
+                    bad_est.publish(b"\x00\x01\x00\x00\x01\x02")
+                    js.publish(L.encode_state(stamp, x, u_prev))                     # a resend: answered once
+            # the stream restarts at t = 0 (a new plant): two stamps are rejected, the third restarts it
+            fed.append((None, None, None))
+            for k in range(40):
+                stamp, x, u_prev = _good_state(1000 + k, stamp=k * PERIOD_NS)
+                js.publish(L.encode_state(stamp, x, u_prev))
+                if k >= 2:
+                    fed.append((stamp, x, u_prev))
+                    assert inj.wait(lambda: answered(stamp), 20), (k, ctl.output()[-2000:])
+            inj.spin(0.3)
+        obs.stop()
+        ctl.stop()
+    est_seq, cmd_seq = _offline(fed)
+    assert len(cmd_seq) == 120 + 38
+    # one command per good state and nothing for a hostile one, each equal to the core on the good states
+    internals = [L.parse_internals(d) for d in int_raw]
+    assert [s for s, _ in internals] == [s for s, _, _ in fed if s is not None]
+    got_u = [v["u"] for _, v in internals]
+    assert got_u == cmd_seq, (next(i for i, (a, b) in enumerate(zip(got_u, cmd_seq)) if a != b), ctl.output()[-3000:])
+    assert [L.parse_command(d) for d in cmd_raw] == cmd_seq
+    # the observer's answers (the test hears its own bad estimates too: they do not parse, or are far ahead)
+    answers = []
+    for d in est_raw:
+        try:
+            s, a, b = L.parse_wrench(d)
+        except BadMessage:
+            continue
+        if s < 10 ** 12:
+            answers.append((s, (a, b)))
+    assert [a for _, a in _dedup(answers)] == est_seq
+    o, c = obs.output(), ctl.output()
+    assert "joint_states restarted at t = 0.010 s" in o and "re-initialising" in c
+    for words in ("non-finite joint state", "implausible theta_w'", "implausible theta_b", "implausible effort",
+                  "jumps ahead of the stream", "is older than the stream", "message ends at byte",
+                  "is not CDR_LE"):
+        assert words in o, words
+    assert "non-finite torque" in c and "implausible torque" in c and "ahead of the states" in c
+    assert obs.popen.returncode == 0 and ctl.popen.returncode == 0
+    assert "Traceback" not in o + c
+
+
+def _dedup(answers):
+    """The observer answers a resent state again with the same estimate: keep the first answer per stamp run."""
+    out = []
+    for s, a in answers:
+        if out and out[-1][0] == s:
+            assert out[-1][1] == a  # the repeat is the same estimate, not a second integration
+            continue
+        out.append((s, a))
+    return out
+
+
+def _rss_mib(pid: int) -> float:
+    with open(f"/proc/{pid}/status") as f:
+        for line in f:
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) / 1024
+    raise AssertionError("no VmRSS")
+
+
+def flood(inj, js, n: int, big: int = 60) -> int:
+    """Publish ``n`` hostile joint_states of ever new layouts (and ``big`` with 1 MiB names); returns how many."""
+    sent = 0
+    for i in range(big):
+        enc = cdr.JointStateEncoder(("w" * (1 << 20) + str(i), "body_pitch"))
+        js.publish(enc(i, (0.0, 0.0), (0.0, 0.0), (0.0, 0.0)))
+        sent += 1
+        inj.spin(0.05)
+    for i in range(n):
+        names = ("wheel", "body_pitch" + "x" * (i % 900))  # a new layout for the template cache, every time
+        data = cdr.JointStateEncoder(names)(10 ** 9 + i, (0.0, 0.0), (0.0, math.nan), (0.0, 0.0))
+        js.publish(data if i % 3 else data[: 20 + i % 50])
+        sent += 1
+        if i % 500 == 0:
+            inj.spin(0.005)
+    return sent
+
+
+def test_a_flood_of_hostile_messages_leaves_memory_bounded(tmp_path):
+    """Short soak (CI); scripts/soak.py runs the long one (a million messages)."""
+    with Graph(tmp_path) as g:
+        obs = g.start("disturbance_observer")
+        with Injector(g.domain_id) as inj:
+            js = inj.publisher("joint_states", JointState)
+            est = inj.record("disturbance_estimate", WrenchStamped)
+            assert inj.wait(lambda: js.get_subscription_count() >= 1, 30)
+            assert obs.wait_for_output("ready", 30)
+            inj.spin(0.5)
+            before = _rss_mib(obs.pid)
+            sent = flood(inj, js, 20000)
+            # still answering, with the right numbers: a good state after the flood is estimated from scratch
+            stamp, x, u_prev = _good_state(0, stamp=0)
+            js.publish(L.encode_state(stamp, x, u_prev))
+            assert inj.wait(lambda: any(L.parse_wrench(d)[0] == 0 for d in est), 60), obs.output()[-2000:]
+            after = _rss_mib(obs.pid)
+        obs.stop()
+    out = obs.output()
+    assert f"rejected: joint_states: {sent}" in out, out[-1500:]
+    assert after - before < 40, (before, after)  # 60 x 1 MiB names and 20,000 layouts kept nothing
+    assert out.count("rejected message #") < 60  # rate-limited: a line per kind, then one per 100
