@@ -51,3 +51,36 @@ class Injector:
 
     def __exit__(self, *exc):
         self.close()
+
+
+def rss_mib(pid: int) -> float:
+    with open(f"/proc/{pid}/status") as f:
+        for line in f:
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) / 1024
+    raise AssertionError("no VmRSS")
+
+
+def flood(inj, js, n: int, big: int = 60) -> int:
+    """Publish ``n`` hostile joint_states of ever new layouts (and ``big`` with 1 MiB names); returns how many.
+
+    Paced by acknowledgements every 500 messages (the reliable history keeps 1000)."""
+    import math
+
+    from rclpy.duration import Duration
+
+    from mwip_ros.msgs import cdr
+    sent = 0
+    for i in range(big):
+        enc = cdr.JointStateEncoder(("w" * (1 << 20) + str(i), "body_pitch"))
+        js.publish(enc(i, (0.0, 0.0), (0.0, 0.0), (0.0, 0.0)))
+        sent += 1
+        assert js.wait_for_all_acked(Duration(seconds=30))
+    for i in range(n):
+        names = ("wheel", "body_pitch" + "x" * (i % 900))  # a new layout for the template cache, every time
+        data = cdr.JointStateEncoder(names)(10 ** 9 + i, (0.0, 0.0), (0.0, math.nan), (0.0, 0.0))
+        js.publish(data if i % 3 else data[: 20 + i % 50])
+        sent += 1
+        if i % 500 == 499:  # reliable, keep last 1000: let the reader take them before the history wraps
+            assert js.wait_for_all_acked(Duration(seconds=30))
+    return sent

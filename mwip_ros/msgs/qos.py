@@ -1,10 +1,27 @@
-"""The QoS of the graph's topics."""
+"""The QoS of the graph's topics, and why.
+
+* Publishers (:data:`GRAPH_QOS`): reliable, keep last 1000, **transient local**.  In
+  lockstep nothing may be lost, also not by a recorder that matched a moment after the
+  run started: a transient-local writer hands a late reader its last 1000 samples, which
+  covers the first five seconds of a lockstep run at 200 Hz (several seconds of wall time).
+* The loop's own subscriptions (:data:`INPUT_QOS`, observer, controller, plant): reliable,
+  keep last 1000, **volatile**: a node that joins late must not integrate a backlog of old
+  states; the lockstep driver resends the one state that is waiting.
+* The recorder (:data:`RECORD_QOS`): reliable, keep last 1000, transient local, so it gets
+  that backlog.  A volatile publisher (``ros2 topic pub`` by default) does not match a
+  transient-local reader: the recorder takes ``external_wrench``, which users publish by
+  hand, with :data:`INPUT_QOS`.
+"""
 from __future__ import annotations
 
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-__all__ = ["GRAPH_QOS"]
+__all__ = ["GRAPH_QOS", "INPUT_QOS", "RECORD_QOS", "DEPTH"]
 
-# Reliable and deep enough that nothing is dropped in lockstep, also for a recorder.
-GRAPH_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000, reliability=ReliabilityPolicy.RELIABLE,
+DEPTH = 1000
+
+GRAPH_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=DEPTH, reliability=ReliabilityPolicy.RELIABLE,
+                       durability=DurabilityPolicy.TRANSIENT_LOCAL)
+INPUT_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=DEPTH, reliability=ReliabilityPolicy.RELIABLE,
                        durability=DurabilityPolicy.VOLATILE)
+RECORD_QOS = GRAPH_QOS

@@ -25,7 +25,7 @@ from mwip_ros.core.theorem import observer_conditions
 from mwip_ros.core.trajectory import Trajectory
 from mwip_ros.msgs import BadMessage
 from mwip_ros.msgs import layouts as L
-from mwip_ros.msgs.qos import GRAPH_QOS
+from mwip_ros.msgs.qos import GRAPH_QOS, INPUT_QOS
 from mwip_ros.nodes.guards import NEW, REPEAT, RESTART, STAMP_WINDOW_PERIODS, PublisherWatch, Rejects, StampGuard
 from mwip_ros.nodes.params import declare
 from mwip_ros.nodes.runtime import GracefulNodeMixin, run_node
@@ -48,7 +48,7 @@ class DisturbanceObserver(Node, GracefulNodeMixin):
         self.written = array("d") if self.v["csv"] else None  # t, tau_hat1, tau_hat2 per estimate
         self.rejects = Rejects(self.get_logger())
         self.pub = self.create_publisher(WrenchStamped, "disturbance_estimate", GRAPH_QOS)
-        self.create_subscription(JointState, "joint_states", self._on_state, GRAPH_QOS, raw=True)
+        self.create_subscription(JointState, "joint_states", self._on_state, INPUT_QOS, raw=True)
         self.watch = PublisherWatch(self, ["joint_states"])
         self.get_logger().info(f"NDO ready: X = {self.v['X']}, h = {self.h * 1e3:.3f} ms")
 

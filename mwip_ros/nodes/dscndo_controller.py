@@ -25,7 +25,7 @@ from mwip_ros.core.controller import DscController
 from mwip_ros.core.theorem import controller_conditions
 from mwip_ros.msgs import BadMessage
 from mwip_ros.msgs import layouts as L
-from mwip_ros.msgs.qos import GRAPH_QOS
+from mwip_ros.msgs.qos import GRAPH_QOS, INPUT_QOS
 from mwip_ros.nodes.guards import NEW, REPEAT, RESTART, STAMP_WINDOW_PERIODS, PublisherWatch, Rejects, StampGuard
 from mwip_ros.nodes.params import declare
 from mwip_ros.nodes.runtime import GracefulNodeMixin, run_node
@@ -48,8 +48,8 @@ class DscndoController(Node, GracefulNodeMixin):
         self.rejects = Rejects(self.get_logger())
         self.cmd_pub = self.create_publisher(Float64, "wheel_torque_cmd", GRAPH_QOS)
         self.int_pub = self.create_publisher(JointState, "controller_internals", GRAPH_QOS)
-        self.create_subscription(JointState, "joint_states", self._on_state, GRAPH_QOS, raw=True)
-        self.create_subscription(WrenchStamped, "disturbance_estimate", self._on_estimate, GRAPH_QOS, raw=True)
+        self.create_subscription(JointState, "joint_states", self._on_state, INPUT_QOS, raw=True)
+        self.create_subscription(WrenchStamped, "disturbance_estimate", self._on_estimate, INPUT_QOS, raw=True)
         self.window_ns = STAMP_WINDOW_PERIODS * round(P.period(self.v) * 1e9)
         self.guard = StampGuard(self.window_ns, "joint_states stamp")
         self.watch = PublisherWatch(self, ["joint_states", "disturbance_estimate"])

@@ -6,9 +6,15 @@ states the way the plant drives them with simulated ones.
 
 1. **Wait for the graph** (:meth:`LockstepDriver.wait_for_graph`): until the controller
    publishes ``wheel_torque_cmd``, any further required publishers are there and
-   ``joint_states`` has ``need_subs`` matched subscriptions, then ``settle_s`` more (so
-   that other subscribers, a recorder, match too).  While waiting it logs what is missing
-   every 2 s; after ``timeout_s`` it reports the wait as failed.
+   ``joint_states`` has ``need_subs`` matched subscriptions (the floor the user gives);
+   then until the discovered graph is complete and stable: every subscriber discovered on
+   a topic the driver's node publishes has matched its writer, and the set of nodes and
+   those counts have not changed for ``settle_s``.  So a recorder that is running when
+   the plant starts is part of the run from its first message, without the user counting
+   it; what a late match still misses the transient-local writers hand over (msgs.qos).
+   A discovered subscriber that never matches (incompatible QoS) holds the start for at
+   most ``COMPLETE_WAIT_S``, then the run starts with a warning naming it.  While waiting
+   it logs what is missing every 2 s; after ``timeout_s`` it reports the wait as failed.
 2. **Step** (:meth:`send`, :meth:`take_answer`): publish ``/clock`` and the state, then
    exactly one ``wheel_torque_cmd`` answers it.  A command while no state waits is the
    caller's to reject.
@@ -32,6 +38,7 @@ __all__ = ["LockstepDriver", "RESEND_S", "graph_missing"]
 
 RESEND_S = 0.5          # resend a state nobody answered after this long [s]
 WAIT_LOG_PERIOD_S = 2.0
+COMPLETE_WAIT_S = 3.0   # once the required nodes are there, wait at most this long for every discovered subscriber
 
 
 def graph_missing(node, state_pub, need_subs: int) -> list:
@@ -57,9 +64,11 @@ class LockstepDriver:
     """
 
     def __init__(self, node, state_pub, clock_pub, cmd_sub, *, need_subs: int, timeout_s: float,
-                 timeout_param: str, settle_s: float = 0.0, needed: Sequence = (), idle_hint: str = ""):
+                 timeout_param: str, settle_s: float = 0.0, needed: Sequence = (), idle_hint: str = "",
+                 also_published: Sequence = ()):
         self.node = node
         self.state_pub, self.clock_pub, self.cmd_sub = state_pub, clock_pub, cmd_sub
+        self.own_pubs = [p for p in (state_pub, clock_pub, *also_published) if p is not None]
         self.need_subs = need_subs
         self.timeout_s = timeout_s
         self.timeout_param = timeout_param
@@ -70,7 +79,9 @@ class LockstepDriver:
         self._last: Optional[Tuple[int, bytes]] = None     # (stamp, bytes) of the last state sent
         self.sent_at = self.resent_at = 0.0
         self.wait_since = time.monotonic()
-        self._ready_at: Optional[float] = None
+        self._required_at: Optional[float] = None         # since when the required nodes are there
+        self._signature = None                             # the discovered graph, to see it settle
+        self._stable_since = 0.0
         self._last_wait_log = 0.0
         self._estimate_sub = None                          # created at the first resend
         self._last_estimate: Optional[int] = None          # stamp of the newest estimate heard since
@@ -81,8 +92,22 @@ class LockstepDriver:
                 and all(s.get_publisher_count() >= 1 for s in self.needed)
                 and self.state_pub.get_subscription_count() >= self.need_subs)
 
+    def unmatched(self) -> list:
+        """Subscribers discovered on our own topics that have not matched our writers: [(topic, matched, found)]."""
+        out = []
+        for pub in self.own_pubs:
+            found, matched = self.node.count_subscribers(pub.topic_name), pub.get_subscription_count()
+            if matched < found:
+                out.append((pub.topic_name, matched, found))
+        return out
+
+    def _graph_signature(self) -> tuple:
+        return (tuple(sorted(self.node.get_node_names_and_namespaces())),
+                tuple((self.node.count_subscribers(p.topic_name), p.get_subscription_count()) for p in self.own_pubs))
+
     def missing(self) -> str:
         what = graph_missing(self.node, self.state_pub, self.need_subs)
+        what += [f"{t}: {m} of {n} discovered subscribers matched" for t, m, n in self.unmatched()]
         if self.awaiting is not None and self._estimate_sub is not None and not any("observer" in w for w in what):
             k, stamp = self.awaiting
             if self._last_estimate is None or self._last_estimate < stamp:
@@ -94,7 +119,7 @@ class LockstepDriver:
 
     def _listen_to_observer(self) -> None:
         from geometry_msgs.msg import WrenchStamped
-        from mwip_ros.msgs.qos import GRAPH_QOS
+        from mwip_ros.msgs.qos import INPUT_QOS
 
         def on_estimate(data) -> None:
             try:
@@ -105,18 +130,27 @@ class LockstepDriver:
                 self._last_estimate = stamp
 
         self._estimate_sub = self.node.create_subscription(WrenchStamped, "disturbance_estimate", on_estimate,
-                                                           GRAPH_QOS, raw=True)
+                                                           INPUT_QOS, raw=True)
 
     def wait_for_graph(self) -> Optional[bool]:
-        """True once the graph is ready (and settled), False when ``timeout_s`` passed, else None."""
+        """True once the graph is ready, complete and settled; False when ``timeout_s`` passed; else None."""
         now = time.monotonic()
         if self.ready():
-            if self._ready_at is None:
-                self._ready_at = now
-            if now - self._ready_at >= self.settle_s:
+            if self._required_at is None:
+                self._required_at = now
+            sig = self._graph_signature()
+            if sig != self._signature:
+                self._signature, self._stable_since = sig, now
+            unmatched = self.unmatched()
+            if now - self._stable_since >= self.settle_s and (
+                    not unmatched or now - self._required_at >= COMPLETE_WAIT_S):
+                if unmatched:
+                    self.node.get_logger().warning(
+                        "starting although discovered subscribers have not matched (incompatible QoS?): "
+                        + ", ".join(f"{t} {m} of {n}" for t, m, n in unmatched) + "; they may miss messages")
                 return True
         else:
-            self._ready_at = None
+            self._required_at = self._signature = None
         if now - self.wait_since > self.timeout_s:
             return False
         if now - self._last_wait_log > WAIT_LOG_PERIOD_S:

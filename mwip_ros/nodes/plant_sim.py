@@ -36,7 +36,7 @@ from mwip_ros.core.plant import PlantSim, saturate
 from mwip_ros.core.trajectory import TrajectoryTable
 from mwip_ros.msgs import BadMessage
 from mwip_ros.msgs import layouts as L
-from mwip_ros.msgs.qos import GRAPH_QOS
+from mwip_ros.msgs.qos import GRAPH_QOS, INPUT_QOS
 from mwip_ros.nodes.guards import PublisherWatch, Rejects
 from mwip_ros.nodes.lockstep import LockstepDriver
 from mwip_ros.nodes.params import declare
@@ -45,7 +45,7 @@ from mwip_ros.params import plant_config
 from mwip_ros.runs import write_csv
 
 NAME = "plant_sim"
-SETTLE_S = 0.3  # after our own subscriptions matched, let the other nodes (e.g. a recorder) match too
+SETTLE_S = 0.3  # the discovered graph must be unchanged this long before the first state
 
 
 class PlantSimNode(Node, GracefulNodeMixin):
@@ -75,14 +75,15 @@ class PlantSimNode(Node, GracefulNodeMixin):
         self.state_pub = self.create_publisher(JointState, "joint_states", GRAPH_QOS)
         self.truth_pub = self.create_publisher(WrenchStamped, "lumped_disturbance", GRAPH_QOS)
         self.clock_pub = self.create_publisher(Clock, "/clock", GRAPH_QOS) if self.mode == "lockstep" else None
-        cmd_sub = self.create_subscription(Float64, "wheel_torque_cmd", self._on_cmd, GRAPH_QOS, raw=True)
-        self.create_subscription(Wrench, "external_wrench", self._on_wrench, GRAPH_QOS, raw=True)
+        cmd_sub = self.create_subscription(Float64, "wheel_torque_cmd", self._on_cmd, INPUT_QOS, raw=True)
+        self.create_subscription(Wrench, "external_wrench", self._on_wrench, INPUT_QOS, raw=True)
         # one graph, one controller: a second publisher of commands or states means mixed streams
         self.watch = PublisherWatch(self, ["wheel_torque_cmd", "joint_states"])
         self.lockstep = LockstepDriver(
             self, self.state_pub, self.clock_pub, cmd_sub, need_subs=self.v["expected_subscribers"],
             timeout_s=self.v["lockstep_timeout_s"], timeout_param="lockstep_timeout_s", settle_s=SETTLE_S,
-            idle_hint="a wheel_torque_cmd (the controller is running but did not answer)")
+            idle_hint="a wheel_torque_cmd (the controller is running but did not answer)",
+            also_published=(self.truth_pub,))
         dur = f"{self.v['duration_s']:g} s" if self.n_steps is not None else "until stopped"
         self.get_logger().info(f"{self.mode} plant: h = {self.h * 1e3:.3f} ms, {self.cfg.substeps} RK4 sub-steps, "
                                f"{dur}, seed {self.cfg.seed}")

@@ -23,7 +23,7 @@ from std_msgs.msg import Float64
 from mwip_ros.bag import BagError, raw_messages
 from mwip_ros.msgs import BadMessage
 from mwip_ros.msgs import layouts as L
-from mwip_ros.msgs.qos import GRAPH_QOS
+from mwip_ros.msgs.qos import GRAPH_QOS, INPUT_QOS
 from mwip_ros.msgs.topics import leaf
 from mwip_ros.nodes.comparison import Stat, compare_stamped, diff
 from mwip_ros.nodes.guards import Rejects
@@ -73,9 +73,9 @@ class Resim:
 
         clock_pub = node.create_publisher(Clock, "/clock", GRAPH_QOS)
         state_pub = node.create_publisher(JointState, "joint_states", GRAPH_QOS)
-        cmd_sub = node.create_subscription(Float64, "wheel_torque_cmd", self._on_cmd, GRAPH_QOS, raw=True)
-        est_sub = node.create_subscription(WrenchStamped, "disturbance_estimate", self._on_est, GRAPH_QOS, raw=True)
-        int_sub = node.create_subscription(JointState, "controller_internals", self._on_int, GRAPH_QOS, raw=True)
+        cmd_sub = node.create_subscription(Float64, "wheel_torque_cmd", self._on_cmd, INPUT_QOS, raw=True)
+        est_sub = node.create_subscription(WrenchStamped, "disturbance_estimate", self._on_est, INPUT_QOS, raw=True)
+        int_sub = node.create_subscription(JointState, "controller_internals", self._on_int, INPUT_QOS, raw=True)
         need = v["wait_for_subscribers"]
         needed = [int_sub] if self.has["controller_internals"] else []
         if self.has["disturbance_estimate"] and need == 0:
