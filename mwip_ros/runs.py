@@ -59,8 +59,9 @@ def read_bag_run(bag, label: Optional[str] = None) -> Trajectory:
     state k+1; the last row takes the last recorded wheel_torque_cmd.  A state resent
     with the same stamp counts once.
     """
-    from mwip_ros.bag import raw_messages
+    from mwip_ros.bag import check, raw_messages
 
+    check(bag)  # a damaged chunk raises BagError naming it: never read as data
     states: Dict[int, tuple] = {}
     est: Dict[int, tuple] = {}
     truth: Dict[int, tuple] = {}

@@ -113,7 +113,7 @@ def test_bag_cut_by_kill_9_mid_run_is_repaired(tmp_path):
         rec.popen.wait(10)
     subprocess.run(["fastdds", "shm", "clean"], capture_output=True, timeout=60, env=ros_env(0))
     assert not (bag / "metadata.yaml").exists()  # the recorder never got to close the bag
-    r = subprocess.run(["python", "-m", "mwip_ros.bag.repair", str(bag)], capture_output=True, text=True,
+    r = subprocess.run(["python", "-m", "mwip_ros.cli.bag_repair", str(bag)], capture_output=True, text=True,
                        timeout=120, env=ros_env(0))
     assert r.returncode == 0, r.stdout + r.stderr
     counts = _anyreader_counts(bag)

@@ -1,5 +1,23 @@
-"""rosbag2-compatible MCAP bags: writing (:mod:`.writer`), reading (:mod:`.reader`),
-repairing a recording cut short (:mod:`.repair`) and message definitions (:mod:`.schema`)."""
-from .schema import BagError, message_definition, type_hash
+"""rosbag2-compatible MCAP bags, without rclpy.
 
-__all__ = ["BagError", "message_definition", "type_hash"]
+==================  ================================================================
+:mod:`.writer`      ``BagWriter``: record a bag (MCAP file + ``metadata.yaml``)
+:mod:`.reader`      the one reader: files, metadata, raw messages in log-time order
+:mod:`.metadata`    QoS profile YAML, ``metadata.yaml`` contents, the YAML dumper
+:mod:`.schema`      message definitions and type hashes for MCAP schemas
+:mod:`.scan`        the record walk of a damaged MCAP file (for repair)
+:mod:`.repair`      ``repair``: make a bag cut short whole again
+:mod:`.errors`      ``BagError``
+==================  ================================================================
+"""
+from .errors import BagError
+from .metadata import qos_profiles_yaml
+from .reader import check, damaged_chunks, mcap_files, raw_messages, read_metadata, topic_counts, topic_types
+from .repair import RepairResult, repair
+from .schema import message_definition, type_hash
+from .writer import BagWriter
+
+__all__ = [
+    "BagError", "BagWriter", "RepairResult", "check", "damaged_chunks", "mcap_files", "message_definition", "qos_profiles_yaml",
+    "raw_messages", "read_metadata", "repair", "topic_counts", "topic_types", "type_hash",
+]

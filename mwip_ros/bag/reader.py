@@ -1,27 +1,41 @@
-"""Read rosbag2 MCAP bags without rclpy (mcap + mcap_ros2's CDR decoder).
+"""Read rosbag2 MCAP bags with the ``mcap`` library alone (no rclpy, no message decoding).
 
-``read_messages(bag)`` yields ``(topic, type_name, log_time_ns, msg)`` in log-time order,
-where ``msg`` is a decoded message object with attribute access (``msg.position``,
-``msg.header.stamp.sec``); ``topic_counts(bag)`` gives the messages per topic.  ``bag``
-is a bag directory (its ``metadata.yaml`` lists the files; without one every ``*.mcap``
-in it is read) or a single ``.mcap`` file.
+``bag`` is a bag directory (its ``metadata.yaml`` lists the files; without one every
+``*.mcap`` in it is read, in the order of their ``_<n>`` suffix) or a single ``.mcap`` file.
+
+* :func:`raw_messages` yields ``(log_time_ns, topic, cdr_bytes)`` in log-time order, the
+  files of a split bag merged; decoding the bytes is the message layer's job;
+* :func:`topic_counts` and :func:`topic_types` read the MCAP summaries;
+* :func:`mcap_files` and :func:`read_metadata` find the files and ``metadata.yaml``.
+
+Chunk CRCs are checked on every read: damaged data is never handed out as messages.
+:func:`check` finds every damaged chunk of a bag up front (the tools that replay or
+re-simulate a bag call it before they start); a read that meets one raises
+:class:`~.errors.BagError` naming the file and the chunk's byte offset, and a file that
+cannot be read at all (a recording cut short) raises one that suggests ``mwip_bag_repair``.
 """
 from __future__ import annotations
 
 import heapq
 import re
 import struct
-from contextlib import ExitStack
 from pathlib import Path
 from typing import Any, Dict, Iterable, Iterator, List, Optional, Tuple, Union
 
 import yaml
+from mcap.data_stream import ReadDataStream
 from mcap.exceptions import McapError
 from mcap.reader import make_reader
+from mcap.records import Chunk
+from mcap.stream_reader import breakup_chunk
 
-from .schema import BagError
+from .errors import BagError
+
+__all__ = ["check", "damaged_chunks", "mcap_files", "raw_messages", "read_metadata", "topic_counts",
+           "topic_types"]
 
 PathLike = Union[str, Path]
+_UNREADABLE = (McapError, struct.error, EOFError, ValueError)
 
 
 def _file_index(path: Path) -> Tuple[int, str]:
@@ -64,91 +78,101 @@ def mcap_files(bag: PathLike) -> List[Path]:
     return files
 
 
-def _merged(bag: PathLike, per_file) -> Iterator:
-    """Merge per-file streams of ``(log_time, ...)`` tuples into one log-time ordered stream."""
-    with ExitStack() as stack:
-        streams = [per_file(f, stack) for f in mcap_files(bag)]
-        yield from streams[0] if len(streams) == 1 else heapq.merge(*streams, key=lambda x: x[0])
-
-
 def _cut_short(path: Path, exc: Exception) -> BagError:
     return BagError(f"cannot read {path}: {exc} (a recording cut short? try mwip_bag_repair)")
 
 
-def read_messages(bag_dir: PathLike, topics: Optional[Iterable[str]] = None
-                  ) -> Iterator[Tuple[str, str, int, Any]]:
-    """Yield ``(topic, type_name, log_time_ns, message)`` for every message, in log-time order."""
-    from mcap_ros2.decoder import DecoderFactory
+def damaged_chunks(path: Path) -> List[int]:
+    """Byte offsets of the chunks of one MCAP file whose data fails its CRC (or does not decompress).
 
-    wanted = None if topics is None else list(topics)
+    Needs the file's summary (its chunk index); raises BagError for a file without one."""
+    summary = _summary(path)
+    if summary is None:
+        raise _cut_short(path, "no summary")
+    bad = []
+    with open(path, "rb") as fh:
+        for index in summary.chunk_indexes:
+            try:
+                fh.seek(index.chunk_start_offset + 9)  # opcode (1) and record length (8)
+                breakup_chunk(Chunk.read(ReadDataStream(fh)), validate_crc=True)
+            except Exception:  # bad CRC, bad compression, bad framing: the data is not what was written
+                bad.append(index.chunk_start_offset)
+    return bad
 
-    def decoded(path: Path, stack: ExitStack):
-        reader = make_reader(stack.enter_context(open(path, "rb")), decoder_factories=[DecoderFactory()])
+
+def check(bag: PathLike) -> None:
+    """Raise BagError naming the file and byte offset of the first damaged chunk of ``bag``, if any."""
+    for path in mcap_files(bag):
+        bad = damaged_chunks(path)
+        if bad:
+            raise _damaged(path, bad)
+
+
+def _damaged(path: Path, bad: List[int]) -> BagError:
+    where = ", ".join(str(b) for b in bad[:5]) + (" ..." if len(bad) > 5 else "")
+    return BagError(f"{path}: {len(bad)} damaged chunk(s) (CRC mismatch) at byte {where}; the data in them is "
+                    f"not what was recorded (mwip_bag_repair {path.parent} keeps every other chunk)")
+
+
+def _file_messages(path: Path, topics: Optional[List[str]]) -> Iterator[Tuple[int, str, bytes]]:
+    with open(path, "rb") as fh:
         try:
-            for schema, channel, message, msg in reader.iter_decoded_messages(topics=wanted, log_time_order=True):
-                yield message.log_time, channel.topic, schema.name if schema else "", msg
-        except McapError as exc:
-            raise _cut_short(path, exc) from None
-
-    for log_time, topic, type_name, msg in _merged(bag_dir, decoded):
-        yield topic, type_name, log_time, msg
+            reader = make_reader(fh, validate_crcs=True)
+            for _schema, channel, message in reader.iter_messages(topics=topics, log_time_order=True):
+                yield message.log_time, channel.topic, bytes(message.data)
+        except _UNREADABLE as exc:
+            try:
+                bad = damaged_chunks(path)
+            except BagError:
+                bad = []
+            raise (_damaged(path, bad) if bad else _cut_short(path, exc)) from None
 
 
 def raw_messages(bag: PathLike, topics: Optional[Iterable[str]] = None) -> Iterator[Tuple[int, str, bytes]]:
-    """``(log_time_ns, topic, cdr_bytes)`` of every message in log-time order: the exact recorded bytes."""
+    """``(log_time_ns, topic, cdr_bytes)`` of every message in log-time order: the exact recorded bytes.
+
+    ``topics`` limits the output to those topic names; the files of a split bag are merged."""
     wanted = None if topics is None else list(topics)
+    streams = [_file_messages(path, wanted) for path in mcap_files(bag)]
+    yield from streams[0] if len(streams) == 1 else heapq.merge(*streams, key=lambda m: m[0])
 
-    def raw(path: Path, stack: ExitStack):
-        reader = make_reader(stack.enter_context(open(path, "rb")))
+
+def _summary(path: Path):
+    """The file's MCAP summary, or None when it has none (or it cannot be read)."""
+    with open(path, "rb") as fh:
         try:
-            for _schema, channel, message in reader.iter_messages(topics=wanted, log_time_order=True):
-                yield message.log_time, channel.topic, bytes(message.data)
-        except McapError as exc:
-            raise _cut_short(path, exc) from None
-
-    yield from _merged(bag, raw)
+            return make_reader(fh).get_summary()
+        except _UNREADABLE:
+            return None
 
 
-def topic_counts(bag_dir: PathLike) -> Dict[str, int]:
+def topic_counts(bag: PathLike) -> Dict[str, int]:
     """Messages per topic (topics without messages included when the bag lists them)."""
     counts: Dict[str, int] = {}
-    for path in mcap_files(bag_dir):
-        with open(path, "rb") as fh:
-            try:
-                summary = make_reader(fh).get_summary()
-            except (McapError, struct.error, EOFError, ValueError):
-                summary = None
-            if summary is not None and summary.statistics is not None:
-                for cid, channel in summary.channels.items():
-                    counts[channel.topic] = counts.get(channel.topic, 0) + \
-                        summary.statistics.channel_message_counts.get(cid, 0)
-                continue
-        # No summary: count by scanning.
-        with open(path, "rb") as fh:
+    for path in mcap_files(bag):
+        summary = _summary(path)
+        if summary is not None and summary.statistics is not None:
+            for cid, channel in summary.channels.items():
+                counts[channel.topic] = counts.get(channel.topic, 0) + \
+                    summary.statistics.channel_message_counts.get(cid, 0)
+            continue
+        with open(path, "rb") as fh:  # no summary: count by scanning
             try:
                 for _schema, channel, _message in make_reader(fh).iter_messages(log_time_order=False):
                     counts[channel.topic] = counts.get(channel.topic, 0) + 1
-            except (McapError, struct.error, EOFError) as exc:
-                raise BagError(f"cannot read {path}: {exc} (a recording cut short? try mwip_bag_repair)") \
-                    from None
+            except _UNREADABLE as exc:
+                raise _cut_short(path, exc) from None
     return counts
 
 
-def topic_types(bag_dir: PathLike) -> Dict[str, str]:
+def topic_types(bag: PathLike) -> Dict[str, str]:
     """Topic -> message type name, from the MCAP channels and schemas."""
     types: Dict[str, str] = {}
-    for path in mcap_files(bag_dir):
-        with open(path, "rb") as fh:
-            try:
-                summary = make_reader(fh).get_summary()
-            except (McapError, struct.error, EOFError, ValueError) as exc:
-                raise BagError(f"cannot read {path}: {exc}") from None
+    for path in mcap_files(bag):
+        summary = _summary(path)
         if summary is None:
             raise BagError(f"{path} has no summary (a recording cut short? try mwip_bag_repair)")
         for channel in summary.channels.values():
             schema = summary.schemas.get(channel.schema_id)
             types[channel.topic] = schema.name if schema else ""
     return types
-
-
-__all__ = ["mcap_files", "read_messages", "read_metadata", "topic_counts", "topic_types"]

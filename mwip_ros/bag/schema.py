@@ -26,32 +26,28 @@ import sys
 from pathlib import Path
 from typing import Dict, List, Set, Tuple
 
+from mwip_ros.msgs.topics import split_type
 
-class BagError(ValueError):
-    """A bag cannot be written, read or repaired; the message says what and where."""
+from .errors import BagError
 
+__all__ = ["message_definition", "share_directory", "type_hash"]
 
 SEPARATOR = "=" * 80 + "\n"
 MAX_RECURSION_DEPTH = 50
 
 # A field line of a .msg file: its type ("foo_msgs/Bar" in "foo_msgs/Bar[] bar").
 _MSG_FIELD_TYPE = re.compile(r"(?:^|\n)\s*([a-zA-Z0-9_/]+)(?:\[[^\]]*\])?\s+")
-_ROS_NAME = r"[a-zA-Z][a-zA-Z0-9_]*"
-_TYPE_2 = re.compile(rf"^({_ROS_NAME})/({_ROS_NAME})$")
-_TYPE_3 = re.compile(rf"^({_ROS_NAME})/({_ROS_NAME})/({_ROS_NAME})$")
 PRIMITIVE_TYPES = frozenset({
     "bool", "byte", "char", "float32", "float64", "int8", "uint8",
     "int16", "uint16", "int32", "uint32", "int64", "uint64", "string"})
 
 
 def _split(type_name: str) -> Tuple[str, str, str]:
-    m = _TYPE_2.match(type_name)
-    if m:
-        return m.group(1), "msg", m.group(2)
-    m = _TYPE_3.match(type_name)
-    if m:
-        return m.group(1), m.group(2), m.group(3)
-    raise BagError(f"not a ROS message type name: {type_name!r} (expected e.g. 'sensor_msgs/msg/JointState')")
+    """(package, namespace, name) of a type name; BagError when it is not one."""
+    try:
+        return split_type(type_name)
+    except ValueError as exc:
+        raise BagError(str(exc)) from None
 
 
 @functools.lru_cache(maxsize=None)

@@ -15,6 +15,8 @@ import sys
 from pathlib import Path
 from typing import List
 
+from mwip_ros.bag import BagError, read_metadata
+from mwip_ros.bag.ledger import GAPS_KEY
 from mwip_ros.cli import plotting
 from mwip_ros.core import metrics
 from mwip_ros.core.trajectory import Trajectory
@@ -24,13 +26,25 @@ from mwip_ros.runs import load_run
 FALL_ANGLE = defaults_for("plant_sim")["fall_angle"]
 
 
-def write_report(runs: List[Trajectory], out: Path, window=metrics.WINDOW, fall_angle: float = FALL_ANGLE) -> dict:
+def recording_gaps(path) -> str:
+    """What a lockstep bag lacks, as its recorder wrote into the metadata ('' when complete or not a bag)."""
+    p = Path(path)
+    try:
+        info = read_metadata(p if p.is_dir() else p.parent) if p.suffix != ".csv" else None
+    except BagError:
+        return ""
+    return str(((info or {}).get("custom_data") or {}).get(GAPS_KEY, "") or "")
+
+
+def write_report(runs: List[Trajectory], out: Path, window=metrics.WINDOW, fall_angle: float = FALL_ANGLE,
+                 warnings: List[str] = ()) -> dict:
     out.mkdir(parents=True, exist_ok=True)
     named = [(r.label, metrics.compute(r.columns, window, fall_angle)) for r in runs]
     plotting.fig3(runs, out / "fig3.png")
     plotting.observer_plot(runs, out / "observer.png")
-    md = ["# mwip_ros report", "", f"Metrics over t in [{window[0]:g}, {window[1]:g}] s.", "",
-          metrics.markdown_table(named), ""]
+    md = ["# mwip_ros report", ""]
+    md += [line for w in warnings for line in (f"**Warning:** {w}", "")]
+    md += [f"Metrics over t in [{window[0]:g}, {window[1]:g}] s.", "", metrics.markdown_table(named), ""]
     if len(named) >= 2 and named[-1][1].theta_b_p2p > 0:
         ratio = named[0][1].theta_b_p2p / named[-1][1].theta_b_p2p
         md.append(f"theta_b peak-to-peak, {named[0][0]} / {named[-1][0]}: **{ratio:.2f}x**")
@@ -38,7 +52,7 @@ def write_report(runs: List[Trajectory], out: Path, window=metrics.WINDOW, fall_
     md += ["![Fig. 3 layout](fig3.png)", "", "![observer](observer.png)", ""]
     (out / "metrics.md").write_text("\n".join(md))
     doc = {"window": list(window), "runs": {name: m.as_dict() for name, m in named},
-           "sources": {r.label: len(r) for r in runs}}
+           "sources": {r.label: len(r) for r in runs}, "warnings": list(warnings)}
     (out / "metrics.json").write_text(json.dumps(doc, indent=2, allow_nan=True))
     return {"named": named}
 
@@ -47,7 +61,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(
         prog="mwip_report",
         description="Read recorded bags (rosbag2 MCAP directories) or mwip_sim / plant_sim CSVs and write "
-                    "fig3.png, observer.png, metrics.md and metrics.json into --out.")
+                    "fig3.png, observer.png, metrics.md and metrics.json into --out.",
+        epilog="Exit codes: 0 written, 2 an input cannot be read (a damaged bag names the file and the chunk).")
     ap.add_argument("runs", nargs="+", help="bag directories, .mcap files or .csv files (one run each)")
     ap.add_argument("--out", type=Path, required=True, help="directory for the report (created)")
     ap.add_argument("--labels", nargs="+", default=None, help="a label per run (default: the file/dir name)")
@@ -61,16 +76,20 @@ def main(argv=None) -> int:
         given = getattr(args, opt)
         if given and len(given) != len(args.runs):
             ap.error(f"--{opt} needs {len(args.runs)} values (one per run), got {len(given)}")
-    runs = []
+    runs, warnings = [], []
     for i, path in enumerate(args.runs):
         try:
             runs.append(load_run(path, args.labels[i] if args.labels else None,
                                  args.estimates[i] if args.estimates else None))
-        except Exception as exc:  # a clear line per unreadable input, no traceback
+        except (OSError, ValueError) as exc:  # BagError too: a clear line per unreadable input, no traceback
             print(f"mwip_report: error: {path}: {exc}", file=sys.stderr)
-            return 1
+            return 2
         print(f"read {path}: {len(runs[-1])} samples, t = 0 .. {runs[-1].t[-1]:.3f} s")
-    res = write_report(runs, args.out, tuple(args.window))
+        gaps = recording_gaps(path)
+        if gaps:
+            warnings.append(f"{runs[-1].label}: incomplete lockstep recording ({path}): {gaps}")
+            print(f"mwip_report: WARNING: {warnings[-1]}", file=sys.stderr)
+    res = write_report(runs, args.out, tuple(args.window), warnings=warnings)
     print(metrics.text_table(res["named"]))
     for f in ("fig3.png", "observer.png", "metrics.md", "metrics.json"):
         print(f"wrote {args.out / f}")

@@ -34,7 +34,7 @@ from .errors import CdrError
 from .stamps import NS_PER_S as _NS, join_ns, split_ns
 
 __all__ = ["CDR_LE", "CdrError", "JointStateEncoder", "WrenchStampedEncoder", "decode_clock", "decode_float64",
-           "decode_joint_state", "decode_wrench", "decode_wrench_stamped", "encode_clock", "encode_float64", "encode_wrench", "split_ns"]
+           "decode_joint_state", "decode_wrench", "decode_wrench_stamped", "peek_stamp", "encode_clock", "encode_float64", "encode_wrench", "split_ns"]
 
 CDR_LE = b"\x00\x01\x00\x00"
 
@@ -195,6 +195,14 @@ def decode_wrench(data) -> Tuple[Tuple[float, float, float], Tuple[float, float,
     """geometry_msgs/Wrench -> (force xyz, torque xyz)."""
     v = _Reader(data, "Wrench").doubles(6)
     return v[:3], v[3:]
+
+
+def peek_stamp(data):
+    """The leading ``Time`` of a stamped message (a Header's stamp, a Clock's clock) in ns, or None."""
+    if len(data) < 12 or data[0] != 0 or data[1] not in (0, 1):
+        return None
+    sec, nsec = _st("<iI" if data[1] == 1 else ">iI").unpack_from(data, 4)
+    return join_ns(sec, nsec) if nsec < _NS else None
 
 
 def decode_float64(data) -> float:

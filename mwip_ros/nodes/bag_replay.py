@@ -33,7 +33,7 @@ exit codes:
     0  replay: finished;  resim: every output reproduced within tolerance
     1  runtime error: resim lockstep timeout (names the missing node), replay subscribers
        never matched, unreadable message data, or interrupted before the end of a resim
-    2  bad parameters (a missing or unreadable bag names 'bag')
+    2  bad parameters (a missing, unreadable or damaged bag names 'bag', the file and the chunk's byte offset)
     4  resim: outputs differ (a difference above tolerance, or a recorded output not reproduced)
 """
 from __future__ import annotations
@@ -43,7 +43,7 @@ from pathlib import Path
 
 from rclpy.node import Node
 
-from mwip_ros.bag import BagError, topic_counts, topic_types
+from mwip_ros.bag import BagError, check, topic_counts, topic_types
 from mwip_ros.nodes.params import declare
 from mwip_ros.nodes.replay import Replay
 from mwip_ros.nodes.resim import Resim
@@ -66,6 +66,7 @@ class BagReplay(Node, GracefulNodeMixin):
         try:
             self.types = topic_types(self.bag)
             self.counts = topic_counts(self.bag)
+            check(self.bag)  # a damaged chunk is never replayed as data
         except BagError as exc:
             raise ParamError("bag", f"cannot read the bag: {exc}") from None
         except (OSError, ValueError) as exc:

@@ -8,12 +8,23 @@ Parameters: ``output`` (the bag directory to create; required, must not exist),
 
 Every message is stored as the exact CDR bytes received (raw subscriptions), with the
 node clock's receive time as log time (sim time under ``use_sim_time``, as rosbag2 does)
-and as publish time (rclpy's EventsExecutor gives raw subscriptions no MessageInfo).  The subscriptions are reliable,
-KEEP_LAST 1000, volatile.  A topic's channel is created at its first message, with the
-QoS the publishers offer and the type hash they announce (as ``ros2 bag record`` writes
-them).  SIGINT/SIGTERM: the queued messages are drained, the MCAP file is finished and
-``metadata.yaml`` written; exit code 0.  A recorder killed with SIGKILL leaves every
-finished chunk on disk: ``mwip_bag_repair <output>`` recovers them.
+and as publish time (rclpy's EventsExecutor gives raw subscriptions no MessageInfo).
+
+A topic is subscribed once its first publisher is discovered, with a QoS adapted to the
+publishers (as ``ros2 bag record`` does): keep last 1000, reliable unless a publisher is
+best effort, transient local when every publisher is (the graph's are: a recorder that
+matches a moment after a lockstep run began still gets its first messages), else
+volatile (``ros2 topic pub``).  A topic's channel is created at its first message, with
+the QoS the publishers offer and the type hash they announce.
+
+On SIGINT/SIGTERM the queued messages are drained, the MCAP file is finished and
+``metadata.yaml`` written; exit code 0.  The closing summary gives the messages per topic;
+for a lockstep run (the plant publishes ``/clock`` only then) it checks that every topic of
+the loop has one message per state (:mod:`mwip_ros.bag.ledger`) and, where one lacks some, logs a
+warning naming the topics and the first missing stamp and writes the same line into the
+bag's metadata (``custom_data``, key ``mwip_ros.lockstep_gaps``), which ``mwip_report``
+shows.  A recorder killed with SIGKILL leaves every finished chunk on disk:
+``mwip_bag_repair <output>`` recovers them.
 """
 from __future__ import annotations
 
@@ -23,11 +34,13 @@ from pathlib import Path
 from typing import Dict, List, Optional, Tuple
 
 from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from mwip_ros.bag import BagError, BagWriter, message_definition, qos_profiles_yaml
 from mwip_ros.bag import type_hash as installed_type_hash
-from mwip_ros.msgs.qos import GRAPH_QOS
+from mwip_ros.msgs.qos import DEPTH
 from mwip_ros.msgs.topics import GRAPH_TOPICS, graph_type, msg_class
+from mwip_ros.bag.ledger import GAPS_KEY, Ledger
 from mwip_ros.nodes.params import declare
 from mwip_ros.nodes.runtime import EXIT_ERROR, GracefulNodeMixin, run_node
 from mwip_ros.params import ParamError
@@ -36,6 +49,17 @@ NAME = "mcap_recorder"
 PROGRESS_PERIOD_S = 5.0
 DRAIN_IDLE_S = 0.3      # on shutdown: stop draining after this long without a message
 DRAIN_MAX_S = 5.0       # ... or after this long in all
+DISCOVERY_POLL_S = 0.02  # how often to look for the first publisher of a topic not yet subscribed
+
+
+def adapted_qos(infos) -> QoSProfile:
+    """The subscription QoS that matches every publisher in ``infos`` and loses nothing they keep."""
+    profiles = [i.qos_profile for i in infos]
+    reliable = all(p.reliability == ReliabilityPolicy.RELIABLE for p in profiles)
+    transient = all(p.durability == DurabilityPolicy.TRANSIENT_LOCAL for p in profiles)
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=DEPTH,
+                      reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
+                      durability=DurabilityPolicy.TRANSIENT_LOCAL if transient else DurabilityPolicy.VOLATILE)
 
 
 class McapRecorder(Node, GracefulNodeMixin):
@@ -56,6 +80,7 @@ class McapRecorder(Node, GracefulNodeMixin):
                                     chunk_size=self.v["chunk_size"])
         except BagError as exc:
             raise ParamError("output", str(exc)) from None
+        self.ledger = Ledger()              # what was written, per topic, to judge a lockstep run (subscribed topics)
         self.counts: Dict[str, int] = {}
         self.types: Dict[str, str] = {}
         self.received = 0
@@ -63,13 +88,14 @@ class McapRecorder(Node, GracefulNodeMixin):
         self._executor = None
         self._last_progress = time.monotonic()
         self._last_progress_count = 0
-        self.subs = []
+        self.subs = {}
+        self.pending = {}                   # resolved name -> (name as given, type): no publisher seen yet
+        self._next_poll = 0.0
         for name, resolved, type_name in wanted:
-            self.subs.append(self.create_subscription(
-                msg_class(type_name), name, self._callback(resolved, type_name), GRAPH_QOS, raw=True,
-                event_callbacks=self._events(resolved)))
+            self.pending[resolved] = (name, type_name)
             self.types[resolved] = type_name
             self.counts[resolved] = 0
+        self._subscribe_discovered()
         self.get_logger().info(
             f"recording {len(self.types)} topic(s) to {self.output} ({self.writer.relative_path}; compression "
             f"{self.writer.compression or 'none'}, chunk size {self.writer.chunk_size} B): "
@@ -102,6 +128,21 @@ class McapRecorder(Node, GracefulNodeMixin):
             out.append((name, resolved, type_name))
         return out
 
+    def _subscribe_discovered(self) -> None:
+        """Subscribe each pending topic that has a publisher now, with a QoS that matches them."""
+        for resolved in list(self.pending):
+            infos = self.get_publishers_info_by_topic(resolved)
+            if not infos:
+                continue
+            name, type_name = self.pending.pop(resolved)
+            self.ledger.counts.setdefault(resolved, 0)
+            qos = adapted_qos(infos)
+            self.subs[resolved] = self.create_subscription(
+                msg_class(type_name), name, self._callback(resolved, type_name), qos, raw=True,
+                event_callbacks=self._events(resolved))
+            self.get_logger().info(f"subscribed {resolved} ({len(infos)} publisher(s); {qos.reliability.name.lower()}, "
+                                   f"{qos.durability.name.lower()})")
+
     def _events(self, name: str):
         try:
             from rclpy.event_handler import SubscriptionEventCallbacks
@@ -110,8 +151,9 @@ class McapRecorder(Node, GracefulNodeMixin):
 
         def incompatible(event) -> None:
             self.get_logger().warning(
-                f"a publisher on {name} offers a QoS incompatible with the recorder's (reliable, volatile; "
-                f"last policy kind {getattr(event, 'last_policy_kind', '?')}): its messages are NOT recorded")
+                f"a publisher on {name} offers a QoS incompatible with the recorder's (chosen for the publishers "
+                f"it found first; last policy kind {getattr(event, 'last_policy_kind', '?')}): its messages are NOT "
+                f"recorded")
 
         return SubscriptionEventCallbacks(incompatible_qos=incompatible)
 
@@ -136,6 +178,7 @@ class McapRecorder(Node, GracefulNodeMixin):
             self.failed = True
             self.finish(EXIT_ERROR, f"cannot write to {self.writer.mcap_path}: {exc}; stopping")
             return
+        self.ledger.add(topic, type_name, data)
         self.counts[topic] = self.counts.get(topic, 0) + 1
         self.received += 1
 
@@ -155,8 +198,11 @@ class McapRecorder(Node, GracefulNodeMixin):
 
     def spin_step(self, executor) -> None:
         self._executor = executor
+        if self.pending and time.monotonic() >= self._next_poll:
+            self._next_poll = time.monotonic() + DISCOVERY_POLL_S
+            self._subscribe_discovered()
         try:
-            executor.spin_once(timeout_sec=0.1)
+            executor.spin_once(timeout_sec=DISCOVERY_POLL_S if self.pending else 0.1)
         except Exception as exc:  # keep the bag: on_shutdown still finishes it
             self.failed = True
             self.finish(EXIT_ERROR, f"recorder error: {type(exc).__name__}: {exc}; stopping")
@@ -193,6 +239,14 @@ class McapRecorder(Node, GracefulNodeMixin):
     def on_shutdown(self) -> None:
         log = self.get_logger()
         self._drain()
+        gaps = self.ledger.gaps_text()
+        if gaps:
+            self.writer.custom_data[GAPS_KEY] = gaps
+            log.warning(f"INCOMPLETE lockstep recording: {gaps}")
+        elif "/clock" in self.ledger.stamps:
+            log.info(f"lockstep recording complete: every topic has all {len(self.ledger.expected())} states"
+                     + (f" ({sum(self.ledger.repeats.values())} resent message(s) recorded twice, read once)"
+                        if self.ledger.repeats else ""))
         try:
             self.writer.close()
         except (BagError, OSError) as exc:

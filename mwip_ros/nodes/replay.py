@@ -4,7 +4,10 @@ The exact recorded CDR bytes go out on each topic (all, or ``topics``) at the re
 log times scaled by 1/``rate``; ``publish_clock`` publishes ``/clock`` with the bag's time
 instead of a recorded ``/clock``; ``loop`` starts again at the end;
 ``wait_for_subscribers`` waits (up to ``timeout_s``) for that many matched subscriptions
-on every replayed topic.  Progress every few seconds, a count per topic at the end.
+on every replayed topic.  A stamped message with the same stamp as the one before it on
+its topic (a state the lockstep plant resent before the graph had matched, and the
+observer's repeated answer to it) is recorded twice but replayed once.  Progress every
+few seconds, a count per topic at the end.
 """
 from __future__ import annotations
 
@@ -15,6 +18,7 @@ from rclpy.duration import Duration
 from rosgraph_msgs.msg import Clock
 
 from mwip_ros.bag import BagError, raw_messages
+from mwip_ros.msgs.cdr import peek_stamp
 from mwip_ros.msgs.layouts import encode_clock
 from mwip_ros.msgs.qos import GRAPH_QOS
 from mwip_ros.msgs.topics import leaf, msg_class
@@ -54,6 +58,9 @@ class Replay:
         if not self.pubs and self.clock_pub is None:
             raise ParamError("topics" if self.v["topics"] else "bag", f"nothing to replay in {node.bag}")
         self.sent: Dict[str, int] = {t: 0 for t in self.pubs}
+        stamped = ("sensor_msgs/msg/JointState", "geometry_msgs/msg/WrenchStamped", "rosgraph_msgs/msg/Clock")
+        self.last_stamp = {t: None for t in self.pubs if node.types[t] in stamped}  # resends are replayed once
+        self.resends = 0
         self.clock_count = 0
         self.total = sum(node.counts.get(t, 0) for t in self.pubs)
         self.loops = 0
@@ -144,6 +151,13 @@ class Replay:
             self.clock_pub.publish(encode_clock(log_time))
             self.last_clock = log_time
             self.clock_count += 1
+        if topic in self.last_stamp:
+            stamp = peek_stamp(data)
+            if stamp is not None and stamp == self.last_stamp[topic]:
+                self.resends += 1
+                self.pending = None
+                return
+            self.last_stamp[topic] = stamp
         self.pubs[topic].publish(data)
         self.sent[topic] += 1
         self.bag_duration = max(self.bag_duration, (log_time - self.first_log) * 1e-9)
@@ -163,7 +177,7 @@ class Replay:
         for pub in (*self.pubs.values(), self.clock_pub):
             if pub is not None:  # let the subscribers receive the last messages before this process exits
                 pub.wait_for_all_acked(Duration(seconds=2.0))
-        n = sum(self.sent.values())
+        n = sum(self.sent.values()) + self.resends  # the bag's messages gone through, a resend counted too
         per = ", ".join(f"{t} {c}" for t, c in self.sent.items())
         if self.clock_pub is not None:
             per += f", /clock {self.clock_count} (from the bag's time)"
@@ -171,5 +185,7 @@ class Replay:
             what = f"{n} messages ({self.total} per pass, {self.loops} complete pass(es))"
         else:
             what = f"{n} of {self.total} messages" + ("" if self.loops >= 1 else " (interrupted)")
+        if self.resends:
+            per += f"; {self.resends} resent message(s) (a stamp repeated on its topic) replayed once"
         self.log.info(f"replayed {what} in {wall:.3f} s wall (bag span {self.bag_duration:.3f} s, "
                       f"rate {self.rate:g}): {per}")

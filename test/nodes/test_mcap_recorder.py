@@ -185,7 +185,7 @@ def test_kill_9_then_repair(graph, tmp_path):
     with pytest.raises(Exception):
         read_bag(bag)
 
-    r = subprocess.run([sys.executable, "-m", "mwip_ros.bag.repair", str(bag)], env=graph.env,
+    r = subprocess.run([sys.executable, "-m", "mwip_ros.cli.bag_repair", str(bag)], env=graph.env,
                        capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stdout + r.stderr
     assert "killed_0.mcap.broken" in r.stdout and "total:" in r.stdout

@@ -1,0 +1,284 @@
+"""Walk an MCAP file that may be cut short or damaged, keeping every usable record.
+
+The walk is the ``mcap`` library's own :class:`~mcap.stream_reader.StreamReader` (record
+framing, every record type, padding, the closing magic after the footer) with chunks
+emitted whole and opened by :func:`~mcap.stream_reader.breakup_chunk` (decompression,
+CRC check, the records inside).  Around it, :class:`Scan` adds what a damaged file needs
+and the library leaves to its caller:
+
+* **bounds**: the file is handed to the reader through :class:`_Source`, which refuses a
+  read past the end of the file (a record cut short: the walk stops there) or past the
+  end of the record being read (a damaged length field inside it: that record is
+  skipped), instead of returning the short read the library would parse as data;
+* **resumption**: a damaged chunk (bad CRC, bad compression) is skipped and the walk goes
+  on; so is any other record that cannot be parsed, by starting a new reader right after
+  it, since its length in the record header is still good;
+* **garbage**: an unknown opcode below 0x80 (the MCAP range reserved for the format
+  itself) means the rest is not MCAP, e.g. the zeros a file system leaves after a crash;
+  the library would skip it as a user record and walk on through the garbage.
+
+:class:`_Walker` learns each record's byte offsets by overriding the reader's private
+``_read_record`` hook; the reader keeps its public ``records`` loop.  :func:`walk` feeds the
+usable records of a file to an optional sink (the repair's rewriter) and collects their
+schemas, channels and per-channel message counts.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Dict, Iterator, Optional, Tuple
+
+from mcap.data_stream import ReadDataStream
+from mcap.opcode import Opcode
+from mcap.records import Attachment, Channel, Chunk, DataEnd, Footer, Header, Message, Metadata, Schema
+from mcap.stream_reader import MAGIC_SIZE, StreamReader, breakup_chunk, read_magic
+
+from .metadata import FileInfo
+
+__all__ = ["Collected", "Scan", "walk"]
+
+_KNOWN_OPCODES = frozenset(int(op) for op in Opcode)
+_USABLE = (Schema, Channel, Message, Metadata, Attachment)
+
+
+class _Truncated(Exception):
+    """The file ends before the record being read does."""
+
+
+class _Overrun(ValueError):
+    """A field runs past the end of its record (a damaged length inside the record)."""
+
+
+class _Garbage(ValueError):
+    """An opcode no MCAP writer uses: the bytes from here on are not MCAP records."""
+
+
+class _Source:
+    """The file as the reader sees it: a read past the end of the file, or past ``limit``
+    (the end of the record being read, when set), raises instead of coming back short."""
+
+    def __init__(self, fh, size: int, pos: int):
+        fh.seek(pos)
+        self._fh = fh
+        self.size = size
+        self.pos = pos
+        self.limit: Optional[int] = None
+
+    def read(self, n: int) -> bytes:
+        if self.pos + n > (self.size if self.limit is None else self.limit):
+            raise _Truncated() if self.limit is None else _Overrun()
+        data = self._fh.read(n)
+        self.pos += len(data)
+        return data
+
+
+class _Walker(StreamReader):
+    """StreamReader that records where each record starts and ends, and bounds its reads.
+
+    ``start``/``end``/``opcode`` describe the record being (or last) read; ``parsed_to`` is
+    the end of the last record read whole."""
+
+    def __init__(self, source: _Source):
+        super().__init__(source, skip_magic=True, emit_chunks=True, validate_crcs=False, record_size_limit=None)
+        self.source = source
+        self.start = self.end = self.parsed_to = source.pos
+        self.opcode: Optional[int] = None
+
+    def _read_record(self, opcode: int, length: int):
+        src = self.source
+        self.opcode, self.start, self.end = opcode, src.pos - 9, src.pos + length
+        if self.end > src.size:
+            raise _Truncated()
+        if opcode < 0x80 and opcode not in _KNOWN_OPCODES:
+            raise _Garbage()
+        src.limit = self.end
+        try:
+            record = super()._read_record(opcode, length)
+        finally:
+            src.limit = None
+        self.parsed_to = self.end
+        return record
+
+    @property
+    def in_record(self) -> bool:
+        """Whether the last failure happened inside a record (not in a record header)."""
+        return self.parsed_to < self.end
+
+
+def _op_name(opcode: Optional[int]) -> str:
+    try:
+        return Opcode(opcode).name.title().replace("_", "")
+    except ValueError:
+        return f"0x{opcode:02x}"
+
+
+class Scan:
+    """Walk the records of one MCAP file in order, yielding the usable ones (:meth:`records`).
+
+    After the walk: ``header``; ``complete`` (data section, summary, footer and closing magic
+    all read) and ``intact`` (complete, and no damaged record skipped); ``good_end`` (every
+    byte before it was used or counted in ``skipped_bytes``); ``problem`` (why the walk
+    stopped early, or what was damaged); the chunks saved and discarded, the chunk
+    compression used and the largest uncompressed chunk.
+    """
+
+    def __init__(self, path: Path):
+        self.path = Path(path)
+        self.size = self.path.stat().st_size
+        self.header: Optional[Header] = None
+        self.complete = False
+        self.good_end = 0
+        self.skipped_bytes = 0
+        self.problem = ""
+        self.chunks_saved = 0
+        self.chunks_discarded = 0
+        self.compression = ""
+        self.max_chunk = 0
+
+    @property
+    def intact(self) -> bool:
+        """Complete, and no record of it had to be skipped."""
+        return self.complete and not self.skipped_bytes
+
+    @property
+    def bytes_discarded(self) -> int:
+        return (0 if self.complete else self.size - self.good_end) + self.skipped_bytes
+
+    def records(self) -> Iterator[Any]:
+        with open(self.path, "rb") as fh:
+            try:
+                read_magic(ReadDataStream(_Source(fh, self.size, 0)))
+            except Exception:
+                self.problem = "not an MCAP file (no MCAP magic at the start)"
+                return
+            walker = _Walker(_Source(fh, self.size, MAGIC_SIZE))
+            self.good_end = MAGIC_SIZE
+            it = walker.records
+            after_data = ""  # once the data section has ended: what a failure from then on means
+            while True:
+                try:
+                    record = next(it)
+                except StopIteration:
+                    self.complete = True
+                    if self.skipped_bytes:
+                        self.problem = "records in its data section fail their checks"
+                    return
+                except Exception as exc:
+                    if after_data:
+                        self.problem = after_data
+                        return
+                    if not self._skip_damaged(walker, exc):
+                        return
+                    walker = _Walker(_Source(fh, self.size, walker.end))
+                    it = walker.records
+                    continue
+                if after_data:  # the summary section repeats what the data section has
+                    continue
+                if isinstance(record, Header):
+                    if self.header is not None:
+                        self.problem = f"a second Header record at byte {walker.start}"
+                        return
+                    self.header = record
+                elif self.header is None:
+                    self.problem = "the first record is not a Header"
+                    return
+                elif isinstance(record, DataEnd):
+                    after_data = "ends after its data section without a valid footer"
+                elif isinstance(record, Footer):  # a file without a DataEnd record
+                    after_data = "footer without the closing magic"
+                elif isinstance(record, Chunk):
+                    yield from self._open_chunk(record, walker)
+                elif isinstance(record, _USABLE):
+                    yield record
+                # Indexes and user records inside the data section: skipped, not lost.
+                self.good_end = walker.parsed_to
+
+    def _open_chunk(self, chunk: Chunk, walker: _Walker) -> Iterator[Any]:
+        try:
+            inner = breakup_chunk(chunk, validate_crc=True)
+        except Exception:  # damaged: bad CRC, bad compression, bad framing inside
+            self.chunks_discarded += 1
+            self.skipped_bytes += walker.end - walker.start
+            return
+        self.chunks_saved += 1
+        self.compression = self.compression or chunk.compression
+        self.max_chunk = max(self.max_chunk, chunk.uncompressed_size)
+        yield from inner
+
+    def _skip_damaged(self, walker: _Walker, exc: Exception) -> bool:
+        """After the reader failed: True to skip the damaged record and walk on, else set ``problem``."""
+        self.good_end = walker.parsed_to
+        if not walker.in_record:
+            self.problem = "ends without a footer" if walker.parsed_to == self.size else \
+                "ends inside a record header"
+            return False
+        if isinstance(exc, _Truncated):
+            self.problem = f"ends inside a {_op_name(walker.opcode)} record at byte {walker.start}"
+            return False
+        if isinstance(exc, _Garbage):
+            self.problem = f"unknown record opcode 0x{walker.opcode:02x} at byte {walker.start} " \
+                           f"(garbage from here on)"
+            return False
+        if walker.opcode == Opcode.CHUNK:
+            self.chunks_discarded += 1
+        self.skipped_bytes += walker.end - walker.start
+        self.good_end = walker.end
+        return True
+
+
+class Collected:
+    """Schemas, channels and per-channel message counts and times of one file's usable records.
+
+    ``orphans`` counts messages of channels the file never defined (dropped);
+    ``rosbag2_metadata`` is the ``serialized_metadata`` of the ``rosbag2`` Metadata record."""
+
+    def __init__(self):
+        self.schemas: Dict[int, Schema] = {}
+        self.channels: Dict[int, Channel] = {}
+        self.counts: Dict[int, int] = {}
+        self.file = FileInfo("")
+        self.orphans = 0
+        self.rosbag2_metadata: Optional[str] = None
+
+    def topic_counts(self) -> Dict[str, int]:
+        out: Dict[str, int] = {}
+        for cid, n in self.counts.items():
+            topic = self.channels[cid].topic
+            out[topic] = out.get(topic, 0) + n
+        return out
+
+
+def walk(path: Path, sink: Any = None) -> Tuple[Scan, Collected]:
+    """Scan ``path``; hand each usable record to ``sink`` (its ``schema``, ``channel``,
+    ``message``, ``metadata`` and ``attachment`` methods), once per schema and channel id.
+
+    The ``rosbag2`` Metadata record is collected, not handed on: the rewrite writes its own."""
+    scan = Scan(path)
+    got = Collected()
+    for rec in scan.records():
+        if isinstance(rec, Schema):
+            if rec.id not in got.schemas:
+                got.schemas[rec.id] = rec
+                if sink:
+                    sink.schema(rec)
+        elif isinstance(rec, Channel):
+            if rec.id not in got.channels:
+                got.channels[rec.id] = rec
+                got.counts.setdefault(rec.id, 0)
+                if sink:
+                    sink.channel(rec)
+        elif isinstance(rec, Message):
+            if rec.channel_id not in got.channels:
+                got.orphans += 1
+                continue
+            got.counts[rec.channel_id] += 1
+            got.file.add(rec.log_time)
+            if sink:
+                sink.message(rec)
+        elif isinstance(rec, Metadata):
+            if rec.name == "rosbag2":
+                got.rosbag2_metadata = rec.metadata.get("serialized_metadata")
+            elif sink:
+                sink.metadata(rec)
+        elif isinstance(rec, Attachment) and sink:
+            sink.attachment(rec)
+    return scan, got

@@ -1,0 +1,75 @@
+"""A lockstep recording is complete, or says loudly that it is not, however the user starts the nodes.
+
+The four nodes are started as a user would (``ros2 run`` each, no ``expected_subscribers``),
+recorder first and in the reverse order, beside a process that keeps a core busy, several
+times.  Every run must end with one message per state on every topic of the loop (a resend
+counted once), or with the recorder's warning, in its log and in the bag's metadata.
+"""
+import re
+import sys
+
+import pytest
+import yaml
+
+from bagcheck import decoded_messages
+from graphproc import Graph
+from mwip_ros.bag.ledger import GAPS_KEY
+
+LOOP_TOPICS = ("/joint_states", "/clock", "/wheel_torque_cmd", "/disturbance_estimate", "/lumped_disturbance",
+               "/controller_internals")
+RUNS = 3
+
+
+def _stamp(topic, msg):
+    if topic == "/clock":
+        return msg.clock.sec, msg.clock.nanosec
+    if topic == "/wheel_torque_cmd":
+        return None
+    return msg.header.stamp.sec, msg.header.stamp.nanosec
+
+
+def _start_cost_s(plant_log: str) -> float:
+    """Seconds from the plant's first line to its first state ('starting lockstep run'), from the log stamps."""
+    times = re.findall(r"\[(\d+\.\d+)\] \[plant_sim\]: (.*)", plant_log)
+    t0 = float(times[0][0])
+    return next(float(t) for t, text in times if "starting lockstep run" in text) - t0
+
+
+@pytest.mark.parametrize("order", ["user", "reverse"])
+def test_every_lockstep_run_is_recorded_whole_or_flagged(tmp_path, order):
+    results = []
+    for run in range(RUNS):
+        bag = tmp_path / f"bag{run}"
+        with Graph(tmp_path) as g:
+            g.start("busy", label=f"busy{run}", params=None,
+                    cmd=[sys.executable, "-c", "import time\nend = time.time() + 120\nwhile time.time() < end: pass"])
+            starts = [("mcap_recorder", ("-p", f"output:={bag}", "-p", "use_sim_time:=true")),
+                      ("disturbance_observer", ()), ("dscndo_controller", ()),
+                      ("plant_sim", ("-p", "duration_s:=5.0"))]
+            if order == "reverse":
+                starts.reverse()
+            procs = {name: g.start(name, *args, label=f"{name}{run}") for name, args in starts}
+            assert procs["plant_sim"].wait(120) == 0, procs["plant_sim"].output()
+            for name in ("disturbance_observer", "dscndo_controller", "mcap_recorder"):
+                assert procs[name].stop() == 0, procs[name].output()
+            plant_log, rec_log = procs["plant_sim"].output(), procs["mcap_recorder"].output()
+        states = int(re.search(r"lockstep run: (\d+) periods", plant_log).group(1))
+        stamps = {t: set() for t in LOOP_TOPICS}
+        counts = {t: 0 for t in LOOP_TOPICS}
+        for topic, _type, _t, msg in decoded_messages(bag):
+            if topic in counts:
+                counts[topic] += 1
+                stamps[topic].add(_stamp(topic, msg))
+        unique = {t: (len(stamps[t]) if t != "/wheel_torque_cmd" else counts[t]) for t in LOOP_TOPICS}
+        meta = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+        flagged = GAPS_KEY in (meta.get("custom_data") or {})
+        complete = all(n == states for n in unique.values())
+        results.append((order, run, states, unique, counts, flagged, round(_start_cost_s(plant_log), 2)))
+        if complete:
+            assert not flagged and "lockstep recording complete" in rec_log, rec_log[-2000:]
+        else:
+            assert flagged and "INCOMPLETE lockstep recording" in rec_log, (unique, rec_log[-2000:])
+            assert meta["custom_data"][GAPS_KEY] in rec_log
+    print("\n".join(map(str, results)))
+    if order == "user":  # the recorder was running when the plant started: nothing may be missing
+        assert all(all(n == r[2] for n in r[3].values()) for r in results), results
