@@ -146,3 +146,58 @@ def test_bad_parameters_exit_2_naming_the_key(tmp_path, bag):
     assert r.returncode == 2 and "'topics'" in r.stderr and "/joint_states" in r.stderr, r.stdout + r.stderr
     r = subprocess.run([sys.executable, "-m", MODULE, "--help"], env=env, capture_output=True, text=True, timeout=60)
     assert r.returncode == 0 and "exit codes" in r.stdout and "resim" in r.stdout, r.stdout + r.stderr
+
+
+def _damaged_bag(tmp_path):
+    """A graph bag of many chunks whose middle chunk has flipped bytes; returns (bag dir, mcap file)."""
+    from bagcheck import damage_cases, write_graph_bag
+    good = tmp_path / "good"
+    write_graph_bag(good, n=60, chunk_size=2000)
+    mcap = next(good.glob("*.mcap"))
+    case = dict((name, data) for name, data, _ in damage_cases(mcap))["damaged chunk in the middle"]
+    mcap.write_bytes(case)
+    return good, mcap
+
+
+def test_a_damaged_chunk_is_never_replayed_as_data(tmp_path):
+    bag, mcap = _damaged_bag(tmp_path)
+    env = Graph(tmp_path).env
+    for mode in ("replay", "resim"):
+        r = subprocess.run([sys.executable, "-m", MODULE, "--ros-args", "-p", f"bag:={bag}", "-p", f"mode:={mode}"],
+                           env=env, capture_output=True, text=True, timeout=60)
+        assert r.returncode == 2, (mode, r.stdout + r.stderr)
+        assert "'bag'" in r.stderr and str(mcap) in r.stderr and "damaged chunk" in r.stderr and "at byte" in r.stderr
+        assert "Traceback" not in r.stderr
+    r = subprocess.run([sys.executable, "-m", "mwip_ros.cli.report", str(bag), "--out", str(tmp_path / "rep")],
+                       env=env, capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2 and "damaged chunk" in r.stderr and "Traceback" not in r.stderr, r.stdout + r.stderr
+    r = subprocess.run([sys.executable, "-m", "mwip_ros.cli.bag_repair", str(bag)], env=env, capture_output=True,
+                       text=True, timeout=60)
+    assert r.returncode == 0 and "damaged chunk" in r.stdout, r.stdout + r.stderr
+    from mwip_ros.bag import check
+    check(bag)  # repaired: every chunk left is intact
+
+
+def test_a_resent_state_is_replayed_once(tmp_path):
+    from injector import Injector
+    from mwip_ros.bag import BagWriter
+    from mwip_ros.core.model import State
+    from mwip_ros.msgs import layouts as L
+    from sensor_msgs.msg import JointState
+
+    bag = tmp_path / "resent"
+    with BagWriter(bag) as w:
+        w.add_topic("/joint_states", "sensor_msgs/msg/JointState")
+        w.add_topic("/clock", "rosgraph_msgs/msg/Clock")
+        for k in (0, 0, 1, 2, 3):  # state 0 resent before the graph had matched: recorded twice
+            w.write("/clock", L.encode_clock(k * 5_000_000), 10 ** 9 + k * 5_000_000)
+            w.write("/joint_states", L.encode_state(k * 5_000_000, State(0.0, 0.1 * k, 0.0, 0.0), 0.0),
+                    10 ** 9 + k * 5_000_000 + 1)
+    with Graph(tmp_path) as g, Injector(g.domain_id) as inj:
+        got = inj.record("joint_states", JointState)
+        br = g.start("bag_replay", "-p", f"bag:={bag}", "-p", "wait_for_subscribers:=1", "-p", "topics:=[joint_states]",
+                     params=None, module=MODULE)
+        assert br.wait(30) == 0, br.output()
+        inj.spin(0.5)
+    assert [L.parse_joint_state(d)[0] for d in got] == [0, 5_000_000, 10_000_000, 15_000_000]
+    assert "1 resent message(s)" in br.output() and "replayed 5 of 5 messages" in br.output(), br.output()

@@ -1,0 +1,67 @@
+"""The ledger of a lockstep recording: one message per state on every topic of the loop, or the gaps named."""
+import subprocess
+import sys
+
+from mwip_ros.bag import BagWriter
+from mwip_ros.bag.ledger import GAPS_KEY, Ledger
+from mwip_ros.core.model import State
+from mwip_ros.msgs import layouts as L
+
+H = 5_000_000
+JS, CLOCK, EST, CMD = ("sensor_msgs/msg/JointState", "rosgraph_msgs/msg/Clock", "geometry_msgs/msg/WrenchStamped",
+                       "std_msgs/msg/Float64")
+
+
+def _run(ledger, states, skip=(), resend=(), start=0):
+    for k in range(start, states):
+        s = k * H
+        for _ in range(2 if k in resend else 1):
+            ledger.add("/joint_states", JS, L.encode_state(s, State(0.0, 0.0, 0.0, 0.0), 0.0))
+            ledger.add("/clock", CLOCK, L.encode_clock(s))
+        if ("est", k) not in skip:
+            ledger.add("/disturbance_estimate", EST, L.encode_wrench(s, 1.0, 2.0))
+        if ("cmd", k) not in skip:
+            ledger.add("/wheel_torque_cmd", CMD, L.encode_command(1.0))
+
+
+def test_a_complete_run_with_a_resend_has_no_gaps():
+    led = Ledger()
+    _run(led, 50, resend={0})
+    assert led.gaps() == [] and led.repeats == {"/joint_states": 1, "/clock": 1}
+    assert len(led.expected()) == 50
+
+
+def test_missing_messages_are_named_with_the_first_missing_stamp():
+    led = Ledger()
+    _run(led, 50, skip={("est", 7), ("est", 30), ("cmd", 49)})
+    assert led.gaps() == [("/disturbance_estimate", 48, 50, 7 * H), ("/wheel_torque_cmd", 49, 50, None)]
+    assert led.gaps_text() == ("/disturbance_estimate: 48 of 50, first missing stamp t = 0.035 s; "
+                               "/wheel_torque_cmd: 49 of 50")
+
+
+def test_a_recorder_that_joined_late_misses_the_start_everywhere_and_says_so():
+    led = Ledger()
+    _run(led, 50, start=10)
+    gaps = led.gaps()
+    assert [g[0] for g in gaps] == ["/clock", "/disturbance_estimate", "/joint_states", "/wheel_torque_cmd"]
+    assert all(g[1] == 40 and g[2] == 50 for g in gaps) and gaps[0][3] == 0
+
+
+def test_without_clock_it_is_not_a_lockstep_run():
+    led = Ledger()
+    for k in range(5):
+        led.add("/joint_states", JS, L.encode_state(k * H, State(0, 0, 0, 0), 0.0))
+    assert led.gaps() == []
+
+
+def test_the_report_shows_the_gaps_of_a_flagged_bag(tmp_path):
+    bag = tmp_path / "flagged"
+    with BagWriter(bag, custom_data={GAPS_KEY: "/disturbance_estimate: 48 of 50"}) as w:
+        w.add_topic("/joint_states", JS)
+        for k in range(50):
+            w.write("/joint_states", L.encode_state(k * H, State(0.0, 0.0, 0.0, 0.0), 0.0), 10 ** 9 + k * H)
+    r = subprocess.run([sys.executable, "-m", "mwip_ros.cli.report", str(bag), "--out", str(tmp_path / "rep"),
+                        "--window", "0", "0.2"], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert "incomplete lockstep recording" in r.stderr and "/disturbance_estimate: 48 of 50" in r.stderr
+    assert "/disturbance_estimate: 48 of 50" in (tmp_path / "rep" / "metrics.md").read_text()
