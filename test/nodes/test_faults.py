@@ -96,3 +96,40 @@ def test_the_plant_rejects_absurd_commands_and_cut_wrenches_and_keeps_running(tm
     assert "implausible command" in out and "not a geometry_msgs/Wrench: message ends at byte" in out
     assert "external wrench: tau_ext1" not in out  # nothing was applied as a push
     assert "Traceback" not in out
+
+
+def test_two_namespaced_graphs_in_one_domain_do_not_hear_each_other(tmp_path):
+    """Each graph under its namespace, /clock remapped into it (README): both runs equal the offline simulator,
+    each recorder records its own graph only."""
+    import numpy as np
+
+    from bagcheck import decoded_messages
+    from graphproc import PARAMS
+    from mwip_ros import params as P
+    from mwip_ros.core.sim import simulate
+    from mwip_ros.runs import load_run
+
+    offline = simulate(P.closed_loop(P.merged_values(P.load_param_file(PARAMS)), duration=2.0))
+    with Graph(tmp_path) as g:
+        plants = {}
+        for ns in ("a", "b"):
+            remap = ("-r", f"__ns:=/{ns}", "-r", f"/clock:=/{ns}/clock")
+            g.start("mcap_recorder", *remap, "-p", f"output:={tmp_path / ('bag_' + ns)}", "-p", "use_sim_time:=true",
+                    label=f"rec_{ns}")
+            g.start("disturbance_observer", *remap, "-p", f"csv:={tmp_path / (ns + '_est.csv')}", label=f"obs_{ns}")
+            g.start("dscndo_controller", *remap, label=f"ctl_{ns}")
+        for ns in ("a", "b"):
+            plants[ns] = g.start("plant_sim", "-r", f"__ns:=/{ns}", "-r", f"/clock:=/{ns}/clock", "-p", "duration_s:=2.0",
+                                 "-p", f"csv:={tmp_path / (ns + '.csv')}", label=f"plant_{ns}")
+        for ns, plant in plants.items():
+            assert plant.wait(120) == 0, plant.output()
+            assert "publishers on" not in plant.output()
+    for ns in ("a", "b"):
+        run = load_run(tmp_path / f"{ns}.csv", estimates=tmp_path / f"{ns}_est.csv")
+        for c in ("theta_b", "u", "tau_hat1", "tau_d1"):
+            np.testing.assert_allclose(run[c], offline[c], rtol=0, atol=1e-9, err_msg=(ns, c))
+        topics = {}
+        for topic, _type, _t, _msg in decoded_messages(tmp_path / f"bag_{ns}"):
+            topics[topic] = topics.get(topic, 0) + 1
+        assert topics[f"/{ns}/clock"] == 401 and topics[f"/{ns}/joint_states"] == 401, topics
+        assert all(t.startswith(f"/{ns}/") for t in topics), topics
