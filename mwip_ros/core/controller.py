@@ -38,30 +38,33 @@ class ControlOutput:
     x4d: float      # filtered virtual control used at this step, eq. (25)
 
 
-def x4_bar_of(nominal: PhysicalParams, k1: float, theta_b: float, x1: float) -> float:
+def x4_bar_of(nominal: PhysicalParams, k1: float, theta_b: float, x1: float, m=math) -> float:
     """Virtual control x4_bar (eq. 24) with S1 = x2 = theta_b (eq. 22)."""
-    mc = nominal.m12 * math.cos(theta_b)
+    mc = nominal.m12 * m.cos(theta_b)
     return (nominal.m22 + mc) / (nominal.m11 + mc) * (x1 / (nominal.m22 + mc) + k1 * theta_b)
 
 
-def dsc_law(nominal: PhysicalParams, gains: DscGains, x, x4d: Optional[float], tau_hat=None) -> ControlOutput:
+def dsc_law(nominal: PhysicalParams, gains: DscGains, x, x4d: Optional[float], tau_hat=None,
+            m=math) -> ControlOutput:
     """u = u_DSC - u_taud for the state ``x``; ``x4d=None`` means the first step (x4d(0) = x4_bar(0)).
 
-    ``tau_hat=None`` is plain DSC (observer term off).
+    ``tau_hat=None`` is plain DSC (observer term off); ``m`` the math namespace (``numpy``
+    for arrays of scenarios).
     """
     p = nominal
     _, x2, x4, x3 = x                            # x2 = theta_b, x3 = theta_b', x4 = theta_w' (eq. 16)
-    mc = p.m12 * math.cos(x2)                    # M_C12
-    gs = p.G_b * math.sin(x2)                    # G_S2
+    mc = p.m12 * m.cos(x2)                       # M_C12
+    sb = m.sin(x2)
+    gs = p.G_b * sb                              # G_S2
     A = p.m11 * p.m22 - mc ** 2
     x1 = (p.m11 + mc) * x4 + (p.m22 + mc) * x3   # eq. (16)
     S1 = x2                                      # eq. (22)
-    x4_bar = x4_bar_of(p, gains.k1, x2, x1)      # eq. (24)
+    x4_bar = x4_bar_of(p, gains.k1, x2, x1, m)   # eq. (24)
     if x4d is None:
         x4d = x4_bar                             # eq. (25) initial condition
     S2 = x4 - x4d                                # eq. (26)
     u_dsc = (A / (p.m22 + mc) * ((x4_bar - x4d) / gains.tau4 - gains.k2 * S2)
-             - p.m12 * p.m22 * math.sin(x2) * (x1 - (p.m11 + mc) * x4) ** 2 / (p.m22 + mc) ** 3
+             - p.m12 * p.m22 * sb * (x1 - (p.m11 + mc) * x4) ** 2 / (p.m22 + mc) ** 3
              + mc * gs / (p.m22 + mc))           # eq. (28)
     if tau_hat is None:
         u_taud = 0.0
@@ -71,9 +74,9 @@ def dsc_law(nominal: PhysicalParams, gains: DscGains, x, x4d: Optional[float], t
                          x1=x1, x4_bar=x4_bar, x4d=x4d)     # eq. (19)
 
 
-def filter_step(x4d: float, x4_bar: float, h: float, tau4: float) -> float:
+def filter_step(x4d: float, x4_bar: float, h: float, tau4: float, m=math) -> float:
     """Exact discretisation of tau4 x4d' + x4d = x4_bar over one period with x4_bar held."""
-    return x4_bar + (x4d - x4_bar) * math.exp(-h / tau4)
+    return x4_bar + (x4d - x4_bar) * m.exp(-h / tau4)
 
 
 @dataclass
@@ -85,8 +88,9 @@ class DscController:
     h: float
     use_observer: bool = True
     x4d: Optional[float] = None
+    m: object = math     # numpy to step a batch of scenarios (array gains and states)
 
     def step(self, x, tau_hat=None) -> ControlOutput:
-        out = dsc_law(self.nominal, self.gains, x, self.x4d, tau_hat if self.use_observer else None)
-        self.x4d = filter_step(out.x4d, out.x4_bar, self.h, self.gains.tau4)
+        out = dsc_law(self.nominal, self.gains, x, self.x4d, tau_hat if self.use_observer else None, self.m)
+        self.x4d = filter_step(out.x4d, out.x4_bar, self.h, self.gains.tau4, self.m)
         return out

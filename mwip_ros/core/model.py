@@ -92,6 +92,10 @@ class Sinusoid:
     def __call__(self, t: float) -> float:
         return self.amplitude * math.sin(self.omega * t + self.phase)
 
+    def at(self, t: float, m=math):
+        """The value at ``t`` with the math namespace ``m`` (``numpy`` when the fields are arrays)."""
+        return self.amplitude * m.sin(self.omega * t + self.phase)
+
 
 def mass_matrix(p: PhysicalParams, x) -> np.ndarray:
     """M(q) of eq. (4): wheel row and the *sum* of the two rows of eq. (1)."""
@@ -107,17 +111,19 @@ def coriolis_gravity(p: PhysicalParams, x) -> np.ndarray:
 
 
 def accel(p: PhysicalParams, D_w: float, D_b: float, x, u: float, tau_ext1: float,
-          tau_ext2: float) -> Tuple[float, float]:
+          tau_ext2: float, m=math) -> Tuple[float, float]:
     """True accelerations (theta_w'', theta_b'') of eq. (1) with eq. (3)'s disturbances, as floats.
 
     ``x`` is a :class:`State` (or any 4-tuple in its order).  *fix*: the left sides of
     eq. (1) are accelerations; tau_ext1 enters the wheel row and tau_ext2 the sum of
     both rows, so the body row gets tau_ext2 - tau_ext1.  Scalar on purpose: the plant
-    calls it 4 x ``substeps`` times per period.
+    calls it 4 x ``substeps`` times per period.  ``m`` is the math namespace: ``math`` for
+    floats, ``numpy`` for arrays of scenarios (the batch simulator); the same arithmetic
+    serves both.
     """
     _, theta_b, dtheta_w, dtheta_b = x
-    s = math.sin(theta_b)
-    mc = p.m12 * math.cos(theta_b)
+    s = m.sin(theta_b)
+    mc = p.m12 * m.cos(theta_b)
     m11, m22 = p.m11, p.m22
     rhs_w = u - (D_w + D_b) * dtheta_w + D_b * dtheta_b + p.m12 * dtheta_b * dtheta_b * s + tau_ext1  # eq. (1), row 1
     rhs_b = -u - D_b * (dtheta_b - dtheta_w) + p.G_b * s + (tau_ext2 - tau_ext1)                     # eq. (1), row 2
@@ -130,10 +136,10 @@ def plant_accel(p: PhysicalParams, fr: Friction, x, u: float, tau_ext1: float, t
     return np.array(accel(p, fr.D_w, fr.D_b, x, u, tau_ext1, tau_ext2))
 
 
-def lumped_disturbance(nominal: PhysicalParams, x, ddq, u: float) -> Tuple[float, float]:
+def lumped_disturbance(nominal: PhysicalParams, x, ddq, u: float, m=math) -> Tuple[float, float]:
     """True tau_d = M_hat(q) q'' + N_hat(q, q') - [u, 0]^T (eq. 6-7), written out for the 2x2 case."""
-    s = math.sin(x[1])
-    mc = nominal.m12 * math.cos(x[1])
+    s = m.sin(x[1])
+    mc = nominal.m12 * m.cos(x[1])
     cent = nominal.m12 * x[3] * x[3] * s
     return (nominal.m11 * ddq[0] + mc * ddq[1] - cent - u,
             (nominal.m11 + mc) * ddq[0] + (nominal.m22 + mc) * ddq[1] - nominal.G_b * s - cent)

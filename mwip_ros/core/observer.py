@@ -36,15 +36,16 @@ def z_dot(nominal: PhysicalParams, X: np.ndarray, x, u: float, z) -> np.ndarray:
     return L @ (coriolis_gravity(nominal, x) - np.array([u, 0.0]) - X @ np.asarray(x[2:]) - np.asarray(z))
 
 
-def z_dot_explicit(nominal: PhysicalParams, X, x, u: float, z) -> Tuple[float, float]:
+def z_dot_explicit(nominal: PhysicalParams, X, x, u: float, z, m=math) -> Tuple[float, float]:
     """Eq. (15): the observer written out for the 2x2 case, as floats (what ``DiscreteObserver`` steps).
 
-    ``X`` is the 2x2 gain matrix or the flat (c1, c2, c3, c4).
+    ``X`` is the 2x2 gain matrix or the flat (c1, c2, c3, c4); ``m`` the math namespace
+    (``numpy`` for arrays of scenarios).
     """
     c1, c2, c3, c4 = _flat(X)
     p = nominal
     _, th_b, dth_w, dth_b = x
-    s, mc = math.sin(th_b), p.m12 * math.cos(th_b)
+    s, mc = m.sin(th_b), p.m12 * m.cos(th_b)
     A = p.m11 * p.m22 - mc * mc
     D1, D2 = p.m22 + mc, p.m11 + mc
     cent = p.m12 * dth_b * dth_b * s
@@ -74,13 +75,15 @@ class DiscreteObserver:
     z_k = z_{k-1} + h z'(x_{k-1}, u_{k-1}, z_{k-1}).  ``h`` is the step length since the
     previous state: the control period unless the caller passes another (a realtime
     node that lost a state integrates over the whole gap).  ``z`` and the returned
-    tau_hat are tuples of two floats.  Assign ``X`` to change the gains.
+    tau_hat are tuples of two floats.  Assign ``X`` to change the gains.  With ``m = numpy``,
+    array parameters and ``X`` as a tuple of four arrays it steps a batch of scenarios.
     """
 
     nominal: PhysicalParams
     X: np.ndarray
     h: float
     z: Optional[tuple] = None
+    m: object = math
     _prev: Optional[tuple] = field(default=None, repr=False)
     _gains: tuple = field(default=(None, None), repr=False)  # (X object, its flat floats)
 
@@ -99,12 +102,12 @@ class DiscreteObserver:
         if self._gains[0] is not self.X:  # X was (re)assigned, e.g. a parameter update
             self._gains = (self.X, _flat(self.X))
         c1, c2, c3, c4 = c = self._gains[1]
-        dw, db = float(x[2]), float(x[3])
+        dw, db = x[2], x[3]
         if self.z is None:
             self.z = (-(c1 * dw + c2 * db), -(c3 * dw + c4 * db))  # tau_hat(0) = 0
         else:
             step = self.h if h is None else h
-            d1, d2 = z_dot_explicit(self.nominal, c, self._prev, u_prev, self.z)
+            d1, d2 = z_dot_explicit(self.nominal, c, self._prev, u_prev, self.z, self.m)
             self.z = (self.z[0] + step * d1, self.z[1] + step * d2)  # explicit Euler of eq. (12)
         self._prev = x
         return (self.z[0] + c1 * dw + c2 * db, self.z[1] + c3 * dw + c4 * db)  # tau_hat = z + X q'

@@ -16,7 +16,7 @@ import numpy as np
 
 from .model import PhysicalParams, Sinusoid, State, accel, lumped_disturbance
 
-__all__ = ["PlantConfig", "PlantSim", "saturate"]
+__all__ = ["PlantConfig", "PlantSim", "rk4_period", "saturate"]
 
 
 @dataclass(frozen=True)
@@ -99,34 +99,39 @@ class PlantSim:
     def step(self, u: float, extra=(0.0, 0.0)) -> None:
         """Integrate t_k -> t_{k+1} with u (already saturated) and D_w held; RK4, ``substeps`` steps."""
         c = self.cfg
-        n = c.substeps
-        dt = c.h / n
-        half, sixth = dt / 2, dt / 6
-        p, D_w, D_b = c.actual, self.D_w, c.D_b
-        f1, f2 = c.tau_ext1, c.tau_ext2
-        x1, x2 = extra
-        t0 = self.t
-        w, b, dw, db = self.x
-        e1, e2 = f1(t0) + x1, f2(t0) + x2
-        for i in range(n):
-            tm = t0 + (i + 0.5) * dt                        # stage times t, t + dt/2 (twice), t + dt
-            te = t0 + (i + 1) * dt
-            m1, m2 = f1(tm) + x1, f2(tm) + x2
-            n1, n2 = f1(te) + x1, f2(te) + x2
-            # accel ignores theta_w (the dynamics do not depend on it): the stages pass w unchanged
-            a1w, a1b = accel(p, D_w, D_b, (w, b, dw, db), u, e1, e2)               # k1
-            b2, dw2, db2 = b + half * db, dw + half * a1w, db + half * a1b
-            a2w, a2b = accel(p, D_w, D_b, (w, b2, dw2, db2), u, m1, m2)            # k2
-            b3, dw3, db3 = b + half * db2, dw + half * a2w, db + half * a2b
-            a3w, a3b = accel(p, D_w, D_b, (w, b3, dw3, db3), u, m1, m2)            # k3
-            b4, dw4, db4 = b + dt * db3, dw + dt * a3w, db + dt * a3b
-            a4w, a4b = accel(p, D_w, D_b, (w, b4, dw4, db4), u, n1, n2)            # k4
-            w += sixth * (dw + 2 * dw2 + 2 * dw3 + dw4)
-            b += sixth * (db + 2 * db2 + 2 * db3 + db4)
-            dw += sixth * (a1w + 2 * a2w + 2 * a3w + a4w)
-            db += sixth * (a1b + 2 * a2b + 2 * a3b + a4b)
-            e1, e2 = n1, n2
-        self.x = State(w, b, dw, db)
+        self.x = State(*rk4_period(c.actual, self.D_w, c.D_b, c.tau_ext1, c.tau_ext2, extra, self.t, self.x, u,
+                                   c.h, c.substeps))
         self.k += 1
         self.u_prev = u
         self.D_w = self._draw_D_w()
+
+
+def rk4_period(p: PhysicalParams, D_w, D_b, f1: Sinusoid, f2: Sinusoid, extra, t0: float, x, u, h: float, n: int,
+               m=math) -> Tuple:
+    """The state after one control period [t0, t0 + h]: classic RK4 of eq. (1) in ``n`` equal sub-steps, u and
+    D_w held, tau_ext (``f1``, ``f2`` plus ``extra``) at each stage time.  ``m`` is the math namespace: the
+    plant steps floats with ``math``, the batch simulator arrays of scenarios with ``numpy``."""
+    dt = h / n
+    half, sixth = dt / 2, dt / 6
+    x1, x2 = extra
+    w, b, dw, db = x
+    e1, e2 = f1.at(t0, m) + x1, f2.at(t0, m) + x2
+    for i in range(n):
+        tm = t0 + (i + 0.5) * dt                        # stage times t, t + dt/2 (twice), t + dt
+        te = t0 + (i + 1) * dt
+        m1, m2 = f1.at(tm, m) + x1, f2.at(tm, m) + x2
+        n1, n2 = f1.at(te, m) + x1, f2.at(te, m) + x2
+        # accel ignores theta_w (the dynamics do not depend on it): the stages pass w unchanged
+        a1w, a1b = accel(p, D_w, D_b, (w, b, dw, db), u, e1, e2, m)               # k1
+        b2, dw2, db2 = b + half * db, dw + half * a1w, db + half * a1b
+        a2w, a2b = accel(p, D_w, D_b, (w, b2, dw2, db2), u, m1, m2, m)            # k2
+        b3, dw3, db3 = b + half * db2, dw + half * a2w, db + half * a2b
+        a3w, a3b = accel(p, D_w, D_b, (w, b3, dw3, db3), u, m1, m2, m)            # k3
+        b4, dw4, db4 = b + dt * db3, dw + dt * a3w, db + dt * a3b
+        a4w, a4b = accel(p, D_w, D_b, (w, b4, dw4, db4), u, n1, n2, m)            # k4
+        w = w + sixth * (dw + 2 * dw2 + 2 * dw3 + dw4)
+        b = b + sixth * (db + 2 * db2 + 2 * db3 + db4)
+        dw = dw + sixth * (a1w + 2 * a2w + 2 * a3w + a4w)
+        db = db + sixth * (a1b + 2 * a2b + 2 * a3b + a4b)
+        e1, e2 = n1, n2
+    return w, b, dw, db

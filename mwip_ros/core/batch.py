@@ -1,0 +1,156 @@
+"""Many scenarios at once: the closed loop of :mod:`.sim` over numpy arrays, one entry per scenario.
+
+Every equation is the scalar loop's own (``model.accel``, ``plant.rk4_period``,
+``DiscreteObserver``, ``DscController``, ``model.lumped_disturbance``), called with the math
+namespace ``numpy`` and parameters whose fields are arrays, so the batch and the scalar
+loop cannot drift apart; a test checks each batch trajectory against :func:`.sim.simulate`.
+
+* Each scenario has its own parameters and its own seeded D_w stream (the scalar plant's
+  generator, drawn in the same order).
+* A scenario that falls (|theta_b| > its fall angle) is marked with the time it fell; its
+  row at that instant is the last it records, and from then on its state is frozen, so a
+  fallen or diverging scenario never poisons the others.
+* The metrics over the window come from :func:`.metrics.window_metrics`, the function the
+  single-run metrics use.
+
+The scenarios of one batch must share the control period, the RK4 sub-steps and the
+duration (a sweep groups them so).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+from typing import Dict, List, Optional, Sequence
+
+import numpy as np
+
+from .controller import DscController, DscGains
+from .metrics import window_metrics
+from .model import PhysicalParams, Sinusoid, State, accel, lumped_disturbance
+from .observer import DiscreteObserver
+from .plant import rk4_period
+from .sim import ClosedLoop
+from .trajectory import COLUMNS, Trajectory
+
+__all__ = ["BatchResult", "simulate_batch"]
+
+NOISE_BLOCK = 256   # D_w draws per generator call; the same sequence as one draw per period
+
+
+@dataclass
+class BatchResult:
+    """Per scenario: fell or not, when, and the metrics over the window (arrays of length N)."""
+
+    fallen: np.ndarray          # bool
+    t_fall: np.ndarray          # [s], NaN when upright
+    upright: np.ndarray         # bool: never fell and ran past the window
+    metrics: Dict[str, np.ndarray]
+    steps: int                  # scenario-steps integrated (fallen scenarios stop counting)
+    trajectories: Optional[List[Trajectory]] = None
+
+
+def _stack(items, cls):
+    """One ``cls`` whose fields are arrays: field f holds [item.f for item in items]."""
+    return cls(**{f.name: np.array([getattr(i, f.name) for i in items], dtype=float) for f in fields(cls)})
+
+
+def _same(values, what: str):
+    values = set(values)
+    if len(values) != 1:
+        raise ValueError(f"the scenarios of one batch must share {what}; got {sorted(values)}")
+    return values.pop()
+
+
+class _Noise:
+    """D_w per period for every scenario: each scenario's own generator, in the scalar plant's order."""
+
+    def __init__(self, seeds, mean, variance):
+        self.mean, self.sd = mean, np.sqrt(variance)
+        self.random = np.flatnonzero(variance != 0.0)
+        self.gens = [np.random.default_rng(int(seeds[i])) for i in self.random]
+        self.block = np.empty((len(self.random), NOISE_BLOCK))
+        self.used = NOISE_BLOCK
+
+    def draw(self) -> np.ndarray:
+        d_w = self.mean.copy()
+        if len(self.random):
+            if self.used == NOISE_BLOCK:
+                for row, gen in enumerate(self.gens):
+                    self.block[row] = gen.standard_normal(NOISE_BLOCK)
+                self.used = 0
+            z = self.block[:, self.used]
+            self.used += 1
+            d_w[self.random] = np.maximum(0.0, self.mean[self.random] + self.sd[self.random] * z)
+        return d_w
+
+
+def simulate_batch(loops: Sequence[ClosedLoop], window: Sequence[float], record: bool = False) -> BatchResult:
+    """Run every scenario of ``loops`` for its ``duration_s``; ``record`` keeps each one's trajectory."""
+    n = len(loops)
+    pcs = [lp.plant for lp in loops]
+    h = _same((pc.h for pc in pcs), "the control period")
+    substeps = int(_same((pc.substeps for pc in pcs), "the RK4 sub-steps"))
+    n_steps = int(round(_same((lp.duration_s for lp in loops), "the duration") / h))
+    actual, nominal = _stack([pc.actual for pc in pcs], PhysicalParams), _stack([pc.nominal for pc in pcs],
+                                                                                  PhysicalParams)
+    f1, f2 = _stack([pc.tau_ext1 for pc in pcs], Sinusoid), _stack([pc.tau_ext2 for pc in pcs], Sinusoid)
+    arr = lambda values: np.array(list(values), dtype=float)  # noqa: E731
+    D_b, limit, fall = arr(pc.D_b for pc in pcs), arr(pc.torque_limit for pc in pcs), arr(pc.fall_angle for pc in pcs)
+    noise = _Noise([pc.seed for pc in pcs], arr(pc.D_w_mean for pc in pcs), arr(pc.D_w_variance for pc in pcs))
+    use_obs = np.array([lp.use_observer for lp in loops], dtype=bool)
+    X = tuple(arr(lp.X[i] for lp in loops) for i in range(4))
+    obs = DiscreteObserver(nominal, X, h, m=np)
+    ctrl = DscController(nominal, _stack([lp.gains for lp in loops], DscGains), h, use_observer=True, m=np)
+
+    x = State(*(arr(pc.initial[i] for pc in pcs) for i in range(4)))
+    u_prev = np.zeros(n)
+    D_w = noise.draw()
+    active = np.ones(n, dtype=bool)
+    t_fall = np.full(n, np.nan)
+    in_window = [k for k in range(n_steps + 1) if window[0] - 1e-9 <= k * h <= window[1] + 1e-9]
+    first_w = in_window[0] if in_window else 0
+    win = {c: np.full((n, len(in_window)), np.nan) for c in ("theta_b", "u", "e1", "e2")}
+    rows = [] if record else None
+    steps = 0
+    zero = np.zeros(n)
+    with np.errstate(all="ignore"):  # a diverging scenario may overflow: it is frozen, the others go on
+        for k in range(n_steps + 1):
+            t = k * h
+            tau_hat = obs.update(x, u_prev)
+            out = ctrl.step(x, (np.where(use_obs, tau_hat[0], 0.0), np.where(use_obs, tau_hat[1], 0.0)))
+            u = np.where(limit > 0.0, np.clip(out.u, -limit, limit), out.u)
+            ddq = accel(actual, D_w, D_b, x, u, f1.at(t, np) + 0.0, f2.at(t, np) + 0.0, np)
+            tau_d = lumped_disturbance(nominal, x, ddq, u, np)
+            if record:
+                rows.append((active.copy(), np.stack([np.full(n, t), *x, u, *tau_hat, *tau_d, out.u_dsc,
+                                                      np.where(use_obs, out.u_taud, 0.0), out.S1, out.S2,
+                                                      out.x4_bar, out.x4d], axis=1)))
+            if first_w <= k < first_w + len(in_window):
+                j = k - first_w
+                for c, v in (("theta_b", x[1]), ("u", u), ("e1", tau_hat[0] - tau_d[0]),
+                             ("e2", tau_hat[1] - tau_d[1])):
+                    win[c][:, j] = np.where(active, v, np.nan)
+            fell = active & (np.abs(x[1]) > fall)
+            t_fall[fell] = t
+            active &= ~fell
+            if k == n_steps or not active.any():
+                break
+            steps += int(active.sum())
+            new = rk4_period(actual, D_w, D_b, f1, f2, (zero, zero), t, x, u, h, substeps, np)
+            x = State(*(np.where(active, a, b) for a, b in zip(new, x)))
+            u_prev = np.where(active, u, u_prev)
+            D_w = noise.draw()
+    fallen = ~np.isnan(t_fall)
+    m = window_metrics(win["theta_b"], win["u"], win["e1"], win["e2"])
+    upright = ~fallen & (n_steps * h >= window[1] - 1e-9)
+    return BatchResult(fallen, t_fall, upright, m, steps, _trajectories(rows, loops, h) if record else None)
+
+
+def _trajectories(rows, loops, h) -> List[Trajectory]:
+    """Each scenario's rows up to the one where it fell (or the end), as the scalar loop returns them."""
+    out = []
+    for i, lp in enumerate(loops):
+        mine = np.array([r[i] for active, r in rows if active[i]])
+        cols = {c: mine[:, j] for j, c in enumerate(COLUMNS)}
+        fell = bool(abs(mine[-1, 2]) > lp.plant.fall_angle)
+        out.append(Trajectory("dscndo" if lp.use_observer else "dsc", cols, fell, h))
+    return out

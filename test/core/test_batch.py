@@ -1,0 +1,68 @@
+"""The batch simulator equals the scalar loop scenario by scenario, noise included; a fall poisons nothing."""
+import numpy as np
+import pytest
+
+from mathfixtures import FALL_ANGLE, P_FILE
+from mwip_ros import params as P
+from mwip_ros.core import metrics
+from mwip_ros.core.batch import simulate_batch
+from mwip_ros.core.sim import simulate
+from mwip_ros.core.trajectory import COLUMNS
+
+BASE = P.merged_values(P.load_param_file(P_FILE))
+WINDOW = (1.0, 2.0)
+
+
+def _scenarios():
+    rng = np.random.default_rng(7)
+    out = []
+    for i in range(12):
+        v = dict(BASE)
+        v.update({"seed": int(rng.integers(0, 1000)), "actual.m_b": BASE["actual.m_b"] * rng.uniform(0.7, 1.3),
+                  "actual.I_b": BASE["actual.I_b"] * rng.uniform(0.7, 1.3),
+                  "tau_ext1.amplitude": float(rng.uniform(0, 45)), "initial.theta_b": float(rng.uniform(-0.5, 0.5)),
+                  "k1": float(rng.uniform(2, 10)), "use_observer": bool(i % 2),
+                  "actual.D_w_variance": 0.0 if i == 3 else 0.2, "torque_limit": 400.0 if i == 5 else 0.0})
+        out.append(v)
+    fall = dict(BASE, **{"initial.theta_b": 0.9, "k1": 0.05, "k2": 0.05, "seed": 3})  # falls within 2 s
+    diverge = dict(BASE, **{"initial.theta_b": 1.0, "tau_ext1.amplitude": 1e5, "seed": 4})
+    return out + [fall, diverge]
+
+
+@pytest.fixture(scope="module")
+def runs():
+    values = _scenarios()
+    loops = [P.closed_loop(v, duration=2.0) for v in values]
+    return loops, simulate_batch(loops, WINDOW, record=True), [simulate(lp) for lp in loops]
+
+
+def test_every_batch_trajectory_equals_the_scalar_loop(runs):
+    loops, batch, scalar = runs
+    for i, (b, s) in enumerate(zip(batch.trajectories, scalar)):
+        assert len(b) == len(s) and b.fallen == s.fallen, i
+        for c in COLUMNS:
+            np.testing.assert_allclose(b[c], s[c], rtol=0, atol=1e-9, err_msg=f"scenario {i}, {c}")
+
+
+def test_falls_are_marked_and_poison_nothing(runs):
+    loops, batch, scalar = runs
+    assert batch.fallen.tolist() == [s.fallen for s in scalar]
+    assert batch.fallen[-2] and batch.fallen[-1] and not batch.fallen[:-2].any()
+    for i, s in enumerate(scalar):
+        if s.fallen:
+            assert batch.t_fall[i] == pytest.approx(s.t[-1])
+        else:
+            assert np.isnan(batch.t_fall[i]) and batch.upright[i]
+    # the metrics are the single-run metrics of each trajectory
+    for i, s in enumerate(scalar):
+        m = metrics.compute(s.columns, WINDOW, FALL_ANGLE)
+        for key, values in batch.metrics.items():
+            assert values[i] == pytest.approx(getattr(m, key), rel=1e-9, abs=1e-12, nan_ok=True), (i, key)
+        assert batch.upright[i] == m.upright
+
+
+def test_scenarios_must_share_the_period():
+    a = P.closed_loop(BASE, duration=0.1)
+    b = P.closed_loop(dict(BASE, control_rate_hz=100.0), duration=0.1)
+    with pytest.raises(ValueError, match="control period"):
+        simulate_batch([a, b], WINDOW)
