@@ -41,6 +41,7 @@ from mwip_ros.bag import type_hash as installed_type_hash
 from mwip_ros.msgs.qos import DEPTH
 from mwip_ros.msgs.topics import GRAPH_TOPICS, graph_type, msg_class
 from mwip_ros.bag.ledger import GAPS_KEY, Ledger
+from mwip_ros.nodes.guards import Rejects
 from mwip_ros.nodes.params import declare
 from mwip_ros.nodes.runtime import EXIT_ERROR, GracefulNodeMixin, run_node
 from mwip_ros.params import ParamError
@@ -80,6 +81,7 @@ class McapRecorder(Node, GracefulNodeMixin):
                                     chunk_size=self.v["chunk_size"])
         except BagError as exc:
             raise ParamError("output", str(exc)) from None
+        self.rejects = Rejects(self.get_logger())   # what the node's own clock refuses (/clock, see guards)
         self.ledger = Ledger()              # what was written, per topic, to judge a lockstep run (subscribed topics)
         self.counts: Dict[str, int] = {}
         self.types: Dict[str, str] = {}
@@ -252,7 +254,8 @@ class McapRecorder(Node, GracefulNodeMixin):
         except (BagError, OSError) as exc:
             self.finish(EXIT_ERROR, f"cannot finish the bag {self.output}: {exc}; run mwip_bag_repair {self.output}")
             return
-        log.info(f"bag {self.output}: {self.writer.message_count} messages: {self._per_topic()}")
+        log.info(f"bag {self.output}: {self.writer.message_count} messages: {self._per_topic()}"
+                 + (f"; the clock rejected: {self.rejects.summary()}" if self.rejects.counts else ""))
 
 
 def main(argv=None) -> int:

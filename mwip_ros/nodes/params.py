@@ -1,22 +1,26 @@
 """Declare a node's parameters from the schema (:mod:`mwip_ros.params`) and keep them validated.
 
-* every ``--params-file`` on the command line is validated as a whole with the
-  same loader the offline tools use (unknown keys, types, ranges -> ParamError);
-* every parameter is declared with its description, type and range;
-* start-up values (file or ``-p name:=value``) are checked; unknown overrides
-  are refused;
-* run-time updates of ``dynamic`` parameters are checked and logged; others are
-  read-only.
+* every ``--params-file`` and ``-p`` rule on the command line is validated before rcl
+  sees it (:func:`check_command_line`, called by ``run_node``), with the same loader the
+  offline tools use (unknown keys, types, ranges, YAML syntax -> ParamError, exit 2);
+* every parameter is declared with its description, type and range; the node reads
+  the ``/**`` section and its own plain-name section of each file even under a namespace
+  (rcl matches sections by fully qualified name and would skip it), then the ``-p`` rules,
+  which win;
+* start-up values are checked, with the derived quantities (the inertia terms); unknown
+  overrides are refused;
+* run-time updates of ``dynamic`` parameters are checked as strictly as start-up values
+  and logged; others are read-only; a refusal names the key.
 """
 from __future__ import annotations
 
-import math
 from typing import Any, Callable, Dict, List, Sequence
 
 import yaml
 
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType, SetParametersResult
-from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
+from rclpy.exceptions import (InvalidParameterTypeException, InvalidParameterValueException,
+                              ParameterNotDeclaredException)
 from rclpy.parameter import Parameter
 
 from mwip_ros import params as P
@@ -38,31 +42,66 @@ def params_files(argv: Sequence[str]) -> List[str]:
 
 
 def cli_overrides(argv: Sequence[str]) -> List[tuple]:
-    """``-p name:=value`` / ``--param name:=value`` rules of a ROS command line, in order, values as YAML."""
+    """``-p name:=value`` / ``--param name:=value`` rules of a ROS command line, in order, values read as ROS
+    reads them (``1e-1`` is a double).  Raises ParamError naming the rule for a value that is not YAML."""
     out, args, in_ros = [], list(argv), False
     for i, a in enumerate(args):
         if a == "--ros-args":
             in_ros = True
         elif a == "--":
             in_ros = False
-        elif in_ros and a in ("-p", "--param") and i + 1 < len(args) and ":=" in args[i + 1]:
-            name, text = args[i + 1].split(":=", 1)
-            out.append((name.split(":")[-1], yaml.safe_load(text) if text else ""))
+        elif in_ros and a in ("-p", "--param") and i + 1 < len(args):
+            rule = args[i + 1]
+            if ":=" not in rule:
+                raise P.ParamError(rule, f"-p {rule!r} is not a 'name:=value' rule", "command line")
+            name, text = rule.split(":=", 1)
+            name = name.split(":")[-1]
+            if not text.strip():
+                raise P.ParamError(name, f"-p {rule!r} gives no value", "command line")
+            try:
+                value = P.load_yaml(text)
+            except yaml.YAMLError as exc:
+                problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
+                raise P.ParamError(name, f"-p {rule!r}: the value is not YAML ({problem})", "command line") from None
+            out.append((name, value))
     return out
 
 
+def check_command_line(argv: Sequence[str]) -> None:
+    """Every parameter file and ``-p`` rule of ``argv``, checked before rcl parses them (its parser stops the
+    process with a traceback): raises ParamError naming the file or the key."""
+    for f in params_files(argv):
+        P.load_param_file(f)
+    cli_overrides(argv)
+
+
+def _file_values(node_name: str, own_name: str, argv: Sequence[str]) -> Dict[str, Any]:
+    """The values the parameter files give this node: ``/**`` then its plain-name section, file by file."""
+    specs = P.specs_for(node_name)
+    values: Dict[str, Any] = {}
+    for f in params_files(argv):
+        sections = P.load_param_file(f).sections
+        for sec in (P.SHARED, node_name, own_name):
+            values.update({k: v for k, v in sections.get(sec, {}).items() if k in specs})
+    return values
+
+
 def _descriptor(spec: P.ParamSpec) -> ParameterDescriptor:
+    # dynamic_typing for the run-time parameters: rclpy would refuse a wrong type before our check runs,
+    # with a reason that does not name the key; our check (ParamSpec.validate) refuses it, naming the key.
     d = ParameterDescriptor(description=spec.description, type=_TYPES[spec.type],
-                            read_only=not spec.dynamic, dynamic_typing=False)
+                            read_only=not spec.dynamic, dynamic_typing=spec.dynamic)
+    bounds = getattr(spec.check, "bounds", None)
     check = spec.check.__name__ if spec.check else ""
-    if spec.type == "double" and check in ("_positive", "_non_negative"):
-        d.floating_point_range = [FloatingPointRange(from_value=0.0, to_value=math.inf, step=0.0)]
-        d.additional_constraints = "> 0" if check == "_positive" else ">= 0"
-    elif spec.type == "integer" and check in ("_at_least_one", "_non_negative", "_priority"):
+    if spec.type == "double" and bounds is not None:
+        d.floating_point_range = [FloatingPointRange(from_value=float(bounds[0]), to_value=float(bounds[1]),
+                                                     step=0.0)]
+        d.additional_constraints = spec.check(bounds[0] - 1.0).split(", got", 1)[0] if bounds[0] == 0.0 else ""
+    elif spec.type == "integer" and check in ("_at_least_one", "_at_least_zero", "_priority"):
         lo = 1 if check == "_at_least_one" else 0
         hi = 99 if check == "_priority" else 2 ** 31 - 1
         d.integer_range = [IntegerRange(from_value=lo, to_value=hi, step=1)]
-    elif spec.check is not None and check == "check":  # _one_of(...)
+    elif spec.check is not None and check == "check" and not bounds:  # _one_of(...)
         d.additional_constraints = spec.check(object()).split(", got", 1)[0]
     return d
 
@@ -74,14 +113,13 @@ def declare(node, node_name: str, argv: Sequence[str],
     Raises ``ParamError`` (naming the key) for a bad file, type, value or unknown override.
     ``on_change(changed)`` is called after an accepted run-time update.
     """
-    for f in params_files(argv):
-        P.load_param_file(f)  # the whole file, with the file name in the message
     specs = P.specs_for(node_name)
-    # rclpy files a -p rule under /**, so a node's own section in the file would win over it;
-    # a user expects the command line to win, so re-apply the -p rules last.
+    # rcl skips a plain-name section under a namespace, and files a -p rule under /**, so that a node's
+    # own section would win over it; apply the files' sections as our loader reads them, then the -p
+    # rules last: the command line wins, as a user expects.
     overrides = getattr(node, "_parameter_overrides", None)  # rclpy's {name: Parameter} from file and -p
     if overrides is not None:
-        for name, value in cli_overrides(argv):
+        for name, value in [*_file_values(node_name, node.get_name(), argv).items(), *cli_overrides(argv)]:
             try:
                 overrides[name] = Parameter(name, value=value)
             except TypeError as exc:
@@ -97,6 +135,7 @@ def declare(node, node_name: str, argv: Sequence[str],
         except InvalidParameterValueException as exc:
             raise P.ParamError(name, f"invalid value ({exc})") from None
         values[name] = spec.validate(_py(p.value, spec), name, "start-up value")
+    P.check_derived(values, "start-up value")
     for name in overrides or {}:
         if name in specs or name in P.ROS_OWN or name.startswith(P.ROS_OWN_PREFIXES):
             continue
@@ -104,16 +143,24 @@ def declare(node, node_name: str, argv: Sequence[str],
                            "command line")
 
     def validate(params: List[Parameter]) -> SetParametersResult:
+        new = dict(values)
         for prm in params:
             spec = specs.get(prm.name)
             if spec is None:
-                continue  # ROS's own (use_sim_time, ...)
+                if prm.name in P.ROS_OWN or prm.name.startswith(P.ROS_OWN_PREFIXES):
+                    continue  # ROS's own (use_sim_time, ...)
+                return SetParametersResult(successful=False, reason=f"parameter '{prm.name}': unknown parameter "
+                                           f"for {node_name}{P.spelling_hint(prm.name, specs)}")
             if not spec.dynamic:
                 return SetParametersResult(successful=False, reason=f"{prm.name} is read-only (restart to change)")
             try:
-                spec.validate(_py(prm.value, spec), prm.name)
+                new[prm.name] = spec.validate(_py(prm.value, spec), prm.name)
             except P.ParamError as exc:
                 return SetParametersResult(successful=False, reason=str(exc))
+        try:
+            P.check_derived(new)
+        except P.ParamError as exc:
+            return SetParametersResult(successful=False, reason=str(exc))
         return SetParametersResult(successful=True)
 
     def apply(params: List[Parameter]) -> None:
@@ -127,6 +174,14 @@ def declare(node, node_name: str, argv: Sequence[str],
         if on_change is not None:
             on_change(changed)
 
+    def check_undeclared(parameter_list: List[Parameter]) -> None:
+        # rclpy's own check reports the undeclared names as [] (it consumes a generator twice); name them
+        unknown = [f"{p.name}{P.spelling_hint(p.name, specs)}" for p in parameter_list
+                   if p.name not in node._parameters]
+        if unknown:
+            raise ParameterNotDeclaredException(unknown)
+
+    node._check_undeclared_parameters = check_undeclared
     node.add_on_set_parameters_callback(validate)
     node.add_post_set_parameters_callback(apply)
     return values

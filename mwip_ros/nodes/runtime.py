@@ -14,7 +14,7 @@ import gc
 import os
 import signal
 import sys
-from typing import Callable, Dict, Optional, Sequence
+from typing import Callable, Optional, Sequence
 
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
@@ -22,8 +22,8 @@ from rclpy.signals import SignalHandlerOptions
 
 from mwip_ros.params import ParamError
 
-__all__ = ["EXIT_OK", "EXIT_ERROR", "EXIT_BAD_PARAMS", "EXIT_FALLEN", "GracefulNodeMixin", "Rejects",
-           "StopRequested", "run_node"]
+__all__ = ["EXIT_OK", "EXIT_ERROR", "EXIT_BAD_PARAMS", "EXIT_FALLEN", "GracefulNodeMixin", "StopRequested",
+           "run_node"]
 
 # Exit codes of every mwip_ros executable.
 EXIT_OK = 0
@@ -104,8 +104,24 @@ def run_node(factory: Callable[..., object], argv: Optional[Sequence[str]] = Non
     def _on_signal(signum, _frame):
         stop["signal"] = signum
 
+    name = argv[0].rsplit('/', 1)[-1] if argv else "node"
+
+    def refuse(text: str) -> int:
+        print(f"[ERROR] {name}: {text}", file=sys.stderr, flush=True)
+        return EXIT_BAD_PARAMS
+
+    from mwip_ros.nodes.guards import install_clock_guard
+    from mwip_ros.nodes.params import check_command_line
+    try:
+        check_command_line(argv)  # before rcl parses them: its parser would end the process with a traceback
+    except ParamError as exc:
+        return refuse(str(exc))
+    install_clock_guard()
     context = rclpy.Context()
-    rclpy.init(args=argv, context=context, signal_handler_options=SignalHandlerOptions.NO)
+    try:
+        rclpy.init(args=argv, context=context, signal_handler_options=SignalHandlerOptions.NO)
+    except Exception as exc:  # rcl's own argument errors (RCLError, RCLInvalidROSArgsError): one line, exit 2
+        return refuse(f"the ROS arguments cannot be parsed: {str(exc).splitlines()[0].split(', at ')[0]}")
     old = {s: signal.signal(s, _on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
     node = executor = None
     code = EXIT_OK
@@ -113,8 +129,7 @@ def run_node(factory: Callable[..., object], argv: Optional[Sequence[str]] = Non
         try:
             node = factory(context=context, argv=argv)
         except ParamError as exc:
-            print(f"[ERROR] {argv[0].rsplit('/', 1)[-1]}: {exc}", file=sys.stderr, flush=True)
-            return EXIT_BAD_PARAMS
+            return refuse(str(exc))
         # Start-up made tens of thousands of long-lived objects (rclpy, numpy, parameters); a full
         # garbage collection over them takes ~9 ms, more than a realtime period.  Freeze them: later
         # collections scan only what the node allocates while it runs.
@@ -154,20 +169,3 @@ def run_node(factory: Callable[..., object], argv: Optional[Sequence[str]] = Non
         for s, h in old.items():
             signal.signal(s, h)
     return code
-
-
-class Rejects:
-    """Counts rejected messages per topic and logs them (first few, then every 100th)."""
-
-    def __init__(self, logger):
-        self.logger = logger
-        self.counts: Dict[str, int] = {}
-
-    def __call__(self, topic: str, reason: str) -> None:
-        n = self.counts.get(topic, 0) + 1
-        self.counts[topic] = n
-        if n <= 5 or n % 100 == 0:
-            self.logger.warning(f"rejected message #{n} on {topic}: {reason}")
-
-    def summary(self) -> str:
-        return ", ".join(f"{k}: {v}" for k, v in sorted(self.counts.items())) or "none"

@@ -5,13 +5,31 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Dict, Mapping, Optional
 
+import re
+
 import yaml
 
 from .errors import ParamError
-from .schema import (NODE_SPECS, ROS_OWN, ROS_OWN_PREFIXES, SHARED, SHARED_SPECS, defaults_for, spelling_hint,
-                     specs_for)
+from .schema import (NODE_SPECS, ROS_OWN, ROS_OWN_PREFIXES, SHARED, SHARED_SPECS, check_derived, defaults_for,
+                     spelling_hint, specs_for)
 
-__all__ = ["ParamFile", "parse_param_dict", "load_param_file", "merged_values", "node_key"]
+
+class RosYamlLoader(yaml.SafeLoader):
+    """PyYAML's safe loader, reading numbers as ROS 2 does: ``1e-1``, ``1E3`` and ``2.5e3`` are doubles (YAML 1.1,
+    and so PyYAML, wants a dot and a signed exponent); ``200`` stays an integer."""
+
+
+yaml.add_implicit_resolver("tag:yaml.org,2002:float",
+                           re.compile(r"^[-+]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)[eE][-+]?[0-9]+$"),
+                           list("-+0123456789."), Loader=RosYamlLoader)
+
+
+def load_yaml(text: str):
+    """A YAML document (a file, or the value of a ``-p name:=value`` rule) with ROS 2's numbers."""
+    return yaml.load(text, Loader=RosYamlLoader)
+
+__all__ = ["ParamFile", "RosYamlLoader", "load_param_file", "load_yaml", "merged_values", "node_key",
+           "parse_param_dict"]
 
 
 def _flatten(d: Mapping, prefix: str, key_path: str, source: str) -> Dict[str, Any]:
@@ -54,6 +72,7 @@ class ParamFile:
             if k not in specs:
                 raise ParamError(k, f"unknown parameter for {node}", "override")
             values[k] = specs[k].validate(v, k, "override")
+        check_derived(values, self.path)
         return values
 
 
@@ -103,12 +122,19 @@ def parse_param_dict(doc: Any, source: str = "<params>") -> ParamFile:
 def load_param_file(path) -> ParamFile:
     """Read and validate a ROS 2 parameter file; raises ParamError naming the key or the file."""
     p = Path(path)
+    if p.is_dir():
+        raise ParamError("--params-file", f"{p} is a directory, not a parameter file")
     if not p.is_file():
         raise ParamError("--params-file", f"no such file: {p}")
     try:
-        doc = yaml.safe_load(p.read_text())
+        doc = load_yaml(p.read_text())
     except yaml.YAMLError as exc:
-        raise ParamError("<file>", f"not valid YAML: {exc}", str(p)) from None
+        where = getattr(exc, "problem_mark", None)
+        line = f" at line {where.line + 1}, column {where.column + 1}" if where is not None else ""
+        problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
+        raise ParamError("<file>", f"not valid YAML{line}: {problem}", str(p)) from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ParamError("--params-file", f"cannot read {p}: {exc}") from None
     return parse_param_dict(doc, str(p))
 
 
@@ -122,4 +148,5 @@ def merged_values(pf: ParamFile, overrides: Optional[Mapping] = None) -> Dict[st
     for node in NODES_OF_THE_LOOP:
         v.update(pf.for_node(node))
     v.update(overrides or {})
+    check_derived(v, pf.path)
     return v

@@ -19,17 +19,63 @@ from typing import Any, Callable, Dict, Iterable, List, Mapping, Optional
 from .errors import ParamError
 
 __all__ = ["SHARED", "ParamSpec", "PAPER_NOMINAL", "PAPER_ACTUAL", "SHARED_SPECS", "NODE_SPECS", "ROS_OWN",
-           "ROS_OWN_PREFIXES", "specs_for", "defaults_for", "spelling_hint"]
+           "ROS_OWN_PREFIXES", "specs_for", "defaults_for", "spelling_hint", "check_derived"]
 
 SHARED = "/**"
 
 # --- checks: each returns None when fine, else the reason -------------------------------------
 
-def _positive(v):
-    return None if v > 0 else f"must be > 0, got {v!r}"
+def _bounds(lo: float, hi: float, lo_open: bool = False):
+    """A check for lo < v <= hi (``lo_open``) or lo <= v <= hi; ``check.bounds`` tells the node's descriptor."""
+    def check(v):
+        if lo_open and not v > lo:
+            return f"must be > {lo:g}, got {v!r}"
+        if not lo_open and not v >= lo:
+            return f"must be >= {lo:g}, got {v!r}"
+        if not v <= hi:
+            return f"must be <= {hi:g} (far beyond any robot of this kind), got {v!r}"
+        return None
+    check.bounds = (lo, hi)
+    return check
 
 
-def _non_negative(v):
+def _positive(hi: float = 1e6):
+    return _bounds(0.0, hi, lo_open=True)
+
+
+def _non_negative(hi: float = 1e6):
+    return _bounds(0.0, hi)
+
+
+def _symmetric(hi: float):
+    return _bounds(-hi, hi)
+
+
+def _tau4(v):
+    """tau4 > 0, and not so small that (x4_bar - x4d) / tau4 overflows."""
+    if not v > 0:
+        return f"must be > 0, got {v!r}"
+    if v < 1e-6:
+        return f"must be >= 1e-06 s (a filter faster than a microsecond is no filter), got {v!r}"
+    return None if v <= 1e6 else f"must be <= 1e+06 s, got {v!r}"
+
+
+_tau4.bounds = (0.0, 1e6)
+
+
+def _rate(v):
+    """control_rate_hz > 0, and a period short enough to count in nanoseconds (<= 1000 s)."""
+    if not v > 0:
+        return f"must be > 0, got {v!r}"
+    if v < 1e-3:
+        return f"must be >= 0.001 Hz (a control period of at most 1000 s), got {v!r}"
+    return None if v <= 1e5 else f"must be <= 1e+05 Hz, got {v!r}"
+
+
+_rate.bounds = (0.0, 1e5)
+
+
+def _at_least_zero(v):
     return None if v >= 0 else f"must be >= 0, got {v!r}"
 
 
@@ -50,6 +96,8 @@ def _one_of(*choices):
 def _four_finite(v):
     if len(v) != 4:
         return f"must have 4 entries [c1, c2, c3, c4], got {len(v)}"
+    if any(abs(c) > 1e9 for c in v):
+        return f"entries must be within +/-1e9, got {v!r}"
     return None
 
 
@@ -114,7 +162,7 @@ def _body(prefix: str, values: Mapping[str, float], what: str) -> List[ParamSpec
     text = {"m_b": "body mass", "m_w": "wheel mass", "I_b": "body moment of inertia",
             "I_w": "wheel moment of inertia", "l": "axle to body centre of gravity",
             "r": "wheel radius", "g": "gravitational acceleration"}
-    return [ParamSpec(f"{prefix}.{k}", "double", v, f"{what} {text[k]} [{units[k]}]", _positive, unit=units[k])
+    return [ParamSpec(f"{prefix}.{k}", "double", v, f"{what} {text[k]} [{units[k]}]", _positive(), unit=units[k])
             for k, v in values.items()]
 
 
@@ -123,7 +171,7 @@ PAPER_ACTUAL = dict(m_b=310.6, m_w=29.0, I_b=65.0, I_w=0.6, l=0.317, r=0.254, g=
 
 SHARED_SPECS: List[ParamSpec] = [
     ParamSpec("control_rate_hz", "double", 200.0, "control rate 1/h [Hz] of plant, observer and controller",
-              _positive, unit="Hz"),
+              _rate, unit="Hz"),
     *_body("nominal", PAPER_NOMINAL, "nominal (hatted)"),
     ParamSpec("realtime_priority", "integer", 0, "SCHED_FIFO priority 1..99 of the node's threads, for realtime "
               "runs (needs root or CAP_SYS_NICE; else a warning); 0 = normal scheduling", _priority),
@@ -133,29 +181,31 @@ NODE_SPECS: Dict[str, List[ParamSpec]] = {
     "plant_sim": [
         ParamSpec("mode", "string", "lockstep", "lockstep (deterministic, waits for each command) or realtime "
                   "(wall-clock timer, zero-order hold)", _one_of("lockstep", "realtime")),
-        ParamSpec("duration_s", "double", 10.0, "simulated time to run [s]; 0 = until stopped", _non_negative),
+        ParamSpec("duration_s", "double", 10.0, "simulated time to run [s]; 0 = until stopped",
+                  _non_negative(1e7)),
         ParamSpec("substeps", "integer", 5, "RK4 sub-steps per control period", _at_least_one),
-        ParamSpec("seed", "integer", 0, "seed of the D_w friction noise", _non_negative),
+        ParamSpec("seed", "integer", 0, "seed of the D_w friction noise", _at_least_zero),
         *_body("actual", PAPER_ACTUAL, "true"),
-        ParamSpec("actual.D_b", "double", 0.1, "true drive viscous friction D_b [N m s/rad]", _non_negative),
-        ParamSpec("actual.D_w_mean", "double", 0.5, "mean of the ground friction D_w [N m s/rad]", _non_negative),
+        ParamSpec("actual.D_b", "double", 0.1, "true drive viscous friction D_b [N m s/rad]", _non_negative()),
+        ParamSpec("actual.D_w_mean", "double", 0.5, "mean of the ground friction D_w [N m s/rad]", _non_negative()),
         ParamSpec("actual.D_w_variance", "double", 0.2, "variance of D_w, drawn once per period; 0 = deterministic",
-                  _non_negative),
-        ParamSpec("initial.theta_w", "double", 0.0, "initial wheel angle [rad]"),
-        ParamSpec("initial.theta_b", "double", -0.1745, "initial body pitch [rad]"),
-        ParamSpec("initial.dtheta_w", "double", 0.0, "initial wheel rate [rad/s]"),
-        ParamSpec("initial.dtheta_b", "double", 0.0, "initial body pitch rate [rad/s]"),
-        ParamSpec("tau_ext1.amplitude", "double", 30.0, "tau_ext1 amplitude [N m] (wheel row)"),
-        ParamSpec("tau_ext1.omega", "double", 2.0, "tau_ext1 angular frequency [rad/s]"),
-        ParamSpec("tau_ext1.phase", "double", math.pi / 2, "tau_ext1 phase [rad]"),
-        ParamSpec("tau_ext2.amplitude", "double", 0.2, "tau_ext2 amplitude [N m] (sum of rows)"),
-        ParamSpec("tau_ext2.omega", "double", 1.0, "tau_ext2 angular frequency [rad/s]"),
-        ParamSpec("tau_ext2.phase", "double", 0.0, "tau_ext2 phase [rad]"),
-        ParamSpec("torque_limit", "double", 0.0, "|u| cap [N m]; 0 = none", _non_negative),
-        ParamSpec("fall_angle", "double", 1.0472, "|theta_b| beyond this ends the run as fallen [rad]", _positive),
+                  _non_negative()),
+        ParamSpec("initial.theta_w", "double", 0.0, "initial wheel angle [rad]", _symmetric(1e9)),
+        ParamSpec("initial.theta_b", "double", -0.1745, "initial body pitch [rad]", _symmetric(math.pi)),
+        ParamSpec("initial.dtheta_w", "double", 0.0, "initial wheel rate [rad/s]", _symmetric(1e3)),
+        ParamSpec("initial.dtheta_b", "double", 0.0, "initial body pitch rate [rad/s]", _symmetric(1e3)),
+        ParamSpec("tau_ext1.amplitude", "double", 30.0, "tau_ext1 amplitude [N m] (wheel row)", _symmetric(1e6)),
+        ParamSpec("tau_ext1.omega", "double", 2.0, "tau_ext1 angular frequency [rad/s]", _symmetric(1e6)),
+        ParamSpec("tau_ext1.phase", "double", math.pi / 2, "tau_ext1 phase [rad]", _symmetric(1e6)),
+        ParamSpec("tau_ext2.amplitude", "double", 0.2, "tau_ext2 amplitude [N m] (sum of rows)", _symmetric(1e6)),
+        ParamSpec("tau_ext2.omega", "double", 1.0, "tau_ext2 angular frequency [rad/s]", _symmetric(1e6)),
+        ParamSpec("tau_ext2.phase", "double", 0.0, "tau_ext2 phase [rad]", _symmetric(1e6)),
+        ParamSpec("torque_limit", "double", 0.0, "|u| cap [N m]; 0 = none", _non_negative()),
+        ParamSpec("fall_angle", "double", 1.0472, "|theta_b| beyond this ends the run as fallen [rad]",
+                  _positive(math.pi)),
         ParamSpec("lockstep_timeout_s", "double", 10.0, "wall time [s] to wait for the graph (the controller and "
                   "expected_subscribers) before the first state, and in lockstep for each command; lockstep gives "
-                  "up after it, realtime starts without the missing nodes", _positive),
+                  "up after it, realtime starts without the missing nodes", _positive()),
         ParamSpec("stale_command_periods", "integer", 4, "realtime: a command older than this many periods "
                   "is replaced by zero torque", _at_least_one),
         ParamSpec("csv", "string", "", "write the trajectory (mwip_sim CSV columns) to this file; '' = none"),
@@ -163,7 +213,7 @@ NODE_SPECS: Dict[str, List[ParamSpec]] = {
                   "deadlines, stale commands, metrics) to this JSON file; '' = none"),
         ParamSpec("expected_subscribers", "integer", 2, "lockstep: wait until joint_states has this many "
                   "matched subscriptions before the first state (2 = observer + controller; +1 per recorder)",
-                  _non_negative),
+                  _at_least_zero),
     ],
     "disturbance_observer": [
         ParamSpec("X", "double_array", [100.0, 0.0, 0.0, 100.0], "observer gain X = [c1, c2, c3, c4] (eq. 14)",
@@ -172,9 +222,9 @@ NODE_SPECS: Dict[str, List[ParamSpec]] = {
                   "'' = none"),
     ],
     "dscndo_controller": [
-        ParamSpec("k1", "double", 6.0, "first surface gain k1 (eq. 24)", _positive, dynamic=True),
-        ParamSpec("k2", "double", 6.0, "second surface gain k2 (eq. 28)", _positive, dynamic=True),
-        ParamSpec("tau4", "double", 0.1, "filter time constant tau4 [s] (eq. 25)", _positive, dynamic=True),
+        ParamSpec("k1", "double", 6.0, "first surface gain k1 (eq. 24)", _positive(), dynamic=True),
+        ParamSpec("k2", "double", 6.0, "second surface gain k2 (eq. 28)", _positive(), dynamic=True),
+        ParamSpec("tau4", "double", 0.1, "filter time constant tau4 [s] (eq. 25)", _tau4, dynamic=True),
         ParamSpec("use_observer", "bool", True, "true = DSCNDO (eq. 19); false = plain DSC", dynamic=True),
     ],
     "mcap_recorder": [
@@ -185,20 +235,20 @@ NODE_SPECS: Dict[str, List[ParamSpec]] = {
     ],
     "bag_replay": [
         ParamSpec("bag", "string", "", "bag directory to replay"),
-        ParamSpec("rate", "double", 1.0, "playback rate factor", _positive),
+        ParamSpec("rate", "double", 1.0, "playback rate factor", _positive()),
         ParamSpec("loop", "bool", False, "start again at the end"),
         ParamSpec("topics", "string_array", [], "topics to replay; empty = all"),
         ParamSpec("publish_clock", "bool", False, "publish /clock from the bag's time"),
         ParamSpec("mode", "string", "replay", "replay (republish) or resim (feed joint_states through a running "
                   "observer and controller and compare)", _one_of("replay", "resim")),
         ParamSpec("tolerance", "double", 1e-9, "resim: largest absolute difference still counted as equal",
-                  _non_negative),
+                  _non_negative()),
         ParamSpec("timeout_s", "double", 10.0, "resim: give up when the graph is not ready or a command does "
-                  "not come within this wall time [s]; replay: how long to wait for subscribers", _positive),
+                  "not come within this wall time [s]; replay: how long to wait for subscribers", _positive()),
         ParamSpec("wait_for_subscribers", "integer", 0, "matched subscriptions to wait for before the first "
                   "message: replay: on every replayed topic (0 = start at once); resim: on joint_states "
                   "(0 = automatic: the controller, plus the observer when the bag has disturbance_estimate)",
-                  _non_negative),
+                  _at_least_zero),
     ],
 }
 
@@ -223,3 +273,19 @@ def spelling_hint(name: str, names: Iterable[str]) -> str:
     """' (did you mean 'x'?)' for the closest of ``names``, else ''."""
     close = difflib.get_close_matches(name, list(names), n=1)
     return f" (did you mean '{close[0]}'?)" if close else ""
+
+
+def check_derived(values: Mapping[str, Any], source: Optional[str] = None) -> None:
+    """Raise ParamError when values that pass their own checks give a model no arithmetic can run:
+    inertia terms that are not finite or an A_bar that is not positive (eq. 2, 38)."""
+    for prefix in ("nominal", "actual"):
+        if f"{prefix}.m_b" not in values:
+            continue
+        v = {k: values[f"{prefix}.{k}"] for k in PAPER_NOMINAL}
+        m11 = (v["m_b"] + v["m_w"]) * v["r"] ** 2 + v["I_w"]
+        m12, m22, G_b = v["m_b"] * v["l"] * v["r"], v["m_b"] * v["l"] ** 2 + v["I_b"], v["m_b"] * v["g"] * v["l"]
+        a_bar = m11 * m22 - m12 ** 2
+        if not all(math.isfinite(x) for x in (m11, m12, m22, G_b, a_bar)) or not a_bar > 0:
+            raise ParamError(f"{prefix}.m_b", f"the {prefix} model's inertia terms are not usable (m11 = {m11:g}, "
+                                              f"m12 = {m12:g}, m22 = {m22:g}, A_bar = {a_bar:g}); check "
+                                              f"{prefix}.{{m_b, m_w, I_b, I_w, l, r, g}}", source)

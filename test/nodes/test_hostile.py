@@ -170,3 +170,33 @@ def test_a_flood_of_hostile_messages_leaves_memory_bounded(tmp_path):
     assert sent // 10 < rejected <= sent and "estimated 1 states" in out, out[-1500:]
     assert after - before < 40, (before, after)  # 60 x 1 MiB names and 20,000 layouts kept nothing
     assert out.count("rejected message #") < 60  # rate-limited: a line per kind, then one per 100
+
+
+def test_a_negative_or_wild_clock_kills_no_node(tmp_path):
+    """rclpy's time source raises on a negative /clock; every node with use_sim_time survives it and says so."""
+    from rosgraph_msgs.msg import Clock
+
+    bag = tmp_path / "bag"
+    with Graph(tmp_path) as g:
+        obs = g.start("disturbance_observer", "-p", "use_sim_time:=true")
+        rec = g.start("mcap_recorder", "-p", f"output:={bag}", "-p", "use_sim_time:=true", params=None)
+        with Injector(g.domain_id) as inj:
+            clock = inj.publisher("/clock", Clock)
+            js = inj.publisher("joint_states", JointState)
+            est = inj.record("disturbance_estimate", WrenchStamped)
+            assert inj.wait(lambda: clock.get_subscription_count() >= 3 and js.get_subscription_count() >= 2, 30), (
+                clock.get_subscription_count(), js.get_subscription_count())
+            for sec in (1, -5, 10 ** 6, 2, -(2 ** 31)):
+                c = Clock()
+                c.clock.sec, c.clock.nanosec = sec, 0
+                clock.publish(c)
+                inj.spin(0.05)
+            stamp, x, u_prev = _good_state(0, stamp=0)
+            js.publish(L.encode_state(stamp, x, u_prev))
+            assert inj.wait(lambda: bool(est), 30), obs.output()[-2000:]
+        assert obs.stop() == 0 and rec.stop() == 0, obs.output() + rec.output()
+    for p in (obs, rec):
+        out = p.output()
+        assert "Traceback" not in out and "rejected message #" in out and "/clock" in out, out[-2000:]
+        assert "/clock -5000000000 ns is negative" in out or "is negative" in out, out[-2000:]
+    assert "jumps ahead of the stream" in rec.output()

@@ -1,0 +1,74 @@
+"""Every start-up mistake ends with exit 2 and one line naming the key or the file, never a traceback."""
+import pytest
+
+from graphproc import PARAMS, Graph
+
+PAPER = PARAMS.read_text()
+
+
+def _file(tmp_path, name, old, new):
+    assert old in PAPER
+    f = tmp_path / name
+    f.write_text(PAPER.replace(old, new))
+    return f
+
+
+CASES = [  # (id, node, file maker or None, extra ros args, words the one line must hold)
+    ("yaml syntax", "dscndo_controller", lambda d: _file(d, "bad.yaml", "k1: 6.0", "k1: [6.0"), (),
+     ("bad.yaml", "not valid YAML at line")),
+    ("missing file", "plant_sim", lambda d: d / "nope.yaml", (), ("'--params-file'", "no such file", "nope.yaml")),
+    ("directory as file", "disturbance_observer", lambda d: d, (), ("'--params-file'", "is a directory")),
+    ("integers in a double array", "disturbance_observer",
+     lambda d: _file(d, "mixed.yaml", "X: [100.0, 0.0, 0.0, 100.0]", "X: [100.0, 0, 0, 100.0]"), (),
+     ("'disturbance_observer.X'", "floating-point")),
+    ("unparsable -p", "dscndo_controller", None, ("-p", "k1:=[1.0"), ("'k1'", "not YAML")),
+    ("empty -p", "dscndo_controller", None, ("-p", "k1:="), ("'k1'", "gives no value")),
+    ("overflowing duration", "plant_sim", lambda d: _file(d, "dur.yaml", "duration_s: 10.0", "duration_s: 1.0e+308"),
+     (), ("'plant_sim.duration_s'", "must be <=")),
+    ("vanishing rate", "plant_sim",
+     lambda d: _file(d, "rate.yaml", "control_rate_hz: 200.0", "control_rate_hz: 1.0e-300"), (),
+     ("'control_rate_hz'", "must be >= 0.001")),
+    ("overflowing mass", "plant_sim", lambda d: _file(d, "mass.yaml", "m_b: 310.6", "m_b: 1.0e+308"), (),
+     ("'plant_sim.actual.m_b'", "must be <=")),
+    ("overflowing nominal mass", "dscndo_controller",
+     lambda d: _file(d, "nom.yaml", "m_b: 210.6", "m_b: 1.0e+308"), (), ("'nominal.m_b'", "must be <=")),
+    ("vanishing tau4", "dscndo_controller", None, ("-p", "tau4:=1e-300"), ("'tau4'", "must be >= 1e-06")),
+    ("not a rule", "dscndo_controller", None, ("-p", "k1"), ("'k1'", "not a 'name:=value' rule")),
+]
+
+
+@pytest.mark.parametrize("case", CASES, ids=[c[0] for c in CASES])
+def test_start_up_mistakes_exit_2_with_one_line(tmp_path, case):
+    _id, node, make_file, extra, words = case
+    params = make_file(tmp_path) if make_file else PARAMS
+    with Graph(tmp_path) as g:
+        p = g.start(node, *extra, params=params)
+        code = p.wait(60)
+    out = p.output()
+    assert code == 2, out
+    assert "Traceback" not in out and len(out.strip().splitlines()) == 1, out
+    for w in words:
+        assert w in out, (w, out)
+
+
+@pytest.mark.parametrize("spelling, value", [("1e-1", 0.1), (".5", 0.5), ("5E-1", 0.5), ("+0.25", 0.25)])
+def test_every_yaml_and_ros_double_spelling_is_accepted(tmp_path, spelling, value):
+    f = _file(tmp_path, "spell.yaml", "tau4: 0.1", f"tau4: {spelling}")
+    with Graph(tmp_path) as g:
+        from_file = g.start("dscndo_controller", params=f, label="file")
+        from_cli = g.start("dscndo_controller", "-p", f"tau4:={spelling}", "-r", "__node:=ctl_b", label="cli")
+        for p in (from_file, from_cli):
+            assert p.wait_for_output("ready", 30), p.output()
+    for p in (from_file, from_cli):
+        assert f"tau4 = {value}" in p.output(), p.output()
+
+
+def test_a_namespaced_node_reads_its_plain_section(tmp_path):
+    f = _file(tmp_path, "ns.yaml", "k1: 6.0", "k1: 7.5")
+    with Graph(tmp_path) as g:
+        p = g.start("dscndo_controller", "-r", "__ns:=/robot1", params=f)
+        assert p.wait_for_output("ready", 30), p.output()
+        q = g.start("dscndo_controller", "-r", "__ns:=/robot2", "-p", "k1:=8.5", params=f, label="cli_wins")
+        assert q.wait_for_output("ready", 30), q.output()
+    assert "k1 = 7.5" in p.output(), p.output()
+    assert "k1 = 8.5" in q.output(), q.output()  # the command line wins over the file
