@@ -23,10 +23,9 @@ from mwip_ros import params as P
 from mwip_ros.core.observer import DiscreteObserver
 from mwip_ros.core.theorem import observer_conditions
 from mwip_ros.core.trajectory import Trajectory
-from mwip_ros.msgs import BadMessage
 from mwip_ros.msgs import layouts as L
 from mwip_ros.msgs.qos import GRAPH_QOS, INPUT_QOS
-from mwip_ros.nodes.guards import NEW, REPEAT, RESTART, STAMP_WINDOW_PERIODS, PublisherWatch, Rejects, StampGuard
+from mwip_ros.nodes.guards import REPEAT, RESTART, STAMP_WINDOW_PERIODS, PublisherWatch, Rejects, StateInput
 from mwip_ros.nodes.params import declare
 from mwip_ros.nodes.runtime import GracefulNodeMixin, run_node
 from mwip_ros.runs import write_csv
@@ -42,11 +41,11 @@ class DisturbanceObserver(Node, GracefulNodeMixin):
         self.period_ns = round(self.h * 1e9)
         self.obs = DiscreteObserver(P.physical(self.v, "nominal"), P.observer_gain(self.v), self.h)
         self._warn_theorem()
-        self.guard = StampGuard(STAMP_WINDOW_PERIODS * self.period_ns, "joint_states stamp")
         self.last_msg = None
         self.count = 0
         self.written = array("d") if self.v["csv"] else None  # t, tau_hat1, tau_hat2 per estimate
         self.rejects = Rejects(self.get_logger())
+        self.input = StateInput(self, self.rejects, STAMP_WINDOW_PERIODS * self.period_ns, "observer")
         self.pub = self.create_publisher(WrenchStamped, "disturbance_estimate", GRAPH_QOS)
         self.create_subscription(JointState, "joint_states", self._on_state, INPUT_QOS, raw=True)
         self.watch = PublisherWatch(self, ["joint_states"])
@@ -64,26 +63,18 @@ class DisturbanceObserver(Node, GracefulNodeMixin):
             self._warn_theorem()
 
     def _on_state(self, data: bytes) -> None:
-        try:
-            stamp, x, u_prev = L.parse_joint_state(data)
-        except BadMessage as exc:
-            self.rejects("joint_states", str(exc))
+        taken = self.input.take(data)
+        if taken is None:
             return
-        last = self.guard.last
-        verdict = self.guard.check(stamp)
+        verdict, stamp, x, u_prev, last = taken
         if verdict == REPEAT:
             if self.last_msg is not None:
                 self.pub.publish(self.last_msg)  # a resent state: answer it again, integrate nothing
             return
         h = None
         if verdict == RESTART:
-            self.get_logger().warning(f"joint_states restarted at t = {stamp * 1e-9:.3f} s (the last state was "
-                                      f"t = {last * 1e-9:.3f} s): re-initialising the observer")
             snap = self.obs.snapshot()
             self.obs.reset()
-        elif verdict != NEW:
-            self.rejects("joint_states", verdict)
-            return
         else:
             snap = self.obs.snapshot()
             n = round((stamp - last) / self.period_ns) if last is not None else 1
@@ -96,7 +87,7 @@ class DisturbanceObserver(Node, GracefulNodeMixin):
             ok = False
         if not ok:
             self.obs.restore(snap)
-            self.guard.last = last
+            self.input.guard.last = last
             self.rejects("joint_states", f"the estimate for t = {stamp * 1e-9:.3f} s is not finite; the state is "
                                          "not integrated")
             return

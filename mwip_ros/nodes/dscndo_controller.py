@@ -26,7 +26,7 @@ from mwip_ros.core.theorem import controller_conditions
 from mwip_ros.msgs import BadMessage
 from mwip_ros.msgs import layouts as L
 from mwip_ros.msgs.qos import GRAPH_QOS, INPUT_QOS
-from mwip_ros.nodes.guards import NEW, REPEAT, RESTART, STAMP_WINDOW_PERIODS, PublisherWatch, Rejects, StampGuard
+from mwip_ros.nodes.guards import REPEAT, RESTART, STAMP_WINDOW_PERIODS, PublisherWatch, Rejects, StateInput
 from mwip_ros.nodes.params import declare
 from mwip_ros.nodes.runtime import GracefulNodeMixin, run_node
 
@@ -51,7 +51,7 @@ class DscndoController(Node, GracefulNodeMixin):
         self.create_subscription(JointState, "joint_states", self._on_state, INPUT_QOS, raw=True)
         self.create_subscription(WrenchStamped, "disturbance_estimate", self._on_estimate, INPUT_QOS, raw=True)
         self.window_ns = STAMP_WINDOW_PERIODS * round(P.period(self.v) * 1e9)
-        self.guard = StampGuard(self.window_ns, "joint_states stamp")
+        self.input = StateInput(self, self.rejects, self.window_ns, "controller")
         self.watch = PublisherWatch(self, ["joint_states", "disturbance_estimate"])
         g = self.ctrl.gains
         self.get_logger().info(f"{'DSCNDO' if self.ctrl.use_observer else 'DSC'} ready: k1 = {g.k1}, k2 = {g.k2}, "
@@ -72,25 +72,17 @@ class DscndoController(Node, GracefulNodeMixin):
             self.ctrl.use_observer = self.v["use_observer"]
 
     def _on_state(self, data: bytes) -> None:
-        try:
-            stamp, x, _ = L.parse_joint_state(data)
-        except BadMessage as exc:
-            self.rejects("joint_states", str(exc))
+        taken = self.input.take(data)
+        if taken is None:
             return
-        last = self.guard.last
-        verdict = self.guard.check(stamp)
+        verdict, stamp, x, _u_prev, _last = taken
         if verdict == REPEAT:
             return  # a resent state: one command per state
         if verdict == RESTART:
-            self.get_logger().warning(f"joint_states restarted at t = {stamp * 1e-9:.3f} s (the last state was "
-                                      f"t = {last * 1e-9:.3f} s): re-initialising the controller")
             self.ctrl.x4d = None
             self.states.clear()
             self.estimates = {s: e for s, e in self.estimates.items() if s >= stamp}
             self.last_answered = None
-        elif verdict != NEW:
-            self.rejects("joint_states", verdict)
-            return
         self.states[stamp] = x
         self._try(stamp)
 
@@ -102,7 +94,7 @@ class DscndoController(Node, GracefulNodeMixin):
             return
         if self.last_answered is not None and stamp <= self.last_answered:
             return  # an estimate answering a resent state: its state is answered already
-        last = self.guard.last
+        last = self.input.guard.last
         if last is not None and stamp > last + self.window_ns:
             self.rejects("disturbance_estimate", f"stamp {stamp * 1e-9:.6f} s is ahead of the states "
                                                  f"({last * 1e-9:.6f} s) by more than {self.window_ns * 1e-9:g} s")

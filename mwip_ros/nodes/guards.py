@@ -6,6 +6,8 @@
   time away from its stream.  A stream that really restarted (a new plant, a reset, a
   pause longer than the window) shows as ``RESYNC`` consecutive stamps that agree with
   each other: then the guard follows it and tells the caller to re-initialise.
+* :class:`StateInput` is ``joint_states`` as the observer and the controller take it: parsed
+  by the message layer, judged by a stamp guard, a rejection counted, a restart logged.
 * :func:`install_clock_guard` puts the same check in front of rclpy's ``/clock``
   subscription (its time source raises on a negative time, which kills the node).
 * :class:`Rejects` counts rejected messages per topic and logs them, rate-limited per kind
@@ -19,7 +21,7 @@ import re
 import time
 from typing import Dict, Optional, Sequence
 
-__all__ = ["Rejects", "StampGuard", "NEW", "REPEAT", "RESTART", "STAMP_WINDOW_PERIODS", "RESYNC", "install_clock_guard",
+__all__ = ["Rejects", "StampGuard", "StateInput", "NEW", "REPEAT", "RESTART", "STAMP_WINDOW_PERIODS", "RESYNC", "install_clock_guard",
            "PublisherWatch"]
 
 STAMP_WINDOW_PERIODS = 20   # a stamp may lead the last accepted one by at most this many control periods
@@ -59,6 +61,34 @@ class StampGuard:
             return f"{self.what} {stamp * 1e-9:.6f} s is older than the stream's {last * 1e-9:.6f} s"
         return (f"{self.what} {stamp * 1e-9:.6f} s jumps ahead of the stream's {last * 1e-9:.6f} s by more than "
                 f"{self.window_ns * 1e-9:g} s")
+
+
+class StateInput:
+    """``take(data)``: None for a state that is rejected (counted), else ``(verdict, stamp, x, u_prev, last)``
+    with verdict :data:`NEW`, :data:`REPEAT` or :data:`RESTART` (logged; the caller re-initialises) and
+    ``last`` the stream's stamp before this one."""
+
+    def __init__(self, node, rejects, window_ns: int, who: str):
+        self.guard = StampGuard(window_ns, "joint_states stamp")
+        self.node, self.rejects, self.who = node, rejects, who
+
+    def take(self, data):
+        from mwip_ros.msgs import BadMessage
+        from mwip_ros.msgs.layouts import parse_joint_state
+        try:
+            stamp, x, u_prev = parse_joint_state(data)
+        except BadMessage as exc:
+            self.rejects("joint_states", str(exc))
+            return None
+        last = self.guard.last
+        verdict = self.guard.check(stamp)
+        if verdict == RESTART:
+            self.node.get_logger().warning(f"joint_states restarted at t = {stamp * 1e-9:.3f} s (the last state was "
+                                           f"t = {last * 1e-9:.3f} s): re-initialising the {self.who}")
+        elif verdict not in (NEW, REPEAT):
+            self.rejects("joint_states", verdict)
+            return None
+        return verdict, stamp, x, u_prev, last
 
 
 def install_clock_guard() -> None:

@@ -51,28 +51,21 @@ def _symmetric(hi: float):
     return _bounds(-hi, hi)
 
 
-def _tau4(v):
-    """tau4 > 0, and not so small that (x4_bar - x4d) / tau4 overflows."""
-    if not v > 0:
-        return f"must be > 0, got {v!r}"
-    if v < 1e-6:
-        return f"must be >= 1e-06 s (a filter faster than a microsecond is no filter), got {v!r}"
-    return None if v <= 1e6 else f"must be <= 1e+06 s, got {v!r}"
+def _positive_from(floor: float, hi: float, why: str):
+    """v > 0 (the descriptor's range starts at 0), and v >= ``floor`` (``why``), and v <= hi."""
+    def check(v):
+        if not v > 0:
+            return f"must be > 0, got {v!r}"
+        if v < floor:
+            return f"must be >= {floor:g} ({why}), got {v!r}"
+        return None if v <= hi else f"must be <= {hi:g}, got {v!r}"
+    check.bounds = (0.0, hi)
+    return check
 
 
-_tau4.bounds = (0.0, 1e6)
-
-
-def _rate(v):
-    """control_rate_hz > 0, and a period short enough to count in nanoseconds (<= 1000 s)."""
-    if not v > 0:
-        return f"must be > 0, got {v!r}"
-    if v < 1e-3:
-        return f"must be >= 0.001 Hz (a control period of at most 1000 s), got {v!r}"
-    return None if v <= 1e5 else f"must be <= 1e+05 Hz, got {v!r}"
-
-
-_rate.bounds = (0.0, 1e5)
+# tau4 so small that (x4_bar - x4d) / tau4 overflows is no filter; a rate below 1 mHz has no nanosecond period
+_tau4 = _positive_from(1e-6, 1e6, "a filter faster than a microsecond is no filter")
+_rate = _positive_from(1e-3, 1e5, "a control period of at most 1000 s")
 
 
 def _at_least_zero(v):
