@@ -21,6 +21,9 @@ import re
 import time
 from typing import Dict, Optional, Sequence
 
+from mwip_ros.msgs import BadMessage
+from mwip_ros.msgs.layouts import parse_joint_state
+
 __all__ = ["Rejects", "StampGuard", "StateInput", "NEW", "REPEAT", "RESTART", "STAMP_WINDOW_PERIODS", "RESYNC", "install_clock_guard",
            "PublisherWatch"]
 
@@ -73,8 +76,6 @@ class StateInput:
         self.node, self.rejects, self.who = node, rejects, who
 
     def take(self, data):
-        from mwip_ros.msgs import BadMessage
-        from mwip_ros.msgs.layouts import parse_joint_state
         try:
             stamp, x, u_prev = parse_joint_state(data)
         except BadMessage as exc:
@@ -181,11 +182,11 @@ class Rejects:
             kind = (topic, "")  # a flood of ever new texts: one limit for the rest of the topic
         m = self._kinds[kind] = self._kinds.get(kind, 0) + 1
         quiet = self._quiet.setdefault(topic, [0.0, 0])
-        now = time.monotonic()
-        if m <= self.FIRST or now - quiet[0] >= self.PERIOD_S:
+        # a flood is the case to make cheap: look at the clock only every 64th quiet rejection
+        if m <= self.FIRST or (quiet[1] % 64 == 0 and time.monotonic() - quiet[0] >= self.PERIOD_S):
             more = f" (+{quiet[1]} more rejected on {topic} since the last such line)" if quiet[1] else ""
             self.logger.warning(f"rejected message #{n} on {topic}: {reason}{more}")
-            quiet[0], quiet[1] = now, 0
+            quiet[0], quiet[1] = time.monotonic(), 0
         else:
             quiet[1] += 1
 
