@@ -223,7 +223,31 @@ def offline(plan: Plan) -> dict:
         r = simulate(loop)
         runs.append(len(r) / (time.perf_counter() - t0))
     progress(f"offline: {statistics.median(runs):.0f} steps/s")
-    return {"per_s": statistics.median(runs), "runs": runs, "steps": len(r)}
+    return {"per_s": statistics.median(runs), "runs": runs, "steps": len(r), "batch": batch(plan)}
+
+
+def batch(plan: Plan) -> list:
+    """The batch simulator in this one process: scenario-steps/s for N scenarios (each its own seed), and
+    the peak memory the N = largest batch allocated (tracemalloc: numpy's arrays included)."""
+    import tracemalloc
+
+    from mwip_ros import params as P
+    from mwip_ros.core.batch import simulate_batch
+    values = P.merged_values(P.load_param_file(PARAMS))
+    out = []
+    for n, duration in ((1, 2.0), (100, 2.0), (1000, 1.0)) if plan.repeat == 1 else \
+            ((1, 10.0), (100, 10.0), (10000, 2.0)):
+        loops = [P.closed_loop(dict(values, seed=i), use_observer=True, duration=duration) for i in range(n)]
+        t0 = time.perf_counter()
+        r = simulate_batch(loops, (0.5 * duration, duration))
+        wall = time.perf_counter() - t0
+        tracemalloc.start()  # a second run for the memory alone: tracing slows the small arrays down a lot
+        simulate_batch(loops, (0.5 * duration, duration))
+        peak = tracemalloc.get_traced_memory()[1]
+        tracemalloc.stop()
+        out.append({"n": n, "per_s": r.steps / wall, "peak_mib": peak / 2 ** 20})
+        progress(f"batch N = {n}: {r.steps / wall:,.0f} scenario-steps/s, peak {peak / 2 ** 20:.0f} MiB")
+    return out
 
 
 # --- the table ------------------------------------------------------------------------------------
@@ -259,6 +283,10 @@ def table(plan: Plan, quick: bool, m: Dict[str, str], floor: dict, typed: dict, 
             f"{f['worst_ms']:.3f} ms / {f['late']} of {f['periods']}")
     row("4. offline simulator (mwip_sim loop, DSCNDO, 10 s)", f"{off['per_s']:,.0f} steps/s", ">= 20,000 steps/s",
         off["per_s"] >= 20000)
+    for b in off["batch"]:
+        row(f"4. batch simulator, N = {b['n']:,} scenarios, one process", f"{b['per_s']:,.0f} scenario-steps/s "
+            f"({b['per_s'] / off['per_s']:.1f} x the scalar loop); peak memory {b['peak_mib']:.0f} MiB "
+            f"(window of half the run kept per scenario)")
     for n in NODES:
         row(f"5. peak resident memory: {n}", f"{ls['peak_rss_mib'][n]:.1f} MiB")
     head = [f"mwip_ros benchmarks{' (--quick: short runs, rough numbers)' if quick else ''}", ""]
