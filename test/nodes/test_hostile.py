@@ -81,12 +81,20 @@ def test_hostile_states_and_estimates_change_nothing(tmp_path):
             def answered(stamp):
                 return any(L.parse_internals(d)[0] == stamp for d in int_raw[-3:])
 
+            def send(data, stamp):
+                """Publish a state and wait for its command, resending as the lockstep plant does (a state sent
+                before the observer's writer matched the controller would otherwise wait for ever)."""
+                for _ in range(40):
+                    js.publish(data)
+                    if inj.wait(lambda: answered(stamp), 0.5):
+                        return True
+                return False
+
             fed = []
             for k in range(120):
                 stamp, x, u_prev = _good_state(k)
-                js.publish(L.encode_state(stamp, x, u_prev))
                 fed.append((stamp, x, u_prev))
-                assert inj.wait(lambda: answered(stamp), 20), (k, ctl.output()[-2000:])
+                assert send(L.encode_state(stamp, x, u_prev), stamp), (k, ctl.output()[-2000:])
                 if k % 10 == 5:
                     for data in _hostile_states(stamp):
                         js.publish(data)
@@ -99,10 +107,11 @@ def test_hostile_states_and_estimates_change_nothing(tmp_path):
             fed.append((None, None, None))
             for k in range(40):
                 stamp, x, u_prev = _good_state(1000 + k, stamp=k * PERIOD_NS)
-                js.publish(L.encode_state(stamp, x, u_prev))
-                if k >= 2:
+                if k < 2:
+                    js.publish(L.encode_state(stamp, x, u_prev))
+                else:
                     fed.append((stamp, x, u_prev))
-                    assert inj.wait(lambda: answered(stamp), 20), (k, ctl.output()[-2000:])
+                    assert send(L.encode_state(stamp, x, u_prev), stamp), (k, ctl.output()[-2000:])
             inj.spin(0.3)
         obs.stop()
         ctl.stop()
