@@ -18,7 +18,7 @@ from typing import Dict, List, Optional, Tuple
 from mwip_ros.msgs.cdr import peek_stamp
 from mwip_ros.msgs.topics import leaf
 
-__all__ = ["Ledger", "GAPS_KEY"]
+__all__ = ["Ledger", "GAPS_KEY", "MAX_STAMPS"]
 
 GAPS_KEY = "mwip_ros.lockstep_gaps"    # the bag's custom_data entry that says what a lockstep recording lacks
 STAMPED = {"sensor_msgs/msg/JointState", "geometry_msgs/msg/WrenchStamped", "rosgraph_msgs/msg/Clock"}
@@ -65,8 +65,9 @@ class Ledger:
 
     def gaps(self) -> List[Tuple[str, int, int, Optional[int]]]:
         """[(topic, messages it has, messages it should have, first missing stamp or None)] for every topic of
-        the loop that lacks some; empty when the recording is complete (or is not of a lockstep run)."""
-        if not any(leaf(t) == "clock" for t in self.stamps):  # only the lockstep plant publishes /clock
+        the loop that lacks some; empty when the recording is complete (or is not of a lockstep run, or is
+        too long to judge: ``overflow``)."""
+        if self.overflow or not any(leaf(t) == "clock" for t in self.stamps):  # only the lockstep plant publishes /clock
             return []
         states = self.expected()
         out = []

@@ -72,11 +72,10 @@ class DisturbanceObserver(Node, GracefulNodeMixin):
                 self.pub.publish(self.last_msg)  # a resent state: answer it again, integrate nothing
             return
         h = None
+        snap = self.obs.snapshot()
         if verdict == RESTART:
-            snap = self.obs.snapshot()
             self.obs.reset()
         else:
-            snap = self.obs.snapshot()
             n = round((stamp - last) / self.period_ns) if last is not None else 1
             if n > 1:  # realtime: a state was lost; integrate over the whole gap (at most the window)
                 h = n * self.h
@@ -96,10 +95,6 @@ class DisturbanceObserver(Node, GracefulNodeMixin):
         self.count += 1
         if self.written is not None:
             self.written.extend((stamp * 1e-9, tau_hat[0], tau_hat[1]))
-
-    def spin_step(self, executor) -> None:
-        executor.spin_once(timeout_sec=0.1)
-        self.watch.check()
 
     def on_shutdown(self) -> None:
         self.get_logger().info(f"estimated {self.count} states; rejected: {self.rejects.summary()}")

@@ -50,8 +50,8 @@ class DscndoController(Node, GracefulNodeMixin):
         self.int_pub = self.create_publisher(JointState, "controller_internals", GRAPH_QOS)
         self.create_subscription(JointState, "joint_states", self._on_state, INPUT_QOS, raw=True)
         self.create_subscription(WrenchStamped, "disturbance_estimate", self._on_estimate, INPUT_QOS, raw=True)
-        self.window_ns = STAMP_WINDOW_PERIODS * round(P.period(self.v) * 1e9)
-        self.input = StateInput(self, self.rejects, self.window_ns, "controller")
+        self.input = StateInput(self, self.rejects, STAMP_WINDOW_PERIODS * round(P.period(self.v) * 1e9),
+                                "controller")
         self.watch = PublisherWatch(self, ["joint_states", "disturbance_estimate"])
         g = self.ctrl.gains
         self.get_logger().info(f"{'DSCNDO' if self.ctrl.use_observer else 'DSC'} ready: k1 = {g.k1}, k2 = {g.k2}, "
@@ -94,10 +94,10 @@ class DscndoController(Node, GracefulNodeMixin):
             return
         if self.last_answered is not None and stamp <= self.last_answered:
             return  # an estimate answering a resent state: its state is answered already
-        last = self.input.guard.last
-        if last is not None and stamp > last + self.window_ns:
+        last, window_ns = self.input.guard.last, self.input.guard.window_ns
+        if last is not None and stamp > last + window_ns:
             self.rejects("disturbance_estimate", f"stamp {stamp * 1e-9:.6f} s is ahead of the states "
-                                                 f"({last * 1e-9:.6f} s) by more than {self.window_ns * 1e-9:g} s")
+                                                 f"({last * 1e-9:.6f} s) by more than {window_ns * 1e-9:g} s")
             return
         self.estimates[stamp] = (t1, t2)
         self._trim()
@@ -137,10 +137,6 @@ class DscndoController(Node, GracefulNodeMixin):
         for d in (self.states, self.estimates):
             while len(d) > _MAX_PENDING:
                 d.pop(min(d))
-
-    def spin_step(self, executor) -> None:
-        executor.spin_once(timeout_sec=0.1)
-        self.watch.check()
 
     def on_shutdown(self) -> None:
         self.get_logger().info(f"answered {self.count} states; rejected: {self.rejects.summary()}")

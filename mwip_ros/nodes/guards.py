@@ -182,8 +182,7 @@ class Rejects:
             kind = (topic, "")  # a flood of ever new texts: one limit for the rest of the topic
         m = self._kinds[kind] = self._kinds.get(kind, 0) + 1
         quiet = self._quiet.setdefault(topic, [0.0, 0])
-        # a flood is the case to make cheap: look at the clock only every 64th quiet rejection
-        if m <= self.FIRST or (quiet[1] % 64 == 0 and time.monotonic() - quiet[0] >= self.PERIOD_S):
+        if m <= self.FIRST or time.monotonic() - quiet[0] >= self.PERIOD_S:
             more = f" (+{quiet[1]} more rejected on {topic} since the last such line)" if quiet[1] else ""
             self.logger.warning(f"rejected message #{n} on {topic}: {reason}{more}")
             quiet[0], quiet[1] = time.monotonic(), 0

@@ -40,7 +40,7 @@ from mwip_ros.bag import BagError, BagWriter, message_definition, qos_profiles_y
 from mwip_ros.bag import type_hash as installed_type_hash
 from mwip_ros.msgs.qos import DEPTH
 from mwip_ros.msgs.topics import GRAPH_TOPICS, graph_type, msg_class
-from mwip_ros.bag.ledger import GAPS_KEY, Ledger
+from mwip_ros.bag.ledger import GAPS_KEY, MAX_STAMPS, Ledger
 from mwip_ros.nodes.guards import Rejects
 from mwip_ros.nodes.params import declare
 from mwip_ros.nodes.runtime import EXIT_ERROR, GracefulNodeMixin, run_node
@@ -83,7 +83,6 @@ class McapRecorder(Node, GracefulNodeMixin):
             raise ParamError("output", str(exc)) from None
         self.rejects = Rejects(self.get_logger())   # what the node's own clock refuses (/clock, see guards)
         self.ledger = Ledger()              # what was written, per topic, to judge a lockstep run (subscribed topics)
-        self.counts: Dict[str, int] = {}
         self.types: Dict[str, str] = {}
         self.received = 0
         self.failed = False
@@ -96,7 +95,7 @@ class McapRecorder(Node, GracefulNodeMixin):
         for name, resolved, type_name in wanted:
             self.pending[resolved] = (name, type_name)
             self.types[resolved] = type_name
-            self.counts[resolved] = 0
+            self.ledger.counts[resolved] = 0
         self._subscribe_discovered()
         self.get_logger().info(
             f"recording {len(self.types)} topic(s) to {self.output} ({self.writer.relative_path}; compression "
@@ -137,7 +136,6 @@ class McapRecorder(Node, GracefulNodeMixin):
             if not infos:
                 continue
             name, type_name = self.pending.pop(resolved)
-            self.ledger.counts.setdefault(resolved, 0)
             qos = adapted_qos(infos)
             self.subs[resolved] = self.create_subscription(
                 msg_class(type_name), name, self._callback(resolved, type_name), qos, raw=True,
@@ -181,7 +179,6 @@ class McapRecorder(Node, GracefulNodeMixin):
             self.finish(EXIT_ERROR, f"cannot write to {self.writer.mcap_path}: {exc}; stopping")
             return
         self.ledger.add(topic, type_name, data)
-        self.counts[topic] = self.counts.get(topic, 0) + 1
         self.received += 1
 
     def _add_topic(self, topic: str, type_name: str) -> None:
@@ -217,7 +214,7 @@ class McapRecorder(Node, GracefulNodeMixin):
                 self.get_logger().info(f"{self.received} messages written: {self._per_topic()}")
 
     def _per_topic(self) -> str:
-        return ", ".join(f"{t} {n}" for t, n in sorted(self.counts.items()))
+        return ", ".join(f"{t} {n}" for t, n in sorted(self.ledger.counts.items()))
 
     def _drain(self) -> None:
         """Run the callbacks of messages already received but not yet handled."""
@@ -242,7 +239,9 @@ class McapRecorder(Node, GracefulNodeMixin):
         log = self.get_logger()
         self._drain()
         gaps = self.ledger.gaps_text()
-        if gaps:
+        if self.ledger.overflow:
+            log.info(f"completeness not checked: a topic has more than {MAX_STAMPS:,} stamps")
+        elif gaps:
             self.writer.custom_data[GAPS_KEY] = gaps
             log.warning(f"INCOMPLETE lockstep recording: {gaps}")
         elif "/clock" in self.ledger.stamps:

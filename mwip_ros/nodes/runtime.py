@@ -56,8 +56,13 @@ class GracefulNodeMixin:
         self.exit_code = code
         self.done = True
 
-    def spin_step(self, executor) -> None:  # pragma: no cover - overridden where needed
+    watch = None  # a guards.PublisherWatch, checked between callbacks when the node has one
+
+    def spin_step(self, executor) -> None:
+        """One turn of the loop: take what arrived (up to 0.1 s), then look for a second publisher."""
         executor.spin_once(timeout_sec=0.1)
+        if self.watch is not None:
+            self.watch.check()
 
     def on_shutdown(self) -> None:
         """Flush files, print reports. Called once, before the node is destroyed."""

@@ -54,6 +54,14 @@ def test_without_clock_it_is_not_a_lockstep_run():
     assert led.gaps() == []
 
 
+def test_past_its_stamp_limit_a_ledger_judges_nothing(monkeypatch):
+    import mwip_ros.bag.ledger as ledger_module
+    monkeypatch.setattr(ledger_module, "MAX_STAMPS", 20)
+    led = Ledger()
+    _run(led, 50, skip={("est", 7)})   # 30 stamps per topic not kept: any "gap" would be false
+    assert led.overflow and led.gaps() == [] and led.counts["/joint_states"] == 50
+
+
 def test_the_report_shows_the_gaps_of_a_flagged_bag(tmp_path):
     bag = tmp_path / "flagged"
     with BagWriter(bag, custom_data={GAPS_KEY: "/disturbance_estimate: 48 of 50"}) as w:

@@ -181,6 +181,43 @@ def test_a_flood_of_hostile_messages_leaves_memory_bounded(tmp_path):
     assert out.count("rejected message #") < 60  # rate-limited: a line per kind, then one per 100
 
 
+ARENAS = """
+import ctypes, sys, threading
+if sys.argv[1] == "nodes":
+    import mwip_ros.nodes  # noqa: F401
+def work():
+    keep = [bytearray(1000 + i % 500) for i in range(20000)]   # malloc, not Python's small-object pool
+    del keep
+threads = [threading.Thread(target=work) for _ in range(4)]
+for t in threads:
+    t.start()
+for t in threads:
+    t.join()
+libc = ctypes.CDLL(None)
+libc.fdopen.restype = ctypes.c_void_p
+out = ctypes.c_void_p(libc.fdopen(1, b"w"))
+libc.malloc_info(0, out)
+libc.fflush(out)
+"""
+
+
+def _malloc_heaps(*args, env=None) -> int:
+    import subprocess
+    import sys
+    r = subprocess.run([sys.executable, "-c", ARENAS, *args], capture_output=True, text=True, timeout=60, env=env)
+    assert r.returncode == 0, r.stderr
+    return r.stdout.count("<heap nr=")
+
+
+def test_a_node_process_allocates_from_one_malloc_arena():
+    """What keeps a flood's RSS flat (scripts/soak.py): threads that allocate share one glibc arena."""
+    import os
+    env = {k: v for k, v in os.environ.items() if k != "MALLOC_ARENA_MAX"}
+    assert _malloc_heaps("plain", env=env) > 1    # glibc's default: an arena per allocating thread
+    assert _malloc_heaps("nodes", env=env) == 1   # importing mwip_ros.nodes limits it before any thread
+    assert _malloc_heaps("nodes", env=dict(env, MALLOC_ARENA_MAX="3")) > 1   # the user's setting wins
+
+
 def test_a_negative_or_wild_clock_kills_no_node(tmp_path):
     """rclpy's time source raises on a negative /clock; every node with use_sim_time survives it and says so."""
     from rosgraph_msgs.msg import Clock
