@@ -14,6 +14,7 @@ setup(
             ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
         ('share/' + package_name + '/config', sorted(glob('config/*.yaml'))),
+        ('share/' + package_name + '/config/sweeps', sorted(glob('config/sweeps/*.yaml'))),
     ],
     install_requires=['setuptools'],
     zip_safe=True,
@@ -43,6 +44,7 @@ setup(
             'mwip_theorem = mwip_ros.cli.theorem:main',
             'mwip_report = mwip_ros.cli.report:main',
             'mwip_bag_repair = mwip_ros.cli.bag_repair:main',
+            'mwip_sweep = mwip_ros.cli.sweep:main',
         ],
     },
 )

@@ -14,7 +14,9 @@
    or CAP_SYS_NICE): loop period p50/p99/max, missed deadlines (a period longer than 1.5 h),
    stale-command substitutions; beside them, the wake-up latency of two bare Python sleep
    loops (no ROS), the machine's own limit without SCHED_FIFO.
-4. Offline simulator: control steps/s of mwip_sim's closed loop, 10 s scenario.
+4. Offline simulator: control steps/s of mwip_sim's closed loop, 10 s scenario; the batch
+   simulator's scenario-steps/s at N = 1, 100, 10,000 in one process, and a mass-mismatch
+   sweep through mwip_sweep's engine in one process and on every core.
 5. Memory: peak resident memory (ru_maxrss) of each node in the lockstep run.
 
 ``--quick`` shortens every run (a smoke test: the tests run it); its numbers are rougher.
@@ -39,6 +41,8 @@ from typing import Dict, List, Optional
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO / "test"))
 from graphproc import PARAMS, Graph  # noqa: E402
+
+from mwip_ros.sweep.engine import DEFAULT_CHUNK  # noqa: E402
 
 NODES = ("plant_sim", "disturbance_observer", "dscndo_controller", "mcap_recorder")
 RT_PRIORITY = 50     # the realtime runs are made with normal scheduling and with this SCHED_FIFO priority
@@ -227,12 +231,17 @@ def offline(plan: Plan) -> dict:
 
 
 def batch(plan: Plan) -> list:
-    """The batch simulator in this one process: scenario-steps/s for N scenarios (each its own seed), and
-    the peak memory the N = largest batch allocated (tracemalloc: numpy's arrays included)."""
+    """The batch simulator: scenario-steps/s for N scenarios in this one process (each its own seed, the
+    rest shared), and the peak memory the largest batch allocated (tracemalloc: numpy's arrays included);
+    then a mass-mismatch sweep (m_b, I_b, l scaled per scenario) through mwip_sweep's engine, in one process
+    and on every core, worker start-up included."""
     import tracemalloc
 
     from mwip_ros import params as P
     from mwip_ros.core.batch import simulate_batch
+    from mwip_ros.sweep import engine
+    from mwip_ros.sweep.scenarios import expand
+    from mwip_ros.sweep.spec import parse_spec
     values = P.merged_values(P.load_param_file(PARAMS))
     out = []
     for n, duration in ((1, 2.0), (100, 2.0), (1000, 1.0)) if plan.repeat == 1 else \
@@ -245,8 +254,22 @@ def batch(plan: Plan) -> list:
         simulate_batch(loops, (0.5 * duration, duration))
         peak = tracemalloc.get_traced_memory()[1]
         tracemalloc.stop()
-        out.append({"n": n, "per_s": r.steps / wall, "peak_mib": peak / 2 ** 20})
+        out.append({"n": n, "per_s": r.steps / wall, "peak_mib": peak / 2 ** 20, "what": "seeds", "workers": 1,
+                    "duration": duration})
         progress(f"batch N = {n}: {r.steps / wall:,.0f} scenario-steps/s, peak {peak / 2 ** 20:.0f} MiB")
+    n, duration = (2000, 1.0) if plan.repeat == 1 else (20000, 4.0)   # 2 chunks per core: worker start amortized
+    spec = parse_spec({"base": str(PARAMS), "duration_s": duration, "metrics_window_s": [0.5 * duration, duration],
+                       "controllers": ["dscndo"], "seed": 1, "samples": n,
+                       "vary": {f"plant_sim.actual.{k}": {"scale": [0.7, 1.3]} for k in ("m_b", "I_b", "l")}},
+                      "bench")
+    chunks = engine.make_chunks(spec, expand(spec), engine.DEFAULT_CHUNK)
+    cores = os.cpu_count() or 1
+    for workers in sorted({1, cores}):
+        t0 = time.perf_counter()
+        steps = sum(res.steps for _, res in engine.run_local(chunks, workers))
+        wall = time.perf_counter() - t0
+        out.append({"n": n, "per_s": steps / wall, "what": "mass", "workers": workers, "duration": duration})
+        progress(f"mass-mismatch sweep, N = {n}, {workers} worker(s): {steps / wall:,.0f} scenario-steps/s")
     return out
 
 
@@ -284,9 +307,16 @@ def table(plan: Plan, quick: bool, m: Dict[str, str], floor: dict, typed: dict, 
     row("4. offline simulator (mwip_sim loop, DSCNDO, 10 s)", f"{off['per_s']:,.0f} steps/s", ">= 20,000 steps/s",
         off["per_s"] >= 20000)
     for b in off["batch"]:
-        row(f"4. batch simulator, N = {b['n']:,} scenarios, one process", f"{b['per_s']:,.0f} scenario-steps/s "
-            f"({b['per_s'] / off['per_s']:.1f} x the scalar loop); peak memory {b['peak_mib']:.0f} MiB "
-            f"(window of half the run kept per scenario)")
+        ratio = f"{b['per_s'] / off['per_s']:.1f} x the scalar loop"
+        if b["what"] == "seeds":
+            row(f"4. batch simulator, N = {b['n']:,} scenarios (own seeds), {b['duration']:g} s, one process",
+                f"{b['per_s']:,.0f} scenario-steps/s ({ratio}); peak memory {b['peak_mib']:.0f} MiB "
+                f"(window of half the run kept per scenario)")
+        else:
+            where = "one process" if b["workers"] == 1 else f"{b['workers']} worker processes (all cores)"
+            row(f"4. mwip_sweep engine: mass mismatch (m_b, I_b, l scaled), N = {b['n']:,}, {b['duration']:g} s, "
+                f"chunks of {DEFAULT_CHUNK:,}, {where}", f"{b['per_s']:,.0f} scenario-steps/s ({ratio})",
+                ">= 2,000,000 on 2 cores" if b["workers"] > 1 else "", b["per_s"] >= 2e6 if b["workers"] > 1 else None)
     for n in NODES:
         row(f"5. peak resident memory: {n}", f"{ls['peak_rss_mib'][n]:.1f} MiB")
     head = [f"mwip_ros benchmarks{' (--quick: short runs, rough numbers)' if quick else ''}", ""]

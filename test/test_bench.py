@@ -1,4 +1,5 @@
 """scripts/bench.sh --quick runs and prints every row (numbers are not judged here: BENCHMARKS.md)."""
+import os
 import re
 import subprocess
 
@@ -16,6 +17,11 @@ ROWS = [
     *[rf"3\. for comparison: a bare Python loop sleeping to {h} ms deadlines .* \| [\d.]+ ms / \d+ of \d+"
       for h in (5, 1)],
     r"4\. offline simulator \(mwip_sim loop, DSCNDO, 10 s\) \| [\d,]+ steps/s",
+    *[rf"4\. batch simulator, N = {n} scenarios \(own seeds\), [\d.]+ s, one process \| [\d,]+ scenario-steps/s "
+      r"\([\d.]+ x the scalar loop\); peak memory \d+ MiB" for n in ("1", "100", "1,000")],
+    r"4\. mwip_sweep engine: mass mismatch .* one process \| [\d,]+ scenario-steps/s \([\d.]+ x the scalar loop\)",
+    *([r"4\. mwip_sweep engine: mass mismatch .* worker processes \(all cores\) \| [\d,]+ scenario-steps/s"]
+      if (os.cpu_count() or 1) > 1 else []),
 ] + [rf"5\. peak resident memory: {n} \| [\d.]+ MiB" for n in
      ("plant_sim", "disturbance_observer", "dscndo_controller", "mcap_recorder")]
 

@@ -20,6 +20,7 @@ CONSOLE_SCRIPTS = [
     'mwip_theorem',
     'mwip_report',
     'mwip_bag_repair',
+    'mwip_sweep',
 ]
 PACKAGE_FILES = ['package.xml', 'setup.py', 'setup.cfg']
 PACKAGE_DIRS = ['resource', PACKAGE, 'config']
@@ -78,6 +79,7 @@ def test_colcon_build_installs_ament_python_layout(tmp_path):
     share = prefix / 'share' / PACKAGE
     assert (share / 'package.xml').is_file()
     assert (share / 'config' / 'paper.yaml').is_file()
+    assert (share / 'config' / 'sweeps' / 'mass_mismatch.yaml').is_file()
 
     child_env = {k: v for k, v in os.environ.items()
                  if k not in ('AMENT_PREFIX_PATH', 'COLCON_PREFIX_PATH')}

@@ -120,3 +120,35 @@ def test_bag_cut_by_kill_9_mid_run_is_repaired(tmp_path):
     assert counts["/joint_states"] > 100
     total = sum(counts.values())
     assert str(total) in r.stdout  # it reports how many messages it saved
+
+
+def test_a_sweep_row_runs_through_the_ros_graph_with_the_same_metrics(tmp_path):
+    """mwip_sweep --write-params, then scripts/run_experiment.sh --params: the nodes in lockstep give the row's
+    metrics, for both laws of that scenario."""
+    import sys
+    spec = tmp_path / "spec.yaml"
+    spec.write_text(yaml.safe_dump({
+        "base": str(REPO / "config" / "paper.yaml"), "controllers": ["dsc", "dscndo"], "duration_s": 10.0,
+        "metrics_window_s": [5.0, 10.0], "seed": 11, "samples": 2,
+        "vary": {"plant_sim.actual.m_b": {"scale": [0.7, 1.3]}, "dscndo_controller.k1": {"grid": [4.0, 8.0]}}}))
+    sweep = [sys.executable, "-m", "mwip_ros.cli.sweep"]
+    r = subprocess.run([*sweep, str(spec), "--out", str(tmp_path / "sweep"), "--workers", "1", "--no-figures"],
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    params = tmp_path / "s3.yaml"
+    r = subprocess.run([*sweep, "--results", str(tmp_path / "sweep"), "--scenario", "3", "--write-params",
+                        str(params)], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0, r.stderr
+    r = subprocess.run(["bash", str(REPO / "scripts" / "run_experiment.sh"), "--params", str(params), "--no-record",
+                        "--out", str(tmp_path / "graph")], capture_output=True, text=True, timeout=600,
+                       env=dict(os.environ))
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+    report = next((tmp_path / "graph").glob("*_report"))
+    graph = json.loads((report / "metrics.json").read_text())["runs"]
+    from mwip_ros.sweep.results import METRICS, read_results
+    cols = read_results(tmp_path / "sweep" / "results.csv")
+    for law in ("dsc", "dscndo"):
+        j = [k for k, (s, c) in enumerate(zip(cols["scenario"], cols["controller"])) if s == 3 and c == law][0]
+        assert graph[law]["upright"] == cols["upright"][j]
+        for name, ours in METRICS.items():
+            assert abs(graph[law][ours] - cols[name][j]) <= 1e-9, (law, name, graph[law][ours], cols[name][j])

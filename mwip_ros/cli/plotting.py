@@ -5,6 +5,8 @@ from typing import Sequence
 
 import numpy as np
 
+from mwip_ros.sweep.results import laws
+
 
 def _plt():
     import matplotlib
@@ -52,6 +54,114 @@ def observer_plot(runs: Sequence, path) -> None:
             ax.grid(True, alpha=0.3)
             ax.legend(loc="upper right")
         axes[-1][j].set_xlabel("t [s]")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+# --- sweeps ------------------------------------------------------------------------------------
+
+def _axis_values(values, is_grid: bool, bins: int = 8):
+    """(the levels of an axis, each run's level index): a grid axis's own values, a random axis in bins."""
+    v = np.asarray(values, dtype=float)
+    if is_grid:
+        levels = np.unique(v)
+        return levels, np.searchsorted(levels, v)
+    edges = np.linspace(v.min(), v.max(), bins + 1)
+    idx = np.clip(np.digitize(v, edges[1:-1]), 0, bins - 1)
+    return 0.5 * (edges[:-1] + edges[1:]), idx
+
+
+def sweep_upright_map(cols: dict, axes: Sequence, path) -> bool:
+    """Share upright over the first two varied axes (a heat map per law, cells labelled; a line for one
+    axis).  ``axes`` are (key, is_grid) of the numeric varied parameters; False when there is none.  Grid
+    axes show their own values, one cell each; random axes are binned."""
+    if not axes:
+        return False
+    plt = _plt()
+    names = laws(cols)
+    ctrl = np.asarray(cols["controller"])
+    up = np.asarray(cols["upright"], dtype=float)
+    (kx, gx), *rest = axes[:2]
+    fig, panels = plt.subplots(1, len(names), figsize=(5.4 * len(names) + (1.2 if rest else 0), 4.4), squeeze=False,
+                               constrained_layout=True)
+    im = None
+    for ax, law in zip(panels[0], names):
+        sel = ctrl == law
+        lx, ix = _axis_values(np.asarray(cols[kx])[sel], gx)
+        if rest:
+            ky, gy = rest[0]
+            ly, iy = _axis_values(np.asarray(cols[ky])[sel], gy)
+            share = np.full((len(ly), len(lx)), np.nan)
+            for a in range(len(lx)):
+                for b in range(len(ly)):
+                    m = (ix == a) & (iy == b)
+                    if m.any():
+                        share[b, a] = up[sel][m].mean()
+            im = ax.imshow(share, origin="lower", vmin=0, vmax=1, cmap="RdYlGn", aspect="auto")
+            ax.set_xticks(range(len(lx)), [f"{v:.3g}" for v in lx], rotation=45 if len(lx) > 8 else 0)
+            ax.set_yticks(range(len(ly)), [f"{v:.3g}" for v in ly])
+            if share.size <= 150:
+                for (b, a), v in np.ndenumerate(share):
+                    if np.isfinite(v):
+                        ax.text(a, b, f"{v:.2f}", ha="center", va="center", fontsize=7)
+            ax.set_ylabel(ky + ("" if gy else " (binned)"))
+        else:
+            share = [up[sel][ix == a].mean() if (ix == a).any() else np.nan for a in range(len(lx))]
+            ax.plot(lx, share, "o-")
+            ax.set_ylim(-0.05, 1.05)
+            ax.set_ylabel("share upright")
+        ax.set_xlabel(kx + ("" if gx else " (binned)"))
+        ax.set_title(f"{law}: share upright")
+    if im is not None:
+        fig.colorbar(im, ax=list(panels[0]), label="share upright")
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return True
+
+
+def sweep_rms_distribution(cols: dict, path) -> None:
+    """The distribution of theta_b RMS over the window per law (upright runs)."""
+    plt = _plt()
+    ctrl = np.asarray(cols["controller"])
+    up = np.asarray(cols["upright"], dtype=bool)
+    rms = np.asarray(cols["theta_b_rms"], dtype=float)
+    fig, ax = plt.subplots(figsize=(7, 4))
+    ok = up & np.isfinite(rms) & (rms > 0)
+    if ok.any():
+        bins = np.geomspace(rms[ok].min(), rms[ok].max() * 1.0001, 40)
+        for law in laws(cols):
+            sel = ok & (ctrl == law)
+            ax.hist(rms[sel], bins=bins, histtype="step", lw=1.5, label=f"{law} ({sel.sum()} upright)")
+        ax.set_xscale("log")
+        ax.legend()
+    ax.set_xlabel(r"$\theta_b$ RMS over the window [rad]")
+    ax.set_ylabel("scenarios")
+    ax.set_title(r"Distribution of $\theta_b$ RMS")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def sweep_roa(cols: dict, key: str, roa: dict, path) -> None:
+    """Share upright against theta_b(0) per law, with each law's region of attraction marked."""
+    plt = _plt()
+    ctrl = np.asarray(cols["controller"])
+    up = np.asarray(cols["upright"], dtype=float)
+    th = np.asarray(cols[key], dtype=float)
+    fig, ax = plt.subplots(figsize=(7, 4))
+    for law in laws(cols):
+        sel = ctrl == law
+        levels = np.unique(th[sel])
+        line, = ax.plot(levels, [up[sel][th[sel] == v].mean() for v in levels], "o-", ms=3, label=law)
+        a = roa.get(law)
+        if a is not None:
+            ax.axvspan(-a, a, color=line.get_color(), alpha=0.12)
+    ax.set_xlabel(r"$\theta_b(0)$ [rad]")
+    ax.set_ylabel("share upright")
+    ax.set_ylim(-0.05, 1.05)
+    ax.set_title("Region of attraction (shaded: every scenario recovered)")
+    ax.legend()
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

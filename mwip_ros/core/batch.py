@@ -48,9 +48,19 @@ class BatchResult:
     trajectories: Optional[List[Trajectory]] = None
 
 
+def _column(values):
+    """The scenarios' values of one quantity: one float when they all share it, else an array.
+
+    A shared value stays a scalar, so whatever depends only on shared values (tau_ext with one
+    amplitude and frequency, the nominal model's inertia terms) is computed once per step, not
+    once per scenario; elementwise it is the same arithmetic, so the results do not change."""
+    a = np.asarray(list(values), dtype=float)
+    return float(a[0]) if len(a) and (a == a[0]).all() else a
+
+
 def _stack(items, cls):
-    """One ``cls`` whose fields are arrays: field f holds [item.f for item in items]."""
-    return cls(**{f.name: np.array([getattr(i, f.name) for i in items], dtype=float) for f in fields(cls)})
+    """One ``cls`` whose field f holds the scenarios' values of f (:func:`_column`)."""
+    return cls(**{f.name: _column(getattr(i, f.name) for i in items) for f in fields(cls)})
 
 
 def _same(values, what: str):
@@ -66,20 +76,24 @@ class _Noise:
     def __init__(self, seeds, mean, variance):
         self.mean, self.sd = mean, np.sqrt(variance)
         self.random = np.flatnonzero(variance != 0.0)
+        self.all_random = len(self.random) == len(variance)
         self.gens = [np.random.default_rng(int(seeds[i])) for i in self.random]
         self.block = np.empty((len(self.random), NOISE_BLOCK))
         self.used = NOISE_BLOCK
 
     def draw(self) -> np.ndarray:
+        if not len(self.random):
+            return self.mean.copy()
+        if self.used == NOISE_BLOCK:
+            for row, gen in enumerate(self.gens):
+                self.block[row] = gen.standard_normal(NOISE_BLOCK)
+            self.used = 0
+        z = self.block[:, self.used]
+        self.used += 1
+        if self.all_random:
+            return np.maximum(0.0, self.mean + self.sd * z)
         d_w = self.mean.copy()
-        if len(self.random):
-            if self.used == NOISE_BLOCK:
-                for row, gen in enumerate(self.gens):
-                    self.block[row] = gen.standard_normal(NOISE_BLOCK)
-                self.used = 0
-            z = self.block[:, self.used]
-            self.used += 1
-            d_w[self.random] = np.maximum(0.0, self.mean[self.random] + self.sd[self.random] * z)
+        d_w[self.random] = np.maximum(0.0, self.mean[self.random] + self.sd[self.random] * z)
         return d_w
 
 
@@ -94,10 +108,10 @@ def simulate_batch(loops: Sequence[ClosedLoop], window: Sequence[float], record:
                                                                                   PhysicalParams)
     f1, f2 = _stack([pc.tau_ext1 for pc in pcs], Sinusoid), _stack([pc.tau_ext2 for pc in pcs], Sinusoid)
     arr = lambda values: np.array(list(values), dtype=float)  # noqa: E731
-    D_b, limit, fall = arr(pc.D_b for pc in pcs), arr(pc.torque_limit for pc in pcs), arr(pc.fall_angle for pc in pcs)
+    D_b, limit, fall = (_column(getattr(pc, f) for pc in pcs) for f in ("D_b", "torque_limit", "fall_angle"))
     noise = _Noise([pc.seed for pc in pcs], arr(pc.D_w_mean for pc in pcs), arr(pc.D_w_variance for pc in pcs))
     use_obs = np.array([lp.use_observer for lp in loops], dtype=bool)
-    X = tuple(arr(lp.X[i] for lp in loops) for i in range(4))
+    X = tuple(_column(lp.X[i] for lp in loops) for i in range(4))
     obs = DiscreteObserver(nominal, X, h, m=np)
     ctrl = DscController(nominal, _stack([lp.gains for lp in loops], DscGains), h, use_observer=True, m=np)
 
@@ -106,41 +120,49 @@ def simulate_batch(loops: Sequence[ClosedLoop], window: Sequence[float], record:
     D_w = noise.draw()
     active = np.ones(n, dtype=bool)
     t_fall = np.full(n, np.nan)
-    in_window = [k for k in range(n_steps + 1) if window[0] - 1e-9 <= k * h <= window[1] + 1e-9]
-    first_w = in_window[0] if in_window else 0
-    win = {c: np.full((n, len(in_window)), np.nan) for c in ("theta_b", "u", "e1", "e2")}
+    window_steps = [k for k in range(n_steps + 1) if window[0] - 1e-9 <= k * h <= window[1] + 1e-9]
+    first_w, n_window = (window_steps[0] if window_steps else 0), len(window_steps)
+    # a row per sample, a column per scenario: each step writes one contiguous row
+    win = {c: np.full((n_window, n), np.nan) for c in ("theta_b", "u", "e1", "e2")}
     rows = [] if record else None
     steps = 0
-    zero = np.zeros(n)
     with np.errstate(all="ignore"):  # a diverging scenario may overflow: it is frozen, the others go on
         for k in range(n_steps + 1):
             t = k * h
             tau_hat = obs.update(x, u_prev)
             out = ctrl.step(x, (np.where(use_obs, tau_hat[0], 0.0), np.where(use_obs, tau_hat[1], 0.0)))
             u = np.where(limit > 0.0, np.clip(out.u, -limit, limit), out.u)
-            ddq = accel(actual, D_w, D_b, x, u, f1.at(t, np) + 0.0, f2.at(t, np) + 0.0, np)
-            tau_d = lumped_disturbance(nominal, x, ddq, u, np)
+            in_window = first_w <= k < first_w + n_window
+            if record or in_window:   # the true tau_d is only compared inside the window
+                ddq = accel(actual, D_w, D_b, x, u, f1.at(t, np) + 0.0, f2.at(t, np) + 0.0, np)
+                tau_d = lumped_disturbance(nominal, x, ddq, u, np)
             if record:
                 rows.append((active.copy(), np.stack([np.full(n, t), *x, u, *tau_hat, *tau_d, out.u_dsc,
                                                       np.where(use_obs, out.u_taud, 0.0), out.S1, out.S2,
                                                       out.x4_bar, out.x4d], axis=1)))
-            if first_w <= k < first_w + len(in_window):
+            everyone = bool(active.all())   # the usual case: no scenario has fallen, nothing to mask
+            if in_window:
                 j = k - first_w
                 for c, v in (("theta_b", x[1]), ("u", u), ("e1", tau_hat[0] - tau_d[0]),
                              ("e2", tau_hat[1] - tau_d[1])):
-                    win[c][:, j] = np.where(active, v, np.nan)
+                    win[c][j] = v if everyone else np.where(active, v, np.nan)
             fell = active & (np.abs(x[1]) > fall)
-            t_fall[fell] = t
-            active &= ~fell
+            if fell.any():
+                t_fall[fell] = t
+                active &= ~fell
+                everyone = False
             if k == n_steps or not active.any():
                 break
-            steps += int(active.sum())
-            new = rk4_period(actual, D_w, D_b, f1, f2, (zero, zero), t, x, u, h, substeps, np)
-            x = State(*(np.where(active, a, b) for a, b in zip(new, x)))
-            u_prev = np.where(active, u, u_prev)
+            steps += n if everyone else int(active.sum())
+            new = rk4_period(actual, D_w, D_b, f1, f2, (0.0, 0.0), t, x, u, h, substeps, np)
+            if everyone:
+                x, u_prev = State(*new), u
+            else:
+                x = State(*(np.where(active, a, b) for a, b in zip(new, x)))
+                u_prev = np.where(active, u, u_prev)
             D_w = noise.draw()
     fallen = ~np.isnan(t_fall)
-    m = window_metrics(win["theta_b"], win["u"], win["e1"], win["e2"])
+    m = window_metrics(win["theta_b"].T, win["u"].T, win["e1"].T, win["e2"].T)
     upright = ~fallen & (n_steps * h >= window[1] - 1e-9)
     return BatchResult(fallen, t_fall, upright, m, steps, _trajectories(rows, loops, h) if record else None)
 

@@ -1,0 +1,17 @@
+"""Robustness sweeps: many scenarios through the batch simulator, here or on a Dask cluster.
+
+===================  ===============================================================
+:mod:`.spec`         the sweep spec (YAML): base file, laws, window, varied parameters
+:mod:`.scenarios`    every scenario's values and D_w seed; a scenario's parameter file
+:mod:`.engine`       chunks, and the runners: this process, worker processes, Dask
+:mod:`.results`      results.csv (streamed), summary.json / summary.md, region of attraction
+===================  ===============================================================
+
+The command line is :mod:`mwip_ros.cli.sweep` (``mwip_sweep``); the figures are in
+:mod:`mwip_ros.cli.plotting`.
+"""
+from .spec import Axis, SpecError, SweepSpec, load_spec, parse_spec
+from .scenarios import Scenarios, expand, noise_seed, parameter_file
+
+__all__ = ["Axis", "SpecError", "SweepSpec", "load_spec", "parse_spec", "Scenarios", "expand", "noise_seed",
+           "parameter_file"]

@@ -1,0 +1,184 @@
+"""A sweep's outputs: ``results.csv`` (streamed), ``summary.json`` and ``summary.md``.
+
+``results.csv`` has one row per scenario and law: ``scenario, seed, controller``, each varied
+parameter by its spec key holding the value used, then ``upright, t_fall`` and the metrics over
+the window (:data:`METRICS`; NaN where a run has no sample in the window).  Values are written
+with ``repr`` so a row reads back to the very floats that ran.  Rows are written and flushed as
+chunks finish, so an interrupted sweep leaves every finished row readable.
+
+The summary takes, per law, the share of scenarios that stayed upright and the median, 90th
+percentile and maximum of each metric over the upright ones; where the spec varies
+``plant_sim.initial.theta_b``, the region of attraction: the largest |theta_b(0)| such that every
+scenario starting at most that far from upright recovered.
+"""
+from __future__ import annotations
+
+import csv
+import json
+import math
+from pathlib import Path
+from typing import Dict, List, Optional
+
+import numpy as np
+
+__all__ = ["METRICS", "ResultsWriter", "laws", "sort_file", "read_results", "summarize", "summary_markdown", "region_of_attraction",
+           "write_summary", "THETA0_KEY"]
+
+# results.csv name -> the batch simulator's metric name
+METRICS = {"theta_b_p2p": "theta_b_p2p", "theta_b_rms": "theta_b_rms", "max_abs_theta_b": "theta_b_max_abs",
+           "u_rms": "u_rms", "tau_hat1_err_rms": "tau_err1_rms", "tau_hat2_err_rms": "tau_err2_rms"}
+THETA0_KEY = "plant_sim.initial.theta_b"
+
+
+def _fmt(v) -> str:
+    if isinstance(v, (bool, np.bool_)):
+        return "1" if v else "0"
+    if isinstance(v, (float, np.floating)):
+        return repr(float(v))
+    if isinstance(v, list):
+        return json.dumps(v)
+    return str(v)
+
+
+class ResultsWriter:
+    """Append rows to ``results.csv`` chunk by chunk (header first), flushing after each chunk."""
+
+    def __init__(self, path: Path, varied: List[str]):
+        self.path = path
+        self.varied = list(varied)
+        self.header = ["scenario", "seed", "controller", *self.varied, "upright", "t_fall", *METRICS]
+        self._f = open(path, "w", newline="")
+        self._w = csv.writer(self._f)
+        self._w.writerow(self.header)
+        self._f.flush()
+        self.rows = 0
+
+    def add(self, chunk, result, scenarios) -> None:
+        for j in range(len(chunk)):
+            i = chunk.first + j
+            row = [i, scenarios.seeds[i], chunk.controller, *(scenarios.values[k][i] for k in self.varied),
+                   bool(result.upright[j]), float(result.t_fall[j]),
+                   *(float(result.metrics[m][j]) for m in METRICS.values())]
+            self._w.writerow([_fmt(v) for v in row])
+        self._f.flush()
+        self.rows += len(chunk)
+
+    def close(self) -> None:
+        self._f.close()
+
+
+def laws(cols: Dict[str, list]) -> List[str]:
+    """The laws of a results table, in the order dsc, dscndo (whatever order their chunks finished in)."""
+    from .spec import CONTROLLERS
+    return sorted(set(cols["controller"]), key=lambda c: CONTROLLERS.index(c) if c in CONTROLLERS else len(c))
+
+
+def sort_file(path: Path, order: List[str]) -> None:
+    """Rewrite a finished results.csv by scenario, then law (rows arrive as chunks finish, in any order), so
+    the file is the same however the sweep ran.  Atomic: the sorted copy replaces the file."""
+    with open(path, newline="") as f:
+        rows = list(csv.reader(f))
+    head, body = rows[0], rows[1:]
+    i_s, i_c = head.index("scenario"), head.index("controller")
+    body.sort(key=lambda r: (int(r[i_s]), order.index(r[i_c])))
+    tmp = path.with_suffix(".csv.tmp")
+    with open(tmp, "w", newline="") as f:
+        csv.writer(f).writerows([head, *body])
+    tmp.replace(path)
+
+
+def read_results(path: Path) -> Dict[str, list]:
+    """results.csv as columns: numbers as floats (``scenario``, ``seed`` as ints, ``upright`` as bools),
+    list-valued parameters as lists, ``controller`` as strings."""
+    with open(path, newline="") as f:
+        rows = list(csv.reader(f))
+    if not rows:
+        raise ValueError(f"{path} is empty")
+    head, body = rows[0], rows[1:]
+    cols: Dict[str, list] = {h: [] for h in head}
+    for r in body:
+        if len(r) != len(head):   # a row cut by a crash mid-write: not a result
+            continue
+        for h, v in zip(head, r):
+            if h == "controller":
+                cols[h].append(v)
+            elif h in ("scenario", "seed"):
+                cols[h].append(int(v))
+            elif h == "upright":
+                cols[h].append(v == "1")
+            elif v.startswith("["):
+                cols[h].append(json.loads(v))
+            else:
+                cols[h].append(float(v))
+    return cols
+
+
+def region_of_attraction(theta0: np.ndarray, upright: np.ndarray) -> Optional[float]:
+    """The largest a = |theta_b(0)| among the runs such that every run with |theta_b(0)| <= a stayed upright;
+    None when the smallest one already fell."""
+    a = np.abs(np.asarray(theta0, dtype=float))
+    ok = np.asarray(upright, dtype=bool)
+    best = None
+    for level in np.unique(a):
+        if not ok[a <= level].all():
+            break
+        best = float(level)
+    return best
+
+
+def _stats(x: np.ndarray) -> Dict[str, Optional[float]]:
+    x = x[np.isfinite(x)]
+    if not len(x):
+        return {"median": None, "p90": None, "max": None}
+    return {"median": float(np.median(x)), "p90": float(np.percentile(x, 90)), "max": float(np.max(x))}
+
+
+def summarize(cols: Dict[str, list], spec_info: dict) -> dict:
+    """The summary document of a results table (``read_results``)."""
+    ctrl = np.array(cols["controller"])
+    upright = np.array(cols["upright"], dtype=bool)
+    out = {"spec": spec_info, "scenarios": len(set(cols["scenario"])), "controllers": {}}
+    for c in laws(cols):
+        sel = ctrl == c
+        entry = {"runs": int(sel.sum()), "upright": int(upright[sel].sum()),
+                 "upright_share": float(upright[sel].mean()) if sel.any() else math.nan,
+                 "metrics_over": "upright runs",
+                 "metrics": {m: _stats(np.array(cols[m], dtype=float)[sel & upright]) for m in METRICS}}
+        if THETA0_KEY in cols:
+            entry["region_of_attraction_theta_b0"] = region_of_attraction(np.array(cols[THETA0_KEY])[sel],
+                                                                          upright[sel])
+        out["controllers"][c] = entry
+    return out
+
+
+def _num(v, fmt="{:.4g}") -> str:
+    return "-" if v is None or (isinstance(v, float) and not math.isfinite(v)) else fmt.format(v)
+
+
+def summary_markdown(doc: dict) -> str:
+    spec = doc["spec"]
+    lines = [f"# Sweep summary: {spec.get('name', '')}", "",
+             f"{doc['scenarios']:,} scenarios x {len(doc['controllers'])} law(s), {spec['duration_s']:g} s each, "
+             f"metrics over t in [{spec['window'][0]:g}, {spec['window'][1]:g}] s (median / p90 / max over the "
+             f"runs that stayed upright).", ""]
+    if spec.get("varied"):
+        lines += ["Varied: " + ", ".join(f"`{k}` ({d})" for k, d in spec["varied"].items()), ""]
+    head = ["law", "upright", *METRICS]
+    lines += ["| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in head) + "|"]
+    for c, e in doc["controllers"].items():
+        cells = [c, f"{e['upright']}/{e['runs']} ({100 * e['upright_share']:.1f} %)"]
+        for m in METRICS:
+            s = e["metrics"][m]
+            cells.append(" / ".join(_num(s[k]) for k in ("median", "p90", "max")))
+        lines.append("| " + " | ".join(cells) + " |")
+    roa = {c: e.get("region_of_attraction_theta_b0") for c, e in doc["controllers"].items()
+           if "region_of_attraction_theta_b0" in e}
+    if roa:
+        lines += ["", "Region of attraction (largest |theta_b(0)| from which every scenario recovered): "
+                  + ", ".join(f"{c} {_num(v, '{:.3f}')} rad" for c, v in roa.items())]
+    return "\n".join(lines) + "\n"
+
+
+def write_summary(doc: dict, out: Path) -> None:
+    (out / "summary.json").write_text(json.dumps(doc, indent=2, allow_nan=False, default=str))
+    (out / "summary.md").write_text(summary_markdown(doc))

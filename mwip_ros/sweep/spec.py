@@ -1,0 +1,300 @@
+"""A sweep spec (YAML): the base parameter file, the laws, the length, the window, and what varies.
+
+.. code-block:: yaml
+
+    base: ../paper.yaml                 # relative to this spec; default: the package's config/paper.yaml
+    controllers: [dsc, dscndo]
+    duration_s: 10.0
+    metrics_window_s: [5.0, 10.0]
+    seed: 1
+    samples: 200                        # draws per grid point of the random axes
+    vary:
+      plant_sim.actual.m_b: {scale: [0.7, 1.3]}      # uniform factor on the base value
+      plant_sim.tau_ext1.amplitude: {grid: [0, 15, 30, 45]}
+      plant_sim.initial.theta_b: {linspace: [-0.6, 0.6, 25]}
+      dscndo_controller.k1: {uniform: [2.0, 10.0]}
+      nominal.m_b: {values: [210.6]}                  # keys of the shared /** section have no prefix
+
+Grid axes (``grid``, ``values``, ``linspace``) form a Cartesian product; random axes
+(``uniform``, ``scale``, ``normal: [mean, sd]``) are drawn ``samples`` times per grid point.
+:func:`load_spec` checks everything a sweep could trip on later (unknown keys, with a "did you
+mean"; a key under the wrong section; a parameter the offline loop does not use; an empty grid;
+an impossible distribution; values outside a parameter's range) and raises :class:`SpecError`
+naming the key.
+"""
+from __future__ import annotations
+
+import difflib
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Dict, List, Optional, Tuple
+
+import yaml
+
+from mwip_ros import params as P
+from mwip_ros.params.file import NODES_OF_THE_LOOP
+
+__all__ = ["SpecError", "Axis", "SweepSpec", "load_spec", "parse_spec", "CONTROLLERS", "GRID_KINDS",
+           "RANDOM_KINDS"]
+
+CONTROLLERS = ("dsc", "dscndo")
+GRID_KINDS = ("grid", "values", "linspace")
+RANDOM_KINDS = ("uniform", "scale", "normal")
+TOP_KEYS = ("base", "controllers", "duration_s", "metrics_window_s", "seed", "samples", "vary")
+MAX_SCENARIOS = 50_000_000
+
+# Parameters of the loop's nodes that do not change the offline closed loop (or that the spec sets itself).
+NOT_SIMULATED = {
+    "mode": "the offline loop is always lockstep", "duration_s": "set the spec's duration_s",
+    "use_observer": "list the laws under controllers:", "csv": "an output file", "summary_json": "an output file",
+    "lockstep_timeout_s": "wall-clock time of the ROS graph", "expected_subscribers": "the ROS graph's set-up",
+    "stale_command_periods": "realtime runs only", "realtime_priority": "process scheduling",
+}
+
+
+class SpecError(ValueError):
+    """A sweep spec that cannot run; ``key`` names the offending entry (``vary.<key>`` for an axis)."""
+
+    def __init__(self, key: str, message: str, source: Optional[str] = None):
+        self.key, self.reason, self.source = key, message, source
+        super().__init__(f"{source + ': ' if source else ''}{key}: {message}")
+
+
+@dataclass(frozen=True)
+class Axis:
+    """One varied parameter: its spec key, the merged-values name, its ROS type and its distribution."""
+
+    key: str          # as written in the spec: 'plant_sim.actual.m_b', 'nominal.m_b'
+    section: str      # '/**' or a node name: where --write-params puts it
+    name: str         # the parameter's name in that section (and in merged values): 'actual.m_b'
+    type: str         # 'double' | 'integer' | 'double_array'
+    kind: str         # grid | values | linspace | uniform | scale | normal
+    args: tuple       # the grid's values, or the distribution's numbers
+    base: Any = None  # the base file's value (for scale)
+
+    @property
+    def random(self) -> bool:
+        return self.kind in RANDOM_KINDS
+
+    def grid_values(self) -> list:
+        if self.kind == "linspace":
+            a, b, n = self.args
+            return [a + (b - a) * i / (n - 1) for i in range(n)] if n > 1 else [a]
+        return list(self.args)
+
+
+@dataclass
+class SweepSpec:
+    path: str
+    base_path: Path
+    base_values: Dict[str, Any]       # merged values of the base file (plant, observer, controller)
+    base_sections: Dict[str, Dict[str, Any]]
+    controllers: Tuple[str, ...]
+    duration_s: float
+    window: Tuple[float, float]
+    seed: int
+    samples: int
+    axes: List[Axis] = field(default_factory=list)
+
+    @property
+    def grid_axes(self) -> List[Axis]:
+        return [a for a in self.axes if not a.random]
+
+    @property
+    def random_axes(self) -> List[Axis]:
+        return [a for a in self.axes if a.random]
+
+    @property
+    def n_scenarios(self) -> int:
+        n = 1
+        for a in self.grid_axes:
+            n *= len(a.grid_values())
+        return n * (self.samples if self.random_axes else 1)
+
+
+def load_spec(path, base_override: Optional[Path] = None) -> SweepSpec:
+    """Read and check a sweep spec file; raises :class:`SpecError` (or ``ParamError`` for the base file)."""
+    p = Path(path)
+    if not p.is_file():
+        raise SpecError("<spec>", f"no such file: {p}" if not p.is_dir() else f"{p} is a directory")
+    try:
+        doc = P.load_yaml(p.read_text())
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" at line {mark.line + 1}" if mark is not None else ""
+        raise SpecError("<spec>", f"not valid YAML{where}: {getattr(exc, 'problem', None) or exc}", str(p)) from None
+    return parse_spec(doc, str(p), p.parent, base_override)
+
+
+def _did_you_mean(word: str, options) -> str:
+    close = difflib.get_close_matches(word, list(options), n=1)
+    return f" (did you mean '{close[0]}'?)" if close else ""
+
+
+def _number(v, key: str, source: str, what: str = "a number") -> float:
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+        raise SpecError(key, f"expected {what}, got {v!r}", source)
+    return float(v)
+
+
+def parse_spec(doc: Any, source: str = "<spec>", here: Path = Path("."),
+               base_override: Optional[Path] = None) -> SweepSpec:
+    """Check a loaded spec document; ``here`` is the directory ``base`` is relative to."""
+    if not isinstance(doc, dict):
+        raise SpecError("<spec>", "expected a mapping with base, controllers, duration_s, ..., vary", source)
+    for k in doc:
+        if k not in TOP_KEYS:
+            raise SpecError(str(k), f"unknown key{_did_you_mean(str(k), TOP_KEYS)}; known: {', '.join(TOP_KEYS)}",
+                            source)
+    if base_override is not None:
+        base_path = Path(base_override)
+    elif doc.get("base") is not None:
+        if not isinstance(doc["base"], str) or not doc["base"]:
+            raise SpecError("base", f"expected a parameter file's path, got {doc['base']!r}", source)
+        base_path = (here / doc["base"]).resolve()
+    else:
+        from mwip_ros.params.paths import default_params_file
+        base_path = default_params_file()
+    pf = P.load_param_file(base_path)   # ParamError names the file and the key
+    base_values = P.merged_values(pf)
+
+    ctrls = doc.get("controllers", list(CONTROLLERS))
+    if isinstance(ctrls, str):
+        ctrls = [ctrls]
+    if not isinstance(ctrls, list) or not ctrls:
+        raise SpecError("controllers", f"expected a non-empty list of {', '.join(CONTROLLERS)}", source)
+    for c in ctrls:
+        if c not in CONTROLLERS:
+            raise SpecError("controllers", f"unknown law {c!r}{_did_you_mean(str(c), CONTROLLERS)}; known: "
+                                           f"{', '.join(CONTROLLERS)}", source)
+    if len(set(ctrls)) != len(ctrls):
+        raise SpecError("controllers", f"a law is listed twice: {ctrls}", source)
+
+    duration = _number(doc.get("duration_s", base_values["duration_s"]), "duration_s", source, "seconds > 0")
+    if not 0 < duration <= 1e5:
+        raise SpecError("duration_s", f"must be > 0 and at most 1e5 s, got {duration!r}", source)
+    win = doc.get("metrics_window_s", [0.5 * duration, duration])
+    if not isinstance(win, list) or len(win) != 2:
+        raise SpecError("metrics_window_s", f"expected [t0, t1], got {win!r}", source)
+    t0, t1 = (_number(w, "metrics_window_s", source, "seconds") for w in win)
+    if not 0 <= t0 < t1 <= duration + 1e-9:
+        raise SpecError("metrics_window_s", f"needs 0 <= t0 < t1 <= duration_s ({duration:g}), got {win!r}", source)
+    seed = doc.get("seed", 0)
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise SpecError("seed", f"expected an integer >= 0, got {seed!r}", source)
+    samples = doc.get("samples", 1)
+    if isinstance(samples, bool) or not isinstance(samples, int) or samples < 1:
+        raise SpecError("samples", f"expected an integer >= 1, got {samples!r}", source)
+
+    vary = doc.get("vary") or {}
+    if not isinstance(vary, dict):
+        raise SpecError("vary", "expected a mapping of parameter keys to distributions", source)
+    axes = [_axis(str(k), d, base_values, source) for k, d in vary.items()]
+    spec = SweepSpec(source, base_path, base_values, pf.sections, tuple(ctrls), duration, (t0, t1), seed,
+                     samples, axes)
+    if spec.n_scenarios > MAX_SCENARIOS:
+        raise SpecError("vary", f"{spec.n_scenarios:,} scenarios; at most {MAX_SCENARIOS:,} per sweep", source)
+    return spec
+
+
+def _resolve(key: str, source: str) -> Tuple[str, str, P.ParamSpec]:
+    """'plant_sim.actual.m_b' -> ('plant_sim', 'actual.m_b', spec); 'nominal.m_b' -> ('/**', ...)."""
+    shared = {s.name: s for s in P.SHARED_SPECS}
+    def owners(name: str) -> List[str]:
+        return [n for n in NODES_OF_THE_LOOP if any(s.name == name for s in P.NODE_SPECS[n])]
+
+    head, _, rest = key.partition(".")
+    if head in P.NODE_SPECS:
+        if head not in NODES_OF_THE_LOOP:
+            raise SpecError(f"vary.{key}", f"{head} is not part of the simulated loop (its parameters are "
+                                           f"{', '.join(NODES_OF_THE_LOOP)}'s)", source)
+        if rest in shared:
+            raise SpecError(f"vary.{key}", f"{rest} is shared by every node (the /** section): write it without "
+                                           f"a prefix, as '{rest}'", source)
+        mine = {s.name: s for s in P.NODE_SPECS[head]}
+        if rest in mine:
+            return head, rest, mine[rest]
+        others = owners(rest)
+        if others:
+            raise SpecError(f"vary.{key}", f"{rest} is not a parameter of {head}; it belongs under {others[0]} "
+                                           f"(write '{others[0]}.{rest}')", source)
+        raise SpecError(f"vary.{key}", f"unknown parameter for {head}{_did_you_mean(rest, mine)}", source)
+    if key in shared:
+        return P.SHARED, key, shared[key]
+    others = owners(key)
+    if others:
+        raise SpecError(f"vary.{key}", f"{key} belongs under {others[0]}: write '{others[0]}.{key}'", source)
+    every = list(shared) + [f"{n}.{s.name}" for n in NODES_OF_THE_LOOP for s in P.NODE_SPECS[n]]
+    raise SpecError(f"vary.{key}", f"unknown parameter{_did_you_mean(key, every)}; write 'node.key' (e.g. "
+                                   f"plant_sim.actual.m_b) or a key of the shared section (e.g. nominal.m_b)",
+                    source)
+
+
+def _axis(key: str, dist: Any, base_values: Dict[str, Any], source: str) -> Axis:
+    section, name, ps = _resolve(key, source)
+    where = f"vary.{key}"
+    if name in NOT_SIMULATED:
+        raise SpecError(where, f"does not change the offline closed loop ({NOT_SIMULATED[name]})", source)
+    if ps.type not in ("double", "integer", "double_array"):
+        raise SpecError(where, f"a {ps.type} parameter cannot be varied", source)
+    kinds = GRID_KINDS + RANDOM_KINDS
+    if not isinstance(dist, dict) or len(dist) != 1:
+        raise SpecError(where, f"expected one distribution, e.g. {{grid: [...]}}; one of {', '.join(kinds)}", source)
+    (kind, args), = dist.items()
+    if kind not in kinds:
+        raise SpecError(where, f"unknown distribution {kind!r}{_did_you_mean(str(kind), kinds)}; one of "
+                               f"{', '.join(kinds)}", source)
+    base = base_values[name]
+    if ps.type != "double" and kind in RANDOM_KINDS + ("linspace",):
+        raise SpecError(where, f"{kind} draws real numbers; {name} is a {ps.type}: use grid or values", source)
+
+    def check(v, what=""):
+        """The value as the parameter holds it, checked against its range."""
+        if ps.type == "double":
+            v = _number(v, where, source)
+        elif ps.type == "integer":
+            if isinstance(v, bool) or not isinstance(v, int):
+                raise SpecError(where, f"expected integers, got {v!r}", source)
+        else:
+            if not isinstance(v, list) or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v):
+                raise SpecError(where, f"expected lists of numbers such as {base}, got {v!r}", source)
+            v = [float(x) for x in v]
+        try:
+            return ps.validate(v, name)
+        except P.ParamError as exc:
+            raise SpecError(where, f"{what}{exc.reason}", source) from None
+
+    if kind in ("grid", "values"):
+        if not isinstance(args, list) or not args:
+            raise SpecError(where, f"{kind} needs a non-empty list of values, got {args!r}", source)
+        return Axis(key, section, name, ps.type, kind, tuple(check(v) for v in args), base)
+    if not isinstance(args, list) or len(args) != (3 if kind == "linspace" else 2):
+        shape = {"linspace": "[start, stop, count]", "uniform": "[low, high]", "scale": "[low, high] (factors)",
+                 "normal": "[mean, standard deviation]"}[kind]
+        raise SpecError(where, f"{kind} needs {shape}, got {args!r}", source)
+    if kind == "linspace":
+        a, b = check(args[0], "start "), check(args[1], "stop ")
+        n = args[2]
+        if isinstance(n, bool) or not isinstance(n, int) or n < 1:
+            raise SpecError(where, f"linspace count must be an integer >= 1, got {n!r}", source)
+        if n == 1 and a != b:
+            raise SpecError(where, "linspace with one point needs start == stop", source)
+        return Axis(key, section, name, ps.type, kind, (a, b, n), base)
+    lo, hi = (_number(v, where, source) for v in args)
+    if kind == "normal":
+        check(lo, "mean ")
+        if not hi > 0:
+            raise SpecError(where, f"normal needs a standard deviation > 0, got {hi!r}", source)
+        return Axis(key, section, name, ps.type, kind, (lo, hi), base)
+    if not lo < hi:
+        raise SpecError(where, f"{kind} needs low < high, got [{lo!r}, {hi!r}] (use values: for one value)", source)
+    if kind == "scale":
+        if not lo > 0:
+            raise SpecError(where, f"scale factors must be > 0, got {lo!r}", source)
+        check(base * lo, f"scale {lo:g} of the base value {base!r} ")
+        check(base * hi, f"scale {hi:g} of the base value {base!r} ")
+    else:
+        check(lo, "low end ")
+        check(hi, "high end ")
+    return Axis(key, section, name, ps.type, kind, (lo, hi), base)
