@@ -2,7 +2,10 @@
 # The main job: run the ROS graph for DSC and then DSCNDO, record both runs, write the report.
 #
 #   scripts/run_experiment.sh [--params FILE] [--mode lockstep|realtime] [--duration S] [--no-record]
-#                             [--out DIR]
+#                             [--out DIR] [--laws dsc,dscndo,lqr,lqr_ndo]
+#
+# --laws picks the runs (default dsc,dscndo): dsc and dscndo are DSC without and with the
+# observer term, lqr and lqr_ndo the LQR baseline without and with it.
 #
 # Bags, logs and the report go to DIR (default: bags/), named by date and controller.
 # Each node is its own process (plant_sim, disturbance_observer, dscndo_controller,
@@ -16,6 +19,7 @@ MODE=lockstep
 DURATION=""
 RECORD=1
 OUT="$ROOT/bags"
+LAWS="dsc,dscndo"
 
 usage() { awk 'NR > 1 && /^#/ { sub(/^# ?/, ""); print; next } NR > 1 { exit }' "$0"; }
 while [ $# -gt 0 ]; do
@@ -25,6 +29,7 @@ while [ $# -gt 0 ]; do
         --duration) DURATION="$2"; shift 2 ;;
         --no-record) RECORD=0; shift ;;
         --out) mkdir -p "$2"; OUT="$(cd "$2" && pwd)"; shift 2 ;;
+        --laws) LAWS="$2"; shift 2 ;;
         -h|--help) usage; exit 0 ;;
         *) echo "run_experiment: unknown argument '$1'" >&2; usage >&2; exit 2 ;;
     esac
@@ -35,6 +40,10 @@ if [ -n "$DURATION" ]; then
     [[ "$DURATION" == *.* ]] || DURATION="$DURATION.0"   # ROS 2 reads 60 as an integer
 fi
 [ -f "$PARAMS" ] || { echo "run_experiment: no such parameter file: $PARAMS" >&2; exit 2; }
+IFS=',' read -r -a LAW_LIST <<< "$LAWS"
+for CTRL in "${LAW_LIST[@]}"; do
+    case "$CTRL" in dsc|dscndo|lqr|lqr_ndo) ;; *) echo "run_experiment: --laws takes dsc, dscndo, lqr, lqr_ndo; got '$CTRL'" >&2; exit 2 ;; esac
+done
 
 bash "$ROOT/scripts/setup.sh"
 # shellcheck disable=SC1091
@@ -75,9 +84,10 @@ PLANT_EXTRA=(-p "mode:=$MODE")
 
 RUNS=()
 ESTIMATES=()   # the observer's estimates (CSV), for a report from the plant's CSVs (--no-record)
-for CTRL in dsc dscndo; do
+for CTRL in "${LAW_LIST[@]}"; do
     export ROS_DOMAIN_ID=$(( (RANDOM % 200) + 1 ))
-    USE_OBS=false; [ "$CTRL" = dscndo ] && USE_OBS=true
+    USE_OBS=false; case "$CTRL" in dscndo|lqr_ndo) USE_OBS=true ;; esac
+    LAW=dsc; case "$CTRL" in lqr|lqr_ndo) LAW=lqr ;; esac
     echo "=== $CTRL: $MODE run, ROS_DOMAIN_ID=$ROS_DOMAIN_ID, logs in ${LOGS#$ROOT/}/ ==="
     SUBS=2
     if [ "$RECORD" = 1 ]; then
@@ -94,7 +104,7 @@ for CTRL in dsc dscndo; do
     disturbance_observer --ros-args --params-file "$PARAMS" -p "csv:=$LOGS/${CTRL}_estimates.csv" \
         > "$LOGS/${CTRL}_disturbance_observer.log" 2>&1 &
     PIDS+=($!)
-    dscndo_controller --ros-args --params-file "$PARAMS" -p "use_observer:=$USE_OBS" \
+    dscndo_controller --ros-args --params-file "$PARAMS" -p "use_observer:=$USE_OBS" -p "law:=$LAW" \
         > "$LOGS/${CTRL}_dscndo_controller.log" 2>&1 &
     PIDS+=($!)
     plant_sim --ros-args --params-file "$PARAMS" "${PLANT_EXTRA[@]}" -p "expected_subscribers:=$SUBS" \
@@ -123,13 +133,13 @@ done
 REPORT="$OUT/${STAMP}_report"
 echo "=== report ==="
 if [ "$RECORD" = 1 ]; then
-    mwip_report "${RUNS[@]}" --labels dsc dscndo --out "$REPORT"
+    mwip_report "${RUNS[@]}" --labels "${LAW_LIST[@]}" --out "$REPORT"
 else
-    mwip_report "${RUNS[@]}" --estimates "${ESTIMATES[@]}" --labels dsc dscndo --out "$REPORT"
+    mwip_report "${RUNS[@]}" --estimates "${ESTIMATES[@]}" --labels "${LAW_LIST[@]}" --out "$REPORT"
 fi
 echo
 if [ "$RECORD" = 1 ]; then
-    echo "bags:   ${RUNS[0]#$ROOT/}  ${RUNS[1]#$ROOT/}"
+    echo "bags:  " "${RUNS[@]#$ROOT/}"
 fi
 echo "report: ${REPORT#$ROOT/}/metrics.md (figures fig3.png, observer.png)"
 echo "logs:   ${LOGS#$ROOT/}/"

@@ -138,7 +138,7 @@ class Graph:
 
 
 def run_lockstep(workdir: Path, use_observer: bool, *plant_args: str, timeout: float = 180.0,
-                 params: Path = PARAMS):
+                 params: Path = PARAMS, law: str = "dsc"):
     """Observer, controller and plant (lockstep) as three processes; returns (plant exit, csv path, graph logs).
 
     The plant writes ``graph.csv``, the observer its estimates to ``estimates.csv`` beside it."""
@@ -147,7 +147,7 @@ def run_lockstep(workdir: Path, use_observer: bool, *plant_args: str, timeout: f
         obs = g.start("disturbance_observer", "-p", "use_sim_time:=true", "-p", f"csv:={workdir / 'estimates.csv'}",
                       params=params)
         ctl = g.start("dscndo_controller", "-p", "use_sim_time:=true", "-p",
-                      f"use_observer:={'true' if use_observer else 'false'}", params=params)
+                      f"use_observer:={'true' if use_observer else 'false'}", "-p", f"law:={law}", params=params)
         plant = g.start("plant_sim", "-p", f"csv:={csv_path}", *plant_args, params=params)
         code = plant.wait(timeout)
         logs = {p.name: p for p in (obs, ctl, plant)}

@@ -9,7 +9,7 @@ from mwip_ros import params as P
 from mwip_ros.cli import plotting
 from mwip_ros.cli.theorem import theorem_report
 from mwip_ros.core import metrics
-from mwip_ros.core.sim import simulate
+from mwip_ros.core.sim import LAWS, law_name, simulate
 from mwip_ros.params.paths import default_params_file
 from mwip_ros.runs import write_csv
 
@@ -21,14 +21,17 @@ def _parser() -> argparse.ArgumentParser:
                     "uses (docs/theory.md), print the metrics over the window, optionally write a CSV and "
                     "a plot in the layout of the paper's Fig. 3.",
         epilog="examples:\n  mwip_sim --controller dscndo --plot dscndo.png\n"
-               "  mwip_sim --compare --plot compare.png --csv runs.csv   (writes runs_dsc.csv, runs_dscndo.csv)",
+               "  mwip_sim --compare --plot compare.png --csv runs.csv   (writes runs_dsc.csv, runs_dscndo.csv)\n"
+               "  mwip_sim --compare dsc dscndo lqr lqr_ndo              (the paper's laws and the LQR baseline)",
         formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--params", type=Path, default=None,
                     help="ROS 2 parameter file (default: the package's config/paper.yaml)")
     mode = ap.add_mutually_exclusive_group()
-    mode.add_argument("--controller", choices=("dsc", "dscndo"), default=None,
-                      help="dsc = observer term off; dscndo = full law (default: the file's use_observer)")
-    mode.add_argument("--compare", action="store_true", help="run DSC and DSCNDO, overlay them, print both rows")
+    mode.add_argument("--controller", choices=tuple(LAWS), default=None,
+                      help="dsc, dscndo (DSC with the observer term), lqr (the LQR baseline), lqr_ndo (LQR with the "
+                           "observer term); default: the file's law and use_observer")
+    mode.add_argument("--compare", nargs="*", choices=tuple(LAWS), metavar="LAW",
+                      help="run several laws (default: dsc dscndo), overlay them, print a row each")
     ap.add_argument("--duration", type=float, default=None, metavar="S",
                     help="simulated seconds (default: plant_sim.duration_s)")
     ap.add_argument("--csv", type=Path, default=None, metavar="FILE",
@@ -48,44 +51,46 @@ def main(argv=None) -> int:
     args = _parser().parse_args(argv)
     path = args.params or default_params_file()
     try:
-        pf = P.load_param_file(path)
+        values = P.merged_values(P.load_param_file(path))
     except P.ParamError as exc:
         print(f"mwip_sim: error: {exc}", file=sys.stderr)
         return 2
     if args.duration is not None and args.duration <= 0:
         print("mwip_sim: error: --duration must be > 0", file=sys.stderr)
         return 2
-    values = P.merged_values(pf)
-    if args.compare:
-        kinds = [False, True]
-    elif args.controller:
-        kinds = [args.controller == "dscndo"]
+    if args.compare is not None:
+        names = list(dict.fromkeys(args.compare or ["dsc", "dscndo"]))
     else:
-        kinds = [values["use_observer"]]
+        names = [args.controller or law_name(values["law"], values["use_observer"])]
     if not args.quiet:
         print(theorem_report(values), file=sys.stderr)
+        if any(LAWS[n][0] == "lqr" for n in names):
+            K = P.typed.lqr_gain(values)
+            print(f"LQR gain K = [{K[0]:.6g}, {K[1]:.6g}, {K[2]:.6g}] on [theta_b, theta_b', theta_w'] "
+                  f"(lqr.Q = {values['lqr.Q']}, lqr.R = {values['lqr.R']:g}; u = -K x)", file=sys.stderr)
     runs = []
-    for use_obs in kinds:
-        label = "dscndo" if use_obs else "dsc"
+    for label in names:
+        law, use_obs = LAWS[label]
 
         def progress(frac, label=label):
             if not args.quiet and sys.stderr.isatty():
                 print(f"\r  {label}: {frac * 100:5.1f} %", end="", file=sys.stderr, flush=True)
 
-        run = simulate(P.closed_loop(values, use_observer=use_obs, duration=args.duration), label, progress)
+        run = simulate(P.closed_loop(values, use_observer=use_obs, duration=args.duration, law=law), label, progress)
         if not args.quiet:
             print(f"\r  {label}: done, {len(run)} samples, h = {run.h * 1e3:.3f} ms"
                   + ("  FALLEN" if run.fallen else ""), file=sys.stderr)
         runs.append(run)
         if args.csv:
-            out = _suffixed(args.csv, label) if args.compare else args.csv
+            out = _suffixed(args.csv, label) if len(names) > 1 else args.csv
             write_csv(run, out)
             print(f"wrote {out}")
     named = [(r.label, metrics.compute(r.columns, args.window, values["fall_angle"])) for r in runs]
     print(f"metrics over t in [{args.window[0]:g}, {args.window[1]:g}] s:")
     print(metrics.text_table(named))
-    if len(named) == 2:
-        a, b = named[0][1].theta_b_p2p, named[1][1].theta_b_p2p
+    by = dict(named)
+    if "dsc" in by and "dscndo" in by:
+        a, b = by["dsc"].theta_b_p2p, by["dscndo"].theta_b_p2p
         print(f"DSCNDO / DSC theta_b peak-to-peak: {b / a:.3f} (DSCNDO is {a / b:.1f}x smaller)")
     for run in runs:
         print(f"{run.label}: {'FELL' if run.fallen else 'stayed upright'} "

@@ -12,7 +12,8 @@ from pathlib import Path
 from mwip_ros import params as P
 from mwip_ros.sweep import engine, results
 from mwip_ros.sweep.scenarios import expand, parameter_file
-from mwip_ros.sweep.spec import SpecError, load_spec
+from mwip_ros.core.sim import LAWS
+from mwip_ros.sweep.spec import CONTROLLERS, SpecError, load_spec
 
 PROG = "mwip_sweep"
 EXIT_BAD_INPUT, EXIT_INTERRUPTED = 2, 130
@@ -49,7 +50,7 @@ def _parser() -> argparse.ArgumentParser:
     back = ap.add_argument_group("from a row back to the ROS graph")
     back.add_argument("--results", type=Path, metavar="DIR", help="a finished (or interrupted) sweep's --out")
     back.add_argument("--scenario", type=int, metavar="N", help="the row's scenario number")
-    back.add_argument("--controller", choices=("dsc", "dscndo"),
+    back.add_argument("--controller", choices=CONTROLLERS,
                       help="the row's law (default: dscndo when the sweep ran it)")
     back.add_argument("--write-params", type=Path, metavar="FILE",
                       help="write the scenario's complete parameter file (for mwip_sim --params or "
@@ -209,7 +210,7 @@ def _write_params(args) -> int:
                      f"{info['scenarios'] - 1}; an interrupted sweep lacks some)")
     j = rows[0]
     placed = {("plant_sim", "seed"): cols["seed"][j], ("plant_sim", "duration_s"): float(info["duration_s"]),
-              ("dscndo_controller", "use_observer"): law == "dscndo"}
+              ("dscndo_controller", "use_observer"): LAWS[law][1], ("dscndo_controller", "law"): LAWS[law][0]}
     for a in info["axes"]:
         v = cols[a["key"]][j]
         placed[(a["section"], a["name"])] = int(v) if a["type"] == "integer" else v

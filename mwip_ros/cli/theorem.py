@@ -35,11 +35,10 @@ def main(argv=None) -> int:
     ap.add_argument("--params", type=Path, default=None, help="parameter file (default: config/paper.yaml)")
     args = ap.parse_args(argv)
     try:
-        pf = P.load_param_file(args.params or default_params_file())
+        values = P.merged_values(P.load_param_file(args.params or default_params_file()))
     except P.ParamError as exc:
         print(f"mwip_theorem: error: {exc}", file=sys.stderr)
         return 2
-    values = P.merged_values(pf)
     print(theorem_report(values))
     return 0 if theorem2(P.physical(values, "nominal"), P.gains(values), P.observer_gain(values)).satisfied else 1
 

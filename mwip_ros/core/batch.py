@@ -23,12 +23,12 @@ from typing import Dict, List, Optional, Sequence
 
 import numpy as np
 
-from .controller import DscController, DscGains
+from .controller import DscGains
 from .metrics import window_metrics
 from .model import PhysicalParams, Sinusoid, State, accel, lumped_disturbance
 from .observer import DiscreteObserver
 from .plant import rk4_period
-from .sim import ClosedLoop
+from .sim import ClosedLoop, make_controller
 from .trajectory import COLUMNS, Trajectory
 
 __all__ = ["BatchResult", "simulate_batch"]
@@ -113,7 +113,9 @@ def simulate_batch(loops: Sequence[ClosedLoop], window: Sequence[float], record:
     use_obs = np.array([lp.use_observer for lp in loops], dtype=bool)
     X = tuple(_column(lp.X[i] for lp in loops) for i in range(4))
     obs = DiscreteObserver(nominal, X, h, m=np)
-    ctrl = DscController(nominal, _stack([lp.gains for lp in loops], DscGains), h, use_observer=True, m=np)
+    law = _same((lp.law for lp in loops), "the law")
+    K = tuple(_column(lp.K[i] for lp in loops) for i in range(3)) if law == "lqr" else None
+    ctrl = make_controller(law, nominal, _stack([lp.gains for lp in loops], DscGains), K, h, True, np)
 
     x = State(*(arr(pc.initial[i] for pc in pcs) for i in range(4)))
     u_prev = np.zeros(n)
@@ -137,9 +139,9 @@ def simulate_batch(loops: Sequence[ClosedLoop], window: Sequence[float], record:
                 ddq = accel(actual, D_w, D_b, x, u, f1.at(t, np) + 0.0, f2.at(t, np) + 0.0, np)
                 tau_d = lumped_disturbance(nominal, x, ddq, u, np)
             if record:
-                rows.append((active.copy(), np.stack([np.full(n, t), *x, u, *tau_hat, *tau_d, out.u_dsc,
-                                                      np.where(use_obs, out.u_taud, 0.0), out.S1, out.S2,
-                                                      out.x4_bar, out.x4d], axis=1)))
+                cols = (t, *x, u, *tau_hat, *tau_d, out.u_dsc, np.where(use_obs, out.u_taud, 0.0), out.S1, out.S2,
+                        out.x4_bar, out.x4d)
+                rows.append((active.copy(), np.stack([np.broadcast_to(c, (n,)) for c in cols], axis=1)))
             everyone = bool(active.all())   # the usual case: no scenario has fallen, nothing to mask
             if in_window:
                 j = k - first_w
@@ -174,5 +176,5 @@ def _trajectories(rows, loops, h) -> List[Trajectory]:
         mine = np.array([r[i] for active, r in rows if active[i]])
         cols = {c: mine[:, j] for j, c in enumerate(COLUMNS)}
         fell = bool(abs(mine[-1, 2]) > lp.plant.fall_angle)
-        out.append(Trajectory("dscndo" if lp.use_observer else "dsc", cols, fell, h))
+        out.append(Trajectory(lp.name, cols, fell, h))
     return out

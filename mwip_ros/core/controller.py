@@ -12,7 +12,7 @@ from typing import Optional
 
 from .model import PhysicalParams
 
-__all__ = ["DscGains", "ControlOutput", "x4_bar_of", "dsc_law", "filter_step", "DscController"]
+__all__ = ["DscGains", "ControlOutput", "u_taud_of", "x4_bar_of", "dsc_law", "filter_step", "DscController"]
 
 
 @dataclass(frozen=True)
@@ -29,13 +29,18 @@ class ControlOutput:
     """Everything the law computed for one state (published as controller internals)."""
 
     u: float        # applied command, eq. (19)
-    u_dsc: float    # eq. (28)
+    u_dsc: float    # the law's own command before the observer term: eq. (28) for DSC, -K x for LQR
     u_taud: float   # observer compensation, eq. (20)-(21); 0 for plain DSC
     S1: float       # eq. (22)
     S2: float       # eq. (26)
     x1: float       # eq. (16)
     x4_bar: float   # virtual control, eq. (24)
     x4d: float      # filtered virtual control used at this step, eq. (25)
+
+
+def u_taud_of(nominal: PhysicalParams, mc, tau_hat):
+    """The observer's compensation u_taud for M_C12 = ``mc`` (m12 cos theta_b) and the estimate ``tau_hat``."""
+    return tau_hat[0] - mc / (nominal.m22 + mc) * tau_hat[1]  # eq. (20)-(21), fix: uses tau_hat1
 
 
 def x4_bar_of(nominal: PhysicalParams, k1: float, theta_b: float, x1: float, m=math) -> float:
@@ -66,10 +71,7 @@ def dsc_law(nominal: PhysicalParams, gains: DscGains, x, x4d: Optional[float], t
     u_dsc = (A / (p.m22 + mc) * ((x4_bar - x4d) / gains.tau4 - gains.k2 * S2)
              - p.m12 * p.m22 * sb * (x1 - (p.m11 + mc) * x4) ** 2 / (p.m22 + mc) ** 3
              + mc * gs / (p.m22 + mc))           # eq. (28)
-    if tau_hat is None:
-        u_taud = 0.0
-    else:
-        u_taud = tau_hat[0] - mc / (p.m22 + mc) * tau_hat[1]  # eq. (20)-(21), fix: uses tau_hat1
+    u_taud = 0.0 if tau_hat is None else u_taud_of(p, mc, tau_hat)
     return ControlOutput(u=u_dsc - u_taud, u_dsc=u_dsc, u_taud=u_taud, S1=S1, S2=S2,
                          x1=x1, x4_bar=x4_bar, x4d=x4d)     # eq. (19)
 

@@ -7,26 +7,53 @@ order, so a lockstep graph reproduces these numbers.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Callable, Optional, Tuple
 
 from .controller import DscController, DscGains
+from .lqr import LqrController
 from .observer import DiscreteObserver, gain_matrix
 from .plant import PlantConfig, PlantSim, saturate
 from .trajectory import Trajectory, TrajectoryTable
 
-__all__ = ["ClosedLoop", "simulate"]
+__all__ = ["ClosedLoop", "simulate", "LAWS", "law_name", "make_controller"]
+
+# The laws a user names (mwip_sim --controller, a sweep's controllers): (law, use_observer).
+LAWS = {"dsc": ("dsc", False), "dscndo": ("dsc", True), "lqr": ("lqr", False), "lqr_ndo": ("lqr", True)}
+
+
+def law_name(law: str, use_observer: bool) -> str:
+    """('dsc', True) -> 'dscndo', the inverse of :data:`LAWS`."""
+    return next(k for k, v in LAWS.items() if v == (law, bool(use_observer)))
+
+
+def make_controller(law: str, nominal, gains: DscGains, K, h: float, use_observer: bool, m=math):
+    """The law's stepper: ``DscController`` (eq. 19-28) or ``LqrController`` (``K`` from ``core.lqr.lqr_gain``)."""
+    if law == "lqr":
+        if K is None:
+            raise ValueError("the lqr law needs its gain K")
+        return LqrController(nominal, K, use_observer=use_observer, m=m)
+    if law != "dsc":
+        raise ValueError(f"unknown law {law!r} (dsc or lqr)")
+    return DscController(nominal, gains, h, use_observer=use_observer, m=m)
 
 
 @dataclass(frozen=True)
 class ClosedLoop:
-    """One closed-loop scenario: the plant, the observer gain X, the DSC gains, the law and the length."""
+    """One closed-loop scenario: the plant, the observer gain X, the law and its gains, the length."""
 
     plant: PlantConfig
     X: Tuple[float, float, float, float]   # c1, c2, c3, c4 (eq. 14)
     gains: DscGains
-    use_observer: bool                     # True = DSCNDO, False = DSC
+    use_observer: bool                     # True: the law plus the observer term (DSCNDO, LQR+NDO)
     duration_s: float
+    law: str = "dsc"                       # 'dsc' (eq. 19-28) or 'lqr' (core.lqr)
+    K: Optional[Tuple[float, float, float]] = None   # the LQR gain, for law 'lqr'
+
+    @property
+    def name(self) -> str:
+        return law_name(self.law, self.use_observer)
 
 
 def simulate(loop: ClosedLoop, label: str = "", progress: Optional[Callable[[float], None]] = None) -> Trajectory:
@@ -36,7 +63,7 @@ def simulate(loop: ClosedLoop, label: str = "", progress: Optional[Callable[[flo
     n_steps = int(round(loop.duration_s / h))
     plant = PlantSim(pc)
     obs = DiscreteObserver(pc.nominal, gain_matrix(loop.X), h)
-    ctrl = DscController(pc.nominal, loop.gains, h, use_observer=loop.use_observer)
+    ctrl = make_controller(loop.law, pc.nominal, loop.gains, loop.K, h, loop.use_observer)
     table = TrajectoryTable(internals=True)
     fallen = False
     every = max(1, n_steps // 10)
@@ -54,4 +81,4 @@ def simulate(loop: ClosedLoop, label: str = "", progress: Optional[Callable[[flo
         plant.step(u)
         if progress is not None and k % every == 0:
             progress(k / n_steps)
-    return table.trajectory(label or ("dscndo" if loop.use_observer else "dsc"), fallen, h)
+    return table.trajectory(label or loop.name, fallen, h)

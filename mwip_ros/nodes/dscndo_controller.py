@@ -1,4 +1,9 @@
-"""``dscndo_controller``: DSC / DSCNDO (eq. 16-28, 19-21) as a node.
+"""``dscndo_controller``: DSC / DSCNDO (eq. 16-28, 19-21), or the LQR baseline, as a node.
+
+The parameter ``law`` picks DSC (the paper) or LQR (``core.lqr``: the gain K, designed from
+``lqr.Q``, ``lqr.R`` and the nominal model, is logged at start-up and whenever it changes);
+``use_observer`` adds the observer term u_taud (DSCNDO, LQR+NDO).  All of them change at run
+time (``ros2 param set``); switching to DSC starts its filter afresh.
 
 Subscribes ``joint_states`` and (with ``use_observer``) ``disturbance_estimate``,
 pairs them by stamp, publishes ``wheel_torque_cmd`` once per state and the
@@ -22,6 +27,8 @@ from std_msgs.msg import Float64
 
 from mwip_ros import params as P
 from mwip_ros.core.controller import DscController
+from mwip_ros.core.lqr import LqrController
+from mwip_ros.core.sim import law_name
 from mwip_ros.core.theorem import controller_conditions
 from mwip_ros.msgs import BadMessage
 from mwip_ros.msgs import layouts as L
@@ -38,8 +45,9 @@ class DscndoController(Node, GracefulNodeMixin):
     def __init__(self, context=None, argv=()):
         super().__init__(NAME, context=context)
         self.v = declare(self, NAME, argv, on_change=self._on_change)
-        self.ctrl = DscController(P.physical(self.v, "nominal"), P.gains(self.v), P.period(self.v),
-                                  use_observer=self.v["use_observer"])
+        nominal = P.physical(self.v, "nominal")
+        self.dsc = DscController(nominal, P.gains(self.v), P.period(self.v), use_observer=self.v["use_observer"])
+        self.lqr = LqrController(nominal, P.typed.lqr_gain(self.v), use_observer=self.v["use_observer"])
         self._warn_theorem()
         self.states = {}      # stamp -> State waiting for an estimate
         self.estimates = {}   # stamp -> (tau_hat1, tau_hat2) waiting for a state
@@ -53,12 +61,26 @@ class DscndoController(Node, GracefulNodeMixin):
         self.input = StateInput(self, self.rejects, STAMP_WINDOW_PERIODS * round(P.period(self.v) * 1e9),
                                 "controller")
         self.watch = PublisherWatch(self, ["joint_states", "disturbance_estimate"])
-        g = self.ctrl.gains
-        self.get_logger().info(f"{'DSCNDO' if self.ctrl.use_observer else 'DSC'} ready: k1 = {g.k1}, k2 = {g.k2}, "
-                               f"tau4 = {g.tau4}")
+        self.get_logger().info(f"{self._describe()} ready; {self._lqr_text()}")
+
+    @property
+    def ctrl(self):
+        """The law in use: ``self.dsc`` or ``self.lqr``."""
+        return self.lqr if self.v["law"] == "lqr" else self.dsc
+
+    def _describe(self) -> str:
+        g = self.dsc.gains
+        name = {"dsc": "DSC", "dscndo": "DSCNDO", "lqr": "LQR", "lqr_ndo": "LQR+NDO"}[
+            law_name(self.v["law"], self.v["use_observer"])]
+        return f"{name} (k1 = {g.k1}, k2 = {g.k2}, tau4 = {g.tau4})" if self.v["law"] == "dsc" else name
+
+    def _lqr_text(self) -> str:
+        K = self.lqr.K
+        return (f"LQR gain K = [{K[0]:.6g}, {K[1]:.6g}, {K[2]:.6g}] on [theta_b, theta_b', theta_w'] "
+                f"(lqr.Q = {self.v['lqr.Q']}, lqr.R = {self.v['lqr.R']:g})")
 
     def _warn_theorem(self):
-        th = controller_conditions(self.ctrl.nominal, self.ctrl.gains)
+        th = controller_conditions(self.dsc.nominal, self.dsc.gains)
         if not th.satisfied:
             self.get_logger().warning(f"gains break Theorem 2 (eq. 35): a1 = {th.a1:.4f}, a2 = {th.a2:.4f}, "
                                       f"a3 = {th.a3:.4f} (all must be > 0); allowed, but stability is not "
@@ -66,10 +88,17 @@ class DscndoController(Node, GracefulNodeMixin):
 
     def _on_change(self, changed):
         if {"k1", "k2", "tau4"} & set(changed):
-            self.ctrl.gains = P.gains(self.v)
+            self.dsc.gains = P.gains(self.v)
             self._warn_theorem()
         if "use_observer" in changed:
-            self.ctrl.use_observer = self.v["use_observer"]
+            self.dsc.use_observer = self.lqr.use_observer = self.v["use_observer"]
+        if {"lqr.Q", "lqr.R"} & set(changed):   # the design was checked before the change was accepted
+            self.lqr.K = P.typed.lqr_gain(self.v)
+            self.get_logger().info(self._lqr_text())
+        if "law" in changed:
+            self.dsc.x4d = None   # DSC starts its filter afresh from the next state
+        if {"law", "use_observer"} & set(changed):
+            self.get_logger().info(f"law now {self._describe()}")
 
     def _on_state(self, data: bytes) -> None:
         taken = self.input.take(data)
@@ -79,7 +108,7 @@ class DscndoController(Node, GracefulNodeMixin):
         if verdict == REPEAT:
             return  # a resent state: one command per state
         if verdict == RESTART:
-            self.ctrl.x4d = None
+            self.dsc.x4d = None
             self.states.clear()
             self.estimates = {s: e for s, e in self.estimates.items() if s >= stamp}
             self.last_answered = None
@@ -112,17 +141,16 @@ class DscndoController(Node, GracefulNodeMixin):
             return  # wait for the estimate of this very state
         x = self.states.pop(stamp)
         self.estimates.pop(stamp, None)
-        x4d = self.ctrl.x4d
+        ctrl, x4d = self.ctrl, self.dsc.x4d
         try:
-            out = self.ctrl.step(x, tau_hat)
-            ok = all(math.isfinite(v) for v in (out.u, self.ctrl.x4d))
+            out = ctrl.step(x, tau_hat)
+            ok = math.isfinite(out.u) and (ctrl is not self.dsc or math.isfinite(self.dsc.x4d))
         except (ArithmeticError, ValueError):
             ok = False
         if not ok:
-            self.ctrl.x4d = x4d  # keep the filter as it was: setting a bad gain back repairs the loop
+            self.dsc.x4d = x4d  # keep the filter as it was: setting a bad gain back repairs the loop
             self.rejects("joint_states", f"the law gives no finite command for t = {stamp * 1e-9:.3f} s "
-                                         f"(gains k1 = {self.ctrl.gains.k1:g}, k2 = {self.ctrl.gains.k2:g}, "
-                                         f"tau4 = {self.ctrl.gains.tau4:g}); nothing published")
+                                         f"({self._describe()}); nothing published")
             return
         self.cmd_pub.publish(L.encode_command(out.u))
         self.int_pub.publish(L.encode_internals(stamp, out))

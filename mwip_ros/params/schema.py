@@ -94,6 +94,14 @@ def _four_finite(v):
     return None
 
 
+def _lqr_q(v):
+    if len(v) not in (3, 9):
+        return f"give the diagonal (3 entries) or the 3x3 matrix row by row (9), got {len(v)} entries"
+    if any(abs(c) > 1e12 for c in v):
+        return f"entries must be within +/-1e12, got {v!r}"
+    return None
+
+
 @dataclass(frozen=True)
 class ParamSpec:
     """One parameter: dotted name, ROS type, default, description, check, run-time changeable."""
@@ -218,7 +226,15 @@ NODE_SPECS: Dict[str, List[ParamSpec]] = {
         ParamSpec("k1", "double", 6.0, "first surface gain k1 (eq. 24)", _positive(), dynamic=True),
         ParamSpec("k2", "double", 6.0, "second surface gain k2 (eq. 28)", _positive(), dynamic=True),
         ParamSpec("tau4", "double", 0.1, "filter time constant tau4 [s] (eq. 25)", _tau4, dynamic=True),
-        ParamSpec("use_observer", "bool", True, "true = DSCNDO (eq. 19); false = plain DSC", dynamic=True),
+        ParamSpec("use_observer", "bool", True, "true: add the observer term u_taud (eq. 20) to the law: DSCNDO "
+                  "(eq. 19) or LQR+NDO; false: the law alone (DSC or LQR)", dynamic=True),
+        ParamSpec("law", "string", "dsc", "dsc (dynamic surface control, eq. 16-28) or lqr (the baseline: discrete "
+                  "LQR on the nominal model's linearization, gain K from lqr.Q and lqr.R)", _one_of("dsc", "lqr"),
+                  dynamic=True),
+        ParamSpec("lqr.Q", "double_array", [100.0, 10.0, 1.0], "LQR state weight on [theta_b, theta_b', theta_w']: "
+                  "the diagonal (3 entries) or the 3x3 matrix row by row (9); symmetric positive semidefinite",
+                  _lqr_q, dynamic=True),
+        ParamSpec("lqr.R", "double", 0.01, "LQR input weight (> 0)", _positive(), dynamic=True),
     ],
     "mcap_recorder": [
         ParamSpec("output", "string", "", "bag directory to create (refuses an existing one)"),
@@ -270,7 +286,9 @@ def spelling_hint(name: str, names: Iterable[str]) -> str:
 
 def check_derived(values: Mapping[str, Any], source: Optional[str] = None) -> None:
     """Raise ParamError when values that pass their own checks give a model no arithmetic can run:
-    inertia terms that are not finite or an A_bar that is not positive (eq. 2, 38)."""
+    inertia terms that are not finite or an A_bar that is not positive (eq. 2, 38); or LQR weights that
+    give no stabilizing gain for the nominal model (checked whatever the law, so a switch to lqr at run
+    time cannot fail)."""
     for prefix in ("nominal", "actual"):
         if f"{prefix}.m_b" not in values:
             continue
@@ -282,3 +300,11 @@ def check_derived(values: Mapping[str, Any], source: Optional[str] = None) -> No
             raise ParamError(f"{prefix}.m_b", f"the {prefix} model's inertia terms are not usable (m11 = {m11:g}, "
                                               f"m12 = {m12:g}, m22 = {m22:g}, A_bar = {a_bar:g}); check "
                                               f"{prefix}.{{m_b, m_w, I_b, I_w, l, r, g}}", source)
+    if "lqr.Q" in values and "nominal.m_b" in values:
+        from mwip_ros.core.lqr import LqrDesignError, lqr_gain
+        from mwip_ros.core.model import PhysicalParams
+        try:
+            lqr_gain(PhysicalParams(**{k: values[f"nominal.{k}"] for k in PAPER_NOMINAL}),
+                     1.0 / values["control_rate_hz"], values["lqr.Q"], values["lqr.R"])
+        except LqrDesignError as exc:
+            raise ParamError(exc.key, exc.reason, source) from None

@@ -10,7 +10,7 @@ from mwip_ros.core.sim import ClosedLoop
 
 from .schema import PAPER_NOMINAL
 
-__all__ = ["physical", "sinusoid", "gains", "period", "observer_gain", "plant_config", "closed_loop"]
+__all__ = ["physical", "sinusoid", "gains", "period", "observer_gain", "plant_config", "lqr_gain", "closed_loop"]
 
 
 def physical(values: Mapping[str, Any], prefix: str) -> PhysicalParams:
@@ -48,10 +48,18 @@ def plant_config(v: Mapping[str, Any]) -> PlantConfig:
         torque_limit=v["torque_limit"], fall_angle=v["fall_angle"])
 
 
+def lqr_gain(v: Mapping[str, Any]):
+    """K of the LQR baseline for these values (nominal model, period, lqr.Q, lqr.R)."""
+    from mwip_ros.core.lqr import lqr_gain as design
+    return design(physical(v, "nominal"), period(v), v["lqr.Q"], v["lqr.R"])
+
+
 def closed_loop(v: Mapping[str, Any], use_observer: Optional[bool] = None,
-                duration: Optional[float] = None) -> ClosedLoop:
-    """The offline scenario of a merged parameter dict (``merged_values``); ``use_observer`` and
-    ``duration`` override the file's ``use_observer`` and ``duration_s``."""
+                duration: Optional[float] = None, law: Optional[str] = None) -> ClosedLoop:
+    """The offline scenario of a merged parameter dict (``merged_values``); ``use_observer``, ``duration``
+    and ``law`` override the file's ``use_observer``, ``duration_s`` and ``law``."""
+    law = v["law"] if law is None else law
     return ClosedLoop(plant=plant_config(v), X=tuple(float(c) for c in v["X"]), gains=gains(v),
                       use_observer=v["use_observer"] if use_observer is None else use_observer,
-                      duration_s=v["duration_s"] if duration is None else duration)
+                      duration_s=v["duration_s"] if duration is None else duration,
+                      law=law, K=lqr_gain(v) if law == "lqr" else None)

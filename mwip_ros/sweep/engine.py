@@ -29,7 +29,7 @@ DEFAULT_CHUNK = 5000   # scenarios per chunk: numpy's per-call cost is small aga
 @dataclass(frozen=True)
 class Chunk:
     first: int                         # index of the first scenario
-    controller: str                    # 'dsc' | 'dscndo'
+    controller: str                    # a law of core.sim.LAWS: 'dsc', 'dscndo', 'lqr', 'lqr_ndo'
     base: Dict[str, Any]               # the base file's merged values
     overrides: Tuple[Dict[str, Any], ...]   # per scenario (seed included)
     duration_s: float
@@ -62,12 +62,14 @@ def run_chunk(chunk: Chunk) -> ChunkResult:
     """Simulate one chunk (scenarios that differ in control period or RK4 sub-steps run as separate batches)."""
     from mwip_ros import params as P
     from mwip_ros.core.batch import simulate_batch
+    from mwip_ros.core.sim import LAWS
 
+    law, use_observer = LAWS[chunk.controller]
     loops = []
     for ov in chunk.overrides:
         v = dict(chunk.base)
         v.update(ov)
-        loops.append(P.closed_loop(v, use_observer=chunk.controller == "dscndo", duration=chunk.duration_s))
+        loops.append(P.closed_loop(v, use_observer=use_observer, duration=chunk.duration_s, law=law))
     n = len(loops)
     groups: Dict[tuple, List[int]] = {}
     for i, lp in enumerate(loops):

@@ -38,7 +38,7 @@ from mwip_ros.params.file import NODES_OF_THE_LOOP
 __all__ = ["SpecError", "Axis", "SweepSpec", "load_spec", "parse_spec", "CONTROLLERS", "GRID_KINDS",
            "RANDOM_KINDS"]
 
-CONTROLLERS = ("dsc", "dscndo")
+CONTROLLERS = ("dsc", "dscndo", "lqr", "lqr_ndo")   # core.sim.LAWS
 GRID_KINDS = ("grid", "values", "linspace")
 RANDOM_KINDS = ("uniform", "scale", "normal")
 TOP_KEYS = ("base", "controllers", "duration_s", "metrics_window_s", "seed", "samples", "vary")
@@ -47,7 +47,7 @@ MAX_SCENARIOS = 50_000_000
 # Parameters of the loop's nodes that do not change the offline closed loop (or that the spec sets itself).
 NOT_SIMULATED = {
     "mode": "the offline loop is always lockstep", "duration_s": "set the spec's duration_s",
-    "use_observer": "list the laws under controllers:", "csv": "an output file", "summary_json": "an output file",
+    "use_observer": "list the laws under controllers:", "law": "list the laws under controllers:", "csv": "an output file", "summary_json": "an output file",
     "lockstep_timeout_s": "wall-clock time of the ROS graph", "expected_subscribers": "the ROS graph's set-up",
     "stale_command_periods": "realtime runs only", "realtime_priority": "process scheduling",
 }
@@ -159,7 +159,7 @@ def parse_spec(doc: Any, source: str = "<spec>", here: Path = Path("."),
     pf = P.load_param_file(base_path)   # ParamError names the file and the key
     base_values = P.merged_values(pf)
 
-    ctrls = doc.get("controllers", list(CONTROLLERS))
+    ctrls = doc.get("controllers", ["dsc", "dscndo"])   # the paper's comparison unless the spec says more
     if isinstance(ctrls, str):
         ctrls = [ctrls]
     if not isinstance(ctrls, list) or not ctrls:

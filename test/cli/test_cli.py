@@ -60,3 +60,20 @@ def test_help_texts():
     for mod in ("mwip_ros.cli.sim", "mwip_ros.cli.theorem"):
         r = run(mod, "--help")
         assert r.returncode == 0 and "usage" in r.stdout
+
+
+def test_mwip_sim_compares_the_four_laws_and_prints_the_lqr_gain(tmp_path):
+    r = run("mwip_ros.cli.sim", "--compare", "dsc", "dscndo", "lqr", "lqr_ndo", "--duration", "6", "--window", "3", "6",
+            "--csv", str(tmp_path / "r.csv"))
+    assert r.returncode == 0, r.stderr
+    rows = {line.split()[0]: line.split() for line in r.stdout.splitlines() if line.split()[:1] and
+            line.split()[0] in ("dsc", "dscndo", "lqr", "lqr_ndo") and "yes" in line}
+    assert set(rows) == {"dsc", "dscndo", "lqr", "lqr_ndo"}
+    assert "LQR gain K = [" in r.stderr and "lqr.R = 0.01" in r.stderr
+    p2p = {k: float(v[2]) for k, v in rows.items()}
+    assert p2p["lqr_ndo"] < p2p["lqr"] and p2p["dscndo"] < p2p["dsc"]   # the observer term helps both laws
+    assert all((tmp_path / f"r_{k}.csv").is_file() for k in rows)
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(default_params_file().read_text().replace("Q: [100.0, 10.0, 1.0]", "Q: [100.0, 10.0, 0.0]"))
+    r = run("mwip_ros.cli.sim", "--params", str(bad), "--controller", "lqr")
+    assert r.returncode == 2 and "lqr.Q" in r.stderr and "Traceback" not in r.stderr

@@ -66,3 +66,24 @@ def test_scenarios_must_share_the_period():
     b = P.closed_loop(dict(BASE, control_rate_hz=100.0), duration=0.1)
     with pytest.raises(ValueError, match="control period"):
         simulate_batch([a, b], WINDOW)
+
+
+def test_the_lqr_baseline_in_a_batch_equals_the_scalar_loop():
+    """lqr and lqr_ndo, scenarios with their own nominal model (so their own K) and weights."""
+    rng = np.random.default_rng(11)
+    values = [dict(BASE, law="lqr", use_observer=bool(i % 2), seed=i, **{
+        "nominal.m_b": BASE["nominal.m_b"] * rng.uniform(0.9, 1.1), "lqr.R": float(rng.uniform(0.005, 0.05)),
+        "initial.theta_b": float(rng.uniform(-0.3, 0.3))}) for i in range(6)]
+    loops = [P.closed_loop(v, duration=2.0) for v in values]
+    assert len({lp.K for lp in loops}) == 6
+    batch = simulate_batch(loops, WINDOW, record=True)
+    for i, (b, lp) in enumerate(zip(batch.trajectories, loops)):
+        s = simulate(lp)
+        assert b.label == s.label == ("lqr_ndo" if i % 2 else "lqr") and len(b) == len(s)
+        for c in COLUMNS:
+            np.testing.assert_allclose(b[c], s[c], rtol=0, atol=1e-9, err_msg=f"scenario {i}, {c}")
+
+
+def test_one_batch_runs_one_law():
+    with pytest.raises(ValueError, match="the law"):
+        simulate_batch([P.closed_loop(BASE, duration=0.1), P.closed_loop(BASE, duration=0.1, law="lqr")], WINDOW)

@@ -17,13 +17,14 @@ from mwip_ros.runs import load_run, read_csv
 COLUMNS = ["t", "theta_w", "theta_b", "dtheta_w", "dtheta_b", "u", "tau_hat1", "tau_hat2", "tau_d1", "tau_d2"]
 
 
-@pytest.mark.parametrize("controller", ["dsc", "dscndo"])
+@pytest.mark.parametrize("controller", ["dsc", "dscndo", "lqr", "lqr_ndo"])
 def test_lockstep_graph_equals_offline_simulator(tmp_path, controller):
-    use_obs = controller == "dscndo"
-    code, csv_path, logs = run_lockstep(tmp_path, use_obs)
+    from mwip_ros.core.sim import LAWS
+    law, use_obs = LAWS[controller]
+    code, csv_path, logs = run_lockstep(tmp_path, use_obs, law=law)
     assert code == 0, logs["plant_sim"].output()
     graph = load_run(csv_path, estimates=tmp_path / "estimates.csv")  # the observer's estimates, joined by stamp
-    offline = simulate(P.closed_loop(P.merged_values(P.load_param_file(PARAMS)), use_observer=use_obs))
+    offline = simulate(P.closed_loop(P.merged_values(P.load_param_file(PARAMS)), use_observer=use_obs, law=law))
     assert len(graph) == len(offline) == 2001
     for c in COLUMNS:
         g, o = graph[c], offline[c]
@@ -33,6 +34,9 @@ def test_lockstep_graph_equals_offline_simulator(tmp_path, controller):
             assert ok.sum() >= len(g) - 2, c
             g, o = g[ok], o[ok]
         np.testing.assert_allclose(g, o, rtol=0, atol=1e-9, err_msg=c)
+    if law == "lqr":
+        K = P.typed.lqr_gain(P.merged_values(P.load_param_file(PARAMS)))
+        assert f"LQR gain K = [{K[0]:.6g}, {K[1]:.6g}, {K[2]:.6g}]" in logs["dscndo_controller"].output()
     # every node exited cleanly on SIGINT and reported what it did
     for name in ("disturbance_observer", "dscndo_controller"):
         assert logs[name].popen.returncode == 0, logs[name].output()
@@ -232,6 +236,10 @@ def test_gains_change_at_runtime_and_bad_updates_are_refused(tmp_path):
             wrong_type = set_("k2", 3)
             ro = set_("nominal.m_b", 300.0)
             flip = set_("use_observer", False)
+            to_lqr = set_("law", "lqr")
+            q_ok = set_("lqr.Q", [50.0, 5.0, 1.0])
+            q_bad = set_("lqr.Q", [100.0, 10.0, 0.0])      # the wheel-speed mode left undamped: no design
+            law_bad = set_("law", "pid")
         finally:
             node.destroy_node()
             rclpy.shutdown(context=ctx)
@@ -242,6 +250,13 @@ def test_gains_change_at_runtime_and_bad_updates_are_refused(tmp_path):
         assert not ro.successful and "read-only" in ro.reason
         assert ctl.wait_for_output("k1: 6.0 -> 7.0")
         assert ctl.wait_for_output("use_observer: True -> False")
+        assert to_lqr.successful and q_ok.successful
+        assert not q_bad.successful and "lqr.Q" in q_bad.reason and "stabilize" in q_bad.reason
+        assert not law_bad.successful and "law" in law_bad.reason
+        v = dict(P.merged_values(P.load_param_file(PARAMS)), **{"lqr.Q": [50.0, 5.0, 1.0]})
+        K = P.typed.lqr_gain(v)
+        assert ctl.wait_for_output("law now LQR")
+        assert ctl.wait_for_output(f"LQR gain K = [{K[0]:.6g}, {K[1]:.6g}, {K[2]:.6g}]")
 
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])

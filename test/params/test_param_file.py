@@ -51,6 +51,11 @@ def test_paper_file_loads_with_spec_values(tmp_path):
     (("disturbance_observer", "ros__parameters", "X"), [100.0, 0.0, 100.0], "disturbance_observer.X", "4 entries"),
     (("disturbance_observer", "ros__parameters", "X"), [100, 0, 0, 100], "disturbance_observer.X", "floating-point"),
     (("plant_sim", "ros__parameters", "fall_angle"), float("nan"), "plant_sim.fall_angle", "finite"),
+    (("dscndo_controller", "ros__parameters", "law"), "pid", "dscndo_controller.law", "one of 'dsc', 'lqr'"),
+    (("dscndo_controller", "ros__parameters", "lqr"), {"Q": [1.0, 1.0], "R": 0.01}, "dscndo_controller.lqr.Q",
+     "3 entries"),
+    (("dscndo_controller", "ros__parameters", "lqr"), {"Q": [1.0, 1.0, 1.0], "R": 0.0}, "dscndo_controller.lqr.R",
+     "> 0"),
 ])
 def test_bad_values_are_refused_naming_the_key(tmp_path, path, value, key, words):
     with pytest.raises(P.ParamError) as ei:
@@ -58,6 +63,15 @@ def test_bad_values_are_refused_naming_the_key(tmp_path, path, value, key, words
     assert ei.value.key == key
     assert f"'{key}'" in str(ei.value) and words in str(ei.value)
     assert "p.yaml" in str(ei.value)
+
+
+@pytest.mark.parametrize("Q, words", [([100.0, 10.0, 0.0], "does not stabilize"), ([-1.0, 1.0, 1.0], "semidefinite")])
+def test_lqr_weights_without_a_design_are_refused_naming_lqr_q(tmp_path, Q, words):
+    """Checked whatever the law: a switch to lqr at run time must not be the first to fail."""
+    pf = _load(tmp_path, _mutate(("dscndo_controller", "ros__parameters", "lqr"), {"Q": Q, "R": 0.01}))
+    with pytest.raises(P.ParamError) as ei:
+        P.merged_values(pf)
+    assert ei.value.key == "lqr.Q" and words in ei.value.reason and "p.yaml" in str(ei.value)
 
 
 def test_unknown_and_misspelled_keys(tmp_path):

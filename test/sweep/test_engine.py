@@ -6,7 +6,7 @@ import pytest
 
 from mwip_ros import params as P
 from mwip_ros.core import metrics
-from mwip_ros.core.sim import simulate
+from mwip_ros.core.sim import LAWS, simulate
 from mwip_ros.params.paths import default_params_file
 from mwip_ros.sweep import engine
 from mwip_ros.sweep.results import METRICS
@@ -19,9 +19,9 @@ VARY = {"plant_sim.actual.m_b": {"scale": [0.7, 1.3]}, "plant_sim.actual.l": {"s
         "plant_sim.torque_limit": {"values": [300.0]}}   # |u| <= 300 N m: from 0.9 rad it falls
 
 
-def small_spec(samples=3, duration=1.5):
+def small_spec(samples=3, duration=1.5, controllers=("dsc", "dscndo")):
     return parse_spec({"base": str(default_params_file()), "duration_s": duration, "metrics_window_s": [0.5, 1.5],
-                       "seed": 3, "samples": samples, "vary": VARY}, "spec.yaml")
+                       "seed": 3, "samples": samples, "vary": VARY, "controllers": list(controllers)}, "spec.yaml")
 
 
 def rows(runner):
@@ -40,7 +40,7 @@ def same(a, b):
 
 
 def test_each_row_equals_the_scalar_simulator_on_that_scenarios_parameter_file(tmp_path):
-    s = small_spec()
+    s = small_spec(controllers=("dsc", "dscndo", "lqr", "lqr_ndo"))
     sc = expand(s)
     got = rows(engine.run_local(engine.make_chunks(s, sc, chunk_size=4), workers=1))
     fell = 0
@@ -48,10 +48,11 @@ def test_each_row_equals_the_scalar_simulator_on_that_scenarios_parameter_file(t
         f = tmp_path / f"s{i}_{ctrl}.yaml"
         placed = {(a.section, a.name): sc.values[a.key][i] for a in s.axes}
         placed.update({("plant_sim", "seed"): sc.seeds[i], ("plant_sim", "duration_s"): s.duration_s,
-                       ("dscndo_controller", "use_observer"): ctrl == "dscndo"})
+                       ("dscndo_controller", "use_observer"): LAWS[ctrl][1], ("dscndo_controller", "law"): LAWS[ctrl][0]})
         parameter_file(s.base_sections, placed, f)
         v = P.merged_values(P.load_param_file(f))
         run = simulate(P.closed_loop(v))                    # what mwip_sim --params f runs
+        assert run.label == ctrl
         m = metrics.compute(run.columns, s.window, v["fall_angle"])
         assert row[0] == m.upright and row[0] == (not run.fallen)
         if run.fallen:
