@@ -45,6 +45,7 @@ setup(
             'mwip_report = mwip_ros.cli.report:main',
             'mwip_bag_repair = mwip_ros.cli.bag_repair:main',
             'mwip_sweep = mwip_ros.cli.sweep:main',
+            'mwip_tune = mwip_ros.cli.tune:main',
         ],
     },
 )

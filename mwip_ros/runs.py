@@ -57,21 +57,24 @@ def read_bag_run(bag, label: Optional[str] = None) -> Trajectory:
 
     u_k is the torque the plant applied over period k, i.e. the effort reported with
     state k+1; the last row takes the last recorded wheel_torque_cmd.  A state resent
-    with the same stamp counts once.
+    with the same stamp counts once.  When the plant measured with noise or delay, the bag
+    has ``true_joint_states`` too: the trajectory (and so every metric) is the true one, and the last
+    row's torque is NaN (with an actuator delay no message holds it).
     """
     from mwip_ros.bag import check, raw_messages
 
     check(bag)  # a damaged chunk raises BagError naming it: never read as data
     states: Dict[int, tuple] = {}
+    true_states: Dict[int, tuple] = {}
     est: Dict[int, tuple] = {}
     truth: Dict[int, tuple] = {}
     cmds: List[float] = []
     for _log_time, topic, data in raw_messages(bag):
         name = leaf(topic)
         try:
-            if name == "joint_states":
+            if name in ("joint_states", "true_joint_states"):
                 stamp, x, u_prev = L.parse_joint_state(data)
-                states[stamp] = (x, u_prev)
+                (states if name == "joint_states" else true_states)[stamp] = (x, u_prev)
             elif name == "disturbance_estimate":
                 stamp, a, b = L.parse_wrench(data)
                 est[stamp] = (a, b)
@@ -82,6 +85,9 @@ def read_bag_run(bag, label: Optional[str] = None) -> Trajectory:
                 cmds.append(L.parse_command(data))
         except BadMessage:
             continue  # not the graph's message (a foreign publisher): not part of the run
+    if true_states:   # the measurement is what the loop saw; the truth is what happened
+        # the torque that acted over the last period is in no message (an actuator delay holds it back)
+        states, cmds = true_states, []
     if not states:
         raise ValueError(f"{bag}: no joint_states messages (is this an mwip_ros bag?)")
     stamps = sorted(states)

@@ -1,9 +1,11 @@
 #!/usr/bin/env bash
 # The main job: run the ROS graph for DSC and then DSCNDO, record both runs, write the report.
 #
-#   scripts/run_experiment.sh [--params FILE] [--mode lockstep|realtime] [--duration S] [--no-record]
+#   scripts/run_experiment.sh [--params FILE]... [--mode lockstep|realtime] [--duration S] [--no-record]
 #                             [--out DIR] [--laws dsc,dscndo,lqr,lqr_ndo]
 #
+# --params may be repeated: a base file, then overlays (config/sensing_realistic.yaml, a tuned
+# overlay), merged in order as ROS merges repeated --params-file.
 # --laws picks the runs (default dsc,dscndo): dsc and dscndo are DSC without and with the
 # observer term, lqr and lqr_ndo the LQR baseline without and with it.
 #
@@ -14,7 +16,7 @@
 set -euo pipefail
 
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
-PARAMS="$ROOT/config/paper.yaml"
+PARAMS=()   # --params may be given several times: a base file, then overlays (merged in order, as ROS does)
 MODE=lockstep
 DURATION=""
 RECORD=1
@@ -24,7 +26,8 @@ LAWS="dsc,dscndo"
 usage() { awk 'NR > 1 && /^#/ { sub(/^# ?/, ""); print; next } NR > 1 { exit }' "$0"; }
 while [ $# -gt 0 ]; do
     case "$1" in
-        --params) PARAMS="$(cd "$(dirname "$2")" && pwd)/$(basename "$2")"; shift 2 ;;
+        --params) [ -f "$2" ] || { echo "run_experiment: no such parameter file: $2" >&2; exit 2; }
+                  PARAMS+=("$(cd "$(dirname "$2")" && pwd)/$(basename "$2")"); shift 2 ;;
         --mode) MODE="$2"; shift 2 ;;
         --duration) DURATION="$2"; shift 2 ;;
         --no-record) RECORD=0; shift ;;
@@ -39,7 +42,9 @@ if [ -n "$DURATION" ]; then
     [[ "$DURATION" =~ ^[0-9]+([.][0-9]*)?$ ]] || { echo "run_experiment: --duration must be seconds >= 0, got '$DURATION'" >&2; exit 2; }
     [[ "$DURATION" == *.* ]] || DURATION="$DURATION.0"   # ROS 2 reads 60 as an integer
 fi
-[ -f "$PARAMS" ] || { echo "run_experiment: no such parameter file: $PARAMS" >&2; exit 2; }
+[ ${#PARAMS[@]} -gt 0 ] || PARAMS=("$ROOT/config/paper.yaml")
+PF=()   # --params-file FILE for each
+for f in "${PARAMS[@]}"; do PF+=(--params-file "$f"); done
 IFS=',' read -r -a LAW_LIST <<< "$LAWS"
 for CTRL in "${LAW_LIST[@]}"; do
     case "$CTRL" in dsc|dscndo|lqr|lqr_ndo) ;; *) echo "run_experiment: --laws takes dsc, dscndo, lqr, lqr_ndo; got '$CTRL'" >&2; exit 2 ;; esac
@@ -69,7 +74,7 @@ stop_all() {
 trap 'stop_all' EXIT
 trap 'echo; echo "run_experiment: interrupted, stopping every node" >&2; exit 130' INT TERM
 
-mwip_theorem --params "$PARAMS" || echo "run_experiment: warning: the gains break Theorem 2 (see above)" >&2
+mwip_theorem --params "${PARAMS[@]}" || echo "run_experiment: warning: the gains break Theorem 2 (see above)" >&2
 
 STAMP="$(date +%Y-%m-%d_%H%M%S)"
 LOGS="$OUT/${STAMP}_logs"
@@ -92,7 +97,7 @@ for CTRL in "${LAW_LIST[@]}"; do
     SUBS=2
     if [ "$RECORD" = 1 ]; then
         BAG="$OUT/${STAMP}_${CTRL}"
-        mcap_recorder --ros-args --params-file "$PARAMS" -p "output:=$BAG" "${SIMTIME[@]}" \
+        mcap_recorder --ros-args "${PF[@]}" -p "output:=$BAG" "${SIMTIME[@]}" \
             > "$LOGS/${CTRL}_mcap_recorder.log" 2>&1 &
         PIDS+=($!)
         SUBS=3
@@ -101,13 +106,13 @@ for CTRL in "${LAW_LIST[@]}"; do
         RUNS+=("$LOGS/${CTRL}.csv")
     fi
     ESTIMATES+=("$LOGS/${CTRL}_estimates.csv")
-    disturbance_observer --ros-args --params-file "$PARAMS" -p "csv:=$LOGS/${CTRL}_estimates.csv" \
+    disturbance_observer --ros-args "${PF[@]}" -p "csv:=$LOGS/${CTRL}_estimates.csv" \
         > "$LOGS/${CTRL}_disturbance_observer.log" 2>&1 &
     PIDS+=($!)
-    dscndo_controller --ros-args --params-file "$PARAMS" -p "use_observer:=$USE_OBS" -p "law:=$LAW" \
+    dscndo_controller --ros-args "${PF[@]}" -p "use_observer:=$USE_OBS" -p "law:=$LAW" \
         > "$LOGS/${CTRL}_dscndo_controller.log" 2>&1 &
     PIDS+=($!)
-    plant_sim --ros-args --params-file "$PARAMS" "${PLANT_EXTRA[@]}" -p "expected_subscribers:=$SUBS" \
+    plant_sim --ros-args "${PF[@]}" "${PLANT_EXTRA[@]}" -p "expected_subscribers:=$SUBS" \
         -p "csv:=$LOGS/${CTRL}.csv" > "$LOGS/${CTRL}_plant_sim.log" 2>&1 &
     PLANT=$!
     PIDS+=("$PLANT")

@@ -120,24 +120,41 @@ def sweep_upright_map(cols: dict, axes: Sequence, path) -> bool:
     return True
 
 
-def sweep_rms_distribution(cols: dict, path) -> None:
-    """The distribution of theta_b RMS over the window per law (upright runs)."""
-    plt = _plt()
+def _rms_histogram(ax, cols: dict, bins) -> None:
     ctrl = np.asarray(cols["controller"])
     up = np.asarray(cols["upright"], dtype=bool)
     rms = np.asarray(cols["theta_b_rms"], dtype=float)
-    fig, ax = plt.subplots(figsize=(7, 4))
     ok = up & np.isfinite(rms) & (rms > 0)
-    if ok.any():
-        bins = np.geomspace(rms[ok].min(), rms[ok].max() * 1.0001, 40)
-        for law in laws(cols):
-            sel = ok & (ctrl == law)
-            ax.hist(rms[sel], bins=bins, histtype="step", lw=1.5, label=f"{law} ({sel.sum()} upright)")
-        ax.set_xscale("log")
-        ax.legend()
+    for law in laws(cols):
+        sel = ok & (ctrl == law)
+        ax.hist(rms[sel], bins=bins, histtype="step", lw=1.5, label=f"{law} ({sel.sum()} upright)")
+    ax.set_xscale("log")
     ax.set_xlabel(r"$\theta_b$ RMS over the window [rad]")
-    ax.set_ylabel("scenarios")
-    ax.set_title(r"Distribution of $\theta_b$ RMS")
+    ax.legend(fontsize=8)
+
+
+def _rms_bins(all_cols):
+    vals = np.concatenate([np.asarray(c["theta_b_rms"], dtype=float)[np.asarray(c["upright"], dtype=bool)]
+                           for c in all_cols])
+    vals = vals[np.isfinite(vals) & (vals > 0)]
+    return np.geomspace(vals.min(), vals.max() * 1.0001, 50) if len(vals) else 10
+
+
+def sweep_rms_distribution(cols: dict, path) -> None:
+    """The distribution of theta_b RMS over the window per law (upright runs)."""
+    sweep_rms_panels([("Distribution of $\\theta_b$ RMS", cols)], path)
+
+
+def sweep_rms_panels(named: Sequence, path) -> None:
+    """One panel per (title, results columns), side by side with a shared axis: e.g. ideal and realistic
+    sensing."""
+    plt = _plt()
+    fig, axes = plt.subplots(1, len(named), figsize=(7 * len(named), 4), sharex=True, sharey=True, squeeze=False)
+    bins = _rms_bins([c for _, c in named])
+    for ax, (title, cols) in zip(axes[0], named):
+        _rms_histogram(ax, cols, bins)
+        ax.set_title(title)
+    axes[0][0].set_ylabel("scenarios")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

@@ -24,8 +24,9 @@ def _parser() -> argparse.ArgumentParser:
                "  mwip_sim --compare --plot compare.png --csv runs.csv   (writes runs_dsc.csv, runs_dscndo.csv)\n"
                "  mwip_sim --compare dsc dscndo lqr lqr_ndo              (the paper's laws and the LQR baseline)",
         formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--params", type=Path, default=None,
-                    help="ROS 2 parameter file (default: the package's config/paper.yaml)")
+    ap.add_argument("--params", type=Path, nargs="+", default=None, metavar="FILE",
+                    help="ROS 2 parameter file(s), merged in order as ROS merges repeated --params-file (e.g. "
+                         "config/paper.yaml config/sensing_realistic.yaml); default: the package's config/paper.yaml")
     mode = ap.add_mutually_exclusive_group()
     mode.add_argument("--controller", choices=tuple(LAWS), default=None,
                       help="dsc, dscndo (DSC with the observer term), lqr (the LQR baseline), lqr_ndo (LQR with the "
@@ -49,9 +50,9 @@ def _suffixed(path: Path, label: str) -> Path:
 
 def main(argv=None) -> int:
     args = _parser().parse_args(argv)
-    path = args.params or default_params_file()
+    paths = args.params or [default_params_file()]
     try:
-        values = P.merged_values(P.load_param_file(path))
+        values = P.merged_values(P.load_param_files(paths))
     except P.ParamError as exc:
         print(f"mwip_sim: error: {exc}", file=sys.stderr)
         return 2

@@ -37,25 +37,41 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("spec", nargs="?", type=Path, help="the sweep spec (YAML); see config/sweeps/")
     ap.add_argument("--out", type=Path, metavar="DIR", help="output directory (created; must not hold results)")
     ap.add_argument("--force", action="store_true", help="overwrite the results already in --out")
-    ap.add_argument("--workers", type=int, default=os.cpu_count() or 1, metavar="N",
-                    help="local worker processes (default: the core count, %(default)s); 1 = in this process")
-    ap.add_argument("--dask", metavar="ADDRESS",
-                    help="run the chunks on a dask.distributed scheduler (tcp://host:8786), or 'local:N' for a "
-                         "local cluster of N workers; --workers is then ignored")
-    ap.add_argument("--chunk", type=int, default=engine.DEFAULT_CHUNK, metavar="N",
-                    help="scenarios per chunk (default %(default)s); the chunking, not the runner, fixes the "
-                         "results")
+    add_runner_arguments(ap)
     ap.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     ap.add_argument("-q", "--quiet", action="store_true", help="no progress output")
     back = ap.add_argument_group("from a row back to the ROS graph")
-    back.add_argument("--results", type=Path, metavar="DIR", help="a finished (or interrupted) sweep's --out")
+    back.add_argument("--results", type=Path, nargs="+", metavar="DIR",
+                      help="a finished (or interrupted) sweep's --out (several with --plot-rms)")
     back.add_argument("--scenario", type=int, metavar="N", help="the row's scenario number")
     back.add_argument("--controller", choices=CONTROLLERS,
                       help="the row's law (default: dscndo when the sweep ran it)")
     back.add_argument("--write-params", type=Path, metavar="FILE",
                       help="write the scenario's complete parameter file (for mwip_sim --params or "
                            "scripts/run_experiment.sh --params)")
+    back.add_argument("--plot-rms", type=Path, metavar="FILE.png",
+                      help="the theta_b RMS distribution of each --results DIR, side by side on one axis")
     return ap
+
+
+def add_runner_arguments(ap: argparse.ArgumentParser) -> None:
+    """--workers, --dask, --chunk: where a sweep's (or a tuner's) chunks run."""
+    ap.add_argument("--workers", type=int, default=os.cpu_count() or 1, metavar="N",
+                    help="local worker processes (default: the core count, %(default)s); 1 = in this process")
+    ap.add_argument("--dask", metavar="ADDRESS",
+                    help="run the chunks on a dask.distributed scheduler (tcp://host:8786), or 'local:N' for a "
+                         "local cluster of N workers; --workers is then ignored")
+    ap.add_argument("--chunk", type=int, default=engine.DEFAULT_CHUNK, metavar="N",
+                    help="runs per chunk (default %(default)s); the chunking, not the runner, fixes the results")
+
+
+def runner_from(args) -> engine.Runner:
+    """The runner the arguments ask for; ValueError (the message for the user) when they make no sense."""
+    if args.workers < 1 or args.chunk < 1:
+        raise ValueError("--workers and --chunk must be >= 1")
+    if args.dask and args.dask.startswith("local:") and not args.dask[6:].isdigit():
+        raise ValueError(f"--dask local:N needs a number of workers, got {args.dask!r}")
+    return engine.Runner(args.workers, args.dask)
 
 
 def _fail(text: str) -> int:
@@ -65,14 +81,16 @@ def _fail(text: str) -> int:
 
 def main(argv=None) -> int:
     args = _parser().parse_args(argv)
+    if args.plot_rms is not None:
+        return _plot_rms(args)
     if args.results is not None or args.write_params is not None:
         return _write_params(args)
     if args.spec is None or args.out is None:
         return _fail("give a spec and --out DIR (or --results DIR --scenario N --write-params FILE); see --help")
-    if args.workers < 1 or args.chunk < 1:
-        return _fail("--workers and --chunk must be >= 1")
-    if args.dask and args.dask.startswith("local:") and not args.dask[6:].isdigit():
-        return _fail(f"--dask local:N needs a number of workers, got {args.dask!r}")
+    try:
+        runner = runner_from(args)
+    except ValueError as exc:
+        return _fail(str(exc))
     try:
         spec = load_spec(args.spec)
         scenarios = expand(spec)
@@ -83,22 +101,21 @@ def main(argv=None) -> int:
     args.out.mkdir(parents=True, exist_ok=True)
     info = _sweep_info(spec, args)
     (args.out / "sweep.json").write_text(json.dumps(info, indent=2))
-    shutil.copyfile(spec.base_path, args.out / "base.yaml")
+    parameter_file(spec.base_sections, {}, args.out / "base.yaml",   # the base (and overlays) as one file
+                   f"# {PROG}: the base of this sweep: {' + '.join(map(str, spec.base_path))}\n")
     shutil.copyfile(args.spec, args.out / "spec.yaml")
 
     chunks = engine.make_chunks(spec, scenarios, args.chunk)
     total = sum(len(c) for c in chunks)
     steps_per_run = int(round(spec.duration_s * spec.base_values["control_rate_hz"]))
-    where = f"Dask at {args.dask}" if args.dask else (f"{args.workers} worker processes" if args.workers > 1
-                                                      else "this process")
+    where = runner.describe()
     if not args.quiet:
         print(f"{PROG}: {len(scenarios):,} scenarios x {len(spec.controllers)} law(s) = {total:,} runs of "
               f"{spec.duration_s:g} s in {len(chunks)} chunk(s), on {where}", file=sys.stderr)
     writer = results.ResultsWriter(args.out / "results.csv", [a.key for a in spec.axes])
     progress = _Progress(total, steps_per_run, args.quiet)
-    runner = engine.run_dask(chunks, args.dask) if args.dask else engine.run_local(chunks, args.workers)
     try:
-        for chunk, res in runner:
+        for chunk, res in runner(chunks):
             writer.add(chunk, res, scenarios)
             progress.update(len(chunk), res.steps)
     except KeyboardInterrupt:
@@ -114,8 +131,7 @@ def main(argv=None) -> int:
               f"{args.out / 'results.csv'}", file=sys.stderr)
         return 1
     finally:
-        if hasattr(runner, "close"):
-            runner.close()
+        runner.close()
     progress.close()
     writer.close()
     results.sort_file(args.out / "results.csv", list(spec.controllers))
@@ -133,7 +149,7 @@ def main(argv=None) -> int:
 def _sweep_info(spec, args) -> dict:
     def dist(a):
         return f"{a.kind} {list(a.args)}" if a.kind != "grid" or len(a.args) <= 6 else f"grid of {len(a.args)}"
-    return {"name": args.spec.stem, "spec": str(args.spec), "base": str(spec.base_path),
+    return {"name": args.spec.stem, "spec": str(args.spec), "base": [str(b) for b in spec.base_path],
             "controllers": list(spec.controllers), "duration_s": spec.duration_s, "window": list(spec.window),
             "seed": spec.seed, "samples": spec.samples, "scenarios": spec.n_scenarios,
             "varied": {a.key: dist(a) for a in spec.axes},
@@ -191,10 +207,26 @@ class _Progress:
                   f"({self.steps / max(wall, 1e-9):,.0f} scenario-steps/s)", file=sys.stderr)
 
 
+def _plot_rms(args) -> int:
+    if not args.results:
+        return _fail("--plot-rms needs --results DIR [DIR ...]")
+    named = []
+    for d in args.results:
+        try:
+            info = json.loads((d / "sweep.json").read_text())
+            named.append((info.get("name", d.name), results.read_results(d / "results.csv")))
+        except (OSError, ValueError) as exc:
+            return _fail(f"{d} is not a sweep's output directory ({exc})")
+    from mwip_ros.cli import plotting
+    plotting.sweep_rms_panels(named, args.plot_rms)
+    print(f"wrote {args.plot_rms}")
+    return 0
+
+
 def _write_params(args) -> int:
-    if args.results is None or args.scenario is None or args.write_params is None:
-        return _fail("--write-params needs --results DIR and --scenario N")
-    d = args.results
+    if args.results is None or len(args.results) != 1 or args.scenario is None or args.write_params is None:
+        return _fail("--write-params needs one --results DIR and --scenario N")
+    d = args.results[0]
     try:
         info = json.loads((d / "sweep.json").read_text())
         cols = results.read_results(d / "results.csv")

@@ -32,10 +32,11 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="mwip_theorem",
                                  description="Print a1..a5 and gamma of Theorem 2 (eq. 34-35) for the gains and "
                                              "nominal model of a ROS 2 parameter file. Exit 0 if gamma > 0, else 1.")
-    ap.add_argument("--params", type=Path, default=None, help="parameter file (default: config/paper.yaml)")
+    ap.add_argument("--params", type=Path, nargs="+", default=None, metavar="FILE",
+                    help="parameter file(s), merged in order (default: config/paper.yaml)")
     args = ap.parse_args(argv)
     try:
-        values = P.merged_values(P.load_param_file(args.params or default_params_file()))
+        values = P.merged_values(P.load_param_files(args.params or [default_params_file()]))
     except P.ParamError as exc:
         print(f"mwip_theorem: error: {exc}", file=sys.stderr)
         return 2

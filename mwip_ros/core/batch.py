@@ -28,6 +28,7 @@ from .metrics import window_metrics
 from .model import PhysicalParams, Sinusoid, State, accel, lumped_disturbance
 from .observer import DiscreteObserver
 from .plant import rk4_period
+from .sensing import NOISE_BLOCK as SENSOR_BLOCK, Actuator, Sensors, sensor_rng
 from .sim import ClosedLoop, make_controller
 from .trajectory import COLUMNS, Trajectory
 
@@ -97,6 +98,44 @@ class _Noise:
         return d_w
 
 
+class _SensorNormals:
+    """The sensors' four normal draws per period for every scenario: each noisy scenario's own stream, in the
+    scalar plant's order (``core.sensing.Normals``); zeros for the others."""
+
+    def __init__(self, seeds, noisy):
+        self.idx = np.flatnonzero(noisy)
+        self.gens = [sensor_rng(int(seeds[i])) for i in self.idx]
+        self.block = np.empty((len(self.idx), SENSOR_BLOCK, 4))
+        self.used = SENSOR_BLOCK
+        self.z = np.zeros((4, len(seeds)))
+
+    def __call__(self):
+        if self.used == SENSOR_BLOCK:
+            for row, gen in enumerate(self.gens):
+                self.block[row] = gen.standard_normal((SENSOR_BLOCK, 4))
+            self.used = 0
+        self.z[:, self.idx] = self.block[:, self.used, :].T
+        self.used += 1
+        return tuple(self.z)
+
+
+def _sensing(pcs, n):
+    """The batch's sensors and actuator (None when off); the scenarios share the encoder and the delays."""
+    scs = [pc.sensing for pc in pcs]
+    counts = _same((sc.encoder_counts_per_rev for sc in scs), "the encoder resolution")
+    delay = _same((sc.delay_periods for sc in scs), "the measurement delay")
+    act_delay = _same((sc.actuator_delay_periods for sc in scs), "the actuator delay")
+    sensors = actuator = None
+    if any(sc.measuring for sc in scs):
+        noisy = np.array([sc.noisy for sc in scs])
+        std = tuple(_column(sc.noise_std[i] for sc in scs) for i in range(4))
+        normals = _SensorNormals([pc.seed for pc in pcs], noisy) if noisy.any() else None
+        sensors = Sensors(delay, counts, std, normals, np)
+    if act_delay:
+        actuator = Actuator(act_delay, np.zeros(n))
+    return sensors, actuator
+
+
 def simulate_batch(loops: Sequence[ClosedLoop], window: Sequence[float], record: bool = False) -> BatchResult:
     """Run every scenario of ``loops`` for its ``duration_s``; ``record`` keeps each one's trajectory."""
     n = len(loops)
@@ -117,6 +156,7 @@ def simulate_batch(loops: Sequence[ClosedLoop], window: Sequence[float], record:
     K = tuple(_column(lp.K[i] for lp in loops) for i in range(3)) if law == "lqr" else None
     ctrl = make_controller(law, nominal, _stack([lp.gains for lp in loops], DscGains), K, h, True, np)
 
+    sensors, actuator = _sensing(pcs, n)
     x = State(*(arr(pc.initial[i] for pc in pcs) for i in range(4)))
     u_prev = np.zeros(n)
     D_w = noise.draw()
@@ -131,9 +171,12 @@ def simulate_batch(loops: Sequence[ClosedLoop], window: Sequence[float], record:
     with np.errstate(all="ignore"):  # a diverging scenario may overflow: it is frozen, the others go on
         for k in range(n_steps + 1):
             t = k * h
-            tau_hat = obs.update(x, u_prev)
-            out = ctrl.step(x, (np.where(use_obs, tau_hat[0], 0.0), np.where(use_obs, tau_hat[1], 0.0)))
+            x_m, u_m = sensors.sample(x, u_prev) if sensors else (x, u_prev)   # what the loop sees
+            tau_hat = obs.update(x_m, u_m)
+            out = ctrl.step(x_m, (np.where(use_obs, tau_hat[0], 0.0), np.where(use_obs, tau_hat[1], 0.0)))
             u = np.where(limit > 0.0, np.clip(out.u, -limit, limit), out.u)
+            if actuator:
+                u = actuator.apply(u)   # the torque that acts over [t_k, t_k+1)
             in_window = first_w <= k < first_w + n_window
             if record or in_window:   # the true tau_d is only compared inside the window
                 ddq = accel(actual, D_w, D_b, x, u, f1.at(t, np) + 0.0, f2.at(t, np) + 0.0, np)

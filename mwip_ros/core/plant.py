@@ -15,6 +15,7 @@ from typing import Optional, Tuple
 import numpy as np
 
 from .model import PhysicalParams, Sinusoid, State, accel, lumped_disturbance
+from .sensing import SensingConfig
 
 __all__ = ["PlantConfig", "PlantSim", "rk4_period", "saturate"]
 
@@ -36,6 +37,7 @@ class PlantConfig:
     initial: State
     torque_limit: float              # 0 = none
     fall_angle: float                # |theta_b| beyond this is a fall [rad]
+    sensing: SensingConfig = SensingConfig()   # measurement noise, encoder, delays (core.sensing); off
 
 
 def saturate(u: float, limit: float) -> float:

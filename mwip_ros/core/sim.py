@@ -1,7 +1,9 @@
 """Offline closed-loop simulator: the discrete-time contract (docs/theory.md), without ROS.
 
 Row k of the result is the state at t_k, the command u_k computed from it, the estimate
-tau_hat_k and the true lumped disturbance at t_k (:mod:`.trajectory`).  The ``plant_sim``,
+tau_hat_k and the true lumped disturbance at t_k (:mod:`.trajectory`).  With sensing or
+actuation options on (:mod:`.sensing`), the observer and the law see the measurement, the
+table holds the true state and the torque that acted.  The ``plant_sim``,
 ``disturbance_observer`` and ``dscndo_controller`` nodes call the same classes in the same
 order, so a lockstep graph reproduces these numbers.
 """
@@ -15,6 +17,7 @@ from .controller import DscController, DscGains
 from .lqr import LqrController
 from .observer import DiscreteObserver, gain_matrix
 from .plant import PlantConfig, PlantSim, saturate
+from .sensing import Actuator, Sensors
 from .trajectory import Trajectory, TrajectoryTable
 
 __all__ = ["ClosedLoop", "simulate", "LAWS", "law_name", "make_controller"]
@@ -65,13 +68,19 @@ def simulate(loop: ClosedLoop, label: str = "", progress: Optional[Callable[[flo
     obs = DiscreteObserver(pc.nominal, gain_matrix(loop.X), h)
     ctrl = make_controller(loop.law, pc.nominal, loop.gains, loop.K, h, loop.use_observer)
     table = TrajectoryTable(internals=True)
+    sc = pc.sensing
+    sensors = Sensors.for_plant(sc, pc.seed) if sc.measuring else None
+    actuator = Actuator(sc.actuator_delay_periods) if sc.actuator_delay_periods else None
     fallen = False
     every = max(1, n_steps // 10)
     for k in range(n_steps + 1):
-        x = plant.x
-        tau_hat = obs.update(x, plant.u_prev)
-        out = ctrl.step(x, tau_hat)
+        x = plant.x                      # the true state: the table and the metrics judge it
+        x_m, u_m = sensors.sample(x, plant.u_prev) if sensors else (x, plant.u_prev)   # what the loop sees
+        tau_hat = obs.update(x_m, u_m)
+        out = ctrl.step(x_m, tau_hat)
         u = saturate(out.u, pc.torque_limit)
+        if actuator:
+            u = actuator.apply(u)        # the torque that acts over [t_k, t_k+1)
         table.append(plant.t, x, u, tau_hat, plant.lumped_disturbance(u), out)
         if plant.fallen:
             fallen = True

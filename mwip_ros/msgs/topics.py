@@ -13,6 +13,7 @@ __all__ = ["GRAPH_TOPICS", "split_type", "msg_class", "leaf", "graph_type"]
 
 GRAPH_TOPICS: Dict[str, str] = {
     "joint_states": "sensor_msgs/msg/JointState",
+    "true_joint_states": "sensor_msgs/msg/JointState",   # only with sensing or actuation options on
     "wheel_torque_cmd": "std_msgs/msg/Float64",
     "disturbance_estimate": "geometry_msgs/msg/WrenchStamped",
     "lumped_disturbance": "geometry_msgs/msg/WrenchStamped",

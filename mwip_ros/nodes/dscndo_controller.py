@@ -61,18 +61,26 @@ class DscndoController(Node, GracefulNodeMixin):
         self.input = StateInput(self, self.rejects, STAMP_WINDOW_PERIODS * round(P.period(self.v) * 1e9),
                                 "controller")
         self.watch = PublisherWatch(self, ["joint_states", "disturbance_estimate"])
-        self.get_logger().info(f"{self._describe()} ready; {self._lqr_text()}")
+        self.get_logger().info(self._ready_text())
 
     @property
     def ctrl(self):
         """The law in use: ``self.dsc`` or ``self.lqr``."""
         return self.lqr if self.v["law"] == "lqr" else self.dsc
 
+    def _name(self) -> str:
+        return {"dsc": "DSC", "dscndo": "DSCNDO", "lqr": "LQR", "lqr_ndo": "LQR+NDO"}[
+            law_name(self.v["law"], self.v["use_observer"])]
+
     def _describe(self) -> str:
         g = self.dsc.gains
-        name = {"dsc": "DSC", "dscndo": "DSCNDO", "lqr": "LQR", "lqr_ndo": "LQR+NDO"}[
-            law_name(self.v["law"], self.v["use_observer"])]
-        return f"{name} (k1 = {g.k1}, k2 = {g.k2}, tau4 = {g.tau4})" if self.v["law"] == "dsc" else name
+        return f"{self._name()} (k1 = {g.k1}, k2 = {g.k2}, tau4 = {g.tau4})" if self.v["law"] == "dsc" else self._name()
+
+    def _ready_text(self) -> str:
+        g = self.dsc.gains
+        if self.v["law"] == "dsc":
+            return f"{self._name()} ready: k1 = {g.k1}, k2 = {g.k2}, tau4 = {g.tau4}; ({self._lqr_text()}, not in use)"
+        return f"{self._name()} ready: {self._lqr_text()}"
 
     def _lqr_text(self) -> str:
         K = self.lqr.K

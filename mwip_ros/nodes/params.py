@@ -97,6 +97,8 @@ def _descriptor(spec: P.ParamSpec) -> ParameterDescriptor:
         d.floating_point_range = [FloatingPointRange(from_value=float(bounds[0]), to_value=float(bounds[1]),
                                                      step=0.0)]
         d.additional_constraints = spec.check(bounds[0] - 1.0).split(", got", 1)[0] if bounds[0] == 0.0 else ""
+    elif spec.type == "integer" and bounds is not None:
+        d.integer_range = [IntegerRange(from_value=int(bounds[0]), to_value=int(bounds[1]), step=1)]
     elif spec.type == "integer" and check in ("_at_least_one", "_at_least_zero", "_priority"):
         lo = 1 if check == "_at_least_one" else 0
         hi = 99 if check == "_priority" else 2 ** 31 - 1

@@ -33,6 +33,7 @@ from std_msgs.msg import Float64
 
 from mwip_ros.core import metrics
 from mwip_ros.core.plant import PlantSim, saturate
+from mwip_ros.core.sensing import Actuator, Sensors
 from mwip_ros.core.trajectory import TrajectoryTable
 from mwip_ros.msgs import BadMessage
 from mwip_ros.msgs import layouts as L
@@ -54,6 +55,9 @@ class PlantSimNode(Node, GracefulNodeMixin):
         self.v = declare(self, NAME, argv)
         self.cfg = plant_config(self.v)
         self.plant = PlantSim(self.cfg)
+        sc = self.cfg.sensing
+        self.sensors = Sensors.for_plant(sc, self.cfg.seed) if sc.measuring else None
+        self.actuator = Actuator(sc.actuator_delay_periods) if sc.actuator_delay_periods else None
         self.mode = self.v["mode"]
         self.h = self.cfg.h
         self.period_ns = round(self.h * 1e9)
@@ -73,6 +77,8 @@ class PlantSimNode(Node, GracefulNodeMixin):
         self.missed = 0
 
         self.state_pub = self.create_publisher(JointState, "joint_states", GRAPH_QOS)
+        # with sensing or actuation options on, joint_states is the measurement: the truth goes here
+        self.true_pub = self.create_publisher(JointState, "true_joint_states", GRAPH_QOS) if sc.active else None
         self.truth_pub = self.create_publisher(WrenchStamped, "lumped_disturbance", GRAPH_QOS)
         self.clock_pub = self.create_publisher(Clock, "/clock", GRAPH_QOS) if self.mode == "lockstep" else None
         cmd_sub = self.create_subscription(Float64, "wheel_torque_cmd", self._on_cmd, INPUT_QOS, raw=True)
@@ -83,10 +89,15 @@ class PlantSimNode(Node, GracefulNodeMixin):
             self, self.state_pub, self.clock_pub, cmd_sub, need_subs=self.v["expected_subscribers"],
             timeout_s=self.v["lockstep_timeout_s"], timeout_param="lockstep_timeout_s", settle_s=SETTLE_S,
             idle_hint="a wheel_torque_cmd (the controller is running but did not answer)",
-            also_published=(self.truth_pub,))
+            also_published=tuple(p for p in (self.truth_pub, self.true_pub) if p is not None))
         dur = f"{self.v['duration_s']:g} s" if self.n_steps is not None else "until stopped"
         self.get_logger().info(f"{self.mode} plant: h = {self.h * 1e3:.3f} ms, {self.cfg.substeps} RK4 sub-steps, "
                                f"{dur}, seed {self.cfg.seed}")
+        if sc.active:
+            self.get_logger().info(
+                f"sensing: noise std {list(sc.noise_std)} (theta_w, theta_b, theta_w', theta_b'), encoder "
+                f"{sc.encoder_counts_per_rev or 'ideal'} counts/rev, measurement delay {sc.delay_periods}, actuator "
+                f"delay {sc.actuator_delay_periods} period(s); the true state is on true_joint_states")
 
     # --- inputs ---------------------------------------------------------------------------
     def _on_wrench(self, data: bytes) -> None:
@@ -119,11 +130,20 @@ class PlantSimNode(Node, GracefulNodeMixin):
         return self.plant.k * self.period_ns
 
     def _state_bytes(self) -> bytes:
-        return L.encode_state(self._stamp(), self.plant.x, self.plant.u_prev)
+        """State k as published: the measurement (core.sensing), once per step; the truth beside it when
+        sensing or actuation options are on."""
+        p = self.plant
+        if self.true_pub is not None:
+            self.true_pub.publish(L.encode_state(self._stamp(), p.x, p.u_prev))
+        x, u_prev = self.sensors.sample(p.x, p.u_prev) if self.sensors else (p.x, p.u_prev)
+        return L.encode_state(self._stamp(), x, u_prev)
 
     def _finish_period(self, u: float) -> bool:
-        """Record row k with u_k, publish tau_d at t_k; integrate unless the run ends. True = ended."""
+        """Record row k with u_k (as it acts: after the actuator's delay), publish tau_d at t_k; integrate
+        unless the run ends. True = ended."""
         p = self.plant
+        if self.actuator is not None:
+            u = self.actuator.apply(u)
         tau_d = p.lumped_disturbance(u, self.extra)
         self.truth_pub.publish(L.encode_wrench(self._stamp(), tau_d[0], tau_d[1]))
         self.table.append(p.t, p.x, u, tau_d=tau_d)
@@ -224,7 +244,7 @@ class PlantSimNode(Node, GracefulNodeMixin):
             log.warning(f"interrupted at t = {self.plant.t:.3f} s of {self.n_steps * self.h:g} s")
         wall = (time.monotonic() - self.t_wall0) if self.t_wall0 else 0.0
         n = len(self.table)
-        for pub in (self.state_pub, self.truth_pub, self.clock_pub):
+        for pub in (self.state_pub, self.truth_pub, self.clock_pub, self.true_pub):
             if pub is not None:  # let a recorder receive the last states before this process exits
                 pub.wait_for_all_acked(Duration(seconds=2.0))
         summary = {"mode": self.mode, "control_rate_hz": 1.0 / self.h, "periods": n, "wall_s": wall,

@@ -28,7 +28,7 @@ def load_yaml(text: str):
     """A YAML document (a file, or the value of a ``-p name:=value`` rule) with ROS 2's numbers."""
     return yaml.load(text, Loader=RosYamlLoader)
 
-__all__ = ["ParamFile", "RosYamlLoader", "load_param_file", "load_yaml", "merged_values", "node_key",
+__all__ = ["ParamFile", "RosYamlLoader", "load_param_file", "load_param_files", "load_yaml", "merged_values", "node_key",
            "parse_param_dict"]
 
 
@@ -136,6 +136,17 @@ def load_param_file(path) -> ParamFile:
     except (OSError, UnicodeDecodeError) as exc:
         raise ParamError("--params-file", f"cannot read {p}: {exc}") from None
     return parse_param_dict(doc, str(p))
+
+
+def load_param_files(paths) -> ParamFile:
+    """Several parameter files, each checked, merged in order as ROS merges repeated ``--params-file``: a key
+    in a later file wins (a base file, then an overlay such as ``config/sensing_realistic.yaml``)."""
+    paths = [paths] if isinstance(paths, (str, Path)) else list(paths)
+    merged = ParamFile(path=" + ".join(str(p) for p in paths))
+    for p in paths:
+        for section, values in load_param_file(p).sections.items():
+            merged.sections.setdefault(section, {}).update(values)
+    return merged
 
 
 NODES_OF_THE_LOOP = ("dscndo_controller", "disturbance_observer", "plant_sim")

@@ -76,6 +76,13 @@ def _at_least_one(v):
     return None if v >= 1 else f"must be >= 1, got {v!r}"
 
 
+def _count_range(lo: int, hi: int):
+    def check(v):
+        return None if lo <= v <= hi else f"must be a whole number from {lo} to {hi}, got {v!r}"
+    check.bounds = (lo, hi)
+    return check
+
+
 def _priority(v):
     return None if 0 <= v <= 99 else f"must be 0 (normal scheduling) or a SCHED_FIFO priority 1..99, got {v!r}"
 
@@ -212,6 +219,17 @@ NODE_SPECS: Dict[str, List[ParamSpec]] = {
         ParamSpec("csv", "string", "", "write the trajectory (mwip_sim CSV columns) to this file; '' = none"),
         ParamSpec("summary_json", "string", "", "write the run's summary (steps/s, realtime loop periods, missed "
                   "deadlines, stale commands, metrics) to this JSON file; '' = none"),
+        *[ParamSpec(f"sensors.noise_std.{ch}", "double", 0.0, f"standard deviation of the zero-mean Gaussian noise on "
+                    f"the published {ch} [{unit}], drawn once per period (its own seeded stream); 0 = none",
+                    _non_negative(hi), unit=unit)
+          for ch, unit, hi in (("theta_w", "rad", 1e3), ("theta_b", "rad", math.pi), ("dtheta_w", "rad/s", 1e3),
+                               ("dtheta_b", "rad/s", 1e3))],
+        ParamSpec("sensors.encoder_counts_per_rev", "integer", 0, "wheel encoder resolution: the published theta_w "
+                  "is quantized to 2 pi / counts; 0 = ideal", _count_range(0, 1 << 30)),
+        ParamSpec("sensors.delay_periods", "integer", 0, "measurement delay: the state published at step k is the "
+                  "measurement of step k - d (the first d steps publish the first one)", _count_range(0, 100000)),
+        ParamSpec("actuator.delay_periods", "integer", 0, "actuator delay: the command answering state k acts "
+                  "over [t_(k+d), t_(k+d+1)); zero torque before the first one", _count_range(0, 100000)),
         ParamSpec("expected_subscribers", "integer", 2, "lockstep: wait until joint_states has this many "
                   "matched subscriptions before the first state (2 = observer + controller; +1 per recorder)",
                   _at_least_zero),

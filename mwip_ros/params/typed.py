@@ -6,11 +6,13 @@ from typing import Any, Mapping, Optional
 from mwip_ros.core.controller import DscGains
 from mwip_ros.core.model import PhysicalParams, Sinusoid, State
 from mwip_ros.core.plant import PlantConfig
+from mwip_ros.core.sensing import SensingConfig
 from mwip_ros.core.sim import ClosedLoop
 
 from .schema import PAPER_NOMINAL
 
-__all__ = ["physical", "sinusoid", "gains", "period", "observer_gain", "plant_config", "lqr_gain", "closed_loop"]
+__all__ = ["physical", "sinusoid", "gains", "period", "observer_gain", "plant_config", "sensing", "lqr_gain",
+           "closed_loop"]
 
 
 def physical(values: Mapping[str, Any], prefix: str) -> PhysicalParams:
@@ -45,7 +47,15 @@ def plant_config(v: Mapping[str, Any]) -> PlantConfig:
         tau_ext1=sinusoid(v, "tau_ext1"), tau_ext2=sinusoid(v, "tau_ext2"),
         h=period(v), substeps=v["substeps"], seed=v["seed"],
         initial=State(v["initial.theta_w"], v["initial.theta_b"], v["initial.dtheta_w"], v["initial.dtheta_b"]),
-        torque_limit=v["torque_limit"], fall_angle=v["fall_angle"])
+        torque_limit=v["torque_limit"], fall_angle=v["fall_angle"], sensing=sensing(v))
+
+
+def sensing(v: Mapping[str, Any]) -> SensingConfig:
+    """The plant's sensing and actuation options (all off by default)."""
+    return SensingConfig(noise_std=tuple(v[f"sensors.noise_std.{c}"] for c in ("theta_w", "theta_b", "dtheta_w",
+                                                                                "dtheta_b")),
+                         encoder_counts_per_rev=v["sensors.encoder_counts_per_rev"],
+                         delay_periods=v["sensors.delay_periods"], actuator_delay_periods=v["actuator.delay_periods"])
 
 
 def lqr_gain(v: Mapping[str, Any]):

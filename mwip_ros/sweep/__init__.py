@@ -5,9 +5,11 @@
 :mod:`.scenarios`    every scenario's values and D_w seed; a scenario's parameter file
 :mod:`.engine`       chunks, and the runners: this process, worker processes, Dask
 :mod:`.results`      results.csv (streamed), summary.json / summary.md, region of attraction
+:mod:`.tune`         gain tuning: differential evolution over a spec's scenarios
 ===================  ===============================================================
 
-The command line is :mod:`mwip_ros.cli.sweep` (``mwip_sweep``); the figures are in
+The command lines are :mod:`mwip_ros.cli.sweep` (``mwip_sweep``) and :mod:`mwip_ros.cli.tune`
+(``mwip_tune``); the figures are in
 :mod:`mwip_ros.cli.plotting`.
 """
 from .spec import Axis, SpecError, SweepSpec, load_spec, parse_spec

@@ -20,7 +20,8 @@ from typing import Any, Dict, Iterator, List, Sequence, Tuple
 
 import numpy as np
 
-__all__ = ["Chunk", "ChunkResult", "make_chunks", "run_chunk", "run_local", "run_dask", "DEFAULT_CHUNK"]
+__all__ = ["Chunk", "ChunkResult", "make_chunks", "chunks_of", "run_chunk", "Runner", "run_local", "run_dask",
+           "DEFAULT_CHUNK"]
 
 DEFAULT_CHUNK = 5000   # scenarios per chunk: numpy's per-call cost is small against 5,000 elements, and a
                        # 10 s run's window (4 x 1,001 samples per scenario) takes 160 MB (BENCHMARKS.md)
@@ -49,17 +50,22 @@ class ChunkResult:
 
 def make_chunks(spec, scenarios, chunk_size: int = DEFAULT_CHUNK) -> List[Chunk]:
     """Law by law, ``chunk_size`` scenarios at a time."""
-    n = len(scenarios)
-    out = []
-    for ctrl in spec.controllers:
-        for first in range(0, n, chunk_size):
-            rows = tuple(scenarios.overrides(i) for i in range(first, min(n, first + chunk_size)))
-            out.append(Chunk(first, ctrl, spec.base_values, rows, spec.duration_s, spec.window))
-    return out
+    overrides = [scenarios.overrides(i) for i in range(len(scenarios))]
+    return [c for ctrl in spec.controllers
+            for c in chunks_of(ctrl, spec.base_values, overrides, spec.duration_s, spec.window, chunk_size)]
+
+
+def chunks_of(controller: str, base: Dict[str, Any], overrides: Sequence[Dict[str, Any]], duration_s: float,
+              window: Tuple[float, float], chunk_size: int = DEFAULT_CHUNK) -> List[Chunk]:
+    """Runs of one law, one per entry of ``overrides`` (changes to ``base``), ``chunk_size`` at a time."""
+    n = len(overrides)
+    return [Chunk(first, controller, base, tuple(overrides[first:first + chunk_size]), duration_s, window)
+            for first in range(0, n, chunk_size)]
 
 
 def run_chunk(chunk: Chunk) -> ChunkResult:
-    """Simulate one chunk (scenarios that differ in control period or RK4 sub-steps run as separate batches)."""
+    """Simulate one chunk (scenarios that differ in control period, RK4 sub-steps, encoder or delays run as
+    separate batches)."""
     from mwip_ros import params as P
     from mwip_ros.core.batch import simulate_batch
     from mwip_ros.core.sim import LAWS
@@ -73,7 +79,9 @@ def run_chunk(chunk: Chunk) -> ChunkResult:
     n = len(loops)
     groups: Dict[tuple, List[int]] = {}
     for i, lp in enumerate(loops):
-        groups.setdefault((lp.plant.h, lp.plant.substeps), []).append(i)
+        sc = lp.plant.sensing
+        key = (lp.plant.h, lp.plant.substeps, sc.encoder_counts_per_rev, sc.delay_periods, sc.actuator_delay_periods)
+        groups.setdefault(key, []).append(i)
     upright, t_fall = np.zeros(n, dtype=bool), np.full(n, np.nan)
     metrics: Dict[str, np.ndarray] = {}
     steps = 0
@@ -86,46 +94,88 @@ def run_chunk(chunk: Chunk) -> ChunkResult:
     return ChunkResult(upright, t_fall, metrics, steps)
 
 
+class Runner:
+    """Where chunks run: this process (``workers=1``), a pool of ``workers`` processes (spawned once, kept for
+    the runner's life: a tuner sends it a generation at a time), or a Dask cluster (``dask``: the address
+    of a running scheduler, or ``local:N``).  ``runner(chunks)`` yields ``(chunk, result)`` as each
+    finishes; use it as a context manager, or call :meth:`close`."""
+
+    def __init__(self, workers: int = 1, dask: str = None):
+        self.workers, self.dask = max(1, int(workers)), dask
+        self._pool = self._client = self._cluster = None
+
+    def describe(self) -> str:
+        if self.dask:
+            return f"Dask at {self.dask}"
+        return f"{self.workers} worker processes" if self.workers > 1 else "this process"
+
+    def __call__(self, chunks: Sequence[Chunk]) -> Iterator[Tuple[Chunk, ChunkResult]]:
+        if self.dask:
+            yield from self._dask(chunks)
+        elif self.workers <= 1:
+            for c in chunks:
+                yield c, run_chunk(c)
+        else:
+            yield from self._local(chunks)
+
+    def _local(self, chunks):
+        import multiprocessing
+        from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+
+        if self._pool is None:
+            self._pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=multiprocessing.get_context("spawn"))
+        todo, running = list(chunks), {}
+        try:
+            while todo or running:
+                while todo and len(running) < 2 * self.workers:   # a few ahead: results stream, memory stays small
+                    c = todo.pop(0)
+                    running[self._pool.submit(run_chunk, c)] = c
+                done, _ = wait(running, return_when=FIRST_COMPLETED)
+                for f in done:
+                    yield running.pop(f), f.result()
+        except BaseException:
+            self.close()   # an interrupt or a failed chunk: cancel the rest
+            raise
+
+    def _dask(self, chunks):
+        from dask.distributed import Client, LocalCluster, as_completed
+
+        if self._client is None:
+            if self.dask.startswith("local:"):
+                self._cluster = LocalCluster(n_workers=int(self.dask.split(":", 1)[1]), threads_per_worker=1,
+                                             processes=True, dashboard_address=None)
+                self._client = Client(self._cluster)
+            else:
+                self._client = Client(self.dask, timeout=30)
+        futures = {self._client.submit(run_chunk, c, pure=False): c for c in chunks}
+        for f in as_completed(futures):
+            yield futures[f], f.result()
+
+    def close(self) -> None:
+        if self._pool is not None:
+            self._pool.shutdown(wait=True, cancel_futures=True)
+            self._pool = None
+        if self._client is not None:
+            self._client.close()
+            self._client = None
+        if self._cluster is not None:
+            self._cluster.close()
+            self._cluster = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
 def run_local(chunks: Sequence[Chunk], workers: int = 1) -> Iterator[Tuple[Chunk, ChunkResult]]:
     """Run the chunks here (``workers=1``) or on ``workers`` processes; yields each as it finishes."""
-    if workers <= 1:
-        for c in chunks:
-            yield c, run_chunk(c)
-        return
-    import multiprocessing
-    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
-
-    pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
-    try:
-        todo = list(chunks)
-        running = {}
-        while todo or running:
-            while todo and len(running) < 2 * workers:   # a few ahead: results stream, memory stays small
-                c = todo.pop(0)
-                running[pool.submit(run_chunk, c)] = c
-            done, _ = wait(running, return_when=FIRST_COMPLETED)
-            for f in done:
-                yield running.pop(f), f.result()
-    finally:
-        pool.shutdown(wait=True, cancel_futures=True)
+    with Runner(workers) as runner:
+        yield from runner(chunks)
 
 
 def run_dask(chunks: Sequence[Chunk], address: str) -> Iterator[Tuple[Chunk, ChunkResult]]:
     """Run the chunks on a Dask cluster: ``tcp://host:port`` of a running scheduler, or ``local:N``."""
-    from dask.distributed import Client, LocalCluster, as_completed
-
-    cluster = None
-    if address.startswith("local:"):
-        cluster = LocalCluster(n_workers=int(address.split(":", 1)[1]), threads_per_worker=1, processes=True,
-                               dashboard_address=None)
-        client = Client(cluster)
-    else:
-        client = Client(address, timeout=30)
-    try:
-        futures = {client.submit(run_chunk, c, pure=False): c for c in chunks}
-        for f in as_completed(futures):
-            yield futures[f], f.result()
-    finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()
+    with Runner(dask=address) as runner:
+        yield from runner(chunks)

@@ -22,7 +22,7 @@ from mwip_ros.params.file import NODES_OF_THE_LOOP
 
 from .spec import Axis, SpecError, SweepSpec
 
-__all__ = ["Scenarios", "expand", "noise_seed", "parameter_file"]
+__all__ = ["Scenarios", "expand", "noise_seed", "parameter_file", "parameter_overlay"]
 
 
 def noise_seed(spec_seed: int, i: int) -> int:
@@ -108,6 +108,17 @@ def parameter_file(base_sections: Dict[str, Dict[str, Any]], placed: Dict[tuple,
         doc[node] = {"ros__parameters": _nest(own)}
     text = yaml.dump(doc, Dumper=_Dumper, sort_keys=False, default_flow_style=False, width=120)
     path.write_text(header + text)
+    P.load_param_file(path)   # what was written reads back as a valid file
+
+
+def parameter_overlay(placed: Dict[tuple, Any], path: Path, header: str = "") -> None:
+    """Write only ``placed[(section, name)]`` as a ROS 2 parameter file: an overlay to pass after a base file
+    (``mwip_sim --params base.yaml overlay.yaml``, or a second ``--params-file``)."""
+    doc: Dict[str, Any] = {}
+    for (section, name), value in placed.items():
+        doc.setdefault(section, {"ros__parameters": {}})["ros__parameters"][name] = value
+    doc = {sec: {"ros__parameters": _nest(body["ros__parameters"])} for sec, body in doc.items()}
+    path.write_text(header + yaml.dump(doc, Dumper=_Dumper, sort_keys=False, default_flow_style=False, width=120))
     P.load_param_file(path)   # what was written reads back as a valid file
 
 

@@ -2,7 +2,8 @@
 
 .. code-block:: yaml
 
-    base: ../paper.yaml                 # relative to this spec; default: the package's config/paper.yaml
+    base: ../paper.yaml                 # relative to this spec (or a list: a base, then overlays);
+                                        # default: the package's config/paper.yaml
     controllers: [dsc, dscndo]
     duration_s: 10.0
     metrics_window_s: [5.0, 10.0]
@@ -87,7 +88,7 @@ class Axis:
 @dataclass
 class SweepSpec:
     path: str
-    base_path: Path
+    base_path: List[Path]             # the base file and any overlays, merged in order
     base_values: Dict[str, Any]       # merged values of the base file (plant, observer, controller)
     base_sections: Dict[str, Dict[str, Any]]
     controllers: Tuple[str, ...]
@@ -148,15 +149,17 @@ def parse_spec(doc: Any, source: str = "<spec>", here: Path = Path("."),
             raise SpecError(str(k), f"unknown key{_did_you_mean(str(k), TOP_KEYS)}; known: {', '.join(TOP_KEYS)}",
                             source)
     if base_override is not None:
-        base_path = Path(base_override)
+        base_path = [Path(base_override)]
     elif doc.get("base") is not None:
-        if not isinstance(doc["base"], str) or not doc["base"]:
-            raise SpecError("base", f"expected a parameter file's path, got {doc['base']!r}", source)
-        base_path = (here / doc["base"]).resolve()
+        base = doc["base"] if isinstance(doc["base"], list) else [doc["base"]]
+        if not base or not all(isinstance(b, str) and b for b in base):
+            raise SpecError("base", f"expected a parameter file's path (or a list: a base and overlays), got "
+                                    f"{doc['base']!r}", source)
+        base_path = [(here / b).resolve() for b in base]
     else:
         from mwip_ros.params.paths import default_params_file
-        base_path = default_params_file()
-    pf = P.load_param_file(base_path)   # ParamError names the file and the key
+        base_path = [default_params_file()]
+    pf = P.load_param_files(base_path)   # ParamError names the file and the key
     base_values = P.merged_values(pf)
 
     ctrls = doc.get("controllers", ["dsc", "dscndo"])   # the paper's comparison unless the spec says more

@@ -87,3 +87,19 @@ def test_the_lqr_baseline_in_a_batch_equals_the_scalar_loop():
 def test_one_batch_runs_one_law():
     with pytest.raises(ValueError, match="the law"):
         simulate_batch([P.closed_loop(BASE, duration=0.1), P.closed_loop(BASE, duration=0.1, law="lqr")], WINDOW)
+
+
+def test_sensing_and_actuation_in_a_batch_equal_the_scalar_loop():
+    rng = np.random.default_rng(5)
+    values = [dict(BASE, seed=i, use_observer=bool(i % 2), **{
+        "sensors.noise_std.theta_b": float(rng.uniform(0, 0.004)), "sensors.noise_std.dtheta_w": float(rng.uniform(0, 0.4)),
+        "sensors.noise_std.dtheta_b": 0.0 if i == 2 else 0.02, "sensors.encoder_counts_per_rev": 1024,
+        "sensors.delay_periods": 1, "actuator.delay_periods": 2}) for i in range(5)]
+    values[3] = dict(values[3], **{f"sensors.noise_std.{c}": 0.0 for c in ("theta_w", "theta_b", "dtheta_w", "dtheta_b")})
+    loops = [P.closed_loop(v, duration=2.0) for v in values]
+    batch = simulate_batch(loops, WINDOW, record=True)
+    for i, (b, lp) in enumerate(zip(batch.trajectories, loops)):
+        s = simulate(lp)
+        assert len(b) == len(s)
+        for c in COLUMNS:
+            np.testing.assert_allclose(b[c], s[c], rtol=0, atol=1e-9, err_msg=f"scenario {i}, {c}")

@@ -45,6 +45,46 @@ def test_lockstep_graph_equals_offline_simulator(tmp_path, controller):
     assert "steps/s" in logs["plant_sim"].output()
 
 
+SENSING = {"sensors.noise_std.theta_b": 0.002, "sensors.noise_std.dtheta_w": 0.3, "sensors.noise_std.dtheta_b": 0.02,
+           "sensors.encoder_counts_per_rev": 1024, "sensors.delay_periods": 1, "actuator.delay_periods": 1}
+
+
+def test_with_noisy_delayed_sensing_the_graph_equals_mwip_sim_and_the_bag_holds_the_truth(tmp_path):
+    """The observer and controller see the measurement (joint_states); the plant's table, true_joint_states
+    and so the bag's report are the true state."""
+    from mwip_ros.runs import read_bag_run
+    plant_args = [a for k, v in SENSING.items() for a in ("-p", f"{k}:={v}")]
+    csv_path, bag = tmp_path / "graph.csv", tmp_path / "bag"
+    with Graph(tmp_path) as g:
+        rec = g.start("mcap_recorder", "-p", f"output:={bag}", "-p", "use_sim_time:=true")
+        g.start("disturbance_observer", "-p", "use_sim_time:=true")
+        g.start("dscndo_controller", "-p", "use_sim_time:=true")
+        plant = g.start("plant_sim", "-p", f"csv:={csv_path}", "-p", "duration_s:=3.0", "-p", "expected_subscribers:=3",
+                        *plant_args)
+        assert plant.wait(180) == 0, plant.output()
+        assert rec.stop() == 0, rec.output()
+    assert "the true state is on true_joint_states" in plant.output()
+    offline = simulate(P.closed_loop(dict(P.merged_values(P.load_param_file(PARAMS)), **SENSING), duration=3.0))
+    graph = load_run(csv_path)
+    assert len(graph) == len(offline) == 601
+    for c in ("theta_w", "theta_b", "dtheta_w", "dtheta_b", "u", "tau_d1", "tau_d2"):
+        np.testing.assert_allclose(graph[c], offline[c], rtol=0, atol=1e-9, err_msg=c)
+    from_bag = read_bag_run(bag)   # the true states: what mwip_report judges
+    for c in ("theta_b", "dtheta_b"):
+        np.testing.assert_allclose(from_bag[c], offline[c], rtol=0, atol=1e-9, err_msg=c)
+    np.testing.assert_allclose(from_bag["u"][:-1], offline["u"][:-1], rtol=0, atol=1e-9)   # the torque that acted
+    assert math.isnan(from_bag["u"][-1])
+    from bagcheck import decoded_messages
+    measured = {m.header.stamp.sec * 10 ** 9 + m.header.stamp.nanosec: m   # a resent state counts once
+                for topic, _t, _l, m in decoded_messages(bag) if topic == "/joint_states"}
+    assert len(measured) == 601
+    measured = [measured[s] for s in sorted(measured)]
+    q = 2 * math.pi / 1024
+    assert all(abs(m.position[0] / q - round(m.position[0] / q)) < 1e-6 for m in measured)   # encoder counts
+    assert abs(measured[100].velocity[1] - offline["dtheta_b"][99]) < 0.2   # one period late, noisy
+    assert measured[100].velocity[1] != offline["dtheta_b"][99]
+
+
 def test_lockstep_without_controller_times_out_naming_it(tmp_path):
     with Graph(tmp_path) as g:
         plant = g.start("plant_sim", "-p", "lockstep_timeout_s:=2.0", "-p", "expected_subscribers:=0")

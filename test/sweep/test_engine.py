@@ -72,9 +72,11 @@ def test_local_workers_and_one_process_give_identical_rows():
     assert same(rows(engine.run_local(chunks, workers=1)), rows(engine.run_local(chunks, workers=2)))
 
 
-def test_scenarios_with_another_control_period_run_in_their_own_batch():
+def test_scenarios_with_another_control_period_or_delay_run_in_their_own_batch():
     s = parse_spec({"base": str(default_params_file()), "duration_s": 1.0, "metrics_window_s": [0.5, 1.0],
-                    "vary": {"control_rate_hz": {"grid": [200.0, 100.0]}, "plant_sim.substeps": {"grid": [5, 2]}}},
+                    "vary": {"control_rate_hz": {"grid": [200.0, 100.0]}, "plant_sim.substeps": {"grid": [5, 2]},
+                             "plant_sim.sensors.delay_periods": {"grid": [0, 2]},
+                             "plant_sim.sensors.noise_std.dtheta_b": {"values": [0.01]}}},
                    "spec.yaml")
     sc = expand(s)
     got = rows(engine.run_local(engine.make_chunks(s, sc), workers=1))
