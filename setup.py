@@ -46,6 +46,7 @@ setup(
             'mwip_bag_repair = mwip_ros.cli.bag_repair:main',
             'mwip_sweep = mwip_ros.cli.sweep:main',
             'mwip_tune = mwip_ros.cli.tune:main',
+            'robot_markers = mwip_ros.nodes.robot_markers:main',
         ],
     },
 )

@@ -21,6 +21,8 @@ CONSOLE_SCRIPTS = [
     'mwip_report',
     'mwip_bag_repair',
     'mwip_sweep',
+    'mwip_tune',
+    'robot_markers',
 ]
 PACKAGE_FILES = ['package.xml', 'setup.py', 'setup.cfg']
 PACKAGE_DIRS = ['resource', PACKAGE, 'config']

@@ -5,6 +5,7 @@
 :mod:`.disturbance_observer`  the NDO
 :mod:`.dscndo_controller`  DSC / DSCNDO
 :mod:`.mcap_recorder`      records the graph into a rosbag2 MCAP bag
+:mod:`.robot_markers`      the robot as a MarkerArray, for Foxglove or RViz
 :mod:`.bag_replay`         replays a bag (:mod:`.replay`) or re-simulates it (:mod:`.resim`)
 :mod:`.lockstep`           the one lockstep driver (plant_sim and resim)
 :mod:`.params`             declares a node's parameters from the schema, validates updates

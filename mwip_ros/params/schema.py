@@ -260,6 +260,7 @@ NODE_SPECS: Dict[str, List[ParamSpec]] = {
         ParamSpec("compression", "string", "", "'' or 'zstd' (MCAP chunk compression)", _one_of("", "zstd")),
         ParamSpec("chunk_size", "integer", 1 << 20, "MCAP chunk size [bytes]", _at_least_one),
     ],
+    "robot_markers": [],   # the shared section only (the nominal model sizes the robot)
     "bag_replay": [
         ParamSpec("bag", "string", "", "bag directory to replay"),
         ParamSpec("rate", "double", 1.0, "playback rate factor", _positive()),

@@ -122,7 +122,7 @@ def test_ctrl_c_keeps_every_finished_row_readable(tmp_path):
 
 
 def test_write_params_gives_the_rows_scenario_to_mwip_sim(tmp_path):
-    spec = write_spec(tmp_path / "s.yaml", samples=2, duration_s=10.0, metrics_window_s=[5.0, 10.0],
+    spec = write_spec(tmp_path / "s.yaml", samples=2, duration_s=4.0, metrics_window_s=[2.0, 4.0],
                       vary={"plant_sim.actual.m_b": {"scale": [0.7, 1.3]}, "dscndo_controller.k1": {"grid": [4.0, 8.0]}})
     out = tmp_path / "out"
     assert sweep(spec, "--out", out, "--workers", "1", "--no-figures").returncode == 0
@@ -131,13 +131,13 @@ def test_write_params_gives_the_rows_scenario_to_mwip_sim(tmp_path):
     assert r.returncode == 0, r.stderr
     cols = read_results(out / "results.csv")
     j = [k for k, (s, c) in enumerate(zip(cols["scenario"], cols["controller"])) if s == 3 and c == "dsc"][0]
-    sim = subprocess.run([sys.executable, "-m", "mwip_ros.cli.sim", "--params", str(f), "-q", "--csv",
-                          str(tmp_path / "run.csv")], capture_output=True, text=True, timeout=120)
+    sim = subprocess.run([sys.executable, "-m", "mwip_ros.cli.sim", "--params", str(f), "-q", "--window", "2", "4",
+                          "--csv", str(tmp_path / "run.csv")], capture_output=True, text=True, timeout=120)
     assert sim.returncode == 0, sim.stderr
     from mwip_ros.core import metrics
     from mwip_ros.runs import read_csv
     run = read_csv(tmp_path / "run.csv")
-    m = metrics.compute(run.columns, (5.0, 10.0), 1.0472)
+    m = metrics.compute(run.columns, (2.0, 4.0), 1.0472)
     assert abs(m.theta_b_rms - cols["theta_b_rms"][j]) < 1e-9 and abs(m.u_rms - cols["u_rms"][j]) < 1e-9
     assert "use_observer: false" in f.read_text() and "k1: 8.0" in f.read_text()   # scenario 3: k1 = 8.0, dsc
     r = sweep("--results", out, "--scenario", 99, "--write-params", f)
