@@ -12,12 +12,13 @@
 """
 from .errors import BagError
 from .metadata import qos_profiles_yaml
-from .reader import check, damaged_chunks, mcap_files, raw_messages, read_metadata, topic_counts, topic_types
+from .reader import (check, damaged_chunks, mcap_files, raw_messages, read_metadata, topic_counts, topic_qos,
+                     topic_types)
 from .repair import RepairResult, repair
 from .schema import message_definition, type_hash
 from .writer import BagWriter
 
 __all__ = [
     "BagError", "BagWriter", "RepairResult", "check", "damaged_chunks", "mcap_files", "message_definition", "qos_profiles_yaml",
-    "raw_messages", "read_metadata", "repair", "topic_counts", "topic_types", "type_hash",
+    "raw_messages", "read_metadata", "repair", "topic_counts", "topic_qos", "topic_types", "type_hash",
 ]

@@ -32,7 +32,7 @@ from mcap.stream_reader import breakup_chunk
 from .errors import BagError
 
 __all__ = ["check", "damaged_chunks", "mcap_files", "raw_messages", "read_metadata", "topic_counts",
-           "topic_types"]
+           "topic_qos", "topic_types"]
 
 PathLike = Union[str, Path]
 _UNREADABLE = (McapError, struct.error, EOFError, ValueError)
@@ -163,6 +163,19 @@ def topic_counts(bag: PathLike) -> Dict[str, int]:
             except _UNREADABLE as exc:
                 raise _cut_short(path, exc) from None
     return counts
+
+
+def topic_qos(bag: PathLike) -> Dict[str, list]:
+    """Topic -> the recorded publishers' QoS profiles (v9 dicts; the channels' ``offered_qos_profiles``)."""
+    from .metadata import parse_qos_yaml
+    out: Dict[str, list] = {}
+    for path in mcap_files(bag):
+        summary = _summary(path)
+        if summary is None:
+            raise BagError(f"{path} has no summary (a recording cut short? try mwip_bag_repair)")
+        for channel in summary.channels.values():
+            out.setdefault(channel.topic, []).extend(parse_qos_yaml(channel.metadata.get("offered_qos_profiles")))
+    return out
 
 
 def topic_types(bag: PathLike) -> Dict[str, str]:

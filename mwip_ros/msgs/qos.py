@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-__all__ = ["GRAPH_QOS", "INPUT_QOS", "RECORD_QOS", "DEPTH"]
+__all__ = ["GRAPH_QOS", "INPUT_QOS", "RECORD_QOS", "DEPTH", "recorded_qos"]
 
 DEPTH = 1000
 
@@ -25,3 +25,17 @@ GRAPH_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=DEPTH, reliability
 INPUT_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=DEPTH, reliability=ReliabilityPolicy.RELIABLE,
                        durability=DurabilityPolicy.VOLATILE)
 RECORD_QOS = GRAPH_QOS
+
+
+def recorded_qos(profiles) -> QoSProfile:
+    """The QoS to replay a topic with: what its recorded publishers offered (``offered_qos_profiles``, v9
+    dicts). Reliable / transient local only if every recorded publisher was; the largest recorded depth
+    (keep last); with nothing recorded, :data:`GRAPH_QOS`."""
+    if not profiles:
+        return GRAPH_QOS
+    reliable = all(str(p.get("reliability")) == "reliable" for p in profiles)
+    transient = all(str(p.get("durability")) == "transient_local" for p in profiles)
+    depth = max(int(p.get("depth") or 0) for p in profiles) or DEPTH
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth,
+                      reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
+                      durability=DurabilityPolicy.TRANSIENT_LOCAL if transient else DurabilityPolicy.VOLATILE)

@@ -43,7 +43,7 @@ from pathlib import Path
 
 from rclpy.node import Node
 
-from mwip_ros.bag import BagError, check, topic_counts, topic_types
+from mwip_ros.bag import BagError, check, topic_counts, topic_qos, topic_types
 from mwip_ros.nodes.params import declare
 from mwip_ros.nodes.replay import Replay
 from mwip_ros.nodes.resim import Resim
@@ -66,6 +66,7 @@ class BagReplay(Node, GracefulNodeMixin):
         try:
             self.types = topic_types(self.bag)
             self.counts = topic_counts(self.bag)
+            self.qos = topic_qos(self.bag)
             check(self.bag)  # a damaged chunk is never replayed as data
         except BagError as exc:
             raise ParamError("bag", f"cannot read the bag: {exc}") from None

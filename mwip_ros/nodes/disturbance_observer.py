@@ -96,6 +96,12 @@ class DisturbanceObserver(Node, GracefulNodeMixin):
         if self.written is not None:
             self.written.extend((stamp * 1e-9, tau_hat[0], tau_hat[1]))
 
+    def diagnostic_count(self) -> int:
+        return self.count
+
+    def diagnostic_status(self):
+        return 0, f"estimating; X = {self.v['X']}", {"estimates": self.count}
+
     def on_shutdown(self) -> None:
         self.get_logger().info(f"estimated {self.count} states; rejected: {self.rejects.summary()}")
         if self.written is not None:

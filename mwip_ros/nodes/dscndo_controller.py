@@ -174,6 +174,13 @@ class DscndoController(Node, GracefulNodeMixin):
             while len(d) > _MAX_PENDING:
                 d.pop(min(d))
 
+    def diagnostic_count(self) -> int:
+        return self.count
+
+    def diagnostic_status(self):
+        return 0, f"{self._describe()} answering", {"commands": self.count, "law": self._name(),
+                                                     "waiting_states": len(self.states)}
+
     def on_shutdown(self) -> None:
         self.get_logger().info(f"answered {self.count} states; rejected: {self.rejects.summary()}")
 

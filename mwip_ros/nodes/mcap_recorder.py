@@ -236,6 +236,14 @@ class McapRecorder(Node, GracefulNodeMixin):
             if self.received != seen:
                 seen, last = self.received, time.monotonic()
 
+    def diagnostic_count(self) -> int:
+        return self.received
+
+    def diagnostic_status(self):
+        values = {"messages_written": self.received, "topics_subscribed": len(self.subs),
+                  "topics_waiting_for_a_publisher": len(self.pending)}
+        return 0, f"recording to {self.output}", values
+
     def on_shutdown(self) -> None:
         log = self.get_logger()
         self._drain()

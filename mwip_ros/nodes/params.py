@@ -80,9 +80,10 @@ def _file_values(node_name: str, own_name: str, argv: Sequence[str]) -> Dict[str
     specs = P.specs_for(node_name)
     values: Dict[str, Any] = {}
     for f in params_files(argv):
-        sections = P.load_param_file(f).sections
-        for sec in (P.SHARED, node_name, own_name):
-            values.update({k: v for k, v in sections.get(sec, {}).items() if k in specs})
+        pf = P.load_param_file(f)
+        for sec in dict.fromkeys((P.SHARED, node_name, own_name)):
+            section = pf.sections.get(sec, {}) if sec in (P.SHARED, node_name) else pf.section_for(node_name, sec)
+            values.update({k: v for k, v in section.items() if k in specs})
     return values
 
 
@@ -139,7 +140,9 @@ def declare(node, node_name: str, argv: Sequence[str],
         values[name] = spec.validate(_py(p.value, spec), name, "start-up value")
     P.check_derived(values, "start-up value")
     for name in overrides or {}:
-        if name in specs or name in P.ROS_OWN or name.startswith(P.ROS_OWN_PREFIXES):
+        if name.startswith(P.schema.QOS_OVERRIDES):
+            raise P.ParamError(name, P.schema.QOS_OVERRIDES_REFUSED, "command line")
+        if name in specs or name in P.ROS_OWN:
             continue
         raise P.ParamError(name, f"unknown parameter for {node_name}{P.spelling_hint(name, specs)}",
                            "command line")
@@ -149,7 +152,7 @@ def declare(node, node_name: str, argv: Sequence[str],
         for prm in params:
             spec = specs.get(prm.name)
             if spec is None:
-                if prm.name in P.ROS_OWN or prm.name.startswith(P.ROS_OWN_PREFIXES):
+                if prm.name in P.ROS_OWN:
                     continue  # ROS's own (use_sim_time, ...)
                 return SetParametersResult(successful=False, reason=f"parameter '{prm.name}': unknown parameter "
                                            f"for {node_name}{P.spelling_hint(prm.name, specs)}")

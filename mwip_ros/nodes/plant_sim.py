@@ -236,6 +236,26 @@ class PlantSimNode(Node, GracefulNodeMixin):
                 return
         self.state_pub.publish(self._state_bytes())
 
+    # --- health (nodes.diagnostics) -------------------------------------------------------------
+    def diagnostic_count(self) -> int:
+        return self.plant.k
+
+    def diagnostic_status(self):
+        p = self.plant
+        values = {"mode": self.mode, "t_sim_s": f"{p.t:.3f}", "theta_b_rad": f"{p.x[1]:+.5f}"}
+        if self.mode == "realtime" and len(self.tick_times) > 2:
+            per = np.diff(self.tick_times[-400:]) * 1e3
+            values.update({"loop_period_p99_ms": f"{np.percentile(per, 99):.3f}", "missed_deadlines": self.missed,
+                           "stale_commands": self.stale})
+        if self.fallen:
+            return 2, f"FALLEN at t = {p.t:.3f} s", values
+        if not self.started:
+            return 1, f"waiting for the graph (missing: {self.lockstep.missing()})", values
+        if self.mode == "lockstep" and self.lockstep.awaiting is not None and \
+                time.monotonic() - self.lockstep.sent_at > 1.0:
+            return 2, f"no answer for over a second (missing: {self.lockstep.missing()})", values
+        return 0, f"{self.mode} run at t = {p.t:.2f} s", values
+
     # --- end of run --------------------------------------------------------------------------------
     def on_shutdown(self) -> None:
         log = self.get_logger()

@@ -20,7 +20,7 @@ from rosgraph_msgs.msg import Clock
 from mwip_ros.bag import BagError, raw_messages
 from mwip_ros.msgs.cdr import peek_stamp
 from mwip_ros.msgs.layouts import encode_clock
-from mwip_ros.msgs.qos import GRAPH_QOS
+from mwip_ros.msgs.qos import GRAPH_QOS, recorded_qos
 from mwip_ros.msgs.topics import leaf, msg_class
 from mwip_ros.nodes.runtime import EXIT_ERROR, EXIT_OK
 from mwip_ros.params import ParamError
@@ -54,7 +54,8 @@ class Replay:
                     raise ParamError("topics", f"cannot replay {topic}: {exc}") from None
                 self.log.warning(f"skipping {topic}: {exc}")
                 continue
-            self.pubs[topic] = node.create_publisher(cls, topic, GRAPH_QOS)
+            qos = recorded_qos(node.qos.get(topic, []))   # as the recorded publishers offered it
+            self.pubs[topic] = node.create_publisher(cls, topic, qos)
         if not self.pubs and self.clock_pub is None:
             raise ParamError("topics" if self.v["topics"] else "bag", f"nothing to replay in {node.bag}")
         self.sent: Dict[str, int] = {t: 0 for t in self.pubs}

@@ -58,6 +58,9 @@ class RobotMarkers(Node, GracefulNodeMixin):
         self.pub.publish(markers(self.nominal, x, stamp))
         self.count += 1
 
+    def diagnostic_count(self) -> int:
+        return self.count
+
     def on_shutdown(self) -> None:
         self.get_logger().info(f"drew {self.count} states; rejected: {self.rejects.summary()}")
 

@@ -48,11 +48,13 @@ class GracefulNodeMixin:
     done: bool = False
     exit_code: int = EXIT_OK
     stop_signal: Optional[int] = None  # set by run_node before on_shutdown when SIGINT/SIGTERM ended the loop
+    failure: Optional[str] = None      # the reason a run ended in error (reported on /diagnostics as ERROR)
 
     def finish(self, code: int = EXIT_OK, reason: Optional[str] = None) -> None:
         """End the run with exit ``code``; ``reason`` (a failure) is logged as an error first."""
         if reason:
             self.get_logger().error(reason)
+            self.failure = reason
         self.exit_code = code
         self.done = True
 
@@ -142,15 +144,20 @@ def run_node(factory: Callable[..., object], argv: Optional[Sequence[str]] = Non
         executor = _make_executor(context)
         executor.add_node(node)
         _realtime_priority(node)
+        from mwip_ros.nodes.diagnostics import Diagnostics
+        diagnostics = Diagnostics(node)
         try:
             while stop["signal"] is None and not node.done and context.ok():
                 node.spin_step(executor)
+                diagnostics.tick()
         except StopRequested:
             pass
         if stop["signal"] is not None:
             node.stop_signal = stop["signal"]
             node.get_logger().info(f"received {signal.Signals(stop['signal']).name}, shutting down")
         node.on_shutdown()
+        if context.ok():
+            diagnostics.tick(force=True)   # the run's last word: ERROR with the reason if it failed
         code = node.exit_code
     finally:
         # Everything is written; what is left is the middleware's own clean-up.  Fast DDS 2.14 can

@@ -5,12 +5,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Dict, Mapping, Optional
 
+import difflib
 import re
 
 import yaml
 
 from .errors import ParamError
-from .schema import (NODE_SPECS, ROS_OWN, ROS_OWN_PREFIXES, SHARED, SHARED_SPECS, check_derived, defaults_for,
+from .schema import (NODE_SPECS, QOS_OVERRIDES, QOS_OVERRIDES_REFUSED, ROS_OWN, SHARED, SHARED_SPECS, check_derived, defaults_for,
                      spelling_hint, specs_for)
 
 
@@ -22,6 +23,9 @@ class RosYamlLoader(yaml.SafeLoader):
 yaml.add_implicit_resolver("tag:yaml.org,2002:float",
                            re.compile(r"^[-+]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)[eE][-+]?[0-9]+$"),
                            list("-+0123456789."), Loader=RosYamlLoader)
+
+
+TYPO_CUTOFF = 0.8   # a foreign section name this close to one of ours is refused as a misspelling
 
 
 def load_yaml(text: str):
@@ -55,10 +59,24 @@ def node_key(section: str) -> str:
 
 @dataclass
 class ParamFile:
-    """A validated parameter file: section -> {dotted name: value}."""
+    """A validated parameter file: section -> {dotted name: value}.
+
+    ``others`` holds, unchecked, the sections of nodes that are not mwip_ros's (a shared file may
+    configure a whole system): a node renamed with ``__node:=`` reads its own among them, checked
+    then (:meth:`section_for`)."""
 
     path: str
     sections: Dict[str, Dict[str, Any]] = field(default_factory=dict)
+    others: Dict[str, Dict[str, Any]] = field(default_factory=dict)
+
+    def section_for(self, node: str, name: str) -> Dict[str, Any]:
+        """The section of the ``node`` (its kind, e.g. 'dscndo_controller') running under ``name``, checked
+        against ``node``'s parameters: an unknown key in it is refused, naming it."""
+        if name in self.sections:
+            return self.sections[name]
+        if name in self.others:
+            return {k: _check_entry(node, k, v, self.path, shown=name) for k, v in self.others[name].items()}
+        return {}
 
     def for_node(self, node: str, overrides: Optional[Mapping[str, Any]] = None) -> Dict[str, Any]:
         """Defaults, then the shared section, then the node's section, then ``overrides`` (checked)."""
@@ -76,12 +94,12 @@ class ParamFile:
         return values
 
 
-def _check_entry(section: str, name: str, value: Any, source: str) -> Any:
-    key = name if section == SHARED else f"{section}.{name}"
+def _check_entry(section: str, name: str, value: Any, source: str, shown: Optional[str] = None) -> Any:
+    key = name if section == SHARED else f"{shown or section}.{name}"
     if name in ROS_OWN:
         return ROS_OWN[name].validate(value, key, source)
-    if name.startswith(ROS_OWN_PREFIXES):
-        return value
+    if name.startswith(QOS_OVERRIDES):
+        raise ParamError(key, QOS_OVERRIDES_REFUSED, source)
     if section == SHARED:
         shared = {s.name: s for s in SHARED_SPECS}
         if name in shared:
@@ -104,16 +122,21 @@ def parse_param_dict(doc: Any, source: str = "<params>") -> ParamFile:
     pf = ParamFile(path=source)
     for section_raw, body in doc.items():
         section = node_key(str(section_raw))
-        if section != SHARED and section not in NODE_SPECS:
-            hint = spelling_hint(section, NODE_SPECS)
-            raise ParamError(str(section_raw), f"unknown node name{hint}; known: /**, {', '.join(NODE_SPECS)}",
-                             source)
+        foreign = section != SHARED and section not in NODE_SPECS
+        if foreign:
+            close = difflib.get_close_matches(section, list(NODE_SPECS), n=1, cutoff=TYPO_CUTOFF)
+            if close:   # one letter off one of ours: a typo, not another node
+                raise ParamError(str(section_raw), f"unknown node name (did you mean '{close[0]}'?); mwip_ros's "
+                                                   f"nodes: /**, {', '.join(NODE_SPECS)}", source)
         if not isinstance(body, Mapping) or set(body) != {"ros__parameters"}:
             raise ParamError(f"{section_raw}", "each node section must contain exactly 'ros__parameters:'", source)
         params = body["ros__parameters"] or {}
         if not isinstance(params, Mapping):
             raise ParamError(f"{section_raw}.ros__parameters", "must be a mapping", source)
         flat = _flatten(params, "", "", source)
+        if foreign:   # another node's section (or one of ours renamed with __node:=): checked by whoever reads it
+            pf.others.setdefault(section, {}).update(flat)
+            continue
         checked = {name: _check_entry(section, name, v, source) for name, v in flat.items()}
         pf.sections.setdefault(section, {}).update(checked)
     return pf
@@ -144,8 +167,11 @@ def load_param_files(paths) -> ParamFile:
     paths = [paths] if isinstance(paths, (str, Path)) else list(paths)
     merged = ParamFile(path=" + ".join(str(p) for p in paths))
     for p in paths:
-        for section, values in load_param_file(p).sections.items():
+        pf = load_param_file(p)
+        for section, values in pf.sections.items():
             merged.sections.setdefault(section, {}).update(values)
+        for section, values in pf.others.items():
+            merged.others.setdefault(section, {}).update(values)
     return merged
 
 

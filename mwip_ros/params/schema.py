@@ -19,7 +19,7 @@ from typing import Any, Callable, Dict, Iterable, List, Mapping, Optional
 from .errors import ParamError
 
 __all__ = ["SHARED", "ParamSpec", "PAPER_NOMINAL", "PAPER_ACTUAL", "SHARED_SPECS", "NODE_SPECS", "ROS_OWN",
-           "ROS_OWN_PREFIXES", "specs_for", "defaults_for", "spelling_hint", "check_derived"]
+           "ROS_OWN_PREFIXES", "QOS_OVERRIDES", "QOS_OVERRIDES_REFUSED", "specs_for", "defaults_for", "spelling_hint", "check_derived"]
 
 SHARED = "/**"
 
@@ -283,7 +283,13 @@ NODE_SPECS: Dict[str, List[ParamSpec]] = {
 # Parameters ROS itself declares on every node; allowed anywhere in the file.
 ROS_OWN = {"use_sim_time": ParamSpec("use_sim_time", "bool", False, "use /clock"),
            "start_type_description_service": ParamSpec("start_type_description_service", "bool", True, "ROS")}
-ROS_OWN_PREFIXES = ("qos_overrides.",)
+ROS_OWN_PREFIXES = ()
+# rclpy applies qos_overrides.* only to publishers and subscriptions created with QoSOverridingOptions; the
+# nodes set each topic's QoS themselves (msgs.qos: lockstep must lose nothing), so such a key is refused,
+# never silently ignored.
+QOS_OVERRIDES = "qos_overrides."
+QOS_OVERRIDES_REFUSED = ("QoS overrides are not supported: mwip_ros chooses each topic's QoS itself (README: "
+                         "QoS; lockstep must lose nothing); remove the key")
 
 
 def specs_for(node: str) -> Dict[str, ParamSpec]:

@@ -201,3 +201,39 @@ def test_a_resent_state_is_replayed_once(tmp_path):
         inj.spin(0.5)
     assert [L.parse_joint_state(d)[0] for d in got] == [0, 5_000_000, 10_000_000, 15_000_000]
     assert "1 resent message(s)" in br.output() and "replayed 5 of 5 messages" in br.output(), br.output()
+
+
+def test_replay_publishes_each_topic_with_its_recorded_qos(tmp_path):
+    """A best-effort, volatile topic comes back best-effort and volatile; a reliable, transient-local one as such."""
+    from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
+
+    from bagcheck import make_msg, typestore
+    from injector import Injector
+    from mwip_ros.bag import BagWriter, qos_profiles_yaml
+
+    best_effort = {"history": 1, "depth": 7, "reliability": 2, "durability": 2}
+    reliable_tl = {"history": 1, "depth": 1000, "reliability": 1, "durability": 1}
+    topics = {"/wheel_torque_cmd": ("std_msgs/msg/Float64", best_effort),
+              "/joint_states": ("sensor_msgs/msg/JointState", reliable_tl)}
+    bag = tmp_path / "qosbag"
+    ts = typestore()
+    with BagWriter(bag) as w:
+        for topic, (type_name, qos) in topics.items():
+            w.add_topic(topic, type_name, qos_profiles_yaml([qos]), "")
+        for i in range(20):
+            for topic, (type_name, _q) in topics.items():
+                w.write(topic, bytes(ts.serialize_cdr(make_msg(type_name, i), type_name)), 10 ** 9 + i * 10 ** 7)
+    with Graph(tmp_path) as g, Injector(g.domain_id) as inj:
+        node = g.start(MODULE.rsplit(".", 1)[-1], "-p", f"bag:={bag}", "-p", "loop:=true", "-p", "rate:=0.2",
+                       params=None, module=MODULE)
+        infos = {}
+
+        def seen():
+            for topic in topics:
+                infos[topic] = inj.node.get_publishers_info_by_topic(topic)
+            return all(infos.values())
+
+        assert inj.wait(seen, 30), node.output()
+    cmd, js = infos["/wheel_torque_cmd"][0].qos_profile, infos["/joint_states"][0].qos_profile
+    assert cmd.reliability == ReliabilityPolicy.BEST_EFFORT and cmd.durability == DurabilityPolicy.VOLATILE
+    assert js.reliability == ReliabilityPolicy.RELIABLE and js.durability == DurabilityPolicy.TRANSIENT_LOCAL

@@ -34,6 +34,13 @@ CASES = [  # (id, node, file maker or None, extra ros args, words the one line m
      lambda d: _file(d, "nom.yaml", "m_b: 210.6", "m_b: 1.0e+308"), (), ("'nominal.m_b'", "must be <=")),
     ("vanishing tau4", "dscndo_controller", None, ("-p", "tau4:=1e-300"), ("'tau4'", "must be >= 1e-06")),
     ("not a rule", "dscndo_controller", None, ("-p", "k1"), ("'k1'", "not a 'name:=value' rule")),
+    # QoS overrides would be ignored (the nodes set their QoS): refused, not silently dropped
+    ("qos override by -p", "dscndo_controller", None, ("-p", "qos_overrides./joint_states.subscription.depth:=10"),
+     ("'qos_overrides./joint_states.subscription.depth'", "QoS overrides are not supported")),
+    ("qos override in a file", "plant_sim",
+     lambda d: _file(d, "qos.yaml", "    mode: lockstep", "    mode: lockstep\n    qos_overrides:\n      /joint_states:\n"
+                                                         "        publisher:\n          depth: 10"), (),
+     ("'plant_sim.qos_overrides./joint_states.publisher.depth'", "QoS overrides are not supported")),
 ]
 
 
@@ -72,3 +79,22 @@ def test_a_namespaced_node_reads_its_plain_section(tmp_path):
         assert q.wait_for_output("ready", 30), q.output()
     assert "k1 = 7.5" in p.output(), p.output()
     assert "k1 = 8.5" in q.output(), q.output()  # the command line wins over the file
+
+
+def test_a_shared_file_with_other_nodes_sections_and_a_renamed_nodes_own_section(tmp_path):
+    """Sections of nodes that are not ours are left to them; a node renamed with __node:= reads its own section
+    (checked: an unknown key in it stops the node, named)."""
+    shared = PAPER + ("robot_state_publisher:\n  ros__parameters:\n    publish_frequency: 30.0\n"
+                      "ctl_b:\n  ros__parameters:\n    k1: 7.5\n")
+    good, bad = tmp_path / "shared.yaml", tmp_path / "bad.yaml"
+    good.write_text(shared)
+    bad.write_text(shared + "    k3: 1.0\n")
+    with Graph(tmp_path) as g:
+        plain = g.start("dscndo_controller", params=good, label="plain")
+        renamed = g.start("dscndo_controller", "-r", "__node:=ctl_b", params=good, label="renamed")
+        wrong = g.start("dscndo_controller", "-r", "__node:=ctl_b", params=bad, label="wrong")
+        assert plain.wait_for_output("ready: k1 = 6.0", timeout=30), plain.output()
+        assert renamed.wait_for_output("ready: k1 = 7.5", timeout=30), renamed.output()
+        assert wrong.wait(60) == 2
+    out = wrong.output()
+    assert "'ctl_b.k3'" in out and "unknown parameter" in out and len(out.strip().splitlines()) == 1, out

@@ -102,6 +102,20 @@ def test_unknown_and_misspelled_keys(tmp_path):
         _load(tmp_path, doc)
 
 
+def test_a_shared_file_may_configure_other_nodes_and_a_renamed_node_reads_its_own_section(tmp_path):
+    doc = copy.deepcopy(BASE)
+    doc["robot_state_publisher"] = {"ros__parameters": {"publish_frequency": 30.0, "robot_description": "<urdf/>"}}
+    doc["/teleop/joy_node"] = {"ros__parameters": {"deadzone": 0.1}}
+    doc["ctl_b"] = {"ros__parameters": {"k1": 7.5, "lqr": {"R": 0.02}}}
+    pf = _load(tmp_path, doc)
+    assert P.merged_values(pf) == P.merged_values(P.load_param_file(default_params_file()))   # ours unchanged
+    assert set(pf.others) == {"robot_state_publisher", "joy_node", "ctl_b"}
+    assert pf.section_for("dscndo_controller", "ctl_b") == {"k1": 7.5, "lqr.R": 0.02}
+    doc["ctl_b"]["ros__parameters"]["k3"] = 1.0   # inside the node's own section, an unknown key is still refused
+    with pytest.raises(P.ParamError, match="'ctl_b.k3'.*unknown parameter"):
+        _load(tmp_path, doc).section_for("dscndo_controller", "ctl_b")
+
+
 def test_ros_own_parameters_and_namespaced_sections_are_accepted(tmp_path):
     doc = copy.deepcopy(BASE)
     doc["/**"]["ros__parameters"]["use_sim_time"] = True

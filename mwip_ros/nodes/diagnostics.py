@@ -1,0 +1,80 @@
+"""Every node's health on ``/diagnostics`` (``diagnostic_msgs/DiagnosticArray``), once a second of wall time.
+
+``run_node`` calls :meth:`Diagnostics.tick` between callbacks (no timer: the lockstep loop
+is not disturbed, and with ``use_sim_time`` the report still comes every wall second) and
+once more at shutdown.  A node describes itself with ``diagnostic_status()``, which returns
+``(level, message, {key: value})``; the :class:`Diagnostics` adds the rate of the node's
+work counter (``diagnostic_count()``) and its rejected messages (``node.rejects``).  Levels
+are diagnostic_msgs' OK, WARN and ERROR: a node reports ERROR when the robot fell or a
+lockstep peer is missing, WARN when it rejected messages in the last second.
+"""
+from __future__ import annotations
+
+import time
+from typing import Dict, Tuple
+
+__all__ = ["OK", "WARN", "ERROR", "Diagnostics", "PERIOD_S"]
+
+OK, WARN, ERROR = 0, 1, 2      # diagnostic_msgs/DiagnosticStatus levels (bytes 0, 1, 2)
+PERIOD_S = 1.0
+
+
+class Diagnostics:
+    def __init__(self, node):
+        from diagnostic_msgs.msg import DiagnosticArray
+        from rclpy.qos import QoSProfile
+
+        self.node = node
+        self.pub = node.create_publisher(DiagnosticArray, "/diagnostics", QoSProfile(depth=10))
+        self.name = f"{node.get_namespace().rstrip('/')}/{node.get_name()}"
+        self._next = time.monotonic() + PERIOD_S
+        self._last = (time.monotonic(), self._count(), self._rejected())
+        self.published = 0
+
+    def _count(self) -> int:
+        f = getattr(self.node, "diagnostic_count", None)
+        return int(f()) if f else 0
+
+    def _rejected(self) -> int:
+        rejects = getattr(self.node, "rejects", None)
+        return sum(rejects.counts.values()) if rejects is not None else 0
+
+    def tick(self, force: bool = False) -> None:
+        now = time.monotonic()
+        if not force and now < self._next:
+            return
+        self._next = now + PERIOD_S
+        self.pub.publish(self.report(now))
+        self.published += 1
+        if force:   # the last report, just before the process ends: let a listener have it
+            from rclpy.duration import Duration
+            self.pub.wait_for_all_acked(Duration(seconds=0.5))
+
+    def report(self, now: float):
+        from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+
+        t0, c0, r0 = self._last
+        count, rejected = self._count(), self._rejected()
+        self._last = (now, count, rejected)
+        level, message, values = self.status()
+        fresh_rejects = rejected - r0
+        if fresh_rejects and level == OK:
+            level, message = WARN, f"{fresh_rejects} message(s) rejected in the last {now - t0:.1f} s; {message}"
+        rate = (count - c0) / max(now - t0, 1e-9)
+        values = {"rate_per_s": f"{rate:.1f}", "handled": str(count), "rejected_messages": str(rejected), **values}
+        rejects = getattr(self.node, "rejects", None)
+        if rejects is not None and rejects.counts:
+            values["rejected_by_topic"] = rejects.summary()
+        st = DiagnosticStatus(level=bytes([level]), name=self.name, message=message, hardware_id="mwip_ros",
+                              values=[KeyValue(key=k, value=str(v)) for k, v in values.items()])
+        arr = DiagnosticArray(status=[st])
+        arr.header.stamp = self.node.get_clock().now().to_msg()
+        return arr
+
+    def status(self) -> Tuple[int, str, Dict[str, object]]:
+        f = getattr(self.node, "diagnostic_status", None)
+        level, message, values = f() if f is not None else (OK, "running", {})
+        failure = getattr(self.node, "failure", None)
+        if failure:
+            return ERROR, failure, values
+        return level, message, values

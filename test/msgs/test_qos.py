@@ -1,0 +1,24 @@
+"""The QoS a replayed topic gets: what its recorded publishers offered."""
+from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
+
+from mwip_ros.bag.metadata import qos_profile_dict
+from mwip_ros.msgs.qos import GRAPH_QOS, recorded_qos
+
+
+def _p(rel, dur, depth):
+    return qos_profile_dict({"history": 1, "depth": depth, "reliability": rel, "durability": dur})
+
+
+def test_every_publisher_reliable_and_transient_local_keeps_them_with_the_largest_depth():
+    q = recorded_qos([_p(1, 1, 10), _p(1, 1, 1000)])
+    assert (q.reliability, q.durability, q.depth) == (ReliabilityPolicy.RELIABLE, DurabilityPolicy.TRANSIENT_LOCAL,
+                                                      1000)
+
+
+def test_one_best_effort_or_volatile_publisher_makes_the_replay_so():
+    q = recorded_qos([_p(1, 1, 5), _p(2, 2, 7)])
+    assert (q.reliability, q.durability, q.depth) == (ReliabilityPolicy.BEST_EFFORT, DurabilityPolicy.VOLATILE, 7)
+
+
+def test_nothing_recorded_replays_with_the_graphs_qos():
+    assert recorded_qos([]) is GRAPH_QOS
