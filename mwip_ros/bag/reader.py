@@ -165,27 +165,29 @@ def topic_counts(bag: PathLike) -> Dict[str, int]:
     return counts
 
 
-def topic_qos(bag: PathLike) -> Dict[str, list]:
-    """Topic -> the recorded publishers' QoS profiles (v9 dicts; the channels' ``offered_qos_profiles``)."""
-    from .metadata import parse_qos_yaml
-    out: Dict[str, list] = {}
+def _channels(bag: PathLike):
+    """(summary, channel) for every channel of every MCAP file of ``bag``, from the files' summaries."""
     for path in mcap_files(bag):
         summary = _summary(path)
         if summary is None:
             raise BagError(f"{path} has no summary (a recording cut short? try mwip_bag_repair)")
         for channel in summary.channels.values():
-            out.setdefault(channel.topic, []).extend(parse_qos_yaml(channel.metadata.get("offered_qos_profiles")))
+            yield summary, channel
+
+
+def topic_qos(bag: PathLike) -> Dict[str, list]:
+    """Topic -> the recorded publishers' QoS profiles (v9 dicts; the channels' ``offered_qos_profiles``)."""
+    from .metadata import parse_qos_yaml
+    out: Dict[str, list] = {}
+    for _summary_, channel in _channels(bag):
+        out.setdefault(channel.topic, []).extend(parse_qos_yaml(channel.metadata.get("offered_qos_profiles")))
     return out
 
 
 def topic_types(bag: PathLike) -> Dict[str, str]:
     """Topic -> message type name, from the MCAP channels and schemas."""
     types: Dict[str, str] = {}
-    for path in mcap_files(bag):
-        summary = _summary(path)
-        if summary is None:
-            raise BagError(f"{path} has no summary (a recording cut short? try mwip_bag_repair)")
-        for channel in summary.channels.values():
-            schema = summary.schemas.get(channel.schema_id)
-            types[channel.topic] = schema.name if schema else ""
+    for summary, channel in _channels(bag):
+        schema = summary.schemas.get(channel.schema_id)
+        types[channel.topic] = schema.name if schema else ""
     return types
