@@ -28,13 +28,12 @@ from .metrics import window_metrics
 from .model import PhysicalParams, Sinusoid, State, accel, lumped_disturbance
 from .observer import DiscreteObserver
 from .plant import rk4_period
-from .sensing import NOISE_BLOCK as SENSOR_BLOCK, Actuator, Sensors, sensor_rng
+from .sensing import NOISE_BLOCK, Actuator, Sensors, sensor_rng
 from .sim import ClosedLoop, make_controller
 from .trajectory import COLUMNS, Trajectory
 
 __all__ = ["BatchResult", "simulate_batch"]
 
-NOISE_BLOCK = 256   # D_w draws per generator call; the same sequence as one draw per period
 
 
 @dataclass
@@ -71,6 +70,26 @@ def _same(values, what: str):
     return values.pop()
 
 
+class _Streams:
+    """Standard normal draws, ``width`` per period, for some scenarios, each from its own generator, drawn
+    NOISE_BLOCK periods at a time: the sequence the scalar plant draws (D_w: one per period; the sensors:
+    four, ``core.sensing.Normals``).  ``next()`` is (scenarios, width)."""
+
+    def __init__(self, gens, width: int):
+        self.gens, self.width = gens, width
+        self.block = np.empty((len(gens), NOISE_BLOCK, width))
+        self.used = NOISE_BLOCK
+
+    def next(self) -> np.ndarray:
+        if self.used == NOISE_BLOCK:
+            for row, gen in enumerate(self.gens):
+                self.block[row] = gen.standard_normal((NOISE_BLOCK, self.width))
+            self.used = 0
+        z = self.block[:, self.used, :]
+        self.used += 1
+        return z
+
+
 class _Noise:
     """D_w per period for every scenario: each scenario's own generator, in the scalar plant's order."""
 
@@ -78,19 +97,12 @@ class _Noise:
         self.mean, self.sd = mean, np.sqrt(variance)
         self.random = np.flatnonzero(variance != 0.0)
         self.all_random = len(self.random) == len(variance)
-        self.gens = [np.random.default_rng(int(seeds[i])) for i in self.random]
-        self.block = np.empty((len(self.random), NOISE_BLOCK))
-        self.used = NOISE_BLOCK
+        self.streams = _Streams([np.random.default_rng(int(seeds[i])) for i in self.random], 1)
 
     def draw(self) -> np.ndarray:
         if not len(self.random):
             return self.mean.copy()
-        if self.used == NOISE_BLOCK:
-            for row, gen in enumerate(self.gens):
-                self.block[row] = gen.standard_normal(NOISE_BLOCK)
-            self.used = 0
-        z = self.block[:, self.used]
-        self.used += 1
+        z = self.streams.next()[:, 0]
         if self.all_random:
             return np.maximum(0.0, self.mean + self.sd * z)
         d_w = self.mean.copy()
@@ -99,23 +111,16 @@ class _Noise:
 
 
 class _SensorNormals:
-    """The sensors' four normal draws per period for every scenario: each noisy scenario's own stream, in the
-    scalar plant's order (``core.sensing.Normals``); zeros for the others."""
+    """The sensors' four normal draws per period for every scenario: each noisy scenario's own stream
+    (``core.sensing.sensor_rng``); zeros for the others."""
 
     def __init__(self, seeds, noisy):
         self.idx = np.flatnonzero(noisy)
-        self.gens = [sensor_rng(int(seeds[i])) for i in self.idx]
-        self.block = np.empty((len(self.idx), SENSOR_BLOCK, 4))
-        self.used = SENSOR_BLOCK
+        self.streams = _Streams([sensor_rng(int(seeds[i])) for i in self.idx], 4)
         self.z = np.zeros((4, len(seeds)))
 
     def __call__(self):
-        if self.used == SENSOR_BLOCK:
-            for row, gen in enumerate(self.gens):
-                self.block[row] = gen.standard_normal((SENSOR_BLOCK, 4))
-            self.used = 0
-        self.z[:, self.idx] = self.block[:, self.used, :].T
-        self.used += 1
+        self.z[:, self.idx] = self.streams.next().T
         return tuple(self.z)
 
 

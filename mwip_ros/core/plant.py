@@ -15,7 +15,7 @@ from typing import Optional, Tuple
 import numpy as np
 
 from .model import PhysicalParams, Sinusoid, State, accel, lumped_disturbance
-from .sensing import SensingConfig
+from .sensing import NOISE_BLOCK, SensingConfig
 
 __all__ = ["PlantConfig", "PlantSim", "rk4_period", "saturate"]
 
@@ -82,7 +82,7 @@ class PlantSim:
         if c.D_w_variance == 0.0:
             return c.D_w_mean
         if not self._noise:  # draw in blocks: the same sequence as one standard_normal() per period
-            self._noise = self._rng.standard_normal(256).tolist()[::-1]
+            self._noise = self._rng.standard_normal(NOISE_BLOCK).tolist()[::-1]
         return max(0.0, c.D_w_mean + math.sqrt(c.D_w_variance) * self._noise.pop())
 
     def tau_ext(self, t: float, extra: Tuple[float, float] = (0.0, 0.0)) -> Tuple[float, float]:

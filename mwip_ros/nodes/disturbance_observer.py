@@ -25,6 +25,7 @@ from mwip_ros.core.theorem import observer_conditions
 from mwip_ros.core.trajectory import Trajectory
 from mwip_ros.msgs import layouts as L
 from mwip_ros.msgs.qos import GRAPH_QOS, INPUT_QOS
+from mwip_ros.nodes.diagnostics import OK
 from mwip_ros.nodes.guards import REPEAT, RESTART, STAMP_WINDOW_PERIODS, PublisherWatch, Rejects, StateInput
 from mwip_ros.nodes.params import declare
 from mwip_ros.nodes.runtime import GracefulNodeMixin, run_node
@@ -100,7 +101,7 @@ class DisturbanceObserver(Node, GracefulNodeMixin):
         return self.count
 
     def diagnostic_status(self):
-        return 0, f"estimating; X = {self.v['X']}", {"estimates": self.count}
+        return OK, f"estimating; X = {self.v['X']}", {"estimates": self.count}
 
     def on_shutdown(self) -> None:
         self.get_logger().info(f"estimated {self.count} states; rejected: {self.rejects.summary()}")

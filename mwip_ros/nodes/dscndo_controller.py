@@ -33,6 +33,7 @@ from mwip_ros.core.theorem import controller_conditions
 from mwip_ros.msgs import BadMessage
 from mwip_ros.msgs import layouts as L
 from mwip_ros.msgs.qos import GRAPH_QOS, INPUT_QOS
+from mwip_ros.nodes.diagnostics import OK
 from mwip_ros.nodes.guards import REPEAT, RESTART, STAMP_WINDOW_PERIODS, PublisherWatch, Rejects, StateInput
 from mwip_ros.nodes.params import declare
 from mwip_ros.nodes.runtime import GracefulNodeMixin, run_node
@@ -178,7 +179,7 @@ class DscndoController(Node, GracefulNodeMixin):
         return self.count
 
     def diagnostic_status(self):
-        return 0, f"{self._describe()} answering", {"commands": self.count, "law": self._name(),
+        return OK, f"{self._describe()} answering", {"commands": self.count, "law": self._name(),
                                                      "waiting_states": len(self.states)}
 
     def on_shutdown(self) -> None:

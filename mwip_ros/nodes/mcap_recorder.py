@@ -41,6 +41,7 @@ from mwip_ros.bag import type_hash as installed_type_hash
 from mwip_ros.msgs.qos import DEPTH
 from mwip_ros.msgs.topics import GRAPH_TOPICS, graph_type, msg_class
 from mwip_ros.bag.ledger import GAPS_KEY, MAX_STAMPS, Ledger
+from mwip_ros.nodes.diagnostics import OK
 from mwip_ros.nodes.guards import Rejects
 from mwip_ros.nodes.params import declare
 from mwip_ros.nodes.runtime import EXIT_ERROR, GracefulNodeMixin, run_node
@@ -242,7 +243,7 @@ class McapRecorder(Node, GracefulNodeMixin):
     def diagnostic_status(self):
         values = {"messages_written": self.received, "topics_subscribed": len(self.subs),
                   "topics_waiting_for_a_publisher": len(self.pending)}
-        return 0, f"recording to {self.output}", values
+        return OK, f"recording to {self.output}", values
 
     def on_shutdown(self) -> None:
         log = self.get_logger()

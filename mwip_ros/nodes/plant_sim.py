@@ -38,6 +38,7 @@ from mwip_ros.core.trajectory import TrajectoryTable
 from mwip_ros.msgs import BadMessage
 from mwip_ros.msgs import layouts as L
 from mwip_ros.msgs.qos import GRAPH_QOS, INPUT_QOS
+from mwip_ros.nodes.diagnostics import ERROR, OK, WARN
 from mwip_ros.nodes.guards import PublisherWatch, Rejects
 from mwip_ros.nodes.lockstep import LockstepDriver
 from mwip_ros.nodes.params import declare
@@ -248,13 +249,13 @@ class PlantSimNode(Node, GracefulNodeMixin):
             values.update({"loop_period_p99_ms": f"{np.percentile(per, 99):.3f}", "missed_deadlines": self.missed,
                            "stale_commands": self.stale})
         if self.fallen:
-            return 2, f"FALLEN at t = {p.t:.3f} s", values
+            return ERROR, f"FALLEN at t = {p.t:.3f} s", values
         if not self.started:
-            return 1, f"waiting for the graph (missing: {self.lockstep.missing()})", values
+            return WARN, f"waiting for the graph (missing: {self.lockstep.missing()})", values
         if self.mode == "lockstep" and self.lockstep.awaiting is not None and \
                 time.monotonic() - self.lockstep.sent_at > 1.0:
-            return 2, f"no answer for over a second (missing: {self.lockstep.missing()})", values
-        return 0, f"{self.mode} run at t = {p.t:.2f} s", values
+            return ERROR, f"no answer for over a second (missing: {self.lockstep.missing()})", values
+        return OK, f"{self.mode} run at t = {p.t:.2f} s", values
 
     # --- end of run --------------------------------------------------------------------------------
     def on_shutdown(self) -> None:

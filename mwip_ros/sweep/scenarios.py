@@ -99,25 +99,25 @@ def parameter_file(base_sections: Dict[str, Dict[str, Any]], placed: Dict[tuple,
     pf = P.ParamFile(path="<sweep>", sections={k: dict(v) for k, v in base_sections.items()})
     for (section, name), value in placed.items():
         pf.sections.setdefault(section, {})[name] = value
-    doc: Dict[str, Any] = {}
     shared_names = [s.name for s in P.SHARED_SPECS]
-    shared = {k: v for k, v in pf.for_node(NODES_OF_THE_LOOP[0]).items() if k in shared_names}
-    doc[P.SHARED] = {"ros__parameters": _nest(shared)}
+    sections = {P.SHARED: {k: v for k, v in pf.for_node(NODES_OF_THE_LOOP[0]).items() if k in shared_names}}
     for node in ("plant_sim", "disturbance_observer", "dscndo_controller"):
-        own = {k: v for k, v in pf.for_node(node).items() if k not in shared_names}
-        doc[node] = {"ros__parameters": _nest(own)}
-    text = yaml.dump(doc, Dumper=_Dumper, sort_keys=False, default_flow_style=False, width=120)
-    path.write_text(header + text)
-    P.load_param_file(path)   # what was written reads back as a valid file
+        sections[node] = {k: v for k, v in pf.for_node(node).items() if k not in shared_names}
+    _write(sections, path, header)
 
 
 def parameter_overlay(placed: Dict[tuple, Any], path: Path, header: str = "") -> None:
     """Write only ``placed[(section, name)]`` as a ROS 2 parameter file: an overlay to pass after a base file
     (``mwip_sim --params base.yaml overlay.yaml``, or a second ``--params-file``)."""
-    doc: Dict[str, Any] = {}
+    sections: Dict[str, Dict[str, Any]] = {}
     for (section, name), value in placed.items():
-        doc.setdefault(section, {"ros__parameters": {}})["ros__parameters"][name] = value
-    doc = {sec: {"ros__parameters": _nest(body["ros__parameters"])} for sec, body in doc.items()}
+        sections.setdefault(section, {})[name] = value
+    _write(sections, path, header)
+
+
+def _write(sections: Dict[str, Dict[str, Any]], path: Path, header: str) -> None:
+    """{section: {dotted name: value}} as a ROS 2 parameter file, checked by reading it back."""
+    doc = {sec: {"ros__parameters": _nest(values)} for sec, values in sections.items()}
     path.write_text(header + yaml.dump(doc, Dumper=_Dumper, sort_keys=False, default_flow_style=False, width=120))
     P.load_param_file(path)   # what was written reads back as a valid file
 

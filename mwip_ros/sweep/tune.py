@@ -150,10 +150,28 @@ class Objective:
                  min(vars(controller_conditions(nominal, gains)).values()))
         return min(0.0, gamma)
 
+    def _simulate(self, xs) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(upright, theta_b RMS, u RMS), each (candidates, scenarios), of every candidate on every scenario."""
+        n = len(self.scenarios)
+        overrides = [dict(self.scenarios.overrides(i), **apply(self.knobs, x, self.spec.base_values))
+                     for x in xs for i in range(n)]
+        up, th, u = np.zeros(len(overrides), dtype=bool), np.full(len(overrides), np.nan), np.full(len(overrides),
+                                                                                                  np.nan)
+        for chunk, res in self.runner(engine.chunks_of(self.law_name, self.spec.base_values, overrides,
+                                                       self.spec.duration_s, self.spec.window, self.chunk_size)):
+            sl = slice(chunk.first, chunk.first + len(chunk))
+            up[sl], th[sl], u[sl] = res.upright, res.metrics["theta_b_rms"], res.metrics["u_rms"]
+            self.steps += res.steps
+        return up.reshape(-1, n), th.reshape(-1, n), u.reshape(-1, n)
+
+    def _cost(self, up, th, u) -> np.ndarray:
+        """Per scenario: theta_b RMS + weight * u RMS, or FALL_PENALTY for a fall (or a non-finite metric)."""
+        c = th + self.weight * u
+        return np.where(up & np.isfinite(c), c, FALL_PENALTY)
+
     def per_scenario(self, xs: np.ndarray) -> np.ndarray:
         """(candidates, scenarios) costs; rows of inadmissible candidates are not simulated."""
-        n = len(self.scenarios)
-        cost = np.full((len(xs), n), np.nan)
+        cost = np.full((len(xs), len(self.scenarios)), np.nan)
         ok = []
         for j, x in enumerate(xs):
             gap = self.admissibility(x)
@@ -161,38 +179,19 @@ class Objective:
                 cost[j] = INADMISSIBLE - gap
             else:
                 ok.append(j)
-        overrides = [dict(self.scenarios.overrides(i), **apply(self.knobs, xs[j], self.spec.base_values))
-                     for j in ok for i in range(n)]
-        chunks = engine.chunks_of(self.law_name, self.spec.base_values, overrides, self.spec.duration_s,
-                                  self.spec.window, self.chunk_size)
-        flat = np.full(len(overrides), np.nan)
-        for chunk, res in self.runner(chunks):
-            c = res.metrics["theta_b_rms"] + self.weight * res.metrics["u_rms"]
-            c = np.where(res.upright & np.isfinite(c), c, FALL_PENALTY)
-            flat[chunk.first:chunk.first + len(chunk)] = c
-            self.steps += res.steps
-        for row, j in enumerate(ok):
-            cost[j] = flat[row * n:(row + 1) * n]
+        if ok:
+            cost[ok] = self._cost(*self._simulate([xs[j] for j in ok]))
         self.evaluations += len(xs)
         return cost
 
     def judge(self, x: Sequence[float]) -> Dict[str, float]:
         """One candidate on every scenario: J, the share upright, the median theta_b RMS and u RMS."""
         x = np.asarray(x, dtype=float)
-        overrides = [dict(self.scenarios.overrides(i), **apply(self.knobs, x, self.spec.base_values))
-                     for i in range(len(self.scenarios))]
-        up, th, u = (np.zeros(len(overrides), dtype=bool), np.full(len(overrides), np.nan),
-                     np.full(len(overrides), np.nan))
-        for chunk, res in self.runner(engine.chunks_of(self.law_name, self.spec.base_values, overrides,
-                                                       self.spec.duration_s, self.spec.window, self.chunk_size)):
-            sl = slice(chunk.first, chunk.first + len(chunk))
-            up[sl], th[sl], u[sl] = res.upright, res.metrics["theta_b_rms"], res.metrics["u_rms"]
-        cost = np.where(up & np.isfinite(th + u), th + self.weight * u, FALL_PENALTY)
-        gap = self.admissibility(x)
-        return {"J": float(cost.mean()), "upright_share": float(up.mean()),
+        up, th, u = (a[0] for a in self._simulate([x]))
+        return {"J": float(self._cost(up, th, u).mean()), "upright_share": float(up.mean()),
                 "theta_b_rms_median": float(np.median(th[up])) if up.any() else math.nan,
                 "u_rms_median": float(np.median(u[up])) if up.any() else math.nan,
-                "theorem2_holds": gap >= 0}
+                "theorem2_holds": self.admissibility(x) >= 0}
 
     def __call__(self, xs: np.ndarray) -> np.ndarray:
         """J for each candidate (rows of ``xs``, in parameter units)."""
