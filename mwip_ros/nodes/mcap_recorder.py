@@ -96,6 +96,7 @@ class McapRecorder(Node, GracefulNodeMixin):
         for name, resolved, type_name in wanted:
             self.pending[resolved] = (name, type_name)
             self.types[resolved] = type_name
+            self.ledger.counts[resolved] = 0   # expected: a loop topic never subscribed is a gap, not forgotten
         self._subscribe_discovered()
         self.get_logger().info(
             f"recording {len(self.types)} topic(s) to {self.output} ({self.writer.relative_path}; compression "
@@ -136,7 +137,6 @@ class McapRecorder(Node, GracefulNodeMixin):
             if not infos:
                 continue
             name, type_name = self.pending.pop(resolved)
-            self.ledger.counts.setdefault(resolved, 0)   # subscribed: judged for completeness from now on
             qos = adapted_qos(infos)
             self.subs[resolved] = self.create_subscription(
                 msg_class(type_name), name, self._callback(resolved, type_name), qos, raw=True,
@@ -215,8 +215,7 @@ class McapRecorder(Node, GracefulNodeMixin):
                 self.get_logger().info(f"{self.received} messages written: {self._per_topic()}")
 
     def _per_topic(self) -> str:
-        counts = {t: self.ledger.counts.get(t, 0) for t in self.types}   # a topic nobody published: 0
-        return ", ".join(f"{t} {n}" for t, n in sorted(counts.items()))
+        return ", ".join(f"{t} {n}" for t, n in sorted(self.ledger.counts.items()))
 
     def _drain(self) -> None:
         """Run the callbacks of messages already received but not yet handled."""

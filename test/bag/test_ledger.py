@@ -73,3 +73,15 @@ def test_the_report_shows_the_gaps_of_a_flagged_bag(tmp_path):
     assert r.returncode == 0, r.stderr
     assert "incomplete lockstep recording" in r.stderr and "/disturbance_estimate: 48 of 50" in r.stderr
     assert "/disturbance_estimate: 48 of 50" in (tmp_path / "rep" / "metrics.md").read_text()
+
+
+def test_an_expected_topic_with_nothing_recorded_is_a_gap_and_an_absent_optional_one_is_not():
+    led = Ledger()
+    led.counts.update({"/wheel_torque_cmd": 0, "/true_joint_states": 0})   # what a recorder expects
+    for k in range(20):
+        led.add("/joint_states", JS, L.encode_state(k * H, State(0.0, 0.0, 0.0, 0.0), 0.0))
+        led.add("/clock", CLOCK, L.encode_clock(k * H))
+    assert led.gaps() == [("/wheel_torque_cmd", 0, 20, None)]   # never subscribed: flagged, not forgotten
+    for k in range(5):   # the plant measured with noise: its truth is judged like any loop topic
+        led.add("/true_joint_states", JS, L.encode_state(k * H, State(0.0, 0.0, 0.0, 0.0), 0.0))
+    assert [g[0] for g in led.gaps()] == ["/true_joint_states", "/wheel_torque_cmd"]
