@@ -10,7 +10,7 @@
 * The recorder (:data:`RECORD_QOS`): reliable, keep last 1000, transient local, so it gets
   that backlog.  A volatile publisher (``ros2 topic pub`` by default) does not match a
   transient-local reader: the recorder takes ``external_wrench``, which users publish by
-  hand, with :data:`INPUT_QOS`.
+  hand, and any topic with such a publisher, with a QoS adapted to its publishers.
 """
 from __future__ import annotations
 

@@ -9,7 +9,7 @@ import importlib
 import re
 from typing import Dict, Optional, Tuple
 
-__all__ = ["GRAPH_TOPICS", "split_type", "msg_class", "leaf", "graph_type"]
+__all__ = ["GRAPH_TOPICS", "USER_TOPICS", "split_type", "msg_class", "leaf", "graph_type"]
 
 GRAPH_TOPICS: Dict[str, str] = {
     "joint_states": "sensor_msgs/msg/JointState",
@@ -21,6 +21,7 @@ GRAPH_TOPICS: Dict[str, str] = {
     "controller_internals": "sensor_msgs/msg/JointState",
     "/clock": "rosgraph_msgs/msg/Clock",
 }
+USER_TOPICS = {"external_wrench"}   # published by users (any QoS), not by the graph's nodes with GRAPH_QOS
 
 
 _NAME = re.compile(r"^[a-zA-Z][a-zA-Z0-9_]*$")

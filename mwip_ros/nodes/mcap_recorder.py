@@ -10,12 +10,18 @@ Every message is stored as the exact CDR bytes received (raw subscriptions), wit
 node clock's receive time as log time (sim time under ``use_sim_time``, as rosbag2 does)
 and as publish time (rclpy's EventsExecutor gives raw subscriptions no MessageInfo).
 
-A topic is subscribed once its first publisher is discovered, with a QoS adapted to the
-publishers (as ``ros2 bag record`` does): keep last 1000, reliable unless a publisher is
-best effort, transient local when every publisher is (the graph's are: a recorder that
-matches a moment after a lockstep run began still gets its first messages), else
-volatile (``ros2 topic pub``).  A topic's channel is created at its first message, with
-the QoS the publishers offer and the type hash they announce.
+The loop's own topics (every graph topic but ``external_wrench``) are subscribed at start
+with :data:`~mwip_ros.msgs.qos.RECORD_QOS` (reliable, keep last 1000, transient local, as
+the graph's nodes publish them): the subscription exists before the nodes do, so a plant
+told to wait for it (``expected_subscribers``) starts only once the recorder listens, and
+a writer that matches a moment late still hands over its last 1000 messages.  Should a
+publisher offer a QoS that cannot match it (``ros2 topic pub`` or ``ros2 bag play --clock``
+are volatile), the topic is subscribed again with a QoS adapted to its publishers, as
+``ros2 bag record`` does: keep last 1000, reliable unless a publisher is best effort,
+transient local only when every publisher is.  ``external_wrench``, which users publish by
+hand, is subscribed that way once its first publisher is discovered.  A topic's channel is
+created at its first message, with the QoS the publishers offer and the type hash they
+announce.
 
 On SIGINT/SIGTERM the queued messages are drained, the MCAP file is finished and
 ``metadata.yaml`` written; exit code 0.  The closing summary gives the messages per topic;
@@ -38,8 +44,8 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 
 from mwip_ros.bag import BagError, BagWriter, message_definition, qos_profiles_yaml
 from mwip_ros.bag import type_hash as installed_type_hash
-from mwip_ros.msgs.qos import DEPTH
-from mwip_ros.msgs.topics import GRAPH_TOPICS, graph_type, msg_class
+from mwip_ros.msgs.qos import DEPTH, RECORD_QOS
+from mwip_ros.msgs.topics import GRAPH_TOPICS, USER_TOPICS, graph_type, leaf, msg_class
 from mwip_ros.bag.ledger import GAPS_KEY, MAX_STAMPS, Ledger
 from mwip_ros.nodes.diagnostics import OK
 from mwip_ros.nodes.guards import Rejects
@@ -92,11 +98,15 @@ class McapRecorder(Node, GracefulNodeMixin):
         self._last_progress_count = 0
         self.subs = {}
         self.pending = {}                   # resolved name -> (name as given, type): no publisher seen yet
+        self._readapt = set()               # subscribed with RECORD_QOS, but a publisher cannot match it
         self._next_poll = 0.0
         for name, resolved, type_name in wanted:
-            self.pending[resolved] = (name, type_name)
             self.types[resolved] = type_name
             self.ledger.counts[resolved] = 0   # expected: a loop topic never subscribed is a gap, not forgotten
+            if leaf(resolved) in USER_TOPICS:
+                self.pending[resolved] = (name, type_name)
+            else:
+                self._subscribe(resolved, name, type_name, RECORD_QOS)
         self._subscribe_discovered()
         self.get_logger().info(
             f"recording {len(self.types)} topic(s) to {self.output} ({self.writer.relative_path}; compression "
@@ -130,6 +140,11 @@ class McapRecorder(Node, GracefulNodeMixin):
             out.append((name, resolved, type_name))
         return out
 
+    def _subscribe(self, resolved: str, name: str, type_name: str, qos: QoSProfile) -> None:
+        self.subs[resolved] = self.create_subscription(
+            msg_class(type_name), name, self._callback(resolved, type_name), qos, raw=True,
+            event_callbacks=self._events(resolved, adapted=qos is not RECORD_QOS))
+
     def _subscribe_discovered(self) -> None:
         """Subscribe each pending topic that has a publisher now, with a QoS that matches them."""
         for resolved in list(self.pending):
@@ -138,23 +153,37 @@ class McapRecorder(Node, GracefulNodeMixin):
                 continue
             name, type_name = self.pending.pop(resolved)
             qos = adapted_qos(infos)
-            self.subs[resolved] = self.create_subscription(
-                msg_class(type_name), name, self._callback(resolved, type_name), qos, raw=True,
-                event_callbacks=self._events(resolved))
+            self._subscribe(resolved, name, type_name, qos)
             self.get_logger().info(f"subscribed {resolved} ({len(infos)} publisher(s); {qos.reliability.name.lower()}, "
                                    f"{qos.durability.name.lower()})")
 
-    def _events(self, name: str):
+    def _adapt(self) -> None:
+        """Subscribe again, with a QoS adapted to the publishers, each topic whose RECORD_QOS one a publisher
+        cannot match (the event comes in a callback: the subscription is replaced here, between callbacks)."""
+        for resolved in sorted(self._readapt):
+            self.destroy_subscription(self.subs.pop(resolved))
+            self.pending[resolved] = (resolved, self.types[resolved])
+        self._readapt.clear()
+        self._subscribe_discovered()
+
+    def _events(self, name: str, adapted: bool):
         try:
             from rclpy.event_handler import SubscriptionEventCallbacks
         except ImportError:  # pragma: no cover
             return None
 
         def incompatible(event) -> None:
+            kind = getattr(event, "last_policy_kind", "?")
+            if not adapted:
+                if name not in self._readapt:
+                    self.get_logger().info(f"a publisher on {name} cannot match the graph's QoS (reliable, transient "
+                                           f"local; policy kind {kind}): subscribing with a QoS adapted to the "
+                                           f"publishers instead")
+                self._readapt.add(name)
+                return
             self.get_logger().warning(
                 f"a publisher on {name} offers a QoS incompatible with the recorder's (chosen for the publishers "
-                f"it found first; last policy kind {getattr(event, 'last_policy_kind', '?')}): its messages are NOT "
-                f"recorded")
+                f"it found first; last policy kind {kind}): its messages are NOT recorded")
 
         return SubscriptionEventCallbacks(incompatible_qos=incompatible)
 
@@ -198,6 +227,8 @@ class McapRecorder(Node, GracefulNodeMixin):
 
     def spin_step(self, executor) -> None:
         self._executor = executor
+        if self._readapt:
+            self._adapt()
         if self.pending and time.monotonic() >= self._next_poll:
             self._next_poll = time.monotonic() + DISCOVERY_POLL_S
             self._subscribe_discovered()

@@ -118,6 +118,8 @@ def test_records_exactly_what_was_published(graph, tmp_path, stop_signal):
     assert rec.stop(stop_signal, timeout=20) == 0, rec.output()
     out = rec.output()
     assert f"bag {bag}: {4 * N} messages" in out, out
+    for topic in topics:   # volatile publishers cannot match the graph's QoS: each topic was subscribed again
+        assert f"a publisher on /{topic.lstrip('/')} cannot match the graph's QoS" in out, out
 
     msgs, counts = read_bag(bag)
     assert counts == {"/joint_states": N, "/wheel_torque_cmd": N, "/disturbance_estimate": N, "/clock": N}
@@ -140,6 +142,24 @@ def test_records_exactly_what_was_published(graph, tmp_path, stop_signal):
         assert e["message_count"] == N
         assert tm["type_description_hash"] == type_hash(tm["type"])
         assert [q["reliability"] for q in tm["offered_qos_profiles"]] == ["reliable"]
+
+
+def test_the_loop_topics_are_subscribed_before_any_publisher(graph, tmp_path):
+    """So a plant that waits for the recorder (expected_subscribers) starts only once it listens, and the
+    graph's transient-local writers (GRAPH_QOS) match it with no graph query in between."""
+    from mwip_ros.msgs.qos import GRAPH_QOS
+    from mwip_ros.msgs.topics import GRAPH_TOPICS, USER_TOPICS, msg_class
+    rec = start_recorder(graph, f"output:={tmp_path / 'early'}")
+    loop = {"/" + t.lstrip("/") for t in GRAPH_TOPICS} - {"/" + t for t in USER_TOPICS}
+    end = time.monotonic() + 20
+    while time.monotonic() < end and not all(graph.node.count_subscribers(t) == 1 for t in loop):
+        time.sleep(0.05)
+    assert {t: graph.node.count_subscribers(t) for t in loop} == {t: 1 for t in loop}
+    assert graph.node.count_subscribers("/external_wrench") == 0   # subscribed once a publisher shows
+    pub = graph.node.create_publisher(msg_class(GRAPH_TOPICS["wheel_torque_cmd"]), "wheel_torque_cmd", GRAPH_QOS)
+    wait_matched(graph, {"wheel_torque_cmd": pub})
+    assert rec.stop(signal.SIGINT, timeout=20) == 0, rec.output()
+    assert "cannot match" not in rec.output() and "subscribed /wheel_torque_cmd" not in rec.output(), rec.output()
 
 
 def test_refuses_existing_output(graph, tmp_path):
