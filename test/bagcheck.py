@@ -103,7 +103,27 @@ def make_msg(type_name: str, i: int):
             force=vec(i, 0, 1), torque=vec(0, i, 2)))
     if type_name == "rosgraph_msgs/msg/Clock":
         return T[type_name](clock=stamp())
+    if type_name == "visualization_msgs/msg/MarkerArray":
+        return T[type_name](markers=[_marker(T, header(), i, k) for k in range(2)])
     raise AssertionError(type_name)
+
+
+def _marker(T, header, i: int, k: int):
+    import numpy as np
+    point = T["geometry_msgs/msg/Point"]
+    return T["visualization_msgs/msg/Marker"](
+        header=header, ns="robot", id=k, type=4 if k else 3, action=0,
+        pose=T["geometry_msgs/msg/Pose"](position=point(x=0.1 * i, y=0.0, z=0.5),
+                                         orientation=T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0)),
+        scale=T["geometry_msgs/msg/Vector3"](x=0.1, y=0.1, z=0.1),
+        color=T["std_msgs/msg/ColorRGBA"](r=1.0, g=0.5, b=0.0, a=1.0),
+        lifetime=T["builtin_interfaces/msg/Duration"](sec=0, nanosec=0), frame_locked=False,
+        points=[point(x=0.0, y=0.0, z=0.0), point(x=float(i), y=0.0, z=1.0)] if k else [],
+        colors=[], texture_resource="", texture=T["sensor_msgs/msg/CompressedImage"](
+            header=header, format="", data=np.array([], dtype=np.uint8)),
+        uv_coordinates=[], text="", mesh_resource="",
+        mesh_file=T["visualization_msgs/msg/MeshFile"](filename="", data=np.array([], dtype=np.uint8)),
+        mesh_use_embedded_materials=False)
 
 
 def write_bag(path, topics: Dict[str, str], n: int, compression=None, chunk_size: int = 300,

@@ -20,6 +20,7 @@ GRAPH_TOPICS: Dict[str, str] = {
     "external_wrench": "geometry_msgs/msg/Wrench",
     "controller_internals": "sensor_msgs/msg/JointState",
     "/clock": "rosgraph_msgs/msg/Clock",
+    "robot_markers": "visualization_msgs/msg/MarkerArray",  # robot_markers: the robot to look at
 }
 USER_TOPICS = {"external_wrench"}   # published by users (any QoS), not by the graph's nodes with GRAPH_QOS
 
