@@ -27,8 +27,9 @@ NAN = math.nan
 
 
 def write_csv(run: Trajectory, path) -> None:
-    """The columns ``run`` has, in the trajectory table's order, floats written exactly (repr)."""
-    names = [c for c in COLUMNS if c in run.columns]
+    """The columns ``run`` has, in the trajectory table's order (then ``stamp``, a realtime plant's message
+    stamps in seconds when they are not ``t``), floats written exactly (repr)."""
+    names = [c for c in (*COLUMNS, "stamp") if c in run.columns]
     with open(path, "w", newline="") as f:
         w = csv.writer(f, lineterminator="\n")
         w.writerow(names)

@@ -82,10 +82,12 @@ mkdir -p "$LOGS"
 # Lockstep: the recorder logs in sim time (the plant publishes /clock). The observer and the
 # controller never read a clock (each output carries the stamp of the state it answers), so
 # they run without use_sim_time: that spares each a /clock message per step (BENCHMARKS.md).
+# Every -p names its node (-p NODE:name:=value): in ROS 2 a node's own section of a parameter file
+# wins over a -p rule without a node name (README: The parameter file).
 SIMTIME=()
-[ "$MODE" = lockstep ] && SIMTIME=(-p use_sim_time:=true)
-PLANT_EXTRA=(-p "mode:=$MODE")
-[ -n "$DURATION" ] && PLANT_EXTRA+=(-p "duration_s:=$DURATION")
+[ "$MODE" = lockstep ] && SIMTIME=(-p mcap_recorder:use_sim_time:=true)
+PLANT_EXTRA=(-p "plant_sim:mode:=$MODE")
+[ -n "$DURATION" ] && PLANT_EXTRA+=(-p "plant_sim:duration_s:=$DURATION")
 
 RUNS=()
 ESTIMATES=()   # the observer's estimates (CSV), for a report from the plant's CSVs (--no-record)
@@ -97,7 +99,7 @@ for CTRL in "${LAW_LIST[@]}"; do
     SUBS=2
     if [ "$RECORD" = 1 ]; then
         BAG="$OUT/${STAMP}_${CTRL}"
-        mcap_recorder --ros-args "${PF[@]}" -p "output:=$BAG" "${SIMTIME[@]}" \
+        mcap_recorder --ros-args "${PF[@]}" -p "mcap_recorder:output:=$BAG" "${SIMTIME[@]}" \
             > "$LOGS/${CTRL}_mcap_recorder.log" 2>&1 &
         PIDS+=($!)
         SUBS=3
@@ -106,14 +108,14 @@ for CTRL in "${LAW_LIST[@]}"; do
         RUNS+=("$LOGS/${CTRL}.csv")
     fi
     ESTIMATES+=("$LOGS/${CTRL}_estimates.csv")
-    disturbance_observer --ros-args "${PF[@]}" -p "csv:=$LOGS/${CTRL}_estimates.csv" \
+    disturbance_observer --ros-args "${PF[@]}" -p "disturbance_observer:mode:=$MODE" -p "disturbance_observer:csv:=$LOGS/${CTRL}_estimates.csv" \
         > "$LOGS/${CTRL}_disturbance_observer.log" 2>&1 &
     PIDS+=($!)
-    dscndo_controller --ros-args "${PF[@]}" -p "use_observer:=$USE_OBS" -p "law:=$LAW" \
+    dscndo_controller --ros-args "${PF[@]}" -p "dscndo_controller:mode:=$MODE" -p "dscndo_controller:use_observer:=$USE_OBS" -p "dscndo_controller:law:=$LAW" \
         > "$LOGS/${CTRL}_dscndo_controller.log" 2>&1 &
     PIDS+=($!)
-    plant_sim --ros-args "${PF[@]}" "${PLANT_EXTRA[@]}" -p "expected_subscribers:=$SUBS" \
-        -p "csv:=$LOGS/${CTRL}.csv" > "$LOGS/${CTRL}_plant_sim.log" 2>&1 &
+    plant_sim --ros-args "${PF[@]}" "${PLANT_EXTRA[@]}" -p "plant_sim:expected_subscribers:=$SUBS" \
+        -p "plant_sim:csv:=$LOGS/${CTRL}.csv" > "$LOGS/${CTRL}_plant_sim.log" 2>&1 &
     PLANT=$!
     PIDS+=("$PLANT")
     tail --pid="$PLANT" -n +1 -f "$LOGS/${CTRL}_plant_sim.log" &   # show the plant's progress live
@@ -146,5 +148,5 @@ echo
 if [ "$RECORD" = 1 ]; then
     echo "bags:  " "${RUNS[@]#$ROOT/}"
 fi
-echo "report: ${REPORT#$ROOT/}/metrics.md (figures fig3.png, observer.png)"
+echo "report: ${REPORT#$ROOT/}/metrics.md (figures fig3.png, observer.png; animation.gif)"
 echo "logs:   ${LOGS#$ROOT/}/"

@@ -2,7 +2,7 @@
 # Start one mwip_ros node by hand with the project's parameter file, e.g. one per terminal:
 #
 #   scripts/run_node.sh disturbance_observer
-#   scripts/run_node.sh dscndo_controller -p use_observer:=false
+#   scripts/run_node.sh dscndo_controller -p dscndo_controller:use_observer:=false
 #   scripts/run_node.sh mcap_recorder -p output:=bags/my_run
 #   scripts/run_node.sh plant_sim                      # start the plant last in lockstep
 #

@@ -101,6 +101,18 @@ class Proc:
         return self.poll()
 
 
+def node_rules(node: str, ros_args) -> List[str]:
+    """``ros_args`` with each ``-p name:=value`` made ``-p NODE:name:=value``: for the node started (its name,
+    or the ``-r __node:=`` one), so that it wins over the parameter file's section, as ROS 2 has it."""
+    args = list(ros_args)
+    name = next((a.split(":=", 1)[1] for a in args if a.startswith("__node:=")), node)
+    out = []
+    for i, a in enumerate(args):
+        rule = i > 0 and args[i - 1] in ("-p", "--param")
+        out.append(f"{name}:{a}" if rule and ":=" in a and ":" not in a.split(":=", 1)[0] else a)
+    return out
+
+
 class Graph:
     """A set of node processes on one private ROS domain."""
 
@@ -111,13 +123,14 @@ class Graph:
         self.procs: List[Proc] = []
 
     def start(self, node: str, *ros_args: str, params: Optional[Path] = PARAMS, label: Optional[str] = None,
-              module: Optional[str] = None, cmd: Optional[List[str]] = None) -> Proc:
-        """Start ``python -m mwip_ros.nodes.<node>`` (or ``module``, or the command ``cmd``) --ros-args ..."""
+              module: Optional[str] = None, cmd: Optional[List[str]] = None, as_given: bool = False) -> Proc:
+        """Start ``python -m mwip_ros.nodes.<node>`` (or ``module``, or the command ``cmd``) --ros-args ...
+        (each ``-p`` rule for that node, see :func:`node_rules`, unless ``as_given``)."""
         label = label or node
         cmd = list(cmd or [sys.executable, "-m", module or f"mwip_ros.nodes.{node}"]) + ["--ros-args"]
         if params is not None:
             cmd += ["--params-file", str(params)]
-        cmd += list(ros_args)
+        cmd += list(ros_args) if as_given else node_rules(node, ros_args)
         log = self.workdir / f"{label}.log"
         f = open(log, "wb")
         p = subprocess.Popen(cmd, stdout=f, stderr=subprocess.STDOUT, env=self.env, cwd=self.workdir)

@@ -53,6 +53,37 @@ class Injector:
         self.close()
 
 
+def health(inj) -> dict:
+    """{node name: (its clock's seconds, {topic: rejected messages})} from the latest /diagnostics of each
+    node (a report every wall second), updated as the injector spins."""
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    latest = {}
+
+    def take(arr):
+        for st in arr.status:
+            values = {kv.key: kv.value for kv in st.values}
+            by_topic = dict(item.split(": ") for item in values.get("rejected_by_topic", "").split(", ") if item)
+            latest[st.name] = (arr.header.stamp.sec, {t: int(n) for t, n in by_topic.items()})
+    inj.node.create_subscription(DiagnosticArray, "/diagnostics", take, 100)
+    return latest
+
+
+def publish_until_rejected(inj, latest: dict, node: str, topic: str, pub, data, timeout: float = 30.0) -> bool:
+    """Publish ``data`` (again each 2.5 s: a history of one may drop it) until ``node``'s /diagnostics count
+    one more rejection on ``topic``."""
+    def count():
+        return latest.get(node, (0, {}))[1].get(topic, 0)
+    assert inj.wait(lambda: node in latest, timeout), f"no /diagnostics from {node}"
+    before = count()
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        pub.publish(data)
+        if inj.wait(lambda: count() > before, 2.5):
+            return True
+    return False
+
+
 def rss_mib(pid: int) -> float:
     with open(f"/proc/{pid}/status") as f:
         for line in f:

@@ -5,7 +5,8 @@ answer on every topic of the loop.  So a complete recording has, for every stamp
 grid up to the last one recorded, one message of that stamp on each stamped topic
 (``joint_states``, ``/clock``, ``disturbance_estimate``, ``lumped_disturbance``,
 ``controller_internals``) and as many ``wheel_torque_cmd`` as states; ``external_wrench``
-is whatever a user sent, ``robot_markers`` a view of the states (not compared).  A recorder that joined late lacks the first stamps everywhere:
+is whatever a user sent, ``robot_markers`` a view of the states and ``/rosout``,
+``/parameter_events``, ``/diagnostics`` ROS's own: those are not compared.  A recorder that joined late lacks the first stamps everywhere:
 the grid from 0 still shows it.  A state the plant resent before the graph had matched shows as a
 repeated stamp: it counts once.  :class:`Ledger` keeps the stamps (8 bytes each) and says
 which topics lack which stamps; no ROS here.
@@ -22,7 +23,8 @@ __all__ = ["Ledger", "GAPS_KEY", "MAX_STAMPS"]
 
 GAPS_KEY = "mwip_ros.lockstep_gaps"    # the bag's custom_data entry that says what a lockstep recording lacks
 STAMPED = {"sensor_msgs/msg/JointState", "geometry_msgs/msg/WrenchStamped", "rosgraph_msgs/msg/Clock"}
-NOT_COMPARED = {"external_wrench", "robot_markers"}   # what a user sent; a view, not the loop
+NOT_COMPARED = {"external_wrench", "robot_markers",     # what a user sent; a view, not the loop;
+                "rosout", "parameter_events", "diagnostics"}   # ROS's own topics
 OPTIONAL = {"true_joint_states"}   # published only with sensing options on: judged when it has messages
 MAX_STAMPS = 10_000_000     # per topic (80 MB); past it a topic is only counted
 

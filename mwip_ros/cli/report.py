@@ -4,8 +4,9 @@
     mwip_report logs/dsc.csv logs/dscndo.csv --estimates logs/dsc_estimates.csv logs/dscndo_estimates.csv ...
 
 writes ``fig3.png`` (theta_b, theta_b', theta_w', u; one line per run, the paper's Fig. 3
-layout), ``observer.png`` (tau_hat against the true lumped disturbance) and ``metrics.md`` /
-``metrics.json`` (the metrics of docs/theory.md, per run).
+layout), ``observer.png`` (tau_hat against the true lumped disturbance), ``metrics.md`` /
+``metrics.json`` (the metrics of docs/theory.md, per run) and ``animation.gif`` (the robot from the side,
+one panel per run, :mod:`mwip_ros.cli.animation`; ``--no-animation`` skips it).
 """
 from __future__ import annotations
 
@@ -13,11 +14,11 @@ import argparse
 import json
 import sys
 from pathlib import Path
-from typing import List
+from typing import List, Optional
 
 from mwip_ros.bag import BagError, read_metadata
 from mwip_ros.bag.ledger import GAPS_KEY
-from mwip_ros.cli import plotting
+from mwip_ros.cli import animation, plotting
 from mwip_ros.core import metrics
 from mwip_ros.core.trajectory import Trajectory
 from mwip_ros.params import defaults_for
@@ -37,11 +38,13 @@ def recording_gaps(path) -> str:
 
 
 def write_report(runs: List[Trajectory], out: Path, window=metrics.WINDOW, fall_angle: float = FALL_ANGLE,
-                 warnings: List[str] = ()) -> dict:
+                 warnings: List[str] = (), gif_fps: Optional[float] = animation.FPS) -> dict:
     out.mkdir(parents=True, exist_ok=True)
     named = [(r.label, metrics.compute(r.columns, window, fall_angle)) for r in runs]
     plotting.fig3(runs, out / "fig3.png")
     plotting.observer_plot(runs, out / "observer.png")
+    if gif_fps:   # None: no animation; the robot sized by the schema's nominal model (no run records its own)
+        animation.write_gif(runs, out / "animation.gif", fps=gif_fps, fall_angle=fall_angle)
     md = ["# mwip_ros report", ""]
     md += [line for w in warnings for line in (f"**Warning:** {w}", "")]
     md += [f"Metrics over t in [{window[0]:g}, {window[1]:g}] s.", "", metrics.markdown_table(named), ""]
@@ -50,6 +53,7 @@ def write_report(runs: List[Trajectory], out: Path, window=metrics.WINDOW, fall_
         md.append(f"theta_b peak-to-peak, {named[0][0]} / {named[-1][0]}: **{ratio:.2f}x**")
         md.append("")
     md += ["![Fig. 3 layout](fig3.png)", "", "![observer](observer.png)", ""]
+    md += ["![animation](animation.gif)", ""] if gif_fps else []
     (out / "metrics.md").write_text("\n".join(md))
     doc = {"window": list(window), "runs": {name: m.as_dict() for name, m in named},
            "sources": {r.label: len(r) for r in runs}, "warnings": list(warnings)}
@@ -61,7 +65,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(
         prog="mwip_report",
         description="Read recorded bags (rosbag2 MCAP directories) or mwip_sim / plant_sim CSVs and write "
-                    "fig3.png, observer.png, metrics.md and metrics.json into --out.",
+                    "fig3.png, observer.png, metrics.md, metrics.json and animation.gif into --out.",
         epilog="Exit codes: 0 written, 2 an input cannot be read (a damaged bag names the file and the chunk).")
     ap.add_argument("runs", nargs="+", help="bag directories, .mcap files or .csv files (one run each)")
     ap.add_argument("--out", type=Path, required=True, help="directory for the report (created)")
@@ -71,7 +75,13 @@ def main(argv=None) -> int:
                          "joined to the run by stamp; for plant_sim CSVs, which carry no estimates")
     ap.add_argument("--window", type=float, nargs=2, default=metrics.WINDOW, metavar=("T0", "T1"),
                     help="metrics window [s] (default: 5 10)")
+    ap.add_argument("--no-animation", action="store_true", help="do not write animation.gif")
+    ap.add_argument("--gif-fps", type=float, default=animation.FPS, metavar="FPS",
+                    help=f"animation.gif's frames per second of simulated time, played in real time (default: "
+                         f"{animation.FPS:g}; at most 50: browsers slow down shorter GIF frames)")
     args = ap.parse_args(argv)
+    if not 0 < args.gif_fps <= 50:
+        ap.error(f"--gif-fps must be in (0, 50], got {args.gif_fps:g}")
     for opt in ("labels", "estimates"):
         given = getattr(args, opt)
         if given and len(given) != len(args.runs):
@@ -89,9 +99,11 @@ def main(argv=None) -> int:
         if gaps:
             warnings.append(f"{runs[-1].label}: incomplete lockstep recording ({path}): {gaps}")
             print(f"mwip_report: WARNING: {warnings[-1]}", file=sys.stderr)
-    res = write_report(runs, args.out, tuple(args.window), warnings=warnings)
+    res = write_report(runs, args.out, tuple(args.window), warnings=warnings,
+                       gif_fps=None if args.no_animation else args.gif_fps)
     print(metrics.text_table(res["named"]))
-    for f in ("fig3.png", "observer.png", "metrics.md", "metrics.json"):
+    files = ["fig3.png", "observer.png", "metrics.md", "metrics.json"] + ["animation.gif"] * (not args.no_animation)
+    for f in files:
         print(f"wrote {args.out / f}")
     return 0
 

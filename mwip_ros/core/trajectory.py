@@ -86,11 +86,12 @@ class TrajectoryTable:
 
 def join_estimates(traj: Trajectory, estimates: Iterable[Tuple[float, float, float]]) -> Trajectory:
     """A copy of ``traj`` whose tau_hat columns hold the estimates ``(t, tau_hat1, tau_hat2)`` of the same
-    stamp (rows without one keep what they had)."""
+    stamp (rows without one keep what they had).  A row's stamp is its ``stamp`` column where it has one (a
+    realtime plant stamps with its clock), else its ``t``."""
     by_stamp = {stamp_key(t): (a, b) for t, a, b in estimates}
     cols = dict(traj.columns)
     th1, th2 = cols["tau_hat1"].copy(), cols["tau_hat2"].copy()
-    for i, t in enumerate(cols["t"]):
+    for i, t in enumerate(cols.get("stamp", cols["t"])):
         e = by_stamp.get(stamp_key(t))
         if e is not None:
             th1[i], th2[i] = e

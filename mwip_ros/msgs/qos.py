@@ -7,6 +7,11 @@
 * The loop's own subscriptions (:data:`INPUT_QOS`, observer, controller, plant): reliable,
   keep last 1000, **volatile**: a node that joins late must not integrate a backlog of old
   states; the lockstep driver resends the one state that is waiting.
+* Realtime (``mode: realtime`` of the plant, the observer and the controller): the newest
+  state matters, not a backlog.  Publishers (:data:`REALTIME_QOS`) are reliable, transient
+  local and keep the last 10 (a recorder that joins gets 50 ms at 200 Hz, not seconds);
+  the loop's subscriptions (:data:`REALTIME_INPUT_QOS`) keep the last one only, so a node
+  that fell behind answers the newest state and never works through old ones.
 * The recorder (:data:`RECORD_QOS`): reliable, keep last 1000, transient local, so it gets
   that backlog.  A volatile publisher (``ros2 topic pub`` by default) does not match a
   transient-local reader: the recorder takes ``external_wrench``, which users publish by
@@ -16,7 +21,8 @@ from __future__ import annotations
 
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-__all__ = ["GRAPH_QOS", "INPUT_QOS", "RECORD_QOS", "DEPTH", "recorded_qos"]
+__all__ = ["GRAPH_QOS", "INPUT_QOS", "RECORD_QOS", "REALTIME_QOS", "REALTIME_INPUT_QOS", "DEPTH",
+           "qos_for", "recorded_qos"]
 
 DEPTH = 1000
 
@@ -25,6 +31,16 @@ GRAPH_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=DEPTH, reliability
 INPUT_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=DEPTH, reliability=ReliabilityPolicy.RELIABLE,
                        durability=DurabilityPolicy.VOLATILE)
 RECORD_QOS = GRAPH_QOS
+REALTIME_DEPTH = 10
+REALTIME_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=REALTIME_DEPTH,
+                          reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+REALTIME_INPUT_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                                durability=DurabilityPolicy.VOLATILE)
+
+
+def qos_for(mode: str):
+    """(publisher QoS, loop-subscription QoS) of a loop node in ``mode`` ('lockstep' or 'realtime')."""
+    return (REALTIME_QOS, REALTIME_INPUT_QOS) if mode == "realtime" else (GRAPH_QOS, INPUT_QOS)
 
 
 def recorded_qos(profiles) -> QoSProfile:

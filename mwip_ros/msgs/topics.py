@@ -9,7 +9,7 @@ import importlib
 import re
 from typing import Dict, Optional, Tuple
 
-__all__ = ["GRAPH_TOPICS", "USER_TOPICS", "split_type", "msg_class", "leaf", "graph_type"]
+__all__ = ["GRAPH_TOPICS", "USER_TOPICS", "SYSTEM_TOPICS", "topic_type", "split_type", "msg_class", "leaf", "graph_type"]
 
 GRAPH_TOPICS: Dict[str, str] = {
     "joint_states": "sensor_msgs/msg/JointState",
@@ -23,6 +23,11 @@ GRAPH_TOPICS: Dict[str, str] = {
     "robot_markers": "visualization_msgs/msg/MarkerArray",  # robot_markers: the robot to look at
 }
 USER_TOPICS = {"external_wrench"}   # published by users (any QoS), not by the graph's nodes with GRAPH_QOS
+SYSTEM_TOPICS: Dict[str, str] = {    # ROS's own topics, which every node publishes (absolute names)
+    "/rosout": "rcl_interfaces/msg/Log",
+    "/parameter_events": "rcl_interfaces/msg/ParameterEvent",
+    "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray",
+}
 
 
 _NAME = re.compile(r"^[a-zA-Z][a-zA-Z0-9_]*$")
@@ -72,3 +77,8 @@ def graph_type(topic: str) -> Optional[str]:
     if last in GRAPH_TOPICS:
         return GRAPH_TOPICS[last]
     return None
+
+
+def topic_type(topic: str) -> Optional[str]:
+    """The type of a graph topic (:func:`graph_type`) or of a system topic ('/rosout', 'rosout', ...)."""
+    return graph_type(topic) or SYSTEM_TOPICS.get("/" + topic.strip("/"))

@@ -24,7 +24,7 @@ from mwip_ros.core.observer import DiscreteObserver
 from mwip_ros.core.theorem import observer_conditions
 from mwip_ros.core.trajectory import Trajectory
 from mwip_ros.msgs import layouts as L
-from mwip_ros.msgs.qos import GRAPH_QOS, INPUT_QOS
+from mwip_ros.msgs.qos import qos_for
 from mwip_ros.nodes.diagnostics import OK
 from mwip_ros.nodes.guards import REPEAT, RESTART, STAMP_WINDOW_PERIODS, PublisherWatch, Rejects, StateInput
 from mwip_ros.nodes.params import declare
@@ -47,8 +47,9 @@ class DisturbanceObserver(Node, GracefulNodeMixin):
         self.written = array("d") if self.v["csv"] else None  # t, tau_hat1, tau_hat2 per estimate
         self.rejects = Rejects(self.get_logger())
         self.input = StateInput(self, self.rejects, STAMP_WINDOW_PERIODS * self.period_ns, "observer")
-        self.pub = self.create_publisher(WrenchStamped, "disturbance_estimate", GRAPH_QOS)
-        self.create_subscription(JointState, "joint_states", self._on_state, INPUT_QOS, raw=True)
+        pub_qos, in_qos = qos_for(self.v["mode"])   # msgs.qos: lockstep loses nothing, realtime keeps the newest
+        self.pub = self.create_publisher(WrenchStamped, "disturbance_estimate", pub_qos)
+        self.create_subscription(JointState, "joint_states", self._on_state, in_qos, raw=True)
         self.watch = PublisherWatch(self, ["joint_states"])
         self.get_logger().info(f"NDO ready: X = {self.v['X']}, h = {self.h * 1e3:.3f} ms")
 
@@ -93,6 +94,7 @@ class DisturbanceObserver(Node, GracefulNodeMixin):
             return
         self.last_msg = L.encode_wrench(stamp, tau_hat[0], tau_hat[1])
         self.pub.publish(self.last_msg)
+        self.input.answered(stamp)
         self.count += 1
         if self.written is not None:
             self.written.extend((stamp * 1e-9, tau_hat[0], tau_hat[1]))

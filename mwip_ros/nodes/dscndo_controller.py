@@ -32,7 +32,7 @@ from mwip_ros.core.sim import law_name
 from mwip_ros.core.theorem import controller_conditions
 from mwip_ros.msgs import BadMessage
 from mwip_ros.msgs import layouts as L
-from mwip_ros.msgs.qos import GRAPH_QOS, INPUT_QOS
+from mwip_ros.msgs.qos import qos_for
 from mwip_ros.nodes.diagnostics import OK
 from mwip_ros.nodes.guards import REPEAT, RESTART, STAMP_WINDOW_PERIODS, PublisherWatch, Rejects, StateInput
 from mwip_ros.nodes.params import declare
@@ -55,10 +55,11 @@ class DscndoController(Node, GracefulNodeMixin):
         self.last_answered = None
         self.count = 0
         self.rejects = Rejects(self.get_logger())
-        self.cmd_pub = self.create_publisher(Float64, "wheel_torque_cmd", GRAPH_QOS)
-        self.int_pub = self.create_publisher(JointState, "controller_internals", GRAPH_QOS)
-        self.create_subscription(JointState, "joint_states", self._on_state, INPUT_QOS, raw=True)
-        self.create_subscription(WrenchStamped, "disturbance_estimate", self._on_estimate, INPUT_QOS, raw=True)
+        pub_qos, in_qos = qos_for(self.v["mode"])   # msgs.qos: lockstep loses nothing, realtime keeps the newest
+        self.cmd_pub = self.create_publisher(Float64, "wheel_torque_cmd", pub_qos)
+        self.int_pub = self.create_publisher(JointState, "controller_internals", pub_qos)
+        self.create_subscription(JointState, "joint_states", self._on_state, in_qos, raw=True)
+        self.create_subscription(WrenchStamped, "disturbance_estimate", self._on_estimate, in_qos, raw=True)
         self.input = StateInput(self, self.rejects, STAMP_WINDOW_PERIODS * round(P.period(self.v) * 1e9),
                                 "controller")
         self.watch = PublisherWatch(self, ["joint_states", "disturbance_estimate"])
@@ -163,6 +164,7 @@ class DscndoController(Node, GracefulNodeMixin):
             return
         self.cmd_pub.publish(L.encode_command(out.u))
         self.int_pub.publish(L.encode_internals(stamp, out))
+        self.input.answered(stamp)
         self.last_answered = stamp
         self.count += 1
         for d in (self.states, self.estimates):  # usually empty by now: drop what is older than this state

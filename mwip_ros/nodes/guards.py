@@ -5,7 +5,8 @@
   older one or one too far ahead is rejected, so one stray message cannot pull a node's
   time away from its stream.  A stream that really restarted (a new plant, a reset, a
   pause longer than the window) shows as ``RESYNC`` consecutive stamps that agree with
-  each other: then the guard follows it and tells the caller to re-initialise.
+  each other (each the same as the one before, a lockstep resend, or at most a window
+  after it): then the guard follows it and tells the caller to re-initialise.
 * :class:`StateInput` is ``joint_states`` as the observer and the controller take it: parsed
   by the message layer, judged by a stamp guard, a rejection counted, a restart logged.
 * :func:`install_clock_guard` puts the same check in front of rclpy's ``/clock``
@@ -50,7 +51,7 @@ class StampGuard:
             return NEW
         if stamp == last:
             return REPEAT
-        if self._candidate is not None and 0 < stamp - self._candidate <= self.window_ns:
+        if self._candidate is not None and 0 <= stamp - self._candidate <= self.window_ns:   # a resend agrees too
             self._run += 1
         else:
             self._run = 1
@@ -69,11 +70,23 @@ class StampGuard:
 class StateInput:
     """``take(data)``: None for a state that is rejected (counted), else ``(verdict, stamp, x, u_prev, last)``
     with verdict :data:`NEW`, :data:`REPEAT` or :data:`RESTART` (logged; the caller re-initialises) and
-    ``last`` the stream's stamp before this one."""
+    ``last`` the stream's stamp before this one.
+
+    Without ``use_sim_time`` the node's clock follows the stream: it reads the stamp of the last state
+    answered (:meth:`answered`).  So a parameter change (``ros2 param set``) is stamped, in its ``/parameter_events`` message,
+    with the state after which it took effect: it applies from the next state on, which is how
+    ``bag_replay`` resim applies a recorded change at the same state."""
 
     def __init__(self, node, rejects, window_ns: int, who: str):
         self.guard = StampGuard(window_ns, "joint_states stamp")
         self.node, self.rejects, self.who = node, rejects, who
+        self._clock = None
+        if not node.get_parameter("use_sim_time").value:
+            from rclpy.time import Time
+            self._time = Time
+            self._clock = node.get_clock()
+            self._clock._set_ros_time_is_active(True)
+            self._clock.set_ros_time_override(Time(nanoseconds=0))
 
     def take(self, data):
         try:
@@ -90,6 +103,11 @@ class StateInput:
             self.rejects("joint_states", verdict)
             return None
         return verdict, stamp, x, u_prev, last
+
+    def answered(self, stamp: int) -> None:
+        """The node published its answer to the state of ``stamp``: its clock reads that stamp now."""
+        if self._clock is not None:
+            self._clock.set_ros_time_override(self._time(nanoseconds=stamp))
 
 
 def install_clock_guard() -> None:

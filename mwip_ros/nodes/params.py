@@ -3,10 +3,13 @@
 * every ``--params-file`` and ``-p`` rule on the command line is validated before rcl
   sees it (:func:`check_command_line`, called by ``run_node``), with the same loader the
   offline tools use (unknown keys, types, ranges, YAML syntax -> ParamError, exit 2);
-* every parameter is declared with its description, type and range; the node reads
-  the ``/**`` section and its own plain-name section of each file even under a namespace
-  (rcl matches sections by fully qualified name and would skip it), then the ``-p`` rules,
-  which win;
+* every parameter is declared with its description, type and range; the values follow
+  ROS 2's rule (rclcpp's and rclpy's): what is given for the node by its own name (its
+  section of a file, ``-p NODE:name:=value``) wins over what is given for every node
+  (``/**`` sections, ``-p name:=value``), and among rules of one kind the later on the
+  command line wins.  Beyond rcl, the node also reads its own plain-name section under a
+  namespace (rcl matches sections by fully qualified name and would skip it).  A ``-p``
+  rule that a section overrides is logged as a warning naming both;
 * start-up values are checked, with the derived quantities (the inertia terms); unknown
   overrides are refused;
 * run-time updates of ``dynamic`` parameters are checked as strictly as start-up values
@@ -55,7 +58,7 @@ def cli_overrides(argv: Sequence[str]) -> List[tuple]:
             if ":=" not in rule:
                 raise P.ParamError(rule, f"-p {rule!r} is not a 'name:=value' rule", "command line")
             name, text = rule.split(":=", 1)
-            name = name.split(":")[-1]
+            target, _, name = name.rpartition(":")   # "plant_sim:mode" is for the node plant_sim only
             if not text.strip():
                 raise P.ParamError(name, f"-p {rule!r} gives no value", "command line")
             try:
@@ -63,7 +66,7 @@ def cli_overrides(argv: Sequence[str]) -> List[tuple]:
             except yaml.YAMLError as exc:
                 problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
                 raise P.ParamError(name, f"-p {rule!r}: the value is not YAML ({problem})", "command line") from None
-            out.append((name, value))
+            out.append((name, value, target or P.SHARED))
     return out
 
 
@@ -75,16 +78,37 @@ def check_command_line(argv: Sequence[str]) -> None:
     cli_overrides(argv)
 
 
-def _file_values(node_name: str, own_name: str, argv: Sequence[str]) -> Dict[str, Any]:
-    """The values the parameter files give this node: ``/**`` then its plain-name section, file by file."""
+def _matches(target: str, node) -> bool:
+    """Whether a ``-p TARGET:name:=value`` rule is for ``node`` (its name, or its fully qualified name)."""
+    fqn = f"{node.get_namespace().rstrip('/')}/{node.get_name()}"
+    return target in (node.get_name(), fqn, fqn.lstrip("/"))
+
+
+def start_values(node, node_name: str, argv: Sequence[str]) -> tuple:
+    """The start-up values the command line gives ``node`` (ROS 2's rule: its own name's values over the
+    wildcard's; the later over the earlier within each), and the ``-p`` rules an own-name value overrode:
+    ``({name: value}, [(name, rule value, value that won)])``."""
     specs = P.specs_for(node_name)
-    values: Dict[str, Any] = {}
-    for f in params_files(argv):
-        pf = P.load_param_file(f)
-        for sec in dict.fromkeys((P.SHARED, node_name, own_name)):
-            section = pf.sections.get(sec, {}) if sec in (P.SHARED, node_name) else pf.section_for(node_name, sec)
-            values.update({k: v for k, v in section.items() if k in specs})
-    return values
+    own_name = node.get_name()
+    wildcard: Dict[str, Any] = {}
+    own: Dict[str, Any] = {}
+    cli_wild: Dict[str, Any] = {}
+    args = list(argv)
+    for i, a in enumerate(args):    # files and -p rules in command-line order
+        if a == "--params-file" and i + 1 < len(args):
+            pf = P.load_param_file(args[i + 1])
+            wildcard.update({k: v for k, v in pf.sections.get(P.SHARED, {}).items() if k in specs})
+            for sec in dict.fromkeys((node_name, own_name)):
+                section = pf.sections.get(sec, {}) if sec == node_name else pf.section_for(node_name, sec)
+                own.update({k: v for k, v in section.items() if k in specs})
+        elif a in ("-p", "--param") and i + 1 < len(args):
+            for name, value, target in cli_overrides(["--ros-args", a, args[i + 1]]):
+                if target == P.SHARED:
+                    wildcard[name] = cli_wild[name] = value
+                elif _matches(target, node):
+                    own[name] = value
+    shadowed = [(k, v, own[k]) for k, v in cli_wild.items() if k in own and own[k] != v]
+    return {**wildcard, **own}, shadowed
 
 
 def _descriptor(spec: P.ParamSpec) -> ParameterDescriptor:
@@ -117,16 +141,21 @@ def declare(node, node_name: str, argv: Sequence[str],
     ``on_change(changed)`` is called after an accepted run-time update.
     """
     specs = P.specs_for(node_name)
-    # rcl skips a plain-name section under a namespace, and files a -p rule under /**, so that a node's
-    # own section would win over it; apply the files' sections as our loader reads them, then the -p
-    # rules last: the command line wins, as a user expects.
+    # rcl skips a plain-name section under a namespace: apply the values as start_values reads them (ROS 2's
+    # precedence, with that section too), over rclpy's own reading.
     overrides = getattr(node, "_parameter_overrides", None)  # rclpy's {name: Parameter} from file and -p
     if overrides is not None:
-        for name, value in [*_file_values(node_name, node.get_name(), argv).items(), *cli_overrides(argv)]:
+        given, shadowed = start_values(node, node_name, argv)
+        for name, value in given.items():
             try:
                 overrides[name] = Parameter(name, value=value)
             except TypeError as exc:
                 raise P.ParamError(name, f"unsupported value {value!r} ({exc})", "command line") from None
+        for name, rule, value in shadowed:
+            node.get_logger().warning(
+                f"-p {name}:={rule!r} is overridden by {name}: {value!r} in this node's own section (ROS 2: a "
+                f"node's own section wins over /** and over -p without a node name); write "
+                f"-p {node.get_name()}:{name}:=... to override it")
     values: Dict[str, Any] = {}
     for name, spec in specs.items():
         # an empty list carries no type for rclpy (it would become BYTE_ARRAY): declare by type

@@ -3,8 +3,18 @@
 lockstep: publish /clock and state k, wait for the command that answers it, publish
 the true lumped disturbance at t_k, integrate to t_{k+1}, repeat (the lockstep driver,
 :mod:`.lockstep`).  The graph then reproduces ``mwip_sim`` sample by sample.
-realtime: a wall-clock timer at ``control_rate_hz``; the last command is held; a
-command older than ``stale_command_periods`` periods is replaced by zero torque.
+realtime: a timer at ``control_rate_hz`` on the node's clock; the last command is held; a
+command older than ``stale_command_periods`` periods is replaced by zero torque.  State k
+is stamped t_0 + k h, t_0 the node clock's time at the start (wall time, or simulated time
+under ``use_sim_time`` with a ``/clock``): the stamps are the clock's, on one grid, so the
+observer counts periods by them; the ``csv`` then has a ``stamp`` column beside ``t``
+(time since the start).  Lockstep stamps are simulated time from 0.
+
+Services: ``~/reset`` (``std_srvs/Trigger``) puts the robot back in its initial state and
+its time back to the run's start (lockstep: once the state in flight is answered); the
+observer and the controller see the stamps go back and re-initialise (logged).  To push
+the robot, publish ``external_wrench`` (``geometry_msgs/Wrench``: ``torque.x`` adds to
+tau_ext1, ``torque.y`` to tau_ext2, until the next one; a zero wrench clears it).
 
 The plant's trajectory table (its ``csv``) has the states, the commands it applied and
 the true disturbance; it does not listen to the observer: estimates join the
@@ -30,6 +40,7 @@ from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
+from std_srvs.srv import Trigger
 
 from mwip_ros.core import metrics
 from mwip_ros.core.plant import PlantSim, saturate
@@ -37,7 +48,7 @@ from mwip_ros.core.sensing import Actuator, Sensors
 from mwip_ros.core.trajectory import TrajectoryTable
 from mwip_ros.msgs import BadMessage
 from mwip_ros.msgs import layouts as L
-from mwip_ros.msgs.qos import GRAPH_QOS, INPUT_QOS
+from mwip_ros.msgs.qos import INPUT_QOS, qos_for
 from mwip_ros.nodes.diagnostics import ERROR, OK, WARN
 from mwip_ros.nodes.guards import PublisherWatch, Rejects
 from mwip_ros.nodes.lockstep import LockstepDriver
@@ -64,6 +75,9 @@ class PlantSimNode(Node, GracefulNodeMixin):
         self.period_ns = round(self.h * 1e9)
         self.n_steps = int(round(self.v["duration_s"] / self.h)) if self.v["duration_s"] > 0 else None
         self.extra = (0.0, 0.0)
+        self.stamp0 = 0               # realtime: the node clock's time at the start [ns]; lockstep: 0
+        self.resets = 0
+        self._reset_pending = False   # lockstep: reset once the state in flight is answered
         self.table = TrajectoryTable()
         self.rejects = Rejects(self.get_logger())
         self.fallen = False
@@ -77,13 +91,15 @@ class PlantSimNode(Node, GracefulNodeMixin):
         self.stale = 0
         self.missed = 0
 
-        self.state_pub = self.create_publisher(JointState, "joint_states", GRAPH_QOS)
+        pub_qos, in_qos = qos_for(self.mode)   # msgs.qos: lockstep loses nothing, realtime keeps the newest
+        self.state_pub = self.create_publisher(JointState, "joint_states", pub_qos)
         # with sensing or actuation options on, joint_states is the measurement: the truth goes here
-        self.true_pub = self.create_publisher(JointState, "true_joint_states", GRAPH_QOS) if sc.active else None
-        self.truth_pub = self.create_publisher(WrenchStamped, "lumped_disturbance", GRAPH_QOS)
-        self.clock_pub = self.create_publisher(Clock, "/clock", GRAPH_QOS) if self.mode == "lockstep" else None
-        cmd_sub = self.create_subscription(Float64, "wheel_torque_cmd", self._on_cmd, INPUT_QOS, raw=True)
+        self.true_pub = self.create_publisher(JointState, "true_joint_states", pub_qos) if sc.active else None
+        self.truth_pub = self.create_publisher(WrenchStamped, "lumped_disturbance", pub_qos)
+        self.clock_pub = self.create_publisher(Clock, "/clock", pub_qos) if self.mode == "lockstep" else None
+        cmd_sub = self.create_subscription(Float64, "wheel_torque_cmd", self._on_cmd, in_qos, raw=True)
         self.create_subscription(Wrench, "external_wrench", self._on_wrench, INPUT_QOS, raw=True)
+        self.create_service(Trigger, "~/reset", self._on_reset)
         # one graph, one controller: a second publisher of commands or states means mixed streams
         self.watch = PublisherWatch(self, ["wheel_torque_cmd", "joint_states"])
         self.lockstep = LockstepDriver(
@@ -111,6 +127,30 @@ class PlantSimNode(Node, GracefulNodeMixin):
         self.get_logger().info(f"external wrench: tau_ext1 += {e[0]:g}, tau_ext2 += {e[1]:g} N m"
                                if any(e) else "external wrench cleared")
 
+    def _on_reset(self, request, response):
+        """``~/reset``: the initial state at the run's start time; lockstep: after the state in flight."""
+        if self.mode == "lockstep" and self.lockstep.awaiting is not None:
+            self._reset_pending = True
+            response.message = f"reset after the answer to the state at t = {self.plant.t:.3f} s"
+        else:
+            response.message = self._reset()
+        response.success = True
+        return response
+
+    def _reset(self) -> str:
+        dropped, t = len(self.table), self.plant.t
+        self.plant = PlantSim(self.cfg)
+        sc = self.cfg.sensing
+        self.sensors = Sensors.for_plant(sc, self.cfg.seed) if sc.measuring else None
+        self.actuator = Actuator(sc.actuator_delay_periods) if sc.actuator_delay_periods else None
+        self.table = TrajectoryTable()
+        self.resets += 1
+        self._reset_pending = False
+        text = (f"reset #{self.resets} at t = {t:.3f} s: back to the initial state at t = 0 (the csv keeps the run "
+                f"from here; {dropped} periods before it are only in a recording)")
+        self.get_logger().warning(text)
+        return text
+
     def _on_cmd(self, data: bytes) -> None:
         try:
             u = L.parse_command(data)
@@ -123,12 +163,15 @@ class PlantSimNode(Node, GracefulNodeMixin):
         if not self.lockstep.take_answer():
             self.rejects("wheel_torque_cmd", "command while no state is waiting for one")
             return
-        if not self._finish_period(saturate(u, self.cfg.torque_limit)):
+        if self._reset_pending:
+            self._reset()
+            self._send()
+        elif not self._finish_period(saturate(u, self.cfg.torque_limit)):
             self._send()
 
     # --- the step shared by both modes -------------------------------------------------------
     def _stamp(self) -> int:
-        return self.plant.k * self.period_ns
+        return self.stamp0 + self.plant.k * self.period_ns
 
     def _state_bytes(self) -> bytes:
         """State k as published: the measurement (core.sensing), once per step; the truth beside it when
@@ -175,6 +218,7 @@ class PlantSimNode(Node, GracefulNodeMixin):
         self.t_wall0 = time.monotonic()
         self.get_logger().info(f"{why}; starting {self.mode} run")
         if self.mode == "realtime":
+            self.stamp0 = self.get_clock().now().nanoseconds
             self.create_timer(self.h, self._tick)
         else:
             self._send()
@@ -279,6 +323,8 @@ class PlantSimNode(Node, GracefulNodeMixin):
         log.info(f"rejected messages: {self.rejects.summary()}")
         if n:
             run = self.table.trajectory(NAME, self.fallen, self.h)
+            if self.stamp0:   # the stamps the estimates carry (seconds, as the observer's csv writes them)
+                run.columns["stamp"] = np.array([(self.stamp0 + k * self.period_ns) * 1e-9 for k in range(n)])
             t_end = run.t[-1]
             win = metrics.WINDOW if t_end >= metrics.WINDOW[1] - 1e-9 else (t_end / 2, t_end)
             m = metrics.compute(run.columns, win, self.cfg.fall_angle)

@@ -1,6 +1,8 @@
 """``bag_replay`` mode ``replay``: republish a bag's topics with their recorded timing.
 
-The exact recorded CDR bytes go out on each topic (all, or ``topics``) at the recorded
+The exact recorded CDR bytes go out on each topic (all but ROS's own ``/rosout``,
+``/parameter_events`` and ``/diagnostics``, which tell of the recorded run and would only
+confuse the live one; or ``topics``, which may name them) at the recorded
 log times scaled by 1/``rate``; ``publish_clock`` publishes ``/clock`` with the bag's time
 instead of a recorded ``/clock``; ``loop`` starts again at the end;
 ``wait_for_subscribers`` waits (up to ``timeout_s``) for that many matched subscriptions
@@ -21,7 +23,7 @@ from mwip_ros.bag import BagError, raw_messages
 from mwip_ros.msgs.cdr import peek_stamp
 from mwip_ros.msgs.layouts import encode_clock
 from mwip_ros.msgs.qos import GRAPH_QOS, recorded_qos
-from mwip_ros.msgs.topics import leaf, msg_class
+from mwip_ros.msgs.topics import SYSTEM_TOPICS, leaf, msg_class
 from mwip_ros.nodes.runtime import EXIT_ERROR, EXIT_OK
 from mwip_ros.params import ParamError
 
@@ -82,7 +84,7 @@ class Replay:
     def _select(self, names: List[str]) -> List[str]:
         bag_topics = sorted(self.node.types)
         if not names:
-            return bag_topics
+            return [t for t in bag_topics if t not in SYSTEM_TOPICS]
         out = []
         for name in names:
             name = name.strip()

@@ -9,6 +9,14 @@ k-th recorded command answers the k-th state; estimates and internals by stamp) 
 the largest absolute difference per topic and field, the compared and not reproduced
 samples, and whether everything is within ``tolerance``.  Every message is decoded by the
 message layer (:mod:`mwip_ros.msgs.layouts`).
+
+A gain changed during the recorded run (``ros2 param set``) is in the bag's
+``/parameter_events``, stamped with the last state its node had answered (the observer's
+and the controller's clock follows their stream, :class:`~mwip_ros.nodes.guards.StateInput`).
+With ``parameter_events`` (default true) the same change is made on the running node, through
+its ``set_parameters`` service, before the first state stamped after it: a run with a gain
+change mid-way re-simulates exactly.  Changes of the nodes named ``disturbance_observer`` and
+``dscndo_controller`` (in the recording's namespace) are applied.
 """
 from __future__ import annotations
 
@@ -37,6 +45,7 @@ EXIT_DIFFERENT = 4          # outputs differ from the recording
 COLLECT_IDLE_S = 1.0        # after the last command, wait this long without news for stragglers
 COLLECT_MAX_S = 5.0
 OUTPUTS = ("wheel_torque_cmd", "disturbance_estimate", "controller_internals")
+LOOP_NODES = ("disturbance_observer", "dscndo_controller")   # whose recorded parameter changes resim applies
 
 
 def _estimate(data) -> Tuple[int, Dict[str, float]]:
@@ -70,6 +79,9 @@ class Resim:
         self.last_news = 0.0
         self.finished = False
         self.failed = False
+        self._param_clients: Dict[str, object] = {}
+        self._param_wait: Optional[Tuple[float, list]] = None   # (since, futures) of changes being applied
+        self.applied_changes = 0
 
         clock_pub = node.create_publisher(Clock, "/clock", GRAPH_QOS)
         state_pub = node.create_publisher(JointState, "joint_states", GRAPH_QOS)
@@ -142,6 +154,7 @@ class Resim:
             raise ParamError("bag", f"cannot read the bag: {exc}") from None
         if not self.states:
             raise ParamError("bag", f"{bag} has no joint_states messages to re-simulate")
+        self.param_events = self._read_parameter_events() if self.v["parameter_events"] else []
         if dropped:
             self.log.warning(f"skipped {dropped} recorded state(s) older than the one before them")
         if bad:
@@ -150,6 +163,73 @@ class Resim:
             self.log.warning(f"the bag has {len(self.rec_cmds)} wheel_torque_cmd for {len(self.states)} states; "
                              f"commands are compared in order (k-th command = answer to the k-th state)")
         self.stamp_set = seen
+
+    def _read_parameter_events(self) -> List[Tuple[int, str, list]]:
+        """[(stamp, node, [rcl_interfaces/Parameter])]: the recorded changes of the loop's nodes, in order."""
+        from rcl_interfaces.msg import ParameterEvent
+        from rclpy.serialization import deserialize_message
+
+        if "/parameter_events" not in self.node.types:
+            return []
+        out, others = [], set()
+        for _lt, _topic, data in raw_messages(self.node.bag, ["/parameter_events"]):
+            try:
+                ev = deserialize_message(bytes(data), ParameterEvent)
+            except Exception:  # noqa: BLE001 - a foreign or damaged message: not a change to apply
+                continue
+            changed = [prm for prm in ev.changed_parameters if prm.name != "use_sim_time"]
+            if not changed:
+                continue
+            if leaf(ev.node) not in LOOP_NODES:
+                others.add(ev.node)
+                continue
+            out.append((ev.stamp.sec * 1_000_000_000 + ev.stamp.nanosec, ev.node, changed))
+        if others:
+            self.log.info(f"resim: recorded parameter changes of {', '.join(sorted(others))} are not applied "
+                          f"(only {', '.join(LOOP_NODES)})")
+        out.sort(key=lambda e: e[0])
+        for stamp, node, changed in out:
+            self.log.info(f"resim: will set {', '.join(prm.name for prm in changed)} on {node} before the first "
+                          f"state after t = {stamp * 1e-9:.3f} s, as recorded")
+        return out
+
+    def _apply_due(self, stamp: int) -> bool:
+        """Start applying the recorded changes due before the state of ``stamp``; True if some are under way."""
+        from rcl_interfaces.srv import SetParameters
+
+        futures = []
+        while self.param_events and self.param_events[0][0] < stamp:
+            _, node, changed = self.param_events.pop(0)
+            client = self._param_clients.get(node)
+            if client is None:
+                client = self._param_clients[node] = self.node.create_client(SetParameters,
+                                                                             f"{node}/set_parameters")
+            if not client.wait_for_service(timeout_sec=self.v["timeout_s"]):
+                self._fail(f"cannot apply the recorded parameter change of {node}: no {node}/set_parameters "
+                           f"service after {self.v['timeout_s']:g} s")
+                return True
+            futures.append((node, changed, client.call_async(SetParameters.Request(parameters=changed))))
+        if futures:
+            self._param_wait = (time.monotonic(), futures)
+        return bool(futures)
+
+    def _params_applied(self) -> None:
+        """Between callbacks: once every change under way is answered, send the state that waited for them."""
+        since, futures = self._param_wait
+        if not all(f.done() for _, _, f in futures):
+            if time.monotonic() - since > self.v["timeout_s"]:
+                self._fail(f"no answer to set_parameters within timeout_s = {self.v['timeout_s']:g} s")
+            return
+        self._param_wait = None
+        for node, changed, f in futures:
+            refused = [r.reason for r in f.result().results if not r.successful]
+            if refused:
+                self._fail(f"{node} refused the recorded parameter change: {'; '.join(refused)}")
+                return
+            self.applied_changes += 1
+            self.log.info(f"set {', '.join(prm.name for prm in changed)} on {node} before the state at "
+                          f"t = {self.states[self.k][0] * 1e-9:.3f} s")
+        self._send_now()
 
     # --- inputs
     def _on_cmd(self, data) -> None:
@@ -190,6 +270,10 @@ class Resim:
 
     # --- lockstep
     def _send(self) -> None:
+        if not self._apply_due(self.states[self.k][0]):
+            self._send_now()
+
+    def _send_now(self) -> None:
         stamp, data = self.states[self.k]
         self.lockstep.send(self.k, stamp, data)
 
@@ -210,7 +294,10 @@ class Resim:
                 return
             executor.spin_once(timeout_sec=0.02)
             return
-        executor.spin_once(timeout_sec=0.05)
+        executor.spin_once(timeout_sec=0.05 if self._param_wait is None else 0.005)
+        if self._param_wait is not None and not self.failed:
+            self._params_applied()
+            return
         now = time.monotonic()
         if self.collecting_since is not None:
             if self._all_collected() or now - self.last_news > COLLECT_IDLE_S \
@@ -280,6 +367,9 @@ class Resim:
         else:
             self.node.finish(EXIT_OK)
             lines.append(f"  RESULT: REPRODUCED - every compared output within tolerance {tol:g} (exit {EXIT_OK})")
+        if self.applied_changes or self.param_events:
+            lines.append(f"  recorded parameter changes applied: {self.applied_changes}"
+                         + (f" ({len(self.param_events)} after the last state, not applied)" if self.param_events else ""))
         if self.rejects.counts:
             lines.append(f"  rejected messages: {self.rejects.summary()}")
         print("\n".join(lines), flush=True)

@@ -185,6 +185,10 @@ SHARED_SPECS: List[ParamSpec] = [
               "runs (needs root or CAP_SYS_NICE; else a warning); 0 = normal scheduling", _priority),
 ]
 
+# The observer's and the controller's QoS follow the loop's mode (msgs.qos): give them the plant's.
+_LOOP_MODE = ParamSpec("mode", "string", "lockstep", "the plant's mode, for the QoS: lockstep (nothing lost) or "
+                       "realtime (the newest state only)", _one_of("lockstep", "realtime"))
+
 NODE_SPECS: Dict[str, List[ParamSpec]] = {
     "plant_sim": [
         ParamSpec("mode", "string", "lockstep", "lockstep (deterministic, waits for each command) or realtime "
@@ -235,12 +239,14 @@ NODE_SPECS: Dict[str, List[ParamSpec]] = {
                   _at_least_zero),
     ],
     "disturbance_observer": [
+        _LOOP_MODE,
         ParamSpec("X", "double_array", [100.0, 0.0, 0.0, 100.0], "observer gain X = [c1, c2, c3, c4] (eq. 14)",
                   _four_finite, dynamic=True),
         ParamSpec("csv", "string", "", "write the estimates (t, tau_hat1, tau_hat2) to this file at the end; "
                   "'' = none"),
     ],
     "dscndo_controller": [
+        _LOOP_MODE,
         ParamSpec("k1", "double", 6.0, "first surface gain k1 (eq. 24)", _positive(), dynamic=True),
         ParamSpec("k2", "double", 6.0, "second surface gain k2 (eq. 28)", _positive(), dynamic=True),
         ParamSpec("tau4", "double", 0.1, "filter time constant tau4 [s] (eq. 25)", _tau4, dynamic=True),
@@ -260,6 +266,13 @@ NODE_SPECS: Dict[str, List[ParamSpec]] = {
         ParamSpec("compression", "string", "", "'' or 'zstd' (MCAP chunk compression)", _one_of("", "zstd")),
         ParamSpec("chunk_size", "integer", 1 << 20, "MCAP chunk size [bytes]", _at_least_one),
     ],
+    "foxglove_server": [
+        ParamSpec("host", "string", "127.0.0.1", "address the WebSocket server listens on (0.0.0.0: every "
+                  "interface; the server has no authentication)"),
+        ParamSpec("port", "integer", 8765, "TCP port of the WebSocket server (Foxglove: ws://host:port)",
+                  _count_range(1, 65535)),
+        ParamSpec("topics", "string_array", [], "topics to serve; empty = every topic of the graph"),
+    ],
     "robot_markers": [],   # the shared section only (the nominal model sizes the robot)
     "bag_replay": [
         ParamSpec("bag", "string", "", "bag directory to replay"),
@@ -271,6 +284,8 @@ NODE_SPECS: Dict[str, List[ParamSpec]] = {
                   "observer and controller and compare)", _one_of("replay", "resim")),
         ParamSpec("tolerance", "double", 1e-9, "resim: largest absolute difference still counted as equal",
                   _non_negative()),
+        ParamSpec("parameter_events", "bool", True, "resim: apply the recorded changes of the observer's and "
+                  "the controller's parameters (/parameter_events) before the state they first applied to"),
         ParamSpec("timeout_s", "double", 10.0, "resim: give up when the graph is not ready or a command does "
                   "not come within this wall time [s]; replay: how long to wait for subscribers", _positive()),
         ParamSpec("wait_for_subscribers", "integer", 0, "matched subscriptions to wait for before the first "

@@ -22,3 +22,15 @@ def test_one_best_effort_or_volatile_publisher_makes_the_replay_so():
 
 def test_nothing_recorded_replays_with_the_graphs_qos():
     assert recorded_qos([]) is GRAPH_QOS
+
+
+def test_the_qos_fits_the_mode():
+    """Lockstep loses nothing (deep; transient-local writers); realtime keeps the newest state (shallow; the
+    loop's readers keep one).  The graph does not show history depths, so this is checked here."""
+    from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
+    from mwip_ros.msgs.qos import DEPTH, qos_for
+    (pub, sub), (rt_pub, rt_sub) = qos_for("lockstep"), qos_for("realtime")
+    assert (pub.depth, sub.depth, rt_pub.depth, rt_sub.depth) == (DEPTH, DEPTH, 10, 1)
+    assert pub.durability == rt_pub.durability == DurabilityPolicy.TRANSIENT_LOCAL   # a recorder gets a backlog
+    assert sub.durability == rt_sub.durability == DurabilityPolicy.VOLATILE          # a loop node never does
+    assert {q.reliability for q in (pub, sub, rt_pub, rt_sub)} == {ReliabilityPolicy.RELIABLE}

@@ -78,7 +78,30 @@ def test_a_namespaced_node_reads_its_plain_section(tmp_path):
         q = g.start("dscndo_controller", "-r", "__ns:=/robot2", "-p", "k1:=8.5", params=f, label="cli_wins")
         assert q.wait_for_output("ready", 30), q.output()
     assert "k1 = 7.5" in p.output(), p.output()
-    assert "k1 = 8.5" in q.output(), q.output()  # the command line wins over the file
+    assert "k1 = 8.5" in q.output(), q.output()  # -p dscndo_controller:k1:=8.5 (node_rules) wins over the file
+
+
+def test_precedence_is_ros_2s_own_section_over_wildcard_then_the_later(tmp_path):
+    """rclcpp/rclpy: a node's own values (its section, -p NODE:name:=v) win over the wildcard's (/**, -p name:=v),
+    whatever the order; within one kind the later wins."""
+    f = _file(tmp_path, "own.yaml", "k1: 6.0", "k1: 7.5")
+    later = tmp_path / "later.yaml"
+    later.write_text("dscndo_controller:\n  ros__parameters:\n    k1: 9.0\n")
+    cases = {
+        "wildcard_loses": (("-p", "k1:=8.5"), 7.5),
+        "own_rule_wins": (("-p", "dscndo_controller:k1:=8.5"), 8.5),
+        "later_file_wins": (("-p", "dscndo_controller:k1:=8.5", "--params-file", str(later)), 9.0),
+        "later_rule_wins": (("--params-file", str(later), "-p", "dscndo_controller:k1:=8.5"), 8.5),
+    }
+    with Graph(tmp_path) as g:
+        procs = {label: g.start("dscndo_controller", *args, params=f, label=label, as_given=True)
+                 for label, (args, _) in cases.items()}
+        for label, (_, k1) in cases.items():
+            assert procs[label].wait_for_output(f"ready: k1 = {k1}", 30), (label, procs[label].output())
+    out = procs["wildcard_loses"].output()
+    assert "-p k1:=8.5 is overridden by k1: 7.5 in this node's own section" in out and \
+        "-p dscndo_controller:k1:=..." in out, out
+    assert "overridden" not in procs["own_rule_wins"].output()
 
 
 def test_a_shared_file_with_other_nodes_sections_and_a_renamed_nodes_own_section(tmp_path):

@@ -1,0 +1,53 @@
+"""plant_sim's ~/reset service, called with an rclpy client: the robot and its time go back to the start, and
+the observer and the controller follow the stamps back (re-initialised, logged) so the loop goes on."""
+from sensor_msgs.msg import JointState
+
+from graphproc import Graph
+from injector import Injector
+from mwip_ros.msgs import layouts as L
+from mwip_ros.nodes.guards import NEW, REPEAT, RESTART, RESYNC, StampGuard
+
+INITIAL_THETA_B = -0.1745   # config/paper.yaml
+
+
+def test_a_stream_that_goes_back_is_followed_after_resync_agreeing_stamps_resends_included():
+    g = StampGuard(window_ns=100)
+    assert [g.check(s) for s in (0, 10, 20, 20)] == [NEW, NEW, NEW, REPEAT]
+    back = [g.check(0) for _ in range(RESYNC)]          # a lockstep reset: state 0, resent until answered
+    assert all(v not in (NEW, REPEAT, RESTART) for v in back[:-1]) and back[-1] == RESTART, back
+    assert g.check(10) == NEW
+    stray = StampGuard(window_ns=100)
+    assert [stray.check(s) for s in (0, 10)] == [NEW, NEW]
+    assert stray.check(-500) not in (NEW, RESTART) and stray.check(5000) not in (NEW, RESTART)
+    assert stray.check(20) == NEW          # two stamps that do not agree restart nothing
+
+
+def test_reset_in_lockstep_goes_back_to_the_initial_state_and_the_loop_goes_on(tmp_path):
+    from std_srvs.srv import Trigger
+
+    with Graph(tmp_path) as g:
+        obs = g.start("disturbance_observer")
+        ctl = g.start("dscndo_controller")
+        plant = g.start("plant_sim", "-p", "duration_s:=0.0")
+        with Injector(g.domain_id) as inj:
+            states = inj.record("joint_states", JointState)
+            stamps = lambda: [L.parse_joint_state(d)[0] for d in states]  # noqa: E731
+            assert inj.wait(lambda: len(states) > 400, 120), plant.output()[-2000:]
+            client = inj.node.create_client(Trigger, "/plant_sim/reset")
+            assert client.wait_for_service(timeout_sec=30)
+            future = client.call_async(Trigger.Request())
+            assert inj.wait(future.done, 30)
+            assert future.result().success and "reset" in future.result().message, future.result()
+            n_before = len(states)
+
+            def went_back_and_on():
+                later = stamps()[n_before:]
+                return 0 in later and max(later[later.index(0):]) >= 500_000_000   # 0.5 s after the reset
+            assert inj.wait(went_back_and_on, 120), (plant.output()[-2000:], ctl.output()[-2000:])
+            after = [L.parse_joint_state(d) for d in states[n_before:]]
+            first = next(x for stamp, x, _ in after if stamp == 0)
+            assert first.theta_b == INITIAL_THETA_B and first.theta_w == 0.0 and first.dtheta_b == 0.0
+        for p in (obs, ctl):
+            assert "restarted at t = 0.000 s" in p.output(), p.output()[-2000:]
+        assert "reset #1 at t = " in plant.output()
+        assert plant.stop() == 0 and obs.stop() == 0 and ctl.stop() == 0
