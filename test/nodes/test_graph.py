@@ -98,8 +98,9 @@ def test_lockstep_without_controller_times_out_naming_it(tmp_path):
 
 def test_lockstep_without_observer_times_out_naming_it(tmp_path):
     with Graph(tmp_path) as g:
-        g.start("dscndo_controller", "-p", "use_sim_time:=true")
-        plant = g.start("plant_sim", "-p", "lockstep_timeout_s:=3.0", "-p", "expected_subscribers:=1")
+        ctl = g.start("dscndo_controller", "-p", "use_sim_time:=true")
+        assert ctl.wait_for_output("ready", 30), ctl.output()   # so the plant's graph wait is not what times out
+        plant = g.start("plant_sim", "-p", "lockstep_timeout_s:=5.0", "-p", "expected_subscribers:=1")
         code = plant.wait(60)
     assert code == 1
     out = plant.output()

@@ -31,17 +31,16 @@ def test_reset_in_lockstep_goes_back_to_the_initial_state_and_the_loop_goes_on(t
         plant = g.start("plant_sim", "-p", "duration_s:=0.0")
         with Injector(g.domain_id) as inj:
             states = inj.record("joint_states", JointState)
-            stamps = lambda: [L.parse_joint_state(d)[0] for d in states]  # noqa: E731
             assert inj.wait(lambda: len(states) > 400, 120), plant.output()[-2000:]
             client = inj.node.create_client(Trigger, "/plant_sim/reset")
             assert client.wait_for_service(timeout_sec=30)
+            n_before = len(states)   # before the call: the reset may be done before its answer arrives
             future = client.call_async(Trigger.Request())
             assert inj.wait(future.done, 30)
             assert future.result().success and "reset" in future.result().message, future.result()
-            n_before = len(states)
 
             def went_back_and_on():
-                later = stamps()[n_before:]
+                later = [L.parse_joint_state(d)[0] for d in states[n_before:]]
                 return 0 in later and max(later[later.index(0):]) >= 500_000_000   # 0.5 s after the reset
             assert inj.wait(went_back_and_on, 120), (plant.output()[-2000:], ctl.output()[-2000:])
             after = [L.parse_joint_state(d) for d in states[n_before:]]
