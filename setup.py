@@ -13,7 +13,7 @@ setup(
         ('share/ament_index/resource_index/packages',
             ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
-        ('share/' + package_name + '/config', sorted(glob('config/*.yaml'))),
+        ('share/' + package_name + '/config', sorted(glob('config/*.yaml') + glob('config/*.json'))),
         ('share/' + package_name + '/config/sweeps', sorted(glob('config/sweeps/*.yaml'))),
     ],
     install_requires=['setuptools'],
@@ -47,6 +47,7 @@ setup(
             'mwip_sweep = mwip_ros.cli.sweep:main',
             'mwip_tune = mwip_ros.cli.tune:main',
             'robot_markers = mwip_ros.nodes.robot_markers:main',
+            'foxglove_server = mwip_ros.nodes.foxglove_server:main',
         ],
     },
 )

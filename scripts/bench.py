@@ -8,7 +8,9 @@
    with rclpy message objects, for comparison.
 2. Lockstep graph: plant_sim, disturbance_observer, dscndo_controller and mcap_recorder
    as four processes, the paper's scenario (DSCNDO, 10 s at 200 Hz): control steps per
-   wall-clock second, and that rate divided by the floor.
+   wall-clock second, and that rate divided by the floor; and, in the same run, alternating
+   with it, the same graph with ``foxglove_server`` and a WebSocket client subscribed to
+   every channel it advertises (what a live view costs the loop).
 3. Real time: the same four processes, plant_sim in realtime mode, 30 s at 200 Hz and
    at 1 kHz, with normal scheduling and with realtime_priority 50 (SCHED_FIFO; needs root
    or CAP_SYS_NICE): loop period p50/p99/max, missed deadlines (a period longer than 1.5 h),
@@ -119,23 +121,90 @@ def _wait(proc, timeout: float) -> Optional[int]:
         return None
 
 
+FOXGLOVE_CLIENT = """
+import json, sys
+from websockets.sync.client import connect
+counts, sizes, topics = {}, {}, {}
+with connect("ws://127.0.0.1:" + sys.argv[1], subprotocols=["foxglove.sdk.v1"], open_timeout=60,
+             max_size=None) as ws:
+    print("connected", flush=True)
+    try:
+        for frame in ws:
+            if isinstance(frame, str):
+                m = json.loads(frame)
+                new = []
+                if m["op"] == "advertise":
+                    for c in m["channels"]:
+                        topics[c["id"]] = c["topic"]
+                        new.append({"id": c["id"], "channelId": c["id"]})
+                elif m["op"] == "status" and m.get("message", "").startswith("Unknown channel ID: "):
+                    cid = int(m["message"].rsplit(" ", 1)[1])   # foxglove-sdk 0.30.3: advertised a moment too early
+                    new.append({"id": cid, "channelId": cid})
+                if new:
+                    ws.send(json.dumps({"op": "subscribe", "subscriptions": new}))
+            elif frame[0] == 1:
+                sub = int.from_bytes(frame[1:5], "little")
+                counts[sub] = counts.get(sub, 0) + 1
+                sizes[sub] = sizes.get(sub, 0) + len(frame) - 13
+    except KeyboardInterrupt:
+        pass
+    except Exception as exc:
+        print(f"foxglove client: {type(exc).__name__}: {exc}", file=sys.stderr, flush=True)
+print(json.dumps({"messages": sum(counts.values()), "bytes": sum(sizes.values()),
+                  "by_topic": {topics.get(k, str(k)): n for k, n in counts.items()}}), flush=True)
+"""
+
+
+def _free_port() -> int:
+    import socket
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _start_foxglove(g: Graph, procs: dict, work: Path):
+    """foxglove_server, and a client subscribed to every channel it advertises, connected before the plant starts."""
+    port = _free_port()
+    procs["foxglove_server"] = g.start("foxglove_server", "-p", f"port:={port}")
+    if not procs["foxglove_server"].wait_for_output(f"on ws://127.0.0.1:{port}", 60):
+        raise SystemExit(f"bench: foxglove_server did not start; logs in {work}:\n{procs['foxglove_server'].output()}")
+    client = g.start("foxglove_client", params=None, cmd=[sys.executable, "-c", FOXGLOVE_CLIENT, str(port)])
+    if not client.wait_for_output("connected", 60):
+        raise SystemExit(f"bench: the WebSocket client did not connect; logs in {work}:\n{client.output()}")
+    return client
+
+
+def _stop_foxglove(procs: dict, client) -> dict:
+    """Stop foxglove_server (its clients see the connection close) and return what the client received."""
+    procs["foxglove_server"].stop()
+    if _wait(client, 30) is None:
+        client.stop()
+    lines = [line for line in client.output().splitlines() if line.startswith("{")]
+    if not lines:
+        raise SystemExit(f"bench: the WebSocket client gave no result:\n{client.output()}")
+    return json.loads(lines[-1])
+
+
 def run_graph(work: Path, label: str, plant_args: List[str], shared: List[str], timeout: float,
-              recorder_args: List[str] = ()) -> dict:
+              recorder_args: List[str] = (), foxglove: bool = False) -> dict:
     """Observer, controller, recorder and plant, started as scripts/run_experiment.sh starts them;
     returns the plant's summary and each node's peak RSS."""
     work.mkdir(parents=True, exist_ok=True)
     summary = work / "summary.json"
+    loop_mode = ["-p", "mode:=realtime"] if "mode:=realtime" in plant_args else []   # the QoS of the plant's mode
     with Graph(work) as g:
         procs = {
             "mcap_recorder": g.start("mcap_recorder", "-p", f"output:={work / 'bag'}", *recorder_args, *shared),
-            "disturbance_observer": g.start("disturbance_observer", *shared),
-            "dscndo_controller": g.start("dscndo_controller", *shared),
+            "disturbance_observer": g.start("disturbance_observer", *loop_mode, *shared),
+            "dscndo_controller": g.start("dscndo_controller", *loop_mode, *shared),
         }
+        client = _start_foxglove(g, procs, work) if foxglove else None
         procs["plant_sim"] = g.start("plant_sim", "-p", "expected_subscribers:=3", "-p", f"summary_json:={summary}",
                                      *plant_args, *shared)
         code = _wait(procs["plant_sim"], timeout)
         for name in ("dscndo_controller", "disturbance_observer", "mcap_recorder"):
             procs[name].stop()
+        received = _stop_foxglove(procs, client) if client is not None else None
     if code not in (0, 3) or not summary.exists():  # 3: the robot fell; the summary says so
         raise SystemExit(f"bench: {label}: plant_sim exit {code}; logs in {work}:\n{procs['plant_sim'].output()}")
     result = json.loads(summary.read_text())
@@ -143,20 +212,32 @@ def run_graph(work: Path, label: str, plant_args: List[str], shared: List[str], 
         progress(f"{label}: the robot FELL after {result['periods']} periods; the numbers are for that shorter run")
     result["peak_rss_mib"] = {n: (p.peak_rss_kib or 0) / 1024 for n, p in procs.items()}
     result["fifo_refused"] = any("cannot switch to SCHED_FIFO" in p.output() for p in procs.values())
+    if received is not None:
+        result["foxglove_client"] = received
     return result
 
 
 def lockstep(plan: Plan, work: Path) -> dict:
-    runs = []
-    for i in range(plan.repeat):
+    runs, fox_runs = [], []
+    for i in range(plan.repeat):   # without and with foxglove_server in turn: both see the same machine load
         r = run_graph(work / f"lockstep{i}", "lockstep", ["-p", "mode:=lockstep", "-p",
                       f"duration_s:={plan.lockstep_s}"], [], timeout=300, recorder_args=["-p", "use_sim_time:=true"])
         runs.append(r)
         progress(f"lockstep run {i + 1}/{plan.repeat}: {r['periods']} steps, {r['steps_per_s']:.0f} steps/s")
+        r = run_graph(work / f"lockstep_foxglove{i}", "lockstep with foxglove_server",   # the server counted in
+                      ["-p", "mode:=lockstep", "-p", f"duration_s:={plan.lockstep_s}", "-p", "expected_subscribers:=4"],
+                      [], timeout=300, recorder_args=["-p", "use_sim_time:=true"], foxglove=True)
+        fox_runs.append(r)
+        progress(f"lockstep run with foxglove_server {i + 1}/{plan.repeat}: {r['periods']} steps, "
+                 f"{r['steps_per_s']:.0f} steps/s; its client received {r['foxglove_client']['messages']} messages")
     best = sorted(runs, key=lambda r: r["steps_per_s"])[len(runs) // 2]
     rss = {n: max(r["peak_rss_mib"][n] for r in runs) for n in NODES}
+    fox = sorted(fox_runs, key=lambda r: r["steps_per_s"])[len(fox_runs) // 2]
     return {"per_s": best["steps_per_s"], "runs": [r["steps_per_s"] for r in runs], "wall_s": best["wall_s"],
-            "periods": best["periods"], "peak_rss_mib": rss}
+            "periods": best["periods"], "peak_rss_mib": rss,
+            "foxglove": {"per_s": fox["steps_per_s"], "runs": [r["steps_per_s"] for r in fox_runs],
+                         "wall_s": fox["wall_s"], "periods": fox["periods"], "client": fox["foxglove_client"],
+                         "peak_rss_mib": max(r["peak_rss_mib"]["foxglove_server"] for r in fox_runs)}}
 
 
 def realtime(plan: Plan, rate_hz: float, priority: int, work: Path) -> dict:
@@ -292,6 +373,11 @@ def table(plan: Plan, quick: bool, m: Dict[str, str], floor: dict, typed: dict, 
         ls["per_s"] >= 1000)
     row("2. lockstep rate / DDS floor",
         f"{ratio:.2f} steps per round trip (ideal ~{1 / MSGS_PER_STEP:.2f}: a step is ~{MSGS_PER_STEP} round trips)")
+    fox = ls["foxglove"]
+    row("2. lockstep graph with foxglove_server (a client connected)",
+        f"{fox['per_s']:,.0f} steps/s ({fox['periods']} steps in {fox['wall_s']:.2f} s wall; "
+        f"{fox['per_s'] / ls['per_s']:.0%} of the rate without it; the client, subscribed to every channel, "
+        f"received {fox['client']['messages']:,} messages, {fox['client']['bytes'] / 2 ** 20:.1f} MiB)")
     for (hz, _prio), rt in rts.items():
         target = "0 missed" if hz == 200 else ""
         row(f"3. realtime {hz:g} Hz, {plan.realtime_s:g} s, 4 processes, {rt['sched']}: loop period p50 / p99 / max",
@@ -319,6 +405,7 @@ def table(plan: Plan, quick: bool, m: Dict[str, str], floor: dict, typed: dict, 
                 ">= 2,000,000 on 2 cores" if b["workers"] > 1 else "", b["per_s"] >= 2e6 if b["workers"] > 1 else None)
     for n in NODES:
         row(f"5. peak resident memory: {n}", f"{ls['peak_rss_mib'][n]:.1f} MiB")
+    row("5. peak resident memory: foxglove_server (a client connected)", f"{ls['foxglove']['peak_rss_mib']:.1f} MiB")
     head = [f"mwip_ros benchmarks{' (--quick: short runs, rough numbers)' if quick else ''}", ""]
     head += [f"- {k}: {v}" for k, v in m.items()]
     head += ["", "| measurement | result | target | met |", "|---|---|---|---|"]

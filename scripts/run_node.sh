@@ -10,10 +10,11 @@
 # Every terminal uses ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-42} and localhost-only discovery, so they find
 # each other and nobody else. MWIP_PARAMS=FILE picks another parameter file. In lockstep (the
 # default) the recorder logs on /clock (use_sim_time); MWIP_MODE=realtime: on wall-clock time.
-# The observer and the controller read no clock (their outputs carry the state's stamp).
+# The observer and the controller read no clock (their outputs carry the state's stamp; their clock
+# follows the stamps they answer).
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
-NODES="plant_sim disturbance_observer dscndo_controller mcap_recorder bag_replay"
+NODES="plant_sim disturbance_observer dscndo_controller mcap_recorder bag_replay robot_markers foxglove_server"
 if [ $# -lt 1 ] || [ "$1" = -h ] || [ "$1" = --help ]; then
     awk 'NR > 1 && /^#/ { sub(/^# ?/, ""); print; next } NR > 1 { exit }' "$0"; echo "nodes: $NODES"; exit 0
 fi

@@ -23,6 +23,7 @@ CONSOLE_SCRIPTS = [
     'mwip_sweep',
     'mwip_tune',
     'robot_markers',
+    'foxglove_server',
 ]
 PACKAGE_FILES = ['package.xml', 'setup.py', 'setup.cfg']
 PACKAGE_DIRS = ['resource', PACKAGE, 'config']

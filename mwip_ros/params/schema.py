@@ -272,6 +272,8 @@ NODE_SPECS: Dict[str, List[ParamSpec]] = {
         ParamSpec("port", "integer", 8765, "TCP port of the WebSocket server (Foxglove: ws://host:port)",
                   _count_range(1, 65535)),
         ParamSpec("topics", "string_array", [], "topics to serve; empty = every topic of the graph"),
+        ParamSpec("nice", "integer", 10, "nice value of the server's threads, 0 (normal) .. 19 (lowest): a viewer "
+                  "yields the CPU to the control loop", _count_range(0, 19)),
     ],
     "robot_markers": [],   # the shared section only (the nominal model sizes the robot)
     "bag_replay": [
