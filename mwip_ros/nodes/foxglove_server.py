@@ -74,7 +74,6 @@ from mwip_ros.params import ParamError
 NAME = "foxglove_server"
 SCHEMA_ENCODING = "ros2msg"
 MESSAGE_ENCODING = "cdr"
-PROGRESS_PERIOD_S = 5.0
 
 
 def _renice(log, value: int) -> None:
@@ -154,8 +153,6 @@ class FoxgloveServer(Node, GracefulNodeMixin):
                         for type_name in sorted({t for _, _, t in wanted})}
         self.channels: Dict[str, foxglove.Channel] = {}
         self.received = 0
-        self._last_progress = time.monotonic()
-        self._last_progress_count = 0
         self.tap = TopicTap(self, wanted, self._on_message, what="forwarded")
         self.get_logger().info(
             f"serving {len(self.tap.types)} topic(s) on ws://{self.host}:{self.server.port} (subprotocol "
@@ -183,20 +180,13 @@ class FoxgloveServer(Node, GracefulNodeMixin):
     # --- loop and shutdown --------------------------------------------------------------------------
 
     def spin_step(self, executor) -> None:
-        self.tap.poll()
-        try:
-            executor.spin_once(timeout_sec=self.tap.spin_timeout())
-        except Exception as exc:
-            self.finish(EXIT_ERROR, f"foxglove_server error: {type(exc).__name__}: {exc}; stopping")
-            return
-        now = time.monotonic()
-        if now - self._last_progress >= PROGRESS_PERIOD_S:
-            self._last_progress = now
-            if self.received != self._last_progress_count:
-                self._last_progress_count = self.received
-                clients, subscribed = self.listener.counts()
-                self.get_logger().info(f"{self.received} messages received on {len(self.channels)} channel(s); "
-                                       f"{clients} subscribed client(s), {subscribed} channel subscription(s)")
+        self.tap.spin(executor, lambda: self.received, self._progress,
+                      lambda text: self.finish(EXIT_ERROR, f"foxglove_server error: {text}; stopping"))
+
+    def _progress(self) -> str:
+        clients, subscribed = self.listener.counts()
+        return (f"{self.received} messages received on {len(self.channels)} channel(s); {clients} subscribed "
+                f"client(s), {subscribed} channel subscription(s)")
 
     def diagnostic_count(self) -> int:
         return self.received

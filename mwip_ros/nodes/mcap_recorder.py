@@ -44,7 +44,6 @@ from mwip_ros.nodes.tap import TopicTap, resolve_topics
 from mwip_ros.params import ParamError
 
 NAME = "mcap_recorder"
-PROGRESS_PERIOD_S = 5.0
 DRAIN_IDLE_S = 0.3      # on shutdown: stop draining after this long without a message
 DRAIN_MAX_S = 5.0       # ... or after this long in all
 
@@ -72,8 +71,6 @@ class McapRecorder(Node, GracefulNodeMixin):
         self.received = 0
         self.failed = False
         self._executor = None
-        self._last_progress = time.monotonic()
-        self._last_progress_count = 0
         for _, resolved, _ in wanted:
             self.ledger.counts[resolved] = 0   # expected: a loop topic never subscribed is a gap, not forgotten
         self.tap = TopicTap(self, wanted, self._on_message)
@@ -109,19 +106,12 @@ class McapRecorder(Node, GracefulNodeMixin):
 
     def spin_step(self, executor) -> None:
         self._executor = executor
-        self.tap.poll()
-        try:
-            executor.spin_once(timeout_sec=self.tap.spin_timeout())
-        except Exception as exc:  # keep the bag: on_shutdown still finishes it
-            self.failed = True
-            self.finish(EXIT_ERROR, f"recorder error: {type(exc).__name__}: {exc}; stopping")
-            return
-        now = time.monotonic()
-        if now - self._last_progress >= PROGRESS_PERIOD_S:
-            self._last_progress = now
-            if self.received != self._last_progress_count:
-                self._last_progress_count = self.received
-                self.get_logger().info(f"{self.received} messages written: {self._per_topic()}")
+        self.tap.spin(executor, lambda: self.received,
+                      lambda: f"{self.received} messages written: {self._per_topic()}", self._failed)
+
+    def _failed(self, text: str) -> None:   # keep the bag: on_shutdown still finishes it
+        self.failed = True
+        self.finish(EXIT_ERROR, f"recorder error: {text}; stopping")
 
     def _per_topic(self) -> str:
         return ", ".join(f"{t} {n}" for t, n in sorted(self.ledger.counts.items()))

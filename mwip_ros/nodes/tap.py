@@ -18,8 +18,9 @@ every message as the exact CDR bytes received, through ``on_message(topic, type_
   ``/diagnostics``, each published with its own QoS) are subscribed that way once their first
   publisher is discovered.
 
-The owner calls :meth:`TopicTap.poll` between callbacks (the subscriptions are created and
-replaced there, never inside a callback) and spins with :meth:`TopicTap.spin_timeout`.
+The owner's loop calls :meth:`TopicTap.spin` (or :meth:`TopicTap.poll` between callbacks: the
+subscriptions are created and replaced there, never inside a callback, and spins with
+:meth:`TopicTap.spin_timeout`).
 """
 from __future__ import annotations
 
@@ -37,6 +38,7 @@ from mwip_ros.params import ParamError
 __all__ = ["TopicTap", "adapted_qos", "resolve_topics", "DISCOVERY_POLL_S"]
 
 DISCOVERY_POLL_S = 0.02  # how often to look for the first publisher of a topic not yet subscribed
+PROGRESS_PERIOD_S = 5.0  # a progress line at most this often, when messages came
 
 
 def adapted_qos(infos) -> QoSProfile:
@@ -89,6 +91,7 @@ class TopicTap:
         self.pending: Dict[str, Tuple[str, str]] = {}   # resolved -> (name as given, type): no publisher seen yet
         self._readapt: set = set()                      # subscribed with RECORD_QOS, but a publisher cannot match it
         self._next_poll = 0.0
+        self._last_progress, self._last_count = time.monotonic(), 0
         for name, resolved, type_name in topics:
             if leaf(resolved) in USER_TOPICS or resolved in SYSTEM_TOPICS:
                 self.pending[resolved] = (name, type_name)
@@ -107,6 +110,24 @@ class TopicTap:
         if self.pending and time.monotonic() >= self._next_poll:
             self._next_poll = time.monotonic() + DISCOVERY_POLL_S
             self._subscribe_discovered()
+
+    def spin(self, executor, count: Callable[[], int], progress: Callable[[], str],
+             failed: Callable[[str], None]) -> None:
+        """One turn of the owner's loop: subscribe what is due, take what arrived (an executor error goes to
+        ``failed(text)``), and every ``PROGRESS_PERIOD_S`` log ``progress()`` if ``count()`` moved."""
+        self.poll()
+        try:
+            executor.spin_once(timeout_sec=self.spin_timeout())
+        except Exception as exc:  # noqa: BLE001 - the owner ends the run (and keeps what it has)
+            failed(f"{type(exc).__name__}: {exc}")
+            return
+        now = time.monotonic()
+        if now - self._last_progress >= PROGRESS_PERIOD_S:
+            self._last_progress = now
+            n = count()
+            if n != self._last_count:
+                self._last_count = n
+                self.node.get_logger().info(progress())
 
     def spin_timeout(self, idle: float = 0.1) -> float:
         """How long the owner's ``spin_once`` may block: short while a topic waits for its publisher."""
