@@ -233,3 +233,13 @@ def damage_cases(mcap_path) -> List[Tuple[str, bytes, Dict[str, int]]]:
         ("damaged chunk, then cut short", flipped[:late_cut],
          summed(c for i, c in enumerate(chunks) if i != m and c.end <= late_cut)),
     ]
+
+
+def distinct_stamps(bag, topics) -> Dict[str, int]:
+    """{topic: how many distinct stamps its messages carry} (header stamp, or a Clock's time): a state the
+    lockstep plant resent before its graph answered is recorded twice but is one state."""
+    seen: Dict[str, set] = {t: set() for t in topics}
+    for topic, _type, _t, msg in decoded_messages(bag, list(topics)):
+        stamp = getattr(msg, "clock", None) or msg.header.stamp
+        seen[topic].add((stamp.sec, stamp.nanosec))
+    return {t: len(v) for t, v in seen.items()}

@@ -31,9 +31,12 @@ def bag(tmp_path_factory):
         time.sleep(0.3)
         for p in (obs, ctl, rec):
             assert p.stop(signal.SIGINT, timeout=20) == 0, p.output()
+    from bagcheck import distinct_stamps
     counts = topic_counts(out)
-    for topic in ("/joint_states", "/wheel_torque_cmd", "/disturbance_estimate", "/controller_internals"):
+    for topic in ("/wheel_torque_cmd", "/controller_internals"):   # answered once per state
         assert counts.get(topic) == STATES, (counts, rec.output())
+    assert distinct_stamps(out, ["/joint_states", "/disturbance_estimate"]) == \
+        {"/joint_states": STATES, "/disturbance_estimate": STATES}, (counts, rec.output())   # resends read once
     return out
 
 
