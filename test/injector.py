@@ -53,6 +53,16 @@ class Injector:
         self.close()
 
 
+def rejected_counts(summary: str) -> dict:
+    """{topic: rejected messages} from a node's ``Rejects.summary()`` text ('/clock: 2, joint_states: 5')."""
+    return {t: int(n) for t, n in (item.split(": ") for item in summary.split(", ") if item)}
+
+
+def plant_rejected(output: str) -> dict:
+    """{topic: rejected messages} from plant_sim's closing 'rejected messages: ...' line."""
+    return rejected_counts(output.split("rejected messages: ")[1].splitlines()[0])
+
+
 def health(inj) -> dict:
     """{node name: (its clock's seconds, {topic: rejected messages})} from the latest /diagnostics of each
     node (a report every wall second), updated as the injector spins."""
@@ -63,8 +73,7 @@ def health(inj) -> dict:
     def take(arr):
         for st in arr.status:
             values = {kv.key: kv.value for kv in st.values}
-            by_topic = dict(item.split(": ") for item in values.get("rejected_by_topic", "").split(", ") if item)
-            latest[st.name] = (arr.header.stamp.sec, {t: int(n) for t, n in by_topic.items()})
+            latest[st.name] = (arr.header.stamp.sec, rejected_counts(values.get("rejected_by_topic", "")))
     inj.node.create_subscription(DiagnosticArray, "/diagnostics", take, 100)
     return latest
 

@@ -67,7 +67,7 @@ from rclpy.node import Node
 from mwip_ros.bag import message_definition
 from mwip_ros.nodes.diagnostics import OK
 from mwip_ros.nodes.params import declare
-from mwip_ros.nodes.runtime import EXIT_ERROR, GracefulNodeMixin, run_node
+from mwip_ros.nodes.runtime import EXIT_ERROR, GracefulNodeMixin, for_every_thread, run_node
 from mwip_ros.nodes.tap import TopicTap, resolve_topics
 from mwip_ros.params import ParamError
 
@@ -77,17 +77,14 @@ MESSAGE_ENCODING = "cdr"
 
 
 def _renice(log, value: int) -> None:
-    """Every thread of this process at nice ``value`` at least (Linux: nice is per thread; threads started later
-    inherit their creator's)."""
+    """Every thread of this process at nice ``value`` at least."""
     if not value:
         return
+    def lower(tid: int) -> None:
+        if os.getpriority(os.PRIO_PROCESS, tid) < value:
+            os.setpriority(os.PRIO_PROCESS, tid, value)
     try:
-        for tid in map(int, os.listdir("/proc/self/task")):
-            try:
-                if os.getpriority(os.PRIO_PROCESS, tid) < value:
-                    os.setpriority(os.PRIO_PROCESS, tid, value)
-            except ProcessLookupError:   # the thread ended meanwhile
-                pass
+        for_every_thread(lower)
     except OSError as exc:
         log.warning(f"nice {value}: cannot lower the priority of the node's threads ({exc}); running as is")
         return

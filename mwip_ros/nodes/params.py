@@ -44,9 +44,26 @@ def params_files(argv: Sequence[str]) -> List[str]:
     return out
 
 
+def parse_rule(rule: str) -> tuple:
+    """``(name, value, node)`` of one ``-p [NODE:]name:=value`` rule (node :data:`~mwip_ros.params.SHARED`
+    without one), the value read as ROS reads it (``1e-1`` is a double).  Raises ParamError naming the rule
+    for a value that is not YAML."""
+    if ":=" not in rule:
+        raise P.ParamError(rule, f"-p {rule!r} is not a 'name:=value' rule", "command line")
+    name, text = rule.split(":=", 1)
+    target, _, name = name.rpartition(":")   # "plant_sim:mode" is for the node plant_sim only
+    if not text.strip():
+        raise P.ParamError(name, f"-p {rule!r} gives no value", "command line")
+    try:
+        value = P.load_yaml(text)
+    except yaml.YAMLError as exc:
+        problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
+        raise P.ParamError(name, f"-p {rule!r}: the value is not YAML ({problem})", "command line") from None
+    return name, value, target or P.SHARED
+
+
 def cli_overrides(argv: Sequence[str]) -> List[tuple]:
-    """``-p name:=value`` / ``--param name:=value`` rules of a ROS command line, in order, values read as ROS
-    reads them (``1e-1`` is a double).  Raises ParamError naming the rule for a value that is not YAML."""
+    """``-p name:=value`` / ``--param name:=value`` rules of a ROS command line, in order (:func:`parse_rule`)."""
     out, args, in_ros = [], list(argv), False
     for i, a in enumerate(args):
         if a == "--ros-args":
@@ -54,19 +71,7 @@ def cli_overrides(argv: Sequence[str]) -> List[tuple]:
         elif a == "--":
             in_ros = False
         elif in_ros and a in ("-p", "--param") and i + 1 < len(args):
-            rule = args[i + 1]
-            if ":=" not in rule:
-                raise P.ParamError(rule, f"-p {rule!r} is not a 'name:=value' rule", "command line")
-            name, text = rule.split(":=", 1)
-            target, _, name = name.rpartition(":")   # "plant_sim:mode" is for the node plant_sim only
-            if not text.strip():
-                raise P.ParamError(name, f"-p {rule!r} gives no value", "command line")
-            try:
-                value = P.load_yaml(text)
-            except yaml.YAMLError as exc:
-                problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
-                raise P.ParamError(name, f"-p {rule!r}: the value is not YAML ({problem})", "command line") from None
-            out.append((name, value, target or P.SHARED))
+            out.append(parse_rule(args[i + 1]))
     return out
 
 
@@ -102,11 +107,11 @@ def start_values(node, node_name: str, argv: Sequence[str]) -> tuple:
                 section = pf.sections.get(sec, {}) if sec == node_name else pf.section_for(node_name, sec)
                 own.update({k: v for k, v in section.items() if k in specs})
         elif a in ("-p", "--param") and i + 1 < len(args):
-            for name, value, target in cli_overrides(["--ros-args", a, args[i + 1]]):
-                if target == P.SHARED:
-                    wildcard[name] = cli_wild[name] = value
-                elif _matches(target, node):
-                    own[name] = value
+            name, value, target = parse_rule(args[i + 1])
+            if target == P.SHARED:
+                wildcard[name] = cli_wild[name] = value
+            elif _matches(target, node):
+                own[name] = value
     shadowed = [(k, v, own[k]) for k, v in cli_wild.items() if k in own and own[k] != v]
     return {**wildcard, **own}, shadowed
 

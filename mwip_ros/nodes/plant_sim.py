@@ -66,10 +66,8 @@ class PlantSimNode(Node, GracefulNodeMixin):
         super().__init__(NAME, context=context)
         self.v = declare(self, NAME, argv)
         self.cfg = plant_config(self.v)
-        self.plant = PlantSim(self.cfg)
         sc = self.cfg.sensing
-        self.sensors = Sensors.for_plant(sc, self.cfg.seed) if sc.measuring else None
-        self.actuator = Actuator(sc.actuator_delay_periods) if sc.actuator_delay_periods else None
+        self._initial_state()
         self.mode = self.v["mode"]
         self.h = self.cfg.h
         self.period_ns = round(self.h * 1e9)
@@ -137,12 +135,16 @@ class PlantSimNode(Node, GracefulNodeMixin):
         response.success = True
         return response
 
-    def _reset(self) -> str:
-        dropped, t = len(self.table), self.plant.t
-        self.plant = PlantSim(self.cfg)
+    def _initial_state(self) -> None:
+        """The robot at its initial state, with fresh noise streams (sensors, D_w) and an empty actuator delay."""
         sc = self.cfg.sensing
+        self.plant = PlantSim(self.cfg)
         self.sensors = Sensors.for_plant(sc, self.cfg.seed) if sc.measuring else None
         self.actuator = Actuator(sc.actuator_delay_periods) if sc.actuator_delay_periods else None
+
+    def _reset(self) -> str:
+        dropped, t = len(self.table), self.plant.t
+        self._initial_state()
         self.table = TrajectoryTable()
         self.resets += 1
         self._reset_pending = False

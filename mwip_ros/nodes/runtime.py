@@ -84,6 +84,16 @@ def _make_executor(context):
         return SingleThreadedExecutor(context=context)
 
 
+def for_every_thread(apply: Callable[[int], None]) -> None:
+    """``apply(tid)`` for every thread of this process (Linux: scheduling and nice are per thread; threads
+    started later inherit their creator's); a thread that ended meanwhile is skipped, an OSError goes up."""
+    for tid in map(int, os.listdir("/proc/self/task")):
+        try:
+            apply(tid)
+        except ProcessLookupError:  # the thread ended meanwhile
+            pass
+
+
 def _realtime_priority(node) -> None:
     """Put every thread of this process (rclpy's, Fast DDS's, the executor's timers) under SCHED_FIFO at the
     node's ``realtime_priority``; threads started later inherit it.  0 leaves normal scheduling."""
@@ -91,11 +101,7 @@ def _realtime_priority(node) -> None:
     if not prio:
         return
     try:
-        for tid in os.listdir("/proc/self/task"):
-            try:
-                os.sched_setscheduler(int(tid), os.SCHED_FIFO, os.sched_param(prio))
-            except ProcessLookupError:  # the thread ended meanwhile
-                pass
+        for_every_thread(lambda tid: os.sched_setscheduler(tid, os.SCHED_FIFO, os.sched_param(prio)))
     except (OSError, AttributeError) as exc:
         node.get_logger().warning(f"realtime_priority {prio}: cannot switch to SCHED_FIFO ({exc}); running with "
                                   "normal scheduling (needs root or CAP_SYS_NICE, e.g. an rtprio limit)")

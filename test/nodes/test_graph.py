@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from graphproc import PARAMS, Graph, run_lockstep
-from injector import health, publish_until_rejected
+from injector import health, plant_rejected, publish_until_rejected
 from mwip_ros import params as P
 from mwip_ros.core.sim import simulate
 from mwip_ros.runs import load_run, read_csv
@@ -231,8 +231,8 @@ def test_bad_messages_are_rejected_and_counted(tmp_path):
     assert "rejected: joint_states: 5" in o
     assert "rejected: " in c and "joint_states: 5" in c and "disturbance_estimate: 2" in c
     assert "is not CDR_LE" in c
-    rejected = dict(item.split(": ") for item in p.split("rejected messages: ")[1].splitlines()[0].split(", "))
-    assert int(rejected["wheel_torque_cmd"]) >= 2 and rejected["external_wrench"] == "1", rejected
+    rejected = plant_rejected(p)
+    assert rejected["wheel_torque_cmd"] >= 2 and rejected["external_wrench"] == 1, rejected
     assert "not a std_msgs/Float64" in p
     # nothing non-finite came out, and no estimate or command answered a bad state
     # (the test hears its own injected NaN estimate and NaN command: leave those out)
