@@ -21,8 +21,13 @@ ROWS = [
     *[rf"4\. batch simulator, N = {n} scenarios \(own seeds\), [\d.]+ s, one process \| [\d,]+ scenario-steps/s "
       r"\([\d.]+ x the scalar loop\); peak memory \d+ MiB" for n in ("1", "100", "1,000")],
     r"4\. mwip_sweep engine: mass mismatch .* one process \| [\d,]+ scenario-steps/s \([\d.]+ x the scalar loop\)",
-    *([r"4\. mwip_sweep engine: mass mismatch .* worker processes \(all cores\) \| [\d,]+ scenario-steps/s"]
+    *([r"4\. mwip_sweep engine: mass mismatch .* worker processes \(all cores\), their start-up included \| "
+        r"[\d,]+ scenario-steps/s",
+       r"4\. mwip_sweep engine: mass mismatch .* worker processes \(all cores\), already started .* \| "
+       r"[\d,]+ scenario-steps/s"]
       if (os.cpu_count() or 1) > 1 else []),
+    r"4\. mwip_sweep mass_mismatch_quick\.yaml from the command line, every core: 80 runs, 16,000 scenario-steps \| "
+    r"[\d,]+ scenario-steps/s as the command reports it \([\d.]+ x the scalar loop\); [\d.]+ s wall",
 ] + [rf"5\. peak resident memory: {n} \| [\d.]+ MiB" for n in
      ("plant_sim", "disturbance_observer", "dscndo_controller", "mcap_recorder")]
 

@@ -1,4 +1,4 @@
-"""The mathematics of mwip_ros: plain Python over floats and numpy, no ROS, no file I/O.
+"""The mathematics of mwip_ros: plain Python over floats and numpy, no ROS, no file I/O (numba's cache aside).
 
 ========================  ==========================================================
 :mod:`.model`             the state, rigid-body terms, true dynamics, lumped disturbance (eq. 1-7, 16-18)
@@ -9,6 +9,8 @@
 :mod:`.trajectory`        the trajectory table every source builds the same way
 :mod:`.sim`               the closed loop, offline
 :mod:`.metrics`           the metrics of a run
+:mod:`.batch`             many scenarios at once: the closed loop over numpy arrays
+:mod:`.compiled`          the plant's RK4 period for many scenarios: the same function compiled by numba
 ========================  ==========================================================
 
 docs/theory.md has the equations; docs/architecture.md how the nodes use these modules.

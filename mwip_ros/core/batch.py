@@ -1,9 +1,11 @@
 """Many scenarios at once: the closed loop of :mod:`.sim` over numpy arrays, one entry per scenario.
 
 Every equation is the scalar loop's own (``model.accel``, ``plant.rk4_period``,
-``DiscreteObserver``, ``DscController``, ``model.lumped_disturbance``), called with the math
-namespace ``numpy`` and parameters whose fields are arrays, so the batch and the scalar
-loop cannot drift apart; a test checks each batch trajectory against :func:`.sim.simulate`.
+``DiscreteObserver``, ``DscController``, ``model.lumped_disturbance``), so the batch and the
+scalar loop cannot drift apart; a test checks each batch trajectory against :func:`.sim.simulate`.
+The observer, the law and the true tau_d are called with the math namespace ``numpy`` and
+parameters whose fields are arrays; the plant's RK4 period, where most of the time goes, runs as
+the same ``plant.rk4_period`` compiled by numba, scenario by scenario (:mod:`.compiled`).
 
 * Each scenario has its own parameters and its own seeded D_w stream (the scalar plant's
   generator, drawn in the same order).
@@ -27,7 +29,7 @@ from .controller import DscGains
 from .metrics import window_metrics
 from .model import PhysicalParams, Sinusoid, State, accel, lumped_disturbance
 from .observer import DiscreteObserver
-from .plant import rk4_period
+from .plant import stage_torques
 from .sensing import NOISE_BLOCK, Actuator, Sensors, sensor_rng
 from .sim import ClosedLoop, make_controller
 from .trajectory import COLUMNS, Trajectory
@@ -77,15 +79,15 @@ class _Streams:
 
     def __init__(self, gens, width: int):
         self.gens, self.width = gens, width
-        self.block = np.empty((len(gens), NOISE_BLOCK, width))
+        self.block = np.empty((NOISE_BLOCK, len(gens), width))   # a period's draws are one contiguous row
         self.used = NOISE_BLOCK
 
     def next(self) -> np.ndarray:
         if self.used == NOISE_BLOCK:
             for row, gen in enumerate(self.gens):
-                self.block[row] = gen.standard_normal((NOISE_BLOCK, self.width))
+                self.block[:, row] = gen.standard_normal((NOISE_BLOCK, self.width))
             self.used = 0
-        z = self.block[:, self.used, :]
+        z = self.block[self.used]
         self.used += 1
         return z
 
@@ -143,6 +145,7 @@ def _sensing(pcs, n):
 
 def simulate_batch(loops: Sequence[ClosedLoop], window: Sequence[float], record: bool = False) -> BatchResult:
     """Run every scenario of ``loops`` for its ``duration_s``; ``record`` keeps each one's trajectory."""
+    from .compiled import RK4Periods   # numba: imported (and the RK4 period compiled or loaded) on first use
     n = len(loops)
     pcs = [lp.plant for lp in loops]
     h = _same((pc.h for pc in pcs), "the control period")
@@ -162,6 +165,7 @@ def simulate_batch(loops: Sequence[ClosedLoop], window: Sequence[float], record:
     ctrl = make_controller(law, nominal, _stack([lp.gains for lp in loops], DscGains), K, h, True, np)
 
     sensors, actuator = _sensing(pcs, n)
+    rk4_periods = RK4Periods(actual, D_b, n)
     x = State(*(arr(pc.initial[i] for pc in pcs) for i in range(4)))
     u_prev = np.zeros(n)
     D_w = noise.draw()
@@ -204,12 +208,9 @@ def simulate_batch(loops: Sequence[ClosedLoop], window: Sequence[float], record:
             if k == n_steps or not active.any():
                 break
             steps += n if everyone else int(active.sum())
-            new = rk4_period(actual, D_w, D_b, f1, f2, (0.0, 0.0), t, x, u, h, substeps, np)
-            if everyone:
-                x, u_prev = State(*new), u
-            else:
-                x = State(*(np.where(active, a, b) for a, b in zip(new, x)))
-                u_prev = np.where(active, u, u_prev)
+            tau1, tau2 = stage_torques(f1, f2, (0.0, 0.0), t, h, substeps, np)
+            x = State(*rk4_periods(D_w, tau1, tau2, x, u, h, substeps, active))   # fallen ones frozen
+            u_prev = u if everyone else np.where(active, u, u_prev)
             D_w = noise.draw()
     fallen = ~np.isnan(t_fall)
     m = window_metrics(win["theta_b"].T, win["u"].T, win["e1"].T, win["e2"].T)

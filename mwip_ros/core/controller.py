@@ -43,9 +43,8 @@ def u_taud_of(nominal: PhysicalParams, mc, tau_hat):
     return tau_hat[0] - mc / (nominal.m22 + mc) * tau_hat[1]  # eq. (20)-(21), fix: uses tau_hat1
 
 
-def x4_bar_of(nominal: PhysicalParams, k1: float, theta_b: float, x1: float, m=math) -> float:
-    """Virtual control x4_bar (eq. 24) with S1 = x2 = theta_b (eq. 22)."""
-    mc = nominal.m12 * m.cos(theta_b)
+def x4_bar_of(nominal: PhysicalParams, k1: float, theta_b: float, x1: float, mc: float) -> float:
+    """Virtual control x4_bar (eq. 24) with S1 = x2 = theta_b (eq. 22) and M_C12 = ``mc`` (m12 cos theta_b)."""
     return (nominal.m22 + mc) / (nominal.m11 + mc) * (x1 / (nominal.m22 + mc) + k1 * theta_b)
 
 
@@ -64,7 +63,7 @@ def dsc_law(nominal: PhysicalParams, gains: DscGains, x, x4d: Optional[float], t
     A = p.m11 * p.m22 - mc ** 2
     x1 = (p.m11 + mc) * x4 + (p.m22 + mc) * x3   # eq. (16)
     S1 = x2                                      # eq. (22)
-    x4_bar = x4_bar_of(p, gains.k1, x2, x1, m)   # eq. (24)
+    x4_bar = x4_bar_of(p, gains.k1, x2, x1, mc)  # eq. (24)
     if x4d is None:
         x4d = x4_bar                             # eq. (25) initial condition
     S2 = x4 - x4d                                # eq. (26)

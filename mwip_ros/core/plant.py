@@ -17,7 +17,7 @@ import numpy as np
 from .model import PhysicalParams, Sinusoid, State, accel, lumped_disturbance
 from .sensing import NOISE_BLOCK, SensingConfig
 
-__all__ = ["PlantConfig", "PlantSim", "rk4_period", "saturate"]
+__all__ = ["PlantConfig", "PlantSim", "stage_torques", "rk4_period", "saturate"]
 
 
 @dataclass(frozen=True)
@@ -101,39 +101,44 @@ class PlantSim:
     def step(self, u: float, extra=(0.0, 0.0)) -> None:
         """Integrate t_k -> t_{k+1} with u (already saturated) and D_w held; RK4, ``substeps`` steps."""
         c = self.cfg
-        self.x = State(*rk4_period(c.actual, self.D_w, c.D_b, c.tau_ext1, c.tau_ext2, extra, self.t, self.x, u,
-                                   c.h, c.substeps))
+        tau1, tau2 = stage_torques(c.tau_ext1, c.tau_ext2, extra, self.t, c.h, c.substeps)
+        self.x = State(*rk4_period(c.actual, self.D_w, c.D_b, tau1, tau2, self.x, u, c.h, c.substeps))
         self.k += 1
         self.u_prev = u
         self.D_w = self._draw_D_w()
 
 
-def rk4_period(p: PhysicalParams, D_w, D_b, f1: Sinusoid, f2: Sinusoid, extra, t0: float, x, u, h: float, n: int,
-               m=math) -> Tuple:
+def stage_torques(f1: Sinusoid, f2: Sinusoid, extra, t0: float, h: float, n: int, m=math):
+    """tau_ext1 and tau_ext2 (``f1``, ``f2`` plus ``extra``) at the 2n + 1 times RK4 evaluates them over the period
+    [t0, t0 + h] in ``n`` sub-steps: t0, then each sub-step's midpoint and end."""
+    dt = h / n
+    times = [t0]
+    for i in range(n):
+        times += [t0 + (i + 0.5) * dt, t0 + (i + 1) * dt]
+    return [f1.at(t, m) + extra[0] for t in times], [f2.at(t, m) + extra[1] for t in times]
+
+
+def rk4_period(p: PhysicalParams, D_w, D_b, tau1, tau2, x, u, h: float, n: int, m=math) -> Tuple:
     """The state after one control period [t0, t0 + h]: classic RK4 of eq. (1) in ``n`` equal sub-steps, u and
-    D_w held, tau_ext (``f1``, ``f2`` plus ``extra``) at each stage time.  ``m`` is the math namespace: the
-    plant steps floats with ``math``, the batch simulator arrays of scenarios with ``numpy``."""
+    D_w held; ``tau1[j]``, ``tau2[j]`` are tau_ext at stage time j (:func:`stage_torques`).
+
+    ``m`` is the math namespace of :func:`~.model.accel`.  The plant calls this with floats; the batch
+    simulator runs this same function compiled by numba, once per scenario (``core.compiled``), which is
+    why it takes the stage torques as numbers and not the ``Sinusoid`` objects."""
     dt = h / n
     half, sixth = dt / 2, dt / 6
-    x1, x2 = extra
     w, b, dw, db = x
-    e1, e2 = f1.at(t0, m) + x1, f2.at(t0, m) + x2
     for i in range(n):
-        tm = t0 + (i + 0.5) * dt                        # stage times t, t + dt/2 (twice), t + dt
-        te = t0 + (i + 1) * dt
-        m1, m2 = f1.at(tm, m) + x1, f2.at(tm, m) + x2
-        n1, n2 = f1.at(te, m) + x1, f2.at(te, m) + x2
-        # accel ignores theta_w (the dynamics do not depend on it): the stages pass w unchanged
-        a1w, a1b = accel(p, D_w, D_b, (w, b, dw, db), u, e1, e2, m)               # k1
+        j = 2 * i   # stage times t, t + dt/2 (twice), t + dt
+        a1w, a1b = accel(p, D_w, D_b, (w, b, dw, db), u, tau1[j], tau2[j], m)                  # k1
         b2, dw2, db2 = b + half * db, dw + half * a1w, db + half * a1b
-        a2w, a2b = accel(p, D_w, D_b, (w, b2, dw2, db2), u, m1, m2, m)            # k2
+        a2w, a2b = accel(p, D_w, D_b, (w, b2, dw2, db2), u, tau1[j + 1], tau2[j + 1], m)       # k2
         b3, dw3, db3 = b + half * db2, dw + half * a2w, db + half * a2b
-        a3w, a3b = accel(p, D_w, D_b, (w, b3, dw3, db3), u, m1, m2, m)            # k3
+        a3w, a3b = accel(p, D_w, D_b, (w, b3, dw3, db3), u, tau1[j + 1], tau2[j + 1], m)       # k3
         b4, dw4, db4 = b + dt * db3, dw + dt * a3w, db + dt * a3b
-        a4w, a4b = accel(p, D_w, D_b, (w, b4, dw4, db4), u, n1, n2, m)            # k4
+        a4w, a4b = accel(p, D_w, D_b, (w, b4, dw4, db4), u, tau1[j + 2], tau2[j + 2], m)       # k4
         w = w + sixth * (dw + 2 * dw2 + 2 * dw3 + dw4)
         b = b + sixth * (db + 2 * db2 + 2 * db3 + db4)
         dw = dw + sixth * (a1w + 2 * a2w + 2 * a3w + a4w)
         db = db + sixth * (a1b + 2 * a2b + 2 * a3b + a4b)
-        e1, e2 = n1, n2
     return w, b, dw, db
