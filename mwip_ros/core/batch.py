@@ -143,6 +143,36 @@ def _sensing(pcs, n):
     return sensors, actuator
 
 
+class _Trig:
+    """numpy as the batch's math namespace, remembering sin and cos of the two newest angle arrays.
+
+    Each period the observer takes sin and cos of the previous state's theta_b (eq. 15), and the law (eq. 28)
+    and, inside the metrics window, the true tau_d (eq. 1, eq. 6-7) take them of the current one: three to
+    four times the same two arrays.  Those are the costly numpy calls (libm per element), so each is computed
+    once.  An array is remembered by identity and kept referenced (its id cannot be reused); the batch never
+    changes a state array in place, so a remembered value cannot go stale."""
+
+    def __init__(self):
+        self._memo = []   # [(array, sin, cos)], newest last
+
+    def __getattr__(self, name):
+        return getattr(np, name)
+
+    def _both(self, a):
+        for entry in self._memo:
+            if entry[0] is a:
+                return entry
+        entry = (a, np.sin(a), np.cos(a))
+        self._memo = self._memo[-1:] + [entry]
+        return entry
+
+    def sin(self, a):
+        return self._both(a)[1] if isinstance(a, np.ndarray) else np.sin(a)
+
+    def cos(self, a):
+        return self._both(a)[2] if isinstance(a, np.ndarray) else np.cos(a)
+
+
 def simulate_batch(loops: Sequence[ClosedLoop], window: Sequence[float], record: bool = False) -> BatchResult:
     """Run every scenario of ``loops`` for its ``duration_s``; ``record`` keeps each one's trajectory."""
     from .compiled import RK4Periods   # numba: imported (and the RK4 period compiled or loaded) on first use
@@ -159,10 +189,11 @@ def simulate_batch(loops: Sequence[ClosedLoop], window: Sequence[float], record:
     noise = _Noise([pc.seed for pc in pcs], arr(pc.D_w_mean for pc in pcs), arr(pc.D_w_variance for pc in pcs))
     use_obs = np.array([lp.use_observer for lp in loops], dtype=bool)
     X = tuple(_column(lp.X[i] for lp in loops) for i in range(4))
-    obs = DiscreteObserver(nominal, X, h, m=np)
+    trig = _Trig()
+    obs = DiscreteObserver(nominal, X, h, m=trig)
     law = _same((lp.law for lp in loops), "the law")
     K = tuple(_column(lp.K[i] for lp in loops) for i in range(3)) if law == "lqr" else None
-    ctrl = make_controller(law, nominal, _stack([lp.gains for lp in loops], DscGains), K, h, True, np)
+    ctrl = make_controller(law, nominal, _stack([lp.gains for lp in loops], DscGains), K, h, True, trig)
 
     sensors, actuator = _sensing(pcs, n)
     rk4_periods = RK4Periods(actual, D_b, n)
@@ -188,8 +219,8 @@ def simulate_batch(loops: Sequence[ClosedLoop], window: Sequence[float], record:
                 u = actuator.apply(u)   # the torque that acts over [t_k, t_k+1)
             in_window = first_w <= k < first_w + n_window
             if record or in_window:   # the true tau_d is only compared inside the window
-                ddq = accel(actual, D_w, D_b, x, u, f1.at(t, np) + 0.0, f2.at(t, np) + 0.0, np)
-                tau_d = lumped_disturbance(nominal, x, ddq, u, np)
+                ddq = accel(actual, D_w, D_b, x, u, f1.at(t, np) + 0.0, f2.at(t, np) + 0.0, trig)
+                tau_d = lumped_disturbance(nominal, x, ddq, u, trig)
             if record:
                 cols = (t, *x, u, *tau_hat, *tau_d, out.u_dsc, np.where(use_obs, out.u_taud, 0.0), out.S1, out.S2,
                         out.x4_bar, out.x4d)

@@ -103,3 +103,19 @@ def test_sensing_and_actuation_in_a_batch_equal_the_scalar_loop():
         assert len(b) == len(s)
         for c in COLUMNS:
             np.testing.assert_allclose(b[c], s[c], rtol=0, atol=1e-9, err_msg=f"scenario {i}, {c}")
+
+
+def test_the_batch_math_namespace_computes_each_angle_once_and_never_goes_stale(monkeypatch):
+    from mwip_ros.core import batch
+    calls = []
+    real_sin = np.sin
+    monkeypatch.setattr(batch.np, "sin", lambda a: calls.append(a) or real_sin(a))
+    trig = batch._Trig()
+    a, b, c = (np.linspace(-1, 1, 7) + k for k in range(3))
+    assert np.array_equal(trig.sin(a), real_sin(a)) and np.array_equal(trig.cos(a), np.cos(a))
+    assert np.array_equal(trig.sin(b), real_sin(b)) and np.array_equal(trig.sin(a), real_sin(a))
+    assert len(calls) == 2                               # a and b once each, however often asked
+    d = a.copy()                                         # equal values, another array: computed, not guessed
+    assert np.array_equal(trig.sin(c), real_sin(c)) and np.array_equal(trig.sin(d), real_sin(d))
+    assert len(calls) == 4 and calls[-1] is d
+    assert trig.sin(0.5) == real_sin(0.5) and trig.exp is np.exp and trig.floor is np.floor
