@@ -16,12 +16,12 @@ after another, with the scalar plant's own functions:
 * ``error_model="numpy"``: a diverging scenario gives inf or NaN as numpy would, instead of an
   exception (the batch freezes it at its fall).
 
-numba compiles on first use (about a second) and caches the machine code next to the sources
-(``__pycache__``, or numba's user-wide cache directory when that is not writable), so later processes
-(sweep workers) only load it.  numba would renew a cached function only when its own file changes, but
-the compiled RK4 period contains ``accel`` from ``model.py``: here every cached function is stamped
-with the contents of all three files (``model.py``, ``plant.py``, this one), so an edit to any
-equation is compiled afresh.
+numba compiles on first use (about a second) and caches the machine code where numba would
+(``NUMBA_CACHE_DIR`` if set, else ``__pycache__`` next to the sources, else numba's user-wide cache
+directory), so later processes (sweep workers) only load it.  numba would renew a cached function
+only when its own file changes, but the compiled RK4 period contains ``accel`` from ``model.py``:
+here every cached function is stamped with the contents of all three files (``model.py``,
+``plant.py``, this one), so an edit to any equation is compiled afresh.
 """
 from __future__ import annotations
 
@@ -32,7 +32,8 @@ from typing import NamedTuple
 
 import numba
 import numpy as np
-from numba.core.caching import CompileResultCacheImpl, FunctionCache, InTreeCacheLocator, UserWideCacheLocator
+from numba.core.caching import (CompileResultCacheImpl, FunctionCache, InTreeCacheLocator, UserProvidedCacheLocator,
+                                UserWideCacheLocator)
 
 from . import model, plant
 
@@ -47,6 +48,10 @@ class _Stamped:
         return _STAMP   # numba's own stamp covers the function's file only
 
 
+class _UserProvided(_Stamped, UserProvidedCacheLocator):
+    pass
+
+
 class _InTree(_Stamped, InTreeCacheLocator):
     pass
 
@@ -56,7 +61,7 @@ class _UserWide(_Stamped, UserWideCacheLocator):
 
 
 class _CacheImpl(CompileResultCacheImpl):
-    _locator_classes = [_InTree, _UserWide]
+    _locator_classes = [_UserProvided, _InTree, _UserWide]   # numba's order: NUMBA_CACHE_DIR first
 
 
 class _Cache(FunctionCache):

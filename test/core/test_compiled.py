@@ -2,6 +2,7 @@
 import math
 
 import numpy as np
+import pytest
 
 from mathfixtures import P_FILE
 from mwip_ros import params as P
@@ -85,9 +86,11 @@ print(repr(want[3]), repr(float(got[3][0])))
 """
 
 
-def test_an_edit_to_the_equations_is_compiled_afresh(tmp_path):
+@pytest.mark.parametrize("cache_dir", [None, "numba_cache"])
+def test_an_edit_to_the_equations_is_compiled_afresh(tmp_path, cache_dir):
     """numba renews a cached function only when its own file changes; the compiled RK4 period must follow an
-    edit to model.accel (another file) too, in the next process."""
+    edit to model.accel (another file) too, in the next process; in __pycache__ or in NUMBA_CACHE_DIR."""
+    import os
     import shutil
     import subprocess
     import sys
@@ -95,7 +98,12 @@ def test_an_edit_to_the_equations_is_compiled_afresh(tmp_path):
 
     pkg = Path(compiled.__file__).resolve().parents[1]
     shutil.copytree(pkg, tmp_path / "mwip_ros", ignore=shutil.ignore_patterns("__pycache__"))
-    env = {**__import__("os").environ, "PYTHONPATH": str(tmp_path)}
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
+    env["PYTHONPATH"] = str(tmp_path)
+    where = tmp_path / "mwip_ros" / "core" / "__pycache__"
+    if cache_dir:
+        env["NUMBA_CACHE_DIR"] = str(tmp_path / cache_dir)
+        where = tmp_path / cache_dir
 
     def run():
         out = subprocess.run([sys.executable, "-c", _CHECK], env=env, capture_output=True, text=True, timeout=120,
@@ -106,7 +114,7 @@ def test_an_edit_to_the_equations_is_compiled_afresh(tmp_path):
 
     first = run()
     assert first[0] == first[1]
-    assert list((tmp_path / "mwip_ros" / "core" / "__pycache__").glob("compiled._advance-*.nbi"))   # cached
+    assert list(where.rglob("compiled._advance-*.nbi"))   # cached there
     model_py = tmp_path / "mwip_ros" / "core" / "model.py"
     text = model_py.read_text()
     edit = "+ (tau_ext2 - tau_ext1)                     # eq. (1), row 2"
