@@ -17,7 +17,7 @@
 """
 from __future__ import annotations
 
-from typing import Any, Callable, Dict, List, Sequence
+from typing import Any, Callable, Dict, Iterator, List, Sequence, Tuple
 
 import yaml
 
@@ -35,13 +35,20 @@ _TYPES = {"double": ParameterType.PARAMETER_DOUBLE, "integer": ParameterType.PAR
 _ARRAY_TYPES = {"double_array": Parameter.Type.DOUBLE_ARRAY, "string_array": Parameter.Type.STRING_ARRAY}
 
 
-def params_files(argv: Sequence[str]) -> List[str]:
-    """The ``--params-file`` arguments of a ROS command line."""
-    out, args = [], list(argv)
+def ros_arguments(argv: Sequence[str]) -> Iterator[Tuple[str, str]]:
+    """``("--params-file", path)`` and ``("-p", rule)`` of a ROS command line, in command-line order: the
+    arguments between ``--ros-args`` and ``--`` (or the end), where rcl reads them."""
+    args, in_ros = list(argv), False
     for i, a in enumerate(args):
-        if a == "--params-file" and i + 1 < len(args):
-            out.append(args[i + 1])
-    return out
+        if a == "--ros-args":
+            in_ros = True
+        elif a == "--":
+            in_ros = False
+        elif in_ros and i + 1 < len(args):
+            if a == "--params-file":
+                yield a, args[i + 1]
+            elif a in ("-p", "--param"):
+                yield "-p", args[i + 1]
 
 
 def parse_rule(rule: str) -> tuple:
@@ -62,25 +69,14 @@ def parse_rule(rule: str) -> tuple:
     return name, value, target or P.SHARED
 
 
-def cli_overrides(argv: Sequence[str]) -> List[tuple]:
-    """``-p name:=value`` / ``--param name:=value`` rules of a ROS command line, in order (:func:`parse_rule`)."""
-    out, args, in_ros = [], list(argv), False
-    for i, a in enumerate(args):
-        if a == "--ros-args":
-            in_ros = True
-        elif a == "--":
-            in_ros = False
-        elif in_ros and a in ("-p", "--param") and i + 1 < len(args):
-            out.append(parse_rule(args[i + 1]))
-    return out
-
-
 def check_command_line(argv: Sequence[str]) -> None:
     """Every parameter file and ``-p`` rule of ``argv``, checked before rcl parses them (its parser stops the
     process with a traceback): raises ParamError naming the file or the key."""
-    for f in params_files(argv):
-        P.load_param_file(f)
-    cli_overrides(argv)
+    for kind, arg in ros_arguments(argv):
+        if kind == "--params-file":
+            P.load_param_file(arg)
+        else:
+            parse_rule(arg)
 
 
 def _matches(target: str, node) -> bool:
@@ -98,16 +94,15 @@ def start_values(node, node_name: str, argv: Sequence[str]) -> tuple:
     wildcard: Dict[str, Any] = {}
     own: Dict[str, Any] = {}
     cli_wild: Dict[str, Any] = {}
-    args = list(argv)
-    for i, a in enumerate(args):    # files and -p rules in command-line order
-        if a == "--params-file" and i + 1 < len(args):
-            pf = P.load_param_file(args[i + 1])
+    for kind, arg in ros_arguments(argv):    # files and -p rules in command-line order
+        if kind == "--params-file":
+            pf = P.load_param_file(arg)
             wildcard.update({k: v for k, v in pf.sections.get(P.SHARED, {}).items() if k in specs})
             for sec in dict.fromkeys((node_name, own_name)):
                 section = pf.sections.get(sec, {}) if sec == node_name else pf.section_for(node_name, sec)
                 own.update({k: v for k, v in section.items() if k in specs})
-        elif a in ("-p", "--param") and i + 1 < len(args):
-            name, value, target = parse_rule(args[i + 1])
+        else:
+            name, value, target = parse_rule(arg)
             if target == P.SHARED:
                 wildcard[name] = cli_wild[name] = value
             elif _matches(target, node):
