@@ -172,8 +172,9 @@ class PlantSimNode(Node, GracefulNodeMixin):
             self._send()
 
     # --- the step shared by both modes -------------------------------------------------------
-    def _stamp(self) -> int:
-        return self.stamp0 + self.plant.k * self.period_ns
+    def _stamp(self, k: Optional[int] = None) -> int:
+        """The stamp of state ``k`` (default: the current one) [ns]."""
+        return self.stamp0 + (self.plant.k if k is None else k) * self.period_ns
 
     def _state_bytes(self) -> bytes:
         """State k as published: the measurement (core.sensing), once per step; the truth beside it when
@@ -326,7 +327,7 @@ class PlantSimNode(Node, GracefulNodeMixin):
         if n:
             run = self.table.trajectory(NAME, self.fallen, self.h)
             if self.stamp0:   # the stamps the estimates carry (seconds, as the observer's csv writes them)
-                run.columns["stamp"] = np.array([(self.stamp0 + k * self.period_ns) * 1e-9 for k in range(n)])
+                run.columns["stamp"] = np.array([self._stamp(k) * 1e-9 for k in range(n)])
             t_end = run.t[-1]
             win = metrics.WINDOW if t_end >= metrics.WINDOW[1] - 1e-9 else (t_end / 2, t_end)
             m = metrics.compute(run.columns, win, self.cfg.fall_angle)
