@@ -68,6 +68,11 @@ def progress(text: str) -> None:
     print(f"bench: {text}", file=sys.stderr, flush=True)
 
 
+def median_run(runs: List[dict], key: str) -> dict:
+    """The run whose ``key`` is the median of the runs' (the upper middle one of an even count)."""
+    return sorted(runs, key=lambda r: r[key])[len(runs) // 2]
+
+
 def machine() -> Dict[str, str]:
     cpu = platform.processor() or platform.machine()
     try:
@@ -107,7 +112,7 @@ def dds_floor(plan: Plan, work: Path, typed: bool = False) -> dict:
                 raise SystemExit(f"bench: ping-pong failed (exit {code}):\n{ping.output()}")
             runs.append(json.loads(out.read_text()))
         progress(f"DDS floor ({kind}) run {i + 1}/{plan.repeat}: {runs[-1]['round_trips_per_s']:.0f} round trips/s")
-    best = sorted(runs, key=lambda r: r["round_trips_per_s"])[len(runs) // 2]
+    best = median_run(runs, "round_trips_per_s")
     return {"per_s": best["round_trips_per_s"], "runs": [r["round_trips_per_s"] for r in runs],
             "rtt_us_p50": best["rtt_us_p50"], "rtt_us_p99": best["rtt_us_p99"]}
 
@@ -231,9 +236,9 @@ def lockstep(plan: Plan, work: Path) -> dict:
         fox_runs.append(r)
         progress(f"lockstep run with foxglove_server {i + 1}/{plan.repeat}: {r['periods']} steps, "
                  f"{r['steps_per_s']:.0f} steps/s; its client received {r['foxglove_client']['messages']} messages")
-    best = sorted(runs, key=lambda r: r["steps_per_s"])[len(runs) // 2]
+    best = median_run(runs, "steps_per_s")
     rss = {n: max(r["peak_rss_mib"][n] for r in runs) for n in NODES}
-    fox = sorted(fox_runs, key=lambda r: r["steps_per_s"])[len(fox_runs) // 2]
+    fox = median_run(fox_runs, "steps_per_s")
     return {"per_s": best["steps_per_s"], "runs": [r["steps_per_s"] for r in runs], "wall_s": best["wall_s"],
             "periods": best["periods"], "peak_rss_mib": rss,
             "foxglove": {"per_s": fox["steps_per_s"], "runs": [r["steps_per_s"] for r in fox_runs],
@@ -390,7 +395,7 @@ def sweep_cli(plan: Plan) -> dict:
                               r.stderr)
             runs.append({"wall_s": wall, "runs": int(found[1].replace(",", "")),
                          "steps": int(found[2].replace(",", "")), "per_s": float(found[4].replace(",", ""))})
-    best = sorted(runs, key=lambda x: x["per_s"])[len(runs) // 2]
+    best = median_run(runs, "per_s")
     progress(f"mwip_sweep {spec_path.name}: {best['per_s']:,.0f} scenario-steps/s, {best['wall_s']:.1f} s wall")
     return dict(best, what="cli", all=[x["per_s"] for x in runs], spec=spec_path.name)
 
