@@ -104,9 +104,13 @@ def frame_times(runs: Sequence, fps: float = FPS) -> np.ndarray:
     """
     if not fps > 0:
         raise ValueError(f"fps must be > 0, got {fps!r}")
-    t0 = min(float(r["t"][0]) for r in runs)
-    t1 = max(float(r["t"][-1]) for r in runs)
+    t0, t1 = _span(runs)
     return t0 + np.arange(int(math.floor((t1 - t0) * fps + 1e-9)) + 1) / fps
+
+
+def _span(runs: Sequence) -> Tuple[float, float]:
+    """(the earliest start, the latest end) of the runs."""
+    return min(float(r["t"][0]) for r in runs), max(float(r["t"][-1]) for r in runs)
 
 
 def _palette() -> List[int]:
@@ -157,13 +161,12 @@ class _Panel:
             return f"{self.run.label} (ended at t = {self.t[-1]:.2f} s)", TEXT
         return str(self.run.label), TEXT
 
-    def draw(self, img, t: float) -> None:
-        """Draw the scene at ``t`` onto ``img`` (one panel, :data:`_SS` times the final size)."""
+    def draw(self, img, pose) -> None:
+        """Draw the scene of ``pose`` (:meth:`pose`) onto ``img`` (one panel, :data:`_SS` times the final size)."""
         from PIL import ImageDraw
 
         d = ImageDraw.Draw(img)
         w, h = img.size
-        pose = self.pose(t)
         r, length = pose.wheel_radius, pose.body_length
         ground = h - 0.12 * (h - _TOP * _SS)
         scale = 0.8 * (h - _TOP * _SS) / (r + length)   # [px/m], the same on both axes
@@ -189,9 +192,8 @@ class _Panel:
         d.line([(ax, ay), px(pose.spoke_end)], fill=SPOKE_COLOUR, width=3 * _SS)
         d.line([(ax, ay), px(pose.body_top)], fill=ROD_COLOUR, width=4 * _SS)
 
-    def text(self, d, x0: int, t: float, fonts) -> None:
-        """Title and readout at the final size; the panel's left edge is ``x0``."""
-        pose = self.pose(t)
+    def text(self, d, x0: int, t: float, pose, fonts) -> None:
+        """Title at ``t`` and readout of ``pose`` at the final size; the panel's left edge is ``x0``."""
         title, colour = self.title(t)
         font = fonts[1] if d.textlength(title, font=fonts[1]) <= PANEL_SIZE[0] - 8 else fonts[0]
         while len(title) > 4 and d.textlength(title, font=font) > PANEL_SIZE[0] - 8:   # a long label: its end shows
@@ -234,7 +236,8 @@ def write_gif(runs: Sequence, path, nominal: Optional[PhysicalParams] = None, fp
     nominal = nominal or default_nominal()
     times = frame_times(runs, fps)
     if len(times) > MAX_FRAMES:   # a long run: fewer frames per second, still played in real time
-        fps = (MAX_FRAMES - 1) / (max(float(r["t"][-1]) for r in runs) - min(float(r["t"][0]) for r in runs))
+        t0, t1 = _span(runs)
+        fps = (MAX_FRAMES - 1) / (t1 - t0)
         times = frame_times(runs, fps)
     panels = [_Panel(run, nominal, fall_angle) for run in runs]
     pw, ph = PANEL_SIZE
@@ -245,13 +248,14 @@ def write_gif(runs: Sequence, path, nominal: Optional[PhysicalParams] = None, fp
     frames = []
     for t in times:
         frame = Image.new("RGB", size, BACKGROUND)
-        for j, p in enumerate(panels):
+        poses = [p.pose(float(t)) for p in panels]
+        for j, (p, pose) in enumerate(zip(panels, poses)):
             scene = Image.new("RGB", (pw * _SS, ph * _SS), BACKGROUND)
-            p.draw(scene, float(t))
+            p.draw(scene, pose)
             frame.paste(scene.reduce(_SS), (j * pw, HEADER))
         d = ImageDraw.Draw(frame)
-        for j, p in enumerate(panels):
-            p.text(d, j * pw, float(t), fonts)
+        for j, (p, pose) in enumerate(zip(panels, poses)):
+            p.text(d, j * pw, float(t), pose, fonts)
             if j:
                 d.line([(j * pw, HEADER), (j * pw, size[1])], fill=REFERENCE, width=1)
         d.text((size[0] / 2, 3), f"t = {t:6.2f} s", fill=TEXT, font=fonts[2], anchor="mt")
