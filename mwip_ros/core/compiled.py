@@ -109,7 +109,7 @@ def _advance(m11, m12, m22, G_b, D_b, D_w, tau1, tau2, w, b, dw, db, u, h, subst
                                                    substeps)
 
 
-def _column(v, n: int) -> np.ndarray:
+def _full(v, n: int) -> np.ndarray:
     """A float (shared by the scenarios) or an array of the scenarios' values, as a new array of n."""
     return np.ascontiguousarray(np.broadcast_to(np.asarray(v, dtype=float), (n,)))
 
@@ -134,13 +134,13 @@ class RK4Periods:
 
     def __init__(self, p: model.PhysicalParams, D_b, n: int):
         self.n = n
-        self.params = tuple(_column(getattr(p, f), n) for f in Inertia._fields) + (_column(D_b, n),)
+        self.params = tuple(_full(getattr(p, f), n) for f in Inertia._fields) + (_full(D_b, n),)
 
     def __call__(self, D_w, tau1, tau2, x, u, h: float, substeps: int, active: np.ndarray) -> tuple:
         """The state one period later (four new arrays) of every scenario whose ``active`` is true; the others
         keep theirs.  ``tau1``, ``tau2``: tau_ext per stage time (:func:`.plant.stage_torques`)."""
         n = self.n
         out = tuple(np.array(v, dtype=float) for v in x)
-        _advance(*self.params, _column(D_w, n), _table(tau1, n), _table(tau2, n), *out, _column(u, n),
+        _advance(*self.params, _full(D_w, n), _table(tau1, n), _table(tau2, n), *out, _full(u, n),
                  float(h), int(substeps), np.ascontiguousarray(active, dtype=bool))
         return out
