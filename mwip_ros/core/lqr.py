@@ -4,7 +4,7 @@
 * Linearization of the nominal model (eq. 4 without friction) at theta_b = 0, q' = 0:
   ``M0 [theta_w''; theta_b''] = [u; -u + G_b theta_b]``, ``M0 = [[m11, m12], [m12, m22]]``,
   ``W = M0^-1``: ``A = [[0, 1, 0], [W22 G_b, 0, 0], [W12 G_b, 0, 0]]``, ``B = [0, W21 - W22, W11 - W12]^T``.
-* Zero-order hold at the control period h (``scipy.signal.cont2discrete``), the discrete
+* Zero-order hold at the control period h (``scipy.linalg.expm`` of the block matrix), the discrete
   algebraic Riccati equation (``scipy.linalg.solve_discrete_are``) with ``Q``, ``R``;
   ``K = (R + B_d^T P B_d)^-1 B_d^T P A_d``.
 * Law ``lqr``: ``u_k = -K x_k``; ``lqr_ndo``: ``u_k = -K x_k - u_taud,k`` with u_taud of eq. (20),
@@ -65,6 +65,13 @@ def weights(Q: Sequence[float], R: float) -> Tuple[np.ndarray, np.ndarray]:
     return Qm, np.array([[float(R)]])
 
 
+def _zoh(A: np.ndarray, B: np.ndarray, h: float, expm) -> Tuple[np.ndarray, np.ndarray]:
+    n, m = A.shape[0], B.shape[1]
+    block = np.vstack((np.hstack((A, B)), np.zeros((m, n + m))))
+    ms = expm(h * block)[:n, :]
+    return ms[:, :n], ms[:, n:]
+
+
 def lqr_gain(nominal: PhysicalParams, h: float, Q: Sequence[float], R: float) -> Tuple[float, float, float]:
     """K = (R + B_d^T P B_d)^-1 B_d^T P A_d, the discrete LQR gain at period ``h`` (zero-order hold).
 
@@ -74,12 +81,13 @@ def lqr_gain(nominal: PhysicalParams, h: float, Q: Sequence[float], R: float) ->
 
 @functools.lru_cache(maxsize=256)
 def _gain(nominal: PhysicalParams, h: float, Q: Tuple[float, ...], R: float) -> Tuple[float, float, float]:
-    from scipy.linalg import solve_discrete_are
-    from scipy.signal import cont2discrete
+    from scipy.linalg import expm, solve_discrete_are   # not scipy.signal: it would add ~45 MiB to every node
 
     Qm, Rm = weights(Q, R)
     A, B = linearization(nominal)
-    Ad, Bd, *_ = cont2discrete((A, B, np.eye(3), np.zeros((3, 1))), h, method="zoh")
+    # zero-order hold: expm of [[A, B], [0, 0]] h holds [[A_d, B_d], [0, I]] (what scipy.signal.cont2discrete's
+    # "zoh" computes, written out)
+    Ad, Bd = _zoh(A, B, h, expm)
     try:
         P = solve_discrete_are(Ad, Bd, Qm, Rm)
     except (np.linalg.LinAlgError, ValueError) as exc:

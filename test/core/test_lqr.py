@@ -69,8 +69,10 @@ def test_the_law_with_floats_and_arrays_and_the_observer_term_of_dscndo():
     ([1.0, 1.0], R, "lqr.Q", "3 entries"),
     (Q, 0.0, "lqr.R", "> 0"),
     (Q, -1.0, "lqr.R", "> 0"),
-    ([100.0, 10.0, 0.0], R, "lqr.Q", "does not stabilize"),        # the wheel-speed mode left on the unit circle
-    ([0.0, 0.0, 0.0], R, "lqr.Q", "no stabilizing solution"),
+    # Degenerate weights: the Riccati solve may fail outright or return a P whose gain leaves a mode on the
+    # unit circle, depending on the CPU's LAPACK path. Either way the design is refused as not stabilizing.
+    ([100.0, 10.0, 0.0], R, "lqr.Q", "stabiliz"),        # the wheel-speed mode left on the unit circle
+    ([0.0, 0.0, 0.0], R, "lqr.Q", "stabiliz"),
 ])
 def test_weights_that_give_no_design_are_refused_naming_the_parameter(Qv, Rv, key, words):
     with pytest.raises(LqrDesignError) as e:
