@@ -15,8 +15,10 @@ for a in "$@"; do
         || { awk 'NR > 1 && /^#/ { sub(/^# ?/, ""); print; next } NR > 1 { exit }' "$0"; exit 0; } ;;
     esac
 done
+# shellcheck disable=SC1091
+source "$ROOT/scripts/domain.sh"
+mwip_domain bench >&2 || exit $?   # the benchmark's graphs run on it (yours if set, else a free one)
 bash "$ROOT/scripts/setup.sh" >&2
 # shellcheck disable=SC1091
 source "$ROOT/scripts/env.sh"
-export ROS_DOMAIN_ID=$(( (RANDOM % 200) + 1 ))   # the benchmark's own graphs pick theirs per run
 exec python "$ROOT/scripts/bench.py" "$@"

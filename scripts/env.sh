@@ -20,10 +20,9 @@ case ":${AMENT_PREFIX_PATH:-}:" in
 esac
 
 export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
-# Keep concurrent runs (e.g. several shells / CI jobs) from seeing each other.
-if [ -z "${ROS_DOMAIN_ID:-}" ]; then
-    export ROS_DOMAIN_ID=$(( ($$ % 101) + 1 ))
-fi
+# ROS_DOMAIN_ID is left as you have it (unset: ROS's default, 0), so every terminal that sources this
+# file sees the same graph. scripts/run_experiment.sh, test.sh and bench.sh pick a free domain of their
+# own when you have not set one (scripts/domain.sh).
 export MPLBACKEND=Agg
 
 unset _mwip_root

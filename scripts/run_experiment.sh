@@ -1,59 +1,106 @@
 #!/usr/bin/env bash
 # The main job: run the ROS graph for DSC and then DSCNDO, record both runs, write the report.
 #
-#   scripts/run_experiment.sh [--params FILE]... [--mode lockstep|realtime] [--duration S] [--no-record]
-#                             [--out DIR] [--laws dsc,dscndo,lqr,lqr_ndo]
+#   scripts/run_experiment.sh [--params FILE [FILE ...]] [--mode lockstep|realtime] [--duration S]
+#                             [--no-record] [--out DIR] [--name NAME] [--laws dsc,dscndo,lqr,lqr_ndo]
 #
-# --params may be repeated: a base file, then overlays (config/sensing_realistic.yaml, a tuned
-# overlay), merged in order as ROS merges repeated --params-file.
+# --params takes a base file, then overlays (config/sensing_realistic.yaml, a tuned overlay), merged
+# in order as ROS merges repeated --params-file; every node's section is checked before anything starts.
 # --laws picks the runs (default dsc,dscndo): dsc and dscndo are DSC without and with the
 # observer term, lqr and lqr_ndo the LQR baseline without and with it.
 #
-# Bags, logs and the report go to DIR (default: bags/), named by date and controller.
-# Each node is its own process (plant_sim, disturbance_observer, dscndo_controller,
-# mcap_recorder), on a private ROS domain with localhost-only discovery. Every process
-# started here is stopped by PID when the run ends, fails, or is interrupted (Ctrl-C).
+# Bags, logs and the report go to DIR (default: bags/) as NAME_<law>, NAME_logs and NAME_report, NAME
+# being the date and time (or --name NAME); a second experiment with the same NAME (started in the
+# same second) gets its own names with a suffix (NAME-2_...) instead of sharing or overwriting files.
+# Each node is its own process (plant_sim, disturbance_observer, dscndo_controller, mcap_recorder)
+# with localhost-only discovery, on your ROS_DOMAIN_ID if set, else on a free domain in 1..101
+# (printed first); two experiments never share one. Every process started here is stopped by PID when the run ends, fails, or is interrupted.
+#
+# Exit codes: 0 every robot stayed up, 3 a robot fell (every run and the report are still done),
+# 2 a usage or parameter mistake (nothing started), 1 a node failed, 130 interrupted (Ctrl-C).
 set -euo pipefail
 
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
-PARAMS=()   # --params may be given several times: a base file, then overlays (merged in order, as ROS does)
+PARAMS=()   # --params FILE [FILE ...]: a base file, then overlays (merged in order, as ROS merges repeated --params-file)
 MODE=lockstep
 DURATION=""
 RECORD=1
 OUT="$ROOT/bags"
 LAWS="dsc,dscndo"
+NAME=""
 
 usage() { awk 'NR > 1 && /^#/ { sub(/^# ?/, ""); print; next } NR > 1 { exit }' "$0"; }
+die() { echo "run_experiment: $*" >&2; exit 2; }
+value_of() {   # $1 = option, then the rest of the command line: the option's value, or a usage error
+    [ $# -ge 2 ] && [ -n "$2" ] && [[ "$2" != --* ]] || die "$1 needs a value (scripts/run_experiment.sh --help)"
+    printf '%s' "$2"
+}
 while [ $# -gt 0 ]; do
     case "$1" in
-        --params) [ -f "$2" ] || { echo "run_experiment: no such parameter file: $2" >&2; exit 2; }
-                  PARAMS+=("$(cd "$(dirname "$2")" && pwd)/$(basename "$2")"); shift 2 ;;
-        --mode) MODE="$2"; shift 2 ;;
-        --duration) DURATION="$2"; shift 2 ;;
+        --params) shift
+                  { [ $# -gt 0 ] && [[ "$1" != --* ]]; } || die "--params needs at least one FILE"
+                  while [ $# -gt 0 ] && [[ "$1" != --* ]]; do
+                      [ -f "$1" ] || die "--params: no such parameter file: $1"
+                      PARAMS+=("$(cd "$(dirname "$1")" && pwd)/$(basename "$1")"); shift
+                  done ;;
+        --mode) MODE="$(value_of "$@")"; shift 2 ;;
+        --duration) DURATION="$(value_of "$@")"; shift 2 ;;
         --no-record) RECORD=0; shift ;;
-        --out) mkdir -p "$2"; OUT="$(cd "$2" && pwd)"; shift 2 ;;
-        --laws) LAWS="$2"; shift 2 ;;
+        --out) OUT="$(value_of "$@")"; shift 2
+               [ ! -e "$OUT" ] || [ -d "$OUT" ] || die "--out: $OUT exists and is not a directory" ;;
+        --laws) LAWS="$(value_of "$@")"; shift 2 ;;
+        --name) NAME="$(value_of "$@")"; shift 2
+                [[ "$NAME" =~ ^[A-Za-z0-9][A-Za-z0-9._-]*$ ]] || die "--name takes letters, digits, '.', '_' and '-', got '$NAME'" ;;
         -h|--help) usage; exit 0 ;;
         *) echo "run_experiment: unknown argument '$1'" >&2; usage >&2; exit 2 ;;
     esac
 done
-case "$MODE" in lockstep|realtime) ;; *) echo "run_experiment: --mode must be lockstep or realtime" >&2; exit 2 ;; esac
+case "$MODE" in lockstep|realtime) ;; *) die "--mode must be lockstep or realtime, got '$MODE'" ;; esac
 if [ -n "$DURATION" ]; then
-    [[ "$DURATION" =~ ^[0-9]+([.][0-9]*)?$ ]] || { echo "run_experiment: --duration must be seconds >= 0, got '$DURATION'" >&2; exit 2; }
+    [[ "$DURATION" =~ ^[0-9]+([.][0-9]*)?$ ]] || die "--duration must be seconds >= 0, got '$DURATION'"
     [[ "$DURATION" == *.* ]] || DURATION="$DURATION.0"   # ROS 2 reads 60 as an integer
 fi
 [ ${#PARAMS[@]} -gt 0 ] || PARAMS=("$ROOT/config/paper.yaml")
 PF=()   # --params-file FILE for each
 for f in "${PARAMS[@]}"; do PF+=(--params-file "$f"); done
 IFS=',' read -r -a LAW_LIST <<< "$LAWS"
+[ ${#LAW_LIST[@]} -gt 0 ] || die "--laws needs at least one of dsc, dscndo, lqr, lqr_ndo"
 for CTRL in "${LAW_LIST[@]}"; do
-    case "$CTRL" in dsc|dscndo|lqr|lqr_ndo) ;; *) echo "run_experiment: --laws takes dsc, dscndo, lqr, lqr_ndo; got '$CTRL'" >&2; exit 2 ;; esac
+    case "$CTRL" in dsc|dscndo|lqr|lqr_ndo) ;; *) die "--laws takes dsc, dscndo, lqr, lqr_ndo; got '$CTRL'" ;; esac
 done
+
+# One ROS domain for the whole experiment, the user's if set, held (locked) until every node has stopped.
+# shellcheck disable=SC1091
+source "$ROOT/scripts/domain.sh"
+mwip_domain run_experiment || exit $?
 
 bash "$ROOT/scripts/setup.sh"
 # shellcheck disable=SC1091
 source "$ROOT/scripts/env.sh"
 cd "$ROOT"
+
+# The parameter files, every node's section, checked before anything starts: a mistake is one line, exit 2.
+theorem=0
+mwip_theorem --params "${PARAMS[@]}" || theorem=$?
+case "$theorem" in
+    0) ;;
+    1) echo "run_experiment: warning: the gains break Theorem 2 (see above); running anyway" >&2 ;;
+    *) exit 2 ;;
+esac
+
+# Output names: date and time, made unique by creating the logs folder (mkdir is atomic): a second
+# experiment started in the same second takes the next suffix instead of sharing or overwriting files.
+mkdir -p "$OUT"
+OUT="$(cd "$OUT" && pwd)"
+BASE_STAMP="${NAME:-$(date +%Y-%m-%d_%H%M%S)}"
+STAMP="$BASE_STAMP"
+n=1
+until mkdir "$OUT/${STAMP}_logs" 2>/dev/null; do
+    n=$((n + 1))
+    [ "$n" -le 1000 ] || die "cannot create a logs folder under $OUT"
+    STAMP="${BASE_STAMP}-$n"
+done
+LOGS="$OUT/${STAMP}_logs"
 
 PIDS=()
 TAIL=""
@@ -74,11 +121,6 @@ stop_all() {
 trap 'stop_all' EXIT
 trap 'echo; echo "run_experiment: interrupted, stopping every node" >&2; exit 130' INT TERM
 
-mwip_theorem --params "${PARAMS[@]}" || echo "run_experiment: warning: the gains break Theorem 2 (see above)" >&2
-
-STAMP="$(date +%Y-%m-%d_%H%M%S)"
-LOGS="$OUT/${STAMP}_logs"
-mkdir -p "$LOGS"
 # Lockstep: the recorder logs in sim time (the plant publishes /clock). The observer and the
 # controller never read a clock (each output carries the stamp of the state it answers), so
 # they run without use_sim_time: that spares each a /clock message per step (BENCHMARKS.md).
@@ -90,9 +132,9 @@ PLANT_EXTRA=(-p "plant_sim:mode:=$MODE")
 [ -n "$DURATION" ] && PLANT_EXTRA+=(-p "plant_sim:duration_s:=$DURATION")
 
 RUNS=()
+FELL=()        # the laws whose robot fell: the script then ends with exit 3, as plant_sim does
 ESTIMATES=()   # the observer's estimates (CSV), for a report from the plant's CSVs (--no-record)
 for CTRL in "${LAW_LIST[@]}"; do
-    export ROS_DOMAIN_ID=$(( (RANDOM % 200) + 1 ))
     USE_OBS=false; case "$CTRL" in dscndo|lqr_ndo) USE_OBS=true ;; esac
     LAW=dsc; case "$CTRL" in lqr|lqr_ndo) LAW=lqr ;; esac
     echo "=== $CTRL: $MODE run, ROS_DOMAIN_ID=$ROS_DOMAIN_ID, logs in ${LOGS#$ROOT/}/ ==="
@@ -114,8 +156,9 @@ for CTRL in "${LAW_LIST[@]}"; do
     dscndo_controller --ros-args "${PF[@]}" -p "dscndo_controller:mode:=$MODE" -p "dscndo_controller:use_observer:=$USE_OBS" -p "dscndo_controller:law:=$LAW" \
         > "$LOGS/${CTRL}_dscndo_controller.log" 2>&1 &
     PIDS+=($!)
+    : > "$LOGS/${CTRL}_plant_sim.log"   # exists before tail opens it
     plant_sim --ros-args "${PF[@]}" "${PLANT_EXTRA[@]}" -p "plant_sim:expected_subscribers:=$SUBS" \
-        -p "plant_sim:csv:=$LOGS/${CTRL}.csv" > "$LOGS/${CTRL}_plant_sim.log" 2>&1 &
+        -p "plant_sim:csv:=$LOGS/${CTRL}.csv" >> "$LOGS/${CTRL}_plant_sim.log" 2>&1 &
     PLANT=$!
     PIDS+=("$PLANT")
     tail --pid="$PLANT" -n +1 -f "$LOGS/${CTRL}_plant_sim.log" &   # show the plant's progress live
@@ -127,7 +170,8 @@ for CTRL in "${LAW_LIST[@]}"; do
     stop_all
     case "$code" in
         0) ;;
-        3) echo "run_experiment: the robot FELL in the $CTRL run (report still written)" >&2 ;;
+        3) echo "run_experiment: the robot FELL in the $CTRL run (the report is still written; exit 3)" >&2
+           FELL+=("$CTRL") ;;
         130|143) echo "run_experiment: interrupted, stopping every node" >&2; exit 130 ;;
         *) echo "run_experiment: plant_sim failed in the $CTRL run (exit $code); see ${LOGS#$ROOT/}/" >&2
            exit 1 ;;
@@ -150,3 +194,7 @@ if [ "$RECORD" = 1 ]; then
 fi
 echo "report: ${REPORT#$ROOT/}/metrics.md (figures fig3.png, observer.png; animation.gif)"
 echo "logs:   ${LOGS#$ROOT/}/"
+if [ ${#FELL[@]} -gt 0 ]; then
+    echo "run_experiment: the robot fell in: ${FELL[*]} (exit 3)" >&2
+    exit 3
+fi

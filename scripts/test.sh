@@ -5,6 +5,11 @@ set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$ROOT"
 
+# The session's own ROS domain (yours if ROS_DOMAIN_ID is set), locked while the tests run; every
+# graph a test starts takes a free domain of its own.
+# shellcheck disable=SC1091
+source "$ROOT/scripts/domain.sh"
+mwip_domain test || exit $?
 bash "$ROOT/scripts/setup.sh"
 # shellcheck disable=SC1091
 source "$ROOT/scripts/env.sh"
@@ -18,9 +23,10 @@ for a in "$@"; do
     esac
 done
 
-echo "test: python -m pytest -q ${targets[*]} $* (ROS_DOMAIN_ID=$ROS_DOMAIN_ID)"
+# One line per test file with its share of the suite done, so a long run shows where it is.
+echo "test: python -m pytest ${targets[*]} $*"
 rc=0
-python -m pytest -q "${targets[@]}" "$@" || rc=$?
+python -m pytest "${targets[@]}" "$@" || rc=$?
 if [ "$rc" -eq 5 ]; then
     echo "test: pytest collected no tests; treating as failure" >&2
     exit 1

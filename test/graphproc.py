@@ -6,6 +6,7 @@ its ``Graph``; ``Graph.close()`` ends every process it started, by PID
 """
 from __future__ import annotations
 
+import fcntl
 import itertools
 import os
 import random
@@ -21,9 +22,39 @@ PARAMS = REPO / "config" / "paper.yaml"
 _counter = itertools.count()
 
 
+_held: Dict[int, int] = {}   # domain id -> descriptor of its lock file, while this process holds it
+
+
+def _lock_path(domain_id: int) -> str:
+    return os.path.join(os.environ.get("TMPDIR", "/tmp"), f"mwip_ros-domain-{domain_id}.lock")
+
+
 def fresh_domain_id() -> int:
-    # Fast DDS allows 0..232; spread by pid and a counter so parallel runs do not collide.
-    return 1 + (os.getpid() * 7 + next(_counter) * 13 + random.randrange(0, 97)) % 200
+    """A ROS domain in 1..101 that no other mwip_ros run holds, locked until :func:`release_domain_id`.
+
+    ROS 2 documents 0..101 as the ids whose ports never clash (0 is the default a user's own graph is
+    on). The lock is the one scripts/domain.sh takes (flock on ``$TMPDIR/mwip_ros-domain-ID.lock``),
+    so a test never shares a domain with a run_experiment.sh, a bench or another test session."""
+    start = (os.getpid() * 7 + next(_counter) * 13 + random.randrange(0, 97)) % 101
+    for i in range(101):
+        domain_id = 1 + (start + i) % 101
+        if domain_id in _held:
+            continue
+        fd = os.open(_lock_path(domain_id), os.O_WRONLY | os.O_CREAT, 0o666)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            os.close(fd)
+            continue
+        _held[domain_id] = fd
+        return domain_id
+    raise RuntimeError("every ROS domain 1..101 is held by another mwip_ros run")
+
+
+def release_domain_id(domain_id: int) -> None:
+    fd = _held.pop(domain_id, None)
+    if fd is not None:
+        os.close(fd)
 
 
 def ros_env(domain_id: int) -> Dict[str, str]:
@@ -33,6 +64,15 @@ def ros_env(domain_id: int) -> Dict[str, str]:
     env.setdefault("AMENT_PREFIX_PATH", sys.prefix)
     env["PYTHONUNBUFFERED"] = "1"
     env["RCUTILS_LOGGING_BUFFERED_STREAM"] = "0"
+    return env
+
+
+def script_env(**extra: str) -> Dict[str, str]:
+    """The environment for the project's scripts (run_experiment.sh, bench.sh) as a newcomer has it: no
+    ROS_DOMAIN_ID, so each picks and locks a free domain of its own (this session's own domain is locked
+    by scripts/test.sh, and a script asked for a held domain refuses to share it)."""
+    env = {k: v for k, v in os.environ.items() if k != "ROS_DOMAIN_ID"}
+    env.update(extra)
     return env
 
 
@@ -118,6 +158,7 @@ class Graph:
 
     def __init__(self, workdir: Path, domain_id: Optional[int] = None):
         self.workdir = Path(workdir)
+        self._own_domain = domain_id is None
         self.domain_id = domain_id if domain_id is not None else fresh_domain_id()
         self.env = ros_env(self.domain_id)
         self.procs: List[Proc] = []
@@ -142,6 +183,8 @@ class Graph:
     def close(self) -> None:
         for p in reversed(self.procs):
             p.stop(signal.SIGINT, timeout=10)
+        if self._own_domain:
+            release_domain_id(self.domain_id)
 
     def __enter__(self):
         return self

@@ -3,7 +3,7 @@ import os
 import re
 import subprocess
 
-from graphproc import REPO, ros_env, fresh_domain_id
+from graphproc import REPO, script_env
 
 ROWS = [
     r"1\. DDS floor: Float64 ping-pong, 2 processes, serialized .* \| [\d,]+ round trips/s \(RTT p50 \d+ us, p99 \d+ us\)",
@@ -35,7 +35,7 @@ ROWS = [
 def test_bench_quick_prints_every_row(tmp_path):
     md = tmp_path / "bench.md"
     r = subprocess.run(["bash", str(REPO / "scripts" / "bench.sh"), "--quick", "--markdown", str(md)],
-                       env=ros_env(fresh_domain_id()), capture_output=True, text=True, timeout=600)
+                       env=script_env(), capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stdout + r.stderr
     for row in ROWS:
         assert re.search(row, r.stdout), f"missing row /{row}/ in:\n{r.stdout}"
@@ -49,8 +49,8 @@ def test_bench_quick_prints_every_row(tmp_path):
 
 def test_bench_help_and_bad_arguments():
     r = subprocess.run(["bash", str(REPO / "scripts" / "bench.sh"), "--help"], capture_output=True, text=True,
-                       timeout=120)
+                       timeout=120, env=script_env())
     assert r.returncode == 0 and "--quick" in r.stdout and "DDS floor" in r.stdout
     r = subprocess.run(["bash", str(REPO / "scripts" / "bench.sh"), "--repeat", "0"], capture_output=True,
-                       text=True, timeout=300)
+                       text=True, timeout=300, env=script_env())
     assert r.returncode == 2 and "--repeat must be at least 1" in r.stderr

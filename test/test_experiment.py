@@ -11,7 +11,7 @@ import pytest
 import yaml
 
 from bagcheck import distinct_stamps
-from graphproc import REPO, Graph, ros_env
+from graphproc import REPO, Graph, ros_env, script_env
 
 rosbags_highlevel = pytest.importorskip("rosbags.highlevel")
 
@@ -36,7 +36,7 @@ def _session_pids(sid: int) -> list:
 
 def test_main_job_records_two_bags_and_writes_the_report(tmp_path):
     r = subprocess.run(["bash", str(REPO / "scripts" / "run_experiment.sh"), "--out", str(tmp_path)],
-                       capture_output=True, text=True, timeout=600, env=dict(os.environ))
+                       capture_output=True, text=True, timeout=600, env=script_env())
     assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
     bags = sorted(p for p in tmp_path.iterdir() if p.name.endswith(("_dsc", "_dscndo")))
     assert [b.name.rsplit("_", 1)[1] for b in bags] == ["dsc", "dscndo"]
@@ -76,7 +76,7 @@ def test_main_job_records_two_bags_and_writes_the_report(tmp_path):
 def test_ctrl_c_stops_every_process(tmp_path):
     p = subprocess.Popen(["bash", str(REPO / "scripts" / "run_experiment.sh"), "--out", str(tmp_path),
                           "--duration", "60"], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                         start_new_session=True, env=dict(os.environ))
+                         start_new_session=True, env=script_env())
     try:
         deadline = time.monotonic() + 120
         seen = ""
@@ -143,7 +143,7 @@ def test_a_sweep_row_runs_through_the_ros_graph_with_the_same_metrics(tmp_path):
     assert r.returncode == 0, r.stderr
     r = subprocess.run(["bash", str(REPO / "scripts" / "run_experiment.sh"), "--params", str(params), "--no-record",
                         "--out", str(tmp_path / "graph")], capture_output=True, text=True, timeout=600,
-                       env=dict(os.environ))
+                       env=script_env())
     assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
     report = next((tmp_path / "graph").glob("*_report"))
     graph = json.loads((report / "metrics.json").read_text())["runs"]
@@ -154,3 +154,103 @@ def test_a_sweep_row_runs_through_the_ros_graph_with_the_same_metrics(tmp_path):
         assert graph[law]["upright"] == cols["upright"][j]
         for name, ours in METRICS.items():
             assert abs(graph[law][ours] - cols[name][j]) <= 1e-9, (law, name, graph[law][ours], cols[name][j])
+
+
+RUN_EXPERIMENT = ["bash", str(REPO / "scripts" / "run_experiment.sh")]
+
+
+def _first_line_domain(stdout: str) -> int:
+    import re
+    first = stdout.splitlines()[0]
+    m = re.fullmatch(r"run_experiment: ROS_DOMAIN_ID=(\d+) \(.*\)", first)
+    assert m, f"the domain is not the first line: {first!r}"
+    return int(m.group(1))
+
+
+@pytest.mark.parametrize("args, names", [
+    (["--params"], "--params"),
+    (["--params", "--duration", "1"], "--params"),
+    (["--mode"], "--mode"),
+    (["--duration", "-1"], "--duration"),
+    (["--laws", "dsc,pid"], "--laws"),
+    (["--name", "a/b"], "--name"),
+    (["--params", "no_such_file.yaml"], "no_such_file.yaml"),
+])
+def test_command_line_mistakes_are_one_line_and_exit_2_before_anything_starts(tmp_path, args, names):
+    r = subprocess.run([*RUN_EXPERIMENT, *args, "--out", str(tmp_path / "out")], capture_output=True, text=True,
+                       timeout=120, env=script_env())
+    assert r.returncode == 2, r.stdout + r.stderr
+    assert names in r.stderr and "unbound variable" not in r.stderr, r.stderr
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_mistyped_parameter_stops_the_job_before_any_node_or_folder(tmp_path):
+    bad = tmp_path / "typo.yaml"
+    bad.write_text((REPO / "config" / "paper.yaml").read_text().replace("    k1: ", "    kk1: ", 1))
+    r = subprocess.run([*RUN_EXPERIMENT, "--params", str(bad), "--out", str(tmp_path / "out")],
+                       capture_output=True, text=True, timeout=300, env=script_env())
+    assert r.returncode == 2, r.stdout + r.stderr
+    assert "dscndo_controller.kk1" in r.stderr and "did you mean 'k1'" in r.stderr
+    assert "Theorem 2" not in r.stderr and "===" not in r.stdout   # no wrong warning, no run started
+    assert not (tmp_path / "out").exists()
+
+
+def test_two_experiments_started_together_never_collide(tmp_path):
+    """Same output folder, same name (as two runs started in the same second get): each gets its own
+    domain, logs folder and bag, and each bag is the whole run."""
+    out = tmp_path / "out"
+    cmd = [*RUN_EXPERIMENT, "--out", str(out), "--name", "same", "--duration", "1", "--laws", "dscndo"]
+    ps = [subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=script_env())
+          for _ in range(2)]
+    try:
+        res = [p.communicate(timeout=300) for p in ps]
+    finally:
+        for p in ps:
+            if p.poll() is None:
+                p.kill()
+                p.wait(10)
+    for p, (so, se) in zip(ps, res):
+        assert p.returncode == 0, so[-3000:] + se[-3000:]
+        assert so.count("metrics t in [") == 1, so   # the plant's progress and metrics, shown live
+    domains = [_first_line_domain(so) for so, _ in res]
+    assert len(set(domains)) == 2 and all(1 <= d <= 101 for d in domains), domains
+    assert sorted(p.name for p in out.iterdir()) == sorted(
+        f"{n}_{kind}" for n in ("same", "same-2") for kind in ("dscndo", "logs", "report"))
+    for n in ("same", "same-2"):
+        assert distinct_stamps(out / f"{n}_dscndo", ("/joint_states",)) == {"/joint_states": 201}
+        est = (out / f"{n}_logs" / "dscndo_estimates.csv").read_text().splitlines()
+        assert len(est) == 1 + 201, (n, len(est))   # header + one estimate per state: no interleaving
+        for log in (out / f"{n}_logs").glob("*.log"):
+            assert "[ERROR]" not in log.read_text(), log
+
+
+def test_the_users_domain_is_kept_and_a_domain_in_use_is_refused(tmp_path):
+    from graphproc import fresh_domain_id, release_domain_id
+    free = fresh_domain_id()
+    release_domain_id(free)
+    r = subprocess.run([*RUN_EXPERIMENT, "--out", str(tmp_path / "a"), "--duration", "0.2", "--laws", "dsc",
+                        "--no-record"], capture_output=True, text=True, timeout=300,
+                       env=script_env(ROS_DOMAIN_ID=str(free)))
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+    assert _first_line_domain(r.stdout) == free and "(yours" in r.stdout.splitlines()[0]
+    held = fresh_domain_id()   # this test session holds it now, as a running experiment would
+    try:
+        r = subprocess.run([*RUN_EXPERIMENT, "--out", str(tmp_path / "b"), "--duration", "0.2", "--laws", "dsc"],
+                           capture_output=True, text=True, timeout=300, env=script_env(ROS_DOMAIN_ID=str(held)))
+    finally:
+        release_domain_id(held)
+    assert r.returncode == 2 and f"ROS_DOMAIN_ID={held} is in use" in r.stderr, r.stdout + r.stderr
+    assert not (tmp_path / "b").exists()
+
+
+def test_a_fall_ends_the_job_with_exit_3_after_every_run_and_the_report(tmp_path):
+    weak = tmp_path / "weak_drive.yaml"
+    weak.write_text("plant_sim:\n  ros__parameters:\n    torque_limit: 1.0\n")
+    r = subprocess.run([*RUN_EXPERIMENT, "--params", str(REPO / "config" / "paper.yaml"), str(weak),
+                        "--out", str(tmp_path / "out"), "--duration", "2", "--laws", "dsc,dscndo", "--no-record"],
+                       capture_output=True, text=True, timeout=300, env=script_env())
+    assert r.returncode == 3, r.stdout[-3000:] + r.stderr[-3000:]
+    assert r.stdout.count("FALLEN at t = ") == 2   # both runs ran, and each fall was shown live
+    assert "the robot fell in: dsc dscndo (exit 3)" in r.stderr
+    report = next((tmp_path / "out").glob("*_report"))
+    assert (report / "metrics.md").is_file()
