@@ -2,11 +2,13 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from pathlib import Path
 
 from mwip_ros import params as P
 from mwip_ros.cli import plotting
+from mwip_ros.cli.outputs import refuse_existing
 from mwip_ros.cli.theorem import theorem_report
 from mwip_ros.core import metrics
 from mwip_ros.core.sim import LAWS, law_name, simulate
@@ -38,6 +40,7 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--csv", type=Path, default=None, metavar="FILE",
                     help="write the trajectory; with --compare, FILE gets _dsc / _dscndo suffixes")
     ap.add_argument("--plot", type=Path, default=None, metavar="FILE.png", help="write the Fig. 3 plot")
+    ap.add_argument("--force", action="store_true", help="overwrite a --csv or --plot file that exists")
     ap.add_argument("--window", type=float, nargs=2, default=metrics.WINDOW, metavar=("T0", "T1"),
                     help="metrics window [s] (default: 5 10)")
     ap.add_argument("-q", "--quiet", action="store_true", help="no progress output")
@@ -48,21 +51,36 @@ def _suffixed(path: Path, label: str) -> Path:
     return path.with_name(f"{path.stem}_{label}{path.suffix or '.csv'}")
 
 
+def _fail(text: str) -> int:
+    print(f"mwip_sim: error: {text}", file=sys.stderr)
+    return 2
+
+
+DURATION_MAX_S = P.specs_for("plant_sim")["duration_s"].check.bounds[1]   # the parameter file's own limit
+
+
 def main(argv=None) -> int:
     args = _parser().parse_args(argv)
     paths = args.params or [default_params_file()]
     try:
-        values = P.merged_values(P.load_param_files(paths))
+        values = P.merged_values(P.load_param_files(paths, option="--params"))
     except P.ParamError as exc:
-        print(f"mwip_sim: error: {exc}", file=sys.stderr)
-        return 2
-    if args.duration is not None and args.duration <= 0:
-        print("mwip_sim: error: --duration must be > 0", file=sys.stderr)
-        return 2
+        return _fail(str(exc))
+    if args.duration is not None and not (math.isfinite(args.duration) and 0 < args.duration <= DURATION_MAX_S):
+        return _fail(f"--duration must be > 0 and <= {DURATION_MAX_S:g} s (plant_sim.duration_s's range), "
+                     f"got {args.duration:g}")
     if args.compare is not None:
         names = list(dict.fromkeys(args.compare or ["dsc", "dscndo"]))
     else:
         names = [args.controller or law_name(values["law"], values["use_observer"])]
+    csv_paths = {}
+    if args.csv:
+        csv_paths = {label: _suffixed(args.csv, label) if len(names) > 1 else args.csv for label in names}
+    outputs = [("--csv", p) for p in csv_paths.values()] + ([("--plot", args.plot)] if args.plot else [])
+    for option, path in outputs:   # before any work: a run is not lost to an output it cannot write
+        reason = refuse_existing(path, args.force, option)
+        if reason:
+            return _fail(reason)
     if not args.quiet:
         print(theorem_report(values), file=sys.stderr)
         if any(LAWS[n][0] == "lqr" for n in names):
@@ -83,7 +101,7 @@ def main(argv=None) -> int:
                   + ("  FALLEN" if run.fallen else ""), file=sys.stderr)
         runs.append(run)
         if args.csv:
-            out = _suffixed(args.csv, label) if len(names) > 1 else args.csv
+            out = csv_paths[label]
             write_csv(run, out)
             print(f"wrote {out}")
     named = [(r.label, metrics.compute(r.columns, args.window, values["fall_angle"])) for r in runs]

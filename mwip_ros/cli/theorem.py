@@ -36,7 +36,7 @@ def main(argv=None) -> int:
                     help="parameter file(s), merged in order (default: config/paper.yaml)")
     args = ap.parse_args(argv)
     try:
-        values = P.merged_values(P.load_param_files(args.params or [default_params_file()]))
+        values = P.merged_values(P.load_param_files(args.params or [default_params_file()], option="--params"))
     except P.ParamError as exc:
         print(f"mwip_theorem: error: {exc}", file=sys.stderr)
         return 2

@@ -12,6 +12,7 @@ import numpy as np
 
 from mwip_ros import params as P
 from mwip_ros.core.sim import LAWS
+from mwip_ros.cli.outputs import refuse_existing
 from mwip_ros.cli.sweep import add_runner_arguments, runner_from
 from mwip_ros.sweep.scenarios import parameter_overlay
 from mwip_ros.sweep.spec import CONTROLLERS, SpecError, load_spec
@@ -41,6 +42,7 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--controller", required=True, choices=CONTROLLERS, help="the law to tune")
     ap.add_argument("--tune", nargs="+", required=True, metavar="NAME", help="what to tune: " + ", ".join(KNOBS))
     ap.add_argument("--out", type=Path, required=True, metavar="FILE.yaml", help="the overlay to write")
+    ap.add_argument("--force", action="store_true", help="overwrite an --out file that exists")
     ap.add_argument("--bounds", nargs="*", default=[], metavar="NAME=LO:HI",
                     help="search bounds (e.g. k1=1:20 X.c1=10:500); defaults: k1, k2 0.5:30, tau4 0.005:1, "
                          "X.c1, X.c4 5:2000, lqr.R 1e-4:1, lqr.Q.* 0.1:1e4")
@@ -67,6 +69,12 @@ def main(argv=None) -> int:
         return _fail("--maxiter and --popsize must be >= 1")
     if not (math.isfinite(args.weight) and args.weight >= 0):
         return _fail(f"--weight must be >= 0, got {args.weight}")
+    for option, seed in (("--seed", args.seed), ("--holdout-seed", args.holdout_seed)):
+        if seed is not None and seed < 0:
+            return _fail(f"{option} must be >= 0, got {seed}")
+    reason = refuse_existing(args.out, args.force, "--out")   # now, not after the search
+    if reason:
+        return _fail(reason)
     law = LAWS[args.controller][0]
     try:
         spec = load_spec(args.spec)

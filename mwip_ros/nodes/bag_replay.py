@@ -47,7 +47,7 @@ from mwip_ros.bag import BagError, check, topic_counts, topic_qos, topic_types
 from mwip_ros.nodes.params import declare
 from mwip_ros.nodes.replay import Replay
 from mwip_ros.nodes.resim import Resim
-from mwip_ros.nodes.runtime import EXIT_OK, GracefulNodeMixin, run_node
+from mwip_ros.nodes.runtime import GracefulNodeMixin, run_node
 from mwip_ros.params import ParamError
 
 NAME = "bag_replay"
@@ -82,12 +82,7 @@ class BagReplay(Node, GracefulNodeMixin):
 
 
 def main(argv=None) -> int:
-    args = list(sys.argv if argv is None else argv)
-    head = args[1:args.index("--ros-args")] if "--ros-args" in args else args[1:]
-    if "-h" in head or "--help" in head:
-        print(__doc__)
-        return EXIT_OK
-    return run_node(BagReplay, args)
+    return run_node(BagReplay, argv)   # --help included (run_node)
 
 
 if __name__ == "__main__":

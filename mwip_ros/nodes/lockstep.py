@@ -14,7 +14,9 @@ states the way the plant drives them with simulated ones.
    it; what a late match still misses the transient-local writers hand over (msgs.qos).
    A discovered subscriber that never matches (incompatible QoS) holds the start for at
    most ``COMPLETE_WAIT_S``, then the run starts with a warning naming it.  While waiting
-   it logs what is missing every 2 s; after ``timeout_s`` it reports the wait as failed.
+   it logs progress: "waiting for the graph to come up" at once (discovery takes a moment:
+   the normal start), then, after ``WAIT_GRACE_S``, every 2 s the nodes still missing; after
+   ``timeout_s`` it reports the wait as failed, naming them and why.
 2. **Step** (:meth:`send`, :meth:`take_answer`): publish ``/clock`` and the state, then
    exactly one ``wheel_torque_cmd`` answers it.  A command while no state waits is the
    caller's to reject.
@@ -37,22 +39,29 @@ from mwip_ros.msgs.layouts import encode_clock, parse_wrench
 __all__ = ["LockstepDriver", "RESEND_S", "graph_missing"]
 
 RESEND_S = 0.5          # resend a state nobody answered after this long [s]
+WAIT_GRACE_S = 2.0      # discovery takes a moment: until then a wait for the graph is the normal start
 WAIT_LOG_PERIOD_S = 2.0
 COMPLETE_WAIT_S = 3.0   # once the required nodes are there, wait at most this long for every discovered subscriber
+NOT_FOUND_HINT = "started? same ROS_DOMAIN_ID?"
+
+
+def _graph_gaps(node, state_pub, need_subs: int) -> list:
+    """What the graph lacks: [(what, why, is a node)]."""
+    gaps = []
+    if node.count_publishers("wheel_torque_cmd") == 0:
+        gaps.append(("dscndo_controller", "nothing publishes wheel_torque_cmd", True))
+    if node.count_publishers("disturbance_estimate") == 0:
+        gaps.append(("disturbance_observer", "nothing publishes disturbance_estimate; the controller waits for "
+                                             "it when use_observer is true", True))
+    matched = state_pub.get_subscription_count()
+    if matched < need_subs:
+        gaps.append((f"{need_subs} subscribers on joint_states", f"matched: {matched}", False))
+    return gaps
 
 
 def graph_missing(node, state_pub, need_subs: int) -> list:
     """What a lockstep driver is waiting for, in words naming the nodes."""
-    what = []
-    if node.count_publishers("wheel_torque_cmd") == 0:
-        what.append("dscndo_controller (nothing publishes wheel_torque_cmd)")
-    if node.count_publishers("disturbance_estimate") == 0:
-        what.append("disturbance_observer (nothing publishes disturbance_estimate; the controller waits for "
-                    "it when use_observer is true)")
-    matched = state_pub.get_subscription_count()
-    if matched < need_subs:
-        what.append(f"{need_subs} subscribers on joint_states (matched: {matched})")
-    return what
+    return [f"{what} ({why})" for what, why, _ in _graph_gaps(node, state_pub, need_subs)]
 
 
 class LockstepDriver:
@@ -153,10 +162,22 @@ class LockstepDriver:
             self._required_at = self._signature = None
         if now - self.wait_since > self.timeout_s:
             return False
-        if now - self._last_wait_log > WAIT_LOG_PERIOD_S:
+        if not self._last_wait_log:
             self._last_wait_log = now
-            self.node.get_logger().info(f"waiting for: {self.missing()}")
+            self.node.get_logger().info("waiting for the graph to come up")
+        elif now - self.wait_since >= WAIT_GRACE_S and now - self._last_wait_log >= WAIT_LOG_PERIOD_S:
+            self._last_wait_log = now
+            self.node.get_logger().info(self.waiting_text())
         return None
+
+    def waiting_text(self) -> str:
+        """The progress line of a wait for the graph: what is still missing, in short (the timeout says why)."""
+        gaps = _graph_gaps(self.node, self.state_pub, self.need_subs)
+        nodes = [what for what, _, is_node in gaps if is_node]
+        parts = [f"{', '.join(nodes)} ({NOT_FOUND_HINT})"] if nodes else []
+        parts += [f"{what} ({why})" for what, why, is_node in gaps if not is_node]
+        parts += [f"{t}: {m} of {n} discovered subscribers matched" for t, m, n in self.unmatched()]
+        return f"waiting for the graph: {'; '.join(parts)}" if parts else "waiting for the graph to settle"
 
     def graph_timeout_text(self) -> str:
         return f"graph not ready after {self.timeout_s:g} s; waiting for: {self.missing()}"

@@ -2,7 +2,9 @@
 
 * every ``--params-file`` and ``-p`` rule on the command line is validated before rcl
   sees it (:func:`check_command_line`, called by ``run_node``), with the same loader the
-  offline tools use (unknown keys, types, ranges, YAML syntax -> ParamError, exit 2);
+  offline tools use (unknown keys, types, ranges, YAML syntax -> ParamError, exit 2); an
+  argument outside ``--ros-args`` (which rcl would ignore) is refused, except ``-h`` /
+  ``--help``, which :func:`wants_help` sees and :func:`parameter_help` answers from the schema;
 * every parameter is declared with its description, type and range; the values follow
   ROS 2's rule (rclcpp's and rclpy's): what is given for the node by its own name (its
   section of a file, ``-p NODE:name:=value``) wins over what is given for every node
@@ -17,6 +19,7 @@
 """
 from __future__ import annotations
 
+import textwrap
 from typing import Any, Callable, Dict, Iterator, List, Sequence, Tuple
 
 import yaml
@@ -69,14 +72,109 @@ def parse_rule(rule: str) -> tuple:
     return name, value, target or P.SHARED
 
 
-def check_command_line(argv: Sequence[str]) -> None:
+HELP_FLAGS = ("-h", "--help")
+
+
+class UnknownArgument(P.ParamError):
+    """An argument outside ``--ros-args``: rcl would ignore it, so the node refuses it (one line, exit 2)."""
+
+    def __init__(self, arg: str, text: str):
+        super().__init__(arg, text, "command line")
+        self.args = (text,)   # str(): the text alone (no "parameter '...'": it is not one)
+
+
+def user_arguments(argv: Sequence[str]) -> List[str]:
+    """The arguments after the program name that are outside every ``--ros-args ... [--]`` block: rcl leaves
+    them to the program (rcl's own rule: ``--ros-args`` opens a block, ``--`` closes it)."""
+    out, in_ros = [], False
+    for a in list(argv)[1:]:
+        if a == "--ros-args":
+            in_ros = True
+        elif in_ros:
+            in_ros = a != "--"
+        else:
+            out.append(a)
+    return out
+
+
+def wants_help(argv: Sequence[str]) -> bool:
+    """``-h`` or ``--help`` outside ``--ros-args`` (``plant_sim --help``, ``ros2 run mwip_ros plant_sim --help``)."""
+    return any(a in HELP_FLAGS for a in user_arguments(argv))
+
+
+def usage_line(name: str) -> str:
+    return f"{name} [--ros-args --params-file FILE -p {name}:NAME:=VALUE ...]"
+
+
+def check_command_line(argv: Sequence[str], name: str = "node") -> None:
     """Every parameter file and ``-p`` rule of ``argv``, checked before rcl parses them (its parser stops the
-    process with a traceback): raises ParamError naming the file or the key."""
+    process with a traceback): raises ParamError naming the file or the key; an argument outside
+    ``--ros-args`` (rcl would ignore it: a node takes none), UnknownArgument naming it."""
+    extra = user_arguments(argv)
+    if extra:
+        raise UnknownArgument(extra[0], f"unknown argument {extra[0]!r} (a node takes ROS arguments only, after "
+                                        f"--ros-args; {name} --help lists its parameters)")
     for kind, arg in ros_arguments(argv):
         if kind == "--params-file":
             P.load_param_file(arg)
         else:
             parse_rule(arg)
+
+
+def _show(v: Any) -> str:
+    """A value as it is written in a parameter file or a ``-p`` rule."""
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_show(x) for x in v) + "]"
+    return repr(v)
+
+
+def range_text(spec: P.ParamSpec) -> str:
+    """The values ``spec`` accepts, in words from its check ('' when any value of its type will do)."""
+    check = spec.check
+    if check is None:
+        return ""
+    bounds = getattr(check, "bounds", None)
+    if bounds is not None:
+        lo, hi = bounds
+        if spec.type == "integer":
+            return f"{lo}..{hi}"
+        floor = getattr(check, "floor", None)
+        if floor is not None:
+            return f"[{floor:g}, {hi:g}]"
+        return f"{'[' if check(lo) is None else '('}{lo:g}, {hi:g}]"
+    probe = {"string": object(), "double_array": [], "string_array": []}.get(spec.type, -1)  # one it refuses
+    reason = check(probe)
+    return reason.split(", got", 1)[0].removeprefix("must be ") if reason else ""
+
+
+def _spec_lines(spec: P.ParamSpec) -> List[str]:
+    facts = [spec.type, f"default {_show(spec.default)}"]
+    allowed = range_text(spec)
+    if allowed:
+        facts.append(allowed)
+    if spec.dynamic:
+        facts.append("changeable at run time")
+    return [f"  {spec.name}  ({', '.join(facts)})",
+            textwrap.fill(spec.description, width=100, initial_indent=" " * 6, subsequent_indent=" " * 6)]
+
+
+def parameter_help(node_name: str) -> List[str]:
+    """The parameters of ``node_name`` from the schema (type, default, range, description), as help lines;
+    [] for a node the schema does not know."""
+    if node_name not in P.NODE_SPECS:
+        return []
+    own = P.NODE_SPECS[node_name]
+    lines = textwrap.wrap(f"parameters of every node (the /** section of a --params-file, or -p NAME:=VALUE; "
+                          f"the node's own section and -p {node_name}:NAME:=VALUE win over them):", width=100)
+    for spec in (*P.SHARED_SPECS, P.ROS_OWN["use_sim_time"]):
+        lines += _spec_lines(spec)
+    if own:
+        lines += ["", f"parameters of {node_name} (its {node_name}: section, or -p {node_name}:NAME:=VALUE):"]
+        for spec in own:
+            lines += _spec_lines(spec)
+    return lines
 
 
 def _matches(target: str, node) -> bool:

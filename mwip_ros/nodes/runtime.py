@@ -9,12 +9,15 @@ as an error); nothing else sets ``done`` or ``exit_code``.
 """
 from __future__ import annotations
 
+import ast
 import faulthandler
 import gc
+import inspect
 import os
 import signal
 import sys
-from typing import Callable, Optional, Sequence
+import textwrap
+from typing import Callable, Dict, List, Optional, Sequence
 
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
@@ -23,7 +26,7 @@ from rclpy.signals import SignalHandlerOptions
 from mwip_ros.params import ParamError
 
 __all__ = ["EXIT_OK", "EXIT_ERROR", "EXIT_BAD_PARAMS", "EXIT_FALLEN", "GracefulNodeMixin", "StopRequested",
-           "run_node"]
+           "node_help", "run_node"]
 
 # Exit codes of every mwip_ros executable.
 EXIT_OK = 0
@@ -109,24 +112,84 @@ def _realtime_priority(node) -> None:
     node.get_logger().info(f"SCHED_FIFO priority {prio}")
 
 
+_TOPIC_CALLS = {"create_publisher": "publishes", "create_subscription": "subscribes", "create_service": "services"}
+_GENERIC_EXIT_CODES = ("exit codes: 0 done (or stopped by SIGINT/SIGTERM), 1 a runtime error, 2 bad parameters or "
+                       "arguments (one line naming the key; nothing started)")
+
+
+def _topics(source_file: Optional[str]) -> Dict[str, List[str]]:
+    """The topics and services the node's module creates by a literal name ({'publishes': [...], ...}), read from
+    its source (nothing is imported or started); {} when it names none (its topics are parameters)."""
+    try:
+        with open(source_file or "", encoding="utf-8") as f:
+            tree = ast.parse(f.read())
+    except (OSError, SyntaxError, ValueError):
+        return {}
+    calls = sorted((c.lineno, _TOPIC_CALLS[c.func.attr], c.args[1].value) for c in ast.walk(tree)
+                   if isinstance(c, ast.Call) and isinstance(c.func, ast.Attribute) and c.func.attr in _TOPIC_CALLS
+                   and len(c.args) >= 2 and isinstance(c.args[1], ast.Constant) and isinstance(c.args[1].value, str))
+    found: Dict[str, List[str]] = {}
+    for _line, kind, topic in calls:   # in the order of the source
+        names = found.setdefault(kind, [])
+        if topic not in names:
+            names.append(topic)
+    return found
+
+
+def _paragraphs(doc: str) -> List[str]:
+    return [p for p in inspect.cleandoc(doc or "").split("\n\n") if p.strip()]
+
+
+def node_help(name: str, module=None) -> str:
+    """``NODE --help``: what the node does (its module docstring's first paragraph), its usage, its topics (read
+    from its source), its parameters from the schema and its exit codes.  Creates no ROS context."""
+    from mwip_ros.nodes.params import parameter_help, usage_line
+    paragraphs = _paragraphs(getattr(module, "__doc__", None) or "")
+    lines = [f"usage: {usage_line(name)}", ""]
+    if paragraphs:   # what it does; a usage paragraph of its own (bag_replay's two modes) after it
+        lines += [p.replace("``", "") + "\n" for i, p in enumerate(paragraphs) if i == 0 or p.startswith("usage:")]
+    topics = _topics(getattr(module, "__file__", None))
+    if topics:
+        topics.setdefault("publishes", []).append("/diagnostics")   # runtime's Diagnostics, on every node
+        lines.append("topics (relative names follow -r __ns:=/NS):")
+        lines += [f"  {kind}: {', '.join(names)}" for kind, names in topics.items()]
+        lines.append("")
+    params = parameter_help(name)
+    if params:
+        lines += params + [""]
+    codes = [p.replace("``", "") for p in paragraphs if p.lower().startswith("exit code")]
+    lines += codes or textwrap.wrap(_GENERIC_EXIT_CODES, width=100)
+    dotted = getattr(getattr(module, "__spec__", None), "name", None)   # also under python -m (__name__ __main__)
+    if dotted and dotted != "__main__":
+        lines += ["", f"the full description: python -m pydoc {dotted}"]
+    return "\n".join(lines)
+
+
 def run_node(factory: Callable[..., object], argv: Optional[Sequence[str]] = None) -> int:
-    """Create the node, spin until done/SIGINT/SIGTERM, shut down cleanly, return an exit code."""
+    """Create the node, spin until done/SIGINT/SIGTERM, shut down cleanly, return an exit code.
+
+    ``-h`` / ``--help`` before ``--ros-args`` prints :func:`node_help` and returns 0 without a ROS context; any
+    other argument outside ``--ros-args`` (rcl would ignore it) is refused with one line, exit 2."""
     argv = list(sys.argv if argv is None else argv)
     stop = {"signal": None}
 
     def _on_signal(signum, _frame):
         stop["signal"] = signum
 
-    name = argv[0].rsplit('/', 1)[-1] if argv else "node"
+    module = sys.modules.get(getattr(factory, "__module__", None) or "")
+    name = getattr(module, "NAME", None) or (argv[0].rsplit('/', 1)[-1] if argv else "node")
 
     def refuse(text: str) -> int:
         print(f"[ERROR] {name}: {text}", file=sys.stderr, flush=True)
         return EXIT_BAD_PARAMS
 
     from mwip_ros.nodes.guards import install_clock_guard
-    from mwip_ros.nodes.params import check_command_line
+    from mwip_ros.nodes.params import check_command_line, wants_help
+    if wants_help(argv):
+        print(node_help(name, module), flush=True)
+        return EXIT_OK
     try:
-        check_command_line(argv)  # before rcl parses them: its parser would end the process with a traceback
+        check_command_line(argv, name)  # before rcl parses them: its parser would end the process with a traceback
     except ParamError as exc:
         return refuse(str(exc))
     install_clock_guard()

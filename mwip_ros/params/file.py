@@ -142,13 +142,16 @@ def parse_param_dict(doc: Any, source: str = "<params>") -> ParamFile:
     return pf
 
 
-def load_param_file(path) -> ParamFile:
-    """Read and validate a ROS 2 parameter file; raises ParamError naming the key or the file."""
+def load_param_file(path, option: str = "--params-file") -> ParamFile:
+    """Read and validate a ROS 2 parameter file; raises ParamError naming the key or the file.
+
+    ``option`` is how the user gave the file (a node's ``--params-file``, ``mwip_sim --params``): a file that
+    is missing, a directory or unreadable is reported under that name."""
     p = Path(path)
     if p.is_dir():
-        raise ParamError("--params-file", f"{p} is a directory, not a parameter file")
+        raise ParamError(option, f"{p} is a directory, not a parameter file")
     if not p.is_file():
-        raise ParamError("--params-file", f"no such file: {p}")
+        raise ParamError(option, f"no such file: {p}")
     try:
         doc = load_yaml(p.read_text())
     except yaml.YAMLError as exc:
@@ -157,17 +160,18 @@ def load_param_file(path) -> ParamFile:
         problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
         raise ParamError("<file>", f"not valid YAML{line}: {problem}", str(p)) from None
     except (OSError, UnicodeDecodeError) as exc:
-        raise ParamError("--params-file", f"cannot read {p}: {exc}") from None
+        raise ParamError(option, f"cannot read {p}: {exc}") from None
     return parse_param_dict(doc, str(p))
 
 
-def load_param_files(paths) -> ParamFile:
+def load_param_files(paths, option: str = "--params-file") -> ParamFile:
     """Several parameter files, each checked, merged in order as ROS merges repeated ``--params-file``: a key
-    in a later file wins (a base file, then an overlay such as ``config/sensing_realistic.yaml``)."""
+    in a later file wins (a base file, then an overlay such as ``config/sensing_realistic.yaml``).  ``option``
+    as for :func:`load_param_file`."""
     paths = [paths] if isinstance(paths, (str, Path)) else list(paths)
     merged = ParamFile(path=" + ".join(str(p) for p in paths))
     for p in paths:
-        pf = load_param_file(p)
+        pf = load_param_file(p, option)
         for section, values in pf.sections.items():
             merged.sections.setdefault(section, {}).update(values)
         for section, values in pf.others.items():

@@ -60,6 +60,7 @@ def _positive_from(floor: float, hi: float, why: str):
             return f"must be >= {floor:g} ({why}), got {v!r}"
         return None if v <= hi else f"must be <= {hi:g}, got {v!r}"
     check.bounds = (0.0, hi)
+    check.floor = floor   # the smallest value it takes (the help text's range)
     return check
 
 

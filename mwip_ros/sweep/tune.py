@@ -95,7 +95,27 @@ def parse_bounds(knobs: List[Knob], given: Sequence[str]) -> List[Tuple[float, f
             raise SpecError("--bounds", f"{name}: the range [{lo:g}, {hi:g}] is empty (need low < high)")
         if not lo > 0:
             raise SpecError("--bounds", f"{name}: must stay > 0 (the parameter's valid range), got low = {lo:g}")
+    for k in knobs:
+        for end, value in zip(("low", "high"), bounds[k.name]):
+            reason = _outside_range(k, value)
+            if reason:
+                raise SpecError("--bounds", f"{k.name}: {end} = {value:g} is outside the parameter's range: "
+                                            f"{k.param} {reason}")
     return [bounds[k.name] for k in knobs]
+
+
+def _outside_range(knob: Knob, value: float) -> Optional[str]:
+    """Why the schema refuses ``value`` for the knob's parameter (an array's entry in its default), or None."""
+    spec = P.specs_for(knob.section)[knob.param]
+    trial: object = float(value)
+    if knob.index is not None:
+        trial = [float(x) for x in spec.default]
+        trial[knob.index] = float(value)
+    try:
+        spec.validate(trial)
+    except P.ParamError as exc:
+        return exc.reason.split(", got ", 1)[0]   # the value is in the caller's text
+    return None
 
 
 def apply(knobs: List[Knob], x: Sequence[float], base: Dict) -> Dict:

@@ -77,3 +77,49 @@ def test_mwip_sim_compares_the_four_laws_and_prints_the_lqr_gain(tmp_path):
     bad.write_text(default_params_file().read_text().replace("Q: [100.0, 10.0, 1.0]", "Q: [100.0, 10.0, 0.0]"))
     r = run("mwip_ros.cli.sim", "--params", str(bad), "--controller", "lqr")
     assert r.returncode == 2 and "lqr.Q" in r.stderr and "Traceback" not in r.stderr
+
+
+def _one_error_line(r, *words):
+    assert r.returncode == 2 and "Traceback" not in r.stderr and len(r.stderr.splitlines()) == 1, r.stderr
+    for w in words:
+        assert w in r.stderr, (w, r.stderr)
+
+
+@pytest.mark.parametrize("mod, prog", [("mwip_ros.cli.sim", "mwip_sim"), ("mwip_ros.cli.theorem", "mwip_theorem")])
+def test_a_missing_or_directory_params_file_names_the_option_the_user_typed(tmp_path, mod, prog):
+    r = run(mod, "--params", str(tmp_path / "missing.yaml"))
+    _one_error_line(r, f"{prog}: error: parameter '--params': no such file", "missing.yaml")
+    assert "--params-file" not in r.stderr     # that is the nodes' option, not this tool's
+    r = run(mod, "--params", str(default_params_file()), str(tmp_path))
+    _one_error_line(r, "'--params'", "is a directory")
+
+
+@pytest.mark.parametrize("value", ["nan", "inf", "-inf", "1e9", "0", "-1"])
+def test_mwip_sim_refuses_a_duration_outside_the_parameter_files_range(tmp_path, value):
+    r = subprocess.run([sys.executable, "-m", "mwip_ros.cli.sim", f"--duration={value}", "-q", "--csv",
+                        str(tmp_path / "r.csv")], capture_output=True, text=True, timeout=60)
+    _one_error_line(r, "--duration must be > 0 and <= 1e+07 s")
+    assert not (tmp_path / "r.csv").exists()
+
+
+def test_mwip_sim_checks_its_outputs_before_simulating_and_overwrites_only_with_force(tmp_path):
+    old_csv, old_png = tmp_path / "old.csv", tmp_path / "old.png"
+    old_csv.write_text("mine\n")
+    old_png.write_text("mine\n")
+    (tmp_path / "afile").write_text("a file\n")
+    short = ("--duration", "0.5", "--window", "0", "0.5", "-q")
+    for args, words in ((("--csv", old_csv), f"--csv {old_csv} exists; choose another name or add --force"),
+                        (("--plot", old_png), f"--plot {old_png} exists"),
+                        (("--csv", tmp_path), "is a directory"),
+                        (("--plot", tmp_path / "afile" / "f.png"), "is not a directory"),
+                        (("--csv", tmp_path / "nodir" / "r.csv"), "does not exist")):
+        _one_error_line(run("mwip_ros.cli.sim", *short, *map(str, args)), words)
+    # --compare: each suffixed file is checked before the first run, so none is written
+    (tmp_path / "c_dscndo.csv").write_text("mine\n")
+    _one_error_line(run("mwip_ros.cli.sim", "--compare", *short, "--csv", str(tmp_path / "c.csv")),
+                    f"--csv {tmp_path / 'c_dscndo.csv'} exists")
+    assert not (tmp_path / "c_dsc.csv").exists()
+    assert old_csv.read_text() == old_png.read_text() == (tmp_path / "c_dscndo.csv").read_text() == "mine\n"
+    r = run("mwip_ros.cli.sim", *short, "--csv", str(old_csv), "--force")
+    assert r.returncode == 0, r.stderr
+    assert len(read_csv(old_csv)) == 101

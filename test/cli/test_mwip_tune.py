@@ -50,11 +50,44 @@ def test_tuning_writes_an_overlay_and_judges_it_on_the_held_out_set(tmp_path):
     (["--tune", "lqr.R"], "lqr laws"),
     (["--tune", "k1", "--holdout-seed", "4"], "must differ"),
     (["--tune", "k1", "--weight", "-1"], "--weight"),
+    # beyond k1's schema range (0, 1e6]: once accepted, then a ParamError traceback after the whole search
+    (["--tune", "k1", "--bounds", "k1=2e6:3e6"],
+     "k1: low = 2e+06 is outside the parameter's range: k1 must be <= 1e+06"),
+    (["--tune", "tau4", "--bounds", "tau4=1e-7:0.5"], "tau4: low = 1e-07 is outside the parameter's range"),
+    (["--tune", "X", "--bounds", "X.c4=1:2e9"], "X.c4: high = 2e+09 is outside the parameter's range"),
+    (["--tune", "k1", "--seed", "-1"], "--seed must be >= 0, got -1"),
+    (["--tune", "k1", "--holdout-seed", "-1"], "--holdout-seed must be >= 0"),
 ])
 def test_bad_input_exits_2_before_any_work(tmp_path, args, words):
     r = tune(write_spec(tmp_path / "s.yaml"), "--controller", "dscndo", "--out", tmp_path / "t.yaml", *args)
     assert r.returncode == 2 and words in r.stderr and "Traceback" not in r.stderr, r.stderr
+    assert len(r.stderr.splitlines()) == 1 and "tuning " not in r.stderr, r.stderr   # one line; no search began
     assert not (tmp_path / "t.yaml").exists()
+
+
+@pytest.mark.parametrize("out, words", [
+    (".", "is a directory"),                       # once IsADirectoryError after the whole search
+    ("spec_file/t.yaml", "is not a directory"),    # under a file
+    ("no_dir/t.yaml", "does not exist"),
+    ("old.yaml", "exists; choose another name or add --force"),
+])
+def test_an_output_it_cannot_or_must_not_write_exits_2_before_the_search(tmp_path, out, words):
+    (tmp_path / "spec_file").write_text("a file\n")
+    (tmp_path / "old.yaml").write_text("# mine\n")
+    r = tune(write_spec(tmp_path / "s.yaml"), "--controller", "dscndo", "--tune", "k1", "--out", tmp_path / out,
+             "--maxiter", "1", "--popsize", "1", "--workers", "1")
+    assert r.returncode == 2 and f"--out {tmp_path / out}" in r.stderr and words in r.stderr, r.stderr
+    assert len(r.stderr.splitlines()) == 1 and "tuning " not in r.stderr, r.stderr
+    assert (tmp_path / "old.yaml").read_text() == "# mine\n"
+
+
+def test_force_overwrites_an_existing_output(tmp_path):
+    out = tmp_path / "old.yaml"
+    out.write_text("# mine\n")
+    r = tune(write_spec(tmp_path / "s.yaml"), "--controller", "dscndo", "--tune", "k1", "--out", out, "--force",
+             "--maxiter", "1", "--popsize", "1", "--workers", "1", "-q")
+    assert r.returncode == 0, r.stderr
+    assert set(yaml.safe_load(out.read_text())["dscndo_controller"]["ros__parameters"]) == {"k1"}
 
 
 def test_ctrl_c_keeps_the_best_so_far(tmp_path):

@@ -56,3 +56,7 @@ def test_a_plant_without_its_peers_warns_then_reports_the_timeout_as_an_error(tm
     reports = _by_node(got)["/plant_sim"]
     assert reports[0][0] == 1 and "waiting for the graph" in reports[0][1] and "dscndo_controller" in reports[0][1]
     assert reports[-1][0] == 2 and "lockstep timeout" in reports[-1][1] and "dscndo_controller" in reports[-1][1]
+    out = plant.output()   # the log: progress while waiting, the reasons in the failure
+    assert "waiting for the graph to come up" in out and "waiting for: " not in out.split("[ERROR]")[0], out
+    assert "waiting for the graph: dscndo_controller, disturbance_observer (started? same ROS_DOMAIN_ID?)" in out, out
+    assert "lockstep timeout: graph not ready after 8 s; waiting for: dscndo_controller (nothing publishes" in out, out

@@ -1,7 +1,17 @@
-"""Every start-up mistake ends with exit 2 and one line naming the key or the file, never a traceback."""
+"""Every start-up mistake ends with exit 2 and one line naming the key or the file, never a traceback; every
+node answers --help from the parameter schema without starting."""
+import importlib
+import subprocess
+import sys
+import time
+
 import pytest
 
 from graphproc import PARAMS, Graph
+from mwip_ros import params as P
+
+NODES = ("plant_sim", "disturbance_observer", "dscndo_controller", "mcap_recorder", "bag_replay", "robot_markers",
+         "foxglove_server")
 
 PAPER = PARAMS.read_text()
 
@@ -121,3 +131,154 @@ def test_a_shared_file_with_other_nodes_sections_and_a_renamed_nodes_own_section
         assert wrong.wait(60) == 2
     out = wrong.output()
     assert "'ctl_b.k3'" in out and "unknown parameter" in out and len(out.strip().splitlines()) == 1, out
+
+
+def _words(text):
+    return " ".join(text.split())
+
+
+@pytest.mark.parametrize("node", NODES)
+def test_every_node_answers_help_from_the_schema_without_starting(tmp_path, node):
+    """``NODE --help`` (as typed, and as ``ros2 run mwip_ros NODE --help`` passes it): the usage, what the node
+    does, every parameter with its default and description; exit 0 at once, no rclpy log line (no node ran:
+    a started one would wait for its peers, serve or record until stopped, or fail without its parameters)."""
+    env = Graph(tmp_path).env
+    t0 = time.monotonic()
+    r = subprocess.run([sys.executable, "-m", f"mwip_ros.nodes.{node}", "--help"], env=env, capture_output=True,
+                       text=True, timeout=30)
+    took = time.monotonic() - t0
+    assert r.returncode == 0 and r.stderr == "", r.stdout + r.stderr
+    assert "[INFO]" not in r.stdout and "[WARN]" not in r.stdout
+    assert took < 10, took   # an import and a print (a started node runs until its peers come or it is stopped)
+    out = r.stdout
+    assert out.startswith(f"usage: {node} [--ros-args --params-file FILE -p {node}:NAME:=VALUE ...]"), out
+    doc = importlib.import_module(f"mwip_ros.nodes.{node}").__doc__
+    assert _words(doc.split("\n\n")[0].replace("``", "")) in _words(out)
+    for name, spec in P.specs_for(node).items():
+        assert f"\n  {name}  ({spec.type}, default " in out, name
+        assert _words(spec.description) in _words(out), name
+    assert "exit code" in out.lower() and f"python -m pydoc mwip_ros.nodes.{node}" in out
+
+
+def test_help_shows_defaults_ranges_topics_and_exit_codes(tmp_path):
+    env = Graph(tmp_path).env
+    ctl, fox, plant = (subprocess.run([sys.executable, "-m", f"mwip_ros.nodes.{n}", flag], env=env, capture_output=True,
+                                      text=True, timeout=30).stdout
+                       for n, flag in (("dscndo_controller", "-h"), ("foxglove_server", "--help"), ("plant_sim", "-h")))
+    assert "  tau4  (double, default 0.1, [1e-06, 1e+06], changeable at run time)" in ctl
+    assert "  law  (string, default 'dsc', one of 'dsc', 'lqr', changeable at run time)" in ctl
+    assert "  publishes: wheel_torque_cmd, controller_internals, /diagnostics" in ctl
+    assert "  subscribes: joint_states, disturbance_estimate" in ctl
+    assert "  port  (integer, default 8765, 1..65535)" in fox and "  topics  (string_array, default [])" in fox
+    assert "  duration_s  (double, default 10.0, [0, 1e+07])" in plant and "  services: ~/reset" in plant
+    assert "  use_sim_time  (bool, default false)" in plant
+    assert "3 when\nthe robot fell" in plant   # the node's own exit codes
+
+
+def test_help_in_process_creates_no_ros_context(monkeypatch, capsys):
+    """Every node's main(['NODE', '--help']) returns 0 with rclpy's init and Context unusable."""
+    import rclpy
+
+    def boom(*_a, **_k):
+        raise AssertionError("--help created a ROS context")
+
+    monkeypatch.setattr(rclpy, "init", boom)
+    monkeypatch.setattr(rclpy, "Context", boom)
+    for node in NODES:
+        main = importlib.import_module(f"mwip_ros.nodes.{node}").main
+        # help wins over a file that would be refused, and over what follows --ros-args
+        assert main([node, "-h", "--ros-args", "--params-file", "/no/such.yaml"]) == 0, node
+        assert capsys.readouterr().out.startswith(f"usage: {node} "), node
+
+
+@pytest.mark.parametrize("before, after, word", [
+    (["--bogus"], [], "'--bogus'"),
+    (["--params-file", str(PARAMS)], [], "'--params-file'"),     # a ROS argument outside --ros-args: rcl ignores it
+    ([], ["--", "extra"], "'extra'"),                             # after the --ros-args block ended
+])
+def test_an_argument_outside_ros_args_exits_2_naming_it(tmp_path, before, after, word):
+    with Graph(tmp_path) as g:
+        p = g.start("plant_sim", *after, cmd=[sys.executable, "-m", "mwip_ros.nodes.plant_sim", *before],
+                    as_given=True)
+        code = p.wait(60)
+    out = p.output()
+    assert code == 2, out
+    assert "Traceback" not in out and len(out.strip().splitlines()) == 1, out
+    assert f"unknown argument {word}" in out and "after --ros-args" in out and "plant_sim --help" in out, out
+
+
+class _Fake:
+    """Just enough of a node, a publisher and a subscription for the lockstep driver's graph wait."""
+
+    def __init__(self):
+        self.publishers = {}          # topic -> count
+        self.subscriptions = 0        # matched on joint_states
+        self.lines = []
+        self.topic_name = "joint_states"
+
+    # the node
+    def count_publishers(self, topic):
+        return self.publishers.get(topic, 0)
+
+    def count_subscribers(self, _topic):
+        return self.subscriptions
+
+    def get_node_names_and_namespaces(self):
+        return []
+
+    def get_logger(self):
+        return self
+
+    def info(self, text):
+        self.lines.append(("info", text))
+
+    def warning(self, text):
+        self.lines.append(("warning", text))
+
+    # the state publisher and the command subscription
+    def get_subscription_count(self):
+        return self.subscriptions
+
+    def get_publisher_count(self):
+        return self.publishers.get("wheel_torque_cmd", 0)
+
+
+def _driver(monkeypatch):
+    from mwip_ros.nodes import lockstep
+    now = [100.0]
+    monkeypatch.setattr(lockstep.time, "monotonic", lambda: now[0])
+    fake = _Fake()
+    d = lockstep.LockstepDriver(fake, fake, None, fake, need_subs=2, timeout_s=10.0,
+                                timeout_param="lockstep_timeout_s")
+
+    def at(t):
+        now[0] = 100.0 + t
+        return d.wait_for_graph()
+    return fake, d, at
+
+
+def test_a_normal_start_waits_for_the_graph_as_progress(monkeypatch):
+    """The graph coming up within the grace: one plain line, nothing that reads like an error."""
+    fake, _d, at = _driver(monkeypatch)
+    assert at(0.0) is None and at(1.0) is None
+    fake.publishers = {"wheel_torque_cmd": 1, "disturbance_estimate": 1}
+    fake.subscriptions = 2
+    assert at(1.5) is True
+    assert fake.lines == [("info", "waiting for the graph to come up")]
+
+
+def test_a_graph_that_does_not_come_names_the_nodes_after_the_grace_then_times_out(monkeypatch):
+    fake, d, at = _driver(monkeypatch)
+    assert at(0.0) is None and at(1.9) is None
+    assert fake.lines == [("info", "waiting for the graph to come up")]
+    assert at(2.0) is None and at(3.0) is None and at(4.0) is None
+    missing = ("info", "waiting for the graph: dscndo_controller, disturbance_observer (started? same ROS_DOMAIN_ID?); "
+                       "2 subscribers on joint_states (matched: 0)")
+    assert fake.lines[1:] == [missing, missing]
+    fake.publishers = {"disturbance_estimate": 1}
+    assert at(6.0) is None
+    assert fake.lines[-1][1].startswith("waiting for the graph: dscndo_controller (started? same ROS_DOMAIN_ID?); 2 ")
+    assert at(10.5) is False
+    text = d.graph_timeout_text()   # the failure keeps saying why
+    assert text.startswith("graph not ready after 10 s; waiting for: dscndo_controller (nothing publishes "
+                           "wheel_torque_cmd); 2 subscribers on joint_states (matched: 0)"), text

@@ -61,7 +61,9 @@ def test_unknown_or_foreign_knobs_are_refused(names, law, words):
 
 @pytest.mark.parametrize("given, words", [
     (["k1=5:2"], "empty"), (["k1=0:5"], "> 0"), (["k1=-1:5"], "> 0"), (["k9=1:2"], "not tuned"),
-    (["k1=1"], "name=low:high"), (["k1=a:b"], "numbers")])
+    (["k1=1"], "name=low:high"), (["k1=a:b"], "numbers"),
+    (["k1=2e6:3e6"], "low = 2e+06 is outside the parameter's range: k1 must be <= 1e+06"),   # the schema's (0, 1e6]
+    (["k2=1:1e7"], "high = 1e+07 is outside")])
 def test_bad_bounds_are_refused(given, words):
     with pytest.raises(SpecError) as e:
         parse_bounds(knobs_for(["k1", "k2"], "dsc"), given)
