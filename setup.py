@@ -48,6 +48,7 @@ setup(
             'mwip_tune = mwip_ros.cli.tune:main',
             'robot_markers = mwip_ros.nodes.robot_markers:main',
             'foxglove_server = mwip_ros.nodes.foxglove_server:main',
+            'mwip_ctl = mwip_ros.cli.ctl:main',
         ],
     },
 )

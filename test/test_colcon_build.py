@@ -1,5 +1,6 @@
 """The package builds with `colcon build` into a working ament_python layout."""
 
+import json
 import os
 import shutil
 import subprocess
@@ -24,6 +25,7 @@ CONSOLE_SCRIPTS = [
     'mwip_tune',
     'robot_markers',
     'foxglove_server',
+    'mwip_ctl',
 ]
 PACKAGE_FILES = ['package.xml', 'setup.py', 'setup.cfg']
 PACKAGE_DIRS = ['resource', PACKAGE, 'config']
@@ -84,15 +86,34 @@ def test_colcon_build_installs_ament_python_layout(tmp_path):
     assert (share / 'config' / 'paper.yaml').is_file()
     assert (share / 'config' / 'sweeps' / 'mass_mismatch.yaml').is_file()
 
+    # Ask the built workspace for the package as ROS does: source install/setup.bash in an environment
+    # that knows no prefix, then look the package up in the ament index (ros2 pkg executables and
+    # ros2 run list prefix/lib/<package>/ through ament_index_python.get_package_prefix).
+    assert (share / 'hook' / 'ament_prefix_path.dsv').is_file(), (
+        'no ament_prefix_path hook: colcon did not build the package as ros.ament_python')
     child_env = {k: v for k, v in os.environ.items()
-                 if k not in ('AMENT_PREFIX_PATH', 'COLCON_PREFIX_PATH')}
-    child_env['AMENT_PREFIX_PATH'] = str(prefix)
+                 if k not in ('AMENT_PREFIX_PATH', 'COLCON_PREFIX_PATH', 'PYTHONPATH', 'CMAKE_PREFIX_PATH')}
+    lookup = (
+        'import json, os\n'
+        'from ament_index_python.packages import get_package_prefix, get_package_share_directory\n'
+        f'prefix = get_package_prefix({PACKAGE!r})\n'
+        f'lib = os.path.join(prefix, "lib", {PACKAGE!r})\n'
+        'exes = sorted(f for f in os.listdir(lib)\n'
+        '              if os.path.isfile(os.path.join(lib, f)) and os.access(os.path.join(lib, f), os.X_OK))\n'
+        f'print(json.dumps({{"prefix": prefix, "share": get_package_share_directory({PACKAGE!r}), '
+        '"executables": exes}))\n')
     found = subprocess.run(
-        [sys.executable, '-c',
-         'from ament_index_python.packages import '
-         'get_package_share_directory as g; '
-         f'print(g({PACKAGE!r}))'],
-        env=child_env, stdin=subprocess.DEVNULL,
-        capture_output=True, text=True, timeout=60)
+        ['bash', '-c', f'source {ws / "install" / "setup.bash"} && exec "{sys.executable}" -c "$0"', lookup],
+        env=child_env, stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=60)
     assert found.returncode == 0, found.stderr
-    assert os.path.realpath(found.stdout.strip()) == os.path.realpath(share)
+    index = json.loads(found.stdout.strip().splitlines()[-1])
+    assert os.path.realpath(index['prefix']) == os.path.realpath(prefix)
+    assert os.path.realpath(index['share']) == os.path.realpath(share)
+    assert set(CONSOLE_SCRIPTS) <= set(index['executables']), index['executables']
+    # what `ros2 run mwip_ros mwip_theorem ...` would start: the executable the index names, from the install
+    ran = subprocess.run(
+        ['bash', '-c', f'source {ws / "install" / "setup.bash"} && exec "$0" --params "$1"',
+         os.path.join(index['prefix'], 'lib', PACKAGE, 'mwip_theorem'), str(share / 'config' / 'paper.yaml')],
+        env=child_env, stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=120)
+    assert ran.returncode == 0, ran.stdout + ran.stderr
+    assert 'gamma' in ran.stdout, ran.stdout

@@ -1,0 +1,293 @@
+"""``mwip_ctl``: the README's live actions without a ``ros2`` CLI: set a parameter, reset the plant, push it.
+
+    mwip_ctl param set NODE NAME VALUE     # /NODE/set_parameters; VALUE is YAML, as in -p NAME:=VALUE
+    mwip_ctl param get NODE NAME           # /NODE/get_parameters
+    mwip_ctl param list NODE               # /NODE/list_parameters
+    mwip_ctl reset [--node plant_sim]      # std_srvs/Trigger /plant_sim/reset
+    mwip_ctl push [--wheel NM] [--body NM] [--duration S] [--rate HZ]   # external_wrench, then a zero one
+
+Unlike ``ros2 param set``, a whole number for a ``double`` parameter is sent as a double (the type of
+its current value, from ``/NODE/get_parameters``): ``mwip_ctl param set dscndo_controller k1 8``.
+Relative names (NODE, ``external_wrench``) resolve in ``--namespace``; names starting with '/' are
+absolute.  The domain is the environment's ``ROS_DOMAIN_ID``.  Exit codes: 0 done, 1 nothing answered
+within ``--timeout`` or the node refused, 2 a usage error, 130 Ctrl-C.
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import sys
+import time
+
+from mwip_ros import params as P
+from mwip_ros.msgs import BadMessage
+from mwip_ros.msgs import layouts as L
+
+PROG = "mwip_ctl"
+
+
+class Failure(Exception):
+    """A one-line reason; ``code`` is the exit code (1: nothing answered, or refused; 2: usage)."""
+
+    def __init__(self, text: str, code: int = 1):
+        super().__init__(text)
+        self.code = code
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):   # one line, exit 2 (argparse would print the whole usage first)
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+def _first_line(exc: Exception) -> str:
+    return (str(exc).splitlines() or [type(exc).__name__])[0].split(", at /")[0]   # without rcl's source line
+
+
+def _domain() -> str:
+    return f"ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID') or '0 (unset)'}"
+
+
+class Ros:
+    """One rclpy node in its own context; every wait is a short spin, so Ctrl-C (KeyboardInterrupt) ends it."""
+
+    def __init__(self, namespace: str, timeout: float):
+        import rclpy
+        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.signals import SignalHandlerOptions
+        from rclpy.validate_namespace import validate_namespace
+        self.rclpy, self.timeout, self.ctx = rclpy, timeout, rclpy.Context()
+        try:
+            rclpy.init(args=[PROG], context=self.ctx, signal_handler_options=SignalHandlerOptions.NO)
+        except Exception as exc:   # e.g. a ROS_DOMAIN_ID that is no number
+            raise Failure(f"cannot start ROS ({_domain()}): {_first_line(exc)}") from None
+        try:
+            if namespace:   # before rclpy's node, which warns on its way out
+                validate_namespace("/" + namespace.lstrip("/"))
+            self.node = rclpy.create_node(f"{PROG}_{os.getpid()}", namespace=namespace or None, context=self.ctx,
+                                          start_parameter_services=False)
+        except Exception as exc:   # an invalid namespace
+            rclpy.try_shutdown(context=self.ctx)
+            raise Failure(f"--namespace {namespace!r}: {_first_line(exc)}", 2) from None
+        self.ex = SingleThreadedExecutor(context=self.ctx)
+        self.ex.add_node(self.node)
+
+    def until(self, done, timeout: float) -> bool:
+        end = time.monotonic() + timeout
+        while not done() and time.monotonic() < end:
+            self.ex.spin_once(timeout_sec=min(0.05, max(0.0, end - time.monotonic())))
+        return done()
+
+    def call(self, srv_type, node: str, service: str, request):
+        """The response of NODE's ``service``, or Failure naming the node and the domain."""
+        try:
+            name = self.node.resolve_service_name(f"{node}/{service}")
+            client = self.node.create_client(srv_type, name)
+        except Exception as exc:   # an invalid node name
+            raise Failure(f"NODE {node!r}: {_first_line(exc)}", 2) from None
+        if not self.until(client.service_is_ready, self.timeout):
+            raise Failure(f"no service {name} after {self.timeout:g} s: is the node {node!r} running "
+                          f"({_domain()})?")
+        future = client.call_async(request)
+        if not self.until(future.done, self.timeout):
+            raise Failure(f"{name} did not answer within {self.timeout:g} s")
+        return future.result()
+
+    def close(self) -> None:
+        self.ex.shutdown(timeout_sec=1.0)
+        self.node.destroy_node()
+        self.rclpy.try_shutdown(context=self.ctx)
+
+
+def _text(value) -> str:
+    """A parameter value as YAML, so that it can be given back to ``param set``."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(map(_text, value)) + "]"
+    return str(value)
+
+
+def _as_declared(value, ptype: int, text: str):
+    """``value`` in the declared type where nothing is lost: 8 -> 8.0 for a double, [1, 0] -> [1.0, 0.0] for
+    a double array, the text itself for a string; anything else as it is (the node judges it)."""
+    from rcl_interfaces.msg import ParameterType as T
+
+    def number(x):
+        return isinstance(x, (int, float)) and not isinstance(x, bool)
+    if ptype == T.PARAMETER_DOUBLE and number(value):
+        return float(value)
+    if ptype == T.PARAMETER_DOUBLE_ARRAY and isinstance(value, list) and value and all(map(number, value)):
+        return [float(x) for x in value]
+    return text if ptype == T.PARAMETER_STRING and not isinstance(value, str) else value
+
+
+def _param(ros: Ros, args) -> int:
+    from rcl_interfaces.srv import GetParameters, ListParameters, SetParameters
+    from rclpy.parameter import Parameter, parameter_value_to_python
+
+    node, name = args.node, getattr(args, "name", None)
+    if args.action == "list":
+        print("\n".join(sorted(ros.call(ListParameters, node, "list_parameters", ListParameters.Request())
+                               .result.names)))
+        return 0
+    if args.action == "get":
+        values = ros.call(GetParameters, node, "get_parameters", GetParameters.Request(names=[name])).values
+        if not values or values[0].type == 0:   # PARAMETER_NOT_SET: not declared
+            raise Failure(f"{node} has no parameter {name!r} (see: {PROG} param list {node})")
+        value = parameter_value_to_python(values[0])
+        print(_text(value if isinstance(value, (str, bool, int, float)) else list(value)))
+        return 0
+    # the type of the current value: the declared one (the node validates every value; a descriptor's type can
+    # follow a refused value of another type, rclpy's dynamic typing); none for an undeclared name: sent as it
+    # is, the node's refusal names it
+    current = ros.call(GetParameters, node, "get_parameters", GetParameters.Request(names=[name])).values
+    value = _as_declared(args.value, current[0].type, args.text) if current else args.value
+    try:
+        msg = Parameter(name, value=value).to_parameter_msg()
+    except Exception as exc:   # e.g. a list of mixed types
+        raise Failure(f"VALUE {args.text!r}: {_first_line(exc)}", 2) from None
+    result = ros.call(SetParameters, node, "set_parameters", SetParameters.Request(parameters=[msg])).results[0]
+    if not result.successful:
+        raise Failure(f"{node} refused {name} = {_text(value)}: {result.reason}")
+    print(f"{node}: {name} = {_text(value)}")
+    return 0
+
+
+def _reset(ros: Ros, args) -> int:
+    from std_srvs.srv import Trigger
+    response = ros.call(Trigger, args.node, "reset", Trigger.Request())
+    print(f"{args.node}: {response.message}")
+    return 0 if response.success else 1
+
+
+def _push(ros: Ros, args) -> int:
+    from geometry_msgs.msg import Wrench
+    from rclpy.duration import Duration
+
+    # reliable and volatile, as plant_sim subscribes; keep last 1: the newest wrench is the one that holds, and
+    # Fast DDS acknowledges it at once (at depth 1000, only at its heartbeat, 3 s later)
+    from mwip_ros.msgs.qos import REALTIME_INPUT_QOS
+    t1, t2 = args.wheel, args.wheel + args.body   # the body row of eq. 1 carries tau_ext2 - tau_ext1
+    push = L.encode_external_wrench(t1, t2)
+    pub = ros.node.create_publisher(Wrench, "external_wrench", REALTIME_INPUT_QOS)
+    topic, plant = pub.topic_name, args.node.rstrip("/").rsplit("/", 1)[-1]
+
+    def plant_listens() -> bool:
+        return pub.get_subscription_count() > 0 and any(
+            s.node_name == plant for s in ros.node.get_subscriptions_info_by_topic(topic))
+    if not ros.until(plant_listens, args.timeout):
+        raise Failure(f"no {plant} subscribes {topic} after {args.timeout:g} s: is it running ({_domain()})?")
+    sent, start = 0, time.monotonic()
+    try:
+        while True:
+            pub.publish(push)
+            sent += 1
+            left = args.duration - (time.monotonic() - start)
+            if left <= 0:
+                break
+            ros.until(lambda: False, min(left, 1.0 / args.rate) if args.rate > 0 else left)
+    finally:   # also on Ctrl-C: the push ends
+        pub.publish(L.encode_external_wrench(0.0, 0.0))
+        lasted = time.monotonic() - start
+        acked = pub.wait_for_all_acked(Duration(seconds=args.timeout))
+    if not acked:
+        raise Failure(f"{plant} did not acknowledge the end of the push on {topic} within {args.timeout:g} s")
+    print(f"pushed {plant}: tau_ext1 += {t1:g}, tau_ext2 += {t2:g} N m (wheel row {args.wheel:g}, body row "
+          f"{args.body:g}) for {lasted:.2f} s ({sent} message(s)), then a zero wrench")
+    return 0
+
+
+def _number(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not math.isfinite(v):
+        raise argparse.ArgumentTypeError(f"{text!r} is not finite")
+    return v
+
+
+def _checked(ap: argparse.ArgumentParser, args) -> argparse.Namespace:
+    """What the nodes would refuse anyway, refused here as a usage error, before any ROS."""
+    for key in ("timeout", "duration", "rate"):
+        if getattr(args, key, 0.0) < 0:
+            ap.error(f"--{key} must be >= 0, got {getattr(args, key):g}")
+    if args.command == "param" and args.action == "set":
+        args.text = args.value
+        try:   # as ROS 2 reads a -p name:=value rule (its numbers: 1e-1 is a double)
+            args.value = P.load_yaml(args.text)
+        except Exception as exc:
+            ap.error(f"VALUE {args.text!r} is not YAML ({_first_line(exc)})")
+        if args.value is None or isinstance(args.value, dict):
+            ap.error(f"VALUE {args.text!r}: give a number, true/false, a string or a [list]")
+    if args.command == "push":
+        if not args.duration > 0:   # the plant holds a wrench until the next one: 0 s would be no push at all
+            ap.error("--duration must be > 0")
+        try:   # the plant's own check of an external_wrench
+            L.parse_external_wrench(L.encode_external_wrench(args.wheel, args.wheel + args.body))
+        except BadMessage as exc:
+            ap.error(f"--wheel {args.wheel:g} --body {args.body:g}: {exc}")
+    return args
+
+
+def parser() -> argparse.ArgumentParser:
+    common = _Parser(add_help=False)
+    common.add_argument("--timeout", type=_number, default=5.0, metavar="S",
+                        help="how long to wait for the service or the subscriber, and for an answer (default 5)")
+    common.add_argument("--namespace", default="", metavar="NS",
+                        help="where relative names resolve (the graph's -r __ns:=NS); default /")
+    ap = _Parser(prog=PROG, description="Set parameters, reset and push a running mwip_ros graph, without a ros2 "
+                 "CLI, on the environment's ROS_DOMAIN_ID.")
+    sub = ap.add_subparsers(dest="command", required=True, metavar="{param,reset,push}")
+    psub = sub.add_parser("param", help="set, get or list a node's parameters").add_subparsers(
+        dest="action", required=True, metavar="{set,get,list}")
+    s = psub.add_parser("set", parents=[common], help="set a parameter (the node checks it; a refusal exits 1)",
+                        description="Set NAME on NODE. VALUE is YAML, as in -p NAME:=VALUE (8.0, 8, true, dsc, "
+                        "[100.0, 0.0, 0.0, 100.0]); a whole number for a double parameter is sent as a double.")
+    g = psub.add_parser("get", parents=[common], help="print a parameter's value (as YAML)")
+    lst = psub.add_parser("list", parents=[common], help="print a node's parameter names")
+    for p in (s, g, lst):
+        p.add_argument("node", metavar="NODE")
+    for p in (s, g):
+        p.add_argument("name", metavar="NAME")
+    s.add_argument("value", metavar="VALUE")
+    r = sub.add_parser("reset", parents=[common], help="put the robot back in its initial state (plant's ~/reset)")
+    p = sub.add_parser("push", parents=[common], help="push the robot: external_wrench for a while, then zero",
+                       description="Publish external_wrench (geometry_msgs/Wrench) for --duration, then a zero "
+                       "wrench. The plant adds torque.x to tau_ext1 (the wheel row of eq. 1) and torque.y to "
+                       "tau_ext2 (the sum of the rows, eq. 3; the body row gets tau_ext2 - tau_ext1): --wheel W "
+                       "--body B sends torque.x = W, torque.y = W + B, i.e. W on the wheel row and B on the body row.")
+    p.add_argument("--wheel", type=_number, default=0.0, metavar="NM", help="torque on the wheel row [N m] "
+                   "(tau_ext1 += NM)")
+    p.add_argument("--body", type=_number, default=0.0, metavar="NM", help="torque on the body-pitch row [N m] "
+                   "(tau_ext2 += WHEEL + NM)")
+    p.add_argument("--duration", type=_number, default=0.5, metavar="S", help="how long the push lasts [s] "
+                   "(default 0.5)")
+    p.add_argument("--rate", type=_number, default=10.0, metavar="HZ", help="resend the push at this rate while "
+                   "it lasts; 0 = once (default 10)")
+    for q in (r, p):
+        q.add_argument("--node", default="plant_sim", help="the plant node (default plant_sim)")
+    return ap
+
+
+def main(argv=None) -> int:
+    try:
+        ap = parser()
+        args = _checked(ap, ap.parse_args(argv))
+        ros = Ros(args.namespace, args.timeout)
+        try:
+            return {"param": _param, "reset": _reset, "push": _push}[args.command](ros, args)
+        finally:
+            ros.close()
+    except Failure as exc:
+        print(f"{PROG}: {exc}", file=sys.stderr)
+        return exc.code
+    except KeyboardInterrupt:
+        return 130
+    except SystemExit as exc:   # --help (0) and usage errors (2), also when main() is called as a function
+        return exc.code if isinstance(exc.code, int) else 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

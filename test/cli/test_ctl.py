@@ -1,0 +1,127 @@
+"""mwip_ctl, the README's live actions without a ros2 CLI, against a realtime graph as a user runs them."""
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from graphproc import Graph
+
+MWIP_CTL = Path(sys.executable).with_name("mwip_ctl")   # the console script setup.py installs
+
+
+def ctl(graph, *args, timeout=60):
+    t0 = time.monotonic()
+    r = subprocess.run([str(MWIP_CTL), *args], capture_output=True, text=True, env=graph.env, timeout=timeout)
+    r.seconds = time.monotonic() - t0
+    print(f"{r.seconds:5.2f} s  mwip_ctl {' '.join(args)}")
+    return r
+
+
+@pytest.fixture(scope="module")
+def graph(tmp_path_factory):
+    """Observer, controller and a realtime plant that runs until stopped (upright start: nothing falls)."""
+    workdir = tmp_path_factory.mktemp("ctl")
+    with Graph(workdir) as g:
+        g.obs = g.start("disturbance_observer", "-p", "mode:=realtime")
+        g.ctl = g.start("dscndo_controller", "-p", "mode:=realtime")
+        g.plant = g.start("plant_sim", "-p", "mode:=realtime", "-p", "duration_s:=0.0", "-p", "initial.theta_b:=0.0")
+        for p, text in ((g.obs, "ready"), (g.ctl, "ready"), (g.plant, "starting realtime run")):
+            assert p.wait_for_output(text, 60), p.output()[-2000:]
+        yield g
+
+
+def test_param_set_converts_a_whole_number_for_a_double_get_reads_it_back_and_the_node_logs_it(graph):
+    r = ctl(graph, "param", "set", "dscndo_controller", "k1", "8")
+    assert r.returncode == 0 and r.stdout.strip() == "dscndo_controller: k1 = 8.0", (r.stdout, r.stderr)
+    assert graph.ctl.wait_for_output("parameters changed: k1: 6.0 -> 8.0", 10), graph.ctl.output()[-2000:]
+    r = ctl(graph, "param", "get", "dscndo_controller", "k1")
+    assert r.returncode == 0 and r.stdout.strip() == "8.0", (r.stdout, r.stderr)
+    r = ctl(graph, "param", "list", "dscndo_controller")
+    assert r.returncode == 0 and {"k1", "law", "use_observer", "lqr.Q"} <= set(r.stdout.split()), r.stdout
+
+
+def test_a_value_the_schema_refuses_exits_1_with_the_nodes_reason_and_changes_nothing(graph):
+    before = ctl(graph, "param", "get", "dscndo_controller", "k1").stdout
+    # k1 must be > 0 (ParamSpec _positive): 0 is sent as the double 0.0, so the refusal is the range, not the type
+    r = ctl(graph, "param", "set", "dscndo_controller", "k1", "0")
+    assert r.returncode == 1, (r.stdout, r.stderr)
+    assert "dscndo_controller refused k1 = 0.0" in r.stderr and "parameter 'k1': must be > 0" in r.stderr, r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1
+    r = ctl(graph, "param", "set", "dscndo_controller", "law", "pid")
+    assert r.returncode == 1 and "must be one of 'dsc', 'lqr'" in r.stderr, r.stderr
+    assert ctl(graph, "param", "get", "dscndo_controller", "k1").stdout == before != ""
+
+
+def test_reset_restarts_the_plant_and_the_loop_follows(graph):
+    r = ctl(graph, "reset")
+    assert r.returncode == 0 and r.stdout.startswith("plant_sim: reset #1 at t = "), (r.stdout, r.stderr)
+    assert graph.plant.wait_for_output("reset #1 at t = ", 10)
+    for p in (graph.obs, graph.ctl):   # realtime: they see the stamps go back (to the run's first) at once
+        assert p.wait_for_output("joint_states restarted at t = ", 10), p.output()[-2000:]
+
+
+def test_push_reaches_the_plant_with_its_torques_and_ends_with_a_zero_wrench(graph):
+    r = ctl(graph, "push", "--wheel", "50", "--duration", "0.2")
+    assert r.returncode == 0, (r.stdout, r.stderr)
+    assert "tau_ext1 += 50, tau_ext2 += 50 N m" in r.stdout and "then a zero wrench" in r.stdout
+    # the plant logs the torques it parsed from each external_wrench it took, and the zero one that ends it
+    assert graph.plant.wait_for_output("external wrench cleared", 10), graph.plant.output()[-2000:]
+    out = graph.plant.output()
+    pushed = out.split("external wrench: tau_ext1 += 50, tau_ext2 += 50 N m")
+    assert len(pushed) >= 3 and "external wrench cleared" in pushed[-1]   # 10 Hz for 0.2 s: 3 sent, >= 2 taken
+    # the body row alone: torque.y only (eq. 1's body row carries tau_ext2 - tau_ext1)
+    r = ctl(graph, "push", "--body", "20", "--duration", "0.1", "--rate", "0")
+    assert r.returncode == 0 and graph.plant.wait_for_output("tau_ext1 += 0, tau_ext2 += 20 N m", 10)
+    assert graph.plant.poll() is None, graph.plant.output()[-2000:]   # pushed, not fallen
+
+
+def test_ctrl_c_ends_a_push_with_a_zero_wrench_and_exits_130_quietly(graph):
+    p = subprocess.Popen([str(MWIP_CTL), "push", "--wheel", "5", "--duration", "60"], stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True, env=graph.env)
+    try:
+        assert graph.plant.wait_for_output("external wrench: tau_ext1 += 5, tau_ext2 += 5 N m", 20)
+        cleared = graph.plant.output().count("external wrench cleared")
+        p.send_signal(signal.SIGINT)
+        out, err = p.communicate(timeout=10)
+    finally:
+        if p.poll() is None:
+            p.kill()
+            p.wait()
+    assert p.returncode == 130 and out == err == "", (p.returncode, out, err)
+    end = time.monotonic() + 10
+    while graph.plant.output().count("external wrench cleared") == cleared and time.monotonic() < end:
+        time.sleep(0.05)
+    assert graph.plant.output().count("external wrench cleared") > cleared
+
+
+@pytest.mark.parametrize("args,service", [
+    (["param", "get", "no_such_node", "k1"], "no_such_node/get_parameters"),
+    (["reset", "--node", "no_such_plant"], "no_such_plant/reset"),
+    (["push", "--node", "no_such_plant", "--wheel", "1"], "no_such_plant subscribes /external_wrench"),
+])
+def test_nothing_answering_exits_1_within_the_timeout_naming_the_node_and_the_domain(graph, args, service):
+    r = ctl(graph, *args, "--timeout", "1")
+    assert r.returncode == 1, (r.stdout, r.stderr)
+    line, = r.stderr.strip().splitlines()
+    assert service in line and f"ROS_DOMAIN_ID={graph.domain_id}" in line, line
+    assert r.seconds < 15
+
+
+def test_help_of_every_subcommand_exits_0_without_ros_and_usage_errors_exit_2_in_one_line():
+    script = ("import sys, contextlib, io\n"
+              "from mwip_ros.cli.ctl import main\n"
+              "for argv in ([], ['param'], ['param', 'set'], ['param', 'get'], ['param', 'list'], ['reset'],\n"
+              "             ['push']):\n"
+              "    with contextlib.redirect_stdout(io.StringIO()) as out:\n"
+              "        code = main(argv + ['--help'])\n"
+              "    assert code == 0 and 'usage: mwip_ctl' in out.getvalue(), (argv, code)\n"
+              "print('rclpy' in sys.modules)\n")
+    r = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0 and r.stdout.strip() == "False", (r.stdout, r.stderr)
+    for args in (["param", "set", "dscndo_controller", "k1"], ["param", "set", "dscndo_controller", "k1", "{a: 1}"],
+                 ["push", "--wheel", "nan"], ["push", "--wheel", "2e6"], ["push", "--duration", "0"], ["jump"]):
+        r = subprocess.run([str(MWIP_CTL), *args], capture_output=True, text=True, timeout=60)
+        assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, (args, r.stderr)
