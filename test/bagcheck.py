@@ -29,7 +29,8 @@ from mcap_ros2.decoder import DecoderFactory
 from mwip_ros.bag import mcap_files
 
 __all__ = [
-    "ENDPOINT_QOS", "ENDPOINT_QOS_YAML", "T0", "ChunkInfo", "chunk_table", "damage_cases", "decoded_messages",
+    "ENDPOINT_QOS", "ENDPOINT_QOS_YAML", "T0", "ChunkInfo", "chunk_table", "counts_of", "damage_cases",
+    "decodable_end", "decoded_messages", "saved_in_cut",
     "graph_topics", "make_msg", "summed", "typestore", "write_bag", "write_graph_bag",
 ]
 
@@ -164,21 +165,29 @@ def write_graph_bag(path, n=7, compression=None, chunk_size=300):
 
 @dataclass
 class ChunkInfo:
-    """One chunk of an intact MCAP file: its bytes [start, end) and messages per topic."""
+    """One chunk of an intact MCAP file: its bytes [start, end) and messages per topic;
+    ``data_start``: the file offset of its (compressed) records; ``compression``; ``messages``:
+    ``(topic, log_time, end)`` of each message, ``end`` being where its record ends in the
+    chunk's uncompressed records, in record order."""
 
     start: int
     end: int
     counts: Dict[str, int]
+    data_start: int = 0
+    compression: str = ""
+    messages: List[Tuple[str, int, int]] = None
 
 
 def chunk_table(mcap_path) -> List[ChunkInfo]:
     """The chunks of an intact file in file order, from its summary's chunk indexes and the
-    message indexes they point to (no chunk is opened)."""
+    message indexes they point to (a chunk is opened only to read its records' lengths)."""
+    import zstandard
     with open(mcap_path, "rb") as fh:
         summary = make_reader(fh).get_summary()
         table = []
         for ci in sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset):
             counts: Dict[str, int] = {}
+            starts = []
             for channel_id, offset in ci.message_index_offsets.items():
                 fh.seek(offset)
                 opcode, length = struct.unpack("<BQ", fh.read(9))
@@ -186,7 +195,18 @@ def chunk_table(mcap_path) -> List[ChunkInfo]:
                 index = MessageIndex.read(ReadDataStream(BytesIO(fh.read(length))))
                 topic = summary.channels[channel_id].topic
                 counts[topic] = counts.get(topic, 0) + len(index.records)
-            table.append(ChunkInfo(ci.chunk_start_offset, ci.chunk_start_offset + ci.chunk_length, counts))
+                starts += [(at, topic, t) for t, at in index.records]
+            data_start = ci.chunk_start_offset + 9 + 8 + 8 + 8 + 4 + 4 + len(ci.compression) + 8
+            fh.seek(data_start)
+            data = fh.read(ci.compressed_size)
+            if ci.compression == "zstd":
+                data = zstandard.decompress(data, ci.uncompressed_size)
+            else:
+                assert ci.compression == "", ci.compression
+            messages = [(topic, t, at + 9 + struct.unpack_from("<Q", data, at + 1)[0])
+                        for at, topic, t in sorted(starts)]
+            table.append(ChunkInfo(ci.chunk_start_offset, ci.chunk_start_offset + ci.chunk_length, counts,
+                                   data_start, ci.compression, messages))
     return table
 
 
@@ -198,9 +218,44 @@ def summed(chunks: Iterable[ChunkInfo]) -> Dict[str, int]:
     return {t: n for t, n in out.items() if n}
 
 
+def decodable_end(data: bytes, chunk: ChunkInfo, cut: int) -> int:
+    """How many bytes of ``chunk``'s uncompressed records the first ``cut`` bytes of the file
+    ``data`` hold: the bytes there are (an uncompressed chunk) or what zstd's streaming
+    decompression makes of them (the complete blocks), trailing zeros not trusted."""
+    import zstandard
+    there = data[chunk.data_start:min(cut, chunk.end)].rstrip(b"\0")
+    if chunk.compression == "":
+        return len(there)
+    dec = zstandard.ZstdDecompressor().decompressobj()
+    return len(dec.decompress(there))
+
+
+def saved_in_cut(data: bytes, chunks: List[ChunkInfo], cut: int) -> List[Tuple[str, int]]:
+    """``(topic, log_time)`` of the messages a repair must save from the first ``cut`` bytes of
+    the intact file ``data``: those of the chunks wholly there (and their message indexes
+    need not be), then those of the chunk the cut falls inside whose record is complete."""
+    out = []
+    for c in chunks:
+        if c.end <= cut:
+            out += [(topic, t) for topic, t, _end in c.messages]
+        elif c.start < cut:
+            there = decodable_end(data, c, cut)
+            out += [(topic, t) for topic, t, end in c.messages if end <= there]
+    return out
+
+
+def counts_of(messages: Iterable[Tuple[str, int]]) -> Dict[str, int]:
+    out: Dict[str, int] = {}
+    for topic, _t in messages:
+        out[topic] = out.get(topic, 0) + 1
+    return out
+
+
 def damage_cases(mcap_path) -> List[Tuple[str, bytes, Dict[str, int]]]:
     """Damaged copies of an intact MCAP file (with at least 6 chunks):
-    ``[(case, file bytes, messages per topic a repair must save)]``.
+    ``[(case, file bytes, messages per topic a repair must save)]``: the messages of every
+    intact chunk, and those of a chunk the copy ends inside whose record is complete
+    (:func:`saved_in_cut`).
 
     Cut inside a chunk, one byte before a chunk's end, exactly at a chunk's end, after its
     message indexes, inside the summary, inside a chunk with zeros after the cut (what a
@@ -218,8 +273,9 @@ def damage_cases(mcap_path) -> List[Tuple[str, bytes, Dict[str, int]]]:
     flipped = data[:mid] + bytes(b ^ 0xFF for b in data[mid:mid + 16]) + data[mid + 16:]
     late_cut = (chunks[-2].start + chunks[-2].end) // 2
 
-    def before(offset: int) -> Dict[str, int]:
-        return summed(c for c in chunks if c.end <= offset)
+    def before(offset: int, skip: int = -1) -> Dict[str, int]:  # cut there: the complete records before it
+        keep = [c for i, c in enumerate(chunks) if i != skip]
+        return counts_of(saved_in_cut(data, keep, offset))
 
     return [
         ("cut inside a chunk", data[:mid], before(mid)),
@@ -227,11 +283,12 @@ def damage_cases(mcap_path) -> List[Tuple[str, bytes, Dict[str, int]]]:
         ("cut exactly at a chunk end", data[:chunks[k].end], before(chunks[k].end)),
         ("cut after a chunk's message indexes", data[:chunks[k + 1].start], before(chunks[k + 1].start)),
         ("cut inside the summary", data[:summary_mid], summed(chunks)),
-        ("cut inside a chunk, zeros after", data[:mid] + bytes(4096), before(mid)),
+        ("cut inside a chunk, zeros after", data[:mid] + bytes(4096),
+         before(mid) if mid + 4096 < chunks[m].end else summed(c for c in chunks if c.end <= mid)),
         ("cut 9 bytes in", data[:9], {}),
         ("damaged chunk in the middle", flipped, summed(c for i, c in enumerate(chunks) if i != m)),
         ("damaged chunk, then cut short", flipped[:late_cut],
-         summed(c for i, c in enumerate(chunks) if i != m and c.end <= late_cut)),
+         before(late_cut, skip=m)),
     ]
 
 

@@ -11,7 +11,7 @@
 ==================  ================================================================
 """
 from .errors import BagError
-from .metadata import qos_profiles_yaml
+from .metadata import REPAIRED_KEY, qos_profiles_yaml
 from .reader import (check, damaged_chunks, mcap_files, raw_messages, read_metadata, topic_counts, topic_qos,
                      topic_types)
 from .repair import RepairResult, repair
@@ -19,6 +19,6 @@ from .schema import message_definition, type_hash
 from .writer import BagWriter
 
 __all__ = [
-    "BagError", "BagWriter", "RepairResult", "check", "damaged_chunks", "mcap_files", "message_definition", "qos_profiles_yaml",
+    "REPAIRED_KEY", "BagError", "BagWriter", "RepairResult", "check", "damaged_chunks", "mcap_files", "message_definition", "qos_profiles_yaml",
     "raw_messages", "read_metadata", "repair", "topic_counts", "topic_qos", "topic_types", "type_hash",
 ]

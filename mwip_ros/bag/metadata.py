@@ -26,8 +26,11 @@ from .errors import BagError
 __all__ = [
     "EMPTY_STARTING_TIME", "METADATA_VERSION", "ROS_DISTRO", "SERIALIZATION_FORMAT", "STORAGE_IDENTIFIER",
     "FileInfo", "TopicInfo", "bag_metadata", "dump_yaml", "metadata_yaml_text", "parse_qos_yaml",
-    "qos_profile_dict", "qos_profiles_yaml", "write_metadata_yaml",
-]
+    "qos_profile_dict", "qos_profiles_yaml", "write_metadata_yaml", "REPAIRED_KEY"]
+
+# the custom_data entry mwip_bag_repair writes into a repaired bag's metadata.yaml: one line saying what was
+# saved and what was lost (mwip_report shows it as a warning)
+REPAIRED_KEY = "mwip_ros.repaired"
 
 METADATA_VERSION = 9
 STORAGE_IDENTIFIER = "mcap"

@@ -4,11 +4,14 @@ Such an MCAP file has no summary and no footer, and may end inside a chunk.  :fu
 walks its records with :mod:`.scan` (the ``mcap`` library's stream reader, bounded and
 resumable), keeps the schemas, channels, metadata, attachments and messages of every
 complete record (each chunk whose bytes are all there and whose CRC, when it has one,
-checks out; a damaged chunk in the middle is skipped and the walk goes on), writes a new
-complete MCAP file in its place (the original is kept beside it as ``<name>.mcap.broken``)
-and rebuilds ``metadata.yaml`` from what was saved (creating it when the recorder died
-before writing it; each topic's QoS and type hash come from the channel metadata, else
-from the old ``metadata.yaml``).
+checks out; a damaged chunk in the middle is skipped and the walk goes on; of the chunk
+the file ends inside, every record that is complete and passes the structural checks of
+:func:`.scan.cut_chunk_records`), writes a new complete MCAP file in its place (the
+original is kept beside it as ``<name>.mcap.broken``) and rebuilds ``metadata.yaml`` from
+what was saved (creating it when the recorder died before writing it; each topic's QoS
+and type hash come from the channel metadata, else from the old ``metadata.yaml``), its
+``custom_data`` kept and the entry :data:`~.metadata.REPAIRED_KEY` added: one line saying
+how many messages were kept, up to which log time, and what was lost (:func:`repaired_note`).
 
 :class:`RepairResult` says what was saved per file and topic; its :meth:`~RepairResult.report`
 is what the ``mwip_bag_repair`` command (:mod:`mwip_ros.cli.bag_repair`) prints.
@@ -24,16 +27,18 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Dict, List, Optional, Sequence, Tuple
 
+import yaml
 from mcap.records import Attachment, Channel, Message, Metadata, Schema
 from mcap.writer import CompressionType, Writer
 
 from .errors import BagError
-from .metadata import ROS_DISTRO, TopicInfo, bag_metadata, dump_yaml, parse_qos_yaml, write_metadata_yaml
+from .metadata import (REPAIRED_KEY, ROS_DISTRO, TopicInfo, bag_metadata, dump_yaml, parse_qos_yaml,
+                       write_metadata_yaml)
 from .reader import mcap_files, read_metadata
 from .scan import Collected, walk
 from .writer import DEFAULT_CHUNK_SIZE, FileSink
 
-__all__ = ["FileRepair", "RepairResult", "repair"]
+__all__ = ["FileRepair", "RepairResult", "repair", "repaired_note"]
 
 
 @dataclass
@@ -51,6 +56,10 @@ class FileRepair:
     file_size: int = 0
     chunks_saved: int = 0
     chunks_discarded: int = 0
+    cut_chunk_messages: int = 0  # messages saved from the chunk the file ends inside
+    lost_until_ns: Optional[int] = None  # that chunk's last log time, when messages of it were lost
+    start_ns: Optional[int] = None  # log times of the first and last message saved
+    end_ns: Optional[int] = None
     messages_orphaned: int = 0
     problem: str = ""
     error: str = ""
@@ -104,7 +113,10 @@ class RepairResult:
                 continue
             state = "cut short" if f.cut_short else "damaged"
             what = f"{f.path}: {state} ({f.problem}); {verb} {f.messages_saved} messages " \
-                   f"from {f.chunks_saved} complete chunk(s), discarded {f.bytes_discarded} of {f.file_size} bytes"
+                   f"from {f.chunks_saved} complete chunk(s)"
+            if f.cut_chunk_messages:
+                what += f" and {f.cut_chunk_messages} from the chunk it ends inside"
+            what += f", discarded {f.bytes_discarded} of {f.file_size} bytes"
             if f.chunks_discarded:
                 what += f" ({f.chunks_discarded} damaged chunk(s))"
             if f.messages_orphaned:
@@ -269,6 +281,12 @@ def _repair_file(mcap_path: Path, old: Optional[Dict[str, Any]], dry_run: bool
     fr.was_complete, fr.cut_short, fr.problem = scan.intact, not scan.complete, scan.problem
     fr.chunks_saved, fr.chunks_discarded = scan.chunks_saved, scan.chunks_discarded
     fr.messages_orphaned = got.orphans
+    fr.start_ns, fr.end_ns = got.file.start_ns, got.file.end_ns
+    cut = scan.cut_chunk
+    if cut is not None:
+        fr.cut_chunk_messages = sum(1 for r in cut.records if isinstance(r, Message))
+        if cut.end_time and (fr.end_ns is None or cut.end_time > fr.end_ns):
+            fr.lost_until_ns = cut.end_time
     fr.bytes_discarded = scan.bytes_discarded
     if scan.header is None:
         fr.error = f"nothing could be recovered: {scan.problem or 'no MCAP header'}"
@@ -276,7 +294,7 @@ def _repair_file(mcap_path: Path, old: Optional[Dict[str, Any]], dry_run: bool
     fr.topic_counts = got.topic_counts()
     fr.messages_saved = sum(fr.topic_counts.values())
     if not scan.intact and fr.messages_saved == 0:
-        fr.error = (f"nothing could be recovered: {scan.problem}; no complete chunk "
+        fr.error = (f"nothing could be recovered: {scan.problem}; no complete message "
                     f"({fr.file_size} bytes); left unchanged")
         return fr, None
     got.file.path = mcap_path.name
@@ -300,6 +318,60 @@ def _repair_file(mcap_path: Path, old: Optional[Dict[str, Any]], dry_run: bool
     return fr, got
 
 
+def _custom_data(old: Optional[Dict[str, Any]], collected: Sequence[Collected]) -> Dict[str, str]:
+    """The ``custom_data`` to keep: the old metadata.yaml's, else that of the ``rosbag2``
+    Metadata record in a file (what the recorder wrote at its start)."""
+    if old is not None:
+        return {str(k): str(v) for k, v in (old.get("custom_data") or {}).items()}
+    for got in collected:
+        try:
+            doc = yaml.safe_load(got.rosbag2_metadata or "") or {}
+            doc = doc.get("rosbag2_bagfile_information", doc)
+            return {str(k): str(v) for k, v in (doc.get("custom_data") or {}).items()}
+        except (yaml.YAMLError, AttributeError):
+            continue
+    return {}
+
+
+def repaired_note(result: RepairResult) -> str:
+    """The one line :func:`repair` stores under ``custom_data[REPAIRED_KEY]``: that the bag was
+    repaired, how many messages were kept up to which log time (seconds from the first saved
+    message), and what was lost where known, e.g. ``repaired after a cut: 1234 messages kept up
+    to log time 7.215 s (from the bag's start); the 5120 bytes after that were incomplete
+    (messages up to log time 7.480 s lost)``."""
+    saved = [f for f in result.files if not f.error and f.start_ns is not None]
+    start = min((f.start_ns for f in saved), default=None)
+    end = max((f.end_ns for f in saved), default=None)
+    broken = [f for f in result.files if not f.was_complete]
+    cut = [f for f in broken if f.cut_short]
+    kept = f"{result.total_messages} messages kept"
+    if start is not None:
+        kept += f" up to log time {(end - start) / 1e9:.3f} s (from the bag's start)"
+    lost = []
+    cut_bytes = sum(f.bytes_discarded for f in cut if not f.error)
+    if cut:
+        text = f"the {cut_bytes} bytes after that were incomplete" if cut_bytes else \
+            "the file ends there, without its summary and footer"
+        until = max((f.lost_until_ns for f in cut if f.lost_until_ns is not None), default=None)
+        if until is not None and start is not None:
+            text += f" (messages up to log time {(until - start) / 1e9:.3f} s lost)"
+        lost.append(text)
+    damaged = sum(f.chunks_discarded for f in broken)
+    if damaged:
+        lost.append(f"{damaged} damaged chunk(s) skipped")
+    orphans = sum(f.messages_orphaned for f in broken)
+    if orphans:
+        lost.append(f"{orphans} message(s) of unknown channels dropped")
+    unreadable = [f.path.name for f in result.files if f.error]
+    if unreadable:
+        lost.append("nothing recovered from " + ", ".join(unreadable))
+    other = sum(f.bytes_discarded for f in broken if not f.cut_short)
+    if not lost and other:
+        lost.append(f"{other} damaged bytes skipped")
+    how = "after a cut" if cut else "after damage"
+    return f"repaired {how}: {kept}" + ("; " + "; ".join(lost) if lost else "")
+
+
 def repair(path, dry_run: bool = False) -> RepairResult:
     """Repair the bag directory or MCAP file at ``path``; see the module docstring.
 
@@ -321,11 +393,14 @@ def repair(path, dry_run: bool = False) -> RepairResult:
     if not collected:
         return result
     if bag_dir is not None and not dry_run and (result.needed_repair or old is None):
+        custom = _custom_data(old, collected)
+        if result.needed_repair:
+            custom[REPAIRED_KEY] = repaired_note(result)
         info = bag_metadata(
             _topics_from(collected, old), [got.file for got in collected],
             compression_format=str((old or {}).get("compression_format", "") or ""),
             compression_mode=str((old or {}).get("compression_mode", "") or ""),
-            custom_data=(old or {}).get("custom_data") or None,
+            custom_data=custom or None,
             ros_distro=_distro(old))
         result.metadata_path = write_metadata_yaml(bag_dir, info)
         result.metadata_written = True

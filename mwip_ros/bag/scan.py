@@ -15,7 +15,16 @@ and the library leaves to its caller:
   it, since its length in the record header is still good;
 * **garbage**: an unknown opcode below 0x80 (the MCAP range reserved for the format
   itself) means the rest is not MCAP, e.g. the zeros a file system leaves after a crash;
-  the library would skip it as a user record and walk on through the garbage.
+  the library would skip it as a user record and walk on through the garbage;
+* **the cut chunk**: a file that ends inside a Chunk record still holds that chunk's
+  header and the start of its records.  :func:`cut_chunk_records` decodes them (an
+  uncompressed chunk as it is; zstd and lz4 by streaming decompression, which gives the
+  bytes of every complete block) up to the last complete record.  There is no usable CRC,
+  so each record is checked by its structure instead and decoding stops at the first
+  that fails: Schema, Channel or Message opcodes only, a length inside the bytes there
+  are, fields that parse within that length, a Message of a channel already defined whose
+  log time lies in the chunk header's time range.  Trailing zero bytes are not trusted
+  (what a file system leaves after a crash).
 
 :class:`_Walker` learns each record's byte offsets by overriding the reader's private
 ``_read_record`` hook; the reader keeps its public ``records`` loop.  :func:`walk` feeds the
@@ -24,8 +33,11 @@ schemas, channels and per-channel message counts.
 """
 from __future__ import annotations
 
+import struct
+from dataclasses import dataclass, field
+from io import BytesIO
 from pathlib import Path
-from typing import Any, Dict, Iterator, Optional, Tuple
+from typing import Any, Dict, Iterator, List, Optional, Set, Tuple
 
 from mcap.data_stream import ReadDataStream
 from mcap.opcode import Opcode
@@ -34,7 +46,16 @@ from mcap.stream_reader import MAGIC_SIZE, StreamReader, breakup_chunk, read_mag
 
 from .metadata import FileInfo
 
-__all__ = ["Collected", "Scan", "walk"]
+try:
+    import zstandard
+except ImportError:  # pragma: no cover - a requirement, but optional to the mcap library too
+    zstandard = None
+try:
+    import lz4.frame as lz4_frame
+except ImportError:  # pragma: no cover
+    lz4_frame = None
+
+__all__ = ["Collected", "CutChunk", "Scan", "cut_chunk_records", "walk"]
 
 _KNOWN_OPCODES = frozenset(int(op) for op in Opcode)
 _USABLE = (Schema, Channel, Message, Metadata, Attachment)
@@ -111,6 +132,141 @@ def _op_name(opcode: Optional[int]) -> str:
         return f"0x{opcode:02x}"
 
 
+_CHUNK_FIXED = struct.Struct("<QQQII")  # start time, end time, uncompressed size, CRC, compression length
+_IN_CHUNK = {int(Opcode.SCHEMA): Schema, int(Opcode.CHANNEL): Channel, int(Opcode.MESSAGE): Message}
+_MAX_COMPRESSION_NAME = 64
+_PIECE = 4096  # compressed bytes fed to a streaming decompressor at a time
+
+
+@dataclass
+class CutChunk:
+    """What :func:`cut_chunk_records` made of a chunk the file ends inside.
+
+    ``records``: the complete records decoded, in order; ``used``: how many bytes of the
+    chunk record's body (after its 9-byte opcode and length) they account for (exact for an
+    uncompressed chunk, within 4 KiB of compressed data otherwise); ``start_time`` and
+    ``end_time``: the chunk header's message time range (0, 0 when the header is cut);
+    ``compression``; ``stop``: why decoding stopped."""
+
+    records: List[Any] = field(default_factory=list)
+    used: int = 0
+    start_time: int = 0
+    end_time: int = 0
+    compression: str = ""
+    stop: str = ""
+
+
+def _decompress_prefix(compression: str, data: bytes) -> Tuple[bytes, List[Tuple[int, int]]]:
+    """The uncompressed bytes a prefix of a compressed chunk gives, and [(input bytes fed,
+    output bytes so far)] after each piece (to map output positions back to input).
+
+    Raises ValueError for a compression it cannot stream."""
+    if compression == "":
+        return data, [(len(data), len(data))]
+    if compression == "zstd" and zstandard is not None:
+        dec = zstandard.ZstdDecompressor().decompressobj()
+    elif compression == "lz4" and lz4_frame is not None:
+        dec = lz4_frame.LZ4FrameDecompressor()
+    else:
+        raise ValueError(f"cannot decode a cut chunk compressed with {compression!r}")
+    out, marks = bytearray(), []
+    for at in range(0, len(data), _PIECE):
+        try:
+            out += dec.decompress(data[at:at + _PIECE])
+        except Exception:  # corrupt from here on: keep what came before
+            break
+        marks.append((min(at + _PIECE, len(data)), len(out)))
+        if getattr(dec, "eof", False):
+            break
+    return bytes(out), marks
+
+
+def cut_chunk_records(body: bytes, channels: Set[int]) -> CutChunk:
+    """Decode the complete records of a chunk cut short; see the module docstring.
+
+    ``body``: the bytes of the Chunk record there are, after its opcode and length;
+    ``channels``: the channel ids defined before this chunk (a Channel record decoded here
+    is added for the Messages after it).  Never raises for bad data: it stops instead."""
+    cut = CutChunk()
+    if len(body) < _CHUNK_FIXED.size:
+        cut.stop = "the chunk header is cut"
+        return cut
+    start, end, size, _crc, name_len = _CHUNK_FIXED.unpack_from(body, 0)
+    head = _CHUNK_FIXED.size + name_len + 8
+    if name_len > _MAX_COMPRESSION_NAME or len(body) < head or start > end:
+        cut.stop = "the chunk header is cut or damaged"
+        return cut
+    try:
+        cut.compression = body[_CHUNK_FIXED.size:head - 8].decode("utf-8")
+    except UnicodeDecodeError:
+        cut.stop = "the chunk header is damaged"
+        return cut
+    cut.start_time, cut.end_time = start, end
+    (data_len,) = struct.unpack_from("<Q", body, head - 8)
+    data = body[head:head + data_len].rstrip(b"\0")  # zeros at the end: not trusted
+    try:
+        plain, marks = _decompress_prefix(cut.compression, data)
+    except ValueError as exc:
+        cut.stop = str(exc)
+        return cut
+    plain = plain[:size]
+    known = set(channels)
+    pos = 0
+    while True:
+        if pos + 9 > len(plain):
+            cut.stop = "the next record is incomplete"
+            break
+        opcode, length = struct.unpack_from("<BQ", plain, pos)
+        kind = _IN_CHUNK.get(opcode)
+        if kind is None:
+            cut.stop = f"opcode 0x{opcode:02x} cannot be in a chunk"
+            break
+        if pos + 9 + length > len(plain):
+            cut.stop = "the next record is incomplete"
+            break
+        try:
+            record = _parse_in_chunk(kind, plain[pos + 9:pos + 9 + length], length)
+        except Exception:
+            cut.stop = f"a {kind.__name__} record does not parse"
+            break
+        if isinstance(record, Message) and (record.channel_id not in known
+                                            or not start <= record.log_time <= end):
+            cut.stop = "a Message of an unknown channel or outside the chunk's time range"
+            break
+        if isinstance(record, Channel):
+            known.add(record.id)
+        cut.records.append(record)
+        pos += 9 + length
+    if pos:  # the input it took to produce the first ``pos`` bytes of output
+        cut.used = head + (pos if cut.compression == "" else
+                           next((fed for fed, got in marks if got >= pos), len(data)))
+    return cut
+
+
+def _parse_in_chunk(kind, raw: bytes, length: int):
+    """One record of a cut chunk, from exactly its ``length`` bytes (a field running past
+    them raises)."""
+    if kind is Message:
+        if length < 22:
+            raise ValueError("a Message record shorter than its fixed fields")
+        return Message.read(_BoundedStream(raw), length)
+    return kind.read(_BoundedStream(raw))
+
+
+class _BoundedStream(ReadDataStream):
+    """A ReadDataStream over ``raw`` whose reads past the end raise instead of coming back short."""
+
+    def __init__(self, raw: bytes):
+        super().__init__(BytesIO(raw))
+        self._left = len(raw)
+
+    def read(self, length: int) -> bytes:
+        if length > self._left:
+            raise _Overrun()
+        self._left -= length
+        return super().read(length)
+
+
 class Scan:
     """Walk the records of one MCAP file in order, yielding the usable ones (:meth:`records`).
 
@@ -118,7 +274,8 @@ class Scan:
     all read) and ``intact`` (complete, and no damaged record skipped); ``good_end`` (every
     byte before it was used or counted in ``skipped_bytes``); ``problem`` (why the walk
     stopped early, or what was damaged); the chunks saved and discarded, the chunk
-    compression used and the largest uncompressed chunk.
+    compression used and the largest uncompressed chunk; ``cut_chunk`` (a :class:`CutChunk`)
+    when the file ends inside a chunk, whose complete records were yielded too.
     """
 
     def __init__(self, path: Path):
@@ -133,6 +290,8 @@ class Scan:
         self.chunks_discarded = 0
         self.compression = ""
         self.max_chunk = 0
+        self.cut_chunk: Optional[CutChunk] = None  # the chunk the file ends inside, when it does
+        self._channel_ids: Set[int] = set()
 
     @property
     def intact(self) -> bool:
@@ -167,6 +326,8 @@ class Scan:
                         self.problem = after_data
                         return
                     if not self._skip_damaged(walker, exc):
+                        if isinstance(exc, _Truncated) and walker.opcode == Opcode.CHUNK and walker.in_record:
+                            yield from self._open_cut_chunk(fh, walker)
                         return
                     walker = _Walker(_Source(fh, self.size, walker.end))
                     it = walker.records
@@ -188,6 +349,8 @@ class Scan:
                 elif isinstance(record, Chunk):
                     yield from self._open_chunk(record, walker)
                 elif isinstance(record, _USABLE):
+                    if isinstance(record, Channel):
+                        self._channel_ids.add(record.id)
                     yield record
                 # Indexes and user records inside the data section: skipped, not lost.
                 self.good_end = walker.parsed_to
@@ -202,7 +365,18 @@ class Scan:
         self.chunks_saved += 1
         self.compression = self.compression or chunk.compression
         self.max_chunk = max(self.max_chunk, chunk.uncompressed_size)
+        self._channel_ids.update(r.id for r in inner if isinstance(r, Channel))
         yield from inner
+
+    def _open_cut_chunk(self, fh, walker: _Walker) -> Iterator[Any]:
+        """The complete records of the chunk the file ends inside (see :func:`cut_chunk_records`)."""
+        fh.seek(walker.start + 9)
+        cut = self.cut_chunk = cut_chunk_records(fh.read(self.size - walker.start - 9), self._channel_ids)
+        if not cut.records:
+            return
+        self.compression = self.compression or cut.compression
+        self.good_end = walker.start + 9 + cut.used
+        yield from cut.records
 
     def _skip_damaged(self, walker: _Walker, exc: Exception) -> bool:
         """After the reader failed: True to skip the damaged record and walk on, else set ``problem``."""

@@ -12,9 +12,12 @@ A bag is a directory ``<bag_dir>/`` holding ``<basename>_0.mcap`` and ``metadata
 * ``metadata.yaml`` is rosbag2 metadata version 9 (written at close, atomically; its
   contents and the QoS YAML are built in :mod:`mwip_ros.bag.metadata`).
 
-Chunks are written to the file as soon as they are full, so a recording cut by
-``kill -9`` loses at most its last, unfinished chunk; :mod:`mwip_ros.bag.repair` makes
-such a file whole again.
+Chunks are written to the file as soon as they are full (``chunk_size`` bytes) or span
+``max_chunk_duration`` seconds of log time, whichever comes first: the chunk being filled
+lives in memory, so a recording cut by ``kill -9`` loses it, at most the last
+``max_chunk_duration`` (0.5 s by default) of the run; :mod:`mwip_ros.bag.repair` makes such
+a file whole again (and saves the complete records of a chunk cut short on disk, e.g. by a
+full disk or a power loss).
 
 As with rosbag2's MCAP plugin, zstd compresses each chunk inside the MCAP file, so
 ``metadata.yaml`` says ``compression_format: ""`` and ``compression_mode: ""``.
@@ -34,9 +37,10 @@ from .metadata import (
 )
 from .schema import message_definition, type_hash as installed_type_hash
 
-__all__ = ["DEFAULT_CHUNK_SIZE", "BagWriter", "FileSink"]
+__all__ = ["DEFAULT_CHUNK_SIZE", "DEFAULT_MAX_CHUNK_DURATION", "BagWriter", "FileSink"]
 
 DEFAULT_CHUNK_SIZE = 1 << 20
+DEFAULT_MAX_CHUNK_DURATION = 0.5  # [s of log time]: what a kill -9 of the recorder loses at most
 
 
 def _library_string() -> str:
@@ -92,6 +96,9 @@ def _compression(value: Optional[str]) -> CompressionType:
 class BagWriter:
     """Write a rosbag2 bag (MCAP storage) into a new directory.
 
+    A chunk is written once it holds ``chunk_size`` bytes (uncompressed) or spans
+    ``max_chunk_duration`` seconds of log time (None: no time bound), whichever comes first.
+
     >>> with BagWriter("bags/run1", compression="zstd") as bag:
     ...     bag.add_topic("/joint_states", "sensor_msgs/msg/JointState", qos_yaml, type_hash)
     ...     bag.write("/joint_states", cdr_bytes, log_time_ns)
@@ -99,13 +106,19 @@ class BagWriter:
 
     def __init__(self, bag_dir: Union[str, Path], compression: Optional[str] = None,
                  chunk_size: int = DEFAULT_CHUNK_SIZE, *, custom_data: Optional[Mapping[str, str]] = None,
-                 ros_distro: str = ROS_DISTRO, library: Optional[str] = None):
+                 ros_distro: str = ROS_DISTRO, library: Optional[str] = None,
+                 max_chunk_duration: Optional[float] = DEFAULT_MAX_CHUNK_DURATION):
         self.path = Path(bag_dir)
         if str(bag_dir).strip() == "":
             raise BagError("bag directory must not be empty")
         compression_type = _compression(compression)
         if not isinstance(chunk_size, int) or isinstance(chunk_size, bool) or chunk_size < 1:
             raise BagError(f"chunk_size must be a positive integer number of bytes, got {chunk_size!r}")
+        if max_chunk_duration is not None and not (isinstance(max_chunk_duration, (int, float))
+                                                   and not isinstance(max_chunk_duration, bool)
+                                                   and max_chunk_duration > 0):
+            raise BagError(f"max_chunk_duration must be a positive number of seconds or None, "
+                           f"got {max_chunk_duration!r}")
         if self.path.exists() or self.path.is_symlink():
             raise BagError(f"bag directory {self.path} already exists; refusing to overwrite it "
                            f"(choose a new output path)")
@@ -120,6 +133,9 @@ class BagWriter:
             raise BagError(f"cannot create bag directory {self.path}: {exc.strerror or exc}") from None
         self.compression = "zstd" if compression_type is CompressionType.ZSTD else ""
         self.chunk_size = chunk_size
+        self.max_chunk_duration = max_chunk_duration
+        self._max_chunk_ns = None if max_chunk_duration is None else int(round(max_chunk_duration * 1e9))
+        self._chunk_first_ns: Optional[int] = None  # log time of the first message in the chunk being filled
         self.custom_data = dict(custom_data or {})
         self.ros_distro = ros_distro
         self.relative_path = f"{self.path.name}_0.mcap"
@@ -179,11 +195,23 @@ class BagWriter:
         log_time_ns = int(log_time_ns)
         if log_time_ns < 0:
             raise BagError(f"log time of a message on {topic!r} is negative: {log_time_ns}")
+        written = self._sink.tell()
         self._writer.add_message(channel_id=channel_id, log_time=log_time_ns, data=bytes(data),
                                  publish_time=log_time_ns if publish_time_ns is None else int(publish_time_ns),
                                  sequence=int(sequence) & 0xFFFFFFFF)
         self._topics[topic].message_count += 1
         self._file.add(log_time_ns)
+        self._bound_chunk(log_time_ns, chunk_written=self._sink.tell() != written)
+
+    def _bound_chunk(self, log_time_ns: int, chunk_written: bool) -> None:
+        """Write the chunk being filled once it spans ``max_chunk_duration`` of log time."""
+        if chunk_written:  # full: the mcap writer wrote it, this message included
+            self._chunk_first_ns = None
+        elif self._chunk_first_ns is None:
+            self._chunk_first_ns = log_time_ns
+        elif self._max_chunk_ns is not None and abs(log_time_ns - self._chunk_first_ns) >= self._max_chunk_ns:
+            self._writer.flush()  # finishes the chunk (and its message indexes) and writes it
+            self._chunk_first_ns = None
 
     # -- state --
 

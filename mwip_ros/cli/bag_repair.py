@@ -25,7 +25,7 @@ def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="mwip_bag_repair",
         description="Recover the messages of a rosbag2 MCAP bag whose recording was cut short "
-                    "(e.g. by kill -9): keeps every complete chunk, writes a complete MCAP file "
+                    "(e.g. by kill -9): keeps every complete message, writes a complete MCAP file "
                     "(the original is kept as <name>.mcap.broken) and rebuilds metadata.yaml.",
         epilog="Exit codes: 0 repaired or nothing to repair, 1 nothing could be recovered, 2 usage error.")
     parser.add_argument("path", metavar="BAG_DIR_OR_MCAP", help="bag directory or .mcap file")

@@ -23,8 +23,10 @@ for a lockstep run (the plant publishes ``/clock`` only then) it checks that eve
 the loop has one message per state (:mod:`mwip_ros.bag.ledger`) and, where one lacks some, logs a
 warning naming the topics and the first missing stamp and writes the same line into the
 bag's metadata (``custom_data``, key ``mwip_ros.lockstep_gaps``), which ``mwip_report``
-shows.  A recorder killed with SIGKILL leaves every finished chunk on disk:
-``mwip_bag_repair <output>`` recovers them.
+shows.  The writer closes a chunk when it is full or spans
+:data:`~mwip_ros.bag.writer.DEFAULT_MAX_CHUNK_DURATION` (0.5 s) of log time, whichever comes
+first, and writes it at once: a recorder killed with SIGKILL loses only the chunk it was
+filling, at most the last 0.5 s of the run; ``mwip_bag_repair <output>`` recovers the rest.
 """
 from __future__ import annotations
 
@@ -77,7 +79,8 @@ class McapRecorder(Node, GracefulNodeMixin):
         self.types = self.tap.types
         self.get_logger().info(
             f"recording {len(self.types)} topic(s) to {self.output} ({self.writer.relative_path}; compression "
-            f"{self.writer.compression or 'none'}, chunk size {self.writer.chunk_size} B): "
+            f"{self.writer.compression or 'none'}, chunks of {self.writer.chunk_size} B or "
+            f"{self.writer.max_chunk_duration} s at most): "
             + ", ".join(sorted(self.types)))
 
     # --- recording -------------------------------------------------------------------------------

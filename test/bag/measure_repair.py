@@ -15,6 +15,20 @@ damaged copies of ``bagcheck.damage_cases`` (uncompressed and zstd), repairs eac
 
 and prints a Markdown table of messages saved, plus the messages a reader can read back
 from each repaired file (``readable``: the mcap reader with CRC checks, up to its first error).
+
+    python test/bag/measure_repair.py --cut-loss [--old-root DIR]
+
+measures instead the seconds of a run lost (:mod:`bag.cutloss`): a 10 s run at 200 Hz of
+the loop topics written with the recorder's writer (1 MiB chunks; uncompressed and zstd), cut
+at many points and killed at several times, repaired by
+
+* ``before``: the repair under ``--old-root`` on bags of 1 MiB chunks without a time bound
+  (this checkout's BagWriter with ``max_chunk_duration=None``: the old writer's layout);
+* ``decode only``: this checkout's repair on those same bags;
+* ``after``: this checkout's repair on bags of this checkout's default BagWriter (chunks also
+  closed every ``DEFAULT_MAX_CHUNK_DURATION`` of log time);
+
+then prints the cost of the time bound: file size and CPU time to write the run.
 """
 from __future__ import annotations
 
@@ -87,12 +101,74 @@ def _total(counts):
     return sum(counts.values()) if isinstance(counts, dict) else counts
 
 
+KILLS = (0.3, 1.0, 2.0, 3.0, 4.2, 6.9, 9.7)  # [s]: kill -9 after the messages up to these log times
+
+
+def _old_last(old_counts, bag: Path):
+    from bag.cutloss import saved_last
+    return saved_last(bag) if isinstance(old_counts, dict) and sum(old_counts.values()) else None
+
+
+def cut_loss(old_root) -> int:
+    """The loss table of ``--cut-loss`` (see the module docstring); 1 if ``after`` ever loses 1 s or more."""
+    import time as _time
+
+    from bag.cutloss import copy_bag, cut_points, loss, lost_seconds, record_run, time_at_cut
+    work = Path(tempfile.mkdtemp(prefix="measure_cut_loss_"))
+    bad = 0
+    try:
+        for compression in (None, "zstd"):
+            name = compression or "uncompressed"
+            runs = {who: record_run(work / f"{name}_{who}", compression=compression, kills=KILLS,
+                                    **({"max_chunk_duration": None} if who == "old" else {}))
+                    for who in ("old", "new")}
+            cases = {who: [(label, run.mcap.read_bytes()[:cut], time_at_cut(run, cut))
+                           for label, cut in cut_points(run)]
+                     + [(f"kill -9 at {k:g} s", data, max(t for _topic, t in run.written if t - run.t0 <= k * 1e9))
+                        for k, data in run.kills.items()] for who, run in runs.items()}
+            old = {}
+            if old_root:
+                bags = [copy_bag(data, work / f"{name}_oldcopy{i}") for i, (_l, data, _t) in enumerate(cases["old"])]
+                counts = repair_old(old_root, bags)
+                old = {i: lost_seconds(runs["old"], t, _old_last(counts[str(b)], b))
+                       for i, (b, (_l, _d, t)) in enumerate(zip(bags, cases["old"]))}
+            print(f"\n{name}: {len(runs['new'].written)} messages, {len(runs['new'].chunks)} chunks "
+                  f"(1 MiB only: {len(runs['old'].chunks)})\n")
+            print("| cut | before [s] | decode only [s] | after [s] |")
+            print("|---|---:|---:|---:|")
+            for i, ((label, data, t), (_l2, data2, t2)) in enumerate(zip(cases["old"], cases["new"])):
+                decode = loss(runs["old"], data, t, work / "decode")
+                after = loss(runs["new"], data2, t2, work / "after")
+                bad += after >= 1.0
+                before = f"{old[i]:.3f}" if i in old else "-"
+                print(f"| {label} | {before} | {decode:.3f} | {after:.3f} |")
+        print("\ncost of the time bound (10 s run, 7 topics at 200 Hz; best of 5):\n")
+        print("| compression | max_chunk_duration | chunks | file bytes | write CPU [ms] |")
+        print("|---|---|---:|---:|---:|")
+        for compression in (None, "zstd"):
+            for dur in (None, 0.5):
+                best = None
+                for k in range(5):
+                    start = _time.process_time()
+                    run = record_run(work / f"cost_{compression}_{dur}_{k}", compression=compression,
+                                     max_chunk_duration=dur)
+                    best = min(best or 1e9, _time.process_time() - start)
+                print(f"| {compression or 'none'} | {dur} | {len(run.chunks)} | {run.mcap.stat().st_size} | "
+                      f"{1000 * best:.0f} |")
+        return 1 if bad else 0
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--old-root", type=Path, default=None, help="a checkout whose mwip_ros to compare with")
     ap.add_argument("--messages", type=int, default=1500, help="messages per topic (default 1500)")
     ap.add_argument("--chunk-size", type=int, default=4096, help="chunk size in bytes (default 4096)")
+    ap.add_argument("--cut-loss", action="store_true", help="measure the seconds of a run lost at many cut points")
     args = ap.parse_args()
+    if args.cut_loss:
+        return cut_loss(args.old_root)
     from mwip_ros.bag import repair
 
     work = Path(tempfile.mkdtemp(prefix="measure_repair_"))

@@ -8,8 +8,8 @@ import yaml
 from mcap.reader import make_reader
 from rosbags.highlevel import AnyReader
 
-from bagcheck import ENDPOINT_QOS_YAML, damage_cases, typestore, write_bag, write_graph_bag
-from mwip_ros.bag import RepairResult, raw_messages, repair, topic_counts, type_hash
+from bagcheck import ENDPOINT_QOS_YAML, chunk_table, damage_cases, saved_in_cut, typestore, write_bag, write_graph_bag
+from mwip_ros.bag import REPAIRED_KEY, RepairResult, raw_messages, repair, topic_counts, type_hash
 from mwip_ros.cli.bag_repair import main
 
 TS = typestore()
@@ -18,14 +18,11 @@ TOPICS = {"/joint_states": "sensor_msgs/msg/JointState", "/wheel_torque_cmd": "s
 
 
 def _expected_saved(mcap_path, cut, written):
-    """Messages of the chunks wholly inside the first ``cut`` bytes (from the intact file's index)."""
-    with open(mcap_path, "rb") as fh:
-        chunks = make_reader(fh).get_summary().chunk_indexes
-    complete = [c for c in chunks if c.chunk_start_offset + c.chunk_length <= cut]
-    if not complete:
-        return 0
-    last_time = max(c.message_end_time for c in complete)
-    return sum(1 for w in written if w[2] <= last_time)  # log times increase strictly
+    """Messages whose record is complete in the first ``cut`` bytes: the chunks wholly there, then
+    the complete records of the chunk the cut falls in (from the intact file's indexes)."""
+    saved = saved_in_cut(mcap_path.read_bytes(), chunk_table(mcap_path), cut)
+    assert saved == [(w[0], w[2]) for w in written[:len(saved)]]  # a prefix of what was written
+    return len(saved)
 
 
 @pytest.mark.parametrize("compression", [None, "zstd"])
@@ -53,7 +50,11 @@ def test_repair_truncated_copies(tmp_path, compression):
         assert 0 <= result.bytes_discarded < cut
         if cut == boundary:  # the file ends right after a chunk: nothing lost
             assert result.bytes_discarded == 0
-        if cut == boundary - 1:  # ... one byte less: that whole chunk is lost
+        if cut == boundary - 1 and compression is None:  # one byte less: that chunk's last record is lost
+            assert expected == _expected_saved(src, boundary, written) - 1
+            table = chunk_table(src)[2]
+            assert result.bytes_discarded == table.messages[-1][2] - table.messages[-2][2] - 1
+        if cut == boundary - 1 and compression:  # ... its last zstd block: here the whole (small) chunk
             assert result.bytes_discarded == chunks[2].chunk_length - 1
         broken = bag / f"cut{cut}_0.mcap.broken"
         assert broken.read_bytes() == data[:cut]
@@ -124,8 +125,53 @@ def test_repair_keeps_existing_metadata_fields(tmp_path):
     mcap.write_bytes(mcap.read_bytes()[: mcap.stat().st_size // 2])
     assert main([str(mcap)]) == 0  # an .mcap inside a bag directory repairs the bag
     meta = yaml.safe_load(meta_path.read_text())["rosbag2_bagfile_information"]
-    assert meta["custom_data"] == {"run": "42"}
+    assert set(meta["custom_data"]) == {"run", REPAIRED_KEY} and meta["custom_data"]["run"] == "42"
     assert 0 < meta["message_count"] < len(written)
+
+
+def test_repair_writes_the_repaired_note(tmp_path):
+    """metadata.yaml of a repaired bag says, under custom_data[REPAIRED_KEY], in one line: repaired,
+    how many messages kept up to which log time, what was lost; other entries are kept."""
+    bag = tmp_path / "b"
+    written = write_bag(bag, TOPICS, 200, chunk_size=4096)  # log times 1 ms apart
+    meta_path = bag / "metadata.yaml"
+    doc = yaml.safe_load(meta_path.read_text())
+    doc["rosbag2_bagfile_information"]["custom_data"] = {"mwip_ros.lockstep_gaps": "none", "run": "7"}
+    meta_path.write_text(yaml.safe_dump(doc))
+    mcap = bag / "b_0.mcap"
+    chunk = chunk_table(mcap)[3]
+    cut = chunk.data_start + chunk.messages[4][2] + 5  # 5 bytes into the 6th record of the 4th chunk
+    mcap.write_bytes(mcap.read_bytes()[:cut])
+    result = repair(bag)
+    kept = result.total_messages  # the chunks before, and the first 5 records of the cut one
+    assert kept == sum(1 for w in written if w[2] <= chunk.messages[4][1])
+    custom = yaml.safe_load(meta_path.read_text())["rosbag2_bagfile_information"]["custom_data"]
+    assert custom["mwip_ros.lockstep_gaps"] == "none" and custom["run"] == "7"
+    note = custom[REPAIRED_KEY]
+    assert "\n" not in note
+    last = (written[kept - 1][2] - written[0][2]) / 1e9
+    lost_until = (chunk.messages[-1][1] - written[0][2]) / 1e9
+    assert note == (f"repaired after a cut: {kept} messages kept up to log time {last:.3f} s (from the bag's "
+                    f"start); the {result.bytes_discarded} bytes after that were incomplete (messages up to log "
+                    f"time {lost_until:.3f} s lost)"), note
+    assert result.files[0].cut_chunk_messages == 5
+    assert not repair(bag).needed_repair  # a second run keeps the note
+    custom = yaml.safe_load(meta_path.read_text())["rosbag2_bagfile_information"]["custom_data"]
+    assert custom[REPAIRED_KEY] == note
+
+
+def test_repair_note_for_a_damaged_chunk_without_a_cut(tmp_path):
+    src = tmp_path / "src"
+    write_bag(src, TOPICS, 300, chunk_size=4096)
+    case = dict((name, data) for name, data, _ in damage_cases(src / "src_0.mcap"))["damaged chunk in the middle"]
+    bag = tmp_path / "b"
+    bag.mkdir()
+    (bag / "b_0.mcap").write_bytes(case)
+    result = repair(bag)  # no metadata.yaml: written from scratch, with the note
+    custom = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]["custom_data"]
+    assert custom[REPAIRED_KEY].startswith(f"repaired after damage: {result.total_messages} messages kept up to "
+                                           f"log time ")
+    assert custom[REPAIRED_KEY].endswith("; 1 damaged chunk(s) skipped")
 
 
 def test_repair_complete_bag_without_metadata(tmp_path):
