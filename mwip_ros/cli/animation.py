@@ -8,9 +8,10 @@ drives metres while the body is under one metre tall: a view holding the whole r
 the robot to a few pixels); ground ticks every :data:`TICK` m move past to show the motion, and
 a readout gives the wheel's x and theta_b.  Both axes have one scale, so the rod's drawn angle
 is theta_b.  Frame k shows every run at t_k = t_start + k / ``fps`` (each run's latest sample at
-or before t_k, see :func:`frame_times`) and the GIF plays at ``fps``: real time (a run longer than
-:data:`MAX_FRAMES` frames gets a lower ``fps``).  A run that fell
-(its ``fallen`` flag, or |theta_b| beyond ``fall_angle`` in its table, see :func:`fall_time`) is
+or before t_k, see :func:`frame_times`; the last frame is the latest run's end, held :data:`HOLD_END_MS`)
+and the GIF plays at ``fps``: real time (a run longer than :data:`MAX_FRAMES` frames gets a lower
+``fps``).  A run that fell (|theta_b| beyond ``fall_angle`` in its table, the plant's record of a fall
+in its ``record``, or its ``fallen`` flag, see :func:`fall_time`) is
 titled "FELL at t = ..." in :data:`FELL_COLOUR` from then on; a run that ended before the others
 holds its last pose.
 
@@ -26,15 +27,17 @@ from typing import List, Optional, Sequence, Tuple
 
 import numpy as np
 
+from mwip_ros.core import metrics
 from mwip_ros.core.markers import robot_pose
 from mwip_ros.core.model import PhysicalParams
 
-__all__ = ["FPS", "MAX_FRAMES", "TICK", "PANEL_SIZE", "HEADER", "ROD_COLOUR", "SPOKE_COLOUR", "FELL_COLOUR",
+__all__ = ["FPS", "MAX_FRAMES", "TICK", "HOLD_END_MS", "PANEL_SIZE", "HEADER", "ROD_COLOUR", "SPOKE_COLOUR", "FELL_COLOUR",
            "default_nominal", "fall_time", "frame_times", "write_gif"]
 
 FPS = 20.0            # frames per second of simulated time and of playback (50 ms a frame: exact in a GIF)
 MAX_FRAMES = 1200     # a longer animation gets fewer frames per second (a 10 min run: 2 fps), still in real time
 TICK = 0.25           # [m] between ground ticks
+HOLD_END_MS = 1500    # [ms] the last frame is shown before the GIF loops
 PANEL_SIZE = (280, 220)   # [px] of one run's panel
 HEADER = 24           # [px] above the panels: the time readout
 _SS = 2               # drawn at _SS times the size, then reduced: antialiased edges
@@ -77,14 +80,16 @@ def fall_time(run, fall_angle: float) -> Optional[float]:
     Returns
     -------
     float or None
-        The first t with |theta_b| > ``fall_angle``; else the last t if the run's ``fallen`` flag is
-        set; else None.
+        The first t with |theta_b| > ``fall_angle``; else the fall the run's ``record`` holds (a bag's
+        plant log); else the last t if the run's ``fallen`` flag is set; else None.
     """
     t = np.asarray(run["t"], dtype=float)
-    with np.errstate(invalid="ignore"):
-        over = np.flatnonzero(np.abs(np.asarray(run["theta_b"], dtype=float)) > fall_angle)
-    if len(over):
-        return float(t[over[0]])
+    fell = metrics.fall_time(t, run["theta_b"], fall_angle)
+    if fell is not None:
+        return fell
+    recorded = (getattr(run, "record", None) or {}).get("t_fall")   # the plant's own record (a bag's log)
+    if recorded is not None:
+        return float(recorded)
     return float(t[-1]) if getattr(run, "fallen", False) and len(t) else None
 
 
@@ -100,12 +105,15 @@ def frame_times(runs: Sequence, fps: float = FPS) -> np.ndarray:
     Returns
     -------
     numpy.ndarray
-        t_k = t_start + k / fps for k = 0 .. floor((t_end - t_start) fps).
+        t_k = t_start + k / fps for k = 0 .. floor((t_end - t_start) fps), then t_end itself when it is
+        not on that grid: the last frame shows how the runs ended (a fall at t = 0.48 s with frames every
+        0.05 s would otherwise never be shown).
     """
     if not fps > 0:
         raise ValueError(f"fps must be > 0, got {fps!r}")
     t0, t1 = _span(runs)
-    return t0 + np.arange(int(math.floor((t1 - t0) * fps + 1e-9)) + 1) / fps
+    times = t0 + np.arange(int(math.floor((t1 - t0) * fps + 1e-9)) + 1) / fps
+    return np.append(times, t1) if t1 - times[-1] > 1e-6 else times
 
 
 def _span(runs: Sequence) -> Tuple[float, float]:
@@ -154,7 +162,7 @@ class _Panel:
 
     def title(self, t: float) -> Tuple[str, tuple]:
         if self.fell is not None and t >= self.fell - 1e-9:
-            return f"{self.run.label}: FELL at t = {self.fell:.2f} s", FELL_COLOUR
+            return f"{self.run.label}: FELL at t = {self.fell:.3f} s", FELL_COLOUR
         if not len(self.t):
             return f"{self.run.label} (no states)", TEXT
         if t > self.t[-1] + 1e-9:
@@ -260,5 +268,8 @@ def write_gif(runs: Sequence, path, nominal: Optional[PhysicalParams] = None, fp
                 d.line([(j * pw, HEADER), (j * pw, size[1])], fill=REFERENCE, width=1)
         d.text((size[0] / 2, 3), f"t = {t:6.2f} s", fill=TEXT, font=fonts[2], anchor="mt")
         frames.append(frame.quantize(palette=pal, dither=Image.Dither.NONE))
-    frames[0].save(Path(path), save_all=True, append_images=frames[1:], duration=int(round(1000 / fps)), loop=0)
+    step = int(round(1000 / fps))
+    durations = [step] * len(frames)
+    durations[-1] = max(step, HOLD_END_MS)   # the end (a fall, the last pose) stays readable before the loop
+    frames[0].save(Path(path), save_all=True, append_images=frames[1:], duration=durations, loop=0)
     return len(frames)

@@ -1,7 +1,11 @@
-"""Figures: the paper's Fig. 3 layout and the observer's estimate against the truth."""
+"""Figures: the paper's Fig. 3 layout, the observer's estimate against the truth, and a sweep's figures.
+
+Every time-series figure shades the metrics window it is given; legends sit between the title and the
+axes (they cover no curve); sweep axes are labelled with their parameter's unit (:func:`axis_label`).
+"""
 from __future__ import annotations
 
-from typing import Sequence
+from typing import Optional, Sequence
 
 import numpy as np
 
@@ -16,45 +20,100 @@ def _plt():
 
 
 FIG3_PANELS = [("theta_b", r"$\theta_b$ [rad]"), ("dtheta_b", r"$\dot\theta_b$ [rad/s]"),
-               ("dtheta_w", r"$\dot\theta_w$ [rad/s]"), ("u", r"$u$ [N m]")]
+               ("dtheta_w", r"$\dot\theta_w$ [rad/s]"), ("u", r"$u$ [N m] (applied)")]
+WINDOW_SHADE = dict(color="0.55", alpha=0.13, lw=0)
 
 
-def fig3(runs: Sequence, path, title: str = "MWIP: DSC vs DSCNDO") -> None:
+def title_of(runs: Sequence, what: str = "MWIP") -> str:
+    """'MWIP: dsc vs dscndo vs lqr': the labels that ran."""
+    labels = [str(r.label) for r in runs]
+    return f"{what}: " + " vs ".join(labels) if labels else what
+
+
+def _window_label(window) -> str:
+    return f"metrics window [{window[0]:g}, {window[1]:g}] s"
+
+
+def _legend_outside(fig, axes) -> float:
+    """One legend for the figure, between the title and the axes (it covers no curve).  Returns the top of
+    the axes' area (figure fraction) for ``tight_layout(rect=...)``."""
+    handles, labels = [], []
+    for ax in axes:
+        for h, lab in zip(*ax.get_legend_handles_labels()):
+            if lab not in labels:
+                handles.append(h)
+                labels.append(lab)
+    ncol = min(len(labels), 4) or 1
+    rows = -(-len(labels) // ncol)
+    height = fig.get_figheight()
+    fig.legend(handles, labels, loc="upper center", bbox_to_anchor=(0.5, 1 - 0.45 / height), ncol=ncol,
+               fontsize=9, frameon=False)
+    return 1 - (0.42 + 0.2 * rows) / height
+
+
+def fig3(runs: Sequence, path, title: Optional[str] = None, window=None, falls: Optional[dict] = None) -> None:
     """theta_b, theta_b', theta_w' and u against time, one line per run (paper Fig. 3).
 
-    ``runs`` are objects with ``label`` and ``__getitem__(column)`` (SimResult or a bag run).
+    ``runs`` are objects with ``label`` and ``__getitem__(column)`` (SimResult or a bag run); ``u`` is the
+    torque the plant applied.  ``title`` defaults to the labels that ran; ``window`` (t0, t1) is shaded
+    (the metrics window); ``falls`` {label: t} marks each fall with a cross on theta_b.
     """
     plt = _plt()
-    fig, axes = plt.subplots(len(FIG3_PANELS), 1, sharex=True, figsize=(8, 9))
+    fig, axes = plt.subplots(len(FIG3_PANELS), 1, sharex=True, figsize=(8.5, 9.5))
+    falls = falls or {}
     for ax, (col, ylabel) in zip(axes, FIG3_PANELS):
+        if window is not None:
+            ax.axvspan(window[0], window[1], **WINDOW_SHADE, label=_window_label(window))
         for run in runs:
-            ax.plot(run["t"], run[col], label=run.label, lw=1.0)
+            line, = ax.plot(run["t"], run[col], label=run.label, lw=1.0)
+            if col == "theta_b" and run.label in falls:
+                t = np.asarray(run["t"])
+                k = min(int(np.searchsorted(t, falls[run.label] - 1e-9)), len(t) - 1)
+                ax.plot([t[k]], [run[col][k]], "X", ms=9, color=line.get_color(),
+                        label=f"{run.label} FELL at t = {falls[run.label]:.3f} s")
         ax.set_ylabel(ylabel)
         ax.grid(True, alpha=0.3)
-    axes[0].legend(loc="upper right")
+    top = _legend_outside(fig, axes)
     axes[-1].set_xlabel("t [s]")
-    fig.suptitle(title)
-    fig.tight_layout()
+    fig.suptitle(title or title_of(runs))
+    fig.tight_layout(rect=(0, 0, 1, top))
     fig.savefig(path, dpi=110)
     plt.close(fig)
 
 
-def observer_plot(runs: Sequence, path) -> None:
-    """tau_hat against the true lumped disturbance tau_d, both components, per run."""
+def _finite(x) -> bool:
+    return bool(np.isfinite(np.asarray(x, dtype=float)).any())
+
+
+def observer_plot(runs: Sequence, path, window=None) -> None:
+    """tau_hat against the true lumped disturbance tau_d, both components, a column per run.  A run
+    without estimates (a plant CSV without --estimates, plain DSC) shows its tau_d and says so."""
     plt = _plt()
-    runs = [r for r in runs if np.isfinite(np.asarray(r["tau_hat1"])).any()]
-    fig, axes = plt.subplots(2, max(1, len(runs)), sharex=True, figsize=(6 * max(1, len(runs)), 6), squeeze=False)
+    runs = [r for r in runs if _finite(r["tau_hat1"]) or _finite(r["tau_d1"]) or _finite(r["tau_d2"])] or list(runs)
+    n = max(1, len(runs))
+    fig, axes = plt.subplots(2, n, sharex=True, figsize=(5.2 * n, 6), squeeze=False)
     for j, run in enumerate(runs):
+        has_est = _finite(run["tau_hat1"]) or _finite(run["tau_hat2"])
         for i in (1, 2):
             ax = axes[i - 1][j]
-            ax.plot(run["t"], run[f"tau_d{i}"], label=rf"$\tau_{{d{i}}}$ (true)", lw=1.2)
-            ax.plot(run["t"], run[f"tau_hat{i}"], "--", label=rf"$\hat\tau_{{d{i}}}$ (observer)", lw=1.0)
-            ax.set_ylabel("[N m]")
+            if window is not None:
+                ax.axvspan(window[0], window[1], **WINDOW_SHADE, label=_window_label(window))
+            ax.plot(run["t"], run[f"tau_d{i}"], color="C0", label=r"$\tau_{d}$ (true)", lw=1.2)
+            if has_est:
+                ax.plot(run["t"], run[f"tau_hat{i}"], "--", color="C1", label=r"$\hat\tau_{d}$ (observer)", lw=1.0)
+            else:
+                ax.text(0.5, 0.5, "no estimate recorded", transform=ax.transAxes, ha="center", va="center",
+                        fontsize=11, color="0.35", bbox=dict(fc="white", ec="0.7", alpha=0.8))
+            if not _finite(run[f"tau_d{i}"]):
+                ax.text(0.5, 0.35, "no true disturbance recorded", transform=ax.transAxes, ha="center",
+                        fontsize=9, color="0.35")
+            ax.set_ylabel(rf"$\tau_{{d{i}}}$ [N m]")
             ax.set_title(f"{run.label}: component {i}")
             ax.grid(True, alpha=0.3)
-            ax.legend(loc="upper right")
         axes[-1][j].set_xlabel("t [s]")
-    fig.tight_layout()
+    top = _legend_outside(fig, axes.ravel())
+    fig.suptitle(title_of(runs, "Lumped disturbance and its estimate"))
+    fig.tight_layout(rect=(0, 0, 1, top))
     fig.savefig(path, dpi=110)
     plt.close(fig)
 
@@ -72,52 +131,134 @@ def _axis_values(values, is_grid: bool, bins: int = 8):
     return 0.5 * (edges[:-1] + edges[1:]), idx
 
 
+def axis_label(key: str) -> str:
+    """A sweep axis's label: its key and the unit of its parameter (the schema's description, e.g.
+    'plant_sim.initial.theta_b [rad]'); the key alone when the schema gives none."""
+    import re
+    try:
+        from mwip_ros.sweep.spec import _resolve
+        ps = _resolve(key, "")[2]
+    except Exception:  # noqa: BLE001 - not a parameter key (an old results.csv): the key alone
+        return key
+    unit = getattr(ps, "unit", "") or ""
+    if not unit:
+        m = re.search(r"\[([^\]]+)\]", ps.description)
+        unit = m.group(1) if m else ""
+    return f"{key} [{unit}]" if unit else key
+
+
+def _thin_ticks(ax, which: str, levels, max_ticks: int = 10) -> None:
+    """Ticks on the cells of a categorical axis: every k-th level, at most ``max_ticks`` labels."""
+    step = max(1, -(-len(levels) // max_ticks))
+    idx = list(range(0, len(levels), step))
+    labels = [f"{levels[i]:.3g}" for i in idx]
+    (ax.set_xticks if which == "x" else ax.set_yticks)(idx, labels)
+
+
 def sweep_upright_map(cols: dict, axes: Sequence, path) -> bool:
-    """Share upright over the first two varied axes (a heat map per law, cells labelled; a line for one
-    axis).  ``axes`` are (key, is_grid) of the numeric varied parameters; False when there is none.  Grid
-    axes show their own values, one cell each; random axes are binned."""
-    if not axes:
-        return False
-    plt = _plt()
+    """Share upright over the first two varied axes: a heat map per law (cells labelled when few) for two
+    axes, one chart with a line per law for one axis (a varied axis with a single value counts as none).
+    ``axes`` are (key, is_grid) of the numeric varied parameters; False when none varies.  Grid axes show
+    their own values; random axes are binned.  Axis labels carry the parameter's unit."""
     names = laws(cols)
     ctrl = np.asarray(cols["controller"])
+    varied = [(k, g) for k, g in axes if len(np.unique(np.asarray(cols[k], dtype=float))) > 1] or list(axes[:1])
+    if not varied:
+        return False
+    plt = _plt()
     up = np.asarray(cols["upright"], dtype=float)
-    (kx, gx), *rest = axes[:2]
-    fig, panels = plt.subplots(1, len(names), figsize=(5.4 * len(names) + (1.2 if rest else 0), 4.4), squeeze=False,
+    (kx, gx), *rest = varied[:2]
+    xlabel = axis_label(kx) + ("" if gx else " (binned)")
+    if not rest:   # one axis: a line per law on one chart, offset so equal curves stay visible
+        _share_figure(plt, cols, kx, gx, names, "Share of scenarios upright", path)
+        return True
+    ky, gy = rest[0]
+    fig, panels = plt.subplots(1, len(names), figsize=(5.4 * len(names) + 1.2, 4.6), squeeze=False,
                                constrained_layout=True)
     im = None
     for ax, law in zip(panels[0], names):
         sel = ctrl == law
         lx, ix = _axis_values(np.asarray(cols[kx])[sel], gx)
-        if rest:
-            ky, gy = rest[0]
-            ly, iy = _axis_values(np.asarray(cols[ky])[sel], gy)
-            share = np.full((len(ly), len(lx)), np.nan)
-            for a in range(len(lx)):
-                for b in range(len(ly)):
-                    m = (ix == a) & (iy == b)
-                    if m.any():
-                        share[b, a] = up[sel][m].mean()
-            im = ax.imshow(share, origin="lower", vmin=0, vmax=1, cmap="RdYlGn", aspect="auto")
-            ax.set_xticks(range(len(lx)), [f"{v:.3g}" for v in lx], rotation=45 if len(lx) > 8 else 0)
-            ax.set_yticks(range(len(ly)), [f"{v:.3g}" for v in ly])
-            if share.size <= 150:
-                for (b, a), v in np.ndenumerate(share):
-                    if np.isfinite(v):
-                        ax.text(a, b, f"{v:.2f}", ha="center", va="center", fontsize=7)
-            ax.set_ylabel(ky + ("" if gy else " (binned)"))
-        else:
-            share = [up[sel][ix == a].mean() if (ix == a).any() else np.nan for a in range(len(lx))]
-            ax.plot(lx, share, "o-")
-            ax.set_ylim(-0.05, 1.05)
-            ax.set_ylabel("share upright")
-        ax.set_xlabel(kx + ("" if gx else " (binned)"))
+        ly, iy = _axis_values(np.asarray(cols[ky])[sel], gy)
+        share = np.full((len(ly), len(lx)), np.nan)
+        for a in range(len(lx)):
+            for b in range(len(ly)):
+                m = (ix == a) & (iy == b)
+                if m.any():
+                    share[b, a] = up[sel][m].mean()
+        im = ax.imshow(share, origin="lower", vmin=0, vmax=1, cmap="RdYlGn", aspect="auto")
+        _thin_ticks(ax, "x", lx)
+        _thin_ticks(ax, "y", ly)
+        if len(lx) <= 12 and len(ly) <= 12:   # cells wide enough for their share
+            for (b, a), v in np.ndenumerate(share):
+                if np.isfinite(v):
+                    ax.text(a, b, f"{v:.2f}", ha="center", va="center", fontsize=7)
+        ax.set_ylabel(axis_label(ky) + ("" if gy else " (binned)"))
+        ax.set_xlabel(xlabel)
         ax.set_title(f"{law}: share upright")
     if im is not None:
-        fig.colorbar(im, ax=list(panels[0]), label="share upright")
+        fig.colorbar(im, ax=list(panels[0]), label="share upright [-]")
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return True
+
+
+_STYLES = [dict(marker="o", ls="-"), dict(marker="s", ls="--"), dict(marker="^", ls="-."), dict(marker="D", ls=":")]
+
+
+def _share_lines(ax, cols: dict, key: str, is_grid: bool, names, roa: Optional[dict] = None) -> str:
+    """Share upright against ``key``, a line per law, each with its own marker and line style and drawn a little
+    higher than the one before (:data:`OFFSET` each), so laws with equal shares stay distinguishable.  Returns
+    a note naming the laws whose curves are identical ('' when none are)."""
+    ctrl = np.asarray(cols["controller"])
+    up = np.asarray(cols["upright"], dtype=float)
+    curves = {}
+    for law in names:
+        sel = ctrl == law
+        lx, ix = _axis_values(np.asarray(cols[key], dtype=float)[sel], is_grid)
+        curves[law] = (lx, np.array([up[sel][ix == a].mean() if (ix == a).any() else np.nan
+                                     for a in range(len(lx))]))
+    groups, seen = [], set()
+    for law in names:
+        if law in seen:
+            continue
+        group = [o for o in names if o not in seen and len(curves[o][0]) == len(curves[law][0])
+                 and np.allclose(curves[o][0], curves[law][0])
+                 and np.allclose(curves[o][1], curves[law][1], equal_nan=True)]
+        seen.update(group)
+        if len(group) > 1:
+            groups.append(group)
+    for j, law in enumerate(names):
+        lx, share = curves[law]
+        label = law
+        if roa is not None:
+            label += f" (ROA {roa[law]:.3f} rad)" if roa.get(law) is not None else " (no ROA)"
+        line, = ax.plot(lx, share + j * OFFSET, ms=4, lw=1.2, alpha=0.85, markevery=(j, len(names)),
+                        label=label, **_STYLES[j % len(_STYLES)])
+        if roa is not None and roa.get(law) is not None:
+            a = roa[law]
+            ax.plot([-a, a], [-0.03 - 0.015 * j] * 2, color=line.get_color(), lw=3, solid_capstyle="butt")
+    if not groups:
+        return ""
+    return "identical curves: " + "; ".join(" = ".join(g) for g in groups) + f" (drawn {OFFSET:g} apart)"
+
+
+OFFSET = 0.015   # share upright: each law's curve this much above the one before
+
+
+def _share_figure(plt, cols, key, is_grid, names, title, path, roa=None) -> None:
+    fig, ax = plt.subplots(figsize=(8, 5))
+    note = _share_lines(ax, cols, key, is_grid, names, roa)
+    ax.set_xlabel(axis_label(key) + ("" if is_grid else " (binned)"))
+    ax.set_ylabel("share upright [-]")
+    ax.set_ylim(-0.05 - (0.015 * len(names) if roa is not None else 0.0), 1.03 + OFFSET * len(names))
+    ax.set_title(title + (f"\n{note}" if note else ""), fontsize=10)
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=min(len(names), 2 if roa else 4), fontsize=9,
+              frameon=False)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
 
 
 def _rms_histogram(ax, cols: dict, bins) -> None:
@@ -130,7 +271,7 @@ def _rms_histogram(ax, cols: dict, bins) -> None:
         ax.hist(rms[sel], bins=bins, histtype="step", lw=1.5, label=f"{law} ({sel.sum()} upright)")
     ax.set_xscale("log")
     ax.set_xlabel(r"$\theta_b$ RMS over the window [rad]")
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=8, loc="best")
 
 
 def _rms_bins(all_cols):
@@ -161,24 +302,7 @@ def sweep_rms_panels(named: Sequence, path) -> None:
 
 
 def sweep_roa(cols: dict, key: str, roa: dict, path) -> None:
-    """Share upright against theta_b(0) per law, with each law's region of attraction marked."""
-    plt = _plt()
-    ctrl = np.asarray(cols["controller"])
-    up = np.asarray(cols["upright"], dtype=float)
-    th = np.asarray(cols[key], dtype=float)
-    fig, ax = plt.subplots(figsize=(7, 4))
-    for law in laws(cols):
-        sel = ctrl == law
-        levels = np.unique(th[sel])
-        line, = ax.plot(levels, [up[sel][th[sel] == v].mean() for v in levels], "o-", ms=3, label=law)
-        a = roa.get(law)
-        if a is not None:
-            ax.axvspan(-a, a, color=line.get_color(), alpha=0.12)
-    ax.set_xlabel(r"$\theta_b(0)$ [rad]")
-    ax.set_ylabel("share upright")
-    ax.set_ylim(-0.05, 1.05)
-    ax.set_title("Region of attraction (shaded: every scenario recovered)")
-    ax.legend()
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    """Share upright against theta_b(0) per law, with each law's region of attraction as a bar (in the law's
+    colour) below the curves."""
+    _share_figure(_plt(), cols, key, True, laws(cols), "Region of attraction (bars: every scenario within "
+                  "recovered)", path, roa=roa)

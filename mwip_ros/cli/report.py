@@ -7,16 +7,36 @@ writes ``fig3.png`` (theta_b, theta_b', theta_w', u; one line per run, the paper
 layout), ``observer.png`` (tau_hat against the true lumped disturbance), ``metrics.md`` /
 ``metrics.json`` (the metrics of docs/theory.md, per run) and ``animation.gif`` (the robot from the side,
 one panel per run, :mod:`mwip_ros.cli.animation`; ``--no-animation`` skips it).
+
+What ran is what is judged:
+
+* the metrics window is ``--window`` (default [5, 10] s); when the runs end before the default
+  window does, the longest run's second half is used instead and the report says so; a
+  ``--window`` given explicitly that the runs do not reach is refused (exit 2);
+* ``upright`` means the run never fell (|theta_b| <= fall_angle over the whole run); a fall is
+  reported with its time (the plant's own "FALLEN at t = ..." where a bag recorded it, else
+  the first sample beyond the fall angle): a ``FELL: <label> at t = <t> s`` line on stdout per
+  fallen run (exit 0 still: the report is written), in metrics.md / metrics.json and the figures;
+* every run's end is stated ("run ends at t = X s"), a run that ended before the plant's
+  configured duration (as the bag's plant log tells it) as cut;
+* a bag that ``mwip_bag_repair`` repaired, or whose lockstep recording has gaps, gets a warning;
+* with a run labelled ``dscndo``, each law's theta_b peak-to-peak, theta_b RMS and u RMS as a
+  ratio to DSCNDO's (else to the last run's).
+
+``--out`` must not already hold a report (exit 2) unless ``--force``, which first removes the
+report files there (so none is left over from an earlier report).
 """
 from __future__ import annotations
 
 import argparse
 import json
+import math
+import re
 import sys
 from pathlib import Path
-from typing import List, Optional
+from typing import List, Optional, Sequence
 
-from mwip_ros.bag import BagError, read_metadata
+from mwip_ros.bag import REPAIRED_KEY, BagError, read_metadata
 from mwip_ros.bag.ledger import GAPS_KEY
 from mwip_ros.cli import animation, plotting
 from mwip_ros.core import metrics
@@ -25,40 +45,155 @@ from mwip_ros.params import defaults_for
 from mwip_ros.runs import load_run
 
 FALL_ANGLE = defaults_for("plant_sim")["fall_angle"]
+REPORT_FILES = ("fig3.png", "observer.png", "metrics.md", "metrics.json", "animation.gif")
+REFERENCE = "dscndo"     # the law the ratios compare to, when a run carries its label
+RATIOS = [("theta_b_p2p", "theta_b p2p"), ("theta_b_rms", "theta_b RMS"), ("u_rms", "u RMS")]
+EXIT_BAD_INPUT = 2
+
+
+def bag_custom_data(path) -> dict:
+    """A bag's metadata custom_data ({} for a CSV, a bag without it or unreadable metadata)."""
+    p = Path(path)
+    if p.suffix == ".csv":
+        return {}
+    try:
+        info = read_metadata(p if p.is_dir() else p.parent)
+    except BagError:
+        return {}
+    return dict((info or {}).get("custom_data") or {})
 
 
 def recording_gaps(path) -> str:
     """What a lockstep bag lacks, as its recorder wrote into the metadata ('' when complete or not a bag)."""
-    p = Path(path)
-    try:
-        info = read_metadata(p if p.is_dir() else p.parent) if p.suffix != ".csv" else None
-    except BagError:
-        return ""
-    return str(((info or {}).get("custom_data") or {}).get(GAPS_KEY, "") or "")
+    return str(bag_custom_data(path).get(GAPS_KEY, "") or "")
+
+
+def repaired(path) -> str:
+    """What ``mwip_bag_repair`` wrote into a repaired bag's metadata ('' when it was not repaired)."""
+    return str(bag_custom_data(path).get(REPAIRED_KEY, "") or "")
+
+
+def reference_run(labels: Sequence[str]) -> tuple:
+    """(the index of the run the ratios compare to, a sentence saying which and why)."""
+    for i, name in enumerate(labels):
+        if re.split(r"[^a-z0-9]+", name.lower())[-1:] == [REFERENCE]:   # 'dscndo', '2026-11-22_101500_dscndo'
+            return i, f"{name} is the DSCNDO run"
+    return len(labels) - 1, f"the last run, as no run is labelled {REFERENCE}"
+
+
+def ratio_rows(named: Sequence[tuple]) -> tuple:
+    """(the reference's label, the sentence of :func:`reference_run`, [(label, [ratio or None, ...])] for every
+    other run): its theta_b p2p, theta_b RMS and u RMS over the reference's."""
+    i, why = reference_run([n for n, _ in named])
+    ref = named[i][1]
+    rows = []
+    for j, (name, m) in enumerate(named):
+        if j == i:
+            continue
+        vals = []
+        for key, _ in RATIOS:
+            a, b = getattr(m, key), getattr(ref, key)
+            vals.append(a / b if math.isfinite(a) and math.isfinite(b) and b > 0 else None)
+        rows.append((name, vals))
+    return named[i][0], why, rows
+
+
+def ratio_table(named: Sequence[tuple], markdown: bool = True) -> List[str]:
+    """The ratios of each run to the reference (:func:`ratio_rows`) as table lines; [] for one run."""
+    if len(named) < 2:
+        return []
+    ref, why, rows = ratio_rows(named)
+    head = ["run"] + [f"{label} / {ref} [x]" for _, label in RATIOS]
+    fell = {name for name, m in named if not m.upright}
+    body = [[name] + [("fell" if name in fell else "-") if v is None else f"{v:.2f}" for v in vals]
+            for name, vals in rows]
+    if markdown:
+        return [f"Each run's metrics over {ref}'s ({why}); above 1: {ref}'s is that many times smaller:", "",
+                "| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in head) + "|"] + \
+               ["| " + " | ".join(r) + " |" for r in body]
+    widths = [max(len(head[k]), *(len(r[k]) for r in body)) for k in range(len(head))]
+    fmt = "  ".join("{:<%d}" % w for w in widths)
+    return [f"ratios to {ref} ({why}):", fmt.format(*head)] + [fmt.format(*r) for r in body]
+
+
+def run_notes(run: Trajectory, m: metrics.Metrics) -> List[str]:
+    """What a run's end was: its fall, its cut (the plant's configured duration, where the bag recorded it)."""
+    rec = run.record or {}
+    end = f"run ends at t = {m.t_end:.3f} s"
+    if m.t_fall is not None:
+        said = f" (the plant logged: \"{rec['fall_text']}\")" if rec.get("fall_text") else ""
+        return [f"{end}: it FELL at t = {m.t_fall:.3f} s{said}"]
+    dur = rec.get("duration_s")
+    if rec.get("interrupted_at") is not None:
+        return [f"{end}: cut, the plant was interrupted at t = {rec['interrupted_at']:.3f} s of its configured "
+                f"{dur:g} s"]
+    h = run.h if run.h and math.isfinite(run.h) else 0.0
+    if dur and m.t_end < dur - max(h, 1e-6) / 2:
+        return [f"{end}: cut, before the plant's configured duration of {dur:g} s"]
+    if dur:
+        return [f"{end} (the plant's configured duration: {dur:g} s)"]
+    if dur == 0.0:
+        return [f"{end} (the plant ran until stopped)"]
+    return [end]
 
 
 def write_report(runs: List[Trajectory], out: Path, window=metrics.WINDOW, fall_angle: float = FALL_ANGLE,
-                 warnings: List[str] = (), gif_fps: Optional[float] = animation.FPS) -> dict:
+                 warnings: List[str] = (), gif_fps: Optional[float] = animation.FPS,
+                 window_requested: bool = False) -> dict:
+    """Write the report of ``runs`` into ``out``.
+
+    Returns a dict: ``named`` [(label, Metrics)], ``window`` (the one used), ``window_note`` ('' or why it
+    is not the requested one), ``fallen`` {label: t_fall} of the runs that fell (empty: none did),
+    ``notes`` {label: [sentences on the run's end]}, ``files`` (the names written).  Raises
+    :class:`metrics.WindowError` when ``window_requested`` and the runs do not reach the window."""
+    t_end = max(float(r.t[-1]) for r in runs)
+    window, window_note = metrics.fit_window(window, t_end, window_requested)
+    named, notes = [], {}
+    for r in runs:
+        rec = r.record or {}
+        m = metrics.compute(r.columns, window, rec.get("fall_angle", fall_angle), rec.get("t_fall"))
+        named.append((r.label, m))
+        notes[r.label] = run_notes(r, m)
+        if not m.covers_window and m.upright:
+            notes[r.label].append(f"it ends before the window's end ({window[1]:g} s): its metrics cover "
+                                  f"{m.samples} samples of the window")
+    fallen = {name: m.t_fall for name, m in named if m.t_fall is not None}
     out.mkdir(parents=True, exist_ok=True)
-    named = [(r.label, metrics.compute(r.columns, window, fall_angle)) for r in runs]
-    plotting.fig3(runs, out / "fig3.png")
-    plotting.observer_plot(runs, out / "observer.png")
+    plotting.fig3(runs, out / "fig3.png", window=window, falls=fallen)
+    plotting.observer_plot(runs, out / "observer.png", window=window)
+    files = ["fig3.png", "observer.png"]
     if gif_fps:   # None: no animation; the robot sized by the schema's nominal model (no run records its own)
         animation.write_gif(runs, out / "animation.gif", fps=gif_fps, fall_angle=fall_angle)
+        files.append("animation.gif")
     md = ["# mwip_ros report", ""]
     md += [line for w in warnings for line in (f"**Warning:** {w}", "")]
-    md += [f"Metrics over t in [{window[0]:g}, {window[1]:g}] s.", "", metrics.markdown_table(named), ""]
-    if len(named) >= 2 and named[-1][1].theta_b_p2p > 0:
-        ratio = named[0][1].theta_b_p2p / named[-1][1].theta_b_p2p
-        md.append(f"theta_b peak-to-peak, {named[0][0]} / {named[-1][0]}: **{ratio:.2f}x**")
-        md.append("")
+    if window_note:
+        md += [f"**Note:** {window_note}.", ""]
+    md += [f"Metrics over t in [{window[0]:g}, {window[1]:g}] s. \"upright\": never fell (|theta_b| <= fall angle "
+           f"over the whole run).", "", metrics.markdown_table(named), ""]
+    md += ["## Runs", ""] + [f"- **{name}**: " + "; ".join(notes[name]) for name, _ in named] + [""]
+    md += [f"**FELL: {name} at t = {t:.3f} s**" + "  " for name, t in fallen.items()] + ([""] if fallen else [])
+    ratios = ratio_table(named)
+    md += ratios + ([""] if ratios else [])
     md += ["![Fig. 3 layout](fig3.png)", "", "![observer](observer.png)", ""]
     md += ["![animation](animation.gif)", ""] if gif_fps else []
     (out / "metrics.md").write_text("\n".join(md))
-    doc = {"window": list(window), "runs": {name: m.as_dict() for name, m in named},
+    ref, why, rows = ratio_rows(named) if len(named) >= 2 else (None, "", [])
+    doc = {"window": list(window), "window_note": window_note, "window_requested": bool(window_requested),
+           "runs": {name: m.as_dict() for name, m in named},
+           "fallen": fallen, "notes": notes,
+           "ratios": {"reference": ref, "why": why, "units": "ratio (run / reference)",
+                      "runs": {name: dict(zip((k for k, _ in RATIOS), vals)) for name, vals in rows}},
            "sources": {r.label: len(r) for r in runs}, "warnings": list(warnings)}
-    (out / "metrics.json").write_text(json.dumps(doc, indent=2, allow_nan=True))
-    return {"named": named}
+    (out / "metrics.json").write_text(json.dumps(metrics.json_safe(doc), indent=2, allow_nan=False))
+    files += ["metrics.md", "metrics.json"]
+    return {"named": named, "window": window, "window_note": window_note, "fallen": fallen, "notes": notes,
+            "files": files}
+
+
+def existing_report(out: Path) -> List[str]:
+    """The report files already in ``out``."""
+    return [f for f in REPORT_FILES if (out / f).exists()]
 
 
 def main(argv=None) -> int:
@@ -66,15 +201,21 @@ def main(argv=None) -> int:
         prog="mwip_report",
         description="Read recorded bags (rosbag2 MCAP directories) or mwip_sim / plant_sim CSVs and write "
                     "fig3.png, observer.png, metrics.md, metrics.json and animation.gif into --out.",
-        epilog="Exit codes: 0 written, 2 an input cannot be read (a damaged bag names the file and the chunk).")
+        epilog="Exit codes: 0 written (also when a run fell: a 'FELL: <label> at t = <t> s' line per fallen run), "
+               "2 an input cannot be read (a damaged bag names the file and the chunk), --out already holds a "
+               "report (without --force), or --window lies outside the runs.")
     ap.add_argument("runs", nargs="+", help="bag directories, .mcap files or .csv files (one run each)")
-    ap.add_argument("--out", type=Path, required=True, help="directory for the report (created)")
+    ap.add_argument("--out", type=Path, required=True,
+                    help="directory for the report (created; must not hold a report unless --force)")
+    ap.add_argument("--force", action="store_true",
+                    help="write into an --out that holds a report: its report files are removed first")
     ap.add_argument("--labels", nargs="+", default=None, help="a label per run (default: the file/dir name)")
     ap.add_argument("--estimates", nargs="+", default=None, metavar="CSV",
                     help="per run, the disturbance_observer's CSV (its csv parameter: t, tau_hat1, tau_hat2), "
                          "joined to the run by stamp; for plant_sim CSVs, which carry no estimates")
-    ap.add_argument("--window", type=float, nargs=2, default=metrics.WINDOW, metavar=("T0", "T1"),
-                    help="metrics window [s] (default: 5 10)")
+    ap.add_argument("--window", type=float, nargs=2, default=None, metavar=("T0", "T1"),
+                    help="metrics window [s] (default: 5 10, or the runs' second half when they end before 10 s; "
+                         "a window given here must lie within the runs)")
     ap.add_argument("--no-animation", action="store_true", help="do not write animation.gif")
     ap.add_argument("--gif-fps", type=float, default=animation.FPS, metavar="FPS",
                     help=f"animation.gif's frames per second of simulated time, played in real time (default: "
@@ -86,6 +227,11 @@ def main(argv=None) -> int:
         given = getattr(args, opt)
         if given and len(given) != len(args.runs):
             ap.error(f"--{opt} needs {len(args.runs)} values (one per run), got {len(given)}")
+    there = existing_report(args.out)
+    if there and not args.force:
+        print(f"mwip_report: error: {args.out} already holds a report ({', '.join(there)}); choose another --out "
+              f"or add --force", file=sys.stderr)
+        return EXIT_BAD_INPUT
     runs, warnings = [], []
     for i, path in enumerate(args.runs):
         try:
@@ -93,17 +239,37 @@ def main(argv=None) -> int:
                                  args.estimates[i] if args.estimates else None))
         except (OSError, ValueError) as exc:  # BagError too: a clear line per unreadable input, no traceback
             print(f"mwip_report: error: {path}: {exc}", file=sys.stderr)
-            return 2
+            return EXIT_BAD_INPUT
         print(f"read {path}: {len(runs[-1])} samples, t = 0 .. {runs[-1].t[-1]:.3f} s")
-        gaps = recording_gaps(path)
-        if gaps:
-            warnings.append(f"{runs[-1].label}: incomplete lockstep recording ({path}): {gaps}")
-            print(f"mwip_report: WARNING: {warnings[-1]}", file=sys.stderr)
-    res = write_report(runs, args.out, tuple(args.window), warnings=warnings,
-                       gif_fps=None if args.no_animation else args.gif_fps)
+        for what, text in (("incomplete lockstep recording", recording_gaps(path)),
+                           ("repaired bag (mwip_bag_repair)", repaired(path))):
+            if text:
+                warnings.append(f"{runs[-1].label}: {what} ({path}): {text}")
+                print(f"mwip_report: WARNING: {warnings[-1]}", file=sys.stderr)
+    requested = args.window is not None
+    window = tuple(args.window) if requested else metrics.WINDOW
+    try:
+        metrics.fit_window(window, max(float(r.t[-1]) for r in runs), requested)
+    except metrics.WindowError as exc:
+        print(f"mwip_report: error: --window: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    for f in there:   # --force: no file of an earlier report is left beside this one
+        (args.out / f).unlink()
+    res = write_report(runs, args.out, window, warnings=warnings,
+                       gif_fps=None if args.no_animation else args.gif_fps, window_requested=requested)
+    if res["window_note"]:
+        print(f"NOTE: {res['window_note']}")
+    w = res["window"]
+    print(f"metrics over t in [{w[0]:g}, {w[1]:g}] s:")
     print(metrics.text_table(res["named"]))
-    files = ["fig3.png", "observer.png", "metrics.md", "metrics.json"] + ["animation.gif"] * (not args.no_animation)
-    for f in files:
+    for line in ratio_table(res["named"], markdown=False):
+        print(line)
+    for name, lines in res["notes"].items():
+        for line in lines:
+            print(f"{name}: {line}")
+    for name, t in res["fallen"].items():
+        print(f"FELL: {name} at t = {t:.3f} s")
+    for f in res["files"]:
         print(f"wrote {args.out / f}")
     return 0
 

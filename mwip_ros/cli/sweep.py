@@ -17,6 +17,9 @@ from mwip_ros.sweep.spec import CONTROLLERS, SpecError, load_spec
 
 PROG = "mwip_sweep"
 EXIT_BAD_INPUT, EXIT_INTERRUPTED = 2, 130
+# what a sweep writes into --out: an --out holding any of them is refused without --force, which removes them
+SWEEP_FILES = ("results.csv", "summary.md", "summary.json", "sweep.json", "base.yaml", "spec.yaml",
+               "upright_map.png", "theta_b_rms.png", "roa.png")
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -36,7 +39,9 @@ def _parser() -> argparse.ArgumentParser:
         formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("spec", nargs="?", type=Path, help="the sweep spec (YAML); see config/sweeps/")
     ap.add_argument("--out", type=Path, metavar="DIR", help="output directory (created; must not hold results)")
-    ap.add_argument("--force", action="store_true", help="overwrite the results already in --out")
+    ap.add_argument("--force", action="store_true",
+                    help="overwrite: the outputs already in --out (removed first), the --write-params or "
+                         "--plot-rms file")
     add_runner_arguments(ap)
     ap.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     ap.add_argument("-q", "--quiet", action="store_true", help="no progress output")
@@ -79,6 +84,24 @@ def _fail(text: str) -> int:
     return EXIT_BAD_INPUT
 
 
+def _refuse_existing(paths, force: bool, hint: str) -> int:
+    """The one check of every output mwip_sweep writes: 0 when none of ``paths`` exists, or with ``force``
+    (which removes them: nothing of an earlier output is left beside the new one); else the error exit
+    code, after one line naming what exists."""
+    there = [Path(p) for p in paths if Path(p).exists()]
+    if not there:
+        return 0
+    if not force:
+        if len(paths) == 1:
+            return _fail(f"{there[0]} already exists; {hint} or add --force")
+        return _fail(f"{there[0].parent} already holds {', '.join(p.name for p in there)}; {hint} or add --force")
+    for p in there:
+        if p.is_dir():
+            return _fail(f"{p} is a directory, not a file")
+        p.unlink()
+    return 0
+
+
 def main(argv=None) -> int:
     args = _parser().parse_args(argv)
     if args.plot_rms is not None:
@@ -96,14 +119,19 @@ def main(argv=None) -> int:
         scenarios = expand(spec)
     except (SpecError, P.ParamError) as exc:
         return _fail(str(exc))
-    if (args.out / "results.csv").exists() and not args.force:
-        return _fail(f"{args.out} already holds results.csv; choose another --out or add --force")
+    spec_copy = args.out / "spec.yaml"   # re-running an output's own spec.yaml: that file is the input, kept
+    same = spec_copy.exists() and spec_copy.resolve() == args.spec.resolve()
+    refused = _refuse_existing([args.out / f for f in SWEEP_FILES if not (same and f == "spec.yaml")], args.force,
+                               "choose another --out")
+    if refused:
+        return refused
     args.out.mkdir(parents=True, exist_ok=True)
     info = _sweep_info(spec, args)
     (args.out / "sweep.json").write_text(json.dumps(info, indent=2))
     parameter_file(spec.base_sections, {}, args.out / "base.yaml",   # the base (and overlays) as one file
                    f"# {PROG}: the base of this sweep: {' + '.join(map(str, spec.base_path))}\n")
-    shutil.copyfile(args.spec, args.out / "spec.yaml")
+    if not same:
+        shutil.copyfile(args.spec, spec_copy)
 
     chunks = engine.make_chunks(spec, scenarios, args.chunk)
     total = sum(len(c) for c in chunks)
@@ -217,6 +245,9 @@ def _plot_rms(args) -> int:
             named.append((info.get("name", d.name), results.read_results(d / "results.csv")))
         except (OSError, ValueError) as exc:
             return _fail(f"{d} is not a sweep's output directory ({exc})")
+    refused = _refuse_existing([args.plot_rms], args.force, "choose another --plot-rms file")
+    if refused:
+        return refused
     from mwip_ros.cli import plotting
     plotting.sweep_rms_panels(named, args.plot_rms)
     print(f"wrote {args.plot_rms}")
@@ -240,6 +271,9 @@ def _write_params(args) -> int:
     if not rows:
         return _fail(f"no row for scenario {args.scenario} ({law}) in {d / 'results.csv'} (scenarios 0.."
                      f"{info['scenarios'] - 1}; an interrupted sweep lacks some)")
+    refused = _refuse_existing([args.write_params], args.force, "choose another --write-params file")
+    if refused:
+        return refused
     j = rows[0]
     placed = {("plant_sim", "seed"): cols["seed"][j], ("plant_sim", "duration_s"): float(info["duration_s"]),
               ("dscndo_controller", "use_observer"): LAWS[law][1], ("dscndo_controller", "law"): LAWS[law][0]}

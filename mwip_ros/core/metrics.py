@@ -1,15 +1,20 @@
 """The metrics of a run (docs/theory.md, what a correct implementation shows), from its columns.
 
-``WINDOW`` is the reporting window the paper's comparison uses, t in [5, 10] s.
+``WINDOW`` is the reporting window the paper's comparison uses, t in [5, 10] s.  ``upright`` means the
+run never fell (|theta_b| <= fall_angle over the whole run, :func:`fall_time`); whether the run lasted
+to the window's end is ``covers_window``, a separate question (:func:`fit_window` picks a window that fits
+runs shorter than the requested one).
 """
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass
-from typing import Mapping, Sequence
+from typing import Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 
-__all__ = ["WINDOW", "Metrics", "compute", "window_metrics", "markdown_table", "text_table"]
+__all__ = ["WINDOW", "Metrics", "compute", "window_metrics", "fall_time", "fit_window", "WindowError",
+           "markdown_table", "text_table", "json_safe"]
 
 WINDOW = (5.0, 10.0)
 
@@ -25,10 +30,59 @@ class Metrics:
     u_rms: float             # [N m]
     tau_err1_rms: float      # RMS of tau_hat1 - tau_d1 [N m] (NaN without estimates)
     tau_err2_rms: float      # RMS of tau_hat2 - tau_d2 [N m]
-    upright: bool            # |theta_b| stayed below fall_angle for the whole run
+    upright: bool            # never fell: |theta_b| <= fall_angle over the whole run
+    t_fall: Optional[float] = None    # the first t with |theta_b| > fall_angle (or the run's own record) [s]
+    t_end: float = math.nan           # the run's last sample [s]
+    covers_window: bool = True        # the run lasted to the window's end (a fallen run does not)
 
     def as_dict(self) -> dict:
-        return asdict(self)
+        """The fields, NaN / infinite values as None (JSON null)."""
+        return json_safe(asdict(self))
+
+
+def json_safe(obj):
+    """``obj`` with every non-finite float (NaN, +-inf) replaced by None, so ``json.dumps(..., allow_nan=False)``
+    writes valid JSON (null); dicts, lists and tuples are walked."""
+    if isinstance(obj, dict):
+        return {k: json_safe(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [json_safe(v) for v in obj]
+    if isinstance(obj, (bool, np.bool_)):
+        return bool(obj)
+    if isinstance(obj, (float, np.floating)):
+        return float(obj) if math.isfinite(obj) else None
+    if isinstance(obj, np.integer):
+        return int(obj)
+    return obj
+
+
+def fall_time(t, theta_b, fall_angle: float) -> Optional[float]:
+    """The first t with |theta_b| > ``fall_angle`` (NaN rows are no fall); None when there is none."""
+    with np.errstate(invalid="ignore"):
+        over = np.flatnonzero(np.abs(np.asarray(theta_b, dtype=float)) > fall_angle)
+    return float(np.asarray(t, dtype=float)[over[0]]) if len(over) else None
+
+
+class WindowError(ValueError):
+    """A requested metrics window that no run covers."""
+
+
+def fit_window(window: Sequence[float], t_end: float, requested: bool = False) -> Tuple[Tuple[float, float], str]:
+    """(the window to use, a sentence saying why it differs from ``window``, '' when it does not).
+
+    ``t_end`` is when the longest run ends.  A window ending after it: with ``requested`` (the user asked
+    for it) a :class:`WindowError`; else the run's second half, [t_end / 2, t_end]."""
+    w0, w1 = float(window[0]), float(window[1])
+    if not w0 < w1:
+        raise WindowError(f"the window [{w0:g}, {w1:g}] s is empty (T0 must be < T1)")
+    if t_end >= w1 - 1e-9:
+        return (w0, w1), ""
+    if requested:
+        raise WindowError(f"the window [{w0:g}, {w1:g}] s lies outside the runs: the longest ends at "
+                          f"t = {t_end:.3f} s")
+    fit = (t_end / 2, t_end)
+    return fit, (f"the runs end at t = {t_end:.3f} s, before the default window [{w0:g}, {w1:g}] s ends: "
+                 f"metrics over the run's second half, t in [{fit[0]:g}, {fit[1]:g}] s")
 
 
 def _rms(x: np.ndarray) -> np.ndarray:
@@ -57,8 +111,12 @@ def window_metrics(theta_b: np.ndarray, u: np.ndarray, err1: np.ndarray, err2: n
             "tau_err1_rms": _rms(err1), "tau_err2_rms": _rms(err2)}
 
 
-def compute(cols: Mapping[str, np.ndarray], window: Sequence[float], fall_angle: float) -> Metrics:
-    """Metrics of the columns ``t``, ``theta_b``, ``u`` (and ``tau_hat*``/``tau_d*`` when present)."""
+def compute(cols: Mapping[str, np.ndarray], window: Sequence[float], fall_angle: float,
+            t_fall: Optional[float] = None) -> Metrics:
+    """Metrics of the columns ``t``, ``theta_b``, ``u`` (and ``tau_hat*``/``tau_d*`` when present).
+
+    ``t_fall``: the run's own record of a fall (e.g. the plant's "FALLEN at t = ..." in a bag), used when
+    the table shows none (|theta_b| never beyond ``fall_angle``)."""
     t = np.asarray(cols["t"])
     th = np.asarray(cols["theta_b"], dtype=float)
     sel = (t >= window[0] - 1e-9) & (t <= window[1] + 1e-9)
@@ -67,22 +125,33 @@ def compute(cols: Mapping[str, np.ndarray], window: Sequence[float], fall_angle:
            if f"tau_hat{i}" in cols and f"tau_d{i}" in cols else nan for i in (1, 2)]
     m = window_metrics(th[sel][None, :], np.asarray(cols["u"], dtype=float)[sel][None, :], err[0][None, :],
                        err[1][None, :])
+    fell = fall_time(t, th, fall_angle)
+    fell = t_fall if fell is None else fell
+    t_end = float(t[-1]) if len(t) else math.nan
     return Metrics(window_start=float(window[0]), window_end=float(window[1]), samples=int(sel.sum()),
-                   upright=bool(np.all(np.abs(th) <= fall_angle) and t[-1] >= window[1] - 1e-9),
+                   upright=fell is None, t_fall=fell, t_end=t_end,
+                   covers_window=fell is None and t_end >= window[1] - 1e-9,
                    **{k: float(v[0]) for k, v in m.items()})
 
 
 HEADERS = [("run", "{}"), ("upright", "{}"), ("theta_b p2p [rad]", "{:.5f}"), ("theta_b RMS [rad]", "{:.5f}"),
            ("max abs theta_b [rad]", "{:.5f}"), ("u RMS [N m]", "{:.2f}"), ("tau_hat1 err RMS [N m]", "{:.3f}"),
-           ("tau_hat2 err RMS [N m]", "{:.3f}")]
+           ("tau_hat2 err RMS [N m]", "{:.3f}"), ("fell at t [s]", "{}")]
+
+
+def _cell(fmt: str, v) -> str:
+    """A table cell; a metric without a value (NaN: no sample in the window) is '-'."""
+    if isinstance(v, float) and not math.isfinite(v):
+        return "-"
+    return fmt.format(v)
 
 
 def table_rows(named: Sequence[tuple]) -> list:
     rows = []
     for name, m in named:
         vals = [name, "yes" if m.upright else "NO", m.theta_b_p2p, m.theta_b_rms, m.theta_b_max_abs, m.u_rms,
-                m.tau_err1_rms, m.tau_err2_rms]
-        rows.append([fmt.format(v) for (_, fmt), v in zip(HEADERS, vals)])
+                m.tau_err1_rms, m.tau_err2_rms, "-" if m.t_fall is None else f"{m.t_fall:.3f}"]
+        rows.append([_cell(fmt, v) for (_, fmt), v in zip(HEADERS, vals)])
     return rows
 
 

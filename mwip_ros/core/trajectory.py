@@ -12,8 +12,8 @@ from __future__ import annotations
 
 import math
 from array import array
-from dataclasses import dataclass, replace
-from typing import Dict, Iterable, Sequence, Tuple
+from dataclasses import dataclass, field, replace
+from typing import Any, Dict, Iterable, Sequence, Tuple
 
 import numpy as np
 
@@ -35,12 +35,17 @@ def stamp_key(t: float) -> int:
 
 @dataclass
 class Trajectory:
-    """A finished run: ``columns`` maps a column name to its array (one entry per period)."""
+    """A finished run: ``columns`` maps a column name to its array (one entry per period).
+
+    ``record`` holds what the run's source says of it beside the table (a bag's plant log: the fall,
+    the configured duration, the torque limit; see :func:`mwip_ros.runs.read_bag_run`), empty when
+    it says nothing."""
 
     label: str
     columns: Dict[str, np.ndarray]
     fallen: bool
     h: float
+    record: Dict[str, Any] = field(default_factory=dict)
 
     @property
     def t(self) -> np.ndarray:

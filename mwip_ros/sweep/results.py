@@ -21,13 +21,17 @@ from typing import Dict, List, Optional
 
 import numpy as np
 
-__all__ = ["METRICS", "ResultsWriter", "laws", "sort_file", "read_results", "summarize", "summary_markdown", "region_of_attraction",
+__all__ = ["METRICS", "UNITS", "RATIO_METRICS", "median_ratios", "ResultsWriter", "laws", "sort_file", "read_results", "summarize", "summary_markdown", "region_of_attraction",
            "write_summary", "THETA0_KEY"]
 
 # results.csv name -> the batch simulator's metric name
 METRICS = {"theta_b_p2p": "theta_b_p2p", "theta_b_rms": "theta_b_rms", "max_abs_theta_b": "theta_b_max_abs",
            "u_rms": "u_rms", "tau_hat1_err_rms": "tau_err1_rms", "tau_hat2_err_rms": "tau_err2_rms"}
 THETA0_KEY = "plant_sim.initial.theta_b"
+UNITS = {"theta_b_p2p": "rad", "theta_b_rms": "rad", "max_abs_theta_b": "rad", "u_rms": "N m",
+         "tau_hat1_err_rms": "N m", "tau_hat2_err_rms": "N m"}
+REFERENCE = "dscndo"          # the law each law's medians are compared to (else the last law)
+RATIO_METRICS = ("theta_b_p2p", "theta_b_rms", "u_rms")
 
 
 def _fmt(v) -> str:
@@ -148,7 +152,28 @@ def summarize(cols: Dict[str, list], spec_info: dict) -> dict:
             entry["region_of_attraction_theta_b0"] = region_of_attraction(np.array(cols[THETA0_KEY])[sel],
                                                                           upright[sel])
         out["controllers"][c] = entry
+    out["units"] = dict(UNITS)
+    out["ratios"] = median_ratios(out["controllers"])
     return out
+
+
+def median_ratios(controllers: Dict[str, dict]) -> dict:
+    """Each law's median of :data:`RATIO_METRICS` over the reference law's (DSCNDO when the sweep ran it, else the
+    last law): ``{"reference", "why", "laws": {law: {metric: ratio or None}}}``."""
+    names = list(controllers)
+    if not names:
+        return {"reference": None, "why": "", "laws": {}}
+    ref = REFERENCE if REFERENCE in controllers else names[-1]
+    why = "the DSCNDO law" if ref == REFERENCE else f"the last law, as the sweep did not run {REFERENCE}"
+    out = {}
+    for c in names:
+        if c == ref:
+            continue
+        out[c] = {}
+        for m in RATIO_METRICS:
+            a, b = controllers[c]["metrics"][m]["median"], controllers[ref]["metrics"][m]["median"]
+            out[c][m] = a / b if a is not None and b is not None and b > 0 else None
+    return {"reference": ref, "why": why, "of": "medians over the upright runs", "laws": out}
 
 
 def _num(v, fmt="{:.4g}") -> str:
@@ -163,7 +188,7 @@ def summary_markdown(doc: dict) -> str:
              f"runs that stayed upright).", ""]
     if spec.get("varied"):
         lines += ["Varied: " + ", ".join(f"`{k}` ({d})" for k, d in spec["varied"].items()), ""]
-    head = ["law", "upright", *METRICS]
+    head = ["law", "upright", *(f"{m} [{UNITS[m]}]" for m in METRICS)]
     lines += ["| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in head) + "|"]
     for c, e in doc["controllers"].items():
         cells = [c, f"{e['upright']}/{e['runs']} ({100 * e['upright_share']:.1f} %)"]
@@ -171,6 +196,15 @@ def summary_markdown(doc: dict) -> str:
             s = e["metrics"][m]
             cells.append(" / ".join(_num(s[k]) for k in ("median", "p90", "max")))
         lines.append("| " + " | ".join(cells) + " |")
+    ratios = doc.get("ratios") or median_ratios(doc["controllers"])
+    if ratios["laws"]:
+        ref = ratios["reference"]
+        rhead = ["law", *(f"{m} median / {ref}'s [x]" for m in RATIO_METRICS)]
+        lines += ["", f"Each law's medians over {ref}'s ({ratios['why']}); above 1: {ref}'s is that many times "
+                      f"smaller:", "",
+                  "| " + " | ".join(rhead) + " |", "|" + "|".join("---" for _ in rhead) + "|"]
+        for c, r in ratios["laws"].items():
+            lines.append("| " + " | ".join([c, *(_num(r[m], "{:.2f}") for m in RATIO_METRICS)]) + " |")
     roa = {c: e.get("region_of_attraction_theta_b0") for c, e in doc["controllers"].items()
            if "region_of_attraction_theta_b0" in e}
     if roa:
@@ -180,5 +214,6 @@ def summary_markdown(doc: dict) -> str:
 
 
 def write_summary(doc: dict, out: Path) -> None:
-    (out / "summary.json").write_text(json.dumps(doc, indent=2, allow_nan=False, default=str))
+    from mwip_ros.core.metrics import json_safe
+    (out / "summary.json").write_text(json.dumps(json_safe(doc), indent=2, allow_nan=False, default=str))
     (out / "summary.md").write_text(summary_markdown(doc))

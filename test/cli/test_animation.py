@@ -39,13 +39,18 @@ def write_runs(tmp_path, runs):
     return paths
 
 
-def frames(gif):
+def frames(gif, durations=None):
+    """(the frames as RGB arrays, the size, the first frame's duration [ms]); ``durations``, a list, gets
+    every frame's."""
     with Image.open(gif) as im:
-        out = []
+        out, each = [], []
         for k in range(im.n_frames):
             im.seek(k)
             out.append(np.asarray(im.convert("RGB")))
-        return out, im.size, im.info.get("duration")
+            each.append(im.info.get("duration"))
+        if durations is not None:
+            durations[:] = each
+        return out, im.size, each[0]
 
 
 def panel(frame, j, n):
@@ -96,9 +101,11 @@ def two_runs(tmp_path_factory):
 
 def test_one_frame_per_tenth_of_a_second_side_by_side_panels(two_runs):
     runs, out = two_runs
-    imgs, size, duration = frames(out / "animation.gif")
+    each = []
+    imgs, size, duration = frames(out / "animation.gif", each)
     assert len(imgs) == int(2.0 * FPS) + 1                # t = 0, 0.1, .., 2.0 s
     assert duration == 1000 // FPS                         # played in real time
+    assert each[:-1] == [1000 // FPS] * (len(imgs) - 1) and each[-1] == A.HOLD_END_MS   # the end is held
     assert size == (2 * A.PANEL_SIZE[0], A.HEADER + A.PANEL_SIZE[1]) and size[0] <= 800   # one panel per run
     assert "animation.gif" in (out / "metrics.md").read_text()
 

@@ -142,3 +142,32 @@ def test_write_params_gives_the_rows_scenario_to_mwip_sim(tmp_path):
     assert "use_observer: false" in f.read_text() and "k1: 8.0" in f.read_text()   # scenario 3: k1 = 8.0, dsc
     r = sweep("--results", out, "--scenario", 99, "--write-params", f)
     assert r.returncode == 2 and "no row for scenario 99" in r.stderr
+
+
+def test_no_output_of_mwip_sweep_is_overwritten_without_force(tmp_path):
+    spec = write_spec(tmp_path / "s.yaml", samples=1, vary={})
+    out = tmp_path / "out"
+    assert sweep(spec, "--out", out, "--workers", "1").returncode == 0
+    assert (out / "theta_b_rms.png").is_file()
+    # --write-params: an existing file is refused (one line), kept, and written with --force
+    f = tmp_path / "s0.yaml"
+    f.write_text("mine\n")
+    r = sweep("--results", out, "--scenario", 0, "--write-params", f)
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1 and "--force" in r.stderr
+    assert f.read_text() == "mine\n"
+    r = sweep("--results", out, "--scenario", 0, "--write-params", f, "--force")
+    assert r.returncode == 0 and "plant_sim:" in f.read_text()
+    # --plot-rms the same way
+    png = tmp_path / "rms.png"
+    png.write_bytes(b"old")
+    assert sweep("--results", out, "--plot-rms", png).returncode == 2 and png.read_bytes() == b"old"
+    assert sweep("--results", out, "--plot-rms", png, "--force").returncode == 0 and png.read_bytes() != b"old"
+    # an --out holding any output of a sweep (not only results.csv) is refused
+    other = tmp_path / "other"
+    other.mkdir()
+    (other / "summary.md").write_text("old summary")
+    r = sweep(spec, "--out", other, "--workers", "1")
+    assert r.returncode == 2 and "summary.md" in r.stderr and (other / "summary.md").read_text() == "old summary"
+    # --force: what this run does not write (its figures, with --no-figures) is not left from the last run
+    assert sweep(spec, "--out", out, "--workers", "1", "--no-figures", "--force").returncode == 0
+    assert not (out / "theta_b_rms.png").exists() and (out / "results.csv").is_file()
