@@ -10,6 +10,7 @@
 :mod:`.lockstep`           the one lockstep driver (plant_sim and resim)
 :mod:`.params`             declares a node's parameters from the schema, validates updates
 :mod:`.runtime`            process plumbing, exit codes, ``finish``, rejected-message counts
+:mod:`.rclpy_compat`       what reaches into rclpy: parameter requests it cannot read are refused
 ========================  ==============================================================
 
 A node parses parameters, subscribes, calls the core (:mod:`mwip_ros.core`) and publishes

@@ -16,7 +16,10 @@ and the controller's clock follows their stream, :class:`~mwip_ros.nodes.guards.
 With ``parameter_events`` (default true) the same change is made on the running node, through
 its ``set_parameters`` service, before the first state stamped after it: a run with a gain
 change mid-way re-simulates exactly.  Changes of the nodes named ``disturbance_observer`` and
-``dscndo_controller`` (in the recording's namespace) are applied.
+``dscndo_controller`` (in the recording's namespace) are applied.  A recorded value no node could
+take (an unknown type code, no value, an array too long: :func:`.rclpy_compat.parameter_from_msg`)
+is skipped with a warning naming it, and counted in the report; a value the running node refuses
+is logged with its reason, counted, and the re-simulation goes on without it.
 """
 from __future__ import annotations
 
@@ -154,6 +157,8 @@ class Resim:
             raise ParamError("bag", f"cannot read the bag: {exc}") from None
         if not self.states:
             raise ParamError("bag", f"{bag} has no joint_states messages to re-simulate")
+        self.skipped_values: List[str] = []   # recorded parameter values that cannot be set (named, why)
+        self.refused_values: List[str] = []   # recorded values the running node refused (its reasons)
         self.param_events = self._read_parameter_events() if self.v["parameter_events"] else []
         if dropped:
             self.log.warning(f"skipped {dropped} recorded state(s) older than the one before them")
@@ -169,6 +174,8 @@ class Resim:
         from rcl_interfaces.msg import ParameterEvent
         from rclpy.serialization import deserialize_message
 
+        from mwip_ros.nodes.rclpy_compat import parameter_from_msg
+
         if "/parameter_events" not in self.node.types:
             return []
         out, others = [], set()
@@ -183,7 +190,18 @@ class Resim:
             if leaf(ev.node) not in LOOP_NODES:
                 others.add(ev.node)
                 continue
-            out.append((ev.stamp.sec * 1_000_000_000 + ev.stamp.nanosec, ev.node, changed))
+            stamp = ev.stamp.sec * 1_000_000_000 + ev.stamp.nanosec
+            readable = []
+            for prm in changed:   # a value no node could take (type code 99, ...): skipped, never sent
+                problem = parameter_from_msg(prm)[1]
+                if problem is None:
+                    readable.append(prm)
+                    continue
+                self.skipped_values.append(f"{ev.node} at t = {stamp * 1e-9:.3f} s: {problem}")
+                self.log.warning(f"resim: skipped a recorded parameter value of {ev.node} at t = {stamp * 1e-9:.3f} "
+                                 f"s that cannot be set: {problem}")
+            if readable:
+                out.append((stamp, ev.node, readable))
         if others:
             self.log.info(f"resim: recorded parameter changes of {', '.join(sorted(others))} are not applied "
                           f"(only {', '.join(LOOP_NODES)})")
@@ -221,14 +239,20 @@ class Resim:
                 self._fail(f"no answer to set_parameters within timeout_s = {self.v['timeout_s']:g} s")
             return
         self._param_wait = None
+        t = self.states[self.k][0] * 1e-9
         for node, changed, f in futures:
-            refused = [r.reason for r in f.result().results if not r.successful]
-            if refused:
-                self._fail(f"{node} refused the recorded parameter change: {'; '.join(refused)}")
-                return
-            self.applied_changes += 1
-            self.log.info(f"set {', '.join(prm.name for prm in changed)} on {node} before the state at "
-                          f"t = {self.states[self.k][0] * 1e-9:.3f} s")
+            results = list(f.result().results)
+            refused = [r.reason or f"parameter '{prm.name}' refused" for prm, r in zip(changed, results)
+                       if not r.successful]
+            done = [prm.name for prm, r in zip(changed, results) if r.successful]
+            if refused:   # the node goes on with its old value; the comparison shows what that changes
+                self.refused_values += [f"{node}: {reason}" for reason in refused]
+                self.log.warning(f"{node} refused the recorded parameter change before the state at t = {t:.3f} s: "
+                                 f"{'; '.join(refused)}; going on without it (outputs may differ from the recording)")
+            else:
+                self.applied_changes += 1
+            if done:
+                self.log.info(f"set {', '.join(done)} on {node} before the state at t = {t:.3f} s")
         self._send_now()
 
     # --- inputs
@@ -367,9 +391,15 @@ class Resim:
         else:
             self.node.finish(EXIT_OK)
             lines.append(f"  RESULT: REPRODUCED - every compared output within tolerance {tol:g} (exit {EXIT_OK})")
-        if self.applied_changes or self.param_events:
+        if self.applied_changes or self.param_events or self.refused_values:
             lines.append(f"  recorded parameter changes applied: {self.applied_changes}"
                          + (f" ({len(self.param_events)} after the last state, not applied)" if self.param_events else ""))
+        if self.refused_values:
+            lines.append(f"  recorded parameter values refused by the running node: {len(self.refused_values)} ("
+                         + "; ".join(self.refused_values[:3]) + (" ..." if len(self.refused_values) > 3 else "") + ")")
+        if self.skipped_values:
+            lines.append(f"  recorded parameter values skipped (they cannot be set): {len(self.skipped_values)} ("
+                         + "; ".join(self.skipped_values[:3]) + (" ..." if len(self.skipped_values) > 3 else "") + ")")
         if self.rejects.counts:
             lines.append(f"  rejected messages: {self.rejects.summary()}")
         print("\n".join(lines), flush=True)

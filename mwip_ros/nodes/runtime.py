@@ -193,6 +193,8 @@ def run_node(factory: Callable[..., object], argv: Optional[Sequence[str]] = Non
     except ParamError as exc:
         return refuse(str(exc))
     install_clock_guard()
+    from mwip_ros.nodes import rclpy_compat
+    rclpy_compat.install()  # a parameter request rclpy cannot read is refused, naming it, not raised in the executor
     context = rclpy.Context()
     try:
         rclpy.init(args=argv, context=context, signal_handler_options=SignalHandlerOptions.NO)

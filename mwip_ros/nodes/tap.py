@@ -20,11 +20,13 @@ every message as the exact CDR bytes received, through ``on_message(topic, type_
 
 The owner's loop calls :meth:`TopicTap.spin` (or :meth:`TopicTap.poll` between callbacks: the
 subscriptions are created and replaced there, never inside a callback, and spins with
-:meth:`TopicTap.spin_timeout`).
+:meth:`TopicTap.spin_timeout`).  A callback that raises in the executor (a hostile parameter request
+that got past :mod:`.rclpy_compat`, say) is logged and the owner goes on recording or forwarding.
 """
 from __future__ import annotations
 
 import time
+import traceback
 from typing import Callable, Dict, List, Optional, Sequence, Tuple
 
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -39,6 +41,7 @@ __all__ = ["TopicTap", "adapted_qos", "resolve_topics", "DISCOVERY_POLL_S"]
 
 DISCOVERY_POLL_S = 0.02  # how often to look for the first publisher of a topic not yet subscribed
 PROGRESS_PERIOD_S = 5.0  # a progress line at most this often, when messages came
+BROKEN_AFTER_S = 5.0     # an executor whose every turn raised for this long is broken: the owner ends its run
 
 
 def adapted_qos(infos) -> QoSProfile:
@@ -92,6 +95,8 @@ class TopicTap:
         self._readapt: set = set()                      # subscribed with RECORD_QOS, but a publisher cannot match it
         self._next_poll = 0.0
         self._last_progress, self._last_count = time.monotonic(), 0
+        self.callback_errors = 0                        # exceptions the executor raised from a callback
+        self._failing_since: Optional[float] = None     # the first of the turns that raised in a row
         for name, resolved, type_name in topics:
             if leaf(resolved) in USER_TOPICS or resolved in SYSTEM_TOPICS:
                 self.pending[resolved] = (name, type_name)
@@ -113,14 +118,16 @@ class TopicTap:
 
     def spin(self, executor, count: Callable[[], int], progress: Callable[[], str],
              failed: Callable[[str], None]) -> None:
-        """One turn of the owner's loop: subscribe what is due, take what arrived (an executor error goes to
+        """One turn of the owner's loop: subscribe what is due, take what arrived (a callback that raised is
+        logged and the loop goes on; an executor that raises on every turn for ``BROKEN_AFTER_S`` goes to
         ``failed(text)``), and every ``PROGRESS_PERIOD_S`` log ``progress()`` if ``count()`` moved."""
         self.poll()
         try:
             executor.spin_once(timeout_sec=self.spin_timeout())
-        except Exception as exc:  # noqa: BLE001 - the owner ends the run (and keeps what it has)
-            failed(f"{type(exc).__name__}: {exc}")
+        except Exception as exc:  # noqa: BLE001 - one callback's error: logged, the node goes on
+            self._callback_failed(exc, failed)
             return
+        self._failing_since = None
         now = time.monotonic()
         if now - self._last_progress >= PROGRESS_PERIOD_S:
             self._last_progress = now
@@ -128,6 +135,26 @@ class TopicTap:
             if n != self._last_count:
                 self._last_count = n
                 self.node.get_logger().info(progress())
+
+    def _callback_failed(self, exc: Exception, failed: Callable[[str], None]) -> None:
+        """A callback raised in the executor (a service's, a timer's; the owner's message callbacks handle their
+        own errors): log it (the first few, then every 100th) and go on, so a request that makes rclpy raise
+        ends neither the recording nor the live view.  Only an executor that raises on every turn for
+        :data:`BROKEN_AFTER_S` goes to ``failed``."""
+        self.callback_errors += 1
+        now = time.monotonic()
+        if self._failing_since is None:
+            self._failing_since = now
+        text = f"{type(exc).__name__}: {exc}"
+        if now - self._failing_since >= BROKEN_AFTER_S:
+            failed(f"the executor raised on every turn for {BROKEN_AFTER_S:g} s (the last: {text})")
+            return
+        n = self.callback_errors
+        if n <= 3 or n % 100 == 0:
+            frames = traceback.extract_tb(exc.__traceback__)
+            where = f" in {frames[-1].name} ({frames[-1].filename}:{frames[-1].lineno})" if frames else ""
+            self.node.get_logger().error(f"a callback raised {text}{where}; going on (messages are still "
+                                         f"{self.what}; {n} such error(s) so far)")
 
     def spin_timeout(self, idle: float = 0.1) -> float:
         """How long the owner's ``spin_once`` may block: short while a topic waits for its publisher."""

@@ -1,0 +1,291 @@
+"""What mwip_ros changes in rclpy's internals, in one place, for the rclpy it was written for.
+
+Written for rclpy 7.1.6 (ROS 2 Jazzy, the PyPI wheels ``ros-rclpy``).  :func:`check_version`
+compares the installed rclpy with :data:`WRITTEN_FOR` and, on another version, warns once (to
+stderr) that the replaced internals may have changed; nothing stops.  Nothing happens at import
+time: :func:`install` (called by ``run_node`` for every node) does the work, once per process.
+
+rclpy's parameter services (``rclpy.parameter_service.ParameterService``) read each request
+parameter with ``Parameter.from_parameter_msg`` outside any ``try``: one ``SetParameters`` request
+with a ``ParameterValue`` of type code 99, from any node on the domain, raises ``ValueError`` in the
+executor and ends the process.  :func:`install` replaces the two set callbacks:
+
+* every request parameter is read by :func:`parameter_from_msg` first; one it cannot read is refused
+  with a reason that names it (``parameter 'k1': type code 99 is not a ROS parameter type``), and the
+  rest of the request is still answered, one result per parameter, as rclpy answers;
+* refused without reading further: an unknown type code, ``PARAMETER_NOT_SET`` (rclpy would undeclare
+  the parameter), an empty name, a name longer than :data:`MAX_NAME_CHARS` that the node has not
+  declared, an array longer than :data:`MAX_ARRAY_LEN`, and the parameters past the first
+  :data:`MAX_PARAMETERS` of one request (``set_parameters_atomically``: the whole request);
+* the rest goes to the node as before (rclpy's descriptor checks, then :mod:`.params`' validation); a
+  refusal's reason is prefixed ``parameter 'NAME': `` when it does not start so, an exception from
+  the node's callbacks becomes a refusal, and the descriptor type rclpy changes while checking a
+  dynamically typed parameter is put back when the value is refused.
+
+The four read-only services (get, get_types, describe, list) already answer odd names and depths
+(an undeclared name gives rclpy's empty answer); an exception from one of them is answered with an
+empty response instead of ending the process.  Requests refused unread are counted in the node's
+``rejects`` (:class:`~mwip_ros.nodes.guards.Rejects`, on ``/diagnostics``) and logged rate-limited.
+"""
+from __future__ import annotations
+
+import sys
+from typing import Callable, Dict, List, Optional, Tuple
+
+__all__ = ["WRITTEN_FOR", "MAX_NAME_CHARS", "MAX_ARRAY_LEN", "MAX_PARAMETERS", "rclpy_version", "check_version",
+           "install", "installed", "parameter_from_msg", "shown_name"]
+
+WRITTEN_FOR = ("7.1.6",)   # the rclpy versions whose internals this module was written against (and tested with)
+MAX_NAME_CHARS = 256       # a longer name that the node has not declared is refused unread
+MAX_ARRAY_LEN = 4096       # an array value longer than this is refused unread (the schema's arrays hold a few values)
+MAX_PARAMETERS = 1000      # per request: the parameters after these are refused unread (each still answered)
+SHOWN_NAME_CHARS = 80      # in a reason, a name is cut to this many characters
+
+_CALLBACKS = ("_set_parameters_callback", "_set_parameters_atomically_callback", "_get_parameters_callback",
+              "_get_parameter_types_callback", "_describe_parameters_callback", "_list_parameters_callback")
+_ARRAY_FIELDS = {5: "byte_array_value", 6: "bool_array_value", 7: "integer_array_value", 8: "double_array_value",
+                 9: "string_array_value"}   # ParameterType codes of the arrays
+
+_state = {"installed": False, "warned": False}
+
+
+# --- the version ----------------------------------------------------------------------------------
+
+def rclpy_version() -> Optional[str]:
+    """The version of the distribution that installed the ``rclpy`` package imported (the wheel
+    ``ros-rclpy``; a build may leave a second ``rclpy`` record beside it), None if none says."""
+    from importlib import metadata
+
+    def owners():
+        yield from ("ros-rclpy", "ros-jazzy-rclpy", "rclpy")     # the wheels' names: no scan of every distribution
+        try:
+            yield from metadata.packages_distributions().get("rclpy", [])
+        except Exception:  # noqa: BLE001 - a broken environment: no version known
+            return
+
+    versions = []
+    for name in dict.fromkeys(owners()):
+        try:
+            dist = metadata.distribution(name)
+        except metadata.PackageNotFoundError:
+            continue
+        if any(str(f).replace("\\", "/") == "rclpy/parameter_service.py" for f in (dist.files or ())):
+            return dist.version
+        versions.append(dist.version)
+    return versions[0] if versions else None
+
+
+def check_version(version: Optional[str] = None, warn: Optional[Callable[[str], None]] = None) -> Optional[str]:
+    """None when ``version`` (default: the installed rclpy's) is one of :data:`WRITTEN_FOR`; else the
+    warning text, which is also given to ``warn`` (default: one line on stderr) the first time only."""
+    version = rclpy_version() if version is None else version
+    if version in WRITTEN_FOR:
+        return None
+    text = (f"mwip_ros.nodes.rclpy_compat was written for rclpy {', '.join(WRITTEN_FOR)} (ROS 2 Jazzy); this is "
+            f"rclpy {version or 'of an unknown version'}: its parameter-service guard is installed as written, "
+            f"check it (test/nodes/test_param_hostile.py)")
+    if not _state["warned"]:
+        _state["warned"] = True
+        (warn or (lambda t: print(f"[WARN] [rclpy_compat]: {t}", file=sys.stderr, flush=True)))(text)
+    return text
+
+
+# --- reading a request parameter ------------------------------------------------------------------
+
+def shown_name(name: str) -> str:
+    """``name`` as a reason shows it: control characters escaped, cut to :data:`SHOWN_NAME_CHARS`."""
+    text = name if name.isprintable() else "".join(c if c.isprintable() else repr(c)[1:-1] for c in name)
+    if len(text) > SHOWN_NAME_CHARS:
+        text = f"{text[:SHOWN_NAME_CHARS]}... ({len(name)} characters)"
+    return text
+
+
+def _named(name: str, reason: str) -> str:
+    prefix = f"parameter '{shown_name(name)}'"
+    return reason if reason.startswith("parameter '") else f"{prefix}: {reason}"
+
+
+def parameter_from_msg(msg, declared=None) -> Tuple[object, Optional[str]]:
+    """``(rclpy Parameter, None)`` for an ``rcl_interfaces/Parameter`` message, or ``(None, reason)``
+    naming it when it cannot be set: an unknown type code, no value (``PARAMETER_NOT_SET``), an empty
+    name, a name longer than :data:`MAX_NAME_CHARS` not in ``declared`` (a container of names), an
+    array longer than :data:`MAX_ARRAY_LEN`, or a value rclpy cannot read."""
+    from rcl_interfaces.msg import ParameterType
+    from rclpy.parameter import Parameter
+
+    name = msg.name
+    if not isinstance(name, str) or not name:
+        return None, "parameter '': an empty name is not a parameter name"
+    if len(name) > MAX_NAME_CHARS and (declared is None or name not in declared):
+        return None, f"parameter '{shown_name(name)}': no parameter has a name this long (at most {MAX_NAME_CHARS})"
+    code = msg.value.type
+    if code not in {t.value for t in Parameter.Type}:
+        return None, f"parameter '{shown_name(name)}': type code {code} is not a ROS parameter type"
+    if code == ParameterType.PARAMETER_NOT_SET:
+        return None, (f"parameter '{shown_name(name)}': no value (type code {code}, PARAMETER_NOT_SET); a "
+                      f"parameter cannot be unset")
+    field = _ARRAY_FIELDS.get(code)
+    if field is not None:
+        n = len(getattr(msg.value, field))
+        if n > MAX_ARRAY_LEN:
+            return None, (f"parameter '{shown_name(name)}': an array of {n} values is longer than any parameter "
+                          f"takes (at most {MAX_ARRAY_LEN})")
+    try:
+        return Parameter.from_parameter_msg(msg), None
+    except Exception as exc:  # noqa: BLE001 - whatever rclpy cannot read is refused, naming the parameter
+        return None, f"parameter '{shown_name(name)}': its value cannot be read ({type(exc).__name__}: {exc})"
+
+
+# --- the wrapped callbacks ------------------------------------------------------------------------
+
+def _refused(reason: str):
+    from rcl_interfaces.msg import SetParametersResult
+    return SetParametersResult(successful=False, reason=reason)
+
+
+def _report(service, node, what: str, reason: str) -> None:
+    """Count and log (rate-limited) a request refused unread, in the node's ``rejects`` when it has one."""
+    rejects = getattr(node, "rejects", None)
+    if rejects is None:
+        rejects = service.__dict__.get("_mwip_rejects")
+        if rejects is None:
+            from mwip_ros.nodes.guards import Rejects
+            rejects = service.__dict__["_mwip_rejects"] = Rejects(node.get_logger())
+    try:
+        where = f"{node.get_fully_qualified_name().rstrip('/')}/{what}"
+    except Exception:  # noqa: BLE001
+        where = what
+    try:
+        rejects(where, reason)
+    except Exception:  # noqa: BLE001 - a report never ends a request
+        pass
+
+
+def _descriptor_types(node, names) -> Dict[str, int]:
+    descriptors = getattr(node, "_descriptors", {})
+    return {n: descriptors[n].type for n in names if n in descriptors}
+
+
+def _restore(node, saved: Dict[str, int]) -> None:
+    """rclpy's ``_apply_descriptor`` sets a dynamically typed parameter's descriptor type to the type asked
+    for before the value is judged; put the old one back when the value was refused."""
+    descriptors = getattr(node, "_descriptors", {})
+    for name, type_code in saved.items():
+        if name in descriptors:
+            descriptors[name].type = type_code
+
+
+def _set(node, params: List[object]):
+    """``node.set_parameters_atomically(params)`` that never raises: a refusal names the parameter."""
+    from rcl_interfaces.msg import SetParametersResult
+    from rclpy.exceptions import ParameterNotDeclaredException
+
+    saved = _descriptor_types(node, [p.name for p in params])
+    try:
+        result = node.set_parameters_atomically(params)
+        if not isinstance(result, SetParametersResult):
+            result = _refused(f"the node answered {type(result).__name__}, not a SetParametersResult")
+    except ParameterNotDeclaredException as exc:
+        result = _refused(str(exc))
+    except Exception as exc:  # noqa: BLE001 - a callback that raised: refused, the node goes on
+        result = _refused(f"{type(exc).__name__}: {exc}")
+    if not result.successful:
+        _restore(node, saved)
+        if len(params) == 1:
+            result.reason = _named(params[0].name, result.reason)
+    return result
+
+
+def _declared(node):
+    return getattr(node, "_parameters", None)
+
+
+def _set_parameters_callback(self, request, response):
+    node = self._get_node()
+    declared = _declared(node)
+    for i, msg in enumerate(request.parameters):
+        if i >= MAX_PARAMETERS:
+            reason = (f"parameter '{shown_name(msg.name)}': not read (a request may set at most {MAX_PARAMETERS} "
+                      f"parameters; it has {len(request.parameters)})")
+            if i == MAX_PARAMETERS:
+                _report(self, node, "set_parameters", reason)
+            response.results.append(_refused(reason))
+            continue
+        param, reason = parameter_from_msg(msg, declared)
+        if reason is not None:
+            _report(self, node, "set_parameters", reason)
+            response.results.append(_refused(reason))
+            continue
+        response.results.append(_set(node, [param]))
+    return response
+
+
+def _set_parameters_atomically_callback(self, request, response):
+    node = self._get_node()
+    declared = _declared(node)
+    n = len(request.parameters)
+    if n > MAX_PARAMETERS:
+        first = shown_name(request.parameters[0].name)
+        reason = (f"parameter '{first}' and {n - 1} more: not read (a request may set at most {MAX_PARAMETERS} "
+                  f"parameters); nothing was set")
+        _report(self, node, "set_parameters_atomically", reason)
+        response.result = _refused(reason)
+        return response
+    params = []
+    for msg in request.parameters:
+        param, reason = parameter_from_msg(msg, declared)
+        if reason is not None:
+            reason += "; nothing was set"
+            _report(self, node, "set_parameters_atomically", reason)
+            response.result = _refused(reason)
+            return response
+        params.append(param)
+    response.result = _set(node, params)
+    return response
+
+
+def _guarded(original, what: str):
+    """A read-only service callback that answers an empty response instead of raising."""
+    def callback(self, request, response):
+        try:
+            return original(self, request, response)
+        except Exception as exc:  # noqa: BLE001
+            try:
+                _report(self, self._get_node(), what, f"{type(exc).__name__}: {exc}; answered empty")
+            except Exception:  # noqa: BLE001 - no node left to report to
+                pass
+            return type(response)()
+    callback.__name__ = getattr(original, "__name__", what)
+    return callback
+
+
+def installed() -> bool:
+    """Whether :func:`install` replaced rclpy's parameter-service callbacks in this process."""
+    from rclpy.parameter_service import ParameterService
+    return all(getattr(getattr(ParameterService, a, None), "_mwip_guarded", False) for a in _CALLBACKS)
+
+
+def install() -> None:
+    """Replace rclpy's parameter-service callbacks (see the module text); idempotent.  Nodes created after
+    this answer with the guarded callbacks (rclpy binds them when a node creates its services)."""
+    from rclpy.parameter_service import ParameterService
+
+    if _state["installed"] and installed():
+        return
+    check_version()
+    replacements = {"_set_parameters_callback": lambda _orig: _set_parameters_callback,
+                    "_set_parameters_atomically_callback": lambda _orig: _set_parameters_atomically_callback,
+                    "_get_parameters_callback": lambda orig: _guarded(orig, "get_parameters"),
+                    "_get_parameter_types_callback": lambda orig: _guarded(orig, "get_parameter_types"),
+                    "_describe_parameters_callback": lambda orig: _guarded(orig, "describe_parameters"),
+                    "_list_parameters_callback": lambda orig: _guarded(orig, "list_parameters")}
+    for attr, make in replacements.items():
+        original = getattr(ParameterService, attr, None)
+        if original is None or getattr(original, "_mwip_guarded", False):
+            continue
+        replacement = make(original)
+        replacement._mwip_guarded = True
+        replacement.__wrapped__ = original
+        setattr(ParameterService, attr, replacement)
+    _state["installed"] = True
+
