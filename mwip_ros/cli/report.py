@@ -91,9 +91,10 @@ def ratio_rows(named: Sequence[tuple]) -> tuple:
         if j == i:
             continue
         vals = []
-        for key, _ in RATIOS:
+        for key, _ in RATIOS:   # a run that fell has no steady state to compare: no ratio
             a, b = getattr(m, key), getattr(ref, key)
-            vals.append(a / b if math.isfinite(a) and math.isfinite(b) and b > 0 else None)
+            ok = m.upright and ref.upright and math.isfinite(a) and math.isfinite(b) and b > 0
+            vals.append(a / b if ok else None)
         rows.append((name, vals))
     return named[i][0], why, rows
 
@@ -105,8 +106,11 @@ def ratio_table(named: Sequence[tuple], markdown: bool = True) -> List[str]:
     ref, why, rows = ratio_rows(named)
     head = ["run"] + [f"{label} / {ref} [x]" for _, label in RATIOS]
     fell = {name for name, m in named if not m.upright}
-    body = [[name] + [("fell" if name in fell else "-") if v is None else f"{v:.2f}" for v in vals]
-            for name, vals in rows]
+
+    def missing(name: str) -> str:   # why a run has no ratio
+        return "fell" if name in fell else (f"{ref} fell" if ref in fell else "-")
+
+    body = [[name] + [missing(name) if v is None else f"{v:.2f}" for v in vals] for name, vals in rows]
     if markdown:
         return [f"Each run's metrics over {ref}'s ({why}); above 1: {ref}'s is that many times smaller:", "",
                 "| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in head) + "|"] + \

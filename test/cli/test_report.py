@@ -174,3 +174,13 @@ def test_an_out_holding_a_report_is_refused_unless_force_which_removes_stale_fil
     assert not (out / "animation.gif").exists()                        # stale: this report has none
     assert "[0, 1] s" in (out / "metrics.md").read_text()
     assert (out / "notes.txt").read_text() == "mine"                    # not a report file: left alone
+
+
+def test_no_ratio_is_given_when_the_dscndo_run_fell(tmp_path):
+    # theta_b = 2 t passes the fall angle (1.0472 rad) at t = 0.52 s; the other run stays up
+    runs = [make_run("dsc", 3.0, a=0.05), make_run("dscndo", 3.0, ramp=2.0)]
+    out = tmp_path / "rep"
+    assert report.main(csvs(tmp_path, runs) + ["--out", str(out), "--no-animation"]) == 0
+    md = (out / "metrics.md").read_text()
+    assert "| dsc | dscndo fell | dscndo fell | dscndo fell |" in md, md
+    assert strict_json(out / "metrics.json")["ratios"]["runs"]["dsc"]["theta_b_p2p"] is None
