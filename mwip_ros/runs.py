@@ -15,17 +15,19 @@ from __future__ import annotations
 import csv
 import math
 import re
+import warnings
 from pathlib import Path
 from typing import Dict, List, Optional
 
 import numpy as np
 
-from mwip_ros.core.trajectory import COLUMNS, Trajectory, TrajectoryTable, join_estimates
+from mwip_ros.core.trajectory import COLUMNS, TRAJECTORY_COLUMNS, Trajectory, TrajectoryTable, join_estimates
 from mwip_ros.msgs import BadMessage
 from mwip_ros.msgs import layouts as L
 from mwip_ros.msgs.topics import leaf
 
-__all__ = ["write_csv", "read_csv", "read_bag_run", "load_run", "plant_record", "PLANT_NODE"]
+__all__ = ["write_csv", "read_csv", "read_bag_run", "load_run", "plant_record", "PLANT_NODE", "MAX_ROWS",
+           "MAX_CSV_BYTES", "MAX_BAG_BYTES", "check_size", "check_times", "RUN_COLUMNS"]
 
 PLANT_NODE = "plant_sim"
 # what plant_sim logs (mwip_ros.nodes.plant_sim): its start (the configured duration), a fall, an interruption
@@ -34,6 +36,16 @@ _START = re.compile(r"(?:lockstep|realtime) plant: h = .*?, (?:([-+0-9.eE]+) s|u
 _INTERRUPTED = re.compile(r"interrupted at t = ([-+0-9.eE]+) s of ([-+0-9.eE]+) s")
 
 NAN = math.nan
+# What a run read from disk may hold: bounded before anything is allocated, refused above in one line.
+MAX_ROWS = 2_000_000           # rows (samples): 2.8 h at 200 Hz; ~16 columns of float64 = 256 MB
+MAX_CSV_BYTES = 1 << 30        # a CSV of MAX_ROWS full rows (16 repr floats, ~330 B a row) is ~660 MB
+MAX_BAG_BYTES = 2 << 30        # a bag of MAX_ROWS periods (state, command, estimate, truth: ~600 B) is ~1.2 GB
+MAX_CSV_COLUMNS = 64           # a trajectory has 17 at most (COLUMNS and stamp)
+MAX_T = 1e10   # [s] |t| beyond this is no run; a realtime observer's CSV holds wall-clock stamps (1.8e9 s in 2026)
+_HEADER_MAX = 1 << 16          # characters of a header line
+MAX_LOG_MESSAGES = 100_000     # /rosout, /parameter_events messages of a bag kept for plant_record
+# a run's CSV must have these (the estimates and the disturbance may be missing: NaN, as a plant CSV has)
+RUN_COLUMNS = ("t", "theta_w", "theta_b", "dtheta_w", "dtheta_b", "u")
 
 
 def write_csv(run: Trajectory, path) -> None:
@@ -47,20 +59,100 @@ def write_csv(run: Trajectory, path) -> None:
             w.writerow([repr(float(x)) for x in row])
 
 
-def read_csv(path, label: Optional[str] = None) -> Trajectory:
-    """Read a CSV written by :func:`write_csv` (``mwip_sim --csv``, ``plant_sim``'s or the observer's ``csv``)."""
-    with open(path, newline="") as f:
-        rows = list(csv.reader(f))
-    if not rows or "t" not in rows[0]:
-        raise ValueError(f"{path}: not an mwip_ros CSV (no header with a 't' column)")
-    header = rows[0]
+def _mib(n: float) -> str:
+    return f"{n / 2**20:,.0f} MiB" if n >= 2**20 else f"{n:,.0f} bytes"
+
+
+def _limit_text() -> str:
+    return f"{MAX_ROWS / 200 / 3600:.1f} h at 200 Hz"
+
+
+def check_size(path, limit: int, what: str) -> int:
+    """The size of ``path`` in bytes (a bag directory: its MCAP files'), checked before anything is read:
+    ValueError, one line, above ``limit``."""
+    p = Path(path)
+    if p.is_dir():
+        from mwip_ros.bag import mcap_files
+        size = sum(f.stat().st_size for f in mcap_files(p))
+    else:
+        size = p.stat().st_size
+    if size > limit:
+        raise ValueError(f"{_mib(size)}, more than a {what} of a run of at most {MAX_ROWS:,} rows "
+                         f"({_limit_text()}) takes ({_mib(limit)}); not read")
+    return size
+
+
+def read_csv(path, label: Optional[str] = None, max_rows: Optional[int] = None, ordered: bool = True,
+             empty_ok: bool = False) -> Trajectory:
+    """Read a CSV written by :func:`write_csv` (``mwip_sim --csv``, ``plant_sim``'s or the observer's ``csv``).
+
+    Bounded whatever the file holds: the file's size is checked first (:data:`MAX_CSV_BYTES`), at most
+    ``max_rows`` (default :data:`MAX_ROWS`) rows are read, at most :data:`MAX_CSV_COLUMNS` columns; ValueError
+    (one line naming the file) for more, for a header without ``t``, a repeated column, a row that does not
+    parse or has another number of fields, no rows, or a ``t`` that is not finite or (``ordered``: a run's
+    table) decreases; an observer's CSV may go back in t (a plant reset re-initialises the observer) and
+    (``empty_ok``) have no rows."""
+    max_rows = MAX_ROWS if max_rows is None else max_rows
     try:
-        data = np.array([[float(x) for x in r] for r in rows[1:]], dtype=float).reshape(-1, len(header))
+        size = check_size(path, MAX_CSV_BYTES, "CSV")
     except ValueError as exc:
-        raise ValueError(f"{path}: not an mwip_ros CSV ({exc})") from None
-    cols = {name: data[:, i] for i, name in enumerate(header)}
+        raise ValueError(f"{path}: {exc}") from None
+    with open(path, newline="") as f:
+        try:
+            first = f.readline(_HEADER_MAX)
+        except UnicodeDecodeError as exc:
+            raise ValueError(f"{path}: not an mwip_ros CSV (not text: {exc.reason})") from None
+        if len(first) >= _HEADER_MAX and not first.endswith("\n"):
+            raise ValueError(f"{path}: not an mwip_ros CSV (a header line over {_HEADER_MAX:,} characters)")
+        header = [h.strip() for h in next(csv.reader([first]), [])]
+        if "t" not in header:
+            raise ValueError(f"{path}: not an mwip_ros CSV (no header with a 't' column)")
+        if len(header) > MAX_CSV_COLUMNS:
+            raise ValueError(f"{path}: not an mwip_ros CSV ({len(header):,} columns; at most {MAX_CSV_COLUMNS})")
+        if len(set(header)) != len(header):
+            twice = next(h for h in header if header.count(h) > 1)
+            raise ValueError(f"{path}: not an mwip_ros CSV (the column {twice!r} appears twice)")
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")   # "input contained no data": said below, in one line
+                # a row takes 2 characters a column at least: a file too small to hold more rows than allowed
+                # is read as it is (loadtxt would allocate max_rows rows up front)
+                cap = max_rows + 1 if size >= (max_rows + 1) * 2 * len(header) else None
+                data = np.loadtxt(f, delimiter=",", dtype=float, ndmin=2, max_rows=cap, comments=None,
+                                  encoding=None)
+        except (ValueError, UnicodeDecodeError) as exc:
+            text = " ".join(str(exc).split())
+            raise ValueError(f"{path}: not an mwip_ros CSV ({text[:200]})") from None
+    if not data.size:
+        if not empty_ok:
+            raise ValueError(f"{path}: no rows (a header only)")
+        data = np.empty((0, len(header)))
+    if data.shape[1] != len(header):
+        raise ValueError(f"{path}: not an mwip_ros CSV (rows of {data.shape[1]} fields under a header of "
+                         f"{len(header)} columns)")
+    if len(data) > max_rows:
+        raise ValueError(f"{path}: more than {max_rows:,} rows, the most a run may have ({_limit_text()}); "
+                         f"cut or decimate it first")
+    cols = {name: data[:, i] for i, name in enumerate(header)}   # views: no copy of the table
+    check_times(cols["t"], path, ordered)
     h = float(cols["t"][1] - cols["t"][0]) if len(data) > 1 else NAN
     return Trajectory(label or str(path), cols, False, h)  # a CSV does not say; metrics.compute judges |theta_b|
+
+
+def check_times(t: np.ndarray, source, ordered: bool = True) -> None:
+    """ValueError, one line, unless every ``t`` is finite (and within :data:`MAX_T` s) and (``ordered``) none
+    decreases."""
+    bad = ~np.isfinite(t) | (np.abs(t) > MAX_T)
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise ValueError(f"{source}: t = {float(t[i])!r} s at row {i + 1}: every t must be finite and within "
+                         f"{MAX_T:g} s of 0")
+    if ordered and len(t) > 1:
+        back = np.diff(t) < 0
+        if back.any():
+            i = int(np.argmax(back)) + 1
+            raise ValueError(f"{source}: t decreases at row {i + 1} ({float(t[i - 1])!r} -> {float(t[i])!r} s): not one run's "
+                             f"samples in order")
 
 
 def read_bag_run(bag, label: Optional[str] = None) -> Trajectory:
@@ -78,54 +170,101 @@ def read_bag_run(bag, label: Optional[str] = None) -> Trajectory:
     """
     from mwip_ros.bag import check, raw_messages
 
+    try:
+        check_size(bag, MAX_BAG_BYTES, "bag")   # before a byte of it is read
+    except ValueError as exc:
+        raise ValueError(f"{bag}: {exc}") from None
     check(bag)  # a damaged chunk raises BagError naming it: never read as data
-    states: Dict[int, tuple] = {}
-    true_states: Dict[int, tuple] = {}
-    est: Dict[int, tuple] = {}
-    truth: Dict[int, tuple] = {}
+    states, true_states = _Stamped(5, "joint_states"), _Stamped(5, "true_joint_states")   # x (4), u_prev
+    est, truth = _Stamped(2, "disturbance_estimate"), _Stamped(2, "lumped_disturbance")
     cmds: List[float] = []
-    logs: List[tuple] = []
+    logs: List[bytes] = []
     param_events: List[bytes] = []
     for _log_time, topic, data in raw_messages(bag):
         name = leaf(topic)
         if topic == "/rosout":
-            logs.append(bytes(data))
+            if len(logs) < MAX_LOG_MESSAGES:   # the plant logs a few lines a run; a flood beyond is not read
+                logs.append(bytes(data))
             continue
         if topic == "/parameter_events":
-            param_events.append(bytes(data))
+            if len(param_events) < MAX_LOG_MESSAGES:
+                param_events.append(bytes(data))
             continue
         try:
             if name in ("joint_states", "true_joint_states"):
                 stamp, x, u_prev = L.parse_joint_state(data)
-                (states if name == "joint_states" else true_states)[stamp] = (x, u_prev)
+                (states if name == "joint_states" else true_states).put(bag, stamp, (*x, u_prev))
             elif name == "disturbance_estimate":
                 stamp, a, b = L.parse_wrench(data)
-                est[stamp] = (a, b)
+                est.put(bag, stamp, (a, b))
             elif name == "lumped_disturbance":
                 stamp, a, b = L.parse_wrench(data)
-                truth[stamp] = (a, b)
+                truth.put(bag, stamp, (a, b))
             elif name == "wheel_torque_cmd":
-                cmds.append(L.parse_command(data))
+                cmds[:] = [L.parse_command(data)]   # only the last one is used
         except BadMessage:
             continue  # not the graph's message (a foreign publisher): not part of the run
-    if true_states:   # the measurement is what the loop saw; the truth is what happened
+    if len(true_states):   # the measurement is what the loop saw; the truth is what happened
         # the torque that acted over the last period is in no message (an actuator delay holds it back)
         states, cmds = true_states, []
-    if not states:
+    if not len(states):
         raise ValueError(f"{bag}: no joint_states messages (is this an mwip_ros bag?)")
-    stamps = sorted(states)
+    stamps = sorted(states.index)
     t0 = stamps[0]
     record = plant_record(logs, param_events)
-    applied = [abs(states[s][1]) for s in stamps[1:] if math.isfinite(states[s][1])]
+    applied = [abs(u) for u in (states.value(s, 4) for s in stamps[1:]) if math.isfinite(u)]
     last_u = _last_torque(cmds[-1] if cmds else NAN, record.get("torque_limit"), max(applied, default=NAN))
+    del applied
     table = TrajectoryTable()
+    nan2 = (NAN, NAN)
     for i, s in enumerate(stamps):
-        u = states[stamps[i + 1]][1] if i + 1 < len(stamps) else last_u
-        table.append((s - t0) * 1e-9, states[s][0], u, est.get(s, (NAN, NAN)), truth.get(s, (NAN, NAN)))
+        u = states.value(stamps[i + 1], 4) if i + 1 < len(stamps) else last_u
+        table.append((s - t0) * 1e-9, states.get(s), u, est.get(s, nan2), truth.get(s, nan2))
     run = table.trajectory(label or Path(bag).name, "t_fall" in record, NAN)
+    check_times(run.t, bag)
     run.h = float(np.median(np.diff(run.t))) if len(run) > 1 else NAN
     run.record = record
     return run
+
+
+class _Stamped:
+    """Rows of ``width`` doubles by stamp, in one flat array (a bag of hours: no tuple per message); a message
+    resent with the same stamp replaces its row.  At most :data:`MAX_ROWS` stamps (ValueError, one line)."""
+
+    def __init__(self, width: int, topic: str):
+        from array import array
+        self.width, self.topic = width, topic
+        self.index: Dict[int, int] = {}
+        self.rows = array("d")
+
+    def __len__(self) -> int:
+        return len(self.index)
+
+    def put(self, bag, stamp: int, values) -> None:
+        i = self.index.get(stamp)
+        if i is None:
+            if len(self.index) >= MAX_ROWS:
+                _too_long(bag, self.topic)
+            self.index[stamp] = len(self.index)
+            self.rows.extend(values)
+        else:
+            w = self.width
+            self.rows[i * w:(i + 1) * w] = type(self.rows)("d", values)
+
+    def get(self, stamp: int, default=None):
+        i = self.index.get(stamp)
+        if i is None:
+            return default
+        w = self.width
+        return tuple(self.rows[i * w:(i + 1) * w])
+
+    def value(self, stamp: int, k: int) -> float:
+        return self.rows[self.index[stamp] * self.width + k]
+
+
+def _too_long(bag, name: str) -> None:
+    raise ValueError(f"{bag}: more than {MAX_ROWS:,} {name} messages, the most a run may have "
+                     f"({_limit_text()}); not read further")
 
 
 def _last_torque(cmd: float, limit: Optional[float], largest_applied: float) -> float:
@@ -186,12 +325,19 @@ def load_run(path, label: Optional[str] = None, estimates=None) -> Trajectory:
     p = Path(path)
     if p.is_file() and p.suffix == ".csv":
         run = read_csv(p, label or p.stem)
+        missing = [c for c in RUN_COLUMNS if c not in run.columns]
+        if missing:
+            raise ValueError(f"{path}: no {', '.join(missing)} column{'s' if len(missing) > 1 else ''} (a run's CSV "
+                             f"has {', '.join(RUN_COLUMNS)}; tau_hat1, tau_hat2, tau_d1, tau_d2 may be missing)")
+        for c in TRAJECTORY_COLUMNS:   # what the source does not know is NaN, as a TrajectoryTable writes it
+            if c not in run.columns:
+                run.columns[c] = np.full(len(run), NAN)
     elif p.is_dir() or p.suffix == ".mcap":
         run = read_bag_run(p, label)
     else:
         raise ValueError(f"{path}: not a bag directory, .mcap file or .csv file")
     if estimates is not None:
-        e = read_csv(estimates)
+        e = read_csv(estimates, ordered=False, empty_ok=True)
         if "tau_hat1" not in e.columns or "tau_hat2" not in e.columns:
             raise ValueError(f"{estimates}: no tau_hat1, tau_hat2 columns (not the observer's CSV)")
         run = join_estimates(run, zip(e.t, e["tau_hat1"], e["tau_hat2"]))

@@ -380,7 +380,8 @@ def sweep_cli(plan: Plan) -> dict:
     runs = []
     with tempfile.TemporaryDirectory(prefix="mwip_bench_sweep_") as tmp:
         if plan.repeat == 1:
-            doc = yaml.safe_load(spec_path.read_text())
+            from mwip_ros.yamlio import load_yaml
+            doc = load_yaml(spec_path, "sweep spec")   # the project's one bounded YAML reader
             doc.update(samples=20, duration_s=1.0, metrics_window_s=[0.5, 1.0], base=str(PARAMS))
             spec_path = Path(tmp) / "mass_mismatch_quick.yaml"
             spec_path.write_text(yaml.safe_dump(doc))

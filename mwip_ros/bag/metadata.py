@@ -21,6 +21,9 @@ from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence, Union
 
 import yaml
 
+from mwip_ros.params.errors import bounded
+from mwip_ros.yamlio import YamlRefused, load_yaml, shown
+
 from .errors import BagError
 
 __all__ = [
@@ -136,13 +139,15 @@ def parse_qos_yaml(text: Any) -> List[Dict[str, Any]]:
         return []
     else:
         try:
-            doc = yaml.safe_load(text)
+            doc = load_yaml(str(text), "offered_qos_profiles")   # bounded (mwip_ros.yamlio)
+        except YamlRefused as exc:
+            raise BagError(f"offered_qos_profiles refused: {exc.problem}") from None
         except yaml.YAMLError as exc:
-            raise BagError(f"offered_qos_profiles is not valid YAML: {exc}") from None
+            raise BagError(f"offered_qos_profiles is not valid YAML: {bounded(str(exc))}") from None
     if doc is None:
         return []
     if not isinstance(doc, list) or not all(isinstance(p, Mapping) for p in doc):
-        raise BagError(f"offered_qos_profiles must be a YAML list of profiles, got {text!r}")
+        raise BagError(f"offered_qos_profiles must be a YAML list of profiles, got {shown(text)}")
     return [qos_profile_dict(p) for p in doc]
 
 

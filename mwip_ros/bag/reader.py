@@ -29,6 +29,9 @@ from mcap.reader import make_reader
 from mcap.records import Chunk
 from mcap.stream_reader import breakup_chunk
 
+from mwip_ros.params.errors import bounded
+from mwip_ros.yamlio import YamlRefused, load_yaml
+
 from .errors import BagError
 
 __all__ = ["check", "damaged_chunks", "mcap_files", "raw_messages", "read_metadata", "topic_counts",
@@ -49,9 +52,13 @@ def read_metadata(bag_dir: PathLike) -> Optional[Dict[str, Any]]:
     if not path.is_file():
         return None
     try:
-        doc = yaml.safe_load(path.read_text(encoding="utf-8"))
+        doc = load_yaml(path, "metadata.yaml")   # bounded: size, no aliases, nodes, depth (mwip_ros.yamlio)
+    except YamlRefused as exc:
+        raise BagError(f"{path} refused: {exc.problem}") from None
     except yaml.YAMLError as exc:
-        raise BagError(f"{path} is not valid YAML: {exc}") from None
+        raise BagError(f"{path} is not valid YAML: {bounded(str(exc))}") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise BagError(f"cannot read {path}: {exc}") from None
     info = doc.get("rosbag2_bagfile_information") if isinstance(doc, dict) else None
     if not isinstance(info, dict):
         raise BagError(f"{path} has no 'rosbag2_bagfile_information' mapping")

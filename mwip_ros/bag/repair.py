@@ -31,6 +31,8 @@ import yaml
 from mcap.records import Attachment, Channel, Message, Metadata, Schema
 from mcap.writer import CompressionType, Writer
 
+from mwip_ros.yamlio import load_yaml
+
 from .errors import BagError
 from .metadata import (REPAIRED_KEY, ROS_DISTRO, TopicInfo, bag_metadata, dump_yaml, parse_qos_yaml,
                        write_metadata_yaml)
@@ -325,7 +327,7 @@ def _custom_data(old: Optional[Dict[str, Any]], collected: Sequence[Collected]) 
         return {str(k): str(v) for k, v in (old.get("custom_data") or {}).items()}
     for got in collected:
         try:
-            doc = yaml.safe_load(got.rosbag2_metadata or "") or {}
+            doc = load_yaml(got.rosbag2_metadata or "", "rosbag2 metadata") or {}   # bounded (mwip_ros.yamlio)
             doc = doc.get("rosbag2_bagfile_information", doc)
             return {str(k): str(v) for k, v in (doc.get("custom_data") or {}).items()}
         except (yaml.YAMLError, AttributeError):

@@ -31,13 +31,16 @@ from mwip_ros.core import metrics
 from mwip_ros.core.markers import robot_pose
 from mwip_ros.core.model import PhysicalParams
 
-__all__ = ["FPS", "MAX_FRAMES", "TICK", "HOLD_END_MS", "PANEL_SIZE", "HEADER", "ROD_COLOUR", "SPOKE_COLOUR", "FELL_COLOUR",
+__all__ = ["FPS", "MAX_FRAMES", "MAX_SPAN_S", "MAX_FRAME_MS", "frame_count", "refusal", "TICK", "HOLD_END_MS", "PANEL_SIZE", "HEADER", "ROD_COLOUR", "SPOKE_COLOUR", "FELL_COLOUR",
            "default_nominal", "fall_time", "frame_times", "write_gif"]
 
 FPS = 20.0            # frames per second of simulated time and of playback (50 ms a frame: exact in a GIF)
 MAX_FRAMES = 1200     # a longer animation gets fewer frames per second (a 10 min run: 2 fps), still in real time
 TICK = 0.25           # [m] between ground ticks
 HOLD_END_MS = 1500    # [ms] the last frame is shown before the GIF loops
+MAX_FRAME_MS = 655_350   # [ms] a GIF frame's longest delay (65535 hundredths of a second)
+MAX_SPAN_S = (MAX_FRAMES - 1) * MAX_FRAME_MS / 1000.0   # [s] the longest span played in real time (9 days)
+MAX_FRAME_TIMES = 1_000_000   # frame_times refuses more (write_gif never asks for more than MAX_FRAMES)
 PANEL_SIZE = (280, 220)   # [px] of one run's panel
 HEADER = 24           # [px] above the panels: the time readout
 _SS = 2               # drawn at _SS times the size, then reduced: antialiased edges
@@ -108,12 +111,44 @@ def frame_times(runs: Sequence, fps: float = FPS) -> np.ndarray:
         t_k = t_start + k / fps for k = 0 .. floor((t_end - t_start) fps), then t_end itself when it is
         not on that grid: the last frame shows how the runs ended (a fall at t = 0.48 s with frames every
         0.05 s would otherwise never be shown).
+
+    Raises
+    ------
+    ValueError
+        ``fps`` not > 0, times that are not finite, or more than :data:`MAX_FRAME_TIMES` frames (counted
+        before any is allocated: :func:`write_gif` lowers ``fps`` to :data:`MAX_FRAMES` first).
     """
-    if not fps > 0:
+    if not fps > 0 or not math.isfinite(fps):
         raise ValueError(f"fps must be > 0, got {fps!r}")
     t0, t1 = _span(runs)
-    times = t0 + np.arange(int(math.floor((t1 - t0) * fps + 1e-9)) + 1) / fps
+    n = frame_count(t0, t1, fps)
+    if n > MAX_FRAME_TIMES:
+        raise ValueError(f"{n:,.0f} frames of {1 / fps:g} s over t = {t0:g} .. {t1:g} s: more than "
+                         f"{MAX_FRAME_TIMES:,}")
+    times = t0 + np.arange(int(n)) / fps
     return np.append(times, t1) if t1 - times[-1] > 1e-6 else times
+
+
+def frame_count(t0: float, t1: float, fps: float) -> float:
+    """How many frames 1 / ``fps`` apart span [t0, t1] (a float: it may be astronomically many)."""
+    return math.floor((t1 - t0) * fps + 1e-9) + 1.0
+
+
+def refusal(runs: Sequence) -> Optional[str]:
+    """Why the runs cannot be animated in real time, in one line, or None when they can: times that are not
+    finite, or a span longer than :data:`MAX_FRAMES` frames of a GIF's longest frame (:data:`MAX_SPAN_S`)."""
+    if not runs:
+        return "no runs to animate"
+    try:
+        t0, t1 = _span(runs)
+    except (ValueError, IndexError):
+        return "a run has no samples"
+    if not (math.isfinite(t0) and math.isfinite(t1)):
+        return f"the runs' times are not finite (t = {t0!r} .. {t1!r} s)"
+    if t1 - t0 > MAX_SPAN_S:
+        return (f"the runs span {t1 - t0:g} s: animation.gif plays in real time, at most {MAX_SPAN_S:,.0f} s "
+                f"({MAX_FRAMES} frames of at most {MAX_FRAME_MS / 1000:g} s, a GIF's longest)")
+    return None
 
 
 def _span(runs: Sequence) -> Tuple[float, float]:
@@ -239,14 +274,16 @@ def write_gif(runs: Sequence, path, nominal: Optional[PhysicalParams] = None, fp
     """
     from PIL import Image, ImageDraw
 
-    if not runs:
-        raise ValueError("no runs to animate")
+    if not fps > 0 or not math.isfinite(fps):
+        raise ValueError(f"fps must be > 0, got {fps!r}")
+    why = refusal(runs)
+    if why:
+        raise ValueError(why)
     nominal = nominal or default_nominal()
+    t0, t1 = _span(runs)
+    if frame_count(t0, t1, fps) + 1 > MAX_FRAMES:   # a long run: fewer frames per second, still in real time
+        fps = (MAX_FRAMES - 2) / (t1 - t0)          # counted before any frame time is allocated
     times = frame_times(runs, fps)
-    if len(times) > MAX_FRAMES:   # a long run: fewer frames per second, still played in real time
-        t0, t1 = _span(runs)
-        fps = (MAX_FRAMES - 1) / (t1 - t0)
-        times = frame_times(runs, fps)
     panels = [_Panel(run, nominal, fall_angle) for run in runs]
     pw, ph = PANEL_SIZE
     size = (pw * len(panels), HEADER + ph)
@@ -268,8 +305,8 @@ def write_gif(runs: Sequence, path, nominal: Optional[PhysicalParams] = None, fp
                 d.line([(j * pw, HEADER), (j * pw, size[1])], fill=REFERENCE, width=1)
         d.text((size[0] / 2, 3), f"t = {t:6.2f} s", fill=TEXT, font=fonts[2], anchor="mt")
         frames.append(frame.quantize(palette=pal, dither=Image.Dither.NONE))
-    step = int(round(1000 / fps))
+    step = min(MAX_FRAME_MS, max(10, int(round(1000 / fps))))
     durations = [step] * len(frames)
-    durations[-1] = max(step, HOLD_END_MS)   # the end (a fall, the last pose) stays readable before the loop
+    durations[-1] = min(MAX_FRAME_MS, max(step, HOLD_END_MS))   # the end (a fall, the last pose) stays readable before the loop
     frames[0].save(Path(path), save_all=True, append_images=frames[1:], duration=durations, loop=0)
     return len(frames)

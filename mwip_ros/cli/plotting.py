@@ -1,6 +1,7 @@
 """Figures: the paper's Fig. 3 layout, the observer's estimate against the truth, and a sweep's figures.
 
-Every time-series figure shades the metrics window it is given; legends sit between the title and the
+Every time-series figure shades the metrics window it is given and draws at most :data:`MAX_POINTS` samples
+a line (:func:`decimate`: a run of hours plots in the time and memory of one of minutes); legends sit between the title and the
 axes (they cover no curve); sweep axes are labelled with their parameter's unit (:func:`axis_label`).
 """
 from __future__ import annotations
@@ -17,6 +18,52 @@ def _plt():
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     return plt
+
+
+MAX_POINTS = 20_000   # per drawn line: a longer series is decimated (min and max per bucket, :func:`decimate`)
+
+
+def decimate(t, y, max_points: int = MAX_POINTS):
+    """(t, y) with at most ``max_points`` samples, drawn as the full series would be at a figure's resolution:
+    the smallest and the largest y of each of ``max_points / 2`` consecutive buckets, in time order (peaks
+    and falls kept; a bucket without a finite y stays a gap).  Short series are returned as they are."""
+    t, y = np.asarray(t, dtype=float), np.asarray(y, dtype=float)
+    n = len(t)
+    if n <= max_points:
+        return t, y
+    buckets = max(1, max_points // 2)
+    size = -(-n // buckets)
+    yy = np.full(buckets * size, np.nan)
+    yy[:n] = y
+    yy = yy.reshape(buckets, size)
+    nan = np.isnan(yy)
+    lo = np.where(nan, np.inf, yy).argmin(axis=1)
+    hi = np.where(nan, -np.inf, yy).argmax(axis=1)
+    base = np.arange(buckets) * size
+    idx = np.unique(np.concatenate([base + lo, base + hi]))
+    idx = idx[idx < n]
+    return t[idx], y[idx]
+
+
+MAX_DRAWN = 1e100   # |value| a figure can draw: beyond, an axis range overflows (matplotlib: arange of inf)
+DRAWN_COLUMNS = ("t", "theta_b", "dtheta_b", "dtheta_w", "u", "tau_hat1", "tau_hat2", "tau_d1", "tau_d2", "theta_w")
+
+
+def refusal(runs: Sequence) -> Optional[str]:
+    """Why the runs' figures cannot be drawn, in one line, or None: a finite value beyond :data:`MAX_DRAWN`
+    (non-finite values are gaps; t is checked when a run is read)."""
+    for run in runs:
+        for col in DRAWN_COLUMNS:
+            try:
+                x = np.asarray(run[col], dtype=float)
+            except KeyError:
+                continue
+            big = np.isfinite(x) & (np.abs(x) > MAX_DRAWN)
+            if big.any():
+                i = int(np.argmax(big))
+                return (f"{run.label}: {col} = {float(x[i]):g} at row {i + 1}: beyond what a figure can draw "
+                        f"(|value| <= {MAX_DRAWN:g})")
+    return None
 
 
 FIG3_PANELS = [("theta_b", r"$\theta_b$ [rad]"), ("dtheta_b", r"$\dot\theta_b$ [rad/s]"),
@@ -65,7 +112,7 @@ def fig3(runs: Sequence, path, title: Optional[str] = None, window=None, falls: 
         if window is not None:
             ax.axvspan(window[0], window[1], **WINDOW_SHADE, label=_window_label(window))
         for run in runs:
-            line, = ax.plot(run["t"], run[col], label=run.label, lw=1.0)
+            line, = ax.plot(*decimate(run["t"], run[col]), label=run.label, lw=1.0)
             if col == "theta_b" and run.label in falls:
                 t = np.asarray(run["t"])
                 k = min(int(np.searchsorted(t, falls[run.label] - 1e-9)), len(t) - 1)
@@ -98,9 +145,9 @@ def observer_plot(runs: Sequence, path, window=None) -> None:
             ax = axes[i - 1][j]
             if window is not None:
                 ax.axvspan(window[0], window[1], **WINDOW_SHADE, label=_window_label(window))
-            ax.plot(run["t"], run[f"tau_d{i}"], color="C0", label=r"$\tau_{d}$ (true)", lw=1.2)
+            ax.plot(*decimate(run["t"], run[f"tau_d{i}"]), color="C0", label=r"$\tau_{d}$ (true)", lw=1.2)
             if has_est:
-                ax.plot(run["t"], run[f"tau_hat{i}"], "--", color="C1", label=r"$\hat\tau_{d}$ (observer)", lw=1.0)
+                ax.plot(*decimate(run["t"], run[f"tau_hat{i}"]), "--", color="C1", label=r"$\hat\tau_{d}$ (observer)", lw=1.0)
             else:
                 ax.text(0.5, 0.5, "no estimate recorded", transform=ax.transAxes, ha="center", va="center",
                         fontsize=11, color="0.35", bbox=dict(fc="white", ec="0.7", alpha=0.8))

@@ -24,7 +24,15 @@ What ran is what is judged:
   ratio to DSCNDO's (else to the last run's).
 
 ``--out`` must not already hold a report (exit 2) unless ``--force``, which first removes the
-report files there (so none is left over from an earlier report).
+report files there (so none is left over from an earlier report); an ``--out`` that cannot be a
+directory or be written into is refused before any input is read (:mod:`mwip_ros.cli.outputs`).
+
+Bounded whatever the inputs hold: a CSV or bag is size-checked before it is read and at most
+:data:`mwip_ros.runs.MAX_ROWS` rows (2.8 h at 200 Hz) are read (refused above, one line); every t
+must be finite and in order; the figures draw at most :data:`mwip_ros.cli.plotting.MAX_POINTS`
+samples a line; the animation has at most :data:`mwip_ros.cli.animation.MAX_FRAMES` frames, counted
+before any is allocated, and runs longer than it can play in real time (9 days) are refused with a
+pointer to ``--no-animation``.
 """
 from __future__ import annotations
 
@@ -38,7 +46,7 @@ from typing import List, Optional, Sequence
 
 from mwip_ros.bag import REPAIRED_KEY, BagError, read_metadata
 from mwip_ros.bag.ledger import GAPS_KEY
-from mwip_ros.cli import animation, plotting
+from mwip_ros.cli import animation, interrupts, outputs, plotting
 from mwip_ros.core import metrics
 from mwip_ros.core.trajectory import Trajectory
 from mwip_ros.params import defaults_for
@@ -197,10 +205,20 @@ def write_report(runs: List[Trajectory], out: Path, window=metrics.WINDOW, fall_
 
 def existing_report(out: Path) -> List[str]:
     """The report files already in ``out``."""
-    return [f for f in REPORT_FILES if (out / f).exists()]
+    return outputs.existing_outputs(out, REPORT_FILES)
+
+
+def _fail(text: str) -> int:
+    print(f"mwip_report: error: {text}", file=sys.stderr)
+    return EXIT_BAD_INPUT
 
 
 def main(argv=None) -> int:
+    """mwip_report; SIGTERM is handled like Ctrl-C (one line, exit 143 / 130)."""
+    return interrupts.run_main(_main, argv, "mwip_report")
+
+
+def _main(argv=None) -> int:
     ap = argparse.ArgumentParser(
         prog="mwip_report",
         description="Read recorded bags (rosbag2 MCAP directories) or mwip_sim / plant_sim CSVs and write "
@@ -231,19 +249,19 @@ def main(argv=None) -> int:
         given = getattr(args, opt)
         if given and len(given) != len(args.runs):
             ap.error(f"--{opt} needs {len(args.runs)} values (one per run), got {len(given)}")
-    there = existing_report(args.out)
-    if there and not args.force:
-        print(f"mwip_report: error: {args.out} already holds a report ({', '.join(there)}); choose another --out "
-              f"or add --force", file=sys.stderr)
-        return EXIT_BAD_INPUT
+    reason = outputs.refuse_directory(args.out, REPORT_FILES, args.force, "--out", "a report")
+    if reason:
+        return _fail(reason)
     runs, warnings = [], []
     for i, path in enumerate(args.runs):
         try:
             runs.append(load_run(path, args.labels[i] if args.labels else None,
                                  args.estimates[i] if args.estimates else None))
         except (OSError, ValueError) as exc:  # BagError too: a clear line per unreadable input, no traceback
-            print(f"mwip_report: error: {path}: {exc}", file=sys.stderr)
-            return EXIT_BAD_INPUT
+            text = " ".join(str(exc).split())
+            return _fail(text if text.startswith(str(path)) else f"{path}: {text}")
+        except MemoryError:
+            return _fail(f"{path}: out of memory reading it")
         print(f"read {path}: {len(runs[-1])} samples, t = 0 .. {runs[-1].t[-1]:.3f} s")
         for what, text in (("incomplete lockstep recording", recording_gaps(path)),
                            ("repaired bag (mwip_bag_repair)", repaired(path))):
@@ -255,10 +273,21 @@ def main(argv=None) -> int:
     try:
         metrics.fit_window(window, max(float(r.t[-1]) for r in runs), requested)
     except metrics.WindowError as exc:
-        print(f"mwip_report: error: --window: {exc}", file=sys.stderr)
-        return EXIT_BAD_INPUT
-    for f in there:   # --force: no file of an earlier report is left beside this one
-        (args.out / f).unlink()
+        return _fail(f"--window: {exc}")
+    why = plotting.refusal(runs)
+    if why:
+        return _fail(why)
+    if not args.no_animation:
+        why = animation.refusal(runs)
+        if why:
+            return _fail(f"{why}; add --no-animation for the rest of the report")
+    reason = outputs.remove_stale(args.out, REPORT_FILES)   # --force: nothing of an earlier report is left
+    if reason:
+        return _fail(reason)
+    try:
+        args.out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        return _fail(f"--out {args.out}: cannot create it ({exc.strerror or exc})")
     res = write_report(runs, args.out, window, warnings=warnings,
                        gif_fps=None if args.no_animation else args.gif_fps, window_requested=requested)
     if res["window_note"]:

@@ -3,14 +3,16 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
+import signal
 import sys
 from pathlib import Path
 
 from mwip_ros import params as P
-from mwip_ros.cli import plotting
+from mwip_ros.cli import interrupts, plotting
 from mwip_ros.cli.outputs import refuse_existing
 from mwip_ros.cli.theorem import theorem_report
-from mwip_ros.core import metrics
+from mwip_ros.core import budget, metrics
 from mwip_ros.core.sim import LAWS, law_name, simulate
 from mwip_ros.params.paths import default_params_file
 from mwip_ros.runs import write_csv
@@ -59,7 +61,42 @@ def _fail(text: str) -> int:
 DURATION_MAX_S = P.specs_for("plant_sim")["duration_s"].check.bounds[1]   # the parameter file's own limit
 
 
+def _memory_refusal(values, duration, n_runs: int):
+    """Why the runs would not fit the memory budget (core.budget: every law's trajectory is kept), or None."""
+    try:
+        cap = budget.memory_budget()
+    except ValueError as exc:
+        return str(exc)
+    rate = values["control_rate_hz"]
+    dur = values["duration_s"] if duration is None else duration
+    n_steps = int(round(dur * rate))
+    need = budget.offline_bytes(n_steps, n_runs, values["sensors.delay_periods"], values["actuator.delay_periods"])
+    if need <= cap:
+        return None
+    key = "--duration" if duration is not None else "plant_sim.duration_s"
+    most = (cap // (n_runs * budget.OFFLINE_STEP) - 1) / rate
+    return (f"{key} {dur:g} s at {rate:g} Hz is {n_steps + 1:,} rows per law x {n_runs} law(s): about "
+            f"{budget.fmt_bytes(need)} of trajectories; the memory budget is {budget.fmt_bytes(cap)} (at most "
+            f"{most:,.0f} s here; {budget.BUDGET_ENV} sets it)")
+
+
 def main(argv=None) -> int:
+    """mwip_sim; Ctrl-C or SIGTERM: the runs finished so far keep their CSVs, exit 130 / 143."""
+    return interrupts.run_main(_main, argv, "mwip_sim")
+
+
+def _write_atomic(run, out: Path) -> None:
+    """The CSV appears whole or not at all (an interrupt mid-write leaves no half file)."""
+    tmp = out.with_name(f".{out.name}.{os.getpid()}.tmp")
+    try:
+        write_csv(run, tmp)
+        os.replace(tmp, out)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+
+
+def _main(argv=None) -> int:
     args = _parser().parse_args(argv)
     paths = args.params or [default_params_file()]
     try:
@@ -73,6 +110,9 @@ def main(argv=None) -> int:
         names = list(dict.fromkeys(args.compare or ["dsc", "dscndo"]))
     else:
         names = [args.controller or law_name(values["law"], values["use_observer"])]
+    reason = _memory_refusal(values, args.duration, len(names))
+    if reason:
+        return _fail(reason)
     csv_paths = {}
     if args.csv:
         csv_paths = {label: _suffixed(args.csv, label) if len(names) > 1 else args.csv for label in names}
@@ -87,7 +127,20 @@ def main(argv=None) -> int:
             K = P.typed.lqr_gain(values)
             print(f"LQR gain K = [{K[0]:.6g}, {K[1]:.6g}, {K[2]:.6g}] on [theta_b, theta_b', theta_w'] "
                   f"(lqr.Q = {values['lqr.Q']}, lqr.R = {values['lqr.R']:g}; u = -K x)", file=sys.stderr)
-    runs = []
+    runs, written = [], []
+    try:
+        _run_laws(args, values, names, csv_paths, runs, written)
+    except KeyboardInterrupt:
+        if not args.quiet and sys.stderr.isatty():
+            print(file=sys.stderr)
+        sig = signal.Signals(interrupts.received()).name if interrupts.received() else "SIGINT"
+        kept = f"; kept {', '.join(map(str, written))}" if written else "; no file written"
+        print(f"mwip_sim: interrupted ({sig}) after {len(runs)} of {len(names)} run(s){kept}", file=sys.stderr)
+        return interrupts.exit_code()
+    return _finish(args, values, runs)
+
+
+def _run_laws(args, values, names, csv_paths, runs, written) -> None:
     for label in names:
         law, use_obs = LAWS[label]
 
@@ -102,8 +155,12 @@ def main(argv=None) -> int:
         runs.append(run)
         if args.csv:
             out = csv_paths[label]
-            write_csv(run, out)
+            _write_atomic(run, out)
+            written.append(out)
             print(f"wrote {out}")
+
+
+def _finish(args, values, runs) -> int:
     named = [(r.label, metrics.compute(r.columns, args.window, values["fall_angle"])) for r in runs]
     print(f"metrics over t in [{args.window[0]:g}, {args.window[1]:g}] s:")
     print(metrics.text_table(named))
@@ -114,8 +171,9 @@ def main(argv=None) -> int:
     for run in runs:
         print(f"{run.label}: {'FELL' if run.fallen else 'stayed upright'} "
               f"(max |theta_b| = {abs(run['theta_b']).max():.4f} rad)")
-    if args.plot:
-        plotting.fig3(runs, args.plot)
+    if args.plot:   # shaded like mwip_report's: the window the metrics above are over, each fall marked
+        falls = {name: m.t_fall for name, m in named if m.t_fall is not None}
+        plotting.fig3(runs, args.plot, window=args.window, falls=falls)
         print(f"wrote {args.plot}")
     return 1 if any(r.fallen for r in runs) else 0
 

@@ -3,20 +3,24 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
+import re
 import shutil
+import signal
 import sys
 import time
 from pathlib import Path
 
 from mwip_ros import params as P
+from mwip_ros.cli import interrupts, outputs
 from mwip_ros.sweep import engine, results
 from mwip_ros.sweep.scenarios import expand, parameter_file
 from mwip_ros.core.sim import LAWS
 from mwip_ros.sweep.spec import CONTROLLERS, SpecError, load_spec
 
 PROG = "mwip_sweep"
-EXIT_BAD_INPUT, EXIT_INTERRUPTED = 2, 130
+EXIT_BAD_INPUT, EXIT_INTERRUPTED = 2, interrupts.EXIT_SIGINT   # 143 after SIGTERM (interrupts.run_main)
 # what a sweep writes into --out: an --out holding any of them is refused without --force, which removes them
 SWEEP_FILES = ("results.csv", "summary.md", "summary.json", "sweep.json", "base.yaml", "spec.yaml",
                "upright_map.png", "theta_b_rms.png", "roa.png")
@@ -35,7 +39,8 @@ def _parser() -> argparse.ArgumentParser:
                "  mwip_sweep --results sweeps/mass --scenario 17 --controller dscndo --write-params s17.yaml\n"
                "  scripts/run_experiment.sh --params s17.yaml     # the same scenario through the ROS graph\n\n"
                "exit codes: 0 done, 1 a worker failed, 2 a bad spec or option (nothing ran), 130 interrupted "
-               "(finished rows are in results.csv)",
+               "(Ctrl-C), 143 terminated (SIGTERM: timeout, kill, a batch scheduler); finished rows are in "
+               "results.csv and no worker is left running",
         formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("spec", nargs="?", type=Path, help="the sweep spec (YAML); see config/sweeps/")
     ap.add_argument("--out", type=Path, metavar="DIR", help="output directory (created; must not hold results)")
@@ -59,24 +64,67 @@ def _parser() -> argparse.ArgumentParser:
     return ap
 
 
+def cores() -> int:
+    """The cores this process may run on (its CPU affinity: a container's or ``taskset``'s share)."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except (AttributeError, OSError):
+        return max(1, os.cpu_count() or 1)
+
+
+_LOCAL = re.compile(r"local:([0-9]{1,9})")
+
+
 def add_runner_arguments(ap: argparse.ArgumentParser) -> None:
-    """--workers, --dask, --chunk: where a sweep's (or a tuner's) chunks run."""
-    ap.add_argument("--workers", type=int, default=os.cpu_count() or 1, metavar="N",
-                    help="local worker processes (default: the core count, %(default)s); 1 = in this process")
+    """--workers, --dask, --chunk, --oversubscribe: where a sweep's (or a tuner's) chunks run."""
+    ap.add_argument("--workers", type=int, default=cores(), metavar="N",
+                    help="local worker processes (default: the cores this process may use, %(default)s); 1 = in "
+                         "this process; at most one per chunk and, without --oversubscribe, one per core")
     ap.add_argument("--dask", metavar="ADDRESS",
                     help="run the chunks on a dask.distributed scheduler (tcp://host:8786), or 'local:N' for a "
-                         "local cluster of N workers; --workers is then ignored")
+                         "local cluster of N >= 1 workers (capped like --workers); --workers is then ignored")
     ap.add_argument("--chunk", type=int, default=engine.DEFAULT_CHUNK, metavar="N",
                     help="runs per chunk (default %(default)s); the chunking, not the runner, fixes the results")
+    ap.add_argument("--oversubscribe", action="store_true",
+                    help="allow more local workers (--workers, --dask local:N) than cores")
 
 
-def runner_from(args) -> engine.Runner:
-    """The runner the arguments ask for; ValueError (the message for the user) when they make no sense."""
+def runner_from(args, prog: str = PROG) -> engine.Runner:
+    """The runner the arguments ask for; ValueError (the message for the user) when they make no sense.
+
+    Local workers are capped by the cores (unless ``--oversubscribe``; a note says so) and, when the runner
+    starts, by the number of chunks (:class:`engine.Runner`): 18 idle processes on 2 cores help nobody."""
     if args.workers < 1 or args.chunk < 1:
-        raise ValueError("--workers and --chunk must be >= 1")
-    if args.dask and args.dask.startswith("local:") and not args.dask[6:].isdigit():
-        raise ValueError(f"--dask local:N needs a number of workers, got {args.dask!r}")
-    return engine.Runner(args.workers, args.dask)
+        raise ValueError(f"--workers and --chunk must be >= 1, got --workers {args.workers} --chunk {args.chunk}")
+    n_cores = cores()
+    oversubscribe = getattr(args, "oversubscribe", False)
+    quiet = getattr(args, "quiet", False)
+    dask = args.dask
+    if dask is not None:
+        dask = dask.strip()
+        if not dask:
+            raise ValueError("--dask needs an address (tcp://host:8786) or local:N")
+        if dask.startswith("local:"):
+            m = _LOCAL.fullmatch(dask)
+            if not m:
+                raise ValueError(f"--dask local:N needs a whole number of workers, got {args.dask!r}")
+            n = int(m.group(1))
+            if n < 1:
+                raise ValueError(f"--dask local:N needs N >= 1 workers, got {args.dask!r}")
+            if n > n_cores and not oversubscribe:
+                if not quiet:
+                    print(f"{prog}: note: --dask local:{n} capped at local:{n_cores}, the cores this process may use "
+                          f"(--oversubscribe for more)", file=sys.stderr)
+                n = n_cores
+            dask = f"local:{n}"
+        return engine.Runner(1, dask)
+    workers = args.workers
+    if workers > n_cores and not oversubscribe:
+        if not quiet:
+            print(f"{prog}: note: --workers {workers} capped at {n_cores}, the cores this process may use "
+                  f"(--oversubscribe for more)", file=sys.stderr)
+        workers = n_cores
+    return engine.Runner(workers, None)
 
 
 def _fail(text: str) -> int:
@@ -84,25 +132,19 @@ def _fail(text: str) -> int:
     return EXIT_BAD_INPUT
 
 
-def _refuse_existing(paths, force: bool, hint: str) -> int:
-    """The one check of every output mwip_sweep writes: 0 when none of ``paths`` exists, or with ``force``
-    (which removes them: nothing of an earlier output is left beside the new one); else the error exit
-    code, after one line naming what exists."""
-    there = [Path(p) for p in paths if Path(p).exists()]
-    if not there:
-        return 0
-    if not force:
-        if len(paths) == 1:
-            return _fail(f"{there[0]} already exists; {hint} or add --force")
-        return _fail(f"{there[0].parent} already holds {', '.join(p.name for p in there)}; {hint} or add --force")
-    for p in there:
-        if p.is_dir():
-            return _fail(f"{p} is a directory, not a file")
-        p.unlink()
-    return 0
+def _refuse_file(path, force: bool, option: str) -> int:
+    """0 when the file output ``path`` can be written (:func:`outputs.refuse_existing`), else the error exit
+    code after one line."""
+    reason = outputs.refuse_existing(path, force, option)
+    return _fail(reason) if reason else 0
 
 
 def main(argv=None) -> int:
+    """mwip_sweep; SIGTERM is handled like Ctrl-C (finished rows kept, workers stopped, exit 143)."""
+    return interrupts.run_main(_main, argv, PROG)
+
+
+def _main(argv=None) -> int:
     args = _parser().parse_args(argv)
     if args.plot_rms is not None:
         return _plot_rms(args)
@@ -120,12 +162,16 @@ def main(argv=None) -> int:
     except (SpecError, P.ParamError) as exc:
         return _fail(str(exc))
     spec_copy = args.out / "spec.yaml"   # re-running an output's own spec.yaml: that file is the input, kept
-    same = spec_copy.exists() and spec_copy.resolve() == args.spec.resolve()
-    refused = _refuse_existing([args.out / f for f in SWEEP_FILES if not (same and f == "spec.yaml")], args.force,
-                               "choose another --out")
-    if refused:
-        return refused
-    args.out.mkdir(parents=True, exist_ok=True)
+    same = _same_file(spec_copy, args.spec)
+    mine = [f for f in SWEEP_FILES if not (same and f == "spec.yaml")]
+    reason = (outputs.refuse_directory(args.out, mine, args.force, "--out", "a sweep's outputs")
+              or outputs.remove_stale(args.out, mine))
+    if reason:
+        return _fail(reason)
+    try:
+        args.out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        return _fail(f"--out {args.out}: cannot create it ({os.strerror(exc.errno) if exc.errno else exc})")
     info = _sweep_info(spec, args)
     (args.out / "sweep.json").write_text(json.dumps(info, indent=2))
     parameter_file(spec.base_sections, {}, args.out / "base.yaml",   # the base (and overlays) as one file
@@ -136,7 +182,7 @@ def main(argv=None) -> int:
     chunks = engine.make_chunks(spec, scenarios, args.chunk)
     total = sum(len(c) for c in chunks)
     steps_per_run = int(round(spec.duration_s * spec.base_values["control_rate_hz"]))
-    where = runner.describe()
+    where = runner.describe(len(chunks))
     if not args.quiet:
         print(f"{PROG}: {len(scenarios):,} scenarios x {len(spec.controllers)} law(s) = {total:,} runs of "
               f"{spec.duration_s:g} s in {len(chunks)} chunk(s), on {where}", file=sys.stderr)
@@ -147,9 +193,11 @@ def main(argv=None) -> int:
             writer.add(chunk, res, scenarios)
             progress.update(len(chunk), res.steps)
     except KeyboardInterrupt:
+        runner.close(stop=True)   # before the message: no worker is left when the line is read
         progress.close()
         writer.close()
-        print(f"\n{PROG}: interrupted: {writer.rows:,} of {total:,} rows are in {args.out / 'results.csv'}",
+        sig = signal.Signals(interrupts.received()).name if interrupts.received() else "SIGINT"
+        print(f"\n{PROG}: interrupted ({sig}): {writer.rows:,} of {total:,} rows are in {args.out / 'results.csv'}",
               file=sys.stderr)
         return EXIT_INTERRUPTED
     except Exception as exc:   # a worker's failure (or a lost Dask connection): keep what finished
@@ -172,6 +220,13 @@ def main(argv=None) -> int:
     print(results.summary_markdown(doc))
     print(f"wrote {', '.join(str(args.out / w) for w in written)}")
     return 0
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        return a.exists() and b.exists() and os.path.samefile(a, b)
+    except OSError:
+        return False
 
 
 def _sweep_info(spec, args) -> dict:
@@ -241,11 +296,11 @@ def _plot_rms(args) -> int:
     named = []
     for d in args.results:
         try:
-            info = json.loads((d / "sweep.json").read_text())
-            named.append((info.get("name", d.name), results.read_results(d / "results.csv")))
+            info = _read_sweep_json(d)
+            named.append((str(info.get("name", d.name))[:200], results.read_results(d / "results.csv")))
         except (OSError, ValueError) as exc:
             return _fail(f"{d} is not a sweep's output directory ({exc})")
-    refused = _refuse_existing([args.plot_rms], args.force, "choose another --plot-rms file")
+    refused = _refuse_file(args.plot_rms, args.force, "--plot-rms")
     if refused:
         return refused
     from mwip_ros.cli import plotting
@@ -254,12 +309,55 @@ def _plot_rms(args) -> int:
     return 0
 
 
+def _read_sweep_json(d: Path) -> dict:
+    """A sweep's sweep.json, checked for what --write-params uses; ValueError (one line) when it lacks it."""
+    path = d / "sweep.json"
+    size = path.stat().st_size
+    if size > SWEEP_JSON_MAX_BYTES:
+        raise ValueError(f"{path} is {size:,} bytes, more than a sweep writes ({SWEEP_JSON_MAX_BYTES:,} at most)")
+    try:
+        info = json.loads(path.read_text())
+    except UnicodeDecodeError as exc:
+        raise ValueError(f"{path} is not text ({exc.reason})") from None
+    except RecursionError:
+        raise ValueError(f"{path} is nested too deeply") from None
+    if not isinstance(info, dict):
+        raise ValueError(f"{path} holds no object")
+
+    def need(key, ok, what):
+        if key not in info:
+            raise ValueError(f"{path} has no {key!r}")
+        if not ok(info[key]):
+            raise ValueError(f"{path}: {key!r} must be {what}, got {_short(info[key])}")
+
+    def num(v):
+        return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+    need("controllers", lambda v: isinstance(v, list) and v and all(c in CONTROLLERS for c in v),
+         f"a non-empty list of {', '.join(CONTROLLERS)}")
+    need("axes", lambda v: isinstance(v, list) and all(
+        isinstance(a, dict) and all(isinstance(a.get(k), str) for k in ("key", "section", "name", "type"))
+        for a in v), "a list of {key, section, name, type} objects")
+    need("scenarios", lambda v: isinstance(v, int) and not isinstance(v, bool) and v >= 0, "a count")
+    need("duration_s", lambda v: num(v) and v > 0, "a number of seconds > 0")
+    need("window", lambda v: isinstance(v, list) and len(v) == 2 and all(num(x) for x in v), "[t0, t1]")
+    return info
+
+
+def _short(v, n: int = 60) -> str:
+    text = repr(v)
+    return text if len(text) <= n else text[:n] + f"... ({len(text):,} characters)"
+
+
+SWEEP_JSON_MAX_BYTES = 16 << 20   # a sweep.json names its axes: kilobytes; a larger one was not written by a sweep
+
+
 def _write_params(args) -> int:
     if args.results is None or len(args.results) != 1 or args.scenario is None or args.write_params is None:
         return _fail("--write-params needs one --results DIR and --scenario N")
     d = args.results[0]
     try:
-        info = json.loads((d / "sweep.json").read_text())
+        info = _read_sweep_json(d)
         cols = results.read_results(d / "results.csv")
     except (OSError, ValueError) as exc:
         return _fail(f"{d} is not a sweep's output directory ({exc})")
@@ -267,11 +365,15 @@ def _write_params(args) -> int:
     law = args.controller or ("dscndo" if "dscndo" in laws else laws[0])
     if law not in laws:
         return _fail(f"--controller {law}: the sweep ran {', '.join(laws)}")
+    missing = [a["key"] for a in info["axes"] if a["key"] not in cols]
+    if missing:
+        return _fail(f"{d / 'results.csv'} has no column {missing[0]!r} (an axis of {d / 'sweep.json'}); "
+                     f"not this sweep's results")
     rows = [j for j, (s, c) in enumerate(zip(cols["scenario"], cols["controller"])) if s == args.scenario and c == law]
     if not rows:
         return _fail(f"no row for scenario {args.scenario} ({law}) in {d / 'results.csv'} (scenarios 0.."
                      f"{info['scenarios'] - 1}; an interrupted sweep lacks some)")
-    refused = _refuse_existing([args.write_params], args.force, "choose another --write-params file")
+    refused = _refuse_file(args.write_params, args.force, "--write-params")
     if refused:
         return refused
     j = rows[0]
@@ -279,17 +381,46 @@ def _write_params(args) -> int:
               ("dscndo_controller", "use_observer"): LAWS[law][1], ("dscndo_controller", "law"): LAWS[law][0]}
     for a in info["axes"]:
         v = cols[a["key"]][j]
-        placed[(a["section"], a["name"])] = int(v) if a["type"] == "integer" else v
+        if a["type"] == "integer":
+            if not (isinstance(v, float) and math.isfinite(v) and v == int(v)):
+                return _fail(f"{d / 'results.csv'}: scenario {args.scenario} ({law}): {a['key']} = {_short(v)} is "
+                             f"not an integer")
+            v = int(v)
+        try:
+            spec = P.specs_for(a["section"])[a["name"]]
+        except KeyError:
+            return _fail(f"{d / 'sweep.json'}: axis {a['key']!r} is no parameter ({a['section']}.{a['name']})")
+        try:
+            placed[(a["section"], a["name"])] = spec.validate(v, a["key"], f"{d / 'results.csv'} scenario "
+                                                                            f"{args.scenario} ({law})")
+        except P.ParamError as exc:
+            return _fail(_one_line(exc))
+    out = args.write_params
+    tmp = out.with_name(f".{out.name}.{os.getpid()}.tmp")   # checked before it replaces anything: no bad file left
     try:
         base = P.load_param_file(d / "base.yaml")
         header = (f"# {PROG}: scenario {args.scenario} of {d} ({law}), a complete parameter file.\n"
                   f"# Its results.csv row: upright {cols['upright'][j]}, theta_b RMS {cols['theta_b_rms'][j]!r} rad "
                   f"over t in {info['window']} s.\n")
-        parameter_file(base.sections, placed, args.write_params, header)
-    except (P.ParamError, OSError) as exc:
-        return _fail(str(exc))
+        parameter_file(base.sections, placed, tmp, header)
+        os.replace(tmp, out)
+    except (P.ParamError, ArithmeticError, TypeError) as exc:   # values that pass alone, not together
+        return _fail(f"scenario {args.scenario} ({law}) of {d} gives no valid parameter file: "
+                     f"{_one_line(exc).replace(str(tmp), str(out))}")
+    except (OSError, ValueError) as exc:
+        return _fail(f"--write-params {out}: {_one_line(exc)}")
+    finally:
+        try:
+            tmp.unlink()
+        except OSError:
+            pass
     print(f"wrote {args.write_params} (scenario {args.scenario}, {law})")
     return 0
+
+
+def _one_line(exc) -> str:
+    text = " ".join(str(exc).split())
+    return text if len(text) <= 300 else text[:300] + "..."
 
 
 if __name__ == "__main__":

@@ -4,6 +4,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import math
+import signal
 import sys
 import time
 from pathlib import Path
@@ -12,11 +13,12 @@ import numpy as np
 
 from mwip_ros import params as P
 from mwip_ros.core.sim import LAWS
+from mwip_ros.cli import interrupts
 from mwip_ros.cli.outputs import refuse_existing
 from mwip_ros.cli.sweep import add_runner_arguments, runner_from
 from mwip_ros.sweep.scenarios import parameter_overlay
 from mwip_ros.sweep.spec import CONTROLLERS, SpecError, load_spec
-from mwip_ros.sweep.tune import KNOBS, Objective, Tuner, knobs_for, overlay, parse_bounds
+from mwip_ros.sweep.tune import KNOBS, Objective, check_memory, Tuner, knobs_for, overlay, parse_bounds
 
 PROG = "mwip_tune"
 
@@ -35,8 +37,9 @@ def _parser() -> argparse.ArgumentParser:
                "  mwip_tune SPEC.yaml --controller lqr_ndo --tune lqr.Q lqr.R --bounds lqr.R=0.001:0.1 --out lqr.yaml\n"
                "  mwip_sim --params config/paper.yaml tuned.yaml      # the overlay goes after the base file\n\n"
                f"tunable: {', '.join(KNOBS)} (X: its diagonal c1, c4; lqr.Q: its diagonal)\n"
-               "exit codes: 0 done, 2 a bad spec or option (nothing ran), 130 interrupted (the best so far is "
-               "written)",
+               "exit codes: 0 done, 2 a bad spec or option (nothing ran), 130 interrupted (Ctrl-C: the best so far "
+               "is written, judged on the held-out set), 143 terminated (SIGTERM: the best so far is written, not "
+               "judged)",
         formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("spec", type=Path, help="a sweep spec (its base file, duration, window, scenarios)")
     ap.add_argument("--controller", required=True, choices=CONTROLLERS, help="the law to tune")
@@ -64,6 +67,11 @@ def _fail(text: str) -> int:
 
 
 def main(argv=None) -> int:
+    """mwip_tune; SIGTERM is handled like Ctrl-C (the best so far written, workers stopped, exit 143)."""
+    return interrupts.run_main(_main, argv, PROG)
+
+
+def _main(argv=None) -> int:
     args = _parser().parse_args(argv)
     if args.maxiter < 1 or args.popsize < 1:
         return _fail("--maxiter and --popsize must be >= 1")
@@ -80,6 +88,7 @@ def main(argv=None) -> int:
         spec = load_spec(args.spec)
         knobs = knobs_for(args.tune, law)
         bounds = parse_bounds(knobs, args.bounds)
+        check_memory(spec, knobs, args.popsize)   # before any scenario is expanded
         holdout = dataclasses.replace(spec, seed=spec.seed + 1 if args.holdout_seed is None else args.holdout_seed)
         if holdout.seed == spec.seed:
             raise SpecError("--holdout-seed", "must differ from the spec's seed (the set is held out)")
@@ -87,7 +96,7 @@ def main(argv=None) -> int:
         return _fail(str(exc))
     base_x = _base_values(knobs, spec.base_values)
     try:
-        runner = runner_from(args)
+        runner = runner_from(args, PROG)
     except ValueError as exc:
         return _fail(str(exc))
     with runner:
@@ -131,10 +140,12 @@ def _tune(args, spec, holdout, knobs, bounds, base_x, runner) -> int:
         return 130
     log(("interrupted: keeping the best so far" if tuner.interrupted else "search done")
         + f" after {generations} generation(s), {search.evaluations} candidates, {time.monotonic() - t0:.0f} s")
-    try:
-        before, after = held.judge(base_x), held.judge(best_x)
-    except KeyboardInterrupt:
-        before = after = None
+    before = after = None
+    if interrupts.received() != signal.SIGTERM:   # SIGTERM (a scheduler's grace period): write and go
+        try:
+            before, after = held.judge(base_x), held.judge(best_x)
+        except KeyboardInterrupt:
+            before = after = None
     _write_overlay(args, spec, knobs, best_x, best_j, before, after)
     _print_table(args, names, base_x, best_x, before, after, len(held.scenarios), holdout.seed)
     return 130 if tuner.interrupted else 0

@@ -11,6 +11,7 @@
 :mod:`.metrics`           the metrics of a run
 :mod:`.batch`             many scenarios at once: the closed loop over numpy arrays
 :mod:`.compiled`          the plant's RK4 period for many scenarios: the same function compiled by numba
+:mod:`.budget`            the offline tools' memory budget, and what a run costs, estimated before allocating
 ========================  ==========================================================
 
 docs/theory.md has the equations; docs/architecture.md how the nodes use these modules.

@@ -25,6 +25,7 @@ from typing import Dict, List, Optional, Sequence
 
 import numpy as np
 
+from .budget import window_samples
 from .controller import DscGains
 from .metrics import window_metrics
 from .model import PhysicalParams, Sinusoid, State, accel, lumped_disturbance
@@ -202,8 +203,7 @@ def simulate_batch(loops: Sequence[ClosedLoop], window: Sequence[float], record:
     D_w = noise.draw()
     active = np.ones(n, dtype=bool)
     t_fall = np.full(n, np.nan)
-    window_steps = [k for k in range(n_steps + 1) if window[0] - 1e-9 <= k * h <= window[1] + 1e-9]
-    first_w, n_window = (window_steps[0] if window_steps else 0), len(window_steps)
+    first_w, n_window = window_samples(n_steps, h, window)   # the steps k with k h in the window (+-1e-9)
     # a row per sample, a column per scenario: each step writes one contiguous row
     win = {c: np.full((n_window, n), np.nan) for c in ("theta_b", "u", "e1", "e2")}
     rows = [] if record else None

@@ -6,31 +6,15 @@ from pathlib import Path
 from typing import Any, Dict, Mapping, Optional
 
 import difflib
-import re
-
 import yaml
 
 from .errors import ParamError
+from mwip_ros.yamlio import RosYamlLoader, YamlRefused, load_yaml
 from .schema import (NODE_SPECS, QOS_OVERRIDES, QOS_OVERRIDES_REFUSED, ROS_OWN, SHARED, SHARED_SPECS, check_derived, defaults_for,
                      spelling_hint, specs_for)
 
 
-class RosYamlLoader(yaml.SafeLoader):
-    """PyYAML's safe loader, reading numbers as ROS 2 does: ``1e-1``, ``1E3`` and ``2.5e3`` are doubles (YAML 1.1,
-    and so PyYAML, wants a dot and a signed exponent); ``200`` stays an integer."""
-
-
-yaml.add_implicit_resolver("tag:yaml.org,2002:float",
-                           re.compile(r"^[-+]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)[eE][-+]?[0-9]+$"),
-                           list("-+0123456789."), Loader=RosYamlLoader)
-
-
 TYPO_CUTOFF = 0.8   # a foreign section name this close to one of ours is refused as a misspelling
-
-
-def load_yaml(text: str):
-    """A YAML document (a file, or the value of a ``-p name:=value`` rule) with ROS 2's numbers."""
-    return yaml.load(text, Loader=RosYamlLoader)
 
 __all__ = ["ParamFile", "RosYamlLoader", "load_param_file", "load_param_files", "load_yaml", "merged_values", "node_key",
            "parse_param_dict"]
@@ -153,7 +137,11 @@ def load_param_file(path, option: str = "--params-file") -> ParamFile:
     if not p.is_file():
         raise ParamError(option, f"no such file: {p}")
     try:
-        doc = load_yaml(p.read_text())
+        doc = load_yaml(p, "parameter file")   # bounded: size, no aliases, nodes, depth (mwip_ros.yamlio)
+    except YamlRefused as exc:
+        where = exc.problem_mark
+        line = f" (line {where.line + 1})" if where is not None else ""
+        raise ParamError("<file>", f"refused: {exc.problem}{line}", str(p)) from None
     except yaml.YAMLError as exc:
         where = getattr(exc, "problem_mark", None)
         line = f" at line {where.line + 1}, column {where.column + 1}" if where is not None else ""

@@ -23,6 +23,15 @@ __all__ = ["SHARED", "ParamSpec", "PAPER_NOMINAL", "PAPER_ACTUAL", "SHARED_SPECS
 
 SHARED = "/**"
 
+# What a published measurement may read: mwip_ros.msgs.layouts.LIMITS (the observer and the controller reject a
+# joint_states message beyond them as implausible; a test keeps the two equal).  A noise standard deviation is
+# at most NOISE_LIMIT_FRACTION of the limit, and theta_b's noise must leave NOISE_SIGMAS standard deviations
+# between the fall angle and the limit (check_derived): noise that makes a measurement implausible is a
+# configuration error, refused at start-up, not a fault of the observer found during the run.
+MEASURED_LIMITS = {"theta_b": math.pi, "theta_w": 1e9, "rate": 1e3}
+NOISE_LIMIT_FRACTION = 10.0
+NOISE_SIGMAS = 8.0
+
 # --- checks: each returns None when fine, else the reason -------------------------------------
 
 def _bounds(lo: float, hi: float, lo_open: bool = False):
@@ -225,10 +234,13 @@ NODE_SPECS: Dict[str, List[ParamSpec]] = {
         ParamSpec("summary_json", "string", "", "write the run's summary (steps/s, realtime loop periods, missed "
                   "deadlines, stale commands, metrics) to this JSON file; '' = none"),
         *[ParamSpec(f"sensors.noise_std.{ch}", "double", 0.0, f"standard deviation of the zero-mean Gaussian noise on "
-                    f"the published {ch} [{unit}], drawn once per period (its own seeded stream); 0 = none",
-                    _non_negative(hi), unit=unit)
-          for ch, unit, hi in (("theta_w", "rad", 1e3), ("theta_b", "rad", math.pi), ("dtheta_w", "rad/s", 1e3),
-                               ("dtheta_b", "rad/s", 1e3))],
+                    f"the published {ch} [{unit}], drawn once per period (its own seeded stream); 0 = none; at most "
+                    f"a tenth of what a measurement may read (|{ch}| <= {limit:g}: the observer and the controller "
+                    f"refuse a message beyond it)", _non_negative(limit / NOISE_LIMIT_FRACTION), unit=unit)
+          for ch, unit, limit in (("theta_w", "rad", MEASURED_LIMITS["theta_w"]),
+                                  ("theta_b", "rad", MEASURED_LIMITS["theta_b"]),
+                                  ("dtheta_w", "rad/s", MEASURED_LIMITS["rate"]),
+                                  ("dtheta_b", "rad/s", MEASURED_LIMITS["rate"]))],
         ParamSpec("sensors.encoder_counts_per_rev", "integer", 0, "wheel encoder resolution: the published theta_w "
                   "is quantized to 2 pi / counts; 0 = ideal", _count_range(0, 1 << 30)),
         ParamSpec("sensors.delay_periods", "integer", 0, "measurement delay: the state published at step k is the "
@@ -275,6 +287,12 @@ NODE_SPECS: Dict[str, List[ParamSpec]] = {
         ParamSpec("topics", "string_array", [], "topics to serve; empty = every topic of the graph"),
         ParamSpec("nice", "integer", 10, "nice value of the server's threads, 0 (normal) .. 19 (lowest): a viewer "
                   "yields the CPU to the control loop", _count_range(0, 19)),
+        ParamSpec("max_clients", "integer", 32, "most TCP connections the WebSocket server keeps open; one beyond "
+                  "them is closed at once and logged (and refused at start-up if the descriptor limit leaves no "
+                  "room for it)", _count_range(1, 100000)),
+        ParamSpec("idle_timeout_s", "double", 60.0, "a connection that subscribes to nothing and sends nothing for "
+                  "this long is closed (also one that never completes the WebSocket handshake)",
+                  _positive_from(0.5, 86400.0, "a client needs a moment to subscribe once it connected"), unit="s"),
     ],
     "robot_markers": [],   # the shared section only (the nominal model sizes the robot)
     "bag_replay": [
@@ -343,6 +361,14 @@ def check_derived(values: Mapping[str, Any], source: Optional[str] = None) -> No
             raise ParamError(f"{prefix}.m_b", f"the {prefix} model's inertia terms are not usable (m11 = {m11:g}, "
                                               f"m12 = {m12:g}, m22 = {m22:g}, A_bar = {a_bar:g}); check "
                                               f"{prefix}.{{m_b, m_w, I_b, I_w, l, r, g}}", source)
+    sd = values.get("sensors.noise_std.theta_b")
+    if sd and "fall_angle" in values and values["fall_angle"] + NOISE_SIGMAS * sd > MEASURED_LIMITS["theta_b"]:
+        most = (MEASURED_LIMITS["theta_b"] - values["fall_angle"]) / NOISE_SIGMAS
+        raise ParamError("sensors.noise_std.theta_b", f"{sd:g} rad would publish implausible pitches: a pitch near "
+                                                      f"fall_angle ({values['fall_angle']:g} rad) plus "
+                                                      f"{NOISE_SIGMAS:g} standard deviations passes |theta_b| <= pi, "
+                                                      f"which the observer refuses; at most {most:.4g} rad with this "
+                                                      f"fall_angle", source)
     if "lqr.Q" in values and "nominal.m_b" in values:
         from mwip_ros.core.lqr import LqrDesignError, lqr_gain
         from mwip_ros.core.model import PhysicalParams

@@ -9,16 +9,22 @@ cut the same way whatever runs them, so the results are identical however the sw
 Runners yield ``(chunk, result)`` as chunks finish:
 
 * :func:`run_local` with ``workers=1``: in this process, in order.
-* :func:`run_local` with ``workers=N``: a pool of N processes (spawned, not forked).
+* :func:`run_local` with ``workers=N``: a pool of up to N processes (spawned, not forked), never more
+  than there are chunks.
 * :func:`run_dask`: ``address`` of a running ``dask.distributed`` scheduler, or ``local:N`` for a
   local cluster of N single-threaded worker processes started for this sweep.
 """
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
-from typing import Any, Dict, Iterator, List, Sequence, Tuple
+from typing import Any, Dict, Iterator, List, Optional, Sequence, Tuple
 
 import numpy as np
+
+from mwip_ros.core import budget
+from mwip_ros.core.budget import window_samples
+from mwip_ros.sweep.workers import signals_held, stop_resource_tracker, worker_init
 
 __all__ = ["Chunk", "ChunkResult", "make_chunks", "chunks_of", "run_chunk", "Runner", "run_local", "run_dask",
            "DEFAULT_CHUNK"]
@@ -63,34 +69,55 @@ def chunks_of(controller: str, base: Dict[str, Any], overrides: Sequence[Dict[st
             for first in range(0, n, chunk_size)]
 
 
-def run_chunk(chunk: Chunk) -> ChunkResult:
+def scenario_cost(values: Dict[str, Any], duration_s: float, window: Tuple[float, float]) -> Tuple[int, int]:
+    """(bytes per scenario, bytes per batch) of a run of these merged values in a batch (core.budget)."""
+    h = 1.0 / values["control_rate_hz"]   # params.typed.period: the batch's h
+    n_steps = int(round(duration_s / h))
+    n_window = window_samples(n_steps, h, window)[1]
+    d, a = int(values["sensors.delay_periods"]), int(values["actuator.delay_periods"])
+    return budget.scenario_batch_bytes(n_window, n_steps, d, a), budget.batch_fixed_bytes(n_steps, d, a)
+
+
+def run_chunk(chunk: Chunk, batch_bytes: Optional[int] = None) -> ChunkResult:
     """Simulate one chunk (scenarios that differ in control period, RK4 sub-steps, encoder or delays run as
-    separate batches)."""
+    separate batches).  A batch whose estimated memory (core.budget) is above ``batch_bytes`` (default: the
+    budget's :func:`~mwip_ros.core.budget.batch_budget`) runs as several, each within it; the scenarios'
+    ClosedLoops are built a batch at a time."""
     from mwip_ros import params as P
     from mwip_ros.core.batch import simulate_batch
     from mwip_ros.core.sim import LAWS
 
     law, use_observer = LAWS[chunk.controller]
-    loops = []
-    for ov in chunk.overrides:
+    cap = budget.batch_budget() if batch_bytes is None else batch_bytes
+
+    def values(ov):
         v = dict(chunk.base)
         v.update(ov)
-        loops.append(P.closed_loop(v, use_observer=use_observer, duration=chunk.duration_s, law=law))
-    n = len(loops)
+        return v
+
+    n = len(chunk.overrides)
     groups: Dict[tuple, List[int]] = {}
-    for i, lp in enumerate(loops):
-        sc = lp.plant.sensing
-        key = (lp.plant.h, lp.plant.substeps, sc.encoder_counts_per_rev, sc.delay_periods, sc.actuator_delay_periods)
+    for i, ov in enumerate(chunk.overrides):
+        v = values(ov)
+        key = (1.0 / v["control_rate_hz"], int(v["substeps"]), v["sensors.encoder_counts_per_rev"],
+               v["sensors.delay_periods"], v["actuator.delay_periods"])   # PlantConfig's h, substeps, sensing
         groups.setdefault(key, []).append(i)
     upright, t_fall = np.zeros(n, dtype=bool), np.full(n, np.nan)
     metrics: Dict[str, np.ndarray] = {}
     steps = 0
-    for idx in groups.values():
-        r = simulate_batch([loops[i] for i in idx], chunk.window)
-        upright[idx], t_fall[idx] = r.upright, r.t_fall
-        for k, v in r.metrics.items():
-            metrics.setdefault(k, np.full(n, np.nan))[idx] = v
-        steps += r.steps
+    for group in groups.values():
+        per, fixed = scenario_cost(values(chunk.overrides[group[0]]), chunk.duration_s, chunk.window)
+        size = max(1, int((cap - fixed) // per)) if cap > fixed + per else 1   # one scenario fits (load_spec)
+        for start in range(0, len(group), size):
+            idx = group[start:start + size]
+            loops = [P.closed_loop(values(chunk.overrides[i]), use_observer=use_observer, duration=chunk.duration_s,
+                                   law=law) for i in idx]
+            r = simulate_batch(loops, chunk.window)
+            del loops
+            upright[idx], t_fall[idx] = r.upright, r.t_fall
+            for k, v in r.metrics.items():
+                metrics.setdefault(k, np.full(n, np.nan))[idx] = v
+            steps += r.steps
     return ChunkResult(upright, t_fall, metrics, steps)
 
 
@@ -98,21 +125,40 @@ class Runner:
     """Where chunks run: this process (``workers=1``), a pool of ``workers`` processes (spawned once, kept for
     the runner's life: a tuner sends it a generation at a time), or a Dask cluster (``dask``: the address
     of a running scheduler, or ``local:N``).  ``runner(chunks)`` yields ``(chunk, result)`` as each
-    finishes; use it as a context manager, or call :meth:`close`."""
+    finishes; use it as a context manager, or call :meth:`close`.
+
+    No more local processes start than the first call has chunks (``started``; one chunk runs in this
+    process).  An interrupt (Ctrl-C, or SIGTERM through :mod:`mwip_ros.cli.interrupts`) or a failed chunk
+    stops the workers at once (:meth:`close` with ``stop``): terminated, joined, and multiprocessing's
+    resource tracker stopped, so no process of the run outlives it."""
 
     def __init__(self, workers: int = 1, dask: str = None):
         self.workers, self.dask = max(1, int(workers)), dask
+        local = dask[len("local:"):] if dask and dask.startswith("local:") else None
+        for option, n in (("--workers", self.workers), ("--dask local:N", local)):
+            if n is not None and str(n).isdigit() and int(n) > budget.max_workers():
+                raise ValueError(f"{option} {n}: at most {budget.max_workers()} worker processes (twice this "
+                                 f"machine's {os.cpu_count() or 1} CPUs: more run no faster, and each takes about "
+                                 f"{budget.fmt_bytes(budget.WORKER_PROCESS)} plus up to "
+                                 f"{budget.fmt_bytes(budget.batch_budget())} of batch arrays)")
+        self.started = 0   # the worker processes actually started (at most one per chunk)
         self._pool = self._client = self._cluster = None
 
-    def describe(self) -> str:
+    def describe(self, chunks: int = None) -> str:
+        """Where the chunks run; with ``chunks``, the worker processes that many chunks start (one per chunk
+        at most)."""
         if self.dask:
+            if self.dask.startswith("local:") and chunks is not None:
+                return f"Dask at local:{max(1, min(int(self.dask[6:]), chunks))}"
             return f"Dask at {self.dask}"
-        return f"{self.workers} worker processes" if self.workers > 1 else "this process"
+        n = self.workers if chunks is None else max(1, min(self.workers, chunks))
+        return f"{n} worker processes" if n > 1 else "this process"
 
     def __call__(self, chunks: Sequence[Chunk]) -> Iterator[Tuple[Chunk, ChunkResult]]:
+        chunks = list(chunks)
         if self.dask:
             yield from self._dask(chunks)
-        elif self.workers <= 1:
+        elif self.workers <= 1 or (len(chunks) <= 1 and self._pool is None):   # one chunk: no process to spawn
             for c in chunks:
                 yield c, run_chunk(c)
         else:
@@ -122,45 +168,76 @@ class Runner:
         import multiprocessing
         from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 
-        if self._pool is None:
-            self._pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=multiprocessing.get_context("spawn"))
         todo, running = list(chunks), {}
+        if self._pool is None:   # never more processes than chunks: an idle worker costs ~160 MiB
+            n = max(1, min(self.workers, len(todo)))
+            self._pool = ProcessPoolExecutor(max_workers=n, mp_context=multiprocessing.get_context("spawn"),
+                                             initializer=worker_init)
+            self.started = n
         try:
             while todo or running:
-                while todo and len(running) < 2 * self.workers:   # a few ahead: results stream, memory stays small
+                while todo and len(running) < 2 * self.started:   # a few ahead: results stream, memory stays small
                     c = todo.pop(0)
                     running[self._pool.submit(run_chunk, c)] = c
                 done, _ = wait(running, return_when=FIRST_COMPLETED)
                 for f in done:
                     yield running.pop(f), f.result()
         except BaseException:
-            self.close()   # an interrupt or a failed chunk: cancel the rest
+            self.close(stop=True)   # an interrupt (Ctrl-C, SIGTERM) or a failed chunk: stop the workers now
             raise
 
     def _dask(self, chunks):
         from dask.distributed import Client, LocalCluster, as_completed
 
+        chunks = list(chunks)
         if self._client is None:
             if self.dask.startswith("local:"):
-                self._cluster = LocalCluster(n_workers=int(self.dask.split(":", 1)[1]), threads_per_worker=1,
+                n = max(1, min(int(self.dask.split(":", 1)[1]), len(chunks)))
+                self.started = n
+                self._cluster = LocalCluster(n_workers=n, threads_per_worker=1,
                                              processes=True, dashboard_address=None)
                 self._client = Client(self._cluster)
             else:
                 self._client = Client(self.dask, timeout=30)
-        futures = {self._client.submit(run_chunk, c, pure=False): c for c in chunks}
-        for f in as_completed(futures):
-            yield futures[f], f.result()
+        try:
+            futures = {self._client.submit(run_chunk, c, pure=False): c for c in chunks}
+            for f in as_completed(futures):
+                yield futures[f], f.result()
+        except BaseException:
+            self.close(stop=True)
+            raise
 
-    def close(self) -> None:
-        if self._pool is not None:
-            self._pool.shutdown(wait=True, cancel_futures=True)
-            self._pool = None
-        if self._client is not None:
-            self._client.close()
-            self._client = None
-        if self._cluster is not None:
-            self._cluster.close()
-            self._cluster = None
+    def close(self, stop: bool = False) -> None:
+        """Shut the workers down: after the running chunks (``stop=False``), or at once (``stop``: an interrupt
+        or a failure; running chunks are abandoned, no process is left behind).  SIGINT and SIGTERM wait
+        until it is done."""
+        with signals_held():
+            if self._pool is not None:
+                pool, self._pool = self._pool, None
+                procs = list((getattr(pool, "_processes", None) or {}).values()) if stop else []
+                for p in procs:
+                    if p.is_alive():
+                        p.terminate()
+                pool.shutdown(wait=True, cancel_futures=True)
+                for p in procs:
+                    p.join(5)
+                    if p.is_alive():
+                        p.kill()
+                        p.join(5)
+                stop_resource_tracker()   # no worker holds it now: it exits, and is waited for, not orphaned
+            if self._client is not None:
+                client, self._client = self._client, None
+                try:
+                    client.close(timeout=10)
+                except Exception:  # noqa: BLE001 - a scheduler already gone: nothing more to close
+                    pass
+            if self._cluster is not None:
+                cluster, self._cluster = self._cluster, None
+                try:
+                    cluster.close(timeout=20)
+                except Exception:  # noqa: BLE001
+                    pass
+                stop_resource_tracker()
 
     def __enter__(self):
         return self

@@ -91,30 +91,67 @@ def sort_file(path: Path, order: List[str]) -> None:
     tmp.replace(path)
 
 
+REQUIRED = ("scenario", "seed", "controller", "upright", "t_fall", *METRICS)   # what every results.csv has
+
+
 def read_results(path: Path) -> Dict[str, list]:
     """results.csv as columns: numbers as floats (``scenario``, ``seed`` as ints, ``upright`` as bools),
-    list-valued parameters as lists, ``controller`` as strings."""
-    with open(path, newline="") as f:
-        rows = list(csv.reader(f))
-    if not rows:
-        raise ValueError(f"{path} is empty")
-    head, body = rows[0], rows[1:]
-    cols: Dict[str, list] = {h: [] for h in head}
-    for r in body:
-        if len(r) != len(head):   # a row cut by a crash mid-write: not a result
-            continue
-        for h, v in zip(head, r):
-            if h == "controller":
-                cols[h].append(v)
-            elif h in ("scenario", "seed"):
-                cols[h].append(int(v))
-            elif h == "upright":
-                cols[h].append(v == "1")
-            elif v.startswith("["):
-                cols[h].append(json.loads(v))
-            else:
-                cols[h].append(float(v))
-    return cols
+    list-valued parameters as lists, ``controller`` as strings.
+
+    ValueError, one line naming the file and the line, for anything a sweep does not write: no header or one
+    without :data:`REQUIRED`'s columns, a value that does not parse, a field over the csv module's limit
+    (128 KiB).  A row cut by a crash mid-write (fewer fields) is not a result and is skipped."""
+    path = Path(path)
+    cols: Dict[str, list] = {}
+    try:
+        with open(path, newline="") as f:
+            reader = csv.reader(f)
+            head = next(reader, None)
+            if not head:
+                raise ValueError(f"{path} is empty")
+            missing = [h for h in REQUIRED if h not in head]
+            if missing:
+                raise ValueError(f"{path}: the header has no {', '.join(repr(m) for m in missing[:3])} column"
+                                 f"{'s' if len(missing) > 1 else ''} (a cut header, or not a sweep's results.csv)")
+            if len(set(head)) != len(head):
+                raise ValueError(f"{path}: the header repeats a column")
+            cols = {h: [] for h in head}
+            for r in reader:
+                if len(r) != len(head):   # a row cut by a crash mid-write: not a result
+                    continue
+                try:
+                    for h, v in zip(head, r):
+                        cols[h].append(_value(h, v))
+                except (ValueError, RecursionError) as exc:
+                    raise ValueError(f"{path} line {reader.line_num}: column {h!r}: {_brief(exc)}") from None
+    except csv.Error as exc:
+        raise ValueError(f"{path}: not a results.csv ({exc})") from None
+    except UnicodeDecodeError as exc:
+        raise ValueError(f"{path}: not text ({exc.reason})") from None
+    n = min(len(v) for v in cols.values())
+    return {h: v[:n] for h, v in cols.items()}   # a row cut mid-parse above raised; every column has n values
+
+
+def _brief(exc) -> str:
+    text = " ".join(str(exc).split())
+    return text if len(text) <= 120 else text[:120] + "..."
+
+
+def _value(h: str, v: str):
+    if h == "controller":
+        return v
+    if h in ("scenario", "seed"):
+        return int(v)
+    if h == "upright":
+        if v not in ("0", "1"):
+            raise ValueError(f"{v[:20]!r} is not 0 or 1")
+        return v == "1"
+    if v.startswith("["):
+        x = json.loads(v)
+        if not isinstance(x, list) or not all(isinstance(e, (int, float)) and not isinstance(e, bool) for e in x):
+            raise ValueError("not a list of numbers")
+        return x
+    return float(v)
 
 
 def region_of_attraction(theta0: np.ndarray, upright: np.ndarray) -> Optional[float]:

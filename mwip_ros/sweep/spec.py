@@ -34,7 +34,10 @@ from typing import Any, Dict, List, Optional, Tuple
 import yaml
 
 from mwip_ros import params as P
+from mwip_ros.core import budget
+from mwip_ros.params.errors import bounded
 from mwip_ros.params.file import NODES_OF_THE_LOOP
+from mwip_ros.yamlio import YamlRefused, load_yaml, shown
 
 __all__ = ["SpecError", "Axis", "SweepSpec", "load_spec", "parse_spec", "CONTROLLERS", "GRID_KINDS",
            "RANDOM_KINDS"]
@@ -58,6 +61,7 @@ class SpecError(ValueError):
     """A sweep spec that cannot run; ``key`` names the offending entry (``vary.<key>`` for an axis)."""
 
     def __init__(self, key: str, message: str, source: Optional[str] = None):
+        key, message = bounded(key, 200), bounded(message)   # a value's repr never makes a message of megabytes
         self.key, self.reason, self.source = key, message, source
         super().__init__(f"{source + ': ' if source else ''}{key}: {message}")
 
@@ -77,6 +81,11 @@ class Axis:
     @property
     def random(self) -> bool:
         return self.kind in RANDOM_KINDS
+
+    @property
+    def count(self) -> int:
+        """How many values a grid axis takes (without listing them: a linspace count is checked first)."""
+        return self.args[2] if self.kind == "linspace" else len(self.args)
 
     def grid_values(self) -> list:
         if self.kind == "linspace":
@@ -110,7 +119,7 @@ class SweepSpec:
     def n_scenarios(self) -> int:
         n = 1
         for a in self.grid_axes:
-            n *= len(a.grid_values())
+            n *= a.count
         return n * (self.samples if self.random_axes else 1)
 
 
@@ -120,7 +129,13 @@ def load_spec(path, base_override: Optional[Path] = None) -> SweepSpec:
     if not p.is_file():
         raise SpecError("<spec>", f"no such file: {p}" if not p.is_dir() else f"{p} is a directory")
     try:
-        doc = P.load_yaml(p.read_text())
+        doc = load_yaml(p, "sweep spec")   # bounded: size, no aliases, nodes, depth (mwip_ros.yamlio)
+    except YamlRefused as exc:
+        mark = exc.problem_mark
+        raise SpecError("<spec>", f"refused: {exc.problem}" + (f" (line {mark.line + 1})" if mark else ""),
+                        str(p)) from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise SpecError("<spec>", f"cannot read {p}: {exc}") from None
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f" at line {mark.line + 1}" if mark is not None else ""
@@ -135,7 +150,7 @@ def _did_you_mean(word: str, options) -> str:
 
 def _number(v, key: str, source: str, what: str = "a number") -> float:
     if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-        raise SpecError(key, f"expected {what}, got {v!r}", source)
+        raise SpecError(key, f"expected {what}, got {shown(v)}", source)
     return float(v)
 
 
@@ -154,12 +169,12 @@ def parse_spec(doc: Any, source: str = "<spec>", here: Path = Path("."),
         base = doc["base"] if isinstance(doc["base"], list) else [doc["base"]]
         if not base or not all(isinstance(b, str) and b for b in base):
             raise SpecError("base", f"expected a parameter file's path (or a list: a base and overlays), got "
-                                    f"{doc['base']!r}", source)
+                                    f"{shown(doc['base'])}", source)
         base_path = [(here / b).resolve() for b in base]
     else:
         from mwip_ros.params.paths import default_params_file
         base_path = [default_params_file()]
-    pf = P.load_param_files(base_path)   # ParamError names the file and the key
+    pf = P.load_param_files(base_path, option="base")   # ParamError names the file and the key
     base_values = P.merged_values(pf)
 
     ctrls = doc.get("controllers", ["dsc", "dscndo"])   # the paper's comparison unless the spec says more
@@ -169,26 +184,26 @@ def parse_spec(doc: Any, source: str = "<spec>", here: Path = Path("."),
         raise SpecError("controllers", f"expected a non-empty list of {', '.join(CONTROLLERS)}", source)
     for c in ctrls:
         if c not in CONTROLLERS:
-            raise SpecError("controllers", f"unknown law {c!r}{_did_you_mean(str(c), CONTROLLERS)}; known: "
+            raise SpecError("controllers", f"unknown law {shown(c)}{_did_you_mean(str(c), CONTROLLERS)}; known: "
                                            f"{', '.join(CONTROLLERS)}", source)
     if len(set(ctrls)) != len(ctrls):
         raise SpecError("controllers", f"a law is listed twice: {ctrls}", source)
 
     duration = _number(doc.get("duration_s", base_values["duration_s"]), "duration_s", source, "seconds > 0")
     if not 0 < duration <= 1e5:
-        raise SpecError("duration_s", f"must be > 0 and at most 1e5 s, got {duration!r}", source)
+        raise SpecError("duration_s", f"must be > 0 and at most 1e5 s, got {shown(duration)}", source)
     win = doc.get("metrics_window_s", [0.5 * duration, duration])
     if not isinstance(win, list) or len(win) != 2:
-        raise SpecError("metrics_window_s", f"expected [t0, t1], got {win!r}", source)
+        raise SpecError("metrics_window_s", f"expected [t0, t1], got {shown(win)}", source)
     t0, t1 = (_number(w, "metrics_window_s", source, "seconds") for w in win)
     if not 0 <= t0 < t1 <= duration + 1e-9:
-        raise SpecError("metrics_window_s", f"needs 0 <= t0 < t1 <= duration_s ({duration:g}), got {win!r}", source)
+        raise SpecError("metrics_window_s", f"needs 0 <= t0 < t1 <= duration_s ({duration:g}), got {shown(win)}", source)
     seed = doc.get("seed", 0)
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
-        raise SpecError("seed", f"expected an integer >= 0, got {seed!r}", source)
+        raise SpecError("seed", f"expected an integer >= 0, got {shown(seed)}", source)
     samples = doc.get("samples", 1)
     if isinstance(samples, bool) or not isinstance(samples, int) or samples < 1:
-        raise SpecError("samples", f"expected an integer >= 1, got {samples!r}", source)
+        raise SpecError("samples", f"expected an integer >= 1, got {shown(samples)}", source)
 
     vary = doc.get("vary") or {}
     if not isinstance(vary, dict):
@@ -198,7 +213,74 @@ def parse_spec(doc: Any, source: str = "<spec>", here: Path = Path("."),
                      samples, axes)
     if spec.n_scenarios > MAX_SCENARIOS:
         raise SpecError("vary", f"{spec.n_scenarios:,} scenarios; at most {MAX_SCENARIOS:,} per sweep", source)
+    check_memory(spec)
     return spec
+
+
+def _budget(source: str) -> int:
+    try:
+        return budget.memory_budget()
+    except ValueError as exc:
+        raise SpecError(budget.BUDGET_ENV, str(exc), source) from None
+
+
+def check_memory(spec: SweepSpec) -> None:
+    """Refuse a spec whose runs would not fit the memory budget (core.budget), before anything is built:
+    the sweep's table of scenarios and result rows, and one scenario in a simulation batch (its metrics
+    window and delay queues, at the worst values the axes can take).  Raises SpecError naming the key."""
+    cap = _budget(spec.path)
+    n, laws = spec.n_scenarios, len(spec.controllers)
+    table = budget.sweep_table_bytes(n, len(spec.axes), laws)
+    if table > cap:
+        key = "samples" if spec.random_axes and spec.samples > 1 else "vary"
+        fit = int(n * cap // table)
+        raise SpecError(key, f"{n:,} scenarios x {laws} law(s) need about {budget.fmt_bytes(table)} for the "
+                             f"scenario table and the result rows; the memory budget is {budget.fmt_bytes(cap)} "
+                             f"(about {fit:,} scenarios fit; {budget.BUDGET_ENV} sets it)", spec.path)
+    rate = _worst(spec, "control_rate_hz")
+    delay, act = int(_worst(spec, "sensors.delay_periods")), int(_worst(spec, "actuator.delay_periods"))
+    h = 1.0 / rate
+    n_steps = int(round(spec.duration_s / h))
+    n_window = budget.window_samples(n_steps, h, spec.window)[1]
+    per = budget.scenario_batch_bytes(n_window, n_steps, delay, act) + budget.batch_fixed_bytes(n_steps, delay, act)
+    one = budget.batch_budget(cap)
+    if per > one:
+        parts = {"metrics_window_s": budget.BATCH_WINDOW_SAMPLE * n_window,
+                 "sensors.delay_periods": budget.BATCH_DELAY_PERIOD * min(delay, n_steps),
+                 "actuator.delay_periods": budget.BATCH_ACTUATOR_PERIOD * min(act, n_steps)}
+        key = max(parts, key=parts.get)
+        if key == "metrics_window_s":
+            key = "metrics_window_s" if spec.window != (0.5 * spec.duration_s, spec.duration_s) else "duration_s"
+            what = (f"its metrics window [{spec.window[0]:g}, {spec.window[1]:g}] s at {rate:g} Hz is {n_window:,} "
+                    f"samples")
+        else:
+            what = f"{key} = {max(delay, act):,} queues {min(max(delay, act), n_steps):,} periods"
+        raise SpecError(key, f"one scenario of {spec.duration_s:g} s needs about {budget.fmt_bytes(per)}: {what}; a "
+                             f"simulation batch may hold {budget.fmt_bytes(one)} (a quarter of the memory budget "
+                             f"{budget.fmt_bytes(cap)}, {budget.BUDGET_ENV} sets it)", spec.path)
+
+
+def _worst(spec: SweepSpec, name: str) -> float:
+    """The largest value the merged parameter ``name`` takes in any scenario of ``spec`` (the end of a range;
+    a normal's mean + 8 sd, capped at the parameter's own maximum)."""
+    worst = spec.base_values[name]
+    for a in spec.axes:
+        if a.name != name:
+            continue
+        if a.kind == "linspace":
+            v = max(a.args[0], a.args[1])
+        elif a.kind in ("grid", "values"):
+            v = max(a.args)
+        elif a.kind == "uniform":
+            v = a.args[1]
+        elif a.kind == "scale":
+            v = a.base * a.args[1]
+        else:
+            ps = {s.name: s for s in P.SHARED_SPECS}.get(name) or P.specs_for("plant_sim").get(name)
+            hi = getattr(getattr(ps, "check", None), "bounds", (None, math.inf))[1]
+            v = min(a.args[0] + 8 * a.args[1], hi)
+        worst = max(worst, v)
+    return worst
 
 
 def _resolve(key: str, source: str) -> Tuple[str, str, P.ParamSpec]:
@@ -246,7 +328,7 @@ def _axis(key: str, dist: Any, base_values: Dict[str, Any], source: str) -> Axis
         raise SpecError(where, f"expected one distribution, e.g. {{grid: [...]}}; one of {', '.join(kinds)}", source)
     (kind, args), = dist.items()
     if kind not in kinds:
-        raise SpecError(where, f"unknown distribution {kind!r}{_did_you_mean(str(kind), kinds)}; one of "
+        raise SpecError(where, f"unknown distribution {shown(kind)}{_did_you_mean(str(kind), kinds)}; one of "
                                f"{', '.join(kinds)}", source)
     base = base_values[name]
     if ps.type != "double" and kind in RANDOM_KINDS + ("linspace",):
@@ -258,10 +340,10 @@ def _axis(key: str, dist: Any, base_values: Dict[str, Any], source: str) -> Axis
             v = _number(v, where, source)
         elif ps.type == "integer":
             if isinstance(v, bool) or not isinstance(v, int):
-                raise SpecError(where, f"expected integers, got {v!r}", source)
+                raise SpecError(where, f"expected integers, got {shown(v)}", source)
         else:
             if not isinstance(v, list) or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v):
-                raise SpecError(where, f"expected lists of numbers such as {base}, got {v!r}", source)
+                raise SpecError(where, f"expected lists of numbers such as {base}, got {shown(v)}", source)
             v = [float(x) for x in v]
         try:
             return ps.validate(v, name)
@@ -270,17 +352,17 @@ def _axis(key: str, dist: Any, base_values: Dict[str, Any], source: str) -> Axis
 
     if kind in ("grid", "values"):
         if not isinstance(args, list) or not args:
-            raise SpecError(where, f"{kind} needs a non-empty list of values, got {args!r}", source)
+            raise SpecError(where, f"{kind} needs a non-empty list of values, got {shown(args)}", source)
         return Axis(key, section, name, ps.type, kind, tuple(check(v) for v in args), base)
     if not isinstance(args, list) or len(args) != (3 if kind == "linspace" else 2):
         shape = {"linspace": "[start, stop, count]", "uniform": "[low, high]", "scale": "[low, high] (factors)",
                  "normal": "[mean, standard deviation]"}[kind]
-        raise SpecError(where, f"{kind} needs {shape}, got {args!r}", source)
+        raise SpecError(where, f"{kind} needs {shape}, got {shown(args)}", source)
     if kind == "linspace":
         a, b = check(args[0], "start "), check(args[1], "stop ")
         n = args[2]
         if isinstance(n, bool) or not isinstance(n, int) or n < 1:
-            raise SpecError(where, f"linspace count must be an integer >= 1, got {n!r}", source)
+            raise SpecError(where, f"linspace count must be an integer >= 1, got {shown(n)}", source)
         if n == 1 and a != b:
             raise SpecError(where, "linspace with one point needs start == stop", source)
         return Axis(key, section, name, ps.type, kind, (a, b, n), base)
@@ -288,15 +370,15 @@ def _axis(key: str, dist: Any, base_values: Dict[str, Any], source: str) -> Axis
     if kind == "normal":
         check(lo, "mean ")
         if not hi > 0:
-            raise SpecError(where, f"normal needs a standard deviation > 0, got {hi!r}", source)
+            raise SpecError(where, f"normal needs a standard deviation > 0, got {shown(hi)}", source)
         return Axis(key, section, name, ps.type, kind, (lo, hi), base)
     if not lo < hi:
-        raise SpecError(where, f"{kind} needs low < high, got [{lo!r}, {hi!r}] (use values: for one value)", source)
+        raise SpecError(where, f"{kind} needs low < high, got [{shown(lo)}, {shown(hi)}] (use values: for one value)", source)
     if kind == "scale":
         if not lo > 0:
-            raise SpecError(where, f"scale factors must be > 0, got {lo!r}", source)
-        check(base * lo, f"scale {lo:g} of the base value {base!r} ")
-        check(base * hi, f"scale {hi:g} of the base value {base!r} ")
+            raise SpecError(where, f"scale factors must be > 0, got {shown(lo)}", source)
+        check(base * lo, f"scale {lo:g} of the base value {shown(base)} ")
+        check(base * hi, f"scale {hi:g} of the base value {shown(base)} ")
     else:
         check(lo, "low end ")
         check(hi, "high end ")

@@ -22,6 +22,7 @@ from typing import Callable, Dict, List, Optional, Sequence, Tuple
 import numpy as np
 
 from mwip_ros import params as P
+from mwip_ros.core import budget
 from mwip_ros.core.sim import LAWS
 from mwip_ros.core.theorem import controller_conditions, theorem2
 
@@ -29,7 +30,7 @@ from . import engine
 from .scenarios import expand
 from .spec import SpecError, SweepSpec
 
-__all__ = ["Knob", "KNOBS", "knobs_for", "parse_bounds", "Objective", "FALL_PENALTY", "INADMISSIBLE", "Tuner",
+__all__ = ["Knob", "KNOBS", "check_memory", "knobs_for", "parse_bounds", "Objective", "FALL_PENALTY", "INADMISSIBLE", "Tuner",
            "overlay"]
 
 FALL_PENALTY = 1.0       # per fallen scenario, in the objective's unit (rad): far above any upright RMS
@@ -57,6 +58,24 @@ KNOBS: Dict[str, List[Knob]] = {
     "lqr.Q": [Knob(f"lqr.Q.{s}", "dscndo_controller", "lqr.Q", i, (0.1, 1e4))
               for i, s in enumerate(("theta_b", "dtheta_b", "dtheta_w"))],
 }
+
+
+def check_memory(spec: SweepSpec, knobs: List[Knob], popsize: int) -> None:
+    """Refuse a search whose tables would not fit the memory budget (core.budget): every generation judges
+    ``popsize * len(knobs)`` candidates on every scenario of the spec (and of the held-out set) at once.
+    Raises SpecError naming the spec's ``samples`` (or ``vary``) and ``--popsize``."""
+    try:
+        cap = budget.memory_budget()
+    except ValueError as exc:
+        raise SpecError(budget.BUDGET_ENV, str(exc)) from None
+    n, candidates = spec.n_scenarios, popsize * len(knobs)
+    need = budget.tune_table_bytes(n, len(spec.axes), candidates, len(knobs))
+    if need > cap:
+        key = "samples" if spec.random_axes and spec.samples > 1 else "vary"
+        raise SpecError(key, f"{n:,} scenarios x {candidates} candidates per generation (--popsize {popsize} x "
+                             f"{len(knobs)} tuned numbers) need about {budget.fmt_bytes(need)}; the memory budget is "
+                             f"{budget.fmt_bytes(cap)} (about {int(n * cap // need):,} scenarios fit; "
+                             f"{budget.BUDGET_ENV} sets it)", spec.path)
 
 
 def knobs_for(names: Sequence[str], law: str) -> List[Knob]:

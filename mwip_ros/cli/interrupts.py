@@ -1,0 +1,86 @@
+"""SIGTERM handled like SIGINT by the long-running commands (``mwip_sweep``, ``mwip_tune``, ``mwip_sim``,
+``mwip_report``).
+
+``timeout``, ``kill`` and batch schedulers stop a job with SIGTERM, whose default action ends the
+process at once: no ``finally``, no worker shut down, no "interrupted: N rows kept" line.  With
+:func:`handled`, SIGTERM raises :class:`Interrupted` (a :class:`KeyboardInterrupt`) in the main
+thread exactly as Ctrl-C does, so the one interrupt path of each command runs for both: finished work
+kept, workers stopped, one line.  The exit status is 128 + the signal: 130 for SIGINT, 143 for SIGTERM
+(:func:`exit_code`).
+
+Local worker processes (:mod:`mwip_ros.sweep.engine`) ignore SIGINT: a Ctrl-C at a terminal reaches the
+whole process group, and only the parent, which knows what finished, decides; it stops its workers
+itself (SIGTERM, then SIGKILL), whichever signal it got.
+"""
+from __future__ import annotations
+
+import contextlib
+import signal
+import sys
+import threading
+from typing import Callable, Iterator, Optional
+
+__all__ = ["Interrupted", "handled", "received", "exit_code", "run_main", "EXIT_SIGINT", "EXIT_SIGTERM"]
+
+EXIT_SIGINT, EXIT_SIGTERM = 128 + signal.SIGINT, 128 + signal.SIGTERM   # 130, 143
+
+_received: Optional[int] = None
+
+
+class Interrupted(KeyboardInterrupt):
+    """SIGINT or SIGTERM arrived (``signum``)."""
+
+    def __init__(self, signum: int):
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+
+
+def _handler(signum, _frame):
+    global _received
+    _received = signum
+    raise Interrupted(signum)
+
+
+def received() -> Optional[int]:
+    """The last signal :func:`handled` turned into :class:`Interrupted` (None: none)."""
+    return _received
+
+
+def exit_code(default: int = EXIT_SIGINT) -> int:
+    """128 + the signal that interrupted (130 SIGINT, 143 SIGTERM); ``default`` when none was received
+    (a KeyboardInterrupt raised otherwise)."""
+    return 128 + _received if _received else default
+
+
+@contextlib.contextmanager
+def handled() -> Iterator[None]:
+    """SIGINT and SIGTERM raise :class:`Interrupted` in the main thread while inside; the previous handlers
+    after."""
+    global _received
+    _received = None
+    if threading.current_thread() is not threading.main_thread():   # only the main thread may set handlers
+        yield
+        return
+    old = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    for s in old:
+        signal.signal(s, _handler)
+    try:
+        yield
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h if h is not None else signal.SIG_DFL)
+
+
+def run_main(main: Callable[..., int], argv=None, prog: str = "") -> int:
+    """``main(argv)`` with SIGTERM handled like SIGINT; an interrupt it does not handle itself ends in one
+    line and 128 + the signal; a handled one that returns 130 (SIGINT's code) returns 143 after SIGTERM."""
+    with handled():
+        try:
+            code = main(argv)
+        except KeyboardInterrupt:
+            sig = signal.Signals(_received).name if _received else "SIGINT"
+            print(f"{prog}: interrupted ({sig})", file=sys.stderr)
+            return exit_code()
+    if code == EXIT_SIGINT and _received:
+        return exit_code()
+    return code
