@@ -114,6 +114,7 @@ def main(argv=None) -> int:
     ap.add_argument("--typed", action="store_true", help="rclpy message objects instead of serialized messages "
                                                          "(both processes must agree)")
     args = ap.parse_args(argv[1:ros_at])
+    argv = argv[:1] + argv[ros_at:]   # run_node takes ROS arguments only (ours are parsed above)
     if args.count < 2:
         ap.error("--count must be at least 2")
     if args.role == "pong":

@@ -84,20 +84,33 @@ class Proc:
     def pid(self) -> int:
         return self.popen.pid
 
-    peak_rss_kib: Optional[int] = None  # the process's peak resident memory, known once it has been reaped
+    peak_rss_kib: Optional[int] = None  # the process's peak resident memory (VmHWM), known once it has exited
+
+    def _sample_peak(self) -> None:
+        """Keep the process's own high-water mark of resident memory (``VmHWM`` of /proc/PID/status, kept up
+        to date while it runs; the wheels' re-exec keeps the PID). Not ``ru_maxrss`` from wait4: Linux
+        carries that across exec, so a child of a large parent (pytest, bench.py) would report the
+        parent's size at fork."""
+        try:
+            with open(f"/proc/{self.pid}/status") as f:
+                hwm = next((int(ln.split()[1]) for ln in f if ln.startswith("VmHWM:")), None)
+        except (OSError, ValueError):
+            return
+        if hwm is not None:
+            self.peak_rss_kib = max(hwm, self.peak_rss_kib or 0)
 
     def wait(self, timeout: float) -> int:
-        """Wait for the process to exit (subprocess.TimeoutExpired after ``timeout``); reap it with wait4
-        to learn its peak resident memory (``ru_maxrss``; the wheels' re-exec keeps the PID)."""
+        """Wait for the process to exit (subprocess.TimeoutExpired after ``timeout``), reaped with wait4;
+        :attr:`peak_rss_kib` is sampled while it runs (see :meth:`_sample_peak`)."""
         end = time.monotonic() + timeout
         while self.popen.returncode is None:
+            self._sample_peak()
             try:
-                pid, status, usage = os.wait4(self.pid, os.WNOHANG)
+                pid, status, _usage = os.wait4(self.pid, os.WNOHANG)
             except ChildProcessError:  # reaped elsewhere
                 return self.popen.wait(timeout=max(0.0, end - time.monotonic()))
             if pid:
                 self.popen.returncode = os.waitstatus_to_exitcode(status)
-                self.peak_rss_kib = usage.ru_maxrss
                 break
             if time.monotonic() > end:
                 raise subprocess.TimeoutExpired(self.popen.args, timeout)
@@ -126,6 +139,7 @@ class Proc:
     def stop(self, sig=signal.SIGINT, timeout: float = 10.0) -> Optional[int]:
         """Signal the process by PID and wait; escalate to SIGKILL. Returns the exit code."""
         if self.poll() is None:
+            self._sample_peak()   # the run's peak, before shutdown
             try:
                 os.kill(self.pid, sig)
                 return self.wait(timeout)
