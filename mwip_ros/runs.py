@@ -26,8 +26,8 @@ from mwip_ros.msgs import BadMessage
 from mwip_ros.msgs import layouts as L
 from mwip_ros.msgs.topics import leaf
 
-__all__ = ["write_csv", "read_csv", "read_bag_run", "load_run", "plant_record", "PLANT_NODE", "MAX_ROWS",
-           "MAX_CSV_BYTES", "MAX_BAG_BYTES", "check_size", "check_times", "RUN_COLUMNS"]
+__all__ = ["write_csv", "read_csv", "read_bag_run", "read_bag_runs", "load_run", "load_runs", "plant_record",
+           "PLANT_NODE", "MAX_ROWS", "MAX_CSV_BYTES", "MAX_BAG_BYTES", "check_size", "check_times", "RUN_COLUMNS"]
 
 PLANT_NODE = "plant_sim"
 # what plant_sim logs (mwip_ros.nodes.plant_sim): its start (the configured duration), a fall, an interruption
@@ -155,7 +155,7 @@ def check_times(t: np.ndarray, source, ordered: bool = True) -> None:
                              f"samples in order")
 
 
-def read_bag_run(bag, label: Optional[str] = None) -> Trajectory:
+def read_bag_run(bag, label: Optional[str] = None, segment: Optional[int] = None, segments=None) -> Trajectory:
     """Rebuild the run's trajectory from a bag: states, applied torque, estimate, truth (matched by stamp).
 
     u_k is the torque the plant applied over period k, i.e. the effort reported with
@@ -167,6 +167,11 @@ def read_bag_run(bag, label: Optional[str] = None) -> Trajectory:
     When the plant measured with noise or delay, the bag has ``true_joint_states`` too: the
     trajectory (and so every metric) is the true one, and the last row's torque is NaN (with an
     actuator delay no message holds it).  The run's ``record`` is :func:`plant_record`'s.
+
+    A bag of several runs (a reset or a new plant: the stamps go back, :mod:`mwip_ros.bag.segments`) is
+    never merged: without ``segment`` it raises :class:`~mwip_ros.bag.segments.SpliceError` (a
+    ``ValueError``) naming its runs; with it the trajectory is that run's (0-based; negative from the end).
+    ``segments``: the bag's :class:`~mwip_ros.bag.segments.Segments`, when the caller has them already.
     """
     from mwip_ros.bag import check, raw_messages
 
@@ -175,12 +180,20 @@ def read_bag_run(bag, label: Optional[str] = None) -> Trajectory:
     except ValueError as exc:
         raise ValueError(f"{bag}: {exc}") from None
     check(bag)  # a damaged chunk raises BagError naming it: never read as data
+    from mwip_ros.bag.segments import Segments, SpliceError
+    segs = segments or Segments.from_bag(bag)   # the runs in the bag: the stamps go back at a reset
+    messages = raw_messages(bag)
+    if segs.spliced:
+        if segment is None:
+            raise SpliceError(segs.refusal("a report of one run"))
+        messages = segs.select(segment)
+        label = label or f"{Path(bag).name} [run {range(len(segs))[segment] + 1} of {len(segs)}]"
     states, true_states = _Stamped(5, "joint_states"), _Stamped(5, "true_joint_states")   # x (4), u_prev
     est, truth = _Stamped(2, "disturbance_estimate"), _Stamped(2, "lumped_disturbance")
     cmds: List[float] = []
     logs: List[bytes] = []
     param_events: List[bytes] = []
-    for _log_time, topic, data in raw_messages(bag):
+    for _log_time, topic, data in messages:
         name = leaf(topic)
         if topic == "/rosout":
             if len(logs) < MAX_LOG_MESSAGES:   # the plant logs a few lines a run; a flood beyond is not read
@@ -317,6 +330,25 @@ def plant_record(logs: List[bytes], param_events: List[bytes]) -> dict:
         if m:
             out["interrupted_at"], out["duration_s"] = float(m.group(1)), float(m.group(2))
     return out
+
+
+def read_bag_runs(bag, label: Optional[str] = None) -> List[Trajectory]:
+    """Every run of a bag, one trajectory each (one for a bag without resets), labelled
+    ``<label> [run i of n]`` when there are several (:mod:`mwip_ros.bag.segments`)."""
+    from mwip_ros.bag.segments import Segments
+    segs = Segments.from_bag(bag)
+    n = len(segs)
+    if n <= 1:
+        return [read_bag_run(bag, label, segments=segs)]
+    return [read_bag_run(bag, label and f"{label} [run {i + 1} of {n}]", segment=i, segments=segs) for i in range(n)]
+
+
+def load_runs(path, label: Optional[str] = None, estimates=None) -> List[Trajectory]:
+    """:func:`load_run` for each run of ``path``: a bag may hold several (:func:`read_bag_runs`)."""
+    p = Path(path)
+    if estimates is None and (p.is_dir() or p.suffix == ".mcap"):
+        return read_bag_runs(p, label)
+    return [load_run(path, label, estimates)]
 
 
 def load_run(path, label: Optional[str] = None, estimates=None) -> Trajectory:

@@ -50,7 +50,7 @@ from mwip_ros.cli import animation, interrupts, outputs, plotting
 from mwip_ros.core import metrics
 from mwip_ros.core.trajectory import Trajectory
 from mwip_ros.params import defaults_for
-from mwip_ros.runs import load_run
+from mwip_ros.runs import load_runs
 
 FALL_ANGLE = defaults_for("plant_sim")["fall_angle"]
 REPORT_FILES = ("fig3.png", "observer.png", "metrics.md", "metrics.json", "animation.gif")
@@ -254,15 +254,18 @@ def _main(argv=None) -> int:
         return _fail(reason)
     runs, warnings = [], []
     for i, path in enumerate(args.runs):
-        try:
-            runs.append(load_run(path, args.labels[i] if args.labels else None,
-                                 args.estimates[i] if args.estimates else None))
+        try:   # a bag with resets holds several runs: each is reported as a run of its own
+            got = load_runs(path, args.labels[i] if args.labels else None,
+                            args.estimates[i] if args.estimates else None)
         except (OSError, ValueError) as exc:  # BagError too: a clear line per unreadable input, no traceback
             text = " ".join(str(exc).split())
             return _fail(text if text.startswith(str(path)) else f"{path}: {text}")
         except MemoryError:
             return _fail(f"{path}: out of memory reading it")
-        print(f"read {path}: {len(runs[-1])} samples, t = 0 .. {runs[-1].t[-1]:.3f} s")
+        for j, run in enumerate(got):
+            runs.append(run)
+            which = f" run {j + 1} of {len(got)} ({run.label})" if len(got) > 1 else ""
+            print(f"read {path}{which}: {len(run)} samples, t = 0 .. {run.t[-1]:.3f} s")
         for what, text in (("incomplete lockstep recording", recording_gaps(path)),
                            ("repaired bag (mwip_bag_repair)", repaired(path))):
             if text:

@@ -16,12 +16,16 @@
   that backlog.  A volatile publisher (``ros2 topic pub`` by default) does not match a
   transient-local reader: the recorder takes ``external_wrench``, which users publish by
   hand, and any topic with such a publisher, with a QoS adapted to its publishers.
+* Services the graph offers (:data:`SERVICE_QOS`, ``plant_sim``'s ``~/reset``): reliable,
+  **keep all**: every request is kept until the node takes it, so a burst of calls (1,000
+  at once) is answered call by call.  ROS's default (keep last 10) drops the requests that
+  find ten waiting; a client that sends many at once wants the same profile for its answers.
 """
 from __future__ import annotations
 
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-__all__ = ["GRAPH_QOS", "INPUT_QOS", "RECORD_QOS", "REALTIME_QOS", "REALTIME_INPUT_QOS", "DEPTH",
+__all__ = ["GRAPH_QOS", "INPUT_QOS", "RECORD_QOS", "REALTIME_QOS", "REALTIME_INPUT_QOS", "SERVICE_QOS", "DEPTH",
            "qos_for", "recorded_qos"]
 
 DEPTH = 1000
@@ -36,6 +40,9 @@ REALTIME_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=REALTIME_DEPTH,
                           reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 REALTIME_INPUT_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
                                 durability=DurabilityPolicy.VOLATILE)
+
+SERVICE_QOS = QoSProfile(history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPolicy.RELIABLE,
+                         durability=DurabilityPolicy.VOLATILE)
 
 
 def qos_for(mode: str):

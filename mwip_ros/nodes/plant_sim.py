@@ -11,8 +11,16 @@ observer counts periods by them; the ``csv`` then has a ``stamp`` column beside 
 (time since the start).  Lockstep stamps are simulated time from 0.
 
 Services: ``~/reset`` (``std_srvs/Trigger``) puts the robot back in its initial state and
-its time back to the run's start (lockstep: once the state in flight is answered); the
-observer and the controller see the stamps go back and re-initialise (logged).  To push
+its time back to the run's start, at a period boundary: lockstep once the state in flight
+is answered, realtime at the next tick (state 0 of the new run is published instead of
+the next state).  Stamps restart at the run's start (lockstep 0, realtime t_0), so the
+observer and the controller see them go back and re-initialise (logged), and a reader of a
+recording splits it where they go back (:mod:`mwip_ros.bag.segments`).  A reset asked
+while the robot is still at its initial state (no period has run since the start or the
+last reset: state 0 is in flight) changes nothing and says so; one asked while another
+is pending joins it.  So the new state 0 always goes back below a stamp the loop answered,
+never repeats it (a repeat would be taken for a resend).  The service keeps every request
+(:data:`~mwip_ros.msgs.qos.SERVICE_QOS`) and answers each one.  To push
 the robot, publish ``external_wrench`` (``geometry_msgs/Wrench``: ``torque.x`` adds to
 tau_ext1, ``torque.y`` to tau_ext2, until the next one; a zero wrench clears it).
 
@@ -48,7 +56,7 @@ from mwip_ros.core.sensing import Actuator, Sensors
 from mwip_ros.core.trajectory import TrajectoryTable
 from mwip_ros.msgs import BadMessage
 from mwip_ros.msgs import layouts as L
-from mwip_ros.msgs.qos import INPUT_QOS, qos_for
+from mwip_ros.msgs.qos import INPUT_QOS, SERVICE_QOS, qos_for
 from mwip_ros.nodes.diagnostics import ERROR, OK, WARN
 from mwip_ros.nodes.guards import PublisherWatch, Rejects
 from mwip_ros.nodes.lockstep import LockstepDriver
@@ -75,7 +83,8 @@ class PlantSimNode(Node, GracefulNodeMixin):
         self.extra = (0.0, 0.0)
         self.stamp0 = 0               # realtime: the node clock's time at the start [ns]; lockstep: 0
         self.resets = 0
-        self._reset_pending = False   # lockstep: reset once the state in flight is answered
+        self.reset_calls = 0
+        self._reset_pending = False   # reset at the next period boundary (lockstep: the state in flight answered)
         self.table = TrajectoryTable()
         self.rejects = Rejects(self.get_logger())
         self.fallen = False
@@ -97,7 +106,7 @@ class PlantSimNode(Node, GracefulNodeMixin):
         self.clock_pub = self.create_publisher(Clock, "/clock", pub_qos) if self.mode == "lockstep" else None
         cmd_sub = self.create_subscription(Float64, "wheel_torque_cmd", self._on_cmd, in_qos, raw=True)
         self.create_subscription(Wrench, "external_wrench", self._on_wrench, INPUT_QOS, raw=True)
-        self.create_service(Trigger, "~/reset", self._on_reset)
+        self.create_service(Trigger, "~/reset", self._on_reset, qos_profile=SERVICE_QOS)
         # one graph, one controller: a second publisher of commands or states means mixed streams
         self.watch = PublisherWatch(self, ["wheel_torque_cmd", "joint_states"])
         self.lockstep = LockstepDriver(
@@ -126,13 +135,22 @@ class PlantSimNode(Node, GracefulNodeMixin):
                                if any(e) else "external wrench cleared")
 
     def _on_reset(self, request, response):
-        """``~/reset``: the initial state at the run's start time; lockstep: after the state in flight."""
-        if self.mode == "lockstep" and self.lockstep.awaiting is not None:
-            self._reset_pending = True
-            response.message = f"reset after the answer to the state at t = {self.plant.t:.3f} s"
-        else:
-            response.message = self._reset()
+        """``~/reset``: the initial state at the run's start time, at the next period boundary (module doc)."""
+        self.reset_calls += 1
         response.success = True
+        if self.done:
+            response.success = False
+            response.message = "the run has ended; nothing to reset"
+        elif self.plant.k == 0:   # state 0 is in flight (or not sent yet): a new state 0 would repeat its stamp
+            response.message = ("already at the initial state (t = 0: no period has run since the "
+                                + ("last reset" if self.resets else "start") + "); nothing to reset")
+        elif self._reset_pending:
+            response.message = f"a reset is already pending (#{self.resets + 1}); this call joins it"
+        else:
+            self._reset_pending = True
+            when = "once the state in flight is answered" if self.mode == "lockstep" else "at the next tick"
+            response.message = (f"reset #{self.resets + 1} at t = {self.plant.t:.3f} s: back to the initial state "
+                                f"{when}; stamps restart at the run's start")
         return response
 
     def _initial_state(self) -> None:
@@ -148,8 +166,9 @@ class PlantSimNode(Node, GracefulNodeMixin):
         self.table = TrajectoryTable()
         self.resets += 1
         self._reset_pending = False
-        text = (f"reset #{self.resets} at t = {t:.3f} s: back to the initial state at t = 0 (the csv keeps the run "
-                f"from here; {dropped} periods before it are only in a recording)")
+        text = (f"reset #{self.resets} at t = {t:.3f} s: back to the initial state at t = 0; stamps restart at "
+                f"the run's start (the csv keeps the run from here; {dropped} periods before it are only in a "
+                f"recording, as a segment of their own)")
         self.get_logger().warning(text)
         return text
 
@@ -165,7 +184,7 @@ class PlantSimNode(Node, GracefulNodeMixin):
         if not self.lockstep.take_answer():
             self.rejects("wheel_torque_cmd", "command while no state is waiting for one")
             return
-        if self._reset_pending:
+        if self._reset_pending:   # pending only from k >= 1 on: the new state 0 goes back below the answered stamp
             self._reset()
             self._send()
         elif not self._finish_period(saturate(u, self.cfg.torque_limit)):
@@ -273,7 +292,9 @@ class PlantSimNode(Node, GracefulNodeMixin):
         self.tick_times.append(now)
         if self.done:
             return
-        if len(self.tick_times) > 1:  # finish the period of the state published at the last tick
+        if self._reset_pending:   # a period boundary: the new run's state 0 instead of the next state
+            self._reset()
+        elif len(self.tick_times) > 1:  # finish the period of the state published at the last tick
             u = self.cmd
             if u is None or now - self.cmd_at > self.v["stale_command_periods"] * self.h:
                 self.stale += 1
@@ -317,7 +338,8 @@ class PlantSimNode(Node, GracefulNodeMixin):
                 pub.wait_for_all_acked(Duration(seconds=2.0))
         summary = {"mode": self.mode, "control_rate_hz": 1.0 / self.h, "periods": n, "wall_s": wall,
                    "steps_per_s": n / wall if wall > 0 else None, "fallen": self.fallen,
-                   "exit_code": self.exit_code, "rejected": dict(self.rejects.counts)}
+                   "exit_code": self.exit_code, "rejected": dict(self.rejects.counts),
+                   "resets": self.resets, "reset_calls": self.reset_calls}
         if n:
             log.info(f"{self.mode} run: {n} periods, {self.table.last('t'):.3f} s simulated in {wall:.2f} s wall "
                      f"({n / max(wall, 1e-9):.0f} steps/s); {'FALLEN' if self.fallen else 'upright'}")

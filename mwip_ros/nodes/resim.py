@@ -31,7 +31,8 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 
-from mwip_ros.bag import BagError, raw_messages
+from mwip_ros.bag import BagError
+from mwip_ros.bag.segments import Segments, recorded_messages
 from mwip_ros.msgs import BadMessage
 from mwip_ros.msgs import layouts as L
 from mwip_ros.msgs.qos import GRAPH_QOS, INPUT_QOS
@@ -133,35 +134,47 @@ class Resim:
         self.rec = {"disturbance_estimate": {}, "controller_internals": {}}
         seen = set()
         dropped = bad = 0
+        # the runs of the bag (a reset, a new plant: the stamps go back), re-simulated one after the other;
+        # every stamp is keyed (run, stamp), so two runs under the same stamps are never mixed
+        self.state_keys: List[Tuple[int, int]] = []
+        self._fed_run: Dict[int, int] = {}   # stamp -> the run of the state last fed with it
         try:
-            for _lt, topic, data in raw_messages(bag, list(by_topic)):
-                name = by_topic[topic]
+            self.segs = Segments.from_bag(bag, topics["joint_states"])
+            for seg, _lt, topic, data in self.segs.tag(recorded_messages(bag)):
+                name = by_topic.get(topic)
+                if name is None:
+                    continue
                 try:
                     if name == "joint_states":
                         stamp = L.parse_joint_state(data)[0]
-                        if stamp in seen:
-                            continue  # a state the plant resent: fed (and answered) once
-                        if self.states and stamp < self.states[-1][0]:
-                            dropped += 1
+                        if seg is None:
+                            dropped += 1   # a stray state, outside the recorded stream
                             continue
-                        seen.add(stamp)
+                        if (seg, stamp) in seen:
+                            continue  # a state the plant resent: fed (and answered) once
+                        seen.add((seg, stamp))
                         self.states.append((stamp, data))
+                        self.state_keys.append((seg, stamp))
                     elif name == "wheel_torque_cmd":
                         self.rec_cmds.append(L.parse_command(data))
                     else:
                         stamp, fields = _estimate(data) if name == "disturbance_estimate" else L.parse_internals(data)
-                        self.rec[name].setdefault(stamp, fields)
+                        self.rec[name].setdefault((seg or 0, stamp), fields)
                 except BadMessage:
                     bad += 1
         except BagError as exc:
             raise ParamError("bag", f"cannot read the bag: {exc}") from None
+        if self.segs.spliced:
+            self.log.warning(f"resim: {self.segs.describe()}\nresim: each run is re-simulated from its start, one "
+                             f"after the other (the observer and the controller restart where the stamps go back, "
+                             f"as in the recording); outputs are compared run by run")
         if not self.states:
             raise ParamError("bag", f"{bag} has no joint_states messages to re-simulate")
         self.skipped_values: List[str] = []   # recorded parameter values that cannot be set (named, why)
         self.refused_values: List[str] = []   # recorded values the running node refused (its reasons)
         self.param_events = self._read_parameter_events() if self.v["parameter_events"] else []
         if dropped:
-            self.log.warning(f"skipped {dropped} recorded state(s) older than the one before them")
+            self.log.warning(f"skipped {dropped} stray recorded state(s) (outside the recorded stream of stamps)")
         if bad:
             self.log.warning(f"skipped {bad} recorded message(s) that are not valid graph messages")
         if self.has["wheel_torque_cmd"] and len(self.rec_cmds) != len(self.states):
@@ -179,7 +192,9 @@ class Resim:
         if "/parameter_events" not in self.node.types:
             return []
         out, others = [], set()
-        for _lt, _topic, data in raw_messages(self.node.bag, ["/parameter_events"]):
+        for seg, _lt, topic, data in self.segs.tag(recorded_messages(self.node.bag)):
+            if topic != "/parameter_events":
+                continue
             try:
                 ev = deserialize_message(bytes(data), ParameterEvent)
             except Exception:  # noqa: BLE001 - a foreign or damaged message: not a change to apply
@@ -201,18 +216,20 @@ class Resim:
                 self.log.warning(f"resim: skipped a recorded parameter value of {ev.node} at t = {stamp * 1e-9:.3f} "
                                  f"s that cannot be set: {problem}")
             if readable:
-                out.append((stamp, ev.node, readable))
+                out.append(((seg or 0, stamp), ev.node, readable))
         if others:
             self.log.info(f"resim: recorded parameter changes of {', '.join(sorted(others))} are not applied "
                           f"(only {', '.join(LOOP_NODES)})")
         out.sort(key=lambda e: e[0])
-        for stamp, node, changed in out:
+        for (seg, stamp), node, changed in out:
+            run = f" of run {seg + 1}" if self.segs.spliced else ""
             self.log.info(f"resim: will set {', '.join(prm.name for prm in changed)} on {node} before the first "
-                          f"state after t = {stamp * 1e-9:.3f} s, as recorded")
+                          f"state{run} after t = {stamp * 1e-9:.3f} s, as recorded")
         return out
 
-    def _apply_due(self, stamp: int) -> bool:
-        """Start applying the recorded changes due before the state of ``stamp``; True if some are under way."""
+    def _apply_due(self, stamp) -> bool:
+        """Start applying the recorded changes due before the state of ``stamp`` ((run, stamp)); True if some
+        are under way."""
         from rcl_interfaces.srv import SetParameters
 
         futures = []
@@ -283,7 +300,7 @@ class Resim:
         except BadMessage as exc:
             self.rejects(name, str(exc))
             return
-        self.new[name].setdefault(stamp, fields)
+        self.new[name].setdefault((self._fed_run.get(stamp, 0), stamp), fields)
         self.last_news = time.monotonic()
 
     def _on_est(self, data) -> None:
@@ -294,11 +311,12 @@ class Resim:
 
     # --- lockstep
     def _send(self) -> None:
-        if not self._apply_due(self.states[self.k][0]):
+        if not self._apply_due(self.state_keys[self.k]):
             self._send_now()
 
     def _send_now(self) -> None:
         stamp, data = self.states[self.k]
+        self._fed_run[stamp] = self.state_keys[self.k][0]
         self.lockstep.send(self.k, stamp, data)
 
     def _fail(self, text: str) -> None:
@@ -339,7 +357,7 @@ class Resim:
     # --- comparison
     def compare(self):
         """{topic: Stat}, {topic: {field: Stat}}."""
-        fed = set(s for s, _ in self.states[:self.k])
+        fed = set(self.state_keys[:self.k])
         topics: Dict[str, Stat] = {}
         fields: Dict[str, Dict[str, Stat]] = {}
         if self.has["wheel_torque_cmd"]:
@@ -364,6 +382,8 @@ class Resim:
         wall = (time.monotonic() - self.t_wall0) if self.t_wall0 else 0.0
         lines = [f"bag_replay resim of {self.node.bag}",
                  f"  states fed: {self.k} of {len(self.states)} in {wall:.2f} s wall; tolerance {tol:g}",
+                 *([f"  runs in the bag: {len(self.segs)} (a reset or a new plant), re-simulated one after the "
+                    f"other: {', '.join(str(s.states) for s in self.segs)} states"] if self.segs.spliced else []),
                  f"  {'topic / field':<28}{'compared':>9}{'missing':>9}{'max |diff|':>14}  within",
                  "  " + "-" * 68]
         for topic, st in topics.items():
