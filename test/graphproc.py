@@ -17,6 +17,8 @@ import time
 from pathlib import Path
 from typing import Dict, List, Optional
 
+from mwip_ros.nodes.entry import NODES as NODE_ENTRIES
+
 REPO = Path(__file__).resolve().parent.parent
 PARAMS = REPO / "config" / "paper.yaml"
 _counter = itertools.count()
@@ -74,6 +76,24 @@ def script_env(**extra: str) -> Dict[str, str]:
     env = {k: v for k, v in os.environ.items() if k != "ROS_DOMAIN_ID"}
     env.update(extra)
     return env
+
+
+def wait_until(cond, timeout: float, step: float = 0.05, spin=None) -> bool:
+    """Poll ``cond()`` until it is true (True) or ``timeout`` seconds pass (False, after a last look).
+
+    The event a test waits for (a file appearing, a message count, a process state), instead of a sleep that
+    guesses how long it takes. ``spin(step)``, if given, runs between looks instead of sleeping (e.g. an
+    executor's ``spin_once(timeout_sec=step)``, so the messages counted arrive)."""
+    end = time.monotonic() + timeout
+    while True:
+        if cond():
+            return True
+        if time.monotonic() >= end:
+            return bool(cond())
+        if spin is not None:
+            spin(step)
+        else:
+            time.sleep(step)
 
 
 class Proc:
@@ -179,10 +199,12 @@ class Graph:
 
     def start(self, node: str, *ros_args: str, params: Optional[Path] = PARAMS, label: Optional[str] = None,
               module: Optional[str] = None, cmd: Optional[List[str]] = None, as_given: bool = False) -> Proc:
-        """Start ``python -m mwip_ros.nodes.<node>`` (or ``module``, or the command ``cmd``) --ros-args ...
-        (each ``-p`` rule for that node, see :func:`node_rules`, unless ``as_given``)."""
+        """Start ``python -m mwip_ros.nodes <node>`` (as its console script starts it: mwip_ros.nodes.entry; or
+        ``python -m module``, or the command ``cmd``) --ros-args ... (each ``-p`` rule for that node, see
+        :func:`node_rules`, unless ``as_given``)."""
         label = label or node
-        cmd = list(cmd or [sys.executable, "-m", module or f"mwip_ros.nodes.{node}"]) + ["--ros-args"]
+        default = ["mwip_ros.nodes", node] if node in NODE_ENTRIES else [f"mwip_ros.nodes.{node}"]
+        cmd = list(cmd or [sys.executable, "-m", *([module] if module else default)]) + ["--ros-args"]
         if params is not None:
             cmd += ["--params-file", str(params)]
         cmd += list(ros_args) if as_given else node_rules(node, ros_args)

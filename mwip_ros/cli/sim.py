@@ -13,7 +13,8 @@ from mwip_ros.cli import interrupts, plotting
 from mwip_ros.cli.outputs import refuse_existing
 from mwip_ros.cli.theorem import theorem_report
 from mwip_ros.core import budget, metrics
-from mwip_ros.core.sim import LAWS, law_name, simulate
+from mwip_ros.core import laws
+from mwip_ros.core.sim import simulate
 from mwip_ros.params.paths import default_params_file
 from mwip_ros.runs import write_csv
 
@@ -32,10 +33,10 @@ def _parser() -> argparse.ArgumentParser:
                     help="ROS 2 parameter file(s), merged in order as ROS merges repeated --params-file (e.g. "
                          "config/paper.yaml config/sensing_realistic.yaml); default: the package's config/paper.yaml")
     mode = ap.add_mutually_exclusive_group()
-    mode.add_argument("--controller", choices=tuple(LAWS), default=None,
+    mode.add_argument("--controller", choices=laws.names(), default=None,
                       help="dsc, dscndo (DSC with the observer term), lqr (the LQR baseline), lqr_ndo (LQR with the "
                            "observer term); default: the file's law and use_observer")
-    mode.add_argument("--compare", nargs="*", choices=tuple(LAWS), metavar="LAW",
+    mode.add_argument("--compare", nargs="*", choices=laws.names(), metavar="LAW",
                       help="run several laws (default: dsc dscndo), overlay them, print a row each")
     ap.add_argument("--duration", type=float, default=None, metavar="S",
                     help="simulated seconds (default: plant_sim.duration_s)")
@@ -58,7 +59,7 @@ def _fail(text: str) -> int:
     return 2
 
 
-DURATION_MAX_S = P.specs_for("plant_sim")["duration_s"].check.bounds[1]   # the parameter file's own limit
+DURATION_MAX_S = P.specs_for("plant_sim")["duration_s"].hi   # the parameter file's own limit
 
 
 def _memory_refusal(values, duration, n_runs: int):
@@ -109,7 +110,10 @@ def _main(argv=None) -> int:
     if args.compare is not None:
         names = list(dict.fromkeys(args.compare or ["dsc", "dscndo"]))
     else:
-        names = [args.controller or law_name(values["law"], values["use_observer"])]
+        try:
+            names = [args.controller or laws.variant(values["law"], values["use_observer"]).name]
+        except ValueError as exc:
+            return _fail(str(exc))
     reason = _memory_refusal(values, args.duration, len(names))
     if reason:
         return _fail(reason)
@@ -123,10 +127,11 @@ def _main(argv=None) -> int:
             return _fail(reason)
     if not args.quiet:
         print(theorem_report(values), file=sys.stderr)
-        if any(LAWS[n][0] == "lqr" for n in names):
-            K = P.typed.lqr_gain(values)
-            print(f"LQR gain K = [{K[0]:.6g}, {K[1]:.6g}, {K[2]:.6g}] on [theta_b, theta_b', theta_w'] "
-                  f"(lqr.Q = {values['lqr.Q']}, lqr.R = {values['lqr.R']:g}; u = -K x)", file=sys.stderr)
+        first = {laws.get(n).family: n for n in reversed(names)}   # a law per family: lqr, lqr_ndo share K
+        for n in reversed(list(first.values())):
+            text = laws.get(n).from_params(values, P.physical(values, "nominal"), P.period(values)).design_text(values)
+            if text:
+                print(text, file=sys.stderr)
     runs, written = [], []
     try:
         _run_laws(args, values, names, csv_paths, runs, written)
@@ -142,13 +147,11 @@ def _main(argv=None) -> int:
 
 def _run_laws(args, values, names, csv_paths, runs, written) -> None:
     for label in names:
-        law, use_obs = LAWS[label]
-
         def progress(frac, label=label):
             if not args.quiet and sys.stderr.isatty():
                 print(f"\r  {label}: {frac * 100:5.1f} %", end="", file=sys.stderr, flush=True)
 
-        run = simulate(P.closed_loop(values, use_observer=use_obs, duration=args.duration, law=law), label, progress)
+        run = simulate(P.closed_loop(values, duration=args.duration, controller=label), label, progress)
         if not args.quiet:
             print(f"\r  {label}: done, {len(run)} samples, h = {run.h * 1e3:.3f} ms"
                   + ("  FALLEN" if run.fallen else ""), file=sys.stderr)

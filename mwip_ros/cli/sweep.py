@@ -16,8 +16,8 @@ from mwip_ros import params as P
 from mwip_ros.cli import interrupts, outputs
 from mwip_ros.sweep import engine, results
 from mwip_ros.sweep.scenarios import expand, parameter_file
-from mwip_ros.core.sim import LAWS
-from mwip_ros.sweep.spec import CONTROLLERS, SpecError, load_spec
+from mwip_ros.core import laws as registry
+from mwip_ros.sweep.spec import SpecError, load_spec
 
 PROG = "mwip_sweep"
 EXIT_BAD_INPUT, EXIT_INTERRUPTED = 2, interrupts.EXIT_SIGINT   # 143 after SIGTERM (interrupts.run_main)
@@ -54,7 +54,7 @@ def _parser() -> argparse.ArgumentParser:
     back.add_argument("--results", type=Path, nargs="+", metavar="DIR",
                       help="a finished (or interrupted) sweep's --out (several with --plot-rms)")
     back.add_argument("--scenario", type=int, metavar="N", help="the row's scenario number")
-    back.add_argument("--controller", choices=CONTROLLERS,
+    back.add_argument("--controller", choices=registry.names(),
                       help="the row's law (default: dscndo when the sweep ran it)")
     back.add_argument("--write-params", type=Path, metavar="FILE",
                       help="write the scenario's complete parameter file (for mwip_sim --params or "
@@ -333,8 +333,8 @@ def _read_sweep_json(d: Path) -> dict:
     def num(v):
         return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
 
-    need("controllers", lambda v: isinstance(v, list) and v and all(c in CONTROLLERS for c in v),
-         f"a non-empty list of {', '.join(CONTROLLERS)}")
+    need("controllers", lambda v: isinstance(v, list) and v and all(c in registry.names() for c in v),
+         f"a non-empty list of {', '.join(registry.names())}")
     need("axes", lambda v: isinstance(v, list) and all(
         isinstance(a, dict) and all(isinstance(a.get(k), str) for k in ("key", "section", "name", "type"))
         for a in v), "a list of {key, section, name, type} objects")
@@ -378,7 +378,8 @@ def _write_params(args) -> int:
         return refused
     j = rows[0]
     placed = {("plant_sim", "seed"): cols["seed"][j], ("plant_sim", "duration_s"): float(info["duration_s"]),
-              ("dscndo_controller", "use_observer"): LAWS[law][1], ("dscndo_controller", "law"): LAWS[law][0]}
+              ("dscndo_controller", "use_observer"): registry.get(law).observer,
+              ("dscndo_controller", "law"): registry.get(law).family}
     for a in info["axes"]:
         v = cols[a["key"]][j]
         if a["type"] == "integer":

@@ -12,12 +12,12 @@ from pathlib import Path
 import numpy as np
 
 from mwip_ros import params as P
-from mwip_ros.core.sim import LAWS
+from mwip_ros.core import laws
 from mwip_ros.cli import interrupts
 from mwip_ros.cli.outputs import refuse_existing
 from mwip_ros.cli.sweep import add_runner_arguments, runner_from
 from mwip_ros.sweep.scenarios import parameter_overlay
-from mwip_ros.sweep.spec import CONTROLLERS, SpecError, load_spec
+from mwip_ros.sweep.spec import SpecError, load_spec
 from mwip_ros.sweep.tune import KNOBS, Objective, check_memory, Tuner, knobs_for, overlay, parse_bounds
 
 PROG = "mwip_tune"
@@ -42,7 +42,7 @@ def _parser() -> argparse.ArgumentParser:
                "judged)",
         formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("spec", type=Path, help="a sweep spec (its base file, duration, window, scenarios)")
-    ap.add_argument("--controller", required=True, choices=CONTROLLERS, help="the law to tune")
+    ap.add_argument("--controller", required=True, choices=laws.names(), help="the law to tune")
     ap.add_argument("--tune", nargs="+", required=True, metavar="NAME", help="what to tune: " + ", ".join(KNOBS))
     ap.add_argument("--out", type=Path, required=True, metavar="FILE.yaml", help="the overlay to write")
     ap.add_argument("--force", action="store_true", help="overwrite an --out file that exists")
@@ -83,7 +83,7 @@ def _main(argv=None) -> int:
     reason = refuse_existing(args.out, args.force, "--out")   # now, not after the search
     if reason:
         return _fail(reason)
-    law = LAWS[args.controller][0]
+    law = args.controller
     try:
         spec = load_spec(args.spec)
         knobs = knobs_for(args.tune, law)

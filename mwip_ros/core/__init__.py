@@ -5,6 +5,8 @@
 :mod:`.plant`             the true plant stepped with RK4, D_w per period
 :mod:`.observer`          the nonlinear disturbance observer (eq. 12-15), discrete form
 :mod:`.controller`        DSC and DSCNDO (eq. 19-28), filter stepped exactly
+:mod:`.lqr`               the LQR baseline: linearization, zero-order hold, Riccati, K
+:mod:`.laws`              the control laws' registry: dsc, dscndo, lqr, lqr_ndo, plug-ins (``$MWIP_ROS_LAWS``)
 :mod:`.theorem`           Theorem 2 (eq. 34-35), controller and observer halves
 :mod:`.trajectory`        the trajectory table every source builds the same way
 :mod:`.sim`               the closed loop, offline

@@ -1,7 +1,7 @@
 """Many scenarios at once: the closed loop of :mod:`.sim` over numpy arrays, one entry per scenario.
 
 Every equation is the scalar loop's own (``model.accel``, ``plant.rk4_period``,
-``DiscreteObserver``, ``DscController``, ``model.lumped_disturbance``), so the batch and the
+``DiscreteObserver``, the law's ``step`` (:mod:`.laws`), ``model.lumped_disturbance``), so the batch and the
 scalar loop cannot drift apart; a test checks each batch trajectory against :func:`.sim.simulate`.
 The observer, the law and the true tau_d are called with the math namespace ``numpy`` and
 parameters whose fields are arrays; the plant's RK4 period, where most of the time goes, runs as
@@ -15,25 +15,27 @@ the same ``plant.rk4_period`` compiled by numba, scenario by scenario (:mod:`.co
 * The metrics over the window come from :func:`.metrics.window_metrics`, the function the
   single-run metrics use.
 
-The scenarios of one batch must share the control period, the RK4 sub-steps and the
-duration (a sweep groups them so).
+The scenarios of one batch must share the control period, the RK4 sub-steps, the duration and
+the law's family (a sweep groups them so); with and without the observer term may mix (the
+law's observer variant runs, with tau_hat = 0 for the scenarios without it).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+import math
+from dataclasses import dataclass, fields, is_dataclass
 from typing import Dict, List, Optional, Sequence
 
 import numpy as np
 
 from .budget import window_samples
-from .controller import DscGains
+from . import laws
 from .metrics import window_metrics
 from .model import PhysicalParams, Sinusoid, State, accel, lumped_disturbance
 from .observer import DiscreteObserver
 from .plant import stage_torques
 from .sensing import NOISE_BLOCK, Actuator, Sensors, sensor_rng
-from .sim import ClosedLoop, make_controller
-from .trajectory import COLUMNS, Trajectory
+from .sim import ClosedLoop
+from .trajectory import COLUMNS, INTERNAL_COLUMNS, Trajectory
 
 __all__ = ["BatchResult", "simulate_batch"]
 
@@ -62,8 +64,9 @@ def _column(values):
 
 
 def _stack(items, cls):
-    """One ``cls`` whose field f holds the scenarios' values of f (:func:`_column`)."""
-    return cls(**{f.name: _column(getattr(i, f.name) for i in items) for f in fields(cls)})
+    """One ``cls`` (a dataclass or a NamedTuple) whose field f holds the scenarios' values of f (:func:`_column`)."""
+    names = [f.name for f in fields(cls)] if is_dataclass(cls) else list(cls._fields)
+    return cls(**{f: _column(getattr(i, f) for i in items) for f in names})
 
 
 def _same(values, what: str):
@@ -192,9 +195,12 @@ def simulate_batch(loops: Sequence[ClosedLoop], window: Sequence[float], record:
     X = tuple(_column(lp.X[i] for lp in loops) for i in range(4))
     trig = _Trig()
     obs = DiscreteObserver(nominal, X, h, m=trig)
-    law = _same((lp.law for lp in loops), "the law")
-    K = tuple(_column(lp.K[i] for lp in loops) for i in range(3)) if law == "lqr" else None
-    ctrl = make_controller(law, nominal, _stack([lp.gains for lp in loops], DscGains), K, h, True, trig)
+    family = _same((lp.law for lp in loops), "the law")
+    plain = laws.variant(family, False) if laws.lookup(family, False) else None
+    law = laws.variant(family, True) if use_obs.any() or plain is None else plain
+    ctrl = law(_stack([lp.params for lp in loops], law.Params), nominal, h, trig)   # the scalar law, over arrays
+    # what the plain law records as u_taud (0: the term is off; NaN: a law without one)
+    u_taud_off = 0.0 if plain is None or "u_taud" in plain.internal_names else math.nan
 
     sensors, actuator = _sensing(pcs, n)
     rk4_periods = RK4Periods(actual, D_b, n)
@@ -213,8 +219,8 @@ def simulate_batch(loops: Sequence[ClosedLoop], window: Sequence[float], record:
             t = k * h
             x_m, u_m = sensors.sample(x, u_prev) if sensors else (x, u_prev)   # what the loop sees
             tau_hat = obs.update(x_m, u_m)
-            out = ctrl.step(x_m, (np.where(use_obs, tau_hat[0], 0.0), np.where(use_obs, tau_hat[1], 0.0)))
-            u = np.where(limit > 0.0, np.clip(out.u, -limit, limit), out.u)
+            u_law, internals = ctrl.step(x_m, (np.where(use_obs, tau_hat[0], 0.0), np.where(use_obs, tau_hat[1], 0.0)))
+            u = np.where(limit > 0.0, np.clip(u_law, -limit, limit), u_law)
             if actuator:
                 u = actuator.apply(u)   # the torque that acts over [t_k, t_k+1)
             in_window = first_w <= k < first_w + n_window
@@ -222,8 +228,10 @@ def simulate_batch(loops: Sequence[ClosedLoop], window: Sequence[float], record:
                 ddq = accel(actual, D_w, D_b, x, u, f1.at(t, np) + 0.0, f2.at(t, np) + 0.0, trig)
                 tau_d = lumped_disturbance(nominal, x, ddq, u, trig)
             if record:
-                cols = (t, *x, u, *tau_hat, *tau_d, out.u_dsc, np.where(use_obs, out.u_taud, 0.0), out.S1, out.S2,
-                        out.x4_bar, out.x4d)
+                own = [internals.get(c, math.nan) for c in INTERNAL_COLUMNS]
+                if "u_taud" in internals:
+                    own[INTERNAL_COLUMNS.index("u_taud")] = np.where(use_obs, internals["u_taud"], u_taud_off)
+                cols = (t, *x, u, *tau_hat, *tau_d, *own)
                 rows.append((active.copy(), np.stack([np.broadcast_to(c, (n,)) for c in cols], axis=1)))
             everyone = bool(active.all())   # the usual case: no scenario has fallen, nothing to mask
             if in_window:

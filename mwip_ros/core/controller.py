@@ -3,6 +3,9 @@
 All model terms use the *nominal* parameters.  ``dsc_law`` is a pure function of
 one :class:`~mwip_ros.core.model.State`; ``DscController`` adds the first-order
 filter (eq. 25) advanced exactly once per control period (docs/theory.md).
+The law every caller steps is :class:`mwip_ros.core.laws.dsc.DscLaw` (these functions, and the
+observer term composed by :mod:`mwip_ros.core.laws.ndo`); ``DscController`` and
+``ControlOutput`` stay for the tests of the equations.
 """
 from __future__ import annotations
 

@@ -10,6 +10,10 @@
 * Law ``lqr``: ``u_k = -K x_k``; ``lqr_ndo``: ``u_k = -K x_k - u_taud,k`` with u_taud of eq. (20),
   the same observer term as DSCNDO.  The command computed from state k is applied over
   [t_k, t_{k+1}), as for DSC.
+
+The laws every caller steps are :class:`mwip_ros.core.laws.lqr.LqrLaw` (``lqr_law``, with its own
+internals, no NaN) and its observer variant (:mod:`mwip_ros.core.laws.ndo`); ``LqrController``
+stays for the tests.
 """
 from __future__ import annotations
 

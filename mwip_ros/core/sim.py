@@ -9,54 +9,69 @@ order, so a lockstep graph reproduces these numbers.
 """
 from __future__ import annotations
 
-import math
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Callable, Optional, Tuple
+from typing import Any, Callable, Optional, Tuple
 
-from .controller import DscController, DscGains
-from .lqr import LqrController
+from . import laws
 from .observer import DiscreteObserver, gain_matrix
 from .plant import PlantConfig, PlantSim, saturate
 from .sensing import Actuator, Sensors
 from .trajectory import Trajectory, TrajectoryTable
 
-__all__ = ["ClosedLoop", "simulate", "LAWS", "law_name", "make_controller"]
+__all__ = ["ClosedLoop", "simulate", "LAWS", "law_name"]
 
-# The laws a user names (mwip_sim --controller, a sweep's controllers): (law, use_observer).
-LAWS = {"dsc": ("dsc", False), "dscndo": ("dsc", True), "lqr": ("lqr", False), "lqr_ndo": ("lqr", True)}
+
+class _LawsView(Mapping):
+    """name -> (family, use_observer) of every registered law (:mod:`.laws`), e.g. 'dscndo' -> ('dsc', True);
+    kept for callers of the old table, a live view of the registry."""
+
+    def __getitem__(self, name: str) -> Tuple[str, bool]:
+        law = laws.get(name)
+        return law.family, law.observer
+
+    def __iter__(self):
+        return iter(laws.names())
+
+    def __len__(self) -> int:
+        return len(laws.names())
+
+
+LAWS = _LawsView()
 
 
 def law_name(law: str, use_observer: bool) -> str:
-    """('dsc', True) -> 'dscndo', the inverse of :data:`LAWS`."""
-    return next(k for k, v in LAWS.items() if v == (law, bool(use_observer)))
-
-
-def make_controller(law: str, nominal, gains: DscGains, K, h: float, use_observer: bool, m=math):
-    """The law's stepper: ``DscController`` (eq. 19-28) or ``LqrController`` (``K`` from ``core.lqr.lqr_gain``)."""
-    if law == "lqr":
-        if K is None:
-            raise ValueError("the lqr law needs its gain K")
-        return LqrController(nominal, K, use_observer=use_observer, m=m)
-    if law != "dsc":
-        raise ValueError(f"unknown law {law!r} (dsc or lqr)")
-    return DscController(nominal, gains, h, use_observer=use_observer, m=m)
+    """('dsc', True) -> 'dscndo': the registered law of the node's ``law`` and ``use_observer``."""
+    return laws.variant(law, use_observer).name
 
 
 @dataclass(frozen=True)
 class ClosedLoop:
-    """One closed-loop scenario: the plant, the observer gain X, the law and its gains, the length."""
+    """One closed-loop scenario: the plant, the observer gain X, the law and its parameters, the length."""
 
     plant: PlantConfig
     X: Tuple[float, float, float, float]   # c1, c2, c3, c4 (eq. 14)
-    gains: DscGains
-    use_observer: bool                     # True: the law plus the observer term (DSCNDO, LQR+NDO)
+    controller: str                        # a registered law (core.laws): 'dsc', 'dscndo', 'lqr', 'lqr_ndo', ...
+    params: Any                            # its Params (core.laws.Law.design): DscGains, LqrGain, ...
     duration_s: float
-    law: str = "dsc"                       # 'dsc' (eq. 19-28) or 'lqr' (core.lqr)
-    K: Optional[Tuple[float, float, float]] = None   # the LQR gain, for law 'lqr'
 
     @property
     def name(self) -> str:
-        return law_name(self.law, self.use_observer)
+        return self.controller
+
+    @property
+    def law_class(self) -> type:
+        return laws.get(self.controller)
+
+    @property
+    def law(self) -> str:
+        """The law's family: the controller node's ``law`` parameter ('dsc' for dsc and dscndo)."""
+        return self.law_class.family
+
+    @property
+    def use_observer(self) -> bool:
+        """True: the law plus the observer term (DSCNDO, LQR+NDO)."""
+        return self.law_class.observer
 
 
 def simulate(loop: ClosedLoop, label: str = "", progress: Optional[Callable[[float], None]] = None) -> Trajectory:
@@ -66,7 +81,7 @@ def simulate(loop: ClosedLoop, label: str = "", progress: Optional[Callable[[flo
     n_steps = int(round(loop.duration_s / h))
     plant = PlantSim(pc)
     obs = DiscreteObserver(pc.nominal, gain_matrix(loop.X), h)
-    ctrl = make_controller(loop.law, pc.nominal, loop.gains, loop.K, h, loop.use_observer)
+    ctrl = loop.law_class(loop.params, pc.nominal, h)
     table = TrajectoryTable(internals=True)
     sc = pc.sensing
     sensors = Sensors.for_plant(sc, pc.seed) if sc.measuring else None
@@ -77,11 +92,11 @@ def simulate(loop: ClosedLoop, label: str = "", progress: Optional[Callable[[flo
         x = plant.x                      # the true state: the table and the metrics judge it
         x_m, u_m = sensors.sample(x, plant.u_prev) if sensors else (x, plant.u_prev)   # what the loop sees
         tau_hat = obs.update(x_m, u_m)
-        out = ctrl.step(x_m, tau_hat)
-        u = saturate(out.u, pc.torque_limit)
+        u_law, internals = ctrl.step(x_m, tau_hat)
+        u = saturate(u_law, pc.torque_limit)
         if actuator:
             u = actuator.apply(u)        # the torque that acts over [t_k, t_k+1)
-        table.append(plant.t, x, u, tau_hat, plant.lumped_disturbance(u), out)
+        table.append(plant.t, x, u, tau_hat, plant.lumped_disturbance(u), internals)
         if plant.fallen:
             fallen = True
             break

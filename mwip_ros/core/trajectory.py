@@ -73,10 +73,14 @@ class TrajectoryTable:
 
     def append(self, t: float, x, u: float, tau_hat: Sequence[float] = _NAN2, tau_d: Sequence[float] = _NAN2,
                out=None) -> None:
-        """Row of state ``x`` at ``t`` with command ``u``; ``out`` is the law's ControlOutput (internals)."""
+        """Row of state ``x`` at ``t`` with command ``u``; ``out`` is the law's internals (a dict of its signals,
+        :meth:`mwip_ros.core.laws.Law.step`, or an object with them as attributes); one it lacks is NaN."""
         self.rows.extend((t, x[0], x[1], x[2], x[3], u, tau_hat[0], tau_hat[1], tau_d[0], tau_d[1]))
         if self.width > 10:
-            self.rows.extend((out.u_dsc, out.u_taud, out.S1, out.S2, out.x4_bar, out.x4d))
+            if isinstance(out, dict):
+                self.rows.extend([out.get(c, math.nan) for c in INTERNAL_COLUMNS])
+            else:
+                self.rows.extend([getattr(out, c, math.nan) for c in INTERNAL_COLUMNS])
 
     def __len__(self) -> int:
         return len(self.rows) // self.width

@@ -5,7 +5,8 @@
     wheel_torque_cmd      std_msgs/Float64          u [N m]
     disturbance_estimate  geometry_msgs/WrenchStamped  torque.x = tau_hat1, torque.y = tau_hat2
     lumped_disturbance    geometry_msgs/WrenchStamped  the true tau_d, same layout
-    controller_internals  sensor_msgs/JointState    name = INTERNAL_NAMES, values in position
+    controller_internals  sensor_msgs/JointState    name = the law's internal_names (INTERNAL_NAMES for
+                                                    dsc, dscndo, lqr, lqr_ndo), values in position
     /clock                rosgraph_msgs/Clock       simulation time
 
     external_wrench       geometry_msgs/Wrench      torque.x, torque.y added to tau_ext1, tau_ext2
@@ -86,9 +87,27 @@ def encode_wrench(stamp: int, t1: float, t2: float) -> bytes:
     return _WRENCH(stamp, _ZERO3, (float(t1), float(t2), 0.0))
 
 
-def encode_internals(stamp: int, out) -> bytes:
-    """The controller's internal signals as named values (plot ``controller_internals/position``)."""
-    return _INTERNALS(stamp, [float(getattr(out, n)) for n in INTERNAL_NAMES])
+_INTERNAL_ENCODERS = {INTERNAL_NAMES: _INTERNALS}
+
+
+def encode_internals(stamp: int, out, names: Sequence[str] = INTERNAL_NAMES) -> bytes:
+    """The controller's internal signals as named values (plot ``controller_internals/position``).
+
+    Parameters
+    ----------
+    stamp : int
+        The state's stamp [ns].
+    out : dict or object
+        The law's internals (:meth:`mwip_ros.core.laws.Law.step`: a dict) or an object with them as attributes.
+    names : sequence of str
+        The layout, the law's ``internal_names``; a name ``out`` lacks is published NaN.
+    """
+    names = tuple(names)
+    enc = _INTERNAL_ENCODERS.get(names)
+    if enc is None:
+        enc = _INTERNAL_ENCODERS[names] = cdr.JointStateEncoder(names)
+    get = out.get if isinstance(out, dict) else (lambda n, d: getattr(out, n, d))
+    return enc(stamp, [float(get(n, math.nan)) for n in names])
 
 
 # --- parsing -----------------------------------------------------------------------------------------

@@ -1,14 +1,16 @@
-"""``dscndo_controller``: DSC / DSCNDO (eq. 16-28, 19-21), or the LQR baseline, as a node.
+"""``dscndo_controller``: DSC / DSCNDO (eq. 16-28, 19-21), the LQR baseline, or any registered law, as a node.
 
-The parameter ``law`` picks DSC (the paper) or LQR (``core.lqr``: the gain K, designed from
-``lqr.Q``, ``lqr.R`` and the nominal model, is logged at start-up and whenever it changes);
-``use_observer`` adds the observer term u_taud (DSCNDO, LQR+NDO).  All of them change at run
-time (``ros2 param set``); switching to DSC starts its filter afresh.
+The parameter ``law`` picks a law's family from the registry (``core.laws``: ``dsc``, the paper;
+``lqr``, the baseline, whose gain K, designed from ``lqr.Q``, ``lqr.R`` and the nominal model, is
+logged at start-up and whenever it changes; a plug-in's, ``$MWIP_ROS_LAWS``); ``use_observer``
+adds the observer term u_taud (DSCNDO, LQR+NDO).  All of them change at run time (``ros2 param
+set``); switching to a law starts it afresh (DSC: its filter), switching ``use_observer`` keeps it.
 
 Subscribes ``joint_states`` and (with ``use_observer``) ``disturbance_estimate``,
 pairs them by stamp, publishes ``wheel_torque_cmd`` once per state and the
-internal signals on ``controller_internals`` (a JointState whose ``name`` lists
-S1, S2, x4d, x4_bar, u_dsc, u_taud, u, x1 and whose ``position`` holds them).
+internal signals on ``controller_internals`` (a JointState whose ``name`` lists the law's
+``internal_names``, for DSC and LQR S1, S2, x4d, x4_bar, u_dsc, u_taud, u, x1, and whose
+``position`` holds them).
 A message it cannot use (malformed, non-finite, implausible, a stamp outside the
 stream's window; :mod:`.guards`) is rejected, counted and logged and changes nothing;
 so is a state for which the law gives a non-finite command (nothing is published).
@@ -26,10 +28,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 
 from mwip_ros import params as P
-from mwip_ros.core.controller import DscController
-from mwip_ros.core.lqr import LqrController
-from mwip_ros.core.sim import law_name
-from mwip_ros.core.theorem import controller_conditions
+from mwip_ros.core import laws
 from mwip_ros.msgs import BadMessage
 from mwip_ros.msgs import layouts as L
 from mwip_ros.msgs.qos import qos_for
@@ -46,10 +45,13 @@ class DscndoController(Node, GracefulNodeMixin):
     def __init__(self, context=None, argv=()):
         super().__init__(NAME, context=context)
         self.v = declare(self, NAME, argv, on_change=self._on_change)
-        nominal = P.physical(self.v, "nominal")
-        self.dsc = DscController(nominal, P.gains(self.v), P.period(self.v), use_observer=self.v["use_observer"])
-        self.lqr = LqrController(nominal, P.typed.lqr_gain(self.v), use_observer=self.v["use_observer"])
-        self._warn_theorem()
+        self.nominal, self.h = P.physical(self.v, "nominal"), P.period(self.v)
+        # one instance of each family's law (core.laws); use_observer wraps it with the observer term
+        self.laws = {family: laws.variant(family, False).from_params(self.v, self.nominal, self.h)
+                     for family in laws.families() if laws.lookup(family, False)}
+        self._composed = {}
+        for law in self.laws.values():
+            self._warn(law)
         self.states = {}      # stamp -> State waiting for an estimate
         self.estimates = {}   # stamp -> (tau_hat1, tau_hat2) waiting for a state
         self.last_answered = None
@@ -66,48 +68,53 @@ class DscndoController(Node, GracefulNodeMixin):
         self.get_logger().info(self._ready_text())
 
     @property
-    def ctrl(self):
-        """The law in use: ``self.dsc`` or ``self.lqr``."""
-        return self.lqr if self.v["law"] == "lqr" else self.dsc
+    def ctrl(self) -> laws.Law:
+        """The law in use: the family's law, with the observer term when ``use_observer``."""
+        family, observer = self.v["law"], self.v["use_observer"]
+        law = self.laws.get(family)
+        if law is None or observer:
+            key = (family, bool(observer))
+            if key not in self._composed:   # around the family's instance: its state survives the switch
+                cls = laws.variant(family, observer)
+                self._composed[key] = cls.wrap(law) if law is not None and hasattr(cls, "wrap") else \
+                    cls.from_params(self.v, self.nominal, self.h)
+            law = self._composed[key]
+        return law
 
     def _name(self) -> str:
-        return {"dsc": "DSC", "dscndo": "DSCNDO", "lqr": "LQR", "lqr_ndo": "LQR+NDO"}[
-            law_name(self.v["law"], self.v["use_observer"])]
+        return laws.variant(self.v["law"], self.v["use_observer"]).title
 
     def _describe(self) -> str:
-        g = self.dsc.gains
-        return f"{self._name()} (k1 = {g.k1}, k2 = {g.k2}, tau4 = {g.tau4})" if self.v["law"] == "dsc" else self._name()
+        text = self.ctrl.summary()
+        return f"{self._name()} ({text})" if text else self._name()
 
     def _ready_text(self) -> str:
-        g = self.dsc.gains
-        if self.v["law"] == "dsc":
-            return f"{self._name()} ready: k1 = {g.k1}, k2 = {g.k2}, tau4 = {g.tau4}; ({self._lqr_text()}, not in use)"
-        return f"{self._name()} ready: {self._lqr_text()}"
+        ctrl = self.ctrl
+        own = ", ".join(t for t in (ctrl.summary(), ctrl.design_text(self.v)) if t)
+        others = "".join(f"; ({law.design_text(self.v)}, not in use)" for family, law in self.laws.items()
+                         if family != self.v["law"] and law.announce and law.design_text(self.v))
+        return f"{self._name()} ready: {own}{others}"
 
-    def _lqr_text(self) -> str:
-        K = self.lqr.K
-        return (f"LQR gain K = [{K[0]:.6g}, {K[1]:.6g}, {K[2]:.6g}] on [theta_b, theta_b', theta_w'] "
-                f"(lqr.Q = {self.v['lqr.Q']}, lqr.R = {self.v['lqr.R']:g})")
-
-    def _warn_theorem(self):
-        th = controller_conditions(self.dsc.nominal, self.dsc.gains)
-        if not th.satisfied:
-            self.get_logger().warning(f"gains break Theorem 2 (eq. 35): a1 = {th.a1:.4f}, a2 = {th.a2:.4f}, "
-                                      f"a3 = {th.a3:.4f} (all must be > 0); allowed, but stability is not "
-                                      "guaranteed. Run mwip_theorem for a1..a5")
+    def _warn(self, law) -> None:
+        for text in law.warnings():
+            self.get_logger().warning(text)
 
     def _on_change(self, changed):
-        if {"k1", "k2", "tau4"} & set(changed):
-            self.dsc.gains = P.gains(self.v)
-            self._warn_theorem()
-        if "use_observer" in changed:
-            self.dsc.use_observer = self.lqr.use_observer = self.v["use_observer"]
-        if {"lqr.Q", "lqr.R"} & set(changed):   # the design was checked before the change was accepted
-            self.lqr.K = P.typed.lqr_gain(self.v)
-            self.get_logger().info(self._lqr_text())
+        changed = set(changed)
+        for law in self.laws.values():   # the LQR design was checked before the change was accepted
+            if set(law.param_keys) & changed:
+                try:
+                    law.params = type(law).design(self.v, self.nominal, self.h)
+                except (ArithmeticError, ValueError) as exc:   # a plug-in's design the schema does not check
+                    self.get_logger().error(f"{law.title}: {exc}; its parameters stay as they were")
+                    continue
+                self._warn(law)
+                text = law.design_text(self.v)
+                if text:
+                    self.get_logger().info(text)
         if "law" in changed:
-            self.dsc.x4d = None   # DSC starts its filter afresh from the next state
-        if {"law", "use_observer"} & set(changed):
+            self.ctrl.reset()   # the law starts afresh (DSC: its filter) from the next state
+        if {"law", "use_observer"} & changed:
             self.get_logger().info(f"law now {self._describe()}")
 
     def _on_state(self, data: bytes) -> None:
@@ -118,7 +125,8 @@ class DscndoController(Node, GracefulNodeMixin):
         if verdict == REPEAT:
             return  # a resent state: one command per state
         if verdict == RESTART:
-            self.dsc.x4d = None
+            for law in (*self.laws.values(), *self._composed.values()):
+                law.reset()
             self.states.clear()
             self.estimates = {s: e for s, e in self.estimates.items() if s >= stamp}
             self.last_answered = None
@@ -146,24 +154,25 @@ class DscndoController(Node, GracefulNodeMixin):
         if stamp not in self.states:
             return
         tau_hat = self.estimates.get(stamp)
-        if self.ctrl.use_observer and tau_hat is None:
+        ctrl = self.ctrl
+        if ctrl.observer and tau_hat is None:
             self._trim()
             return  # wait for the estimate of this very state
         x = self.states.pop(stamp)
         self.estimates.pop(stamp, None)
-        ctrl, x4d = self.ctrl, self.dsc.x4d
+        before = ctrl.snapshot()
         try:
-            out = ctrl.step(x, tau_hat)
-            ok = math.isfinite(out.u) and (ctrl is not self.dsc or math.isfinite(self.dsc.x4d))
+            u, internals = ctrl.step(x, tau_hat)
+            ok = math.isfinite(u) and ctrl.finite()
         except (ArithmeticError, ValueError):
             ok = False
         if not ok:
-            self.dsc.x4d = x4d  # keep the filter as it was: setting a bad gain back repairs the loop
+            ctrl.restore(before)  # keep the law's state as it was: setting a bad gain back repairs the loop
             self.rejects("joint_states", f"the law gives no finite command for t = {stamp * 1e-9:.3f} s "
                                          f"({self._describe()}); nothing published")
             return
-        self.cmd_pub.publish(L.encode_command(out.u))
-        self.int_pub.publish(L.encode_internals(stamp, out))
+        self.cmd_pub.publish(L.encode_command(u))
+        self.int_pub.publish(L.encode_internals(stamp, internals, ctrl.internal_names))
         self.input.answered(stamp)
         self.last_answered = stamp
         self.count += 1

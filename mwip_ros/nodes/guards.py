@@ -9,8 +9,8 @@
   after it): then the guard follows it and tells the caller to re-initialise.
 * :class:`StateInput` is ``joint_states`` as the observer and the controller take it: parsed
   by the message layer, judged by a stamp guard, a rejection counted, a restart logged.
-* :func:`install_clock_guard` puts the same check in front of rclpy's ``/clock``
-  subscription (its time source raises on a negative time, which kills the node).
+* the same check stands in front of rclpy's ``/clock`` subscription (its time source raises
+  on a negative time, which kills the node): :func:`.rclpy_compat.guard_clock`.
 * :class:`Rejects` counts rejected messages per topic and logs them, rate-limited per kind
   of reason (the first few of each, then every 100th), so a flood costs a line per 100.
 * :class:`PublisherWatch` notices a second publisher on a topic that must have one (two
@@ -25,12 +25,11 @@ from typing import Dict, Optional, Sequence
 from mwip_ros.msgs import BadMessage
 from mwip_ros.msgs.layouts import parse_joint_state
 
-__all__ = ["Rejects", "StampGuard", "StateInput", "NEW", "REPEAT", "RESTART", "STAMP_WINDOW_PERIODS", "RESYNC", "install_clock_guard",
+__all__ = ["Rejects", "StampGuard", "StateInput", "NEW", "REPEAT", "RESTART", "STAMP_WINDOW_PERIODS", "RESYNC",
            "PublisherWatch"]
 
 STAMP_WINDOW_PERIODS = 20   # a stamp may lead the last accepted one by at most this many control periods
 RESYNC = 3                  # consecutive agreeing stamps outside the window that restart the stream
-CLOCK_WINDOW_NS = 1_000_000_000  # /clock may jump ahead by at most 1 s (simulated time) at once
 NEW, REPEAT, RESTART = "new", "repeat", "restart"
 
 
@@ -83,9 +82,11 @@ class StateInput:
         self._clock = None
         if not node.get_parameter("use_sim_time").value:
             from rclpy.time import Time
+
+            from mwip_ros.nodes.rclpy_compat import use_ros_time_override
             self._time = Time
             self._clock = node.get_clock()
-            self._clock._set_ros_time_is_active(True)
+            use_ros_time_override(self._clock)
             self._clock.set_ros_time_override(Time(nanoseconds=0))
 
     def take(self, data):
@@ -108,38 +109,6 @@ class StateInput:
         """The node published its answer to the state of ``stamp``: its clock reads that stamp now."""
         if self._clock is not None:
             self._clock.set_ros_time_override(self._time(nanoseconds=stamp))
-
-
-def install_clock_guard() -> None:
-    """Make rclpy's time source reject a ``/clock`` it cannot use instead of raising in the executor.
-
-    A negative time, one that goes backwards or one that jumps ahead by more than a second
-    is rejected, counted in the node's ``rejects`` (if it has one) and logged; the node's
-    clock keeps its last good time.  Installed once per process by ``run_node``."""
-    from rclpy.time_source import TimeSource
-
-    original = TimeSource.clock_callback
-    if getattr(original, "_mwip_guarded", False):
-        return
-
-    def clock_callback(self, msg) -> None:
-        stamp = int(msg.clock.sec) * 1_000_000_000 + int(msg.clock.nanosec)
-        guard = self.__dict__.setdefault("_mwip_guard", StampGuard(CLOCK_WINDOW_NS, "/clock"))
-        verdict = guard.check(stamp) if stamp >= 0 else f"/clock {stamp} ns is negative"
-        if verdict == REPEAT:
-            return
-        if verdict not in (NEW, RESTART):
-            node = self._get_node()
-            rejects = getattr(node, "rejects", None)
-            if rejects is not None:
-                rejects("/clock", verdict)
-            elif node is not None:
-                node.get_logger().warning(f"rejected /clock: {verdict}", throttle_duration_sec=5.0)
-            return
-        original(self, msg)
-
-    clock_callback._mwip_guarded = True
-    TimeSource.clock_callback = clock_callback
 
 
 class PublisherWatch:

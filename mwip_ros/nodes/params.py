@@ -25,11 +25,11 @@ from typing import Any, Callable, Dict, Iterator, List, Sequence, Tuple
 import yaml
 
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType, SetParametersResult
-from rclpy.exceptions import (InvalidParameterTypeException, InvalidParameterValueException,
-                              ParameterNotDeclaredException)
+from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.parameter import Parameter
 
 from mwip_ros import params as P
+from mwip_ros.nodes import rclpy_compat
 
 _TYPES = {"double": ParameterType.PARAMETER_DOUBLE, "integer": ParameterType.PARAMETER_INTEGER,
           "bool": ParameterType.PARAMETER_BOOL, "string": ParameterType.PARAMETER_STRING,
@@ -131,22 +131,22 @@ def _show(v: Any) -> str:
 
 
 def range_text(spec: P.ParamSpec) -> str:
-    """The values ``spec`` accepts, in words from its check ('' when any value of its type will do)."""
-    check = spec.check
-    if check is None:
-        return ""
-    bounds = getattr(check, "bounds", None)
-    if bounds is not None:
-        lo, hi = bounds
-        if spec.type == "integer":
+    """The values ``spec`` accepts, in words from its range, choices or rule ('' when any value of its type will
+    do)."""
+    if spec.choices is not None:
+        return f"one of {', '.join(map(repr, spec.choices))}"
+    lo, hi = spec.lo, spec.hi
+    if spec.type == "integer" and (lo is not None or hi is not None):
+        if spec.words:
+            return spec.words
+        if lo is not None and hi is not None:
             return f"{lo}..{hi}"
-        floor = getattr(check, "floor", None)
-        if floor is not None:
-            return f"[{floor:g}, {hi:g}]"
-        return f"{'[' if check(lo) is None else '('}{lo:g}, {hi:g}]"
-    probe = {"string": object(), "double_array": [], "string_array": []}.get(spec.type, -1)  # one it refuses
-    reason = check(probe)
-    return reason.split(", got", 1)[0].removeprefix("must be ") if reason else ""
+        return f">= {lo}" if lo is not None else f"<= {hi}"
+    if spec.type == "double" and lo is not None and hi is not None:
+        if spec.floor is not None:
+            return f"[{spec.floor:g}, {hi:g}]"
+        return f"{'(' if spec.lo_open else '['}{lo:g}, {hi:g}]"
+    return spec.words
 
 
 def _spec_lines(spec: P.ParamSpec) -> List[str]:
@@ -210,24 +210,21 @@ def start_values(node, node_name: str, argv: Sequence[str]) -> tuple:
 
 
 def _descriptor(spec: P.ParamSpec) -> ParameterDescriptor:
+    """The ROS descriptor of ``spec``, from its data: type, description, read-only, the range (an open end of
+    an integer's at the int32 limit), and the words of a lower bound at 0 or of the choices."""
     # dynamic_typing for the run-time parameters: rclpy would refuse a wrong type before our check runs,
     # with a reason that does not name the key; our check (ParamSpec.validate) refuses it, naming the key.
     d = ParameterDescriptor(description=spec.description, type=_TYPES[spec.type],
                             read_only=not spec.dynamic, dynamic_typing=spec.dynamic)
-    bounds = getattr(spec.check, "bounds", None)
-    check = spec.check.__name__ if spec.check else ""
-    if spec.type == "double" and bounds is not None:
-        d.floating_point_range = [FloatingPointRange(from_value=float(bounds[0]), to_value=float(bounds[1]),
-                                                     step=0.0)]
-        d.additional_constraints = spec.check(bounds[0] - 1.0).split(", got", 1)[0] if bounds[0] == 0.0 else ""
-    elif spec.type == "integer" and bounds is not None:
-        d.integer_range = [IntegerRange(from_value=int(bounds[0]), to_value=int(bounds[1]), step=1)]
-    elif spec.type == "integer" and check in ("_at_least_one", "_at_least_zero", "_priority"):
-        lo = 1 if check == "_at_least_one" else 0
-        hi = 99 if check == "_priority" else 2 ** 31 - 1
-        d.integer_range = [IntegerRange(from_value=lo, to_value=hi, step=1)]
-    elif spec.check is not None and check == "check" and not bounds:  # _one_of(...)
-        d.additional_constraints = spec.check(object()).split(", got", 1)[0]
+    lo, hi = spec.lo, spec.hi
+    if spec.type == "double" and lo is not None and hi is not None:
+        d.floating_point_range = [FloatingPointRange(from_value=float(lo), to_value=float(hi), step=0.0)]
+        d.additional_constraints = f"must be {'>' if spec.lo_open else '>='} {lo:g}" if lo == 0.0 else ""
+    elif spec.type == "integer" and (lo is not None or hi is not None):
+        d.integer_range = [IntegerRange(from_value=int(-P.schema.INT32_MAX - 1 if lo is None else lo),
+                                        to_value=int(P.schema.INT32_MAX if hi is None else hi), step=1)]
+    elif spec.choices is not None:
+        d.additional_constraints = f"must be one of {', '.join(map(repr, spec.choices))}"
     return d
 
 
@@ -241,19 +238,18 @@ def declare(node, node_name: str, argv: Sequence[str],
     specs = P.specs_for(node_name)
     # rcl skips a plain-name section under a namespace: apply the values as start_values reads them (ROS 2's
     # precedence, with that section too), over rclpy's own reading.
-    overrides = getattr(node, "_parameter_overrides", None)  # rclpy's {name: Parameter} from file and -p
-    if overrides is not None:
-        given, shadowed = start_values(node, node_name, argv)
-        for name, value in given.items():
-            try:
-                overrides[name] = Parameter(name, value=value)
-            except TypeError as exc:
-                raise P.ParamError(name, f"unsupported value {value!r} ({exc})", "command line") from None
-        for name, rule, value in shadowed:
-            node.get_logger().warning(
-                f"-p {name}:={rule!r} is overridden by {name}: {value!r} in this node's own section (ROS 2: a "
-                f"node's own section wins over /** and over -p without a node name); write "
-                f"-p {node.get_name()}:{name}:=... to override it")
+    overrides = rclpy_compat.parameter_overrides(node)  # rclpy's {name: Parameter} from file and -p
+    given, shadowed = start_values(node, node_name, argv)
+    for name, value in given.items():
+        try:
+            overrides[name] = Parameter(name, value=value)
+        except TypeError as exc:
+            raise P.ParamError(name, f"unsupported value {value!r} ({exc})", "command line") from None
+    for name, rule, value in shadowed:
+        node.get_logger().warning(
+            f"-p {name}:={rule!r} is overridden by {name}: {value!r} in this node's own section (ROS 2: a "
+            f"node's own section wins over /** and over -p without a node name); write "
+            f"-p {node.get_name()}:{name}:=... to override it")
     values: Dict[str, Any] = {}
     for name, spec in specs.items():
         # an empty list carries no type for rclpy (it would become BYTE_ARRAY): declare by type
@@ -266,7 +262,7 @@ def declare(node, node_name: str, argv: Sequence[str],
             raise P.ParamError(name, f"invalid value ({exc})") from None
         values[name] = spec.validate(_py(p.value, spec), name, "start-up value")
     P.check_derived(values, "start-up value")
-    for name in overrides or {}:
+    for name in overrides:
         if name.startswith(P.schema.QOS_OVERRIDES):
             raise P.ParamError(name, P.schema.QOS_OVERRIDES_REFUSED, "command line")
         if name in specs or name in P.ROS_OWN:
@@ -306,14 +302,7 @@ def declare(node, node_name: str, argv: Sequence[str],
         if on_change is not None:
             on_change(changed)
 
-    def check_undeclared(parameter_list: List[Parameter]) -> None:
-        # rclpy's own check reports the undeclared names as [] (it consumes a generator twice); name them
-        unknown = [f"{p.name}{P.spelling_hint(p.name, specs)}" for p in parameter_list
-                   if p.name not in node._parameters]
-        if unknown:
-            raise ParameterNotDeclaredException(unknown)
-
-    node._check_undeclared_parameters = check_undeclared
+    rclpy_compat.name_undeclared_parameters(node, lambda name: P.spelling_hint(name, specs))
     node.add_on_set_parameters_callback(validate)
     node.add_post_set_parameters_callback(apply)
     return values

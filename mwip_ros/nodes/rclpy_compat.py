@@ -3,7 +3,18 @@
 Written for rclpy 7.1.6 (ROS 2 Jazzy, the PyPI wheels ``ros-rclpy``).  :func:`check_version`
 compares the installed rclpy with :data:`WRITTEN_FOR` and, on another version, warns once (to
 stderr) that the replaced internals may have changed; nothing stops.  Nothing happens at import
-time: :func:`install` (called by ``run_node`` for every node) does the work, once per process.
+time: :func:`install` (called by ``run_node`` for every node, before rclpy.init) patches rclpy's
+classes once per process, and a node's ``__init__`` calls the per-node functions.  Every use of an
+rclpy internal is here, each behind one function with its own test (test/nodes/test_rclpy_compat.py,
+test/nodes/test_param_hostile.py); a missing internal raises :class:`RclpyChanged` naming it:
+
+====================================  ==================================================================
+:func:`install`                       the parameter services' callbacks (below) and :func:`guard_clock`
+:func:`guard_clock`                   ``TimeSource.clock_callback``: a /clock it cannot use is rejected
+:func:`parameter_overrides`           ``Node._parameter_overrides``: the start-up values rclpy read
+:func:`name_undeclared_parameters`    ``Node._check_undeclared_parameters``: a refusal names the keys
+:func:`use_ros_time_override`         ``ROSClock._set_ros_time_is_active``: a clock the node sets
+====================================  ==================================================================
 
 rclpy's parameter services (``rclpy.parameter_service.ParameterService``) read each request
 parameter with ``Parameter.from_parameter_msg`` outside any ``try``: one ``SetParameters`` request
@@ -32,14 +43,16 @@ from __future__ import annotations
 import sys
 from typing import Callable, Dict, List, Optional, Tuple
 
-__all__ = ["WRITTEN_FOR", "MAX_NAME_CHARS", "MAX_ARRAY_LEN", "MAX_PARAMETERS", "rclpy_version", "check_version",
-           "install", "installed", "parameter_from_msg", "shown_name"]
+__all__ = ["WRITTEN_FOR", "MAX_NAME_CHARS", "MAX_ARRAY_LEN", "MAX_PARAMETERS", "CLOCK_WINDOW_NS", "RclpyChanged",
+           "rclpy_version", "check_version", "install", "installed", "parameter_from_msg", "shown_name", "guard_clock",
+           "clock_guarded", "parameter_overrides", "name_undeclared_parameters", "use_ros_time_override"]
 
 WRITTEN_FOR = ("7.1.6",)   # the rclpy versions whose internals this module was written against (and tested with)
 MAX_NAME_CHARS = 256       # a longer name that the node has not declared is refused unread
 MAX_ARRAY_LEN = 4096       # an array value longer than this is refused unread (the schema's arrays hold a few values)
 MAX_PARAMETERS = 1000      # per request: the parameters after these are refused unread (each still answered)
 SHOWN_NAME_CHARS = 80      # in a reason, a name is cut to this many characters
+CLOCK_WINDOW_NS = 1_000_000_000  # /clock may jump ahead by at most 1 s (simulated time) at once
 
 _CALLBACKS = ("_set_parameters_callback", "_set_parameters_atomically_callback", "_get_parameters_callback",
               "_get_parameter_types_callback", "_describe_parameters_callback", "_list_parameters_callback")
@@ -82,12 +95,113 @@ def check_version(version: Optional[str] = None, warn: Optional[Callable[[str], 
     if version in WRITTEN_FOR:
         return None
     text = (f"mwip_ros.nodes.rclpy_compat was written for rclpy {', '.join(WRITTEN_FOR)} (ROS 2 Jazzy); this is "
-            f"rclpy {version or 'of an unknown version'}: its parameter-service guard is installed as written, "
-            f"check it (test/nodes/test_param_hostile.py)")
+            f"rclpy {version or 'of an unknown version'}: its patches are installed as written, check them "
+            f"(test/nodes/test_rclpy_compat.py, test/nodes/test_param_hostile.py)")
     if not _state["warned"]:
         _state["warned"] = True
         (warn or (lambda t: print(f"[WARN] [rclpy_compat]: {t}", file=sys.stderr, flush=True)))(text)
     return text
+
+
+class RclpyChanged(RuntimeError):
+    """An rclpy internal this module uses is missing or has another shape (an rclpy other than WRITTEN_FOR)."""
+
+    def __init__(self, what: str):
+        super().__init__(f"rclpy {rclpy_version() or '(unknown version)'}: {what}; mwip_ros.nodes.rclpy_compat was "
+                         f"written for rclpy {', '.join(WRITTEN_FOR)}")
+
+
+# --- a node's parameters: the start-up values rclpy read, the refusal of undeclared names ----------
+
+def parameter_overrides(node) -> Dict[str, object]:
+    """The node's start-up values as rclpy read them in ``Node.__init__`` from its ``--params-file``
+    sections and ``-p`` rules: rclpy's own ``{name: rclpy.parameter.Parameter}`` dict
+    (``Node._parameter_overrides``), which ``declare_parameter`` takes a value from; a value put in it is
+    the one declared.  Raises :class:`RclpyChanged` when the node has no such dict."""
+    overrides = getattr(node, "_parameter_overrides", None)
+    if not isinstance(overrides, dict):
+        raise RclpyChanged(f"Node._parameter_overrides is {type(overrides).__name__}, not the dict of the "
+                           f"node's start-up values")
+    return overrides
+
+
+def name_undeclared_parameters(node, hint: Callable[[str], str] = lambda _name: "") -> None:
+    """Make ``node.set_parameters*`` refuse undeclared names by name: rclpy's check
+    (``Node._check_undeclared_parameters``, called with the list of Parameters before any is set) raises
+    ``ParameterNotDeclaredException([])`` (it consumes a generator twice).  The replacement raises it with
+    each undeclared name followed by ``hint(name)`` (a spelling hint).  Raises :class:`RclpyChanged` when
+    rclpy has no such check or no ``Node._parameters`` dict."""
+    from rclpy.exceptions import ParameterNotDeclaredException
+
+    if not callable(getattr(node, "_check_undeclared_parameters", None)) \
+            or not isinstance(getattr(node, "_parameters", None), dict):
+        raise RclpyChanged("Node._check_undeclared_parameters or the Node._parameters dict is missing")
+
+    def check_undeclared(parameter_list) -> None:
+        unknown = [f"{p.name}{hint(p.name)}" for p in parameter_list if p.name not in node._parameters]
+        if unknown:
+            raise ParameterNotDeclaredException(unknown)
+
+    check_undeclared._mwip_guarded = True
+    node._check_undeclared_parameters = check_undeclared
+
+
+# --- clocks ---------------------------------------------------------------------------------------
+
+def use_ros_time_override(clock) -> None:
+    """Make ``clock`` (a node's ROS-time clock, without ``use_sim_time``) read what the node gives
+    ``clock.set_ros_time_override``: rclpy lets only its TimeSource switch that on
+    (``ROSClock._set_ros_time_is_active``).  Raises :class:`RclpyChanged` when the clock cannot."""
+    switch = getattr(clock, "_set_ros_time_is_active", None)
+    if not callable(switch):
+        raise RclpyChanged("ROSClock._set_ros_time_is_active is missing")
+    switch(True)
+
+
+def clock_guarded() -> bool:
+    """Whether :func:`guard_clock` replaced rclpy's ``TimeSource.clock_callback`` in this process."""
+    from rclpy.time_source import TimeSource
+    return getattr(TimeSource.clock_callback, "_mwip_guarded", False)
+
+
+def guard_clock() -> None:
+    """Make rclpy's time source reject a ``/clock`` it cannot use instead of raising in the executor.
+
+    rclpy's ``TimeSource.clock_callback`` (bound when a node with ``use_sim_time`` subscribes to /clock,
+    so this runs before any node is made) raises on a negative time, which ends the node.  The replacement
+    judges each stamp with a :class:`~mwip_ros.nodes.guards.StampGuard` of :data:`CLOCK_WINDOW_NS`: a
+    negative time, one that goes backwards or one that jumps ahead by more than a second is rejected,
+    counted in the node's ``rejects`` (if it has one) and logged; the node's clock keeps its last good
+    time; a resend is dropped; the rest goes to rclpy's callback.  Idempotent."""
+    from rclpy.time_source import TimeSource
+
+    from mwip_ros.nodes.guards import NEW, REPEAT, RESTART, StampGuard
+
+    original = getattr(TimeSource, "clock_callback", None)
+    if not callable(original) or not callable(getattr(TimeSource, "_get_node", None)):
+        raise RclpyChanged("TimeSource.clock_callback or TimeSource._get_node is missing")
+    if getattr(original, "_mwip_guarded", False):
+        return
+
+    def clock_callback(self, msg) -> None:
+        stamp = int(msg.clock.sec) * 1_000_000_000 + int(msg.clock.nanosec)
+        guard = self.__dict__.setdefault("_mwip_guard", StampGuard(CLOCK_WINDOW_NS, "/clock"))
+        verdict = guard.check(stamp) if stamp >= 0 else f"/clock {stamp} ns is negative"
+        if verdict == REPEAT:
+            return
+        if verdict not in (NEW, RESTART):
+            node = self._get_node()
+            rejects = getattr(node, "rejects", None)
+            if rejects is not None:
+                rejects("/clock", verdict)
+            elif node is not None:
+                node.get_logger().warning(f"rejected /clock: {verdict}", throttle_duration_sec=5.0)
+            return
+        original(self, msg)
+
+    clock_callback._mwip_guarded = True
+    clock_callback.__wrapped__ = original
+    TimeSource.clock_callback = clock_callback
 
 
 # --- reading a request parameter ------------------------------------------------------------------
@@ -260,19 +374,23 @@ def _guarded(original, what: str):
 
 
 def installed() -> bool:
-    """Whether :func:`install` replaced rclpy's parameter-service callbacks in this process."""
+    """Whether :func:`install` replaced rclpy's parameter-service callbacks and its /clock callback in this
+    process."""
     from rclpy.parameter_service import ParameterService
-    return all(getattr(getattr(ParameterService, a, None), "_mwip_guarded", False) for a in _CALLBACKS)
+    return all(getattr(getattr(ParameterService, a, None), "_mwip_guarded", False) for a in _CALLBACKS) \
+        and clock_guarded()
 
 
 def install() -> None:
-    """Replace rclpy's parameter-service callbacks (see the module text); idempotent.  Nodes created after
-    this answer with the guarded callbacks (rclpy binds them when a node creates its services)."""
+    """Replace rclpy's parameter-service callbacks (see the module text) and its /clock callback
+    (:func:`guard_clock`); idempotent.  Nodes created after this answer with the guarded callbacks
+    (rclpy binds them when a node creates its services and its /clock subscription)."""
     from rclpy.parameter_service import ParameterService
 
     if _state["installed"] and installed():
         return
     check_version()
+    guard_clock()
     replacements = {"_set_parameters_callback": lambda _orig: _set_parameters_callback,
                     "_set_parameters_atomically_callback": lambda _orig: _set_parameters_atomically_callback,
                     "_get_parameters_callback": lambda orig: _guarded(orig, "get_parameters"),

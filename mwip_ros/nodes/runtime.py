@@ -1,6 +1,7 @@
 """Process plumbing shared by every node: init, signals, a spin loop that exits, one way to end.
 
-Every node's ``main()`` is ``return run_node(MyNode, argv)``.  The loop is a
+Every node's ``main()`` is ``return run_node(MyNode, argv)``; its console script enters through
+:mod:`.entry` (the malloc arena limit, before rclpy is imported).  The loop is a
 ``spin_once`` loop (an ``EventsExecutor.spin()`` never returns on SIGINT), and
 SIGINT/SIGTERM only set a flag, so a node gets to flush its files and print its
 report before ``rclpy.shutdown()``.  A node ends its run with
@@ -170,6 +171,8 @@ def run_node(factory: Callable[..., object], argv: Optional[Sequence[str]] = Non
 
     ``-h`` / ``--help`` before ``--ros-args`` prints :func:`node_help` and returns 0 without a ROS context; any
     other argument outside ``--ros-args`` (rcl would ignore it) is refused with one line, exit 2."""
+    from mwip_ros.nodes.entry import bound_malloc_arenas
+    bound_malloc_arenas()   # first, for a node started as python -m mwip_ros.nodes.NODE (entry.run did it earlier)
     argv = list(sys.argv if argv is None else argv)
     stop = {"signal": None}
 
@@ -183,7 +186,6 @@ def run_node(factory: Callable[..., object], argv: Optional[Sequence[str]] = Non
         print(f"[ERROR] {name}: {text}", file=sys.stderr, flush=True)
         return EXIT_BAD_PARAMS
 
-    from mwip_ros.nodes.guards import install_clock_guard
     from mwip_ros.nodes.params import check_command_line, wants_help
     if wants_help(argv):
         print(node_help(name, module), flush=True)
@@ -192,9 +194,10 @@ def run_node(factory: Callable[..., object], argv: Optional[Sequence[str]] = Non
         check_command_line(argv, name)  # before rcl parses them: its parser would end the process with a traceback
     except ParamError as exc:
         return refuse(str(exc))
-    install_clock_guard()
     from mwip_ros.nodes import rclpy_compat
-    rclpy_compat.install()  # a parameter request rclpy cannot read is refused, naming it, not raised in the executor
+    # rclpy's classes, patched before any node binds their callbacks: a parameter request rclpy cannot read is
+    # refused, naming it, and a /clock it cannot use is rejected, neither raised in the executor
+    rclpy_compat.install()
     context = rclpy.Context()
     try:
         rclpy.init(args=argv, context=context, signal_handler_options=SignalHandlerOptions.NO)

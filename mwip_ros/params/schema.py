@@ -32,78 +32,53 @@ MEASURED_LIMITS = {"theta_b": math.pi, "theta_w": 1e9, "rate": 1e3}
 NOISE_LIMIT_FRACTION = 10.0
 NOISE_SIGMAS = 8.0
 
-# --- checks: each returns None when fine, else the reason -------------------------------------
+# --- ranges and choices, as data: ParamSpec(**_positive()) ----------------------------------------
+# Each helper gives ParamSpec fields; the start-up and run-time check (ParamSpec.check), the ROS parameter
+# descriptor (nodes.params) and the --help text (nodes.params.range_text) are all derived from them.
 
-def _bounds(lo: float, hi: float, lo_open: bool = False):
-    """A check for lo < v <= hi (``lo_open``) or lo <= v <= hi; ``check.bounds`` tells the node's descriptor."""
-    def check(v):
-        if lo_open and not v > lo:
-            return f"must be > {lo:g}, got {v!r}"
-        if not lo_open and not v >= lo:
-            return f"must be >= {lo:g}, got {v!r}"
-        if not v <= hi:
-            return f"must be <= {hi:g} (far beyond any robot of this kind), got {v!r}"
-        return None
-    check.bounds = (lo, hi)
-    return check
+def _bounds(lo: float, hi: float, lo_open: bool = False) -> Dict[str, Any]:
+    """lo < v <= hi (``lo_open``) or lo <= v <= hi."""
+    return dict(lo=lo, hi=hi, lo_open=lo_open)
 
 
-def _positive(hi: float = 1e6):
+def _positive(hi: float = 1e6) -> Dict[str, Any]:
     return _bounds(0.0, hi, lo_open=True)
 
 
-def _non_negative(hi: float = 1e6):
+def _non_negative(hi: float = 1e6) -> Dict[str, Any]:
     return _bounds(0.0, hi)
 
 
-def _symmetric(hi: float):
+def _symmetric(hi: float) -> Dict[str, Any]:
     return _bounds(-hi, hi)
 
 
-def _positive_from(floor: float, hi: float, why: str):
+def _positive_from(floor: float, hi: float, why: str) -> Dict[str, Any]:
     """v > 0 (the descriptor's range starts at 0), and v >= ``floor`` (``why``), and v <= hi."""
-    def check(v):
-        if not v > 0:
-            return f"must be > 0, got {v!r}"
-        if v < floor:
-            return f"must be >= {floor:g} ({why}), got {v!r}"
-        return None if v <= hi else f"must be <= {hi:g}, got {v!r}"
-    check.bounds = (0.0, hi)
-    check.floor = floor   # the smallest value it takes (the help text's range)
-    return check
+    return dict(lo=0.0, hi=hi, lo_open=True, floor=floor, floor_why=why, hi_why="")
 
 
 # tau4 so small that (x4_bar - x4d) / tau4 overflows is no filter; a rate below 1 mHz has no nanosecond period
 _tau4 = _positive_from(1e-6, 1e6, "a filter faster than a microsecond is no filter")
 _rate = _positive_from(1e-3, 1e5, "a control period of at most 1000 s")
+_at_least_zero = dict(lo=0)     # an integer: its descriptor's range ends at INT32_MAX
+_at_least_one = dict(lo=1)
 
 
-def _at_least_zero(v):
-    return None if v >= 0 else f"must be >= 0, got {v!r}"
+def _count_range(lo: int, hi: int) -> Dict[str, Any]:
+    return dict(lo=lo, hi=hi)
 
 
-def _at_least_one(v):
-    return None if v >= 1 else f"must be >= 1, got {v!r}"
+_priority = dict(lo=0, hi=99, words="0 (normal scheduling) or a SCHED_FIFO priority 1..99")
 
 
-def _count_range(lo: int, hi: int):
-    def check(v):
-        return None if lo <= v <= hi else f"must be a whole number from {lo} to {hi}, got {v!r}"
-    check.bounds = (lo, hi)
-    return check
+def _one_of(*choices) -> Dict[str, Any]:
+    return dict(choices=tuple(choices))
 
 
-def _priority(v):
-    return None if 0 <= v <= 99 else f"must be 0 (normal scheduling) or a SCHED_FIFO priority 1..99, got {v!r}"
+# --- what is not a range: the arrays' shapes (a rule, and its words for --help) --------------------
 
-
-def _one_of(*choices):
-    def check(v):
-        return None if v in choices else f"must be one of {', '.join(map(repr, choices))}, got {v!r}"
-    return check
-
-
-def _four_finite(v):
+def _four_finite_rule(v):
     if len(v) != 4:
         return f"must have 4 entries [c1, c2, c3, c4], got {len(v)}"
     if any(abs(c) > 1e9 for c in v):
@@ -111,7 +86,7 @@ def _four_finite(v):
     return None
 
 
-def _lqr_q(v):
+def _lqr_q_rule(v):
     if len(v) not in (3, 9):
         return f"give the diagonal (3 entries) or the 3x3 matrix row by row (9), got {len(v)} entries"
     if any(abs(c) > 1e12 for c in v):
@@ -119,17 +94,67 @@ def _lqr_q(v):
     return None
 
 
+_four_finite = dict(rule=_four_finite_rule, words="must have 4 entries [c1, c2, c3, c4]")
+_lqr_q = dict(rule=_lqr_q_rule, words="give the diagonal (3 entries) or the 3x3 matrix row by row (9)")
+
+INT32_MAX = 2 ** 31 - 1   # the top of an integer parameter's descriptor range when it has no ``hi``
+HI_WHY = "far beyond any robot of this kind"
+
+
 @dataclass(frozen=True)
 class ParamSpec:
-    """One parameter: dotted name, ROS type, default, description, check, run-time changeable."""
+    """One parameter: dotted name, ROS type, default, description, its range or choices, run-time changeable.
+
+    The accepted values are data: ``lo``/``hi`` (``lo_open``: lo < v; else lo <= v; v <= hi), ``floor`` (a
+    smallest value above an open ``lo``, with ``floor_why``), ``choices``; ``rule`` checks what is not a range
+    (an array's shape), ``words`` says it (and replaces an integer range's words).  :attr:`check` (start-up
+    and run-time values), the ROS descriptor and the ``--help`` text are derived from them."""
 
     name: str
     type: str  # 'double' | 'integer' | 'bool' | 'string' | 'double_array' | 'string_array'
     default: Any
     description: str
-    check: Optional[Callable[[Any], Optional[str]]] = None
+    lo: Optional[float] = None
+    hi: Optional[float] = None
+    lo_open: bool = False
+    floor: Optional[float] = None
+    floor_why: str = ""
+    hi_why: str = HI_WHY     # a double's refusal above ``hi`` says why ('' says nothing)
+    choices: Optional[tuple] = None
+    rule: Optional[Callable[[Any], Optional[str]]] = None
+    words: str = ""
     dynamic: bool = False
     unit: str = ""
+
+    def range_reason(self, v: Any) -> Optional[str]:
+        """None when ``v`` (of the right type) is within the range and choices, else the reason."""
+        if self.choices is not None:
+            return None if v in self.choices else f"must be one of {', '.join(map(repr, self.choices))}, got {v!r}"
+        lo, hi = self.lo, self.hi
+        if self.type == "integer":
+            if (lo is None or v >= lo) and (hi is None or v <= hi):
+                return None
+            if self.words:
+                return f"must be {self.words}, got {v!r}"
+            if hi is None:
+                return f"must be >= {lo}, got {v!r}"
+            if lo is None:
+                return f"must be <= {hi}, got {v!r}"
+            return f"must be a whole number from {lo} to {hi}, got {v!r}"
+        if self.type == "double":
+            if lo is not None and self.lo_open and not v > lo:
+                return f"must be > {lo:g}, got {v!r}"
+            if lo is not None and not self.lo_open and not v >= lo:
+                return f"must be >= {lo:g}, got {v!r}"
+            if self.floor is not None and v < self.floor:
+                return f"must be >= {self.floor:g} ({self.floor_why}), got {v!r}"
+            if hi is not None and not v <= hi:
+                return f"must be <= {hi:g}{f' ({self.hi_why})' if self.hi_why else ''}, got {v!r}"
+        return None
+
+    def check(self, v: Any) -> Optional[str]:
+        """None when ``v`` (of the right type) is accepted, else the reason (the range, then the rule)."""
+        return self.range_reason(v) or (self.rule(v) if self.rule is not None else None)
 
     def validate(self, value: Any, key: Optional[str] = None, source: Optional[str] = None) -> Any:
         """Return the value (arrays as lists) or raise ParamError naming ``key``."""
@@ -143,10 +168,9 @@ class ParamSpec:
                 raise ParamError(key, f"must be finite, got {value!r}", source)
         if self.type.endswith("_array"):
             value = list(value)
-        if self.check is not None:
-            reason = self.check(value)
-            if reason:
-                raise ParamError(key, reason, source)
+        reason = self.check(value)
+        if reason:
+            raise ParamError(key, reason, source)
         return value
 
 
@@ -180,7 +204,7 @@ def _body(prefix: str, values: Mapping[str, float], what: str) -> List[ParamSpec
     text = {"m_b": "body mass", "m_w": "wheel mass", "I_b": "body moment of inertia",
             "I_w": "wheel moment of inertia", "l": "axle to body centre of gravity",
             "r": "wheel radius", "g": "gravitational acceleration"}
-    return [ParamSpec(f"{prefix}.{k}", "double", v, f"{what} {text[k]} [{units[k]}]", _positive(), unit=units[k])
+    return [ParamSpec(f"{prefix}.{k}", "double", v, f"{what} {text[k]} [{units[k]}]", **_positive(), unit=units[k])
             for k, v in values.items()]
 
 
@@ -189,130 +213,148 @@ PAPER_ACTUAL = dict(m_b=310.6, m_w=29.0, I_b=65.0, I_w=0.6, l=0.317, r=0.254, g=
 
 SHARED_SPECS: List[ParamSpec] = [
     ParamSpec("control_rate_hz", "double", 200.0, "control rate 1/h [Hz] of plant, observer and controller",
-              _rate, unit="Hz"),
+              **_rate, unit="Hz"),
     *_body("nominal", PAPER_NOMINAL, "nominal (hatted)"),
     ParamSpec("realtime_priority", "integer", 0, "SCHED_FIFO priority 1..99 of the node's threads, for realtime "
-              "runs (needs root or CAP_SYS_NICE; else a warning); 0 = normal scheduling", _priority),
+              "runs (needs root or CAP_SYS_NICE; else a warning); 0 = normal scheduling", **_priority),
 ]
 
 # The observer's and the controller's QoS follow the loop's mode (msgs.qos): give them the plant's.
 _LOOP_MODE = ParamSpec("mode", "string", "lockstep", "the plant's mode, for the QoS: lockstep (nothing lost) or "
-                       "realtime (the newest state only)", _one_of("lockstep", "realtime"))
+                       "realtime (the newest state only)", **_one_of("lockstep", "realtime"))
+
+def _registry():
+    """The control laws' registry (core.laws; its plug-ins, $MWIP_ROS_LAWS, are imported with it)."""
+    from mwip_ros.core import laws
+    return laws
+
+
+def _law_parameters() -> List[ParamSpec]:
+    """The dscndo_controller parameters the registered laws declare themselves (all changeable at run time)."""
+    laws, seen, out = _registry(), set(), []
+    for name in laws.names():
+        for p in laws.get(name).parameters:
+            if p.name not in seen:
+                seen.add(p.name)
+                out.append(ParamSpec(p.name, p.type, p.default, p.description, lo=p.lo, hi=p.hi, dynamic=True))
+    return out
+
 
 NODE_SPECS: Dict[str, List[ParamSpec]] = {
     "plant_sim": [
         ParamSpec("mode", "string", "lockstep", "lockstep (deterministic, waits for each command) or realtime "
-                  "(wall-clock timer, zero-order hold)", _one_of("lockstep", "realtime")),
+                  "(wall-clock timer, zero-order hold)", **_one_of("lockstep", "realtime")),
         ParamSpec("duration_s", "double", 10.0, "simulated time to run [s]; 0 = until stopped",
-                  _non_negative(1e7)),
-        ParamSpec("substeps", "integer", 5, "RK4 sub-steps per control period", _at_least_one),
-        ParamSpec("seed", "integer", 0, "seed of the D_w friction noise", _at_least_zero),
+                  **_non_negative(1e7)),
+        ParamSpec("substeps", "integer", 5, "RK4 sub-steps per control period", **_at_least_one),
+        ParamSpec("seed", "integer", 0, "seed of the D_w friction noise", **_at_least_zero),
         *_body("actual", PAPER_ACTUAL, "true"),
-        ParamSpec("actual.D_b", "double", 0.1, "true drive viscous friction D_b [N m s/rad]", _non_negative()),
-        ParamSpec("actual.D_w_mean", "double", 0.5, "mean of the ground friction D_w [N m s/rad]", _non_negative()),
+        ParamSpec("actual.D_b", "double", 0.1, "true drive viscous friction D_b [N m s/rad]", **_non_negative()),
+        ParamSpec("actual.D_w_mean", "double", 0.5, "mean of the ground friction D_w [N m s/rad]", **_non_negative()),
         ParamSpec("actual.D_w_variance", "double", 0.2, "variance of D_w, drawn once per period; 0 = deterministic",
-                  _non_negative()),
-        ParamSpec("initial.theta_w", "double", 0.0, "initial wheel angle [rad]", _symmetric(1e9)),
-        ParamSpec("initial.theta_b", "double", -0.1745, "initial body pitch [rad]", _symmetric(math.pi)),
-        ParamSpec("initial.dtheta_w", "double", 0.0, "initial wheel rate [rad/s]", _symmetric(1e3)),
-        ParamSpec("initial.dtheta_b", "double", 0.0, "initial body pitch rate [rad/s]", _symmetric(1e3)),
-        ParamSpec("tau_ext1.amplitude", "double", 30.0, "tau_ext1 amplitude [N m] (wheel row)", _symmetric(1e6)),
-        ParamSpec("tau_ext1.omega", "double", 2.0, "tau_ext1 angular frequency [rad/s]", _symmetric(1e6)),
-        ParamSpec("tau_ext1.phase", "double", math.pi / 2, "tau_ext1 phase [rad]", _symmetric(1e6)),
-        ParamSpec("tau_ext2.amplitude", "double", 0.2, "tau_ext2 amplitude [N m] (sum of rows)", _symmetric(1e6)),
-        ParamSpec("tau_ext2.omega", "double", 1.0, "tau_ext2 angular frequency [rad/s]", _symmetric(1e6)),
-        ParamSpec("tau_ext2.phase", "double", 0.0, "tau_ext2 phase [rad]", _symmetric(1e6)),
-        ParamSpec("torque_limit", "double", 0.0, "|u| cap [N m]; 0 = none", _non_negative()),
+                  **_non_negative()),
+        ParamSpec("initial.theta_w", "double", 0.0, "initial wheel angle [rad]", **_symmetric(1e9)),
+        ParamSpec("initial.theta_b", "double", -0.1745, "initial body pitch [rad]", **_symmetric(math.pi)),
+        ParamSpec("initial.dtheta_w", "double", 0.0, "initial wheel rate [rad/s]", **_symmetric(1e3)),
+        ParamSpec("initial.dtheta_b", "double", 0.0, "initial body pitch rate [rad/s]", **_symmetric(1e3)),
+        ParamSpec("tau_ext1.amplitude", "double", 30.0, "tau_ext1 amplitude [N m] (wheel row)", **_symmetric(1e6)),
+        ParamSpec("tau_ext1.omega", "double", 2.0, "tau_ext1 angular frequency [rad/s]", **_symmetric(1e6)),
+        ParamSpec("tau_ext1.phase", "double", math.pi / 2, "tau_ext1 phase [rad]", **_symmetric(1e6)),
+        ParamSpec("tau_ext2.amplitude", "double", 0.2, "tau_ext2 amplitude [N m] (sum of rows)", **_symmetric(1e6)),
+        ParamSpec("tau_ext2.omega", "double", 1.0, "tau_ext2 angular frequency [rad/s]", **_symmetric(1e6)),
+        ParamSpec("tau_ext2.phase", "double", 0.0, "tau_ext2 phase [rad]", **_symmetric(1e6)),
+        ParamSpec("torque_limit", "double", 0.0, "|u| cap [N m]; 0 = none", **_non_negative()),
         ParamSpec("fall_angle", "double", 1.0472, "|theta_b| beyond this ends the run as fallen [rad]",
-                  _positive(math.pi)),
+                  **_positive(math.pi)),
         ParamSpec("lockstep_timeout_s", "double", 10.0, "wall time [s] to wait for the graph (the controller and "
                   "expected_subscribers) before the first state, and in lockstep for each command; lockstep gives "
-                  "up after it, realtime starts without the missing nodes", _positive()),
+                  "up after it, realtime starts without the missing nodes", **_positive()),
         ParamSpec("stale_command_periods", "integer", 4, "realtime: a command older than this many periods "
-                  "is replaced by zero torque", _at_least_one),
+                  "is replaced by zero torque", **_at_least_one),
         ParamSpec("csv", "string", "", "write the trajectory (mwip_sim CSV columns) to this file; '' = none"),
         ParamSpec("summary_json", "string", "", "write the run's summary (steps/s, realtime loop periods, missed "
                   "deadlines, stale commands, metrics) to this JSON file; '' = none"),
         *[ParamSpec(f"sensors.noise_std.{ch}", "double", 0.0, f"standard deviation of the zero-mean Gaussian noise on "
                     f"the published {ch} [{unit}], drawn once per period (its own seeded stream); 0 = none; at most "
                     f"a tenth of what a measurement may read (|{ch}| <= {limit:g}: the observer and the controller "
-                    f"refuse a message beyond it)", _non_negative(limit / NOISE_LIMIT_FRACTION), unit=unit)
+                    f"refuse a message beyond it)", **_non_negative(limit / NOISE_LIMIT_FRACTION), unit=unit)
           for ch, unit, limit in (("theta_w", "rad", MEASURED_LIMITS["theta_w"]),
                                   ("theta_b", "rad", MEASURED_LIMITS["theta_b"]),
                                   ("dtheta_w", "rad/s", MEASURED_LIMITS["rate"]),
                                   ("dtheta_b", "rad/s", MEASURED_LIMITS["rate"]))],
         ParamSpec("sensors.encoder_counts_per_rev", "integer", 0, "wheel encoder resolution: the published theta_w "
-                  "is quantized to 2 pi / counts; 0 = ideal", _count_range(0, 1 << 30)),
+                  "is quantized to 2 pi / counts; 0 = ideal", **_count_range(0, 1 << 30)),
         ParamSpec("sensors.delay_periods", "integer", 0, "measurement delay: the state published at step k is the "
-                  "measurement of step k - d (the first d steps publish the first one)", _count_range(0, 100000)),
+                  "measurement of step k - d (the first d steps publish the first one)", **_count_range(0, 100000)),
         ParamSpec("actuator.delay_periods", "integer", 0, "actuator delay: the command answering state k acts "
-                  "over [t_(k+d), t_(k+d+1)); zero torque before the first one", _count_range(0, 100000)),
+                  "over [t_(k+d), t_(k+d+1)); zero torque before the first one", **_count_range(0, 100000)),
         ParamSpec("expected_subscribers", "integer", 2, "lockstep: wait until joint_states has this many "
                   "matched subscriptions before the first state (2 = observer + controller; +1 per recorder)",
-                  _at_least_zero),
+                  **_at_least_zero),
     ],
     "disturbance_observer": [
         _LOOP_MODE,
         ParamSpec("X", "double_array", [100.0, 0.0, 0.0, 100.0], "observer gain X = [c1, c2, c3, c4] (eq. 14)",
-                  _four_finite, dynamic=True),
+                  **_four_finite, dynamic=True),
         ParamSpec("csv", "string", "", "write the estimates (t, tau_hat1, tau_hat2) to this file at the end; "
                   "'' = none"),
     ],
     "dscndo_controller": [
         _LOOP_MODE,
-        ParamSpec("k1", "double", 6.0, "first surface gain k1 (eq. 24)", _positive(), dynamic=True),
-        ParamSpec("k2", "double", 6.0, "second surface gain k2 (eq. 28)", _positive(), dynamic=True),
-        ParamSpec("tau4", "double", 0.1, "filter time constant tau4 [s] (eq. 25)", _tau4, dynamic=True),
+        ParamSpec("k1", "double", 6.0, "first surface gain k1 (eq. 24)", **_positive(), dynamic=True),
+        ParamSpec("k2", "double", 6.0, "second surface gain k2 (eq. 28)", **_positive(), dynamic=True),
+        ParamSpec("tau4", "double", 0.1, "filter time constant tau4 [s] (eq. 25)", **_tau4, dynamic=True),
         ParamSpec("use_observer", "bool", True, "true: add the observer term u_taud (eq. 20) to the law: DSCNDO "
                   "(eq. 19) or LQR+NDO; false: the law alone (DSC or LQR)", dynamic=True),
         ParamSpec("law", "string", "dsc", "dsc (dynamic surface control, eq. 16-28) or lqr (the baseline: discrete "
-                  "LQR on the nominal model's linearization, gain K from lqr.Q and lqr.R)", _one_of("dsc", "lqr"),
-                  dynamic=True),
+                  "LQR on the nominal model's linearization, gain K from lqr.Q and lqr.R)",
+                  **_one_of(*_registry().families()), dynamic=True),   # the laws' registry (core.laws)
         ParamSpec("lqr.Q", "double_array", [100.0, 10.0, 1.0], "LQR state weight on [theta_b, theta_b', theta_w']: "
                   "the diagonal (3 entries) or the 3x3 matrix row by row (9); symmetric positive semidefinite",
-                  _lqr_q, dynamic=True),
-        ParamSpec("lqr.R", "double", 0.01, "LQR input weight (> 0)", _positive(), dynamic=True),
+                  **_lqr_q, dynamic=True),
+        ParamSpec("lqr.R", "double", 0.01, "LQR input weight (> 0)", **_positive(), dynamic=True),
+        *_law_parameters(),   # what a plug-in law declares itself (core.laws.Law.parameters)
     ],
     "mcap_recorder": [
         ParamSpec("output", "string", "", "bag directory to create (refuses an existing one)"),
         ParamSpec("topics", "string_array", [], "topics to record; empty = every topic of the graph"),
-        ParamSpec("compression", "string", "", "'' or 'zstd' (MCAP chunk compression)", _one_of("", "zstd")),
-        ParamSpec("chunk_size", "integer", 1 << 20, "MCAP chunk size [bytes]", _at_least_one),
+        ParamSpec("compression", "string", "", "'' or 'zstd' (MCAP chunk compression)", **_one_of("", "zstd")),
+        ParamSpec("chunk_size", "integer", 1 << 20, "MCAP chunk size [bytes]", **_at_least_one),
     ],
     "foxglove_server": [
         ParamSpec("host", "string", "127.0.0.1", "address the WebSocket server listens on (0.0.0.0: every "
                   "interface; the server has no authentication)"),
         ParamSpec("port", "integer", 8765, "TCP port of the WebSocket server (Foxglove: ws://host:port)",
-                  _count_range(1, 65535)),
+                  **_count_range(1, 65535)),
         ParamSpec("topics", "string_array", [], "topics to serve; empty = every topic of the graph"),
         ParamSpec("nice", "integer", 10, "nice value of the server's threads, 0 (normal) .. 19 (lowest): a viewer "
-                  "yields the CPU to the control loop", _count_range(0, 19)),
+                  "yields the CPU to the control loop", **_count_range(0, 19)),
         ParamSpec("max_clients", "integer", 32, "most TCP connections the WebSocket server keeps open; one beyond "
                   "them is closed at once and logged (and refused at start-up if the descriptor limit leaves no "
-                  "room for it)", _count_range(1, 100000)),
+                  "room for it)", **_count_range(1, 100000)),
         ParamSpec("idle_timeout_s", "double", 60.0, "a connection that subscribes to nothing and sends nothing for "
                   "this long is closed (also one that never completes the WebSocket handshake)",
-                  _positive_from(0.5, 86400.0, "a client needs a moment to subscribe once it connected"), unit="s"),
+                  **_positive_from(0.5, 86400.0, "a client needs a moment to subscribe once it connected"), unit="s"),
     ],
     "robot_markers": [],   # the shared section only (the nominal model sizes the robot)
     "bag_replay": [
         ParamSpec("bag", "string", "", "bag directory to replay"),
-        ParamSpec("rate", "double", 1.0, "playback rate factor", _positive()),
+        ParamSpec("rate", "double", 1.0, "playback rate factor", **_positive()),
         ParamSpec("loop", "bool", False, "start again at the end"),
         ParamSpec("topics", "string_array", [], "topics to replay; empty = all"),
         ParamSpec("publish_clock", "bool", False, "publish /clock from the bag's time"),
         ParamSpec("mode", "string", "replay", "replay (republish) or resim (feed joint_states through a running "
-                  "observer and controller and compare)", _one_of("replay", "resim")),
+                  "observer and controller and compare)", **_one_of("replay", "resim")),
         ParamSpec("tolerance", "double", 1e-9, "resim: largest absolute difference still counted as equal",
-                  _non_negative()),
+                  **_non_negative()),
         ParamSpec("parameter_events", "bool", True, "resim: apply the recorded changes of the observer's and "
                   "the controller's parameters (/parameter_events) before the state they first applied to"),
         ParamSpec("timeout_s", "double", 10.0, "resim: give up when the graph is not ready or a command does "
-                  "not come within this wall time [s]; replay: how long to wait for subscribers", _positive()),
+                  "not come within this wall time [s]; replay: how long to wait for subscribers", **_positive()),
         ParamSpec("wait_for_subscribers", "integer", 0, "matched subscriptions to wait for before the first "
                   "message: replay: on every replayed topic (0 = start at once); resim: on joint_states "
                   "(0 = automatic: the controller, plus the observer when the bag has disturbance_estimate)",
-                  _at_least_zero),
+                  **_at_least_zero),
     ],
 }
 
@@ -349,14 +391,14 @@ def check_derived(values: Mapping[str, Any], source: Optional[str] = None) -> No
     """Raise ParamError when values that pass their own checks give a model no arithmetic can run:
     inertia terms that are not finite or an A_bar that is not positive (eq. 2, 38); or LQR weights that
     give no stabilizing gain for the nominal model (checked whatever the law, so a switch to lqr at run
-    time cannot fail)."""
+    time cannot fail).  The inertia terms are the model's (:class:`mwip_ros.core.model.PhysicalParams`)."""
+    from mwip_ros.core.model import PhysicalParams
+
     for prefix in ("nominal", "actual"):
         if f"{prefix}.m_b" not in values:
             continue
-        v = {k: values[f"{prefix}.{k}"] for k in PAPER_NOMINAL}
-        m11 = (v["m_b"] + v["m_w"]) * v["r"] ** 2 + v["I_w"]
-        m12, m22, G_b = v["m_b"] * v["l"] * v["r"], v["m_b"] * v["l"] ** 2 + v["I_b"], v["m_b"] * v["g"] * v["l"]
-        a_bar = m11 * m22 - m12 ** 2
+        model = PhysicalParams(**{k: values[f"{prefix}.{k}"] for k in PAPER_NOMINAL})
+        m11, m12, m22, G_b, a_bar = model.m11, model.m12, model.m22, model.G_b, model.A_bar   # eq. (2), (38)
         if not all(math.isfinite(x) for x in (m11, m12, m22, G_b, a_bar)) or not a_bar > 0:
             raise ParamError(f"{prefix}.m_b", f"the {prefix} model's inertia terms are not usable (m11 = {m11:g}, "
                                               f"m12 = {m12:g}, m22 = {m22:g}, A_bar = {a_bar:g}); check "
@@ -371,9 +413,14 @@ def check_derived(values: Mapping[str, Any], source: Optional[str] = None) -> No
                                                       f"fall_angle", source)
     if "lqr.Q" in values and "nominal.m_b" in values:
         from mwip_ros.core.lqr import LqrDesignError, lqr_gain
-        from mwip_ros.core.model import PhysicalParams
         try:
             lqr_gain(PhysicalParams(**{k: values[f"nominal.{k}"] for k in PAPER_NOMINAL}),
                      1.0 / values["control_rate_hz"], values["lqr.Q"], values["lqr.R"])
         except LqrDesignError as exc:
             raise ParamError(exc.key, exc.reason, source) from None
+    if isinstance(values.get("law"), str) and isinstance(values.get("use_observer"), bool):
+        laws = _registry()   # a law registered without its observer variant cannot take use_observer: true
+        if values["law"] in laws.families() and laws.lookup(values["law"], values["use_observer"]) is None:
+            raise ParamError("use_observer", f"the law {values['law']!r} has no variant "
+                                             f"{'with' if values['use_observer'] else 'without'} the observer term",
+                             source)

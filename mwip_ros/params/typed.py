@@ -3,6 +3,7 @@ from __future__ import annotations
 
 from typing import Any, Mapping, Optional
 
+from mwip_ros.core import laws
 from mwip_ros.core.controller import DscGains
 from mwip_ros.core.model import PhysicalParams, Sinusoid, State
 from mwip_ros.core.plant import PlantConfig
@@ -65,11 +66,25 @@ def lqr_gain(v: Mapping[str, Any]):
 
 
 def closed_loop(v: Mapping[str, Any], use_observer: Optional[bool] = None,
-                duration: Optional[float] = None, law: Optional[str] = None) -> ClosedLoop:
-    """The offline scenario of a merged parameter dict (``merged_values``); ``use_observer``, ``duration``
-    and ``law`` override the file's ``use_observer``, ``duration_s`` and ``law``."""
-    law = v["law"] if law is None else law
-    return ClosedLoop(plant=plant_config(v), X=tuple(float(c) for c in v["X"]), gains=gains(v),
-                      use_observer=v["use_observer"] if use_observer is None else use_observer,
-                      duration_s=v["duration_s"] if duration is None else duration,
-                      law=law, K=lqr_gain(v) if law == "lqr" else None)
+                duration: Optional[float] = None, law: Optional[str] = None,
+                controller: Optional[str] = None) -> ClosedLoop:
+    """The offline scenario of a merged parameter dict (``merged_values``).
+
+    Parameters
+    ----------
+    v : mapping
+        The merged values.
+    use_observer, duration, law : optional
+        Override the file's ``use_observer``, ``duration_s`` and ``law`` (the controller node's: a law's
+        family, core.laws.families()).
+    controller : str, optional
+        A registered law by name (core.laws.names(): 'dscndo', ...), instead of ``law`` and ``use_observer``.
+    """
+    if controller is None:
+        controller = laws.variant(v["law"] if law is None else law,
+                                  v["use_observer"] if use_observer is None else use_observer).name
+    cls = laws.get(controller)
+    plant = plant_config(v)
+    return ClosedLoop(plant=plant, X=tuple(float(c) for c in v["X"]), controller=controller,
+                      params=cls.design(v, plant.nominal, plant.h),
+                      duration_s=v["duration_s"] if duration is None else duration)

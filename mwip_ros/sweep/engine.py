@@ -36,7 +36,7 @@ DEFAULT_CHUNK = 5000   # scenarios per chunk: numpy's per-call cost is small aga
 @dataclass(frozen=True)
 class Chunk:
     first: int                         # index of the first scenario
-    controller: str                    # a law of core.sim.LAWS: 'dsc', 'dscndo', 'lqr', 'lqr_ndo'
+    controller: str                    # a registered law (core.laws.names()): 'dsc', 'dscndo', 'lqr', 'lqr_ndo'
     base: Dict[str, Any]               # the base file's merged values
     overrides: Tuple[Dict[str, Any], ...]   # per scenario (seed included)
     duration_s: float
@@ -85,9 +85,6 @@ def run_chunk(chunk: Chunk, batch_bytes: Optional[int] = None) -> ChunkResult:
     ClosedLoops are built a batch at a time."""
     from mwip_ros import params as P
     from mwip_ros.core.batch import simulate_batch
-    from mwip_ros.core.sim import LAWS
-
-    law, use_observer = LAWS[chunk.controller]
     cap = budget.batch_budget() if batch_bytes is None else batch_bytes
 
     def values(ov):
@@ -110,8 +107,8 @@ def run_chunk(chunk: Chunk, batch_bytes: Optional[int] = None) -> ChunkResult:
         size = max(1, int((cap - fixed) // per)) if cap > fixed + per else 1   # one scenario fits (load_spec)
         for start in range(0, len(group), size):
             idx = group[start:start + size]
-            loops = [P.closed_loop(values(chunk.overrides[i]), use_observer=use_observer, duration=chunk.duration_s,
-                                   law=law) for i in idx]
+            loops = [P.closed_loop(values(chunk.overrides[i]), duration=chunk.duration_s, controller=chunk.controller)
+                     for i in idx]
             r = simulate_batch(loops, chunk.window)
             del loops
             upright[idx], t_fall[idx] = r.upright, r.t_fall

@@ -72,9 +72,11 @@ class ResultsWriter:
 
 
 def laws(cols: Dict[str, list]) -> List[str]:
-    """The laws of a results table, in the order dsc, dscndo (whatever order their chunks finished in)."""
-    from .spec import CONTROLLERS
-    return sorted(set(cols["controller"]), key=lambda c: CONTROLLERS.index(c) if c in CONTROLLERS else len(c))
+    """The laws of a results table, in the registry's order dsc, dscndo, ... (whatever order their chunks
+    finished in)."""
+    from mwip_ros.core import laws as registry
+    known = registry.names()
+    return sorted(set(cols["controller"]), key=lambda c: known.index(c) if c in known else len(known) + len(c))
 
 
 def sort_file(path: Path, order: List[str]) -> None:

@@ -34,15 +34,13 @@ from typing import Any, Dict, List, Optional, Tuple
 import yaml
 
 from mwip_ros import params as P
-from mwip_ros.core import budget
+from mwip_ros.core import budget, laws
 from mwip_ros.params.errors import bounded
 from mwip_ros.params.file import NODES_OF_THE_LOOP
 from mwip_ros.yamlio import YamlRefused, load_yaml, shown
 
-__all__ = ["SpecError", "Axis", "SweepSpec", "load_spec", "parse_spec", "CONTROLLERS", "GRID_KINDS",
-           "RANDOM_KINDS"]
+__all__ = ["SpecError", "Axis", "SweepSpec", "load_spec", "parse_spec", "GRID_KINDS", "RANDOM_KINDS"]
 
-CONTROLLERS = ("dsc", "dscndo", "lqr", "lqr_ndo")   # core.sim.LAWS
 GRID_KINDS = ("grid", "values", "linspace")
 RANDOM_KINDS = ("uniform", "scale", "normal")
 TOP_KEYS = ("base", "controllers", "duration_s", "metrics_window_s", "seed", "samples", "vary")
@@ -178,14 +176,15 @@ def parse_spec(doc: Any, source: str = "<spec>", here: Path = Path("."),
     base_values = P.merged_values(pf)
 
     ctrls = doc.get("controllers", ["dsc", "dscndo"])   # the paper's comparison unless the spec says more
+    known = laws.names()   # the registry (core.laws)
     if isinstance(ctrls, str):
         ctrls = [ctrls]
     if not isinstance(ctrls, list) or not ctrls:
-        raise SpecError("controllers", f"expected a non-empty list of {', '.join(CONTROLLERS)}", source)
+        raise SpecError("controllers", f"expected a non-empty list of {', '.join(known)}", source)
     for c in ctrls:
-        if c not in CONTROLLERS:
-            raise SpecError("controllers", f"unknown law {shown(c)}{_did_you_mean(str(c), CONTROLLERS)}; known: "
-                                           f"{', '.join(CONTROLLERS)}", source)
+        if c not in known:
+            raise SpecError("controllers", f"unknown law {shown(c)}{_did_you_mean(str(c), known)}; known: "
+                                           f"{', '.join(known)}", source)
     if len(set(ctrls)) != len(ctrls):
         raise SpecError("controllers", f"a law is listed twice: {ctrls}", source)
 

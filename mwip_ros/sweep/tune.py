@@ -23,8 +23,7 @@ import numpy as np
 
 from mwip_ros import params as P
 from mwip_ros.core import budget
-from mwip_ros.core.sim import LAWS
-from mwip_ros.core.theorem import controller_conditions, theorem2
+from mwip_ros.core import laws
 
 from . import engine
 from .scenarios import expand
@@ -78,17 +77,27 @@ def check_memory(spec: SweepSpec, knobs: List[Knob], popsize: int) -> None:
                              f"{budget.BUDGET_ENV} sets it)", spec.path)
 
 
+def _law(law: str) -> type:
+    """A registered law by name ('dscndo'), or a family's plain law ('dsc', 'lqr')."""
+    return laws.get(law) if law in laws.names() else laws.variant(law, False)
+
+
 def knobs_for(names: Sequence[str], law: str) -> List[Knob]:
+    """The knobs called ``names`` for ``law`` (a registered law or a family); a controller knob must be one of
+    the law's parameters (core.laws.Law.param_keys), the observer's X is always tunable."""
+    cls = _law(law)
     out: List[Knob] = []
     for name in names:
         if name not in KNOBS:
             close = difflib.get_close_matches(name, list(KNOBS), n=1)
             hint = f" (did you mean '{close[0]}'?)" if close else ""
             raise SpecError("--tune", f"cannot tune {name!r}{hint}; tunable: {', '.join(KNOBS)}")
-        if law == "lqr" and name in ("k1", "k2", "tau4"):
-            raise SpecError("--tune", f"{name} is a DSC gain; the lqr laws take lqr.Q and lqr.R")
-        if law == "dsc" and name.startswith("lqr."):
-            raise SpecError("--tune", f"{name} belongs to the lqr laws")
+        foreign = [k for k in KNOBS[name] if k.section == "dscndo_controller" and k.param not in cls.param_keys]
+        if foreign:
+            owner = next((laws.get(n) for n in laws.names() if foreign[0].param in laws.get(n).param_keys), None)
+            whose = f"{name} is a {owner.title} gain: it belongs to the {owner.family} laws; " if owner else ""
+            raise SpecError("--tune", f"{whose}the {cls.family} laws take "
+                                      f"{', '.join(cls.param_keys) or 'no controller parameter'}")
         out += [k for k in KNOBS[name] if k not in out]
     return out
 
@@ -177,17 +186,20 @@ class Objective:
 
     def __post_init__(self):
         self.scenarios = expand(self.spec)
-        self.law, self.use_observer = LAWS[self.law_name]
+        cls = laws.get(self.law_name)
+        self.law, self.use_observer = cls.family, cls.observer
 
     def admissibility(self, x) -> float:
-        """< 0 when a DSC candidate breaks Theorem 2 (by that much), else 0."""
-        if self.law != "dsc":
-            return 0.0
+        """< 0 when a candidate breaks the law's stability condition (by that much: for DSC and DSCNDO
+        Theorem 2, core.laws.Law.stability_margin), else 0."""
+        cls = laws.get(self.law_name)
         v = dict(self.spec.base_values, **apply(self.knobs, x, self.spec.base_values))
-        nominal, gains = P.physical(v, "nominal"), P.gains(v)
-        gamma = (theorem2(nominal, gains, P.observer_gain(v)).gamma if self.use_observer else
-                 min(vars(controller_conditions(nominal, gains)).values()))
-        return min(0.0, gamma)
+        nominal, h = P.physical(v, "nominal"), P.period(v)
+        try:
+            params = cls.design(v, nominal, h)
+        except ValueError:
+            return 0.0   # no law for these values: the simulation says so, as for any candidate
+        return min(0.0, cls.stability_margin(nominal, params, P.observer_gain(v), observer=cls.observer))
 
     def _simulate(self, xs) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(upright, theta_b RMS, u RMS), each (candidates, scenarios), of every candidate on every scenario."""

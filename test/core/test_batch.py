@@ -9,6 +9,8 @@ from mwip_ros.core.batch import simulate_batch
 from mwip_ros.core.sim import simulate
 from mwip_ros.core.trajectory import COLUMNS
 
+pytestmark = pytest.mark.unit
+
 BASE = P.merged_values(P.load_param_file(P_FILE))
 WINDOW = (1.0, 2.0)
 
@@ -75,7 +77,7 @@ def test_the_lqr_baseline_in_a_batch_equals_the_scalar_loop():
         "nominal.m_b": BASE["nominal.m_b"] * rng.uniform(0.9, 1.1), "lqr.R": float(rng.uniform(0.005, 0.05)),
         "initial.theta_b": float(rng.uniform(-0.3, 0.3))}) for i in range(6)]
     loops = [P.closed_loop(v, duration=2.0) for v in values]
-    assert len({lp.K for lp in loops}) == 6
+    assert len({lp.params for lp in loops}) == 6   # each its own gain K (core.laws.lqr.LqrGain)
     batch = simulate_batch(loops, WINDOW, record=True)
     for i, (b, lp) in enumerate(zip(batch.trajectories, loops)):
         s = simulate(lp)

@@ -7,6 +7,7 @@ the core's observer and controller run on the good states alone, to the last bit
 import math
 import time
 
+import pytest
 from geometry_msgs.msg import WrenchStamped
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
@@ -66,6 +67,7 @@ def _offline(fed):
     return est_seq, cmd_seq
 
 
+@pytest.mark.graph
 def test_hostile_states_and_estimates_change_nothing(tmp_path):
     with Graph(tmp_path) as g:
         obs = g.start("disturbance_observer")
@@ -156,6 +158,7 @@ def _dedup(answers):
     return out
 
 
+@pytest.mark.graph
 def test_a_flood_of_hostile_messages_leaves_memory_bounded(tmp_path):
     """Short soak (CI); scripts/soak.py runs the long one (a million messages)."""
     with Graph(tmp_path) as g:
@@ -183,9 +186,18 @@ def test_a_flood_of_hostile_messages_leaves_memory_bounded(tmp_path):
 
 
 ARENAS = """
-import ctypes, sys, threading
-if sys.argv[1] == "nodes":
-    import mwip_ros.nodes  # noqa: F401
+import contextlib, ctypes, importlib, io, sys, threading
+if sys.argv[1] == "entry":      # as the console script runs a node: entry first, then the node (rclpy) imported
+    from mwip_ros.nodes import entry
+    with contextlib.redirect_stdout(io.StringIO()):
+        assert entry.main(["python", "disturbance_observer", "--help"]) == 0
+elif sys.argv[1] == "run_node":  # python -m mwip_ros.nodes.NODE: the node module (rclpy) imported, then run_node
+    node = importlib.import_module("mwip_ros.nodes.disturbance_observer")
+    with contextlib.redirect_stdout(io.StringIO()):
+        assert node.main(["disturbance_observer", "--help"]) == 0
+elif sys.argv[1] == "import":    # importing changes nothing
+    for name in ("entry", "rclpy_compat", "runtime", "plant_sim", "disturbance_observer", "dscndo_controller"):
+        importlib.import_module("mwip_ros.nodes." + name)
 def work():
     keep = [bytearray(1000 + i % 500) for i in range(20000)]   # malloc, not Python's small-object pool
     del keep
@@ -210,15 +222,20 @@ def _malloc_heaps(*args, env=None) -> int:
     return r.stdout.count("<heap nr=")
 
 
+@pytest.mark.unit
 def test_a_node_process_allocates_from_one_malloc_arena():
     """What keeps a flood's RSS flat (scripts/soak.py): threads that allocate share one glibc arena."""
     import os
     env = {k: v for k, v in os.environ.items() if k != "MALLOC_ARENA_MAX"}
     assert _malloc_heaps("plain", env=env) > 1    # glibc's default: an arena per allocating thread
-    assert _malloc_heaps("nodes", env=env) == 1   # importing mwip_ros.nodes limits it before any thread
-    assert _malloc_heaps("nodes", env=dict(env, MALLOC_ARENA_MAX="3")) > 1   # the user's setting wins
+    assert _malloc_heaps("import", env=env) > 1   # importing the nodes sets no limit (no import side effect)
+    assert _malloc_heaps("entry", env=env) == 1   # mwip_ros.nodes.entry limits it before rclpy's threads start
+    # run_node's own call comes after rclpy's import started threads with arenas of their own: too late
+    assert _malloc_heaps("run_node", env=env) > 1
+    assert _malloc_heaps("entry", env=dict(env, MALLOC_ARENA_MAX="3")) > 1   # the user's setting wins
 
 
+@pytest.mark.graph
 def test_a_negative_or_wild_clock_kills_no_node(tmp_path):
     """rclpy's time source raises on a negative /clock; every node with use_sim_time survives it and says so.
 

@@ -17,13 +17,16 @@ from mwip_ros.params import schema
 CHANNELS = {"theta_w": "theta_w", "theta_b": "theta_b", "dtheta_w": "rate", "dtheta_b": "rate"}
 
 
+@pytest.mark.unit
 def test_the_schema_knows_the_messages_limits():
     assert schema.MEASURED_LIMITS == {k: LIMITS[k] for k in ("theta_b", "theta_w", "rate")}
     specs = P.specs_for("plant_sim")
     for ch, limit in CHANNELS.items():
-        assert specs[f"sensors.noise_std.{ch}"].check.bounds == (0.0, LIMITS[limit] / schema.NOISE_LIMIT_FRACTION)
+        spec = specs[f"sensors.noise_std.{ch}"]
+        assert (spec.lo, spec.hi, spec.lo_open) == (0.0, LIMITS[limit] / schema.NOISE_LIMIT_FRACTION, False)
 
 
+@pytest.mark.unit
 def test_noise_at_the_old_maximum_is_refused_naming_the_key():
     spec = P.specs_for("plant_sim")["sensors.noise_std.theta_b"]
     with pytest.raises(P.ParamError, match=r"parameter 'sensors.noise_std.theta_b': must be <= 0.314159"):
@@ -33,6 +36,7 @@ def test_noise_at_the_old_maximum_is_refused_naming_the_key():
             P.specs_for("plant_sim")[f"sensors.noise_std.{ch}"].validate(1e3, ch)
 
 
+@pytest.mark.unit
 def test_theta_b_noise_must_leave_room_above_the_fall_angle(tmp_path):
     base = P.merged_values(P.load_param_file(PAPER))
     most = (math.pi - base["fall_angle"]) / schema.NOISE_SIGMAS
@@ -49,6 +53,7 @@ def test_theta_b_noise_must_leave_room_above_the_fall_angle(tmp_path):
     P.merged_values(P.load_param_files([PAPER, PAPER.parent / "sensing_realistic.yaml"]))   # shipped: fine
 
 
+@pytest.mark.unit
 def test_the_largest_accepted_noise_publishes_plausible_pitches():
     fall = 1.0472
     sd = (math.pi - fall) / schema.NOISE_SIGMAS
@@ -58,6 +63,7 @@ def test_the_largest_accepted_noise_publishes_plausible_pitches():
     assert worst > fall + 3 * sd   # the noise is real
 
 
+@pytest.mark.graph
 def test_plant_sim_refuses_implausible_noise_at_start_up():
     assert_refused(measured("mwip_ros.nodes.plant_sim",
                             ["--ros-args", "-p", "plant_sim:sensors.noise_std.theta_b:=3.14159"], node=True),

@@ -1,0 +1,234 @@
+"""The control laws and their one registry.
+
+A law is a class (:class:`Law`) with its own parameters, a ``reset`` and a ``step`` from the
+measured state and the observer's estimate to a command and its internal signals.  Every
+caller picks laws here: ``mwip_sim --controller``, a sweep's and a tuning's ``controllers``,
+the offline loop (:mod:`..sim`), the batch simulator (:mod:`..batch`) and the controller node
+(its ``law`` parameter is a law's :attr:`Law.family`, ``use_observer`` picks the variant with
+the observer term).
+
+* :func:`register` adds a law, and with ``with_observer=`` its variant that subtracts the
+  observer term u_taud of eq. (20) (:class:`~.ndo.WithObserver`: composed, not copied).
+* :func:`get` returns a law by its name, :func:`names` lists them, :func:`families` lists the
+  values of the node's ``law`` parameter, :func:`variant` maps (family, use_observer) to a law.
+* Plug-ins: the environment variable ``MWIP_ROS_LAWS`` (``module[:module...]``, importable
+  module names) is read when this package is first imported; each module registers its laws
+  with :func:`register`.  So a process started with it (a node, ``mwip_sim``) knows them.
+
+Today's laws: ``dsc`` and ``dscndo`` (:mod:`.dsc`, eq. 16-28 and 19-21), ``lqr`` and
+``lqr_ndo`` (:mod:`.lqr`, the baseline).
+"""
+from __future__ import annotations
+
+import importlib
+import math
+import os
+from typing import Any, Dict, List, Mapping, NamedTuple, Optional, Tuple
+
+__all__ = ["Law", "LawParam", "register", "get", "names", "families", "variant", "lookup", "PLUGINS_ENV",
+           "load_plugins"]
+
+PLUGINS_ENV = "MWIP_ROS_LAWS"
+
+
+class LawParam(NamedTuple):
+    """A ``dscndo_controller`` parameter a law declares itself (plain data: ``params.schema`` makes its
+    ParamSpec).  The built-in laws' parameters are in the schema already and only named in ``param_keys``."""
+
+    name: str                     # dotted parameter name, e.g. 'trivial.k'
+    type: str                     # ROS type: 'double', 'integer', 'bool', 'string', 'double_array'
+    default: Any
+    description: str
+    lo: Optional[float] = None    # lo <= value (numbers), None: unbounded
+    hi: Optional[float] = None    # value <= hi
+
+
+class Law:
+    """One control law: its parameters, its state, and one step per control period.
+
+    A subclass sets the class attributes and implements :meth:`design`, :meth:`__init__` (when it keeps
+    state), :meth:`reset` and :meth:`step`; the rest has defaults.  ``m`` is the math namespace: ``math``
+    for one scenario, ``numpy`` (the batch's) for arrays of scenarios, whose parameters then hold arrays.
+
+    Attributes
+    ----------
+    name : str
+        The registered name (``mwip_sim --controller``, a sweep's ``controllers``).
+    family : str
+        The node's ``law`` parameter value; the law and its observer variant share it.
+    observer : bool
+        True when the law uses the estimate tau_hat (the node then waits for it).
+    title : str
+        The name in log lines ('DSCNDO').
+    param_keys : tuple of str
+        The ``dscndo_controller`` parameters :meth:`design` reads (a change re-designs the law at run time).
+    parameters : tuple of LawParam
+        The parameters the law declares itself (a plug-in's own keys); the schema adds them to the node.
+    internal_names : tuple of str
+        The names on ``controller_internals`` in order; a name the step's internals lack is published NaN.
+    Params : type
+        A frozen dataclass of numbers, what :meth:`design` returns (the batch stacks its fields).
+    announce : bool
+        Log :meth:`design_text` at start-up even when the law is not in use.
+    """
+
+    name: str = ""
+    family: str = ""
+    observer: bool = False
+    title: str = ""
+    param_keys: Tuple[str, ...] = ()
+    parameters: Tuple[LawParam, ...] = ()
+    internal_names: Tuple[str, ...] = ("u",)
+    Params: type = type(None)
+    announce: bool = False
+
+    def __init__(self, params, nominal, h: float, m=math):
+        self.params, self.nominal, self.h, self.m = params, nominal, h, m
+
+    # --- parameters -------------------------------------------------------------------------------
+
+    @classmethod
+    def design(cls, values: Mapping[str, Any], nominal, h: float):
+        """The law's :attr:`Params` from parameter ``values`` (one scenario), the nominal model and the period.
+
+        Raises ValueError (or a subclass naming the key) when the values give no law."""
+        raise NotImplementedError
+
+    @classmethod
+    def from_params(cls, values: Mapping[str, Any], nominal, h: float, m=math) -> "Law":
+        """The law ready to step, designed from parameter ``values``."""
+        return cls(cls.design(values, nominal, h), nominal, h, m)
+
+    @classmethod
+    def stability_margin(cls, nominal, params, X, observer: bool = False) -> float:
+        """How far the gains satisfy the law's stability condition (> 0: satisfied; math.inf: it has none),
+        with (``observer``) or without the observer term; ``X`` is the observer gain matrix (eq. 14)."""
+        return math.inf
+
+    # --- state --------------------------------------------------------------------------------------
+
+    def reset(self) -> None:
+        """Forget the state: the next step is a first step."""
+
+    def step(self, x, tau_hat=None):
+        """``(u, internals)`` for the measured state ``x`` and the estimate ``tau_hat`` (None: none).
+
+        ``internals`` is a dict of the law's own signals (names from :attr:`internal_names`)."""
+        raise NotImplementedError
+
+    def finite(self) -> bool:
+        """False when the law's state went non-finite (the node then undoes the step)."""
+        return True
+
+    def snapshot(self):
+        """The state as it is now, for :meth:`restore` (a step that gave no finite command is undone)."""
+        return dict(self.__dict__)
+
+    def restore(self, snap) -> None:
+        self.__dict__.update(snap)
+
+    # --- text ---------------------------------------------------------------------------------------
+
+    def summary(self) -> str:
+        """The gains in a few words for status lines ('k1 = 6.0, ...'), '' for none."""
+        return ""
+
+    def design_text(self, values: Optional[Mapping[str, Any]] = None) -> Optional[str]:
+        """A line logged at start-up and whenever the law's parameters change (the LQR gain), or None;
+        ``values`` are the parameter values it was designed from."""
+        return None
+
+    def warnings(self) -> List[str]:
+        """Warnings about the current parameters (gains that break a stability condition)."""
+        return []
+
+
+_LAWS: Dict[str, type] = {}
+
+
+def register(cls: type, with_observer: Optional[str] = None, title: Optional[str] = None) -> type:
+    """Register the law ``cls`` under ``cls.name``; ``with_observer`` also registers, under that name, its
+    variant with the observer term (eq. 19-21, :func:`.ndo.with_observer`), titled ``title``.
+
+    Registering the same class again is allowed (a module imported twice); another class under a taken
+    name is refused."""
+    from .ndo import with_observer as compose
+    if not cls.name:
+        raise ValueError(f"{cls.__name__} has no name")
+    cls.family = cls.family or cls.name
+    cls.title = cls.title or cls.name
+    for law in (cls, compose(cls, with_observer, title) if with_observer else None):
+        if law is None:
+            continue
+        old = _LAWS.get(law.name)
+        if old is not None and old is not law and not _same_law(old, law):
+            raise ValueError(f"a law named {law.name!r} is registered already ({old.__module__}.{old.__name__})")
+        if old is None:
+            _LAWS[law.name] = law
+    return cls
+
+
+def _same_law(a: type, b: type) -> bool:
+    """The observer variant of one base class, composed twice."""
+    return getattr(a, "base", None) is not None and getattr(a, "base", None) is getattr(b, "base", None)
+
+
+def get(name: str) -> type:
+    """The law registered as ``name``; KeyError naming the known ones."""
+    try:
+        return _LAWS[name]
+    except KeyError:
+        raise KeyError(f"unknown law {name!r}; known: {', '.join(names())}") from None
+
+
+def names() -> Tuple[str, ...]:
+    """Every registered law's name, in registration order."""
+    return tuple(_LAWS)
+
+
+def families() -> Tuple[str, ...]:
+    """The values of the controller node's ``law`` parameter, in registration order."""
+    return tuple(dict.fromkeys(law.family for law in _LAWS.values()))
+
+
+def lookup(family: str, use_observer: bool) -> Optional[type]:
+    """The law of ``family`` with (``use_observer``) or without the observer term, or None."""
+    for law in _LAWS.values():
+        if law.family == family and law.observer == bool(use_observer):
+            return law
+    return None
+
+
+def variant(family: str, use_observer: bool) -> type:
+    """:func:`lookup`, or ValueError naming what is missing."""
+    law = lookup(family, use_observer)
+    if law is None:
+        if family not in families():
+            raise ValueError(f"unknown law {family!r}; known: {', '.join(families())}")
+        raise ValueError(f"the law {family!r} has no variant {'with' if use_observer else 'without'} the "
+                         f"observer term (use_observer: {str(bool(use_observer)).lower()})")
+    return law
+
+
+def load_plugins(spec: Optional[str] = None) -> List[str]:
+    """Import the modules named in ``spec`` (default: ``$MWIP_ROS_LAWS``, ``module[:module...]``); returns
+    their names.  Each registers its laws when imported."""
+    spec = os.environ.get(PLUGINS_ENV, "") if spec is None else spec
+    mods = [s.strip() for s in spec.split(":") if s.strip()]
+    for mod in mods:
+        try:
+            importlib.import_module(mod)
+        except ImportError as exc:
+            raise ImportError(f"{PLUGINS_ENV}={spec!r}: cannot import the law module {mod!r} ({exc}); name "
+                              f"importable modules (on PYTHONPATH), separated by ':'") from exc
+    return mods
+
+
+def _builtins() -> None:
+    from . import dsc, lqr
+    register(dsc.DscLaw, with_observer="dscndo", title="DSCNDO")   # eq. 16-28; eq. 19-21
+    register(lqr.LqrLaw, with_observer="lqr_ndo", title="LQR+NDO")  # the baseline (docs/theory.md 6.1)
+
+
+_builtins()
+load_plugins()

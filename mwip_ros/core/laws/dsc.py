@@ -1,0 +1,70 @@
+"""The law ``dsc``: the dynamic surface controller (eq. 16-28); ``dscndo`` is it with the observer term.
+
+The equations are :func:`mwip_ros.core.controller.dsc_law` (u_DSC of eq. 28, with S1, x4_bar, S2 of
+eq. 22-26) and :func:`~mwip_ros.core.controller.filter_step` (eq. 25, exact over one period);
+this module only holds the filter state x4d between steps.  u_taud (eq. 20) is added by
+:mod:`.ndo`, not here.
+"""
+from __future__ import annotations
+
+import math
+from typing import List
+
+from ..controller import DscGains, dsc_law, filter_step
+from . import Law
+
+__all__ = ["DscLaw", "INTERNALS"]
+
+# controller_internals of DSC and DSCNDO (README: plot them): msgs.layouts.INTERNAL_NAMES
+INTERNALS = ("S1", "S2", "x4d", "x4_bar", "u_dsc", "u_taud", "u", "x1")
+
+
+class DscLaw(Law):
+    """DSC: u = u_DSC (eq. 28) with the filter tau4 x4d' + x4d = x4_bar (eq. 25) stepped once per period."""
+
+    name = "dsc"
+    title = "DSC"
+    param_keys = ("k1", "k2", "tau4")
+    internal_names = INTERNALS
+    Params = DscGains
+
+    def __init__(self, params: DscGains, nominal, h: float, m=math):
+        super().__init__(params, nominal, h, m)
+        self.x4d = None   # None: the next step is the first, x4d(0) = x4_bar(0) (eq. 25)
+
+    @classmethod
+    def design(cls, values, nominal, h) -> DscGains:
+        return DscGains(k1=values["k1"], k2=values["k2"], tau4=values["tau4"])
+
+    @classmethod
+    def stability_margin(cls, nominal, params, X, observer: bool = False) -> float:
+        """Theorem 2's gamma (eq. 34-35); without the observer term its controller half min(a1, a2, a3)."""
+        from ..theorem import controller_conditions, theorem2
+        if observer:
+            return theorem2(nominal, params, X).gamma
+        return min(vars(controller_conditions(nominal, params)).values())
+
+    def reset(self) -> None:
+        self.x4d = None
+
+    def step(self, x, tau_hat=None):
+        """u_DSC (eq. 28) for ``x`` with the current x4d, then x4d advanced over one period (eq. 25)."""
+        out = dsc_law(self.nominal, self.params, x, self.x4d, None, self.m)
+        self.x4d = filter_step(out.x4d, out.x4_bar, self.h, self.params.tau4, self.m)
+        return out.u, {"S1": out.S1, "S2": out.S2, "x4d": out.x4d, "x4_bar": out.x4_bar, "u_dsc": out.u_dsc,
+                       "u_taud": out.u_taud, "u": out.u, "x1": out.x1}   # u_taud: 0, the term is off
+
+    def finite(self) -> bool:
+        return self.x4d is None or bool(math.isfinite(self.x4d))
+
+    def summary(self) -> str:
+        g = self.params
+        return f"k1 = {g.k1}, k2 = {g.k2}, tau4 = {g.tau4}"
+
+    def warnings(self) -> List[str]:
+        from ..theorem import controller_conditions
+        th = controller_conditions(self.nominal, self.params)
+        if th.satisfied:
+            return []
+        return [f"gains break Theorem 2 (eq. 35): a1 = {th.a1:.4f}, a2 = {th.a2:.4f}, a3 = {th.a3:.4f} (all must "
+                "be > 0); allowed, but stability is not guaranteed. Run mwip_theorem for a1..a5"]

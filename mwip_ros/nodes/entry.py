@@ -1,0 +1,91 @@
+"""The nodes' entry points: what a node process does first, then the node's ``main``.
+
+The console scripts (setup.py: ``plant_sim = mwip_ros.nodes.entry:plant_sim``, ...) and
+``python -m mwip_ros.nodes NODE [--ros-args ...]`` come here.  :func:`run` limits glibc's malloc
+arenas (:func:`bound_malloc_arenas`) and only then imports the node's module: importing rclpy
+starts threads that allocate (2, with an arena each, when its C extension loads), so the limit
+must come before that import, which is why it is not in ``run_node`` (it runs there too, for a
+node started as ``python -m mwip_ros.nodes.NODE``, where it bounds only the arenas made later).
+This module imports neither rclpy nor numpy; importing it changes nothing.
+"""
+from __future__ import annotations
+
+import ctypes
+import importlib
+import os
+import sys
+from typing import Optional, Sequence
+
+__all__ = ["NODES", "M_ARENA_MAX", "bound_malloc_arenas", "run", "main", *(
+    "plant_sim", "disturbance_observer", "dscndo_controller", "mcap_recorder", "bag_replay", "robot_markers",
+    "foxglove_server")]
+
+NODES = ("plant_sim", "disturbance_observer", "dscndo_controller", "mcap_recorder", "bag_replay", "robot_markers",
+         "foxglove_server")
+M_ARENA_MAX = -8   # glibc's mallopt() parameter number for the arena limit
+
+
+def bound_malloc_arenas(arenas: int = 1) -> bool:
+    """Let every thread of this process allocate from ``arenas`` glibc malloc arena(s), unless the user set
+    ``MALLOC_ARENA_MAX``; True when the limit was set.
+
+    Under a flood of messages Fast DDS's receive threads and the executor allocate and free small
+    buffers in turns; with an arena per thread (glibc's default, up to 8 per core) the arenas keep
+    their fragments, and an observer's resident memory grew by about 5 MiB per 100,000 messages, for
+    as long as the flood lasted.  With one arena it stays flat (``scripts/soak.py``, BENCHMARKS.md).
+    glibc keeps the arenas a thread made before the limit: call this before any thread allocates
+    (before rclpy is imported).  No effect on a C library without ``mallopt``.
+    """
+    if os.environ.get("MALLOC_ARENA_MAX"):
+        return False
+    try:
+        return bool(ctypes.CDLL(None).mallopt(M_ARENA_MAX, arenas))
+    except (OSError, AttributeError):  # pragma: no cover - not glibc
+        return False
+
+
+def run(node: str, argv: Optional[Sequence[str]] = None) -> int:
+    """The malloc arena limit, then ``mwip_ros.nodes.<node>.main(argv)`` (argv None: ``sys.argv``)."""
+    bound_malloc_arenas()
+    return importlib.import_module(f"mwip_ros.nodes.{node}").main(None if argv is None else list(argv))
+
+
+def plant_sim(argv=None) -> int:
+    return run("plant_sim", argv)
+
+
+def disturbance_observer(argv=None) -> int:
+    return run("disturbance_observer", argv)
+
+
+def dscndo_controller(argv=None) -> int:
+    return run("dscndo_controller", argv)
+
+
+def mcap_recorder(argv=None) -> int:
+    return run("mcap_recorder", argv)
+
+
+def bag_replay(argv=None) -> int:
+    return run("bag_replay", argv)
+
+
+def robot_markers(argv=None) -> int:
+    return run("robot_markers", argv)
+
+
+def foxglove_server(argv=None) -> int:
+    return run("foxglove_server", argv)
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    """``python -m mwip_ros.nodes NODE [ARGS]``: the node ``NODE`` as its console script runs it, with the
+    command line ``NODE ARGS``."""
+    args = list(sys.argv if argv is None else argv)[1:]
+    if not args or args[0] not in NODES:
+        given = f"unknown node {args[0]!r}; " if args and not args[0].startswith("-") else ""
+        print(f"usage: python -m mwip_ros.nodes NODE [--ros-args ...] ({given}nodes: {', '.join(NODES)})",
+              file=sys.stderr, flush=True)
+        return 0 if args and args[0] in ("-h", "--help") else 2
+    sys.argv = [args[0], *args[1:]]
+    return run(args[0], sys.argv)

@@ -1,0 +1,130 @@
+"""The laws' registry: the four laws, the observer term composed, and a law added by a test (test/trivial_law.py)
+runs offline, in a batch (equal to the scalar loop) and, through the plug-in hook, in mwip_sim and the schema."""
+import math
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mathfixtures import NOM, P_FILE, PAPER_GAINS, RNG, random_state
+from mwip_ros import params as P
+from mwip_ros.core import laws
+from mwip_ros.core.batch import simulate_batch
+from mwip_ros.core.controller import DscController
+from mwip_ros.core.lqr import LqrController, lqr_gain
+from mwip_ros.core.sim import LAWS, law_name, simulate
+from mwip_ros.core.trajectory import COLUMNS
+from mwip_ros.msgs import layouts as L
+
+import trivial_law  # noqa: E402  registers 'trivial' and 'trivial_ndo', as a plug-in module would
+
+pytestmark = pytest.mark.unit
+
+TEST_DIR = Path(__file__).resolve().parents[1]
+BASE = P.merged_values(P.load_param_file(P_FILE))
+H = 1.0 / BASE["control_rate_hz"]
+
+
+def test_the_registry_holds_the_four_laws_and_maps_the_node_parameters_onto_them():
+    assert laws.names()[:4] == ("dsc", "dscndo", "lqr", "lqr_ndo")
+    assert laws.families()[:2] == ("dsc", "lqr")
+    old = {"dsc": ("dsc", False), "dscndo": ("dsc", True), "lqr": ("lqr", False), "lqr_ndo": ("lqr", True)}
+    assert {n: LAWS[n] for n in old} == old                     # the old table, now a view of the registry
+    for name, (family, obs) in old.items():
+        assert law_name(family, obs) == name == laws.variant(family, obs).name
+    assert [laws.get(n).title for n in old] == ["DSC", "DSCNDO", "LQR", "LQR+NDO"]
+    assert P.specs_for("dscndo_controller")["law"].choices[:2] == ("dsc", "lqr")
+    with pytest.raises(KeyError, match="unknown law 'pid'"):
+        laws.get("pid")
+
+
+def test_the_observer_variants_compose_the_one_observer_term():
+    """DSCNDO = DSC + u_taud (eq. 19-21) and LQR+NDO = LQR + u_taud: the same class, bit for bit as before."""
+    from mwip_ros.core.laws.ndo import WithObserver
+    assert issubclass(laws.get("dscndo"), WithObserver) and laws.get("dscndo").base is laws.get("dsc")
+    assert issubclass(laws.get("lqr_ndo"), WithObserver) and laws.get("lqr_ndo").base is laws.get("lqr")
+    K = lqr_gain(NOM, H, BASE["lqr.Q"], BASE["lqr.R"])
+    for obs in (False, True):
+        old = [DscController(NOM, PAPER_GAINS, H, use_observer=obs), LqrController(NOM, K, use_observer=obs)]
+        new = [laws.variant(f, obs).from_params(BASE, NOM, H) for f in ("dsc", "lqr")]
+        for _ in range(50):
+            x, tau_hat = random_state(RNG), tuple(RNG.uniform(-30, 30, 2))
+            for a, b in zip(old, new):
+                out = a.step(x, tau_hat)
+                u, internals = b.step(x, tau_hat)
+                assert u == out.u
+                assert all(internals[n] == getattr(out, n) for n in internals)
+                assert set(internals) <= set(b.internal_names)
+
+
+def test_each_law_publishes_its_own_internals_and_lqr_keeps_the_documented_layout():
+    for name in ("dsc", "dscndo", "lqr", "lqr_ndo"):
+        assert laws.get(name).internal_names == L.INTERNAL_NAMES
+    u, internals = laws.get("lqr").from_params(BASE, NOM, H).step(random_state(RNG))
+    stamp, values = L.parse_internals(L.encode_internals(7, internals, laws.get("lqr").internal_names))
+    assert list(values) == list(L.INTERNAL_NAMES) and values["u"] == u and values["u_taud"] == 0.0
+    assert all(math.isnan(values[n]) for n in ("S2", "x1", "x4_bar", "x4d"))   # as before: DSC's own, NaN
+    law = laws.get("trivial_ndo").from_params(dict(BASE, **{"trivial.k": 2000.0}), NOM, H)
+    assert law.internal_names == ("u", "theta_b", "u_taud")
+    u, internals = law.step(random_state(RNG), (1.0, 2.0))
+    assert L.parse_internals(L.encode_internals(1, internals, law.internal_names))[1] == internals
+
+
+def test_a_name_is_registered_once():
+    class Other(trivial_law.TrivialLaw):
+        pass
+    with pytest.raises(ValueError, match="registered already"):
+        laws.register(Other)
+    assert laws.register(trivial_law.TrivialLaw, with_observer="trivial_ndo") is trivial_law.TrivialLaw
+
+
+def _trivial(i, **extra):
+    return dict(BASE, seed=i, **{"trivial.k": 1800.0 + 100.0 * i, "initial.theta_b": -0.05 * (i + 1)}, **extra)
+
+
+def test_a_law_added_by_a_test_runs_offline():
+    run = simulate(P.closed_loop(_trivial(0), controller="trivial", duration=2.0))
+    assert run.label == "trivial" and len(run) == 401 and not run.fallen
+    np.testing.assert_array_equal(run["u"], 1800.0 * run["theta_b"])                 # u = k theta_b
+    assert np.isnan(run["S2"]).all() and np.isnan(run["u_taud"]).all()              # not this law's signals
+    ndo = simulate(P.closed_loop(_trivial(0), law="trivial", use_observer=True, duration=2.0))
+    assert ndo.label == "trivial_ndo" and np.isfinite(ndo["u_taud"]).all()
+    m12, m22 = NOM.m12, NOM.m22
+    mc = m12 * np.cos(ndo["theta_b"])
+    u_taud = ndo["tau_hat1"] - mc / (m22 + mc) * ndo["tau_hat2"]                      # eq. (20)-(21)
+    np.testing.assert_allclose(ndo["u"], 1800.0 * ndo["theta_b"] - u_taud, rtol=0, atol=1e-9)   # eq. (19)
+
+
+def test_a_law_added_by_a_test_runs_in_a_batch_equal_to_the_scalar_loop():
+    loops = [P.closed_loop(_trivial(i), law="trivial", use_observer=bool(i % 2), duration=2.0) for i in range(5)]
+    batch = simulate_batch(loops, (1.0, 2.0), record=True)
+    for i, (b, lp) in enumerate(zip(batch.trajectories, loops)):
+        s = simulate(lp)
+        assert b.label == s.label == ("trivial_ndo" if i % 2 else "trivial") and len(b) == len(s)
+        for c in COLUMNS:
+            np.testing.assert_allclose(b[c], s[c], rtol=0, atol=1e-9, err_msg=f"scenario {i}, {c}")
+
+
+def _with_plugin():
+    env = dict(os.environ, MWIP_ROS_LAWS="trivial_law")
+    env["PYTHONPATH"] = os.pathsep.join(p for p in (str(TEST_DIR), env.get("PYTHONPATH", "")) if p)
+    return env
+
+
+def test_the_plugin_hook_gives_the_law_to_the_schema_and_to_mwip_sim(tmp_path):
+    code = ("from mwip_ros import params as P; s = P.specs_for('dscndo_controller'); "
+            "print(s['law'].choices, s['trivial.k'].default, s['trivial.k'].dynamic)")
+    r = subprocess.run([sys.executable, "-c", code], env=_with_plugin(), capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.split() == ["('dsc',", "'lqr',", "'trivial')", "2000.0", "True"]
+    out = tmp_path / "trivial.csv"
+    r = subprocess.run([sys.executable, "-m", "mwip_ros.cli.sim", "--controller", "trivial", "--duration", "1",
+                        "--csv", str(out), "-q"], env=_with_plugin(), capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    from mwip_ros.runs import read_csv
+    offline = simulate(P.closed_loop(dict(BASE, **{"trivial.k": 2000.0}), controller="trivial", duration=1.0))
+    graph = read_csv(out)
+    np.testing.assert_allclose(graph["u"], offline["u"], rtol=0, atol=1e-9)
