@@ -3,7 +3,11 @@ import os
 import re
 import subprocess
 
+import pytest
+
 from graphproc import REPO, script_env
+
+pytestmark = pytest.mark.bench
 
 ROWS = [
     r"1\. DDS floor: Float64 ping-pong, 2 processes, serialized .* \| [\d,]+ round trips/s \(RTT p50 \d+ us, p99 \d+ us\)",

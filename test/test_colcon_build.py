@@ -9,6 +9,8 @@ from pathlib import Path
 
 import pytest
 
+pytestmark = pytest.mark.e2e
+
 REPO_ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = 'mwip_ros'
 CONSOLE_SCRIPTS = [
@@ -56,7 +58,6 @@ def _colcon() -> Path:
     return colcon
 
 
-@pytest.mark.slow
 def test_colcon_build_installs_ament_python_layout(tmp_path):
     colcon = _colcon()
     ws = tmp_path / 'ws'

@@ -11,7 +11,7 @@ import pytest
 import yaml
 
 from bagcheck import distinct_stamps
-from graphproc import REPO, Graph, ros_env, script_env
+from graphproc import REPO, Graph, ros_env, script_env, wait_until
 
 rosbags_highlevel = pytest.importorskip("rosbags.highlevel")
 
@@ -34,6 +34,7 @@ def _session_pids(sid: int) -> list:
     return [int(p) for p, s in (line.split() for line in out.splitlines()) if int(s) == sid]
 
 
+@pytest.mark.e2e
 def test_main_job_records_two_bags_and_writes_the_report(tmp_path):
     r = subprocess.run(["bash", str(REPO / "scripts" / "run_experiment.sh"), "--out", str(tmp_path)],
                        capture_output=True, text=True, timeout=600, env=script_env())
@@ -73,6 +74,7 @@ def test_main_job_records_two_bags_and_writes_the_report(tmp_path):
     assert "report:" in r.stdout and "bags:" in r.stdout
 
 
+@pytest.mark.e2e
 def test_ctrl_c_stops_every_process(tmp_path):
     p = subprocess.Popen(["bash", str(REPO / "scripts" / "run_experiment.sh"), "--out", str(tmp_path),
                           "--duration", "60"], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
@@ -86,13 +88,18 @@ def test_ctrl_c_stops_every_process(tmp_path):
                 break
             seen += line
         assert "graph matched" in seen, seen[-2000:]
-        time.sleep(1.0)
-        assert len(_session_pids(p.pid)) >= 5  # bash, tail, plant, observer, controller, recorder
+        while time.monotonic() < deadline and " s simulated" not in seen.split("graph matched", 1)[1]:
+            line = p.stdout.readline()   # the plant's progress: the run is under way, states are being recorded
+            if not line:
+                break
+            seen += line
+        assert " s simulated" in seen.split("graph matched", 1)[1], seen[-2000:]
+        # bash, tail, plant, observer, controller, recorder
+        assert wait_until(lambda: len(_session_pids(p.pid)) >= 5, 30), _session_pids(p.pid)
         os.killpg(p.pid, signal.SIGINT)  # what a terminal does on Ctrl-C
         rest, _ = p.communicate(timeout=60)
         assert p.returncode != 0 and "interrupted" in rest
-        time.sleep(0.5)
-        assert _session_pids(p.pid) == []
+        assert wait_until(lambda: _session_pids(p.pid) == [], 5), _session_pids(p.pid)
         # the recorder closed its bag properly on SIGINT: readable without repair
         bag = next(b for b in tmp_path.iterdir() if b.name.endswith("_dsc"))
         assert (bag / "metadata.yaml").exists() and _anyreader_counts(bag)["/joint_states"] > 0
@@ -102,6 +109,7 @@ def test_ctrl_c_stops_every_process(tmp_path):
             p.wait(10)
 
 
+@pytest.mark.graph
 def test_bag_cut_by_kill_9_mid_run_is_repaired(tmp_path):
     bag = tmp_path / "cut"
     with Graph(tmp_path) as g:
@@ -110,7 +118,8 @@ def test_bag_cut_by_kill_9_mid_run_is_repaired(tmp_path):
         g.start("dscndo_controller", "-p", "use_sim_time:=true")
         plant = g.start("plant_sim", "-p", "expected_subscribers:=3", "-p", "duration_s:=0.0")
         assert plant.wait_for_output("graph matched", 60)
-        time.sleep(2.0)
+        # kill it once 8 chunks of 16 KiB are on disk (about 200 states of the loop's topics uncompressed)
+        assert wait_until(lambda: sum(f.stat().st_size for f in bag.glob("*.mcap")) >= 8 * 16384, 60), rec.output()
         os.kill(rec.pid, signal.SIGKILL)
         rec.popen.wait(10)
     subprocess.run(["fastdds", "shm", "clean"], capture_output=True, timeout=60, env=ros_env(0))
@@ -124,6 +133,7 @@ def test_bag_cut_by_kill_9_mid_run_is_repaired(tmp_path):
     assert str(total) in r.stdout  # it reports how many messages it saved
 
 
+@pytest.mark.e2e
 def test_a_sweep_row_runs_through_the_ros_graph_with_the_same_metrics(tmp_path):
     """mwip_sweep --write-params, then scripts/run_experiment.sh --params: the nodes in lockstep give the row's
     metrics, for both laws of that scenario."""
@@ -167,6 +177,7 @@ def _first_line_domain(stdout: str) -> int:
     return int(m.group(1))
 
 
+@pytest.mark.e2e
 @pytest.mark.parametrize("args, names", [
     (["--params"], "--params"),
     (["--params", "--duration", "1"], "--params"),
@@ -184,6 +195,7 @@ def test_command_line_mistakes_are_one_line_and_exit_2_before_anything_starts(tm
     assert not (tmp_path / "out").exists()
 
 
+@pytest.mark.e2e
 def test_a_mistyped_parameter_stops_the_job_before_any_node_or_folder(tmp_path):
     bad = tmp_path / "typo.yaml"
     bad.write_text((REPO / "config" / "paper.yaml").read_text().replace("    k1: ", "    kk1: ", 1))
@@ -195,6 +207,7 @@ def test_a_mistyped_parameter_stops_the_job_before_any_node_or_folder(tmp_path):
     assert not (tmp_path / "out").exists()
 
 
+@pytest.mark.e2e
 def test_two_experiments_started_together_never_collide(tmp_path):
     """Same output folder, same name (as two runs started in the same second get): each gets its own
     domain, logs folder and bag, and each bag is the whole run."""
@@ -224,6 +237,7 @@ def test_two_experiments_started_together_never_collide(tmp_path):
             assert "[ERROR]" not in log.read_text(), log
 
 
+@pytest.mark.e2e
 def test_the_users_domain_is_kept_and_a_domain_in_use_is_refused(tmp_path):
     from graphproc import fresh_domain_id, release_domain_id
     free = fresh_domain_id()
@@ -243,6 +257,7 @@ def test_the_users_domain_is_kept_and_a_domain_in_use_is_refused(tmp_path):
     assert not (tmp_path / "b").exists()
 
 
+@pytest.mark.e2e
 def test_a_fall_ends_the_job_with_exit_3_after_every_run_and_the_report(tmp_path):
     weak = tmp_path / "weak_drive.yaml"
     weak.write_text("plant_sim:\n  ros__parameters:\n    torque_limit: 1.0\n")

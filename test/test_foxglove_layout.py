@@ -20,6 +20,8 @@ from graphproc import REPO
 from mwip_ros.msgs.layouts import JOINT_NAMES
 from mwip_ros.msgs.topics import GRAPH_TOPICS, SYSTEM_TOPICS, msg_class
 
+pytestmark = pytest.mark.unit
+
 LAYOUT = REPO / "config" / "foxglove_layout.json"
 TOPICS = {"/" + name.lstrip("/"): type_name for name, type_name in {**GRAPH_TOPICS, **SYSTEM_TOPICS}.items()}
 NUMERIC = {"float", "double", "long double", "boolean", "octet", "int8", "uint8", "int16", "uint16", "int32",

@@ -6,7 +6,10 @@ import sys
 import xml.dom.minidom
 from pathlib import Path
 
+import pytest
 from catkin_pkg.package import parse_package
+
+pytestmark = pytest.mark.unit
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 

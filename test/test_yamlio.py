@@ -24,6 +24,7 @@ from hostile import PAPER, assert_refused, laughs, measured, param_bomb, spec_bo
 
 # --- the loader -----------------------------------------------------------------------------------------
 
+@pytest.mark.unit
 def test_an_alias_is_refused_at_once_in_text_and_files(tmp_path):
     t0 = time.monotonic()
     with pytest.raises(yamlio.YamlRefused, match=r"YAML aliases \(\*l0\) are not supported"):
@@ -35,6 +36,7 @@ def test_an_alias_is_refused_at_once_in_text_and_files(tmp_path):
     assert time.monotonic() - t0 < 2.0
 
 
+@pytest.mark.unit
 def test_the_composer_refuses_aliases_even_without_libyaml(monkeypatch):
     monkeypatch.setattr(yamlio, "_prescan", lambda text: None)
     with pytest.raises(yamlio.YamlRefused, match="aliases"):
@@ -47,6 +49,7 @@ def test_the_composer_refuses_aliases_even_without_libyaml(monkeypatch):
         yamlio.load_yaml("[" * 65 + "]" * 65)
 
 
+@pytest.mark.unit
 def test_nodes_depth_and_huge_integers_are_bounded():
     t0 = time.monotonic()
     with pytest.raises(yamlio.YamlRefused, match="more than 200,000 YAML nodes"):
@@ -61,6 +64,7 @@ def test_nodes_depth_and_huge_integers_are_bounded():
     assert yamlio.load_yaml("x: 1e-1\nn: 200") == {"x": 0.1, "n": 200}   # ROS 2's numbers
 
 
+@pytest.mark.unit
 def test_a_file_is_sized_before_it_is_read(tmp_path):
     big = tmp_path / "big.yaml"
     with open(big, "wb") as f:   # sparse: 1 GiB on paper, nothing on disk
@@ -76,6 +80,7 @@ def test_a_file_is_sized_before_it_is_read(tmp_path):
     assert edge.stat().st_size == yamlio.MAX_BYTES and yamlio.load_yaml(edge) == {"a": 1}
 
 
+@pytest.mark.unit
 def test_a_file_that_grows_after_the_stat_is_read_only_up_to_the_bound(tmp_path, monkeypatch):
     f = tmp_path / "grows.yaml"
     with open(f, "wb") as fh:
@@ -104,6 +109,7 @@ def test_a_file_that_grows_after_the_stat_is_read_only_up_to_the_bound(tmp_path,
     assert reads and all(0 < n <= yamlio.MAX_BYTES + 1 for n in reads)
 
 
+@pytest.mark.unit
 def test_shown_bounds_a_repr():
     assert yamlio.shown([1.0, 2.0]) == "[1.0, 2.0]"
     assert yamlio.shown("fast") == "'fast'"
@@ -113,6 +119,7 @@ def test_shown_bounds_a_repr():
 
 # --- where the project reads YAML -------------------------------------------------------------------------
 
+@pytest.mark.unit
 def test_a_parameter_file_bomb_is_refused_naming_the_file(tmp_path):
     bomb = param_bomb(tmp_path / "bomb.yaml", 5)
     with pytest.raises(P.ParamError, match=r"bomb.yaml: parameter '<file>': refused: YAML aliases") as exc:
@@ -120,6 +127,7 @@ def test_a_parameter_file_bomb_is_refused_naming_the_file(tmp_path):
     assert "\n" not in str(exc.value)
 
 
+@pytest.mark.unit
 def test_a_huge_value_makes_a_short_message(tmp_path):
     f = tmp_path / "p.yaml"
     f.write_text("plant_sim:\n  ros__parameters:\n    mode: " + "x" * 1_000_000 + "\n")
@@ -133,6 +141,7 @@ def test_a_huge_value_makes_a_short_message(tmp_path):
     assert exc.value.key == "duration_s" and len(str(exc.value)) < 1000
 
 
+@pytest.mark.unit
 def test_a_spec_bomb_and_a_base_bomb_are_refused(tmp_path):
     spec = spec_bomb(tmp_path / "spec.yaml", 5)
     with pytest.raises(SpecError, match=r"spec.yaml: <spec>: refused: YAML aliases") as exc:
@@ -151,6 +160,7 @@ def test_a_spec_bomb_and_a_base_bomb_are_refused(tmp_path):
     assert time.monotonic() - t0 < 1.0
 
 
+@pytest.mark.unit
 def test_a_missing_base_names_the_spec_key(tmp_path):
     spec = tmp_path / "spec.yaml"
     spec.write_text("base: nowhere.yaml\n")
@@ -158,6 +168,7 @@ def test_a_missing_base_names_the_spec_key(tmp_path):
         load_spec(spec)
 
 
+@pytest.mark.unit
 def test_bag_metadata_is_bounded(tmp_path):
     (tmp_path / "metadata.yaml").write_text(laughs(5) + "rosbag2_bagfile_information: {files: *l4}\n")
     with pytest.raises(BagError, match=r"metadata.yaml refused: YAML aliases"):
@@ -173,6 +184,7 @@ def test_bag_metadata_is_bounded(tmp_path):
     assert parse_qos_yaml("- history: keep_last\n  depth: 10\n")[0]["depth"] == 10
 
 
+@pytest.mark.unit
 def test_a_p_rule_with_an_alias_is_refused():
     from mwip_ros.nodes.params import parse_rule
     with pytest.raises(P.ParamError, match="aliases"):
@@ -181,11 +193,13 @@ def test_a_p_rule_with_an_alias_is_refused():
 
 # --- the tools and the nodes: exit 2, one line, fast, low memory ------------------------------------------
 
+@pytest.mark.unit
 def test_mwip_sim_refuses_a_bomb(tmp_path):
     assert_refused(measured("mwip_ros.cli.sim", ["--params", param_bomb(tmp_path / "bomb.yaml"), "-q"]),
                    "mwip_sim: error:", "bomb.yaml", "YAML aliases")
 
 
+@pytest.mark.unit
 def test_mwip_sweep_refuses_a_spec_bomb_and_a_base_bomb(tmp_path):
     spec = spec_bomb(tmp_path / "spec.yaml", base=PAPER)
     assert spec.stat().st_size < 700
@@ -198,6 +212,7 @@ def test_mwip_sweep_refuses_a_spec_bomb_and_a_base_bomb(tmp_path):
     assert not (tmp_path / "o").exists()
 
 
+@pytest.mark.graph
 def test_plant_sim_refuses_a_bomb_before_rcl_parses_it(tmp_path):
     bomb = param_bomb(tmp_path / "bomb.yaml")
     assert bomb.stat().st_size < 900

@@ -19,6 +19,8 @@ from mwip_ros.bag import BagError, BagWriter, raw_messages, repair
 from mwip_ros.bag.scan import cut_chunk_records
 from mwip_ros.bag.writer import DEFAULT_MAX_CHUNK_DURATION
 
+pytestmark = pytest.mark.unit
+
 BOUND_S = 1.0
 AT_TIMES = (0.1, 0.25, 0.4, 1.0, 2.0, 3.5)  # s into the run: the first three inside the first 0.5 s chunk
 OF_FILE = tuple(i / 14 for i in range(1, 14))

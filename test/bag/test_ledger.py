@@ -2,10 +2,14 @@
 import subprocess
 import sys
 
+import pytest
+
 from mwip_ros.bag import BagWriter
 from mwip_ros.bag.ledger import GAPS_KEY, Ledger
 from mwip_ros.core.model import State
 from mwip_ros.msgs import layouts as L
+
+pytestmark = pytest.mark.unit
 
 H = 5_000_000
 JS, CLOCK, EST, CMD = ("sensor_msgs/msg/JointState", "rosgraph_msgs/msg/Clock", "geometry_msgs/msg/WrenchStamped",

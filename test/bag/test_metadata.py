@@ -1,4 +1,5 @@
 """QoS profile YAML, metadata.yaml and the YAML dumper (mwip_ros.bag.metadata)."""
+import pytest
 import yaml
 
 from bagcheck import ENDPOINT_QOS, ENDPOINT_QOS_YAML
@@ -6,6 +7,8 @@ from mwip_ros.bag.metadata import (
     FileInfo, TopicInfo, bag_metadata, dump_yaml, metadata_yaml_text, parse_qos_yaml, qos_profiles_yaml,
     write_metadata_yaml,
 )
+
+pytestmark = pytest.mark.unit
 
 ROSBAG2_KEYS = ["version", "storage_identifier", "duration", "starting_time", "message_count",
                 "topics_with_message_count", "compression_format", "compression_mode", "relative_file_paths",

@@ -8,6 +8,8 @@ from bagcheck import T0, decoded_messages, write_bag
 from mwip_ros.bag import BagError, mcap_files, raw_messages, read_metadata, topic_counts, topic_types
 from mwip_ros.bag.metadata import FileInfo, TopicInfo, bag_metadata, write_metadata_yaml
 
+pytestmark = pytest.mark.unit
+
 TOPICS = {"/joint_states": "sensor_msgs/msg/JointState", "/wheel_torque_cmd": "std_msgs/msg/Float64"}
 
 

@@ -12,6 +12,8 @@ from bagcheck import ENDPOINT_QOS_YAML, chunk_table, damage_cases, saved_in_cut,
 from mwip_ros.bag import REPAIRED_KEY, RepairResult, raw_messages, repair, topic_counts, type_hash
 from mwip_ros.cli.bag_repair import main
 
+pytestmark = pytest.mark.unit
+
 TS = typestore()
 TOPICS = {"/joint_states": "sensor_msgs/msg/JointState", "/wheel_torque_cmd": "std_msgs/msg/Float64",
           "/disturbance_estimate": "geometry_msgs/msg/WrenchStamped"}

@@ -8,6 +8,8 @@ import pytest
 from mwip_ros.bag import BagError, message_definition, type_hash
 from mwip_ros.msgs.topics import GRAPH_TOPICS, graph_type
 
+pytestmark = pytest.mark.unit
+
 SEP = "=" * 80
 
 

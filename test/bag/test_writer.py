@@ -11,6 +11,8 @@ from rosbags.highlevel import AnyReader
 from bagcheck import ENDPOINT_QOS_YAML, decoded_messages, graph_topics, make_msg, typestore, write_graph_bag
 from mwip_ros.bag import BagError, BagWriter, message_definition, raw_messages, topic_counts, type_hash
 
+pytestmark = pytest.mark.unit
+
 TS = typestore()
 
 

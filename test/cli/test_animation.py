@@ -14,6 +14,8 @@ from mwip_ros.cli import report
 from mwip_ros.core.trajectory import TRAJECTORY_COLUMNS, Trajectory
 from mwip_ros.runs import write_csv
 
+pytestmark = pytest.mark.unit
+
 H = 0.005          # the sample period [s]
 FPS = 10           # frame k shows t = k / FPS: a sample time
 WHEEL_RATE = -4.0  # theta_w = WHEEL_RATE t: 2 m backwards in 2 s; the spoke >= 50 deg from the rod at 0.7, 1, 1.3 s

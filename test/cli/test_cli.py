@@ -8,6 +8,8 @@ import pytest
 from mwip_ros.params.paths import default_params_file
 from mwip_ros.runs import read_csv
 
+pytestmark = pytest.mark.unit
+
 REQUIRED = ["t", "theta_w", "theta_b", "dtheta_w", "dtheta_b", "u", "tau_hat1", "tau_hat2", "tau_d1", "tau_d2"]
 
 

@@ -33,6 +33,7 @@ def graph(tmp_path_factory):
         yield g
 
 
+@pytest.mark.graph
 def test_param_set_converts_a_whole_number_for_a_double_get_reads_it_back_and_the_node_logs_it(graph):
     r = ctl(graph, "param", "set", "dscndo_controller", "k1", "8")
     assert r.returncode == 0 and r.stdout.strip() == "dscndo_controller: k1 = 8.0", (r.stdout, r.stderr)
@@ -43,6 +44,7 @@ def test_param_set_converts_a_whole_number_for_a_double_get_reads_it_back_and_th
     assert r.returncode == 0 and {"k1", "law", "use_observer", "lqr.Q"} <= set(r.stdout.split()), r.stdout
 
 
+@pytest.mark.graph
 def test_a_value_the_schema_refuses_exits_1_with_the_nodes_reason_and_changes_nothing(graph):
     before = ctl(graph, "param", "get", "dscndo_controller", "k1").stdout
     # k1 must be > 0 (ParamSpec _positive): 0 is sent as the double 0.0, so the refusal is the range, not the type
@@ -55,6 +57,7 @@ def test_a_value_the_schema_refuses_exits_1_with_the_nodes_reason_and_changes_no
     assert ctl(graph, "param", "get", "dscndo_controller", "k1").stdout == before != ""
 
 
+@pytest.mark.graph
 def test_reset_restarts_the_plant_and_the_loop_follows(graph):
     r = ctl(graph, "reset")
     assert r.returncode == 0 and r.stdout.startswith("plant_sim: reset #1 at t = "), (r.stdout, r.stderr)
@@ -63,6 +66,7 @@ def test_reset_restarts_the_plant_and_the_loop_follows(graph):
         assert p.wait_for_output("joint_states restarted at t = ", 10), p.output()[-2000:]
 
 
+@pytest.mark.graph
 def test_push_reaches_the_plant_with_its_torques_and_ends_with_a_zero_wrench(graph):
     r = ctl(graph, "push", "--wheel", "50", "--duration", "0.2")
     assert r.returncode == 0, (r.stdout, r.stderr)
@@ -78,6 +82,7 @@ def test_push_reaches_the_plant_with_its_torques_and_ends_with_a_zero_wrench(gra
     assert graph.plant.poll() is None, graph.plant.output()[-2000:]   # pushed, not fallen
 
 
+@pytest.mark.graph
 def test_ctrl_c_ends_a_push_with_a_zero_wrench_and_exits_130_quietly(graph):
     p = subprocess.Popen([str(MWIP_CTL), "push", "--wheel", "5", "--duration", "60"], stdout=subprocess.PIPE,
                          stderr=subprocess.PIPE, text=True, env=graph.env)
@@ -97,6 +102,7 @@ def test_ctrl_c_ends_a_push_with_a_zero_wrench_and_exits_130_quietly(graph):
     assert graph.plant.output().count("external wrench cleared") > cleared
 
 
+@pytest.mark.graph
 @pytest.mark.parametrize("args,service", [
     (["param", "get", "no_such_node", "k1"], "no_such_node/get_parameters"),
     (["reset", "--node", "no_such_plant"], "no_such_plant/reset"),
@@ -110,6 +116,7 @@ def test_nothing_answering_exits_1_within_the_timeout_naming_the_node_and_the_do
     assert r.seconds < 15
 
 
+@pytest.mark.unit
 def test_help_of_every_subcommand_exits_0_without_ros_and_usage_errors_exit_2_in_one_line():
     script = ("import sys, contextlib, io\n"
               "from mwip_ros.cli.ctl import main\n"

@@ -10,6 +10,8 @@ import yaml
 from mwip_ros import params as P
 from mwip_ros.params.paths import default_params_file
 
+pytestmark = pytest.mark.unit
+
 
 def write_spec(path, samples=4):
     path.write_text(yaml.safe_dump({

@@ -13,6 +13,8 @@ from mwip_ros.cli import outputs
 
 from test_sweep import write_spec   # noqa: E402  (test/cli is on sys.path under pytest)
 
+pytestmark = pytest.mark.unit
+
 
 def sweep(*args, timeout=120):
     return subprocess.run([sys.executable, "-m", "mwip_ros.cli.sweep", *map(str, args)], capture_output=True,

@@ -15,6 +15,8 @@ from mwip_ros.cli import report
 from mwip_ros.core.trajectory import TRAJECTORY_COLUMNS, Trajectory
 from mwip_ros.runs import write_csv
 
+pytestmark = pytest.mark.unit
+
 H = 0.01
 
 

@@ -17,6 +17,8 @@ from mwip_ros.msgs import layouts as L
 from mwip_ros.msgs.cdr import encode_float64
 from mwip_ros.runs import read_bag_run
 
+pytestmark = pytest.mark.unit
+
 H = 0.005
 PERIOD_NS = 5_000_000
 LIMIT = 50.0

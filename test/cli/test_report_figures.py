@@ -8,6 +8,8 @@ from matplotlib.figure import Figure
 from mwip_ros.cli import plotting, report
 from mwip_ros.core.trajectory import TRAJECTORY_COLUMNS, Trajectory
 
+pytestmark = pytest.mark.unit
+
 H = 0.01
 
 

@@ -14,6 +14,8 @@ from mwip_ros.cli import animation as A
 from mwip_ros.cli import plotting, report
 from mwip_ros.core.trajectory import TRAJECTORY_COLUMNS, Trajectory
 
+pytestmark = pytest.mark.unit
+
 HEADER = ",".join(TRAJECTORY_COLUMNS)
 
 

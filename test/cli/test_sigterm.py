@@ -7,11 +7,14 @@ import subprocess
 import sys
 import time
 
+import pytest
 import yaml
 
 from mwip_ros.sweep.results import read_results
 
 from test_sweep import write_spec   # noqa: E402  (test/cli is on sys.path under pytest)
+
+pytestmark = pytest.mark.e2e   # whole jobs signalled, their sessions checked for leftover workers
 
 
 def session_processes(sid: int) -> list:

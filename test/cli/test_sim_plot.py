@@ -1,5 +1,9 @@
 """mwip_sim --plot shades the metrics window (and marks a fall) as mwip_report's fig3.png does."""
+import pytest
+
 from mwip_ros.cli import plotting, sim
+
+pytestmark = pytest.mark.unit
 
 
 def test_the_plot_is_given_the_metrics_window_and_the_falls(tmp_path, monkeypatch, capsys):

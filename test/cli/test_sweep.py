@@ -12,6 +12,8 @@ import yaml
 from mwip_ros.params.paths import default_params_file
 from mwip_ros.sweep.results import read_results
 
+# tiers per test: the two that run several whole sweeps (worker pools, figures) are e2e
+
 BASE = str(default_params_file())
 
 
@@ -31,6 +33,7 @@ def sweep(*args, timeout=300):
                           text=True, timeout=timeout)
 
 
+@pytest.mark.unit
 def test_a_sweep_writes_rows_summary_and_figures(tmp_path):
     spec = write_spec(tmp_path / "s.yaml")
     r = sweep(spec, "--out", tmp_path / "out", "--workers", "1", "--chunk", "8")
@@ -63,6 +66,7 @@ def test_a_sweep_writes_rows_summary_and_figures(tmp_path):
     assert (out / "sweep.json").is_file() and (out / "base.yaml").is_file()
 
 
+@pytest.mark.e2e
 def test_results_csv_is_the_same_file_however_many_workers_ran_it(tmp_path):
     spec = write_spec(tmp_path / "s.yaml", samples=7)
     for w in ("1", "2"):
@@ -72,6 +76,7 @@ def test_results_csv_is_the_same_file_however_many_workers_ran_it(tmp_path):
     assert "2 worker processes" in r.stderr
 
 
+@pytest.mark.unit
 @pytest.mark.parametrize("over, words", [
     ({"vary": {"plant_sim.actual.mb": {"scale": [0.7, 1.3]}}}, "did you mean 'actual.m_b'"),
     ({"vary": {"dscndo_controller.actual.m_b": {"grid": [1.0]}}}, "belongs under plant_sim"),
@@ -87,6 +92,7 @@ def test_a_bad_spec_exits_2_naming_the_key_before_any_work(tmp_path, over, words
     assert not (tmp_path / "out").exists()
 
 
+@pytest.mark.unit
 def test_an_unreadable_spec_and_existing_results_exit_2(tmp_path):
     bad = tmp_path / "bad.yaml"
     bad.write_text("vary: {a: [1, 2\n")
@@ -98,6 +104,7 @@ def test_an_unreadable_spec_and_existing_results_exit_2(tmp_path):
     assert r.returncode == 2 and "--force" in r.stderr
 
 
+@pytest.mark.unit
 def test_ctrl_c_keeps_every_finished_row_readable(tmp_path):
     spec = write_spec(tmp_path / "s.yaml", samples=400, duration_s=4.0, metrics_window_s=[2.0, 4.0])
     out = tmp_path / "out"
@@ -121,6 +128,7 @@ def test_ctrl_c_keeps_every_finished_row_readable(tmp_path):
     assert 50 <= n < 4000 and n % 50 == 0 and "interrupted" in err and f"{n:,} of 4,000 rows" in err
 
 
+@pytest.mark.unit
 def test_write_params_gives_the_rows_scenario_to_mwip_sim(tmp_path):
     spec = write_spec(tmp_path / "s.yaml", samples=2, duration_s=4.0, metrics_window_s=[2.0, 4.0],
                       vary={"plant_sim.actual.m_b": {"scale": [0.7, 1.3]}, "dscndo_controller.k1": {"grid": [4.0, 8.0]}})
@@ -144,6 +152,7 @@ def test_write_params_gives_the_rows_scenario_to_mwip_sim(tmp_path):
     assert r.returncode == 2 and "no row for scenario 99" in r.stderr
 
 
+@pytest.mark.e2e
 def test_no_output_of_mwip_sweep_is_overwritten_without_force(tmp_path):
     spec = write_spec(tmp_path / "s.yaml", samples=1, vary={})
     out = tmp_path / "out"

@@ -9,6 +9,8 @@ from mwip_ros import params as P
 from mwip_ros.core import compiled, model, plant
 from mwip_ros.core.model import PhysicalParams, Sinusoid
 
+pytestmark = pytest.mark.unit
+
 BASE = P.merged_values(P.load_param_file(P_FILE))
 ACTUAL = P.physical(BASE, "actual")
 

@@ -9,6 +9,8 @@ from mwip_ros.core.controller import DscController, DscGains, dsc_law, filter_st
 from mwip_ros.core.model import State, nominal_accel
 from mwip_ros.core.plant import PlantSim
 
+pytestmark = pytest.mark.unit
+
 
 def test_dsc_drives_theta_b_to_zero_with_perfect_model():
     plant = PlantSim(_exact_model_plant())

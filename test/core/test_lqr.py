@@ -9,6 +9,8 @@ from mwip_ros.core.controller import DscController, DscGains
 from mwip_ros.core.lqr import LqrController, LqrDesignError, linearization, lqr_gain, lqr_law, weights
 from mwip_ros.core.model import State, nominal_accel
 
+pytestmark = pytest.mark.unit
+
 H = 0.005
 Q, R = [100.0, 10.0, 1.0], 0.01
 

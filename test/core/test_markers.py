@@ -8,6 +8,8 @@ from mathfixtures import NOM
 from mwip_ros.core.markers import pitch_quaternion, robot_pose
 from mwip_ros.core.model import State
 
+pytestmark = pytest.mark.unit
+
 
 def _rotate_z_axis(q):
     """Where a rotation (x, y, z, w) sends the unit z axis (the quaternion written out)."""

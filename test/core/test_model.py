@@ -8,6 +8,8 @@ from mathfixtures import NOM, RNG, TRUE, random_state
 from mwip_ros.core.model import (Friction, State, lumped_disturbance, nominal_accel, plant_accel, semi_strict_feedback,
                                  x1_of)
 
+pytestmark = pytest.mark.unit
+
 
 def test_inertia_terms_eq2():
     # Hand-computed from Table II's nominal column.

@@ -11,6 +11,8 @@ from mwip_ros.core.model import mass_matrix
 from mwip_ros.core.observer import DiscreteObserver, error_rates, gain_matrix, z_dot, z_dot_explicit
 from mwip_ros.core.plant import PlantSim
 
+pytestmark = pytest.mark.unit
+
 
 @pytest.mark.parametrize("trial", range(25))
 def test_observer_eq15_equals_eq12(trial):

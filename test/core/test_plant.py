@@ -8,6 +8,8 @@ from mathfixtures import NOM, TRUE
 from mwip_ros.core.model import Friction, Sinusoid, State, plant_accel
 from mwip_ros.core.plant import PlantConfig, PlantSim
 
+pytestmark = pytest.mark.unit
+
 
 def test_plant_step_is_classic_rk4_of_eq1():
     """The unrolled scalar RK4 of PlantSim.step equals a textbook vector RK4 over plant_accel."""

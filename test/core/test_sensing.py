@@ -10,6 +10,8 @@ from mwip_ros.core.model import State
 from mwip_ros.core.sensing import Actuator, SensingConfig, Sensors, measure
 from mwip_ros.core.sim import simulate
 
+pytestmark = pytest.mark.unit
+
 BASE = P.merged_values(P.load_param_file(P_FILE))
 
 

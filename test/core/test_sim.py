@@ -7,6 +7,8 @@ from mwip_ros import params as P
 from mwip_ros.core import metrics
 from mwip_ros.core.sim import simulate
 
+pytestmark = pytest.mark.unit
+
 
 @pytest.fixture(scope="module")
 def paper_runs():

@@ -6,6 +6,8 @@ from mwip_ros.core.controller import DscGains
 from mwip_ros.core.observer import gain_matrix
 from mwip_ros.core.theorem import controller_conditions, observer_conditions, theorem2
 
+pytestmark = pytest.mark.unit
+
 
 def test_theorem2_paper_gains_hold_and_slow_filter_violates():
     th = theorem2(NOM, DscGains(6.0, 6.0, 0.1), gain_matrix([100.0, 0, 0, 100.0]))

@@ -2,10 +2,13 @@
 import math
 
 import numpy as np
+import pytest
 
 from mwip_ros.core.controller import ControlOutput
 from mwip_ros.core.model import State
 from mwip_ros.core.trajectory import COLUMNS, TRAJECTORY_COLUMNS, TrajectoryTable, join_estimates
+
+pytestmark = pytest.mark.unit
 
 
 def test_rows_hold_the_state_command_estimate_truth_and_internals_in_column_order():

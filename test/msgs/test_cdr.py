@@ -14,6 +14,8 @@ from std_msgs.msg import Float64
 
 from mwip_ros.msgs import cdr
 
+pytestmark = pytest.mark.unit
+
 RNG = np.random.default_rng(7)
 NAME_SETS = [(), ("wheel",), ("wheel", "body_pitch"), ("S1", "S2", "x4d", "x4_bar", "u_dsc", "u_taud", "u", "x1"),
              ("ä", "", "a" * 13)]

@@ -9,6 +9,8 @@ from mwip_ros.msgs import BadMessage, CdrError, MessageError, cdr
 from mwip_ros.msgs import layouts as L
 from mwip_ros.msgs.stamps import join_ns, split_ns, stamp_ns, to_time
 
+pytestmark = pytest.mark.unit
+
 
 def test_state_round_trip_names_the_joints_and_carries_the_previous_command():
     x = State(0.5, -0.1745, 1.25, -2.5)

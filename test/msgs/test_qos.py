@@ -1,8 +1,11 @@
 """The QoS a replayed topic gets: what its recorded publishers offered."""
+import pytest
 from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
 
 from mwip_ros.bag.metadata import qos_profile_dict
 from mwip_ros.msgs.qos import GRAPH_QOS, recorded_qos
+
+pytestmark = pytest.mark.unit
 
 
 def _p(rel, dur, depth):

@@ -6,7 +6,9 @@ import time
 
 import pytest
 
-from graphproc import Graph
+from graphproc import Graph, wait_until
+
+pytestmark = pytest.mark.graph
 
 MODULE = "mwip_ros.nodes.bag_replay"
 STATES = 401  # duration_s 2.0 at 200 Hz: states k = 0 .. 400
@@ -17,18 +19,32 @@ def bag(tmp_path_factory):
     """A short lockstep DSCNDO run recorded by mcap_recorder (the plant waits for the recorder)."""
     from mwip_ros.bag import topic_counts
 
+    from sensor_msgs.msg import JointState
+    from std_msgs.msg import Float64
+
+    from injector import Injector
+
     work = tmp_path_factory.mktemp("record")
     out = work / "bag"
-    with Graph(work) as g:
+    # the loop topics the observer and the controller publish: their subscribers, the recorder (and the controller)
+    answers = {"/wheel_torque_cmd": 1, "/disturbance_estimate": 2, "/controller_internals": 1}
+    with Graph(work) as g, Injector(g.domain_id) as inj:
         rec = g.start("mcap_recorder", "-p", f"output:={out}", params=None)
         obs = g.start("disturbance_observer", "-p", "use_sim_time:=true")
         ctl = g.start("dscndo_controller", "-p", "use_sim_time:=true")
         for p, text in ((rec, "recording "), (obs, "NDO ready"), (ctl, "DSCNDO ready")):
             assert p.wait_for_output(text, timeout=30), p.output()
-        time.sleep(1.0)  # let the recorder match the controller's and observer's publishers too
+        # the controller's and observer's publishers and the recorder's subscriptions are discovered (a late
+        # match would still get them: the graph's QoS is transient-local, 1000 deep)
+        assert wait_until(lambda: all(inj.node.count_publishers(t) >= 1 and inj.node.count_subscribers(t) >= n
+                                      for t, n in answers.items()), 30), \
+            {t: (inj.node.count_publishers(t), inj.node.count_subscribers(t)) for t in answers}
+        cmds = inj.record("wheel_torque_cmd", Float64)
+        internals = inj.record("controller_internals", JointState)
         plant = g.start("plant_sim", "-p", "duration_s:=2.0", "-p", "expected_subscribers:=3")
         assert plant.wait(120) == 0, plant.output()
-        time.sleep(0.3)
+        # the controller has answered the last state (what the recorder received is drained when it stops)
+        assert inj.wait(lambda: len(cmds) >= STATES and len(internals) >= STATES, 30), (len(cmds), len(internals))
         for p in (obs, ctl, rec):
             assert p.stop(signal.SIGINT, timeout=20) == 0, p.output()
     from bagcheck import distinct_stamps
@@ -116,12 +132,11 @@ def test_replay_at_rate_4_republishes_every_message_in_a_quarter_of_the_time(tmp
         with g:
             br = g.start("bag_replay", "-p", f"bag:={bag}", "-p", "rate:=4.0", "-p", "wait_for_subscribers:=1",
                          params=None, module=MODULE)
-            end = time.monotonic() + 60
-            while br.popen.poll() is None and time.monotonic() < end:
-                ex.spin_once(timeout_sec=0.01)
-            settle = time.monotonic() + 0.5
-            while time.monotonic() < settle:
-                ex.spin_once(timeout_sec=0.01)
+            def spin(step):
+                ex.spin_once(timeout_sec=step)
+            wait_until(lambda: br.poll() is not None, 60, step=0.01, spin=spin)
+            # every replayed message has arrived (the count is asserted below)
+            wait_until(lambda: {t: len(v) for t, v in received.items()} == counts, 10, step=0.01, spin=spin)
             assert br.wait(5) == 0, br.output()
     finally:
         ex.shutdown()

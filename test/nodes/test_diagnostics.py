@@ -1,8 +1,11 @@
 """Every node reports its health on /diagnostics once a second; ERROR when the robot fell or a peer is missing."""
+import pytest
 from diagnostic_msgs.msg import DiagnosticArray
 
 from graphproc import Graph
 from injector import Injector
+
+pytestmark = pytest.mark.graph
 
 
 def _listen(inj):

@@ -2,8 +2,12 @@
 import os
 import signal
 
+import pytest
+
 from graphproc import Graph
 from mwip_ros.msgs.topics import SYSTEM_TOPICS
+
+pytestmark = pytest.mark.graph
 
 LOCKSTEP = ("-p", "duration_s:=0.0", "-p", "lockstep_timeout_s:=3.0")
 

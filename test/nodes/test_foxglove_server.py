@@ -33,6 +33,8 @@ from mwip_ros.bag import message_definition
 from mwip_ros.msgs import layouts as L
 from mwip_ros.msgs.topics import GRAPH_TOPICS, SYSTEM_TOPICS, topic_type
 
+pytestmark = pytest.mark.graph
+
 SUBPROTOCOL = "foxglove.sdk.v1"
 MESSAGE_DATA = 0x01   # binary opcode of a message frame
 RUN_S, PERIOD_NS = 4.0, 5_000_000           # the lockstep run: 4 s of simulated time at 200 Hz

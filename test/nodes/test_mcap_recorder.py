@@ -3,15 +3,16 @@ import os
 import signal
 import subprocess
 import sys
-import time
 
 import pytest
 import yaml
 from rosbags.highlevel import AnyReader
 from rosbags.typesys import Stores, get_typestore
 
-from graphproc import Graph
+from graphproc import Graph, wait_until
 from mwip_ros.bag import type_hash
+
+pytestmark = pytest.mark.graph
 
 TS = get_typestore(Stores.ROS2_JAZZY)
 MODULE = "mwip_ros.nodes.mcap_recorder"
@@ -55,13 +56,36 @@ def publishers(g, topics):
 
 
 def wait_matched(g, pubs, timeout=20.0):
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if all(p.get_subscription_count() >= 1 for p in pubs.values()):
-            return
-        time.sleep(0.05)
+    if wait_until(lambda: all(p.get_subscription_count() >= 1 for p in pubs.values()), timeout):
+        return
     raise AssertionError("the recorder's subscriptions did not match: "
                          + str({n: p.get_subscription_count() for n, p in pubs.items()}))
+
+
+def wait_written(g, n: int, timeout: float = 30.0) -> dict:
+    """Until the recorder's /diagnostics (a report every wall second) says it has written ``n`` messages or more:
+    the event to wait for before stopping or killing it, not a sleep. Returns that report's values."""
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rclpy.executors import SingleThreadedExecutor
+    written, reports = [], []
+
+    def take(arr):
+        for st in arr.status:
+            if st.name.endswith("/mcap_recorder"):
+                reports.append({kv.key: kv.value for kv in st.values})
+                written.append(int(reports[-1]["messages_written"]))
+    sub = g.node.create_subscription(DiagnosticArray, "/diagnostics", take, 10)
+    ex = SingleThreadedExecutor(context=g.ctx)
+    ex.add_node(g.node)
+    try:
+        ok = wait_until(lambda: bool(written) and written[-1] >= n, timeout,
+                        spin=lambda step: ex.spin_once(timeout_sec=step))
+    finally:
+        ex.remove_node(g.node)
+        ex.shutdown()
+        g.node.destroy_subscription(sub)
+    assert ok, f"the recorder reported {written[-1:] or 'nothing'} messages written, not {n}"
+    return reports[-1]
 
 
 def wait_acked(pubs):
@@ -114,10 +138,10 @@ def test_records_exactly_what_was_published(graph, tmp_path, stop_signal):
         c.clock.sec, c.clock.nanosec = i, 5
         pubs["/clock"].publish(c)
     wait_acked(pubs)
-    time.sleep(0.3)
+    wait_written(graph, 4 * N)   # its /diagnostics count (system topics included); the rest is drained at stop
     assert rec.stop(stop_signal, timeout=20) == 0, rec.output()
     out = rec.output()
-    assert f"bag {bag}: " in out and f"/joint_states {N}, " in out, out
+    assert (bag / "metadata.yaml").exists(), out   # the bag was finished; its counts are read from it below
 
     msgs, counts = read_bag(bag)
     system = {t: counts.pop(t) for t in ("/rosout", "/parameter_events", "/diagnostics") if t in counts}
@@ -156,9 +180,7 @@ def test_the_loop_topics_are_subscribed_before_any_publisher(graph, tmp_path):
     from mwip_ros.msgs.topics import GRAPH_TOPICS, USER_TOPICS, msg_class
     rec = start_recorder(graph, f"output:={tmp_path / 'early'}")
     loop = {"/" + t.lstrip("/") for t in GRAPH_TOPICS} - {"/" + t for t in USER_TOPICS}
-    end = time.monotonic() + 20
-    while time.monotonic() < end and not all(graph.node.count_subscribers(t) == 1 for t in loop):
-        time.sleep(0.05)
+    wait_until(lambda: all(graph.node.count_subscribers(t) == 1 for t in loop), 20)
     assert {t: graph.node.count_subscribers(t) for t in loop} == {t: 1 for t in loop}
     assert graph.node.count_subscribers("/external_wrench") == 0   # subscribed once a publisher shows
     pub = graph.node.create_publisher(msg_class(GRAPH_TOPICS["wheel_torque_cmd"]), "wheel_torque_cmd", GRAPH_QOS)
@@ -188,9 +210,9 @@ def test_topics_parameter_selects_topics(graph, tmp_path):
     for i in range(5):
         pubs["wheel_torque_cmd"].publish(Float64(data=float(i)))
     wait_acked(pubs)
-    time.sleep(0.2)
+    report = wait_written(graph, 5)   # only the selected topic is recorded
     assert rec.stop(signal.SIGINT, timeout=20) == 0, rec.output()
-    assert "recording 1 topic(s)" in rec.output()
+    assert report["topics_subscribed"] == "1", report
     assert read_bag(bag)[1] == {"/wheel_torque_cmd": 5}
 
 
@@ -203,7 +225,7 @@ def test_kill_9_then_repair(graph, tmp_path):
     for i in range(n):
         pubs["joint_states"].publish(joint_state(i, empty_effort=False))
     wait_acked(pubs)
-    time.sleep(1.0)  # let the recorder write what it received
+    wait_written(graph, n)  # the recorder has written what it received (only /joint_states is recorded)
     os.kill(rec.pid, signal.SIGKILL)
     rec.popen.wait(timeout=10)
     assert not (bag / "metadata.yaml").exists()

@@ -13,6 +13,8 @@ import socket
 import subprocess
 import sys
 
+import pytest
+
 from graphproc import PARAMS, Graph
 from injector import Injector
 from mwip_ros.nodes import rclpy_compat as C
@@ -101,6 +103,7 @@ class _FakeService:
         return self._node
 
 
+@pytest.mark.unit
 def test_the_wrapped_set_callbacks_refuse_what_they_cannot_read_and_answer_the_rest():
     from rcl_interfaces.srv import SetParameters, SetParametersAtomically
     from rclpy.parameter_service import ParameterService
@@ -140,6 +143,7 @@ def test_the_wrapped_set_callbacks_refuse_what_they_cannot_read_and_answer_the_r
     assert atomically(svc, ok, SetParametersAtomically.Response()).result.successful
 
 
+@pytest.mark.unit
 def test_a_read_only_service_that_raises_answers_empty():
     from rcl_interfaces.srv import GetParameters
     from rclpy.parameter_service import ParameterService
@@ -156,6 +160,7 @@ def test_a_read_only_service_that_raises_answers_empty():
     assert list(response.values) == [] and "RuntimeError: broken" in node.reported[0][1]
 
 
+@pytest.mark.unit
 def test_parameter_from_msg_names_each_value_it_cannot_read():
     assert C.parameter_from_msg(_type99("k1")) == (None, "parameter 'k1': type code 99 is not a ROS parameter type")
     assert C.parameter_from_msg(_pm("a\x00b", type=99))[1] == \
@@ -169,6 +174,7 @@ def test_parameter_from_msg_names_each_value_it_cannot_read():
     assert C.parameter_from_msg(_pm("x" * 300, type=3), declared={"x" * 300})[1] is None
 
 
+@pytest.mark.unit
 def test_another_rclpy_version_is_warned_of_once(monkeypatch):
     monkeypatch.setitem(C._state, "warned", False)
     seen = []
@@ -179,6 +185,7 @@ def test_another_rclpy_version_is_warned_of_once(monkeypatch):
     assert C.rclpy_version() in C.WRITTEN_FOR   # the venv's rclpy is the one this was written for
 
 
+@pytest.mark.unit
 def test_importing_installs_nothing_and_install_is_idempotent():
     code = ("import mwip_ros.nodes.rclpy_compat as C\n"
             "from rclpy.parameter_service import ParameterService as S\n"
@@ -191,6 +198,7 @@ def test_importing_installs_nothing_and_install_is_idempotent():
     assert "[WARN]" not in r.stderr, r.stderr   # the installed rclpy is the one it was written for
 
 
+@pytest.mark.graph
 def test_a_real_node_refuses_each_hostile_update_by_name_and_keeps_its_values():
     """In this process: a node that declares the controller's parameters, its service callbacks called directly."""
     import rclpy
@@ -238,6 +246,7 @@ def test_a_real_node_refuses_each_hostile_update_by_name_and_keeps_its_values():
         release_domain_id(domain)
 
 
+@pytest.mark.unit
 def test_the_recorders_and_live_views_loop_goes_on_after_a_callback_raised(monkeypatch):
     """TopicTap.spin (mcap_recorder, foxglove_server): an exception from a callback is logged, the loop goes on;
     only an executor that raises on every turn for BROKEN_AFTER_S ends the run."""
@@ -360,6 +369,7 @@ def _matched(inj, pub, topic: str, node: str) -> bool:
     return any(i.node_name == node for i in infos) and pub.get_subscription_count() >= len(infos)
 
 
+@pytest.mark.graph
 def test_every_node_refuses_hostile_parameter_requests_naming_the_parameter_and_goes_on(tmp_path):
     from rcl_interfaces.msg import ParameterType
     from rcl_interfaces.srv import GetParameters
@@ -416,6 +426,7 @@ def _event(node: str, stamp_ns: int, *changed):
     return serialize_message(ev)
 
 
+@pytest.mark.graph
 def test_resim_skips_a_recorded_value_it_cannot_set_and_completes(tmp_path):
     from mwip_ros.bag import BagWriter
     from mwip_ros.core.model import State

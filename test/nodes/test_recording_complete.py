@@ -15,6 +15,8 @@ from bagcheck import decoded_messages
 from graphproc import Graph
 from mwip_ros.bag.ledger import GAPS_KEY
 
+pytestmark = pytest.mark.graph
+
 LOOP_TOPICS = ("/joint_states", "/clock", "/wheel_torque_cmd", "/disturbance_estimate", "/lumped_disturbance",
                "/controller_internals")
 RUNS = 3

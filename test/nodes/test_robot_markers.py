@@ -1,6 +1,7 @@
 """robot_markers draws what joint_states says, in frame world, and refuses what it cannot use."""
 import math
 
+import pytest
 from sensor_msgs.msg import JointState
 from visualization_msgs.msg import MarkerArray
 
@@ -9,6 +10,8 @@ from injector import Injector
 from mathfixtures import NOM
 from mwip_ros.core.model import State
 from mwip_ros.msgs import layouts as L
+
+pytestmark = pytest.mark.graph
 
 
 def test_markers_follow_the_state_and_bad_states_are_rejected(tmp_path):

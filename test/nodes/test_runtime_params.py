@@ -1,5 +1,9 @@
 """Run-time parameter changes are checked as strictly as start-up values, and every refusal names the key."""
+import pytest
+
 from graphproc import Graph
+
+pytestmark = pytest.mark.graph
 
 
 def _client(domain_id):

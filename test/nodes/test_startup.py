@@ -54,6 +54,7 @@ CASES = [  # (id, node, file maker or None, extra ros args, words the one line m
 ]
 
 
+@pytest.mark.graph
 @pytest.mark.parametrize("case", CASES, ids=[c[0] for c in CASES])
 def test_start_up_mistakes_exit_2_with_one_line(tmp_path, case):
     _id, node, make_file, extra, words = case
@@ -68,6 +69,7 @@ def test_start_up_mistakes_exit_2_with_one_line(tmp_path, case):
         assert w in out, (w, out)
 
 
+@pytest.mark.graph
 @pytest.mark.parametrize("spelling, value", [("1e-1", 0.1), (".5", 0.5), ("5E-1", 0.5), ("+0.25", 0.25)])
 def test_every_yaml_and_ros_double_spelling_is_accepted(tmp_path, spelling, value):
     f = _file(tmp_path, "spell.yaml", "tau4: 0.1", f"tau4: {spelling}")
@@ -80,6 +82,7 @@ def test_every_yaml_and_ros_double_spelling_is_accepted(tmp_path, spelling, valu
         assert f"tau4 = {value}" in p.output(), p.output()
 
 
+@pytest.mark.graph
 def test_a_namespaced_node_reads_its_plain_section(tmp_path):
     f = _file(tmp_path, "ns.yaml", "k1: 6.0", "k1: 7.5")
     with Graph(tmp_path) as g:
@@ -91,6 +94,7 @@ def test_a_namespaced_node_reads_its_plain_section(tmp_path):
     assert "k1 = 8.5" in q.output(), q.output()  # -p dscndo_controller:k1:=8.5 (node_rules) wins over the file
 
 
+@pytest.mark.graph
 def test_precedence_is_ros_2s_own_section_over_wildcard_then_the_later(tmp_path):
     """rclcpp/rclpy: a node's own values (its section, -p NODE:name:=v) win over the wildcard's (/**, -p name:=v),
     whatever the order; within one kind the later wins."""
@@ -114,6 +118,7 @@ def test_precedence_is_ros_2s_own_section_over_wildcard_then_the_later(tmp_path)
     assert "overridden" not in procs["own_rule_wins"].output()
 
 
+@pytest.mark.graph
 def test_a_shared_file_with_other_nodes_sections_and_a_renamed_nodes_own_section(tmp_path):
     """Sections of nodes that are not ours are left to them; a node renamed with __node:= reads its own section
     (checked: an unknown key in it stops the node, named)."""
@@ -137,6 +142,7 @@ def _words(text):
     return " ".join(text.split())
 
 
+@pytest.mark.graph
 @pytest.mark.parametrize("node", NODES)
 def test_every_node_answers_help_from_the_schema_without_starting(tmp_path, node):
     """``NODE --help`` (as typed, and as ``ros2 run mwip_ros NODE --help`` passes it): the usage, what the node
@@ -160,6 +166,7 @@ def test_every_node_answers_help_from_the_schema_without_starting(tmp_path, node
     assert "exit code" in out.lower() and f"python -m pydoc mwip_ros.nodes.{node}" in out
 
 
+@pytest.mark.graph
 def test_help_shows_defaults_ranges_topics_and_exit_codes(tmp_path):
     env = Graph(tmp_path).env
     ctl, fox, plant = (subprocess.run([sys.executable, "-m", f"mwip_ros.nodes.{n}", flag], env=env, capture_output=True,
@@ -175,6 +182,7 @@ def test_help_shows_defaults_ranges_topics_and_exit_codes(tmp_path):
     assert "3 when\nthe robot fell" in plant   # the node's own exit codes
 
 
+@pytest.mark.unit
 def test_help_in_process_creates_no_ros_context(monkeypatch, capsys):
     """Every node's main(['NODE', '--help']) returns 0 with rclpy's init and Context unusable."""
     import rclpy
@@ -191,6 +199,7 @@ def test_help_in_process_creates_no_ros_context(monkeypatch, capsys):
         assert capsys.readouterr().out.startswith(f"usage: {node} "), node
 
 
+@pytest.mark.graph
 @pytest.mark.parametrize("before, after, word", [
     (["--bogus"], [], "'--bogus'"),
     (["--params-file", str(PARAMS)], [], "'--params-file'"),     # a ROS argument outside --ros-args: rcl ignores it
@@ -257,6 +266,7 @@ def _driver(monkeypatch):
     return fake, d, at
 
 
+@pytest.mark.unit
 def test_a_normal_start_waits_for_the_graph_as_progress(monkeypatch):
     """The graph coming up within the grace: one plain line, nothing that reads like an error."""
     fake, _d, at = _driver(monkeypatch)
@@ -267,6 +277,7 @@ def test_a_normal_start_waits_for_the_graph_as_progress(monkeypatch):
     assert fake.lines == [("info", "waiting for the graph to come up")]
 
 
+@pytest.mark.unit
 def test_a_graph_that_does_not_come_names_the_nodes_after_the_grace_then_times_out(monkeypatch):
     fake, d, at = _driver(monkeypatch)
     assert at(0.0) is None and at(1.9) is None

@@ -7,6 +7,8 @@ import yaml
 from mwip_ros import params as P
 from mwip_ros.params.paths import default_params_file
 
+pytestmark = pytest.mark.unit
+
 BASE = yaml.safe_load(default_params_file().read_text())
 
 

@@ -20,6 +20,8 @@ from mwip_ros.sweep.spec import SpecError, load_spec
 
 from hostile import PAPER, REPO, assert_refused, measured  # noqa: E402  (test/hostile.py)
 
+pytestmark = pytest.mark.unit
+
 
 def spec_file(tmp_path: Path, body: str, base: str = None) -> Path:
     p = tmp_path / "spec.yaml"

@@ -39,6 +39,7 @@ def same(a, b):
         for k in a)
 
 
+@pytest.mark.unit
 def test_each_row_equals_the_scalar_simulator_on_that_scenarios_parameter_file(tmp_path):
     s = small_spec(controllers=("dsc", "dscndo", "lqr", "lqr_ndo"))
     sc = expand(s)
@@ -65,6 +66,7 @@ def test_each_row_equals_the_scalar_simulator_on_that_scenarios_parameter_file(t
     assert 0 < fell < len(got)   # the set has both outcomes
 
 
+@pytest.mark.unit
 def test_local_workers_and_one_process_give_identical_rows():
     s = small_spec(samples=4)
     sc = expand(s)
@@ -72,6 +74,7 @@ def test_local_workers_and_one_process_give_identical_rows():
     assert same(rows(engine.run_local(chunks, workers=1)), rows(engine.run_local(chunks, workers=2)))
 
 
+@pytest.mark.unit
 def test_scenarios_with_another_control_period_or_delay_run_in_their_own_batch():
     s = parse_spec({"base": str(default_params_file()), "duration_s": 1.0, "metrics_window_s": [0.5, 1.0],
                     "vary": {"control_rate_hz": {"grid": [200.0, 100.0]}, "plant_sim.substeps": {"grid": [5, 2]},
@@ -94,6 +97,7 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
+@pytest.mark.e2e
 def test_a_real_dask_scheduler_and_worker_give_the_same_rows(tmp_path):
     """`dask scheduler` and `dask worker` as separate processes on localhost, as on a cluster."""
     import os

@@ -7,6 +7,8 @@ import pytest
 
 from mwip_ros.sweep import results as R
 
+pytestmark = pytest.mark.unit
+
 
 def table(laws=("dsc", "dscndo", "lqr")):
     """Three upright scenarios per law: theta_b RMS base * (1, 2, 3), u RMS 10 * base * (1, 2, 3); one fallen row."""

@@ -12,6 +12,8 @@ from mwip_ros.sweep import engine
 from mwip_ros.sweep.scenarios import expand
 from mwip_ros.sweep.spec import parse_spec
 
+pytestmark = pytest.mark.unit
+
 
 def args(*argv):
     ap = argparse.ArgumentParser()

@@ -6,6 +6,8 @@ from mwip_ros.params.paths import default_params_file
 from mwip_ros.sweep.scenarios import expand, noise_seed, parameter_file
 from mwip_ros.sweep.spec import SpecError, parse_spec
 
+pytestmark = pytest.mark.unit
+
 
 def spec(vary, samples=4, seed=7):
     return parse_spec({"base": str(default_params_file()), "duration_s": 1.0, "seed": seed, "samples": samples,

@@ -4,6 +4,8 @@ import pytest
 from mwip_ros.params.paths import default_params_file
 from mwip_ros.sweep.spec import SpecError, parse_spec
 
+pytestmark = pytest.mark.unit
+
 BASE = str(default_params_file())
 
 

@@ -11,6 +11,8 @@ from mwip_ros.params.paths import default_params_file
 from mwip_ros.sweep.spec import SpecError, parse_spec
 from mwip_ros.sweep.tune import FALL_PENALTY, INADMISSIBLE, Objective, Tuner, apply, knobs_for, parse_bounds
 
+pytestmark = pytest.mark.unit
+
 
 def spec(**over):
     doc = {"base": str(default_params_file()), "duration_s": 2.0, "metrics_window_s": [1.0, 2.0], "seed": 2,
