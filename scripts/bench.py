@@ -366,8 +366,30 @@ def batch(plan: Plan) -> list:
                             "workers": workers, "duration": duration})
                 progress(f"mass-mismatch sweep, N = {n}, {workers} worker(s){', started' if what == 'steady' else ''}"
                          f": {statistics.median(per_s):,.0f} scenario-steps/s (median of {len(per_s)})")
+    out.append(worker_startup(chunks[0], plan))
     out.append(sweep_cli(plan))
     return out
+
+
+def worker_startup(chunk, plan: Plan) -> dict:
+    """A sweep worker's start-up: a process spawned as engine.Runner spawns them, from the pool's creation to the
+    result of its first chunk, one scenario of 0.1 s (the interpreter, the imports, numba loading the compiled
+    loop from its cache, the chunk); numba's cache is warm (the sweep rows above ran)."""
+    import dataclasses
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    from mwip_ros.sweep import engine
+    from mwip_ros.sweep.workers import worker_init
+    chunk = dataclasses.replace(chunk, overrides=chunk.overrides[:1], duration_s=0.1, window=(0.05, 0.1))
+    runs = []
+    for _ in range(max(3, plan.repeat)):
+        t0 = time.perf_counter()
+        with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"), initializer=worker_init) as pool:
+            pool.submit(engine.run_chunk, chunk).result()
+            runs.append(time.perf_counter() - t0)
+    progress(f"sweep worker start-up: {statistics.median(runs):.3f} s (median of {len(runs)})")
+    return {"what": "startup", "s": statistics.median(runs), "runs": runs}
 
 
 def sweep_cli(plan: Plan) -> dict:
@@ -440,6 +462,10 @@ def table(plan: Plan, quick: bool, m: Dict[str, str], floor: dict, typed: dict, 
     row("4. offline simulator (mwip_sim loop, DSCNDO, 10 s)", f"{off['per_s']:,.0f} steps/s", ">= 20,000 steps/s",
         off["per_s"] >= 20000)
     for b in off["batch"]:
+        if b["what"] == "startup":
+            row("4. mwip_sweep worker start-up: a spawned worker to its first chunk's result (one scenario, 0.1 s; "
+                "numba's cache warm)", f"{b['s']:.2f} s (runs {' / '.join(f'{r:.2f}' for r in b['runs'])})")
+            continue
         ratio = f"{b['per_s'] / off['per_s']:.1f} x the scalar loop"
         if b["what"] == "seeds":
             row(f"4. batch simulator, N = {b['n']:,} scenarios (own seeds), {b['duration']:g} s, one process",

@@ -3,9 +3,17 @@
 Every equation is the scalar loop's own (``model.accel``, ``plant.rk4_period``,
 ``DiscreteObserver``, the law's ``step`` (:mod:`.laws`), ``model.lumped_disturbance``), so the batch and the
 scalar loop cannot drift apart; a test checks each batch trajectory against :func:`.sim.simulate`.
-The observer, the law and the true tau_d are called with the math namespace ``numpy`` and
-parameters whose fields are arrays; the plant's RK4 period, where most of the time goes, runs as
-the same ``plant.rk4_period`` compiled by numba, scenario by scenario (:mod:`.compiled`).
+Two forms of the one loop:
+
+* compiled (the default for a law with a pure form, ``Law.pure_step``: dsc, dscndo, lqr, lqr_ndo): the
+  whole period, sensors to RK4, runs as one numba kernel built from those same functions
+  (:func:`.compiled.kernel_for`), scenario by scenario; the normal draws are numpy's, made here a
+  block at a time and handed in; the metrics come from the window's running sums
+  (:func:`window_sums_metrics`, the arithmetic of :func:`.metrics.window_metrics`).
+  ``MWIP_BATCH_COMPILED=0`` (or ``compiled=False``) turns it off.
+* over numpy arrays (a law without a pure form, a plug-in; ``record=True``): the observer, the law and
+  the true tau_d are called with the math namespace ``numpy`` and parameters whose fields are arrays;
+  the plant's RK4 period runs as the same ``plant.rk4_period`` compiled by numba (:mod:`.compiled`).
 
 * Each scenario has its own parameters and its own seeded D_w stream (the scalar plant's
   generator, drawn in the same order).
@@ -22,6 +30,7 @@ law's observer variant runs, with tau_hat = 0 for the scenarios without it).
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass, fields, is_dataclass
 from typing import Dict, List, Optional, Sequence
 
@@ -37,7 +46,17 @@ from .sensing import NOISE_BLOCK, Actuator, Sensors, sensor_rng
 from .sim import ClosedLoop
 from .trajectory import COLUMNS, INTERNAL_COLUMNS, Trajectory
 
-__all__ = ["BatchResult", "simulate_batch"]
+__all__ = ["BatchResult", "simulate_batch", "COMPILED_ENV", "compiled_default"]
+
+COMPILED_ENV = "MWIP_BATCH_COMPILED"   # "0": the numpy loop even for a law with a compiled form
+
+
+BLOCKS = 1   # noise blocks (core.sensing.NOISE_BLOCK periods) drawn and run per call of the compiled loop
+
+
+def compiled_default() -> bool:
+    """Whether :func:`simulate_batch` runs the compiled loop by default (``$MWIP_BATCH_COMPILED``, default on)."""
+    return os.environ.get(COMPILED_ENV, "1").strip() not in ("0", "false", "no", "off", "")
 
 
 
@@ -177,8 +196,28 @@ class _Trig:
         return self._both(a)[2] if isinstance(a, np.ndarray) else np.cos(a)
 
 
-def simulate_batch(loops: Sequence[ClosedLoop], window: Sequence[float], record: bool = False) -> BatchResult:
-    """Run every scenario of ``loops`` for its ``duration_s``; ``record`` keeps each one's trajectory."""
+def simulate_batch(loops: Sequence[ClosedLoop], window: Sequence[float], record: bool = False,
+                   compiled: Optional[bool] = None) -> BatchResult:
+    """Run every scenario of ``loops`` for its ``duration_s``; ``record`` keeps each one's trajectory.
+
+    ``compiled`` (default :func:`compiled_default`): without ``record``, a law with a pure form
+    (``Law.pure_step``) runs as one compiled loop (:func:`_simulate_compiled`); else, and for every other law,
+    the loop runs over numpy arrays with the plant's RK4 compiled."""
+    if compiled is None:
+        compiled = compiled_default()
+    if compiled and not record:
+        from .compiled import kernel_for
+        family = _same((lp.law for lp in loops), "the law")
+        use_obs = [lp.use_observer for lp in loops]
+        law = laws.lookup(family, any(use_obs)) or laws.lookup(family, not any(use_obs))
+        if law is not None and (not any(use_obs) or law.observer):
+            kernel = kernel_for(law)
+            if kernel is not None:
+                return _simulate_compiled(loops, window, law, kernel)
+    return _simulate_numpy(loops, window, record)
+
+
+def _simulate_numpy(loops: Sequence[ClosedLoop], window: Sequence[float], record: bool = False) -> BatchResult:
     from .compiled import RK4Periods   # numba: imported (and the RK4 period compiled or loaded) on first use
     n = len(loops)
     pcs = [lp.plant for lp in loops]
@@ -255,6 +294,98 @@ def simulate_batch(loops: Sequence[ClosedLoop], window: Sequence[float], record:
     m = window_metrics(win["theta_b"].T, win["u"].T, win["e1"].T, win["e2"].T)
     upright = ~fallen & (n_steps * h >= window[1] - 1e-9)
     return BatchResult(fallen, t_fall, upright, m, steps, _trajectories(rows, loops, h) if record else None)
+
+
+def _simulate_compiled(loops: Sequence[ClosedLoop], window: Sequence[float], law: type, kernel) -> BatchResult:
+    """The whole loop compiled (``core.compiled._loop``), NOISE_BLOCK periods per call, the normal draws made
+    here by each scenario's own generators in the scalar loop's order and handed in as blocks."""
+    from .compiled import Inertia
+    n = len(loops)
+    pcs = [lp.plant for lp in loops]
+    h = float(_same((pc.h for pc in pcs), "the control period"))
+    substeps = int(_same((pc.substeps for pc in pcs), "the RK4 sub-steps"))
+    n_steps = int(round(_same((lp.duration_s for lp in loops), "the duration") / h))
+    scs = [pc.sensing for pc in pcs]
+    counts = int(_same((sc.encoder_counts_per_rev for sc in scs), "the encoder resolution"))
+    delay = int(_same((sc.delay_periods for sc in scs), "the measurement delay"))
+    act_delay = int(_same((sc.actuator_delay_periods for sc in scs), "the actuator delay"))
+    core = getattr(law, "base", law)
+    arr = lambda rows: np.ascontiguousarray(np.array(rows, dtype=float).reshape(n, -1))  # noqa: E731
+    terms = {}   # PhysicalParams -> its eq. (2) terms (the property's own function: no cached_property lock)
+
+    def inertia(p):
+        if p not in terms:
+            terms[p] = [getattr(type(p), f).func(p) for f in Inertia._fields]
+        return terms[p]
+    act = arr([inertia(pc.actual) for pc in pcs])
+    nom = arr([inertia(pc.nominal) for pc in pcs])
+    D_b = arr([pc.D_b for pc in pcs])[:, 0].copy()
+    sins = arr([[f.amplitude, f.omega, f.phase, g.amplitude, g.omega, g.phase]
+                for f, g in ((pc.tau_ext1, pc.tau_ext2) for pc in pcs)])
+    shared = bool(n) and bool((sins == sins[0]).all())
+    T = np.zeros((NOISE_BLOCK * BLOCKS if shared else 1, 2, 2 * substeps + 1))
+    limit = arr([pc.torque_limit for pc in pcs])[:, 0].copy()
+    fall = arr([pc.fall_angle for pc in pcs])[:, 0].copy()
+    X = arr([[float(v) for v in np.asarray(lp.X, dtype=float).ravel()] for lp in loops])
+    P = arr([[float(v) for v in core.pure_params(lp.params)] for lp in loops]) if n else np.zeros((0, 0))
+    use_obs = np.array([lp.use_observer for lp in loops], dtype=bool)
+    noisy = np.array([sc.noisy for sc in scs], dtype=bool)
+    std = arr([list(sc.noise_std) for sc in scs])
+    mean = np.array([pc.D_w_mean for pc in pcs], dtype=float)
+    var = np.array([pc.D_w_variance for pc in pcs], dtype=float)
+    random = np.flatnonzero(var != 0.0)
+    dw_gens = [np.random.default_rng(int(pcs[i].seed)) for i in random]
+    z_idx = np.flatnonzero(noisy)
+    z_gens = [sensor_rng(int(pcs[i].seed)) for i in z_idx]
+    block = NOISE_BLOCK * BLOCKS   # periods per call: a generator's one draw of several blocks is the same sequence
+    # the normal draws, a row per scenario (the compiled loop runs one scenario after another), filled in place
+    Nw = np.zeros((n, block)) if len(random) else np.zeros((1, 1))
+    Z = np.zeros((n, block, 4)) if len(z_idx) else np.zeros((1, 1, 4))
+    rnd = var != 0.0
+    sd = np.sqrt(var)
+    x = arr([[float(v) for v in pc.initial] for pc in pcs])
+    u_prev = np.zeros(n)
+    z = np.zeros((n, 2))
+    prev = np.zeros((n, 4))
+    s = np.zeros(n)
+    qx = np.zeros((n, delay + 1, 5))
+    qa = np.zeros((n, act_delay + 1))
+    active = np.ones(n, dtype=bool)
+    t_fall = np.full(n, np.nan)
+    steps = np.zeros(n, dtype=np.int64)
+    acc = np.zeros((n, 8))   # sum of squares and count of theta_b, u, e1, e2 (finite samples)
+    ext = np.empty((n, 3))   # max, min, max |.| of theta_b
+    ext[:, 0], ext[:, 1], ext[:, 2] = -np.inf, np.inf, -np.inf
+    tau1, tau2 = np.zeros(2 * substeps + 1), np.zeros(2 * substeps + 1)
+    first_w, n_window = window_samples(n_steps, h, window)
+    with np.errstate(all="ignore"):
+        for k0 in range(0, n_steps + 1, block):
+            if not active.any():
+                break
+            for row, gen in enumerate(dw_gens):   # core.plant.PlantSim._draw_D_w, a block at a time
+                gen.standard_normal(out=Nw[random[row]])
+            for row, gen in enumerate(z_gens):    # core.sensing.Normals
+                gen.standard_normal(out=Z[z_idx[row]])
+            kernel(k0, min(k0 + block, n_steps + 1), n_steps, h, substeps, first_w, n_window, counts, delay,
+                   act_delay, bool(law.observer), act, nom, D_b, sins, shared, limit, fall, X, P, use_obs, noisy, std,
+                   mean, sd, rnd, Nw, Z,
+                   x, u_prev, z, prev, s, qx, qa, active, t_fall, steps, acc, ext, T, tau1, tau2)
+        m = window_sums_metrics(acc, ext)
+    fallen = ~np.isnan(t_fall)
+    upright = ~fallen & (n_steps * h >= window[1] - 1e-9)
+    return BatchResult(fallen, t_fall, upright, m, int(steps.sum()))
+
+
+def window_sums_metrics(acc: np.ndarray, ext: np.ndarray) -> dict:
+    """:func:`.metrics.window_metrics` from running sums: ``acc`` (N, 8) the sum of squares and the count of the
+    finite samples of theta_b, u, e1, e2; ``ext`` (N, 3) the max, min and max |.| of the finite theta_b."""
+    def rms(j):
+        return np.where(acc[:, j + 1] > 0, np.sqrt(acc[:, j] / np.where(acc[:, j + 1] > 0, acc[:, j + 1], 1.0)),
+                        np.nan)
+    any_ = acc[:, 1] > 0
+    return {"theta_b_p2p": np.where(any_, ext[:, 0] - ext[:, 1], np.nan), "theta_b_rms": rms(0),
+            "theta_b_max_abs": np.where(any_, ext[:, 2], np.nan), "u_rms": rms(2), "tau_err1_rms": rms(4),
+            "tau_err2_rms": rms(6)}
 
 
 def _trajectories(rows, loops, h) -> List[Trajectory]:

@@ -1,4 +1,5 @@
-"""The plant's RK4 period for many scenarios at once: :func:`.plant.rk4_period` compiled by numba.
+"""The batch simulator's compiled code: the plant's RK4 period (:class:`RK4Periods`) and the whole closed loop
+(:func:`kernel_for`), built by numba from the scalar loop's own functions.
 
 The batch simulator spends most of its time integrating the plant (eq. 1 is evaluated 4 x
 ``substeps`` times per period).  Over numpy arrays every one of the ~700 operations of a period is
@@ -16,16 +17,30 @@ after another, with the scalar plant's own functions:
 * ``error_model="numpy"``: a diverging scenario gives inf or NaN as numpy would, instead of an
   exception (the batch freezes it at its fall).
 
-numba compiles on first use (about a second) and caches the machine code where numba would
-(``NUMBA_CACHE_DIR`` if set, else ``__pycache__`` next to the sources, else numba's user-wide cache
-directory), so later processes (sweep workers) only load it.  numba would renew a cached function
-only when its own file changes, but the compiled RK4 period contains ``accel`` from ``model.py``:
-here every cached function is stamped with the contents of all three files (``model.py``,
-``plant.py``, this one), so an edit to any equation is compiled afresh.
+The whole loop (:func:`_loop`, one kernel per law, :func:`kernel_for`) runs every period of
+:func:`.sim.simulate` the same way: the sensors (noise from draws handed in, the encoder
+:func:`.sensing.quantize`, the delay queues), the observer (:func:`.observer.z_start`, ``z_next``,
+``tau_hat_of``), the law (its ``pure_step``, :mod:`.laws`) and the observer term
+(:func:`.controller.u_taud_of`), :func:`.plant.saturate`, the actuator delay, the true tau_d in the
+metrics window (``accel``, :func:`.model.lumped_disturbance`, ``Sinusoid.at``), the fall check and
+the RK4 period; the window's sums, minimum and maximum accumulate as it goes.  Each of those
+functions is compiled from its own code object (:func:`_deep`: the plain functions it calls by a
+global name are compiled alike); the loop's own code is the glue between them.  The normal draws stay
+numpy's (each scenario's own generators, in the scalar loop's order), made by the caller
+(``core.batch``) a block of periods at a time.
+
+numba compiles on first use (about a second for the RK4, a few for a loop) and caches the machine code
+where numba would (``NUMBA_CACHE_DIR`` if set, else ``__pycache__`` next to the sources, else numba's
+user-wide cache directory), so later processes (sweep workers) only load it.  numba would renew a cached
+function only when its own file changes, but the compiled RK4 period contains ``accel`` from ``model.py``:
+here every cached function is stamped with the contents of the files it is made of (``model.py``,
+``plant.py``, this one for the RK4; :data:`LOOP_SOURCES` and the law's own module for the loop), so an
+edit to any equation is compiled afresh.
 """
 from __future__ import annotations
 
 import hashlib
+import math
 import types
 from pathlib import Path
 from typing import NamedTuple
@@ -35,17 +50,30 @@ import numpy as np
 from numba.core.caching import (CompileResultCacheImpl, FunctionCache, InTreeCacheLocator, UserProvidedCacheLocator,
                                 UserWideCacheLocator)
 
-from . import model, plant
+from . import controller, model, observer, plant, sensing
+from .controller import u_taud_of
+from .model import lumped_disturbance
+from .observer import tau_hat_of, z_next, z_start
+from .plant import saturate
+from .sensing import quantize
 
-__all__ = ["Inertia", "RK4Periods", "SOURCES"]
+__all__ = ["Inertia", "RK4Periods", "SOURCES", "Sin", "kernel_for"]
 
-SOURCES = (Path(model.__file__), Path(plant.__file__), Path(__file__))   # what the compiled code is made of
+SOURCES = (Path(model.__file__), Path(plant.__file__), Path(__file__))   # what the compiled plant is made of
 _STAMP = hashlib.sha256(b"".join(p.read_bytes() for p in SOURCES)).hexdigest()
+# what the compiled batch loop is made of besides a law's own module
+LOOP_SOURCES = SOURCES + (Path(observer.__file__), Path(controller.__file__), Path(sensing.__file__))
+
+
+def _stamp_of(paths) -> str:
+    return hashlib.sha256(b"".join(Path(p).read_bytes() for p in paths)).hexdigest()
 
 
 class _Stamped:
+    stamp = _STAMP
+
     def get_source_stamp(self):
-        return _STAMP   # numba's own stamp covers the function's file only
+        return self.stamp   # numba's own stamp covers the function's file only
 
 
 class _UserProvided(_Stamped, UserProvidedCacheLocator):
@@ -68,11 +96,18 @@ class _Cache(FunctionCache):
     _impl_class = _CacheImpl
 
 
-def _jit(fn):
-    """numba's nopython compilation of ``fn``, cached under the stamp of :data:`SOURCES`."""
+def _stamped_cache(stamp: str) -> type:
+    """A :class:`_Cache` whose locators stamp with ``stamp``."""
+    locs = [type(c.__name__, (c,), {"stamp": stamp}) for c in _CacheImpl._locator_classes]
+    impl = type("_Impl", (CompileResultCacheImpl,), {"_locator_classes": locs})
+    return type("_StampedCache", (FunctionCache,), {"_impl_class": impl})
+
+
+def _jit(fn, cache: type = _Cache):
+    """numba's nopython compilation of ``fn``, cached under the stamp of :data:`SOURCES` (or ``cache``'s)."""
     compiled = numba.njit(error_model="numpy")(fn)
     try:
-        compiled._cache = _Cache(compiled.py_func)   # what ``cache=True`` sets, with the stamp above
+        compiled._cache = cache(compiled.py_func)   # what ``cache=True`` sets, with the stamp above
     except RuntimeError:   # no writable cache directory: compile in every process
         pass
     return compiled
@@ -144,3 +179,181 @@ class RK4Periods:
         _advance(*self.params, _full(D_w, n), _table(tau1, n), _table(tau2, n), *out, _full(u, n),
                  float(h), int(substeps), np.ascontiguousarray(active, dtype=bool))
         return out
+
+
+# --- the whole batch loop, compiled -------------------------------------------------------------------------------
+
+class Sin(NamedTuple):
+    """A :class:`~.model.Sinusoid`'s fields, for the compiled ``Sinusoid.at``."""
+
+    amplitude: float
+    omega: float
+    phase: float
+
+
+# the names the loop calls that :func:`kernel_for` binds to compiled functions (here: the scalar ones, and the law's
+# step, which depends on the law)
+accel, rk4_period, at = model.accel, plant.rk4_period, model.Sinusoid.at
+law_step = None
+
+_CACHES: dict = {}
+_DONE: dict = {}   # code object -> its compiled function
+
+
+def _cache_for(extra=()) -> type:
+    paths = LOOP_SOURCES + tuple(Path(p) for p in extra if Path(p) not in LOOP_SOURCES)
+    if paths not in _CACHES:
+        _CACHES[paths] = _stamped_cache(_stamp_of(paths))
+    return _CACHES[paths]
+
+
+def _deep(fn, suffix: str = "", **calls):
+    """``fn``'s own code compiled by numba (as :func:`_compiled`), every plain Python function it calls by a global
+    name compiled alike, recursively: the scalar loop's own functions, no copy.  Cached under the stamp of
+    :data:`LOOP_SOURCES` and ``fn``'s own file."""
+    key = (fn.__code__, suffix)
+    if key in _DONE:
+        return _DONE[key]
+    bound = dict(calls)
+    for name in fn.__code__.co_names:
+        g = fn.__globals__.get(name)
+        if name not in bound and isinstance(g, types.FunctionType):
+            bound[name] = _deep(g)
+    same = types.FunctionType(fn.__code__, {**fn.__globals__, **bound}, fn.__name__, fn.__defaults__)
+    same.__qualname__ = fn.__qualname__ + suffix
+    _DONE[key] = out = _jit(same, _cache_for((fn.__code__.co_filename,)))
+    return out
+
+
+def _stage(tau1, tau2, f1, f2, t, dt, substeps):   # pragma: no cover
+    """:func:`.plant.stage_torques` into ``tau1``, ``tau2`` (2 substeps + 1 each), the same times and values."""
+    tau1[0] = at(f1, t) + 0.0
+    tau2[0] = at(f2, t) + 0.0
+    for j in range(substeps):
+        ta, tb = t + (j + 0.5) * dt, t + (j + 1) * dt
+        tau1[2 * j + 1] = at(f1, ta) + 0.0
+        tau2[2 * j + 1] = at(f2, ta) + 0.0
+        tau1[2 * j + 2] = at(f1, tb) + 0.0
+        tau2[2 * j + 2] = at(f2, tb) + 0.0
+
+
+def _loop(k0, k1, n_steps, h, substeps, first_w, n_window, counts, delay, act_delay, observer_law,
+          act, nom, D_b, sins, shared, limit, fall, X, P, use_obs, noisy, std, D_w_mean, D_w_sd, D_w_random,
+          Nw, Z, x, u_prev, z, prev, s, qx, qa, active, t_fall, steps, acc, ext, T, tau1, tau2):   # pragma: no cover
+    """Periods k0 .. k1 - 1 of every active scenario, one scenario after another: the scalar loop of
+    :func:`.sim.simulate` (sensors, observer, law, saturation, actuator, true tau_d in the window, fall, RK4),
+    calling its own functions compiled; the per-scenario state lives in the arrays between calls.  ``shared``:
+    every scenario has the same tau_ext (``sins`` row 0), whose stage values are computed once per period
+    into ``T`` (periods, 2, 2 substeps + 1)."""
+    n = x.shape[0]
+    dt = h / substeps
+    if shared and n > 0:
+        g1 = Sin(sins[0, 0], sins[0, 1], sins[0, 2])
+        g2 = Sin(sins[0, 3], sins[0, 4], sins[0, 5])
+        for k in range(k0, k1):
+            _stage(T[k - k0, 0], T[k - k0, 1], g1, g2, k * h, dt, substeps)
+    for i in range(n):
+        if not active[i]:
+            continue
+        pa = Inertia(act[i, 0], act[i, 1], act[i, 2], act[i, 3])
+        pn = Inertia(nom[i, 0], nom[i, 1], nom[i, 2], nom[i, 3])
+        f1 = Sin(sins[i, 0], sins[i, 1], sins[i, 2])
+        f2 = Sin(sins[i, 3], sins[i, 4], sins[i, 5])
+        c = (X[i, 0], X[i, 1], X[i, 2], X[i, 3])
+        Pi = P[i]
+        xt = (x[i, 0], x[i, 1], x[i, 2], x[i, 3])
+        up = u_prev[i]
+        zz = (z[i, 0], z[i, 1])
+        pv = (prev[i, 0], prev[i, 1], prev[i, 2], prev[i, 3])
+        si = s[i]
+        measuring = noisy[i] or counts > 0 or delay > 0
+        for k in range(k0, k1):
+            t = k * h
+            if measuring:   # core.sensing.Sensors.sample
+                w, b, dw, db = xt
+                if noisy[i]:
+                    zk = Z[i, k - k0]
+                    w, b, dw, db = w + std[i, 0] * zk[0], b + std[i, 1] * zk[1], dw + std[i, 2] * zk[2], \
+                        db + std[i, 3] * zk[3]
+                if counts > 0:
+                    w = quantize(w, counts)
+                slot = k % (delay + 1)
+                qx[i, slot, 0], qx[i, slot, 1], qx[i, slot, 2], qx[i, slot, 3], qx[i, slot, 4] = w, b, dw, db, up
+                r = (k - delay) % (delay + 1) if k >= delay else 0
+                xm = (qx[i, r, 0], qx[i, r, 1], qx[i, r, 2], qx[i, r, 3])
+                um = qx[i, r, 4]
+            else:
+                xm = xt
+                um = up
+            if k == 0:   # core.observer.DiscreteObserver.update
+                zz = z_start(c, xm[2], xm[3])
+            else:
+                zz = z_next(pn, c, pv, um, zz, h)
+            pv = xm
+            th = tau_hat_of(c, zz, xm[2], xm[3])
+            u, si, _ = law_step(Pi, pn, h, xm, si, k == 0)
+            if observer_law and use_obs[i]:   # core.laws.ndo.WithObserver.step
+                u = u - u_taud_of(pn, pn.m12 * math.cos(xm[1]), th)
+            u = saturate(u, limit[i])
+            if act_delay > 0:   # core.sensing.Actuator.apply
+                qa[i, k % (act_delay + 1)] = u
+                u = qa[i, (k - act_delay) % (act_delay + 1)] if k >= act_delay else 0.0
+            # D_w of this period: core.plant.PlantSim._draw_D_w's max(0, mean + sd z) of its own draw z
+            D_w = max(0.0, D_w_mean[i] + D_w_sd[i] * Nw[i, k - k0]) if D_w_random[i] else D_w_mean[i]
+            if shared:
+                tau1[:] = T[k - k0, 0]
+                tau2[:] = T[k - k0, 1]
+            else:
+                _stage(tau1, tau2, f1, f2, t, dt, substeps)
+            if first_w <= k < first_w + n_window:   # the true tau_d (core.plant.PlantSim.lumped_disturbance)
+                ddq = accel(pa, D_w, D_b[i], xt, u, tau1[0], tau2[0])
+                td = lumped_disturbance(pn, xt, ddq, u)
+                v = xt[1]
+                if math.isfinite(v):
+                    acc[i, 0] += v * v
+                    acc[i, 1] += 1.0
+                    ext[i, 0] = max(ext[i, 0], v)
+                    ext[i, 1] = min(ext[i, 1], v)
+                    ext[i, 2] = max(ext[i, 2], abs(v))
+                for j, v in enumerate((u, th[0] - td[0], th[1] - td[1])):
+                    if math.isfinite(v):
+                        acc[i, 2 * j + 2] += v * v
+                        acc[i, 2 * j + 3] += 1.0
+            if abs(xt[1]) > fall[i]:
+                t_fall[i] = t
+                active[i] = False
+                break
+            if k == n_steps:
+                break
+            steps[i] += 1
+            xt = rk4_period(pa, D_w, D_b[i], tau1, tau2, xt, u, h, substeps)
+            up = u
+        x[i, 0], x[i, 1], x[i, 2], x[i, 3] = xt
+        u_prev[i] = up
+        z[i, 0], z[i, 1] = zz
+        prev[i, 0], prev[i, 1], prev[i, 2], prev[i, 3] = pv
+        s[i] = si
+
+
+_KERNELS: dict = {}
+
+
+def _owner(cls: type, name: str):
+    """The class of ``cls``' MRO that defines ``name``."""
+    return next((c for c in cls.__mro__ if name in c.__dict__), None)
+
+
+def kernel_for(law: type):
+    """The compiled batch loop of the law class ``law`` (its ``pure_step``, or its base's for an observer
+    variant), or None when it has no pure form (the batch then runs over numpy arrays)."""
+    core = getattr(law, "base", law)
+    fn = getattr(core, "pure_step", None)
+    if fn is None or _owner(core, "step") is not _owner(core, "pure_step"):
+        return None   # none, or a subclass that steps otherwise than the pure form it inherits
+    if fn not in _KERNELS:
+        step = _deep(fn)
+        at = _deep(model.Sinusoid.at)
+        _KERNELS[fn] = _deep(_loop, f"__{fn.__module__}.{fn.__qualname__}".replace(".", "_"), law_step=step,
+                             Inertia=Inertia, Sin=Sin, at=at, _stage=_deep(_stage, at=at), accel=_accel,
+                             rk4_period=_rk4_period)
+    return _KERNELS[fn]

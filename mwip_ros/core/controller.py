@@ -15,7 +15,8 @@ from typing import Optional
 
 from .model import PhysicalParams
 
-__all__ = ["DscGains", "ControlOutput", "u_taud_of", "x4_bar_of", "dsc_law", "filter_step", "DscController"]
+__all__ = ["DscGains", "ControlOutput", "u_taud_of", "x4_bar_of", "dsc_law", "dsc_terms", "filter_step",
+           "DscController"]
 
 
 @dataclass(frozen=True)
@@ -58,6 +59,17 @@ def dsc_law(nominal: PhysicalParams, gains: DscGains, x, x4d: Optional[float], t
     ``tau_hat=None`` is plain DSC (observer term off); ``m`` the math namespace (``numpy``
     for arrays of scenarios).
     """
+    first = x4d is None
+    u_dsc, S1, S2, x1, x4_bar, x4d = dsc_terms(nominal, gains.k1, gains.k2, gains.tau4, x, 0.0 if first else x4d,
+                                               first, m)
+    u_taud = 0.0 if tau_hat is None else u_taud_of(nominal, nominal.m12 * m.cos(x[1]), tau_hat)
+    return ControlOutput(u=u_dsc - u_taud, u_dsc=u_dsc, u_taud=u_taud, S1=S1, S2=S2,
+                         x1=x1, x4_bar=x4_bar, x4d=x4d)     # eq. (19)
+
+
+def dsc_terms(nominal, k1, k2, tau4, x, x4d, first, m=math):
+    """(u_DSC, S1, S2, x1, x4_bar, x4d) of eq. (16)-(28) for the state ``x``; ``first``: x4d(0) = x4_bar(0)
+    (``x4d`` is then ignored).  A pure function of numbers (``core.compiled`` compiles it for the batch)."""
     p = nominal
     _, x2, x4, x3 = x                            # x2 = theta_b, x3 = theta_b', x4 = theta_w' (eq. 16)
     mc = p.m12 * m.cos(x2)                       # M_C12
@@ -66,16 +78,14 @@ def dsc_law(nominal: PhysicalParams, gains: DscGains, x, x4d: Optional[float], t
     A = p.m11 * p.m22 - mc ** 2
     x1 = (p.m11 + mc) * x4 + (p.m22 + mc) * x3   # eq. (16)
     S1 = x2                                      # eq. (22)
-    x4_bar = x4_bar_of(p, gains.k1, x2, x1, mc)  # eq. (24)
-    if x4d is None:
+    x4_bar = x4_bar_of(p, k1, x2, x1, mc)        # eq. (24)
+    if first:
         x4d = x4_bar                             # eq. (25) initial condition
     S2 = x4 - x4d                                # eq. (26)
-    u_dsc = (A / (p.m22 + mc) * ((x4_bar - x4d) / gains.tau4 - gains.k2 * S2)
+    u_dsc = (A / (p.m22 + mc) * ((x4_bar - x4d) / tau4 - k2 * S2)
              - p.m12 * p.m22 * sb * (x1 - (p.m11 + mc) * x4) ** 2 / (p.m22 + mc) ** 3
              + mc * gs / (p.m22 + mc))           # eq. (28)
-    u_taud = 0.0 if tau_hat is None else u_taud_of(p, mc, tau_hat)
-    return ControlOutput(u=u_dsc - u_taud, u_dsc=u_dsc, u_taud=u_taud, S1=S1, S2=S2,
-                         x1=x1, x4_bar=x4_bar, x4d=x4d)     # eq. (19)
+    return u_dsc, S1, S2, x1, x4_bar, x4d
 
 
 def filter_step(x4d: float, x4_bar: float, h: float, tau4: float, m=math) -> float:

@@ -27,7 +27,7 @@ import numpy as np
 from .controller import ControlOutput, u_taud_of
 from .model import PhysicalParams
 
-__all__ = ["LqrDesignError", "linearization", "weights", "lqr_gain", "lqr_law", "LqrController"]
+__all__ = ["LqrDesignError", "linearization", "weights", "lqr_gain", "lqr_law", "lqr_u", "LqrController"]
 
 
 class LqrDesignError(ValueError):
@@ -110,12 +110,18 @@ def lqr_law(nominal: PhysicalParams, K, x, tau_hat=None, m=math) -> ControlOutpu
     """u = -K [theta_b, theta_b', theta_w'] (- u_taud of eq. 20 with ``tau_hat``); ``m`` the math namespace.
 
     The fields DSC has and LQR does not (S2, x1, x4_bar, x4d) are NaN; S1 = theta_b as in eq. (22)."""
-    _, theta_b, dtheta_w, dtheta_b = x
-    u_lqr = -(K[0] * theta_b + K[1] * dtheta_b + K[2] * dtheta_w)
+    theta_b = x[1]
+    u_lqr = lqr_u(K, x)
     u_taud = 0.0 if tau_hat is None else u_taud_of(nominal, nominal.m12 * m.cos(theta_b), tau_hat)
     nan = math.nan
     return ControlOutput(u=u_lqr - u_taud, u_dsc=u_lqr, u_taud=u_taud, S1=theta_b, S2=nan, x1=nan, x4_bar=nan,
                          x4d=nan)
+
+
+def lqr_u(K, x):
+    """-K [theta_b, theta_b', theta_w'] (a pure function of numbers: ``core.compiled`` compiles it)."""
+    _, theta_b, dtheta_w, dtheta_b = x
+    return -(K[0] * theta_b + K[1] * dtheta_b + K[2] * dtheta_w)
 
 
 @dataclass

@@ -42,7 +42,13 @@ def z_dot_explicit(nominal: PhysicalParams, X, x, u: float, z, m=math) -> Tuple[
     ``X`` is the 2x2 gain matrix or the flat (c1, c2, c3, c4); ``m`` the math namespace
     (``numpy`` for arrays of scenarios).
     """
-    c1, c2, c3, c4 = _flat(X)
+    return z_dot_of(nominal, _flat(X), x, u, z, m)
+
+
+def z_dot_of(nominal, c, x, u, z, m=math) -> Tuple[float, float]:
+    """:func:`z_dot_explicit` with the gains as the flat (c1, c2, c3, c4): a pure function of numbers, which
+    ``core.compiled`` compiles for the batch (``nominal``: anything with ``m11``, ``m12``, ``m22``, ``G_b``)."""
+    c1, c2, c3, c4 = c
     p = nominal
     _, th_b, dth_w, dth_b = x
     s, mc = m.sin(th_b), p.m12 * m.cos(th_b)
@@ -53,6 +59,24 @@ def z_dot_explicit(nominal: PhysicalParams, X, x, u: float, z, m=math) -> Tuple[
     w2 = p.G_b * s + cent + c3 * dth_w + c4 * dth_b + z[1]
     return (((c2 * D2 - c1 * D1) * w1 - (c2 * p.m11 - c1 * mc) * w2) / A,   # eq. (15), z1'
             ((c4 * D2 - c3 * D1) * w1 - (c4 * p.m11 - c3 * mc) * w2) / A)   # eq. (15), z2'
+
+
+def z_start(c, dw, db) -> Tuple[float, float]:
+    """z_0 = -X q'_0 (so tau_hat_0 = 0)."""
+    c1, c2, c3, c4 = c
+    return (-(c1 * dw + c2 * db), -(c3 * dw + c4 * db))
+
+
+def z_next(nominal, c, prev, u_prev, z, step, m=math) -> Tuple[float, float]:
+    """z_k = z_{k-1} + step z'(x_{k-1}, u_{k-1}, z_{k-1}): explicit Euler of eq. (12)."""
+    d1, d2 = z_dot_of(nominal, c, prev, u_prev, z, m)
+    return (z[0] + step * d1, z[1] + step * d2)
+
+
+def tau_hat_of(c, z, dw, db) -> Tuple[float, float]:
+    """tau_hat = z + X q'."""
+    c1, c2, c3, c4 = c
+    return (z[0] + c1 * dw + c2 * db, z[1] + c3 * dw + c4 * db)
 
 
 def _flat(X) -> Tuple[float, float, float, float]:
@@ -101,13 +125,11 @@ class DiscreteObserver:
     def update(self, x, u_prev: float, h: Optional[float] = None) -> Tuple[float, float]:
         if self._gains[0] is not self.X:  # X was (re)assigned, e.g. a parameter update
             self._gains = (self.X, _flat(self.X))
-        c1, c2, c3, c4 = c = self._gains[1]
+        c = self._gains[1]
         dw, db = x[2], x[3]
         if self.z is None:
-            self.z = (-(c1 * dw + c2 * db), -(c3 * dw + c4 * db))  # tau_hat(0) = 0
+            self.z = z_start(c, dw, db)  # tau_hat(0) = 0
         else:
-            step = self.h if h is None else h
-            d1, d2 = z_dot_explicit(self.nominal, c, self._prev, u_prev, self.z, self.m)
-            self.z = (self.z[0] + step * d1, self.z[1] + step * d2)  # explicit Euler of eq. (12)
+            self.z = z_next(self.nominal, c, self._prev, u_prev, self.z, self.h if h is None else h, self.m)
         self._prev = x
-        return (self.z[0] + c1 * dw + c2 * db, self.z[1] + c3 * dw + c4 * db)  # tau_hat = z + X q'
+        return tau_hat_of(c, self.z, dw, db)  # tau_hat = z + X q'

@@ -29,8 +29,8 @@ import numpy as np
 
 from .model import State
 
-__all__ = ["SensingConfig", "SENSOR_STREAM", "NOISE_BLOCK", "sensor_rng", "measure", "Normals", "Sensors",
-           "Actuator"]
+__all__ = ["SensingConfig", "SENSOR_STREAM", "NOISE_BLOCK", "sensor_rng", "measure", "quantize", "Normals",
+           "Sensors", "Actuator"]
 
 SENSOR_STREAM = 1    # the sensor noise generator is default_rng([seed, SENSOR_STREAM]); D_w uses default_rng(seed)
 NOISE_BLOCK = 256    # periods of draws per generator call (the same sequence as one call per period)
@@ -68,9 +68,14 @@ def measure(x, z, std, counts, m=math) -> State:
         x = tuple(v + s * n for v, s, n in zip(x, std, z))
     w = x[0]
     if counts:
-        q = 2.0 * math.pi / counts
-        w = q * m.floor(w / q + 0.5)   # the nearest count
+        w = quantize(w, counts, m)
     return State(w, x[1], x[2], x[3])
+
+
+def quantize(w, counts, m=math):
+    """theta_w at the nearest count of an encoder with ``counts`` per revolution (> 0)."""
+    q = 2.0 * math.pi / counts
+    return q * m.floor(w / q + 0.5)
 
 
 class Normals:

@@ -94,10 +94,12 @@ def test_one_batch_runs_one_law():
 def test_sensing_and_actuation_in_a_batch_equal_the_scalar_loop():
     rng = np.random.default_rng(5)
     values = [dict(BASE, seed=i, use_observer=bool(i % 2), **{
-        "sensors.noise_std.theta_b": float(rng.uniform(0, 0.004)), "sensors.noise_std.dtheta_w": float(rng.uniform(0, 0.4)),
+        "sensors.noise_std.theta_b": float(rng.uniform(0, 0.004)),
+        "sensors.noise_std.dtheta_w": float(rng.uniform(0, 0.4)),
         "sensors.noise_std.dtheta_b": 0.0 if i == 2 else 0.02, "sensors.encoder_counts_per_rev": 1024,
         "sensors.delay_periods": 1, "actuator.delay_periods": 2}) for i in range(5)]
-    values[3] = dict(values[3], **{f"sensors.noise_std.{c}": 0.0 for c in ("theta_w", "theta_b", "dtheta_w", "dtheta_b")})
+    values[3] = dict(values[3], **{f"sensors.noise_std.{c}": 0.0
+                                   for c in ("theta_w", "theta_b", "dtheta_w", "dtheta_b")})
     loops = [P.closed_loop(v, duration=2.0) for v in values]
     batch = simulate_batch(loops, WINDOW, record=True)
     for i, (b, lp) in enumerate(zip(batch.trajectories, loops)):
@@ -121,3 +123,36 @@ def test_the_batch_math_namespace_computes_each_angle_once_and_never_goes_stale(
     assert np.array_equal(trig.sin(c), real_sin(c)) and np.array_equal(trig.sin(d), real_sin(d))
     assert len(calls) == 4 and calls[-1] is d
     assert trig.sin(0.5) == real_sin(0.5) and trig.exp is np.exp and trig.floor is np.floor
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+def test_the_metrics_without_a_record_equal_the_scalar_loop_in_either_form(runs, compiled):
+    """Without ``record`` the batch runs compiled (core.compiled) by default, or over numpy arrays: the same
+    falls, fall times, steps and metrics as each scenario's scalar run (these scenarios: noise, a torque limit,
+    a fall, a divergence)."""
+    loops, _, scalar = runs
+    r = simulate_batch(loops, WINDOW, compiled=compiled)
+    assert r.trajectories is None
+    assert r.fallen.tolist() == [s.fallen for s in scalar]
+    assert r.steps == sum(len(s) - 1 for s in scalar)
+    for i, s in enumerate(scalar):
+        m = metrics.compute(s.columns, WINDOW, FALL_ANGLE)
+        assert r.t_fall[i] == pytest.approx(s.t[-1], abs=1e-9) if s.fallen else np.isnan(r.t_fall[i])
+        assert r.upright[i] == m.upright
+        for key, values in r.metrics.items():
+            assert values[i] == pytest.approx(getattr(m, key), rel=1e-9, abs=1e-9, nan_ok=True), (i, key)
+
+
+def test_the_compiled_form_is_the_default_and_the_switch_turns_it_off(monkeypatch):
+    from mwip_ros.core import batch, compiled
+    seen = []
+    monkeypatch.setattr(batch, "_simulate_compiled", lambda *a: seen.append("compiled") or "c")
+    monkeypatch.setattr(batch, "_simulate_numpy", lambda *a: seen.append("numpy") or "n")
+    loops = [P.closed_loop(BASE, duration=0.1)]
+    monkeypatch.delenv(batch.COMPILED_ENV, raising=False)
+    assert simulate_batch(loops, WINDOW) == "c"
+    assert simulate_batch(loops, WINDOW, record=True) == "n"   # a trajectory: the numpy form records it
+    monkeypatch.setenv(batch.COMPILED_ENV, "0")
+    assert simulate_batch(loops, WINDOW) == "n"
+    assert simulate_batch(loops, WINDOW, compiled=True) == "c"
+    assert compiled.kernel_for(type("NoPure", (), {})) is None

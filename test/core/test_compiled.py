@@ -1,13 +1,16 @@
 """The batch's compiled RK4 period is the scalar plant's own function: same code, same numbers, bit for bit."""
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from mathfixtures import P_FILE
 from mwip_ros import params as P
-from mwip_ros.core import compiled, model, plant
+from mwip_ros.core import compiled, metrics, model, plant
+from mwip_ros.core.batch import simulate_batch
 from mwip_ros.core.model import PhysicalParams, Sinusoid
+from mwip_ros.core.sim import simulate
 
 pytestmark = pytest.mark.unit
 
@@ -125,3 +128,165 @@ def test_an_edit_to_the_equations_is_compiled_afresh(tmp_path, cache_dir):
     second = run()
     assert second[0] != first[0]           # the edit changes the plant
     assert second[1] == second[0]          # and the compiled batch follows it
+
+
+# --- the whole batch loop compiled (core.compiled._loop) equals the scalar loop ---------------------------------
+
+REALISTIC = P.merged_values(P.load_param_files([P_FILE, Path(__file__).resolve().parents[2] / "config" /
+                                                "sensing_realistic.yaml"]))
+WINDOW = (1.0, 2.0)
+SENSING = {
+    "off": {},
+    "realistic": {k: v for k, v in REALISTIC.items() if k.startswith(("sensors.", "actuator."))},
+    "delays": {"sensors.delay_periods": 2, "actuator.delay_periods": 3},
+}
+
+
+def _loop_values(sensing, shared_tau: bool, seed=7):
+    rng = np.random.default_rng(seed)
+    out = []
+    for i in range(8):
+        v = dict(BASE, **SENSING[sensing])
+        v.update({"seed": int(rng.integers(0, 1000)), "actual.m_b": BASE["actual.m_b"] * rng.uniform(0.7, 1.3),
+                  "actual.I_b": BASE["actual.I_b"] * rng.uniform(0.7, 1.3),
+                  "initial.theta_b": float(rng.uniform(-0.3, 0.3)),
+                  "actual.D_w_variance": 0.0 if i == 3 else 0.2, "torque_limit": 400.0 if i == 5 else 0.0})
+        if not shared_tau:
+            v["tau_ext1.amplitude"] = float(rng.uniform(0, 45))
+        if i == 6 and sensing == "realistic":   # one scenario without noise in a noisy batch
+            v.update({f"sensors.noise_std.{c}": 0.0 for c in ("theta_w", "theta_b", "dtheta_w", "dtheta_b")})
+        out.append(v)
+    fall = dict(out[0], **{"initial.theta_b": 1.0, "tau_ext1.amplitude": 3000.0, "seed": 3})   # falls at once
+    late = dict(out[1], **{"tau_ext2.amplitude": 2500.0, "tau_ext2.omega": 1.0, "seed": 4})     # falls later
+    diverge = dict(out[2], **{"initial.theta_b": 1.0, "tau_ext1.amplitude": 1e5, "seed": 5})
+    if shared_tau:
+        fall["tau_ext1.amplitude"] = diverge["tau_ext1.amplitude"] = BASE["tau_ext1.amplitude"]
+        fall["initial.theta_b"] = diverge["initial.theta_b"] = 1.2   # beyond the fall angle: falls at t = 0
+        late["tau_ext2.amplitude"] = BASE["tau_ext2.amplitude"]
+        late.update({"k1": 0.05, "k2": 0.05, "lqr.R": 1e4, "initial.theta_b": 0.9})
+    return out + [fall, late, diverge]
+
+
+def _check_equal(loops, r):
+    """Every metric, the fall and its time of each scenario of ``r`` equal the scalar loop's to 1e-9."""
+    stepped = 0
+    for i, lp in enumerate(loops):
+        s = simulate(lp)
+        m = metrics.compute(s.columns, WINDOW, lp.plant.fall_angle)
+        assert bool(r.fallen[i]) == s.fallen, i
+        if s.fallen:
+            assert abs(r.t_fall[i] - s.t[-1]) <= 1e-9, i
+        else:
+            assert np.isnan(r.t_fall[i]) and r.upright[i], i
+        for key, values in r.metrics.items():
+            want, got = getattr(m, key), values[i]
+            assert (np.isnan(want) and np.isnan(got)) or abs(got - want) <= 1e-9 * max(1.0, abs(want)), (i, key,
+                                                                                                        got, want)
+        stepped += len(s) - 1
+    assert r.steps == stepped
+    return [bool(v) for v in r.fallen]
+
+
+@pytest.mark.parametrize("sensing", sorted(SENSING))
+@pytest.mark.parametrize("controller", ["dsc", "dscndo", "lqr", "lqr_ndo"])
+def test_the_compiled_batch_loop_equals_the_scalar_loop(controller, sensing):
+    for shared in (True, False):
+        loops = [P.closed_loop(v, duration=2.0, controller=controller) for v in _loop_values(sensing, shared)]
+        r = simulate_batch(loops, WINDOW, compiled=True)
+        fallen = _check_equal(loops, r)
+        assert any(fallen) and not all(fallen)   # some fall, the others run on
+
+
+def test_a_batch_mixing_a_law_with_and_without_the_observer_term_runs_compiled():
+    values = _loop_values("realistic", False, seed=3)
+    loops = [P.closed_loop(v, duration=2.0, controller="dscndo" if i % 2 else "dsc") for i, v in enumerate(values)]
+    _check_equal(loops, simulate_batch(loops, WINDOW, compiled=True))
+
+
+def test_the_compiled_loop_and_the_numpy_loop_give_the_same_numbers():
+    loops = [P.closed_loop(v, duration=2.0, controller="dscndo") for v in _loop_values("realistic", False)]
+    a, b = simulate_batch(loops, WINDOW, compiled=True), simulate_batch(loops, WINDOW, compiled=False)
+    assert a.steps == b.steps and np.array_equal(a.fallen, b.fallen)
+    np.testing.assert_array_equal(a.t_fall, b.t_fall)
+    for key in a.metrics:
+        np.testing.assert_allclose(a.metrics[key], b.metrics[key], rtol=1e-12, atol=0, err_msg=key)
+
+
+def test_the_compiled_loop_calls_the_scalar_loops_own_functions():
+    from mwip_ros.core import controller, observer, sensing
+    from mwip_ros.core.laws import dsc, lqr
+    from mwip_ros.core.laws import get as law
+    kernel = compiled.kernel_for(law("dscndo"))
+    assert kernel is compiled.kernel_for(law("dsc")) is not compiled.kernel_for(law("lqr"))
+    g = kernel.py_func.__globals__
+    assert kernel.py_func.__code__ is compiled._loop.__code__
+    for name, fn in (("z_start", observer.z_start), ("z_next", observer.z_next), ("tau_hat_of", observer.tau_hat_of),
+                     ("u_taud_of", controller.u_taud_of), ("saturate", plant.saturate),
+                     ("lumped_disturbance", model.lumped_disturbance), ("quantize", sensing.quantize),
+                     ("at", model.Sinusoid.at), ("law_step", dsc.dsc_step)):
+        assert g[name].py_func.__code__ is fn.__code__, name
+    assert g["accel"] is compiled._accel and g["rk4_period"] is compiled._rk4_period
+    assert g["z_next"].py_func.__globals__["z_dot_of"].py_func.__code__ is observer.z_dot_of.__code__
+    assert compiled.kernel_for(law("lqr_ndo")).py_func.__globals__["law_step"].py_func.__code__ is \
+        lqr.lqr_step.__code__
+    # the laws' scalar step is the same pure function
+    assert law("dsc").pure_step is dsc.dsc_step and law("lqr").pure_step is lqr.lqr_step
+
+
+def test_a_law_without_a_pure_form_runs_the_numpy_loop():
+    import trivial_law  # noqa: F401  (test/: registers 'trivial' and 'trivial_ndo')
+    from mwip_ros.core.laws import get as law
+    from mwip_ros.core.laws.dsc import DscLaw
+    assert compiled.kernel_for(law("trivial_ndo")) is None
+    # a subclass stepping otherwise than the pure form it inherits runs its own step, over numpy arrays
+    assert compiled.kernel_for(type("Other", (DscLaw,), {"step": lambda self, x, tau_hat=None: (0.0, {})})) is None
+    values = [dict(BASE, **{"trivial.k": 2000.0 + 100 * i, "seed": i, "initial.theta_b": 0.05 * i})
+              for i in range(4)]
+    loops = [P.closed_loop(v, duration=2.0, controller="trivial_ndo" if i % 2 else "trivial")
+             for i, v in enumerate(values)]
+    _check_equal(loops, simulate_batch(loops, WINDOW, compiled=True))
+
+
+_LOOP_CHECK = """
+from mwip_ros import params as P
+from mwip_ros.core import metrics
+from mwip_ros.core.batch import simulate_batch
+from mwip_ros.core.sim import simulate
+loop = P.closed_loop(dict(P.merged_values(P.load_param_file({p_file!r})), **{{"initial.theta_b": 0.1}}),
+                     duration=0.2, controller="dscndo")
+r = simulate_batch([loop], (0.1, 0.2), compiled=True)
+m = metrics.compute(simulate(loop).columns, (0.1, 0.2), loop.plant.fall_angle)
+print(repr(m.tau_err1_rms), repr(float(r.metrics["tau_err1_rms"][0])))
+"""
+
+
+def test_an_edit_to_the_observer_is_compiled_afresh_in_the_batch_loop(tmp_path):
+    """The compiled loop is cached under the stamp of every file it is made of: an edit to observer.py (not the
+    loop's own file) reaches the next process's compiled loop."""
+    import os
+    import shutil
+    import subprocess
+    import sys
+
+    pkg = Path(compiled.__file__).resolve().parents[1]
+    shutil.copytree(pkg, tmp_path / "mwip_ros", ignore=shutil.ignore_patterns("__pycache__"))
+    env = dict(os.environ, PYTHONPATH=str(tmp_path), NUMBA_CACHE_DIR=str(tmp_path / "numba_cache"))
+    script = _LOOP_CHECK.format(p_file=str(P_FILE))
+
+    def run():
+        out = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, timeout=300,
+                             cwd=tmp_path)
+        assert out.returncode == 0, out.stderr
+        return tuple(float(v) for v in out.stdout.split())
+
+    first = run()
+    assert first[1] == pytest.approx(first[0], rel=1e-9)
+    assert list((tmp_path / "numba_cache").rglob("compiled._loop__*.nbi"))   # cached there
+    obs = tmp_path / "mwip_ros" / "core" / "observer.py"
+    text = obs.read_text()
+    edit = "return (z[0] + step * d1, z[1] + step * d2)"
+    assert edit in text
+    obs.write_text(text.replace(edit, "return (z[0] + 0.5 * step * d1, z[1] + step * d2)"))
+    second = run()
+    assert second[0] != pytest.approx(first[0], rel=1e-6)   # the edit changes the observer
+    assert second[1] == pytest.approx(second[0], rel=1e-9)  # and the compiled loop follows it

@@ -70,6 +70,13 @@ class Law:
         A frozen dataclass of numbers, what :meth:`design` returns (the batch stacks its fields).
     announce : bool
         Log :meth:`design_text` at start-up even when the law is not in use.
+    pure_step : function or None
+        The law's period as a pure function of numbers, ``pure_step(P, nominal, h, x, s, first, m=math)`` ->
+        ``(u, s_next, internals tuple)``: ``P`` the numbers :meth:`pure_params` makes of the parameters,
+        ``nominal`` anything with ``m11``, ``m12``, ``m22``, ``G_b``, ``s`` one float of state (ignored when
+        ``first``, the first step).  When a law has one, its :meth:`step` calls it, and the batch simulator runs
+        it compiled by numba inside one compiled loop (``core.compiled``); None: the batch runs :meth:`step`
+        over numpy arrays.
     """
 
     name: str = ""
@@ -81,6 +88,12 @@ class Law:
     internal_names: Tuple[str, ...] = ("u",)
     Params: type = type(None)
     announce: bool = False
+    pure_step = None
+
+    @staticmethod
+    def pure_params(params) -> tuple:
+        """The numbers ``pure_step`` reads as ``P`` (floats, in a fixed order)."""
+        raise NotImplementedError
 
     def __init__(self, params, nominal, h: float, m=math):
         self.params, self.nominal, self.h, self.m = params, nominal, h, m

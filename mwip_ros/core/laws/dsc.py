@@ -10,13 +10,21 @@ from __future__ import annotations
 import math
 from typing import List
 
-from ..controller import DscGains, dsc_law, filter_step
+from ..controller import DscGains, dsc_terms, filter_step
 from . import Law
 
-__all__ = ["DscLaw", "INTERNALS"]
+__all__ = ["DscLaw", "INTERNALS", "dsc_step"]
 
 # controller_internals of DSC and DSCNDO (README: plot them): msgs.layouts.INTERNAL_NAMES
 INTERNALS = ("S1", "S2", "x4d", "x4_bar", "u_dsc", "u_taud", "u", "x1")
+
+
+def dsc_step(P, p, h, x, s, first, m=math):
+    """One period of DSC as a pure function (:attr:`~mwip_ros.core.laws.Law.pure_step`): ``P`` = (k1, k2, tau4),
+    ``s`` the filter state x4d (ignored when ``first``).  Returns (u, the next x4d, (S1, S2, x4d, x4_bar, u_dsc,
+    x1)): u_DSC (eq. 28) with the current x4d, then x4d advanced over one period (eq. 25)."""
+    u_dsc, S1, S2, x1, x4_bar, x4d = dsc_terms(p, P[0], P[1], P[2], x, s, first, m)
+    return u_dsc, filter_step(x4d, x4_bar, h, P[2], m), (S1, S2, x4d, x4_bar, u_dsc, x1)
 
 
 class DscLaw(Law):
@@ -49,10 +57,17 @@ class DscLaw(Law):
 
     def step(self, x, tau_hat=None):
         """u_DSC (eq. 28) for ``x`` with the current x4d, then x4d advanced over one period (eq. 25)."""
-        out = dsc_law(self.nominal, self.params, x, self.x4d, None, self.m)
-        self.x4d = filter_step(out.x4d, out.x4_bar, self.h, self.params.tau4, self.m)
-        return out.u, {"S1": out.S1, "S2": out.S2, "x4d": out.x4d, "x4_bar": out.x4_bar, "u_dsc": out.u_dsc,
-                       "u_taud": out.u_taud, "u": out.u, "x1": out.x1}   # u_taud: 0, the term is off
+        first = self.x4d is None
+        u, self.x4d, (S1, S2, x4d, x4_bar, u_dsc, x1) = dsc_step(self.pure_params(self.params), self.nominal, self.h,
+                                                                 x, 0.0 if first else self.x4d, first, self.m)
+        return u, {"S1": S1, "S2": S2, "x4d": x4d, "x4_bar": x4_bar, "u_dsc": u_dsc,
+                   "u_taud": 0.0, "u": u, "x1": x1}   # u_taud: 0, the term is off
+
+    pure_step = staticmethod(dsc_step)
+
+    @staticmethod
+    def pure_params(params: DscGains):
+        return params.k1, params.k2, params.tau4
 
     def finite(self) -> bool:
         return self.x4d is None or bool(math.isfinite(self.x4d))

@@ -2,13 +2,14 @@
 the observer term (:mod:`.ndo`).  The gain is :func:`mwip_ros.core.lqr.lqr_gain` of ``lqr.Q``, ``lqr.R``."""
 from __future__ import annotations
 
+import math
 from typing import NamedTuple, Optional
 
-from ..lqr import lqr_gain, lqr_law
+from ..lqr import lqr_gain, lqr_u
 from . import Law
 from .dsc import INTERNALS
 
-__all__ = ["LqrGain", "LqrLaw"]
+__all__ = ["LqrGain", "LqrLaw", "lqr_step"]
 
 
 class LqrGain(NamedTuple):
@@ -17,6 +18,13 @@ class LqrGain(NamedTuple):
     k_theta_b: float
     k_dtheta_b: float
     k_dtheta_w: float
+
+
+def lqr_step(P, p, h, x, s, first, m=math):
+    """One period of LQR as a pure function (:attr:`~mwip_ros.core.laws.Law.pure_step`): ``P`` = K; no state
+    (``s`` is returned as it came).  Returns (u, s, (u, S1 = theta_b))."""
+    u = lqr_u(P, x)
+    return u, s, (u, x[1])
 
 
 class LqrLaw(Law):
@@ -38,8 +46,14 @@ class LqrLaw(Law):
         return LqrGain(*lqr_gain(nominal, h, values["lqr.Q"], values["lqr.R"]))
 
     def step(self, x, tau_hat=None):
-        out = lqr_law(self.nominal, self.params, x, None, self.m)
-        return out.u, {"u_dsc": out.u_dsc, "u_taud": out.u_taud, "S1": out.S1, "u": out.u}   # u_taud: 0, off
+        u, _, (u_lqr, S1) = lqr_step(self.params, self.nominal, self.h, x, 0.0, False, self.m)
+        return u, {"u_dsc": u_lqr, "u_taud": 0.0, "S1": S1, "u": u}   # u_taud: 0, off
+
+    pure_step = staticmethod(lqr_step)
+
+    @staticmethod
+    def pure_params(params: LqrGain):
+        return tuple(params)
 
     def design_text(self, values=None) -> Optional[str]:
         K = self.params
