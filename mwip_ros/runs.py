@@ -151,8 +151,8 @@ def check_times(t: np.ndarray, source, ordered: bool = True) -> None:
         back = np.diff(t) < 0
         if back.any():
             i = int(np.argmax(back)) + 1
-            raise ValueError(f"{source}: t decreases at row {i + 1} ({float(t[i - 1])!r} -> {float(t[i])!r} s): not one run's "
-                             f"samples in order")
+            raise ValueError(f"{source}: t decreases at row {i + 1} ({float(t[i - 1])!r} -> {float(t[i])!r} s): "
+                             f"not one run's samples in order")
 
 
 def read_bag_run(bag, label: Optional[str] = None, segment: Optional[int] = None, segments=None) -> Trajectory:

@@ -24,6 +24,15 @@ for a in "$@"; do
     esac
 done
 
+# The linter first (ruff.toml): a finding fails the run before any test starts.
+echo "test: python -m ruff check ."
+if python -m ruff check .; then
+    echo "test: ruff: clean"
+else
+    echo "test: ruff found problems" >&2
+    exit 1
+fi
+
 # One line per test file with its share of the suite done, so a long run shows where it is.
 echo "test: python -m pytest ${targets[*]} $*"
 rc=0

@@ -47,7 +47,8 @@ def spec_bomb(path: Path, levels: int = 9, base: Path = None) -> Path:
     return path
 
 
-AS_LIMIT = 1536 << 20   # a measured process's address space: a regressed loader fails fast instead of eating the machine
+# a measured process's address space: a regressed loader fails fast instead of eating the machine
+AS_LIMIT = 1536 << 20
 
 
 # one thread per pool, and few malloc arenas: the address space then does not grow with the machine's cores

@@ -10,12 +10,14 @@ from graphproc import REPO, script_env
 pytestmark = pytest.mark.bench
 
 ROWS = [
-    r"1\. DDS floor: Float64 ping-pong, 2 processes, serialized .* \| [\d,]+ round trips/s \(RTT p50 \d+ us, p99 \d+ us\)",
+    r"1\. DDS floor: Float64 ping-pong, 2 processes, serialized .* \| [\d,]+ round trips/s "
+    r"\(RTT p50 \d+ us, p99 \d+ us\)",
     r"1\. the same with rclpy message objects \(typed\) \| [\d,]+ round trips/s",
     r"2\. lockstep graph, 4 processes \(with recorder\) \| [\d,]+ steps/s \(201 steps in [\d.]+ s wall\)",
     r"2\. lockstep graph with foxglove_server \(a client connected\) \| [\d,]+ steps/s",
     r"2\. lockstep rate / DDS floor \| [\d.]+ steps per round trip",
-    *[rf"3\. realtime {hz} Hz, 2 s, 4 processes, {sched}[^|]*: loop period p50 / p99 / max \| [\d.]+ / [\d.]+ / [\d.]+ ms"
+    *[rf"3\. realtime {hz} Hz, 2 s, 4 processes, {sched}[^|]*: loop period p50 / p99 / max "
+      r"\| [\d.]+ / [\d.]+ / [\d.]+ ms"
       for hz in (200, 1000) for sched in ("normal scheduling", "SCHED_FIFO 50")],
     *[rf"3\. realtime {hz} Hz, {sched}[^|]*: missed deadlines / stale-command substitutions \| \d+ / \d+ of \d+ "
       "periods" for hz in (200, 1000) for sched in ("normal scheduling", "SCHED_FIFO 50")],

@@ -8,7 +8,6 @@ does, and every printed cell must equal the computed metric formatted with the c
 (strings compared, so an edited digit fails, and so does a change to the code that moves a printed digit).
 """
 import re
-from pathlib import Path
 
 import pytest
 

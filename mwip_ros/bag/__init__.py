@@ -18,7 +18,6 @@ from .repair import RepairResult, repair
 from .schema import message_definition, type_hash
 from .writer import BagWriter
 
-__all__ = [
-    "REPAIRED_KEY", "BagError", "BagWriter", "RepairResult", "check", "damaged_chunks", "mcap_files", "message_definition", "qos_profiles_yaml",
-    "raw_messages", "read_metadata", "repair", "topic_counts", "topic_qos", "topic_types", "type_hash",
-]
+__all__ = ["REPAIRED_KEY", "BagError", "BagWriter", "RepairResult", "check", "damaged_chunks", "mcap_files",
+           "message_definition", "qos_profiles_yaml", "raw_messages", "read_metadata", "repair", "topic_counts",
+           "topic_qos", "topic_types", "type_hash"]

@@ -6,10 +6,10 @@ grid up to the last one recorded, one message of that stamp on each stamped topi
 (``joint_states``, ``/clock``, ``disturbance_estimate``, ``lumped_disturbance``,
 ``controller_internals``) and as many ``wheel_torque_cmd`` as states; ``external_wrench``
 is whatever a user sent, ``robot_markers`` a view of the states and ``/rosout``,
-``/parameter_events``, ``/diagnostics`` ROS's own: those are not compared.  A recorder that joined late lacks the first stamps everywhere:
-the grid from 0 still shows it.  A state the plant resent before the graph had matched shows as a
-repeated stamp: it counts once.  :class:`Ledger` keeps the stamps (8 bytes each) and says
-which topics lack which stamps; no ROS here.
+``/parameter_events``, ``/diagnostics`` ROS's own: those are not compared.  A recorder that joined
+late lacks the first stamps everywhere: the grid from 0 still shows it.  A state the plant resent
+before the graph had matched shows as a repeated stamp: it counts once.  :class:`Ledger` keeps the
+stamps (8 bytes each) and says which topics lack which stamps; no ROS here.
 """
 from __future__ import annotations
 
@@ -70,7 +70,8 @@ class Ledger:
         """[(topic, messages it has, messages it should have, first missing stamp or None)] for every topic of
         the loop that lacks some; empty when the recording is complete (or is not of a lockstep run, or is
         too long to judge: ``overflow``)."""
-        if self.overflow or not any(leaf(t) == "clock" for t in self.stamps):  # only the lockstep plant publishes /clock
+        # only the lockstep plant publishes /clock
+        if self.overflow or not any(leaf(t) == "clock" for t in self.stamps):
             return []
         states = self.expected()
         out = []

@@ -31,8 +31,9 @@ from mwip_ros.core import metrics
 from mwip_ros.core.markers import robot_pose
 from mwip_ros.core.model import PhysicalParams
 
-__all__ = ["FPS", "MAX_FRAMES", "MAX_SPAN_S", "MAX_FRAME_MS", "frame_count", "refusal", "TICK", "HOLD_END_MS", "PANEL_SIZE", "HEADER", "ROD_COLOUR", "SPOKE_COLOUR", "FELL_COLOUR",
-           "default_nominal", "fall_time", "frame_times", "write_gif"]
+__all__ = ["FPS", "MAX_FRAMES", "MAX_SPAN_S", "MAX_FRAME_MS", "frame_count", "refusal", "TICK", "HOLD_END_MS",
+           "PANEL_SIZE", "HEADER", "ROD_COLOUR", "SPOKE_COLOUR", "FELL_COLOUR", "default_nominal", "fall_time",
+           "frame_times", "write_gif"]
 
 FPS = 20.0            # frames per second of simulated time and of playback (50 ms a frame: exact in a GIF)
 MAX_FRAMES = 1200     # a longer animation gets fewer frames per second (a 10 min run: 2 fps), still in real time
@@ -307,6 +308,7 @@ def write_gif(runs: Sequence, path, nominal: Optional[PhysicalParams] = None, fp
         frames.append(frame.quantize(palette=pal, dither=Image.Dither.NONE))
     step = min(MAX_FRAME_MS, max(10, int(round(1000 / fps))))
     durations = [step] * len(frames)
-    durations[-1] = min(MAX_FRAME_MS, max(step, HOLD_END_MS))   # the end (a fall, the last pose) stays readable before the loop
+    # the end (a fall, the last pose) stays readable before the loop
+    durations[-1] = min(MAX_FRAME_MS, max(step, HOLD_END_MS))
     frames[0].save(Path(path), save_all=True, append_images=frames[1:], duration=durations, loop=0)
     return len(frames)

@@ -1,8 +1,8 @@
 """Figures: the paper's Fig. 3 layout, the observer's estimate against the truth, and a sweep's figures.
 
 Every time-series figure shades the metrics window it is given and draws at most :data:`MAX_POINTS` samples
-a line (:func:`decimate`: a run of hours plots in the time and memory of one of minutes); legends sit between the title and the
-axes (they cover no curve); sweep axes are labelled with their parameter's unit (:func:`axis_label`).
+a line (:func:`decimate`: a run of hours plots in the time and memory of one of minutes); legends sit between
+the title and the axes (they cover no curve); sweep axes are labelled with their parameter's unit (:func:`axis_label`).
 """
 from __future__ import annotations
 
@@ -147,7 +147,8 @@ def observer_plot(runs: Sequence, path, window=None) -> None:
                 ax.axvspan(window[0], window[1], **WINDOW_SHADE, label=_window_label(window))
             ax.plot(*decimate(run["t"], run[f"tau_d{i}"]), color="C0", label=r"$\tau_{d}$ (true)", lw=1.2)
             if has_est:
-                ax.plot(*decimate(run["t"], run[f"tau_hat{i}"]), "--", color="C1", label=r"$\hat\tau_{d}$ (observer)", lw=1.0)
+                ax.plot(*decimate(run["t"], run[f"tau_hat{i}"]), "--", color="C1", label=r"$\hat\tau_{d}$ (observer)",
+                        lw=1.0)
             else:
                 ax.text(0.5, 0.5, "no estimate recorded", transform=ax.transAxes, ha="center", va="center",
                         fontsize=11, color="0.35", bbox=dict(fc="white", ec="0.7", alpha=0.8))

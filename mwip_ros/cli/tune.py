@@ -184,7 +184,8 @@ def _print_table(args, names, base_x, best_x, before, after, n, seed) -> None:
     if after is not None:
         rows += [("J (held out)", f"{before['J']:.6g}", f"{after['J']:.6g}"),
                  ("upright", f"{100 * before['upright_share']:.1f} %", f"{100 * after['upright_share']:.1f} %"),
-                 ("theta_b RMS, median [rad]", f"{before['theta_b_rms_median']:.5g}", f"{after['theta_b_rms_median']:.5g}"),
+                 ("theta_b RMS, median [rad]", f"{before['theta_b_rms_median']:.5g}",
+                  f"{after['theta_b_rms_median']:.5g}"),
                  ("u RMS, median [N m]", f"{before['u_rms_median']:.4g}", f"{after['u_rms_median']:.4g}"),
                  ("Theorem 2 holds", str(before["theorem2_holds"]), str(after["theorem2_holds"]))]
     w = [max(len(r[i]) for r in rows) for i in range(3)]

@@ -35,7 +35,8 @@ from .errors import CdrError
 from .stamps import NS_PER_S as _NS, join_ns, split_ns
 
 __all__ = ["CDR_LE", "CdrError", "JointStateEncoder", "WrenchStampedEncoder", "decode_clock", "decode_float64",
-           "decode_joint_state", "decode_wrench", "decode_wrench_stamped", "peek_stamp", "encode_clock", "encode_float64", "encode_wrench", "split_ns"]
+           "decode_joint_state", "decode_wrench", "decode_wrench_stamped", "peek_stamp", "encode_clock",
+           "encode_float64", "encode_wrench", "split_ns"]
 
 CDR_LE = b"\x00\x01\x00\x00"
 

@@ -9,7 +9,8 @@ import importlib
 import re
 from typing import Dict, Optional, Tuple
 
-__all__ = ["GRAPH_TOPICS", "USER_TOPICS", "SYSTEM_TOPICS", "topic_type", "split_type", "msg_class", "leaf", "graph_type"]
+__all__ = ["GRAPH_TOPICS", "USER_TOPICS", "SYSTEM_TOPICS", "topic_type", "split_type", "msg_class", "leaf",
+           "graph_type"]
 
 GRAPH_TOPICS: Dict[str, str] = {
     "joint_states": "sensor_msgs/msg/JointState",

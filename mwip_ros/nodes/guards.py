@@ -72,9 +72,9 @@ class StateInput:
     ``last`` the stream's stamp before this one.
 
     Without ``use_sim_time`` the node's clock follows the stream: it reads the stamp of the last state
-    answered (:meth:`answered`).  So a parameter change (``ros2 param set``) is stamped, in its ``/parameter_events`` message,
-    with the state after which it took effect: it applies from the next state on, which is how
-    ``bag_replay`` resim applies a recorded change at the same state."""
+    answered (:meth:`answered`).  So a parameter change (``ros2 param set``) is stamped, in its
+    ``/parameter_events`` message, with the state after which it took effect: it applies from the next
+    state on, which is how ``bag_replay`` resim applies a recorded change at the same state."""
 
     def __init__(self, node, rejects, window_ns: int, who: str):
         self.guard = StampGuard(window_ns, "joint_states stamp")

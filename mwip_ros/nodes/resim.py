@@ -413,7 +413,8 @@ class Resim:
             lines.append(f"  RESULT: REPRODUCED - every compared output within tolerance {tol:g} (exit {EXIT_OK})")
         if self.applied_changes or self.param_events or self.refused_values:
             lines.append(f"  recorded parameter changes applied: {self.applied_changes}"
-                         + (f" ({len(self.param_events)} after the last state, not applied)" if self.param_events else ""))
+                         + (f" ({len(self.param_events)} after the last state, not applied)"
+                            if self.param_events else ""))
         if self.refused_values:
             lines.append(f"  recorded parameter values refused by the running node: {len(self.refused_values)} ("
                          + "; ".join(self.refused_values[:3]) + (" ..." if len(self.refused_values) > 3 else "") + ")")

@@ -93,7 +93,8 @@ def markers(nominal, x, stamp: int) -> MarkerArray:
     marker(BODY, Marker.CUBE, mid, pose.theta_b, (0.12, 0.3, length), _color(0.1, 0.4, 0.8, 0.9))
     marker(COG, Marker.SPHERE, pose.body_center, 0.0, (0.1, 0.1, 0.1), _color(0.9, 0.1, 0.1))
     ground = marker(GROUND, Marker.LINE_STRIP, scale=(0.02, 0.0, 0.0), color=_color(0.5, 0.5, 0.5))
-    ground.points = [Point(x=pose.wheel_center[0] - GROUND_HALF_LENGTH), Point(x=pose.wheel_center[0] + GROUND_HALF_LENGTH)]
+    ground.points = [Point(x=pose.wheel_center[0] - GROUND_HALF_LENGTH),
+                     Point(x=pose.wheel_center[0] + GROUND_HALF_LENGTH)]
     return MarkerArray(markers=out)
 
 

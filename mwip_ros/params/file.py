@@ -10,14 +10,14 @@ import yaml
 
 from .errors import ParamError
 from mwip_ros.yamlio import RosYamlLoader, YamlRefused, load_yaml
-from .schema import (NODE_SPECS, QOS_OVERRIDES, QOS_OVERRIDES_REFUSED, ROS_OWN, SHARED, SHARED_SPECS, check_derived, defaults_for,
-                     spelling_hint, specs_for)
+from .schema import (NODE_SPECS, QOS_OVERRIDES, QOS_OVERRIDES_REFUSED, ROS_OWN, SHARED, SHARED_SPECS, check_derived,
+                     defaults_for, spelling_hint, specs_for)
 
 
 TYPO_CUTOFF = 0.8   # a foreign section name this close to one of ours is refused as a misspelling
 
-__all__ = ["ParamFile", "RosYamlLoader", "load_param_file", "load_param_files", "load_yaml", "merged_values", "node_key",
-           "parse_param_dict"]
+__all__ = ["ParamFile", "RosYamlLoader", "load_param_file", "load_param_files", "load_yaml", "merged_values",
+           "node_key", "parse_param_dict"]
 
 
 def _flatten(d: Mapping, prefix: str, key_path: str, source: str) -> Dict[str, Any]:

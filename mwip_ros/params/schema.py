@@ -19,7 +19,8 @@ from typing import Any, Callable, Dict, Iterable, List, Mapping, Optional
 from .errors import ParamError
 
 __all__ = ["SHARED", "ParamSpec", "PAPER_NOMINAL", "PAPER_ACTUAL", "SHARED_SPECS", "NODE_SPECS", "ROS_OWN",
-           "ROS_OWN_PREFIXES", "QOS_OVERRIDES", "QOS_OVERRIDES_REFUSED", "specs_for", "defaults_for", "spelling_hint", "check_derived"]
+           "ROS_OWN_PREFIXES", "QOS_OVERRIDES", "QOS_OVERRIDES_REFUSED", "specs_for", "defaults_for", "spelling_hint",
+           "check_derived"]
 
 SHARED = "/**"
 

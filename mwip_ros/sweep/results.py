@@ -21,8 +21,8 @@ from typing import Dict, List, Optional
 
 import numpy as np
 
-__all__ = ["METRICS", "UNITS", "RATIO_METRICS", "median_ratios", "ResultsWriter", "laws", "sort_file", "read_results", "summarize", "summary_markdown", "region_of_attraction",
-           "write_summary", "THETA0_KEY"]
+__all__ = ["METRICS", "UNITS", "RATIO_METRICS", "median_ratios", "ResultsWriter", "laws", "sort_file", "read_results",
+           "summarize", "summary_markdown", "region_of_attraction", "write_summary", "THETA0_KEY"]
 
 # results.csv name -> the batch simulator's metric name
 METRICS = {"theta_b_p2p": "theta_b_p2p", "theta_b_rms": "theta_b_rms", "max_abs_theta_b": "theta_b_max_abs",

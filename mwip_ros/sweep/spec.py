@@ -49,7 +49,8 @@ MAX_SCENARIOS = 50_000_000
 # Parameters of the loop's nodes that do not change the offline closed loop (or that the spec sets itself).
 NOT_SIMULATED = {
     "mode": "the offline loop is always lockstep", "duration_s": "set the spec's duration_s",
-    "use_observer": "list the laws under controllers:", "law": "list the laws under controllers:", "csv": "an output file", "summary_json": "an output file",
+    "use_observer": "list the laws under controllers:", "law": "list the laws under controllers:",
+    "csv": "an output file", "summary_json": "an output file",
     "lockstep_timeout_s": "wall-clock time of the ROS graph", "expected_subscribers": "the ROS graph's set-up",
     "stale_command_periods": "realtime runs only", "realtime_priority": "process scheduling",
 }
@@ -196,7 +197,8 @@ def parse_spec(doc: Any, source: str = "<spec>", here: Path = Path("."),
         raise SpecError("metrics_window_s", f"expected [t0, t1], got {shown(win)}", source)
     t0, t1 = (_number(w, "metrics_window_s", source, "seconds") for w in win)
     if not 0 <= t0 < t1 <= duration + 1e-9:
-        raise SpecError("metrics_window_s", f"needs 0 <= t0 < t1 <= duration_s ({duration:g}), got {shown(win)}", source)
+        raise SpecError("metrics_window_s", f"needs 0 <= t0 < t1 <= duration_s ({duration:g}), got {shown(win)}",
+                        source)
     seed = doc.get("seed", 0)
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise SpecError("seed", f"expected an integer >= 0, got {shown(seed)}", source)
@@ -372,7 +374,8 @@ def _axis(key: str, dist: Any, base_values: Dict[str, Any], source: str) -> Axis
             raise SpecError(where, f"normal needs a standard deviation > 0, got {shown(hi)}", source)
         return Axis(key, section, name, ps.type, kind, (lo, hi), base)
     if not lo < hi:
-        raise SpecError(where, f"{kind} needs low < high, got [{shown(lo)}, {shown(hi)}] (use values: for one value)", source)
+        raise SpecError(where, f"{kind} needs low < high, got [{shown(lo)}, {shown(hi)}] (use values: for one value)",
+                        source)
     if kind == "scale":
         if not lo > 0:
             raise SpecError(where, f"scale factors must be > 0, got {shown(lo)}", source)

@@ -29,8 +29,8 @@ from . import engine
 from .scenarios import expand
 from .spec import SpecError, SweepSpec
 
-__all__ = ["Knob", "KNOBS", "check_memory", "knobs_for", "parse_bounds", "Objective", "FALL_PENALTY", "INADMISSIBLE", "Tuner",
-           "overlay"]
+__all__ = ["Knob", "KNOBS", "check_memory", "knobs_for", "parse_bounds", "Objective", "FALL_PENALTY", "INADMISSIBLE",
+           "Tuner", "overlay"]
 
 FALL_PENALTY = 1.0       # per fallen scenario, in the objective's unit (rad): far above any upright RMS
 INADMISSIBLE = 10.0      # a candidate that breaks Theorem 2 (plus how far it breaks it): worse than any fall

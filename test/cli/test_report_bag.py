@@ -84,7 +84,8 @@ def test_a_fall_the_plant_logged_is_reported_with_its_time_in_every_output(tmp_p
     out = tmp_path / "rep"
     assert report.main([str(bag), "--labels", "dsc", "--out", str(out), "--gif-fps", "20"]) == 0
     stdout = capsys.readouterr().out
-    assert [line for line in stdout.splitlines() if line.startswith("FELL: ")] == [f"FELL: dsc at t = {first_over:.3f} s"]
+    fell = [line for line in stdout.splitlines() if line.startswith("FELL: ")]
+    assert fell == [f"FELL: dsc at t = {first_over:.3f} s"]
     md = (out / "metrics.md").read_text()
     assert text in md and "NO" in md
     doc = json.loads((out / "metrics.json").read_text())

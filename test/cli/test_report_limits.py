@@ -76,10 +76,12 @@ def test_a_hostile_csv_is_one_line_and_exit_2(tmp_path, capsys, body, words):
 
 def test_a_six_column_csv_without_estimates_or_disturbance_is_reported(tmp_path, capsys):
     t = np.arange(201) * 0.01
-    lines = ["t,theta_w,theta_b,dtheta_w,dtheta_b,u"] + [f"{float(x)!r},0.0,{0.01 * float(np.sin(x))!r},0.0,0.0,1.0" for x in t]
+    lines = ["t,theta_w,theta_b,dtheta_w,dtheta_b,u"] + [f"{float(x)!r},0.0,{0.01 * float(np.sin(x))!r},0.0,0.0,1.0"
+                                                         for x in t]
     f = write(tmp_path / "six.csv", "\n".join(lines) + "\n")
     assert report.main([f, "--out", str(tmp_path / "rep"), "--gif-fps", "5"]) == 0
-    assert {"fig3.png", "observer.png", "metrics.json", "animation.gif"} <= {p.name for p in (tmp_path / "rep").iterdir()}
+    written = {p.name for p in (tmp_path / "rep").iterdir()}
+    assert {"fig3.png", "observer.png", "metrics.json", "animation.gif"} <= written
 
 
 def test_rows_beyond_the_limit_are_refused_before_the_rest_is_read(tmp_path, capsys, monkeypatch):

@@ -131,7 +131,8 @@ def test_ctrl_c_keeps_every_finished_row_readable(tmp_path):
 @pytest.mark.unit
 def test_write_params_gives_the_rows_scenario_to_mwip_sim(tmp_path):
     spec = write_spec(tmp_path / "s.yaml", samples=2, duration_s=4.0, metrics_window_s=[2.0, 4.0],
-                      vary={"plant_sim.actual.m_b": {"scale": [0.7, 1.3]}, "dscndo_controller.k1": {"grid": [4.0, 8.0]}})
+                      vary={"plant_sim.actual.m_b": {"scale": [0.7, 1.3]},
+                            "dscndo_controller.k1": {"grid": [4.0, 8.0]}})
     out = tmp_path / "out"
     assert sweep(spec, "--out", out, "--workers", "1", "--no-figures").returncode == 0
     f = tmp_path / "s3.yaml"

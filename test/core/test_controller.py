@@ -29,9 +29,15 @@ def test_filter_step_is_exact():
     # integrate the ODE finely with RK4
     n, y = 1000, x4d
     dt = h / n
-    f = lambda y: (x4_bar - y) / tau4
+
+    def f(y):
+        return (x4_bar - y) / tau4
+
     for _ in range(n):
-        k1 = f(y); k2 = f(y + dt / 2 * k1); k3 = f(y + dt / 2 * k2); k4 = f(y + dt * k3)
+        k1 = f(y)
+        k2 = f(y + dt / 2 * k1)
+        k3 = f(y + dt / 2 * k2)
+        k4 = f(y + dt * k3)
         y += dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
     assert filter_step(x4d, x4_bar, h, tau4) == pytest.approx(y, rel=1e-12)
 
@@ -46,4 +52,5 @@ def test_dsc_law_makes_S2_converge_at_k2():
     assert dS2 == pytest.approx(-g.k2 * out.S2, rel=1e-9)
     # plain DSC ignores tau_hat
     assert dsc_law(NOM, g, x, 0.1, None).u == pytest.approx(out.u_dsc)
-    assert out.u == pytest.approx(out.u_dsc - (tau_d[0] - NOM.m12 * math.cos(0.2) / (NOM.m22 + NOM.m12 * math.cos(0.2)) * tau_d[1]))
+    c = math.cos(0.2)
+    assert out.u == pytest.approx(out.u_dsc - (tau_d[0] - NOM.m12 * c / (NOM.m22 + NOM.m12 * c) * tau_d[1]))

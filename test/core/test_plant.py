@@ -30,7 +30,9 @@ def test_plant_step_is_classic_rk4_of_eq1():
 
         for i in range(cfg.substeps):
             t = t0 + i * dt
-            k1 = f(t, x); k2 = f(t + dt / 2, x + dt / 2 * k1); k3 = f(t + dt / 2, x + dt / 2 * k2)
+            k1 = f(t, x)
+            k2 = f(t + dt / 2, x + dt / 2 * k1)
+            k3 = f(t + dt / 2, x + dt / 2 * k2)
             k4 = f(t + dt, x + dt * k3)
             x = x + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
         plant.step(u, extra)

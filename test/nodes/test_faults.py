@@ -131,9 +131,9 @@ def test_two_namespaced_graphs_in_one_domain_do_not_hear_each_other(tmp_path):
         for ns in ("a", "b"):
             # expected_subscribers 3: the plant starts once its recorder listens too (else, under load, a
             # recorder that discovers the plant late records nothing of a 2 s run)
-            plants[ns] = g.start("plant_sim", "-r", f"__ns:=/{ns}", "-r", f"/clock:=/{ns}/clock", "-p", "duration_s:=2.0",
-                                 "-p", "expected_subscribers:=3", "-p", f"csv:={tmp_path / (ns + '.csv')}",
-                                 label=f"plant_{ns}")
+            plants[ns] = g.start("plant_sim", "-r", f"__ns:=/{ns}", "-r", f"/clock:=/{ns}/clock",
+                                 "-p", "duration_s:=2.0", "-p", "expected_subscribers:=3",
+                                 "-p", f"csv:={tmp_path / (ns + '.csv')}", label=f"plant_{ns}")
         for ns, plant in plants.items():
             assert plant.wait(120) == 0, plant.output()
             assert "publishers on" not in plant.output()

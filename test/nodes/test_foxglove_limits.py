@@ -224,7 +224,8 @@ def test_a_flood_beyond_the_descriptor_limit_is_refused_logged_and_the_port_keep
             stop_s = time.monotonic() - t_stop
         assert stop_s < 5, stop_s
     print(f"\nflood of {FLOOD} under a descriptor limit of {LIMIT}: the server held {MAX_CLIENTS} connections "
-          f"({descriptors} descriptors), {closed} flood connections closed or reset, {opened} open on the client's side; "
+          f"({descriptors} descriptors), {closed} flood connections closed or reset, "
+          f"{opened} open on the client's side; "
           f"{refused} refused (logged), {values['listener_restarts']} listener restart(s); "
           f"descriptors {values['descriptors_open']}/{LIMIT} at the end; SIGINT with an idle connection: exit 0 "
           f"in {stop_s:.2f} s")
@@ -265,8 +266,8 @@ def test_idle_connections_are_closed_after_idle_timeout_a_subscribed_client_is_n
                 assert quiet.closed.wait(15), fox.output()[-3000:]
                 quiet_after = time.monotonic() - t_quiet
             raw.close()
-            assert timeout_s - 0.05 <= raw_after <= timeout_s + 5 and timeout_s - 0.05 <= quiet_after <= timeout_s + 5, \
-                (raw_after, quiet_after)
+            assert (timeout_s - 0.05 <= raw_after <= timeout_s + 5
+                    and timeout_s - 0.05 <= quiet_after <= timeout_s + 5), (raw_after, quiet_after)
             assert quiet.server_info is not None and not quiet.errors, quiet.errors
 
             # the subscribed client, silent and sent nothing for 3 timeouts, is still served

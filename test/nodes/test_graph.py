@@ -162,8 +162,8 @@ def test_realtime_graph_balances(tmp_path):
     with Graph(tmp_path) as g:
         g.start("disturbance_observer", "-p", "mode:=realtime", "-p", f"csv:={tmp_path / 'est.csv'}")
         g.start("dscndo_controller", "-p", "mode:=realtime")
-        plant = g.start("plant_sim", "-p", "mode:=realtime", "-p", "duration_s:=3.0", "-p", f"csv:={tmp_path / 'rt.csv'}",
-                        "-p", f"summary_json:={tmp_path / 'summary.json'}")
+        plant = g.start("plant_sim", "-p", "mode:=realtime", "-p", "duration_s:=3.0",
+                        "-p", f"csv:={tmp_path / 'rt.csv'}", "-p", f"summary_json:={tmp_path / 'summary.json'}")
         code = plant.wait(90)
     out = plant.output()
     assert code == 0, out
@@ -231,10 +231,16 @@ def test_bad_messages_are_rejected_and_counted(tmp_path):
                                                or est.get_subscription_count() < 3):
                 ex.spin_once(timeout_sec=0.05)
             bad_states = []
-            m = joint_state(10**12, (0.0, float("nan")), (0.0, 0.0), 0.0); bad_states.append(m)
-            m = joint_state(10**12 + 1, (0.0, 0.0), (float("inf"), 0.0), 0.0); bad_states.append(m)
-            m = joint_state(10**12 + 2, (0.0, 0.0), (0.0, 0.0), 0.0); m.name = ["left", "right"]; bad_states.append(m)
-            m = joint_state(10**12 + 3, (0.0, 0.0), (0.0, 0.0), 0.0); m.position = [0.0]; bad_states.append(m)
+            m = joint_state(10**12, (0.0, float("nan")), (0.0, 0.0), 0.0)
+            bad_states.append(m)
+            m = joint_state(10**12 + 1, (0.0, 0.0), (float("inf"), 0.0), 0.0)
+            bad_states.append(m)
+            m = joint_state(10**12 + 2, (0.0, 0.0), (0.0, 0.0), 0.0)
+            m.name = ["left", "right"]
+            bad_states.append(m)
+            m = joint_state(10**12 + 3, (0.0, 0.0), (0.0, 0.0), 0.0)
+            m.position = [0.0]
+            bad_states.append(m)
             for m in bad_states:
                 js.publish(m)
             js.publish(b"\x00\x01\x00\x00" + bytes(10))  # bytes that are no JointState (cut off)
@@ -246,7 +252,9 @@ def test_bad_messages_are_rejected_and_counted(tmp_path):
             est.publish(wrench_stamped(10**12 + 4, float("nan"), 0.0))
             est.publish(b"\x07\x07\x00\x00" + bytes(60))   # an unknown encapsulation
             wr.publish(Wrench())  # a valid zero wrench ...
-            w = Wrench(); w.torque.x = float("inf"); wr.publish(w)  # ... and a bad one
+            w = Wrench()  # ... and a bad one
+            w.torque.x = float("inf")
+            wr.publish(w)
             t_end = time.monotonic() + 3
             while time.monotonic() < t_end:
                 ex.spin_once(timeout_sec=0.05)

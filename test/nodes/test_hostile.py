@@ -259,7 +259,8 @@ def test_a_negative_or_wild_clock_kills_no_node(tmp_path):
                 before = {n: latest[n][1].get("/clock", 0) for n in names}
 
                 def done():
-                    return all(latest[n][0] == sec if taken else latest[n][1].get("/clock", 0) > before[n] for n in names)
+                    return all(latest[n][0] == sec if taken else latest[n][1].get("/clock", 0) > before[n]
+                               for n in names)
                 c = Clock()
                 c.clock.sec, c.clock.nanosec = sec, 0
                 end = time.monotonic() + 30

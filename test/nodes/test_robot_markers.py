@@ -21,8 +21,8 @@ def test_markers_follow_the_state_and_bad_states_are_rejected(tmp_path):
             js = inj.publisher("joint_states", JointState)
             got = []
             inj.node.create_subscription(MarkerArray, "robot_markers", got.append, 10)
-            assert inj.wait(lambda: js.get_subscription_count() >= 1 and inj.node.count_publishers("robot_markers") >= 1,
-                            30), node.output()
+            assert inj.wait(lambda: (js.get_subscription_count() >= 1
+                                     and inj.node.count_publishers("robot_markers") >= 1), 30), node.output()
             js.publish(L.encode_state(5_000_000, State(2.0, 0.3, 0.0, 0.0), 0.0))
             assert inj.wait(lambda: len(got) >= 1, 30), node.output()
             js.publish(b"\x00\x01\x00\x00garbage")
@@ -34,7 +34,8 @@ def test_markers_follow_the_state_and_bad_states_are_rejected(tmp_path):
     wheel, body, cog = first[0], first[2], first[3]
     assert math.isclose(wheel.pose.position.x, NOM.r * 2.0) and math.isclose(wheel.pose.position.z, NOM.r)
     assert math.isclose(wheel.scale.x, 2 * NOM.r) and math.isclose(body.scale.z, 2 * NOM.l)
-    assert math.isclose(body.pose.orientation.y, math.sin(0.15)) and math.isclose(body.pose.orientation.w, math.cos(0.15))
+    assert (math.isclose(body.pose.orientation.y, math.sin(0.15))
+            and math.isclose(body.pose.orientation.w, math.cos(0.15)))
     assert math.isclose(cog.pose.position.x, NOM.r * 2.0 + NOM.l * math.sin(0.3))
     second = {m.id: m for m in got[1].markers}
     assert math.isclose(second[0].pose.position.x, -NOM.r)

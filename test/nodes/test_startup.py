@@ -48,8 +48,9 @@ CASES = [  # (id, node, file maker or None, extra ros args, words the one line m
     ("qos override by -p", "dscndo_controller", None, ("-p", "qos_overrides./joint_states.subscription.depth:=10"),
      ("'qos_overrides./joint_states.subscription.depth'", "QoS overrides are not supported")),
     ("qos override in a file", "plant_sim",
-     lambda d: _file(d, "qos.yaml", "    mode: lockstep", "    mode: lockstep\n    qos_overrides:\n      /joint_states:\n"
-                                                         "        publisher:\n          depth: 10"), (),
+     lambda d: _file(d, "qos.yaml", "    mode: lockstep",
+                     "    mode: lockstep\n    qos_overrides:\n      /joint_states:\n"
+                     "        publisher:\n          depth: 10"), (),
      ("'plant_sim.qos_overrides./joint_states.publisher.depth'", "QoS overrides are not supported")),
 ]
 

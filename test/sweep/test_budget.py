@@ -172,7 +172,8 @@ def test_mwip_sim_refuses_a_duration_beyond_the_budget(tmp_path):
     assert_refused(measured("mwip_ros.cli.sim", ["--duration", "100000", "-q"]),
                    "mwip_sim: error: --duration 100000 s at 200 Hz is 20,000,001 rows", "memory budget is 2.0 GiB")
     long = tmp_path / "long.yaml"
-    long.write_text("plant_sim:\n  ros__parameters:\n    duration_s: 1.0e+7\n    sensors:\n      delay_periods: 100000\n")
+    long.write_text("plant_sim:\n  ros__parameters:\n    duration_s: 1.0e+7\n    sensors:\n"
+                    "      delay_periods: 100000\n")
     assert_refused(measured("mwip_ros.cli.sim", ["--params", PAPER, long, "-q", "--compare"]),
                    "plant_sim.duration_s 1e+07 s", "x 2 law(s)")
 

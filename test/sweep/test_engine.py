@@ -49,7 +49,8 @@ def test_each_row_equals_the_scalar_simulator_on_that_scenarios_parameter_file(t
         f = tmp_path / f"s{i}_{ctrl}.yaml"
         placed = {(a.section, a.name): sc.values[a.key][i] for a in s.axes}
         placed.update({("plant_sim", "seed"): sc.seeds[i], ("plant_sim", "duration_s"): s.duration_s,
-                       ("dscndo_controller", "use_observer"): LAWS[ctrl][1], ("dscndo_controller", "law"): LAWS[ctrl][0]})
+                       ("dscndo_controller", "use_observer"): LAWS[ctrl][1],
+                       ("dscndo_controller", "law"): LAWS[ctrl][0]})
         parameter_file(s.base_sections, placed, f)
         v = P.merged_values(P.load_param_file(f))
         run = simulate(P.closed_loop(v))                    # what mwip_sim --params f runs
@@ -111,7 +112,8 @@ def test_a_real_dask_scheduler_and_worker_give_the_same_rows(tmp_path):
     procs = []
     try:
         procs.append(subprocess.Popen([dask, "scheduler", "--host", "127.0.0.1", "--port", str(port),
-                                       "--no-dashboard"], stdout=subprocess.DEVNULL, stderr=open(tmp_path / "s.log", "w")))
+                                       "--no-dashboard"], stdout=subprocess.DEVNULL,
+                                      stderr=open(tmp_path / "s.log", "w")))
         procs.append(subprocess.Popen([dask, "worker", address, "--nworkers", "1", "--nthreads", "1",
                                        "--no-dashboard", "--local-directory", str(tmp_path / "w")],
                                       stdout=subprocess.DEVNULL, stderr=open(tmp_path / "w.log", "w")))

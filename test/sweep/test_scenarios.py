@@ -44,7 +44,8 @@ def test_a_varied_seed_is_the_noise_seed():
 def test_a_normal_draw_outside_the_range_is_refused_before_running():
     with pytest.raises(SpecError) as e:
         expand(spec({"dscndo_controller.k1": {"normal": [0.5, 2.0]}}, samples=200))
-    assert e.value.key == "vary.dscndo_controller.k1" and "must be > 0" in e.value.reason and "scenario" in e.value.reason
+    assert (e.value.key == "vary.dscndo_controller.k1" and "must be > 0" in e.value.reason
+            and "scenario" in e.value.reason)
 
 
 def test_a_scenario_parameter_file_is_complete_and_reads_back(tmp_path):
