@@ -121,11 +121,14 @@ def _damaged(path: Path, bad: List[int]) -> BagError:
                     f"not what was recorded (mwip_bag_repair {path.parent} keeps every other chunk)")
 
 
-def _file_messages(path: Path, topics: Optional[List[str]]) -> Iterator[Tuple[int, str, bytes]]:
+def _file_messages(path: Path, topics: Optional[List[str]],
+                   log_time_order: bool = True) -> Iterator[Tuple[int, str, bytes]]:
+    """One file's ``(log_time_ns, topic, cdr_bytes)``, chunk CRCs checked, in log-time order or (False) in
+    the order they were written; a damaged or cut file raises BagError naming it."""
     with open(path, "rb") as fh:
         try:
             reader = make_reader(fh, validate_crcs=True)
-            for _schema, channel, message in reader.iter_messages(topics=topics, log_time_order=True):
+            for _schema, channel, message in reader.iter_messages(topics=topics, log_time_order=log_time_order):
                 yield message.log_time, channel.topic, bytes(message.data)
         except _UNREADABLE as exc:
             try:

@@ -62,20 +62,10 @@ def recorded_messages(bag, topics: Optional[Iterable[str]] = None) -> Iterator[M
     """``(log_time_ns, topic, cdr_bytes)`` of every message in the order they were recorded (module doc).
 
     Chunk CRCs are checked as :func:`~mwip_ros.bag.reader.raw_messages` checks them."""
-    from .reader import _UNREADABLE, _cut_short, _damaged, damaged_chunks, make_reader, mcap_files
+    from .reader import _file_messages, mcap_files
     wanted = None if topics is None else list(topics)
     for path in mcap_files(bag):
-        with open(path, "rb") as fh:
-            try:
-                reader = make_reader(fh, validate_crcs=True)
-                for _schema, channel, message in reader.iter_messages(topics=wanted, log_time_order=False):
-                    yield message.log_time, channel.topic, bytes(message.data)
-            except _UNREADABLE as exc:
-                try:
-                    bad = damaged_chunks(path)
-                except Exception:  # noqa: BLE001 - the file cannot even be scanned
-                    bad = []
-                raise (_damaged(path, bad) if bad else _cut_short(path, exc)) from None
+        yield from _file_messages(path, wanted, log_time_order=False)
 
 
 @dataclass
