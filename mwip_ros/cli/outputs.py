@@ -23,7 +23,7 @@ import tempfile
 from pathlib import Path
 from typing import Iterable, List, Optional, Sequence
 
-__all__ = ["refuse_existing", "refuse_directory", "existing_outputs", "remove_stale"]
+__all__ = ["refuse_existing", "refuse_directory", "existing_outputs", "remove_stale", "make_directory"]
 
 
 def _probe(directory: Path) -> Optional[str]:
@@ -175,4 +175,14 @@ def remove_stale(path, names: Sequence[str]) -> Optional[str]:
             q.unlink()
         except OSError as exc:
             return f"cannot remove {q} ({os.strerror(exc.errno) if exc.errno else exc})"
+    return None
+
+
+def make_directory(path, option: str) -> Optional[str]:
+    """Create the output directory ``path`` (and its parents); a one-line reason naming ``option`` if it cannot
+    be created, else None."""
+    try:
+        Path(path).mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        return f"{option} {path}: cannot create it ({exc.strerror or exc})"
     return None

@@ -287,10 +287,9 @@ def _main(argv=None) -> int:
     reason = outputs.remove_stale(args.out, REPORT_FILES)   # --force: nothing of an earlier report is left
     if reason:
         return _fail(reason)
-    try:
-        args.out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        return _fail(f"--out {args.out}: cannot create it ({exc.strerror or exc})")
+    reason = outputs.make_directory(args.out, "--out")
+    if reason:
+        return _fail(reason)
     res = write_report(runs, args.out, window, warnings=warnings,
                        gif_fps=None if args.no_animation else args.gif_fps, window_requested=requested)
     if res["window_note"]:

@@ -168,10 +168,9 @@ def _main(argv=None) -> int:
               or outputs.remove_stale(args.out, mine))
     if reason:
         return _fail(reason)
-    try:
-        args.out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        return _fail(f"--out {args.out}: cannot create it ({os.strerror(exc.errno) if exc.errno else exc})")
+    reason = outputs.make_directory(args.out, "--out")
+    if reason:
+        return _fail(reason)
     info = _sweep_info(spec, args)
     (args.out / "sweep.json").write_text(json.dumps(info, indent=2))
     parameter_file(spec.base_sections, {}, args.out / "base.yaml",   # the base (and overlays) as one file
