@@ -54,7 +54,7 @@ from . import controller, model, observer, plant, sensing
 from .controller import u_taud_of
 from .model import lumped_disturbance
 from .observer import tau_hat_of, z_next, z_start
-from .plant import saturate
+from .plant import D_w_of, saturate
 from .sensing import quantize
 
 __all__ = ["Inertia", "RK4Periods", "SOURCES", "Sin", "kernel_for"]
@@ -298,8 +298,8 @@ def _loop(k0, k1, n_steps, h, substeps, first_w, n_window, counts, delay, act_de
             if act_delay > 0:   # core.sensing.Actuator.apply
                 qa[i, k % (act_delay + 1)] = u
                 u = qa[i, (k - act_delay) % (act_delay + 1)] if k >= act_delay else 0.0
-            # D_w of this period: core.plant.PlantSim._draw_D_w's max(0, mean + sd z) of its own draw z
-            D_w = max(0.0, D_w_mean[i] + D_w_sd[i] * Nw[i, k - k0]) if D_w_random[i] else D_w_mean[i]
+            # D_w of this period from its own draw z, as core.plant.PlantSim._draw_D_w
+            D_w = D_w_of(D_w_mean[i], D_w_sd[i], Nw[i, k - k0]) if D_w_random[i] else D_w_mean[i]
             if shared:
                 tau1[:] = T[k - k0, 0]
                 tau2[:] = T[k - k0, 1]

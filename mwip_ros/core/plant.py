@@ -17,7 +17,7 @@ import numpy as np
 from .model import PhysicalParams, Sinusoid, State, accel, lumped_disturbance
 from .sensing import NOISE_BLOCK, SensingConfig
 
-__all__ = ["PlantConfig", "PlantSim", "stage_torques", "rk4_period", "saturate"]
+__all__ = ["PlantConfig", "PlantSim", "stage_torques", "rk4_period", "saturate", "D_w_of"]
 
 
 @dataclass(frozen=True)
@@ -38,6 +38,11 @@ class PlantConfig:
     torque_limit: float              # 0 = none
     fall_angle: float                # |theta_b| beyond this is a fall [rad]
     sensing: SensingConfig = SensingConfig()   # measurement noise, encoder, delays (core.sensing); off
+
+
+def D_w_of(mean: float, sd: float, z: float) -> float:
+    """The wheel friction of one period from its standard normal draw ``z``: Gaussian, clipped at 0 (table II)."""
+    return max(0.0, mean + sd * z)
 
 
 def saturate(u: float, limit: float) -> float:
@@ -83,7 +88,7 @@ class PlantSim:
             return c.D_w_mean
         if not self._noise:  # draw in blocks: the same sequence as one standard_normal() per period
             self._noise = self._rng.standard_normal(NOISE_BLOCK).tolist()[::-1]
-        return max(0.0, c.D_w_mean + math.sqrt(c.D_w_variance) * self._noise.pop())
+        return D_w_of(c.D_w_mean, math.sqrt(c.D_w_variance), self._noise.pop())
 
     def tau_ext(self, t: float, extra: Tuple[float, float] = (0.0, 0.0)) -> Tuple[float, float]:
         return self.cfg.tau_ext1(t) + extra[0], self.cfg.tau_ext2(t) + extra[1]
