@@ -27,3 +27,19 @@ def exact_model_plant(tau_ext=(0.0, 0.0), theta_b0=-0.1745, h=0.005) -> PlantCon
                        tau_ext1=Sinusoid(tau_ext[0], 0.0, math.pi / 2), tau_ext2=Sinusoid(tau_ext[1], 0.0, math.pi / 2),
                        h=h, substeps=5, seed=0, initial=State(0.0, theta_b0, 0.0, 0.0), torque_limit=0.0,
                        fall_angle=FALL_ANGLE)
+
+
+def assert_batch_equals_scalar(loops, window, batch=None, scalar=None):
+    """The oracle of the batch simulator: its trajectories (``record=True``) equal the scalar loop's, scenario by
+    scenario, every column of the trajectory table to 1e-9, the same length, fall and label. Returns
+    (batch result, scalar trajectories)."""
+    from mwip_ros.core.batch import simulate_batch
+    from mwip_ros.core.sim import simulate
+    from mwip_ros.core.trajectory import COLUMNS
+    batch = batch if batch is not None else simulate_batch(loops, window, record=True)
+    scalar = scalar if scalar is not None else [simulate(lp) for lp in loops]
+    for i, (b, s) in enumerate(zip(batch.trajectories, scalar)):
+        assert len(b) == len(s) and b.fallen == s.fallen and b.label == s.label, i
+        for c in COLUMNS:
+            np.testing.assert_allclose(b[c], s[c], rtol=0, atol=1e-9, err_msg=f"scenario {i}, {c}")
+    return batch, scalar

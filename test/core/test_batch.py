@@ -2,12 +2,11 @@
 import numpy as np
 import pytest
 
-from mathfixtures import FALL_ANGLE, P_FILE
+from mathfixtures import FALL_ANGLE, P_FILE, assert_batch_equals_scalar
 from mwip_ros import params as P
 from mwip_ros.core import metrics
 from mwip_ros.core.batch import simulate_batch
 from mwip_ros.core.sim import simulate
-from mwip_ros.core.trajectory import COLUMNS
 
 pytestmark = pytest.mark.unit
 
@@ -40,10 +39,7 @@ def runs():
 
 def test_every_batch_trajectory_equals_the_scalar_loop(runs):
     loops, batch, scalar = runs
-    for i, (b, s) in enumerate(zip(batch.trajectories, scalar)):
-        assert len(b) == len(s) and b.fallen == s.fallen, i
-        for c in COLUMNS:
-            np.testing.assert_allclose(b[c], s[c], rtol=0, atol=1e-9, err_msg=f"scenario {i}, {c}")
+    assert_batch_equals_scalar(loops, WINDOW, batch, scalar)
 
 
 def test_falls_are_marked_and_poison_nothing(runs):
@@ -78,12 +74,8 @@ def test_the_lqr_baseline_in_a_batch_equals_the_scalar_loop():
         "initial.theta_b": float(rng.uniform(-0.3, 0.3))}) for i in range(6)]
     loops = [P.closed_loop(v, duration=2.0) for v in values]
     assert len({lp.params for lp in loops}) == 6   # each its own gain K (core.laws.lqr.LqrGain)
-    batch = simulate_batch(loops, WINDOW, record=True)
-    for i, (b, lp) in enumerate(zip(batch.trajectories, loops)):
-        s = simulate(lp)
-        assert b.label == s.label == ("lqr_ndo" if i % 2 else "lqr") and len(b) == len(s)
-        for c in COLUMNS:
-            np.testing.assert_allclose(b[c], s[c], rtol=0, atol=1e-9, err_msg=f"scenario {i}, {c}")
+    batch, _ = assert_batch_equals_scalar(loops, WINDOW)
+    assert [b.label for b in batch.trajectories] == ["lqr_ndo" if i % 2 else "lqr" for i in range(len(loops))]
 
 
 def test_one_batch_runs_one_law():
@@ -101,12 +93,7 @@ def test_sensing_and_actuation_in_a_batch_equal_the_scalar_loop():
     values[3] = dict(values[3], **{f"sensors.noise_std.{c}": 0.0
                                    for c in ("theta_w", "theta_b", "dtheta_w", "dtheta_b")})
     loops = [P.closed_loop(v, duration=2.0) for v in values]
-    batch = simulate_batch(loops, WINDOW, record=True)
-    for i, (b, lp) in enumerate(zip(batch.trajectories, loops)):
-        s = simulate(lp)
-        assert len(b) == len(s)
-        for c in COLUMNS:
-            np.testing.assert_allclose(b[c], s[c], rtol=0, atol=1e-9, err_msg=f"scenario {i}, {c}")
+    assert_batch_equals_scalar(loops, WINDOW)
 
 
 def test_the_batch_math_namespace_computes_each_angle_once_and_never_goes_stale(monkeypatch):

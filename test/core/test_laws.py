@@ -9,14 +9,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mathfixtures import NOM, P_FILE, PAPER_GAINS, RNG, random_state
+from mathfixtures import NOM, P_FILE, PAPER_GAINS, RNG, assert_batch_equals_scalar, random_state
 from mwip_ros import params as P
 from mwip_ros.core import laws
-from mwip_ros.core.batch import simulate_batch
 from mwip_ros.core.controller import DscController
 from mwip_ros.core.lqr import LqrController, lqr_gain
 from mwip_ros.core.sim import LAWS, law_name, simulate
-from mwip_ros.core.trajectory import COLUMNS
 from mwip_ros.msgs import layouts as L
 
 import trivial_law  # noqa: E402  registers 'trivial' and 'trivial_ndo', as a plug-in module would
@@ -100,12 +98,8 @@ def test_a_law_added_by_a_test_runs_offline():
 
 def test_a_law_added_by_a_test_runs_in_a_batch_equal_to_the_scalar_loop():
     loops = [P.closed_loop(_trivial(i), law="trivial", use_observer=bool(i % 2), duration=2.0) for i in range(5)]
-    batch = simulate_batch(loops, (1.0, 2.0), record=True)
-    for i, (b, lp) in enumerate(zip(batch.trajectories, loops)):
-        s = simulate(lp)
-        assert b.label == s.label == ("trivial_ndo" if i % 2 else "trivial") and len(b) == len(s)
-        for c in COLUMNS:
-            np.testing.assert_allclose(b[c], s[c], rtol=0, atol=1e-9, err_msg=f"scenario {i}, {c}")
+    batch, _ = assert_batch_equals_scalar(loops, (1.0, 2.0))
+    assert [b.label for b in batch.trajectories] == ["trivial_ndo" if i % 2 else "trivial" for i in range(5)]
 
 
 def _with_plugin():
