@@ -14,6 +14,7 @@ scenario starting at most that far from upright recovered.
 from __future__ import annotations
 
 import csv
+import io
 import json
 import math
 from pathlib import Path
@@ -58,12 +59,17 @@ class ResultsWriter:
         self.rows = 0
 
     def add(self, chunk, result, scenarios) -> None:
+        """The chunk's rows in one write: a Ctrl-C or SIGTERM (raised between Python statements) lands before
+        or after it, so the file holds whole chunks only."""
+        text = io.StringIO()
+        w = csv.writer(text)
         for j in range(len(chunk)):
             i = chunk.first + j
             row = [i, scenarios.seeds[i], chunk.controller, *(scenarios.values[k][i] for k in self.varied),
                    bool(result.upright[j]), float(result.t_fall[j]),
                    *(float(result.metrics[m][j]) for m in METRICS.values())]
-            self._w.writerow([_fmt(v) for v in row])
+            w.writerow([_fmt(v) for v in row])
+        self._f.write(text.getvalue())
         self._f.flush()
         self.rows += len(chunk)
 
