@@ -234,13 +234,13 @@ def run_lockstep(workdir: Path, use_observer: bool, *plant_args: str, timeout: f
     """Observer, controller and plant (lockstep) as three processes; returns (plant exit, csv path, graph logs).
 
     The plant writes ``graph.csv``, the observer its estimates to ``estimates.csv`` beside it."""
+    from mwip_ros.nodes.lockstep import CHAIN   # the answering stages the plant's driver waits for (core.loop)
     csv_path = workdir / "graph.csv"
+    args = {"disturbance_observer": ("-p", f"csv:={workdir / 'estimates.csv'}"),
+            "dscndo_controller": ("-p", f"use_observer:={'true' if use_observer else 'false'}", "-p", f"law:={law}")}
     with Graph(workdir) as g:
-        obs = g.start("disturbance_observer", "-p", "use_sim_time:=true", "-p", f"csv:={workdir / 'estimates.csv'}",
-                      params=params)
-        ctl = g.start("dscndo_controller", "-p", "use_sim_time:=true", "-p",
-                      f"use_observer:={'true' if use_observer else 'false'}", "-p", f"law:={law}", params=params)
+        procs = [g.start(a.node, "-p", "use_sim_time:=true", *args.get(a.node, ()), params=params) for a in CHAIN]
         plant = g.start("plant_sim", "-p", f"csv:={csv_path}", *plant_args, params=params)
         code = plant.wait(timeout)
-        logs = {p.name: p for p in (obs, ctl, plant)}
+        logs = {p.name: p for p in (*procs, plant)}
     return code, csv_path, logs

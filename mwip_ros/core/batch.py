@@ -256,12 +256,19 @@ def _simulate_numpy(loops: Sequence[ClosedLoop], window: Sequence[float], record
     with np.errstate(all="ignore"):  # a diverging scenario may overflow: it is frozen, the others go on
         for k in range(n_steps + 1):
             t = k * h
+            # the stages of core.loop.STAGES, in its order
+            # stage: sensors
             x_m, u_m = sensors.sample(x, u_prev) if sensors else (x, u_prev)   # what the loop sees
+            # stage: estimator (the identity: the measurement is a state)
+            # stage: observer
             tau_hat = obs.update(x_m, u_m)
+            # stage: law
             u_law, internals = ctrl.step(x_m, (np.where(use_obs, tau_hat[0], 0.0), np.where(use_obs, tau_hat[1], 0.0)))
+            # stage: drive
             u = np.where(limit > 0.0, np.clip(u_law, -limit, limit), u_law)
             if actuator:
                 u = actuator.apply(u)   # the torque that acts over [t_k, t_k+1)
+            # stage: plant (row k, its true tau_d and the fall check, then RK4)
             in_window = first_w <= k < first_w + n_window
             if record or in_window:   # the true tau_d is only compared inside the window
                 ddq = accel(actual, D_w, D_b, x, u, f1.at(t, np) + 0.0, f2.at(t, np) + 0.0, trig)

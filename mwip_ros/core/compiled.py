@@ -269,6 +269,8 @@ def _loop(k0, k1, n_steps, h, substeps, first_w, n_window, counts, delay, act_de
         measuring = noisy[i] or counts > 0 or delay > 0
         for k in range(k0, k1):
             t = k * h
+            # the stages of core.loop.STAGES, in its order
+            # stage: sensors
             if measuring:   # core.sensing.Sensors.sample
                 w, b, dw, db = xt
                 if noisy[i]:
@@ -285,19 +287,24 @@ def _loop(k0, k1, n_steps, h, substeps, first_w, n_window, counts, delay, act_de
             else:
                 xm = xt
                 um = up
+            # stage: estimator (the identity: the measurement is a state)
+            # stage: observer
             if k == 0:   # core.observer.DiscreteObserver.update
                 zz = z_start(c, xm[2], xm[3])
             else:
                 zz = z_next(pn, c, pv, um, zz, h)
             pv = xm
             th = tau_hat_of(c, zz, xm[2], xm[3])
+            # stage: law
             u, si, _ = law_step(Pi, pn, h, xm, si, k == 0)
             if observer_law and use_obs[i]:   # core.laws.ndo.WithObserver.step
                 u = u - u_taud_of(pn, pn.m12 * math.cos(xm[1]), th)
+            # stage: drive
             u = saturate(u, limit[i])
             if act_delay > 0:   # core.sensing.Actuator.apply
                 qa[i, k % (act_delay + 1)] = u
                 u = qa[i, (k - act_delay) % (act_delay + 1)] if k >= act_delay else 0.0
+            # stage: plant (row k's true tau_d in the window, the fall check, then RK4)
             # D_w of this period from its own draw z, as core.plant.PlantSim._draw_D_w
             D_w = D_w_of(D_w_mean[i], D_w_sd[i], Nw[i, k - k0]) if D_w_random[i] else D_w_mean[i]
             if shared:

@@ -10,14 +10,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Optional, Tuple
+from typing import Dict, Optional, Protocol, Tuple, runtime_checkable
 
 import numpy as np
 
 from .model import PhysicalParams, Sinusoid, State, accel, lumped_disturbance
 from .sensing import NOISE_BLOCK, SensingConfig
 
-__all__ = ["PlantConfig", "PlantSim", "stage_torques", "rk4_period", "saturate", "D_w_of"]
+__all__ = ["Plant", "PLANTS", "make_plant", "PlantConfig", "PlantSim", "RK4Plant", "stage_torques", "rk4_period",
+           "saturate", "D_w_of"]
 
 
 @dataclass(frozen=True)
@@ -50,6 +51,29 @@ def saturate(u: float, limit: float) -> float:
     if limit > 0.0:
         return max(-limit, min(limit, u))
     return u
+
+
+@runtime_checkable
+class Plant(Protocol):
+    """What a runner needs of a plant (the offline loop, the ``plant_sim`` node's lockstep and realtime runners):
+    the true state at t_k = k h, the torque that acted over the previous period, one period's integration, and the
+    true lumped disturbance.  :class:`PlantSim` (RK4 of eq. 1) implements it; another backend (a physics engine)
+    is one more class in :data:`PLANTS`."""
+
+    cfg: PlantConfig
+    k: int
+    x: State
+    u_prev: float
+
+    @property
+    def t(self) -> float: ...
+
+    @property
+    def fallen(self) -> bool: ...
+
+    def step(self, u: float, extra=(0.0, 0.0)) -> None: ...
+
+    def lumped_disturbance(self, u: float, extra=(0.0, 0.0)) -> Tuple[float, float]: ...
 
 
 @dataclass
@@ -147,3 +171,16 @@ def rk4_period(p: PhysicalParams, D_w, D_b, tau1, tau2, x, u, h: float, n: int, 
         dw = dw + sixth * (a1w + 2 * a2w + 2 * a3w + a4w)
         db = db + sixth * (a1b + 2 * a2b + 2 * a3b + a4b)
     return w, b, dw, db
+
+
+RK4Plant = PlantSim
+PLANTS: Dict[str, type] = {"rk4": PlantSim}   # backend name -> class implementing :class:`Plant`
+
+
+def make_plant(cfg: PlantConfig, backend: str = "rk4") -> Plant:
+    """A fresh plant at the initial state of ``cfg`` (``backend``: a key of :data:`PLANTS`)."""
+    try:
+        cls = PLANTS[backend]
+    except KeyError:
+        raise ValueError(f"unknown plant backend {backend!r}; known: {', '.join(sorted(PLANTS))}") from None
+    return cls(cfg)

@@ -3,9 +3,10 @@
 Row k of the result is the state at t_k, the command u_k computed from it, the estimate
 tau_hat_k and the true lumped disturbance at t_k (:mod:`.trajectory`).  With sensing or
 actuation options on (:mod:`.sensing`), the observer and the law see the measurement, the
-table holds the true state and the torque that acted.  The ``plant_sim``,
-``disturbance_observer`` and ``dscndo_controller`` nodes call the same classes in the same
-order, so a lockstep graph reproduces these numbers.
+table holds the true state and the torque that acted.  A period is :class:`.loop.Period`: the
+stages of :data:`.loop.STAGES` in their order; the ``plant_sim`` node runs the plant's stages
+with the same :class:`.loop.PlantSide` and the ``disturbance_observer`` and ``dscndo_controller``
+nodes the others, so a lockstep graph reproduces these numbers.
 """
 from __future__ import annotations
 
@@ -14,9 +15,9 @@ from dataclasses import dataclass
 from typing import Any, Callable, Optional, Tuple
 
 from . import laws
+from .loop import Period, PlantSide
 from .observer import DiscreteObserver, gain_matrix
-from .plant import PlantConfig, PlantSim, saturate
-from .sensing import Actuator, Sensors
+from .plant import PlantConfig
 from .trajectory import Trajectory, TrajectoryTable
 
 __all__ = ["ClosedLoop", "simulate", "LAWS", "law_name"]
@@ -79,30 +80,18 @@ def simulate(loop: ClosedLoop, label: str = "", progress: Optional[Callable[[flo
     pc = loop.plant
     h = pc.h
     n_steps = int(round(loop.duration_s / h))
-    plant = PlantSim(pc)
-    obs = DiscreteObserver(pc.nominal, gain_matrix(loop.X), h)
-    ctrl = loop.law_class(loop.params, pc.nominal, h)
-    table = TrajectoryTable(internals=True)
-    sc = pc.sensing
-    sensors = Sensors.for_plant(sc, pc.seed) if sc.measuring else None
-    actuator = Actuator(sc.actuator_delay_periods) if sc.actuator_delay_periods else None
+    period = Period(PlantSide(pc), DiscreteObserver(pc.nominal, gain_matrix(loop.X), h),
+                    loop.law_class(loop.params, pc.nominal, h))   # the stages of core.loop, in its order
+    table = TrajectoryTable(internals=True)   # the true state: the table and the metrics judge it
     fallen = False
     every = max(1, n_steps // 10)
     for k in range(n_steps + 1):
-        x = plant.x                      # the true state: the table and the metrics judge it
-        x_m, u_m = sensors.sample(x, plant.u_prev) if sensors else (x, plant.u_prev)   # what the loop sees
-        tau_hat = obs.update(x_m, u_m)
-        u_law, internals = ctrl.step(x_m, tau_hat)
-        u = saturate(u_law, pc.torque_limit)
-        if actuator:
-            u = actuator.apply(u)        # the torque that acts over [t_k, t_k+1)
-        table.append(plant.t, x, u, tau_hat, plant.lumped_disturbance(u), internals)
-        if plant.fallen:
+        if period.run(table):
             fallen = True
             break
         if k == n_steps:
             break
-        plant.step(u)
+        period.advance()
         if progress is not None and k % every == 0:
             progress(k / n_steps)
     return table.trajectory(label or loop.name, fallen, h)

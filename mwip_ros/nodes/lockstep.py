@@ -25,18 +25,26 @@ states the way the plant drives them with simulated ones.
    answers a repeated stamp again and the controller answers each stamp once, so a
    resend is harmless).  After ``timeout_s`` without an answer the step has failed; the
    text names the node that is missing.  A node that died keeps its place in the graph for
-   a while, so from the first resend on the driver also listens to ``disturbance_estimate``:
-   the observer answers a resent state again, and if it does not, it is the one to name.
+   a while, so from the first resend on the driver also listens to the chain's intermediate
+   answers (``disturbance_estimate``): the observer answers a resent state again, and if it does
+   not, it is the one to name.
+
+The chain is data (``answers``, :func:`mwip_ros.core.loop.answering`, from
+:data:`mwip_ros.core.loop.STAGES`): the nodes that answer a state, in order, and the topic each
+answers on.  The plant, the re-simulation and the tests' graph wait all use it.
 """
 from __future__ import annotations
 
 import time
 from typing import Optional, Sequence, Tuple
 
-from mwip_ros.msgs import BadMessage
-from mwip_ros.msgs.layouts import encode_clock, parse_wrench
+from mwip_ros.core.loop import Answer, answering
+from mwip_ros.msgs.cdr import peek_stamp
+from mwip_ros.msgs.layouts import encode_clock
 
-__all__ = ["LockstepDriver", "RESEND_S", "graph_missing"]
+__all__ = ["LockstepDriver", "RESEND_S", "graph_missing", "CHAIN"]
+
+CHAIN = answering()   # the answering stages of today's loop: the observer, then the law (core.loop.STAGES)
 
 RESEND_S = 0.5          # resend a state nobody answered after this long [s]
 WAIT_GRACE_S = 2.0      # discovery takes a moment: until then a wait for the graph is the normal start
@@ -45,37 +53,41 @@ COMPLETE_WAIT_S = 3.0   # once the required nodes are there, wait at most this l
 NOT_FOUND_HINT = "started? same ROS_DOMAIN_ID?"
 
 
-def _graph_gaps(node, state_pub, need_subs: int) -> list:
-    """What the graph lacks: [(what, why, is a node)]."""
+def _graph_gaps(node, state_pub, need_subs: int, answers: Sequence[Answer]) -> list:
+    """What the graph lacks: [(what, why, is a node)], the answer that ends a period (the command) first."""
     gaps = []
-    if node.count_publishers("wheel_torque_cmd") == 0:
-        gaps.append(("dscndo_controller", "nothing publishes wheel_torque_cmd", True))
-    if node.count_publishers("disturbance_estimate") == 0:
-        gaps.append(("disturbance_observer", "nothing publishes disturbance_estimate; the controller waits for "
-                                             "it when use_observer is true", True))
+    last = answers[-1].topic if answers else None
+    for a in reversed(answers):
+        if node.count_publishers(a.topic) == 0:
+            gaps.append((a.node, f"nothing publishes {a.topic}" + (f"; {a.why}" if a.why and a.topic != last else ""),
+                         True))
     matched = state_pub.get_subscription_count()
     if matched < need_subs:
-        gaps.append((f"{need_subs} subscribers on joint_states", f"matched: {matched}", False))
+        gaps.append((f"{need_subs} subscribers on {state_pub.topic_name.lstrip('/')}", f"matched: {matched}", False))
     return gaps
 
 
-def graph_missing(node, state_pub, need_subs: int) -> list:
+def graph_missing(node, state_pub, need_subs: int, answers: Sequence[Answer] = CHAIN) -> list:
     """What a lockstep driver is waiting for, in words naming the nodes."""
-    return [f"{what} ({why})" for what, why, _ in _graph_gaps(node, state_pub, need_subs)]
+    return [f"{what} ({why})" for what, why, _ in _graph_gaps(node, state_pub, need_subs, answers)]
 
 
 class LockstepDriver:
     """Graph wait, one state in flight, resend and timeout, for a node that publishes states.
 
-    ``needed`` are further subscriptions of the caller whose topics must have a publisher
-    before the start (e.g. ``controller_internals`` for a re-simulation); ``idle_hint`` is
-    what to say when the graph is complete but no answer comes.
+    ``answers`` are the answering stages of the chain, in order (:func:`mwip_ros.core.loop.answering`):
+    each names its node and the topic it answers on, the last one the command ``cmd_sub`` reads.  An
+    extra answering node (a state estimator) is one more entry, not new code here.  ``needed`` are
+    further subscriptions of the caller whose topics must have a publisher before the start (e.g.
+    ``controller_internals`` for a re-simulation); ``idle_hint`` is what to say when the graph is
+    complete but no answer comes.
     """
 
     def __init__(self, node, state_pub, clock_pub, cmd_sub, *, need_subs: int, timeout_s: float,
                  timeout_param: str, settle_s: float = 0.0, needed: Sequence = (), idle_hint: str = "",
-                 also_published: Sequence = ()):
+                 also_published: Sequence = (), answers: Sequence[Answer] = CHAIN):
         self.node = node
+        self.answers = tuple(answers)
         self.state_pub, self.clock_pub, self.cmd_sub = state_pub, clock_pub, cmd_sub
         self.own_pubs = [p for p in (state_pub, clock_pub, *also_published) if p is not None]
         self.need_subs = need_subs
@@ -92,8 +104,8 @@ class LockstepDriver:
         self._signature = None                             # the discovered graph, to see it settle
         self._stable_since = 0.0
         self._last_wait_log = 0.0
-        self._estimate_sub = None                          # created at the first resend
-        self._last_estimate: Optional[int] = None          # stamp of the newest estimate heard since
+        self._listening = None                             # subscriptions to the intermediate answers (1st resend)
+        self._heard: dict = {}                             # answer topic -> stamp of its newest message heard since
 
     # --- the graph -----------------------------------------------------------------------------
     def ready(self) -> bool:
@@ -115,31 +127,36 @@ class LockstepDriver:
                 tuple((self.node.count_subscribers(p.topic_name), p.get_subscription_count()) for p in self.own_pubs))
 
     def missing(self) -> str:
-        what = graph_missing(self.node, self.state_pub, self.need_subs)
+        what = graph_missing(self.node, self.state_pub, self.need_subs, self.answers)
         what += [f"{t}: {m} of {n} discovered subscribers matched" for t, m, n in self.unmatched()]
-        if self.awaiting is not None and self._estimate_sub is not None and not any("observer" in w for w in what):
+        if self.awaiting is not None and self._listening is not None:
             k, stamp = self.awaiting
-            if self._last_estimate is None or self._last_estimate < stamp:
-                heard = ("none since" if self._last_estimate is None
-                         else f"the last for t = {self._last_estimate * 1e-9:.3f} s, before")
-                what.append(f"disturbance_observer (it did not answer state k = {k}: no disturbance_estimate "
-                            f"for it, {heard} the state was resent; stopped, or killed?)")
+            for a in self.answers[:-1]:   # the first stage of the chain that did not answer the resent state
+                if any(a.node in w for w in what):
+                    break
+                heard = self._heard.get(a.topic)
+                if heard is None or heard < stamp:
+                    said = "none since" if heard is None else f"the last for t = {heard * 1e-9:.3f} s, before"
+                    what.append(f"{a.node} (it did not answer state k = {k}: no {a.topic} for it, {said} the "
+                                f"state was resent; stopped, or killed?)")
+                    break
         return "; ".join(what) or self.idle_hint
 
-    def _listen_to_observer(self) -> None:
-        from geometry_msgs.msg import WrenchStamped
+    def _listen_to_answers(self) -> None:
+        """Hear the chain's intermediate answers (the observer's estimate, ...): a node that died keeps its place
+        in the graph for a while, so this is how the driver learns which one stopped answering."""
         from mwip_ros.msgs.qos import INPUT_QOS
+        from mwip_ros.msgs.topics import graph_type, msg_class
 
-        def on_estimate(data) -> None:
-            try:
-                stamp = parse_wrench(data)[0]
-            except BadMessage:
-                return
-            if self._last_estimate is None or stamp > self._last_estimate:
-                self._last_estimate = stamp
+        def on_answer(topic):
+            def heard(data) -> None:
+                stamp = peek_stamp(data)
+                if stamp is not None and (self._heard.get(topic) is None or stamp > self._heard[topic]):
+                    self._heard[topic] = stamp
+            return heard
 
-        self._estimate_sub = self.node.create_subscription(WrenchStamped, "disturbance_estimate", on_estimate,
-                                                           INPUT_QOS, raw=True)
+        self._listening = [self.node.create_subscription(msg_class(graph_type(a.topic)), a.topic, on_answer(a.topic),
+                                                         INPUT_QOS, raw=True) for a in self.answers[:-1]]
 
     def wait_for_graph(self) -> Optional[bool]:
         """True once the graph is ready, complete and settled; False when ``timeout_s`` passed; else None."""
@@ -172,7 +189,7 @@ class LockstepDriver:
 
     def waiting_text(self) -> str:
         """The progress line of a wait for the graph: what is still missing, in short (the timeout says why)."""
-        gaps = _graph_gaps(self.node, self.state_pub, self.need_subs)
+        gaps = _graph_gaps(self.node, self.state_pub, self.need_subs, self.answers)
         nodes = [what for what, _, is_node in gaps if is_node]
         parts = [f"{', '.join(nodes)} ({NOT_FOUND_HINT})"] if nodes else []
         parts += [f"{what} ({why})" for what, why, is_node in gaps if not is_node]
@@ -214,7 +231,7 @@ class LockstepDriver:
                     f"within {self.timeout_param} = {self.timeout_s:g} s; missing: {self.missing()}")
         if now - self.resent_at > RESEND_S:
             self.resent_at = now
-            if self._estimate_sub is None:
-                self._listen_to_observer()
+            if self._listening is None:
+                self._listen_to_answers()
             self._publish()
         return None

@@ -38,7 +38,6 @@ import json
 import math
 import sys
 import time
-from array import array
 from typing import Optional
 
 import numpy as np
@@ -51,8 +50,7 @@ from std_msgs.msg import Float64
 from std_srvs.srv import Trigger
 
 from mwip_ros.core import metrics
-from mwip_ros.core.plant import PlantSim, saturate
-from mwip_ros.core.sensing import Actuator, Sensors
+from mwip_ros.core.loop import PlantSide
 from mwip_ros.core.trajectory import TrajectoryTable
 from mwip_ros.msgs import BadMessage
 from mwip_ros.msgs import layouts as L
@@ -61,6 +59,7 @@ from mwip_ros.nodes.diagnostics import ERROR, OK, WARN
 from mwip_ros.nodes.guards import PublisherWatch, Rejects
 from mwip_ros.nodes.lockstep import LockstepDriver
 from mwip_ros.nodes.params import declare
+from mwip_ros.nodes.plant_runners import RUNNERS
 from mwip_ros.nodes.runtime import EXIT_ERROR, EXIT_FALLEN, GracefulNodeMixin, run_node
 from mwip_ros.params import plant_config
 from mwip_ros.runs import write_csv
@@ -70,6 +69,9 @@ SETTLE_S = 0.3  # the discovered graph must be unchanged this long before the fi
 
 
 class PlantSimNode(Node, GracefulNodeMixin):
+    """The plant's stages (:class:`~mwip_ros.core.loop.PlantSide`) as a node; its mode is a runner
+    (:mod:`.plant_runners`: lockstep or realtime), which decides when a period is finished."""
+
     def __init__(self, context=None, argv=()):
         super().__init__(NAME, context=context)
         self.v = declare(self, NAME, argv)
@@ -91,29 +93,26 @@ class PlantSimNode(Node, GracefulNodeMixin):
         self.started = False
         self.t_wall0 = None
         self.last_progress = time.monotonic()
-        # realtime bookkeeping
-        self.cmd: Optional[float] = None
-        self.cmd_at = 0.0
-        self.tick_times = array("d")
-        self.stale = 0
-        self.missed = 0
+        runner = RUNNERS[self.mode]
 
         pub_qos, in_qos = qos_for(self.mode)   # msgs.qos: lockstep loses nothing, realtime keeps the newest
         self.state_pub = self.create_publisher(JointState, "joint_states", pub_qos)
         # with sensing or actuation options on, joint_states is the measurement: the truth goes here
         self.true_pub = self.create_publisher(JointState, "true_joint_states", pub_qos) if sc.active else None
         self.truth_pub = self.create_publisher(WrenchStamped, "lumped_disturbance", pub_qos)
-        self.clock_pub = self.create_publisher(Clock, "/clock", pub_qos) if self.mode == "lockstep" else None
+        self.clock_pub = self.create_publisher(Clock, "/clock", pub_qos) if runner.publishes_clock else None
         cmd_sub = self.create_subscription(Float64, "wheel_torque_cmd", self._on_cmd, in_qos, raw=True)
         self.create_subscription(Wrench, "external_wrench", self._on_wrench, INPUT_QOS, raw=True)
         self.create_service(Trigger, "~/reset", self._on_reset, qos_profile=SERVICE_QOS)
         # one graph, one controller: a second publisher of commands or states means mixed streams
         self.watch = PublisherWatch(self, ["wheel_torque_cmd", "joint_states"])
+        # both runners wait for the graph of core.loop.STAGES' answering stages (lockstep also steps with it)
         self.lockstep = LockstepDriver(
             self, self.state_pub, self.clock_pub, cmd_sub, need_subs=self.v["expected_subscribers"],
             timeout_s=self.v["lockstep_timeout_s"], timeout_param="lockstep_timeout_s", settle_s=SETTLE_S,
             idle_hint="a wheel_torque_cmd (the controller is running but did not answer)",
             also_published=tuple(p for p in (self.truth_pub, self.true_pub) if p is not None))
+        self.runner = runner(self)
         dur = f"{self.v['duration_s']:g} s" if self.n_steps is not None else "until stopped"
         self.get_logger().info(f"{self.mode} plant: h = {self.h * 1e3:.3f} ms, {self.cfg.substeps} RK4 sub-steps, "
                                f"{dur}, seed {self.cfg.seed}")
@@ -122,6 +121,10 @@ class PlantSimNode(Node, GracefulNodeMixin):
                 f"sensing: noise std {list(sc.noise_std)} (theta_w, theta_b, theta_w', theta_b'), encoder "
                 f"{sc.encoder_counts_per_rev or 'ideal'} counts/rev, measurement delay {sc.delay_periods}, actuator "
                 f"delay {sc.actuator_delay_periods} period(s); the true state is on true_joint_states")
+
+    @property
+    def plant(self):
+        return self.side.plant
 
     # --- inputs ---------------------------------------------------------------------------
     def _on_wrench(self, data: bytes) -> None:
@@ -148,17 +151,13 @@ class PlantSimNode(Node, GracefulNodeMixin):
             response.message = f"a reset is already pending (#{self.resets + 1}); this call joins it"
         else:
             self._reset_pending = True
-            when = "once the state in flight is answered" if self.mode == "lockstep" else "at the next tick"
             response.message = (f"reset #{self.resets + 1} at t = {self.plant.t:.3f} s: back to the initial state "
-                                f"{when}; stamps restart at the run's start")
+                                f"{self.runner.reset_when}; stamps restart at the run's start")
         return response
 
     def _initial_state(self) -> None:
         """The robot at its initial state, with fresh noise streams (sensors, D_w) and an empty actuator delay."""
-        sc = self.cfg.sensing
-        self.plant = PlantSim(self.cfg)
-        self.sensors = Sensors.for_plant(sc, self.cfg.seed) if sc.measuring else None
-        self.actuator = Actuator(sc.actuator_delay_periods) if sc.actuator_delay_periods else None
+        self.side = PlantSide(self.cfg)
 
     def _reset(self) -> str:
         dropped, t = len(self.table), self.plant.t
@@ -178,39 +177,27 @@ class PlantSimNode(Node, GracefulNodeMixin):
         except BadMessage as exc:
             self.rejects("wheel_torque_cmd", str(exc))
             return
-        if self.mode == "realtime":
-            self.cmd, self.cmd_at = u, time.monotonic()
-            return
-        if not self.lockstep.take_answer():
-            self.rejects("wheel_torque_cmd", "command while no state is waiting for one")
-            return
-        if self._reset_pending:   # pending only from k >= 1 on: the new state 0 goes back below the answered stamp
-            self._reset()
-            self._send()
-        elif not self._finish_period(saturate(u, self.cfg.torque_limit)):
-            self._send()
+        self.runner.on_command(u)
 
-    # --- the step shared by both modes -------------------------------------------------------
+    # --- the plant's stages, the same for both runners ------------------------------------------
     def _stamp(self, k: Optional[int] = None) -> int:
         """The stamp of state ``k`` (default: the current one) [ns]."""
         return self.stamp0 + (self.plant.k if k is None else k) * self.period_ns
 
     def _state_bytes(self) -> bytes:
-        """State k as published: the measurement (core.sensing), once per step; the truth beside it when
-        sensing or actuation options are on."""
+        """State k as published (stage ``sensors``): the measurement (core.sensing), once per step; the truth
+        beside it when sensing or actuation options are on."""
         p = self.plant
         if self.true_pub is not None:
             self.true_pub.publish(L.encode_state(self._stamp(), p.x, p.u_prev))
-        x, u_prev = self.sensors.sample(p.x, p.u_prev) if self.sensors else (p.x, p.u_prev)
+        x, u_prev = self.side.sense()
         return L.encode_state(self._stamp(), x, u_prev)
 
-    def _finish_period(self, u: float) -> bool:
-        """Record row k with u_k (as it acts: after the actuator's delay), publish tau_d at t_k; integrate
-        unless the run ends. True = ended."""
+    def _finish_period(self, u_cmd: float) -> bool:
+        """Stages ``drive`` and ``plant`` for the command answering state k: record row k with the torque that
+        acts, publish tau_d at t_k; integrate unless the run ends. True = ended."""
         p = self.plant
-        if self.actuator is not None:
-            u = self.actuator.apply(u)
-        tau_d = p.lumped_disturbance(u, self.extra)
+        u, tau_d = self.side.act(u_cmd, self.extra)
         self.truth_pub.publish(L.encode_wrench(self._stamp(), tau_d[0], tau_d[1]))
         self.table.append(p.t, p.x, u, tau_d=tau_d)
         if p.fallen:
@@ -222,7 +209,7 @@ class PlantSimNode(Node, GracefulNodeMixin):
             self.finish()
             return True
         try:
-            p.step(u, self.extra)
+            self.side.advance(u, self.extra)
             finite = all(map(math.isfinite, p.x))
         except (ArithmeticError, ValueError):  # e.g. sin of an infinite angle
             finite = False
@@ -231,45 +218,26 @@ class PlantSimNode(Node, GracefulNodeMixin):
             return True
         return False
 
-    # --- lockstep ------------------------------------------------------------------------------
-    def _send(self) -> None:
-        self.lockstep.send(self.plant.k, self._stamp(), self._state_bytes())
-
     def _start(self, why: str) -> None:
         self.started = True
         self.t_wall0 = time.monotonic()
         self.get_logger().info(f"{why}; starting {self.mode} run")
-        if self.mode == "realtime":
-            self.stamp0 = self.get_clock().now().nanoseconds
-            self.create_timer(self.h, self._tick)
-        else:
-            self._send()
+        self.runner.start()
 
     def spin_step(self, executor) -> None:
         if not self.started:
             ready = self.lockstep.wait_for_graph()
             if ready:
                 self._start("graph matched")
-            elif ready is False:  # both modes wait for the graph; lockstep cannot run without it
-                if self.mode == "lockstep":
-                    self.finish(EXIT_ERROR, "lockstep timeout: " + self.lockstep.graph_timeout_text())
-                else:
-                    self.get_logger().warning(f"graph not ready after {self.lockstep.timeout_s:g} s (missing: "
-                                              f"{self.lockstep.missing()}); starting the realtime run anyway")
-                    self._start("realtime without the whole graph")
+            elif ready is False:  # both runners wait for the graph; what a timeout means is theirs
+                self.runner.graph_timed_out()
             executor.spin_once(timeout_sec=0.02)
             return
         executor.spin_once(timeout_sec=0.05)
         self._progress()
         crowded = self.watch.check()
-        if self.mode == "lockstep" and not self.done:
-            failure = self.lockstep.check()
-            if crowded:
-                failure = ("lockstep refuses mixed streams: " + "; ".join(
-                    f"{len(names)} publishers on {topic} ({', '.join(names)})" for topic, names in crowded.items())
-                    + "; run each graph in its own ROS_DOMAIN_ID or namespace")
-            if failure:
-                self.finish(EXIT_ERROR, failure)
+        if not self.done:
+            self.runner.watch(crowded)
 
     def _progress(self) -> None:
         now = time.monotonic()
@@ -281,30 +249,6 @@ class PlantSimNode(Node, GracefulNodeMixin):
                                f"{self.plant.k / max(now - self.t_wall0, 1e-9):.0f} steps/s, "
                                f"theta_b = {self.plant.x[1]:+.4f} rad")
 
-    # --- realtime ------------------------------------------------------------------------------
-    def _tick(self) -> None:
-        now = time.monotonic()
-        if self.tick_times:
-            if now - self.tick_times[-1] > 1.5 * self.h:
-                self.missed += 1
-        else:
-            self.t_wall0 = now
-        self.tick_times.append(now)
-        if self.done:
-            return
-        if self._reset_pending:   # a period boundary: the new run's state 0 instead of the next state
-            self._reset()
-        elif len(self.tick_times) > 1:  # finish the period of the state published at the last tick
-            u = self.cmd
-            if u is None or now - self.cmd_at > self.v["stale_command_periods"] * self.h:
-                self.stale += 1
-                if self.stale <= 3 or self.stale % 200 == 0:
-                    self.get_logger().warning(f"no fresh wheel_torque_cmd (#{self.stale}); applying zero torque")
-                u = 0.0
-            if self._finish_period(saturate(u, self.cfg.torque_limit)):
-                return
-        self.state_pub.publish(self._state_bytes())
-
     # --- health (nodes.diagnostics) -------------------------------------------------------------
     def diagnostic_count(self) -> int:
         return self.plant.k
@@ -312,20 +256,17 @@ class PlantSimNode(Node, GracefulNodeMixin):
     def diagnostic_status(self):
         p = self.plant
         values = {"mode": self.mode, "t_sim_s": f"{p.t:.3f}", "theta_b_rad": f"{p.x[1]:+.5f}"}
-        if self.mode == "realtime" and len(self.tick_times) > 2:
-            per = np.diff(self.tick_times[-400:]) * 1e3
-            values.update({"loop_period_p99_ms": f"{np.percentile(per, 99):.3f}", "missed_deadlines": self.missed,
-                           "stale_commands": self.stale})
+        values.update(self.runner.diagnostic_values())
         if self.fallen:
             return ERROR, f"FALLEN at t = {p.t:.3f} s", values
         if not self.started:
             return WARN, f"waiting for the graph (missing: {self.lockstep.missing()})", values
-        if self.mode == "lockstep" and self.lockstep.awaiting is not None and \
-                time.monotonic() - self.lockstep.sent_at > 1.0:
-            return ERROR, f"no answer for over a second (missing: {self.lockstep.missing()})", values
+        problem = self.runner.diagnostic_problem()
+        if problem:
+            return ERROR, problem, values
         return OK, f"{self.mode} run at t = {p.t:.2f} s", values
 
-    # --- end of run --------------------------------------------------------------------------------
+    # --- end of run: the one report of both runners -------------------------------------------------
     def on_shutdown(self) -> None:
         log = self.get_logger()
         if self.stop_signal is not None and self.n_steps is not None and not self.done:
@@ -343,8 +284,7 @@ class PlantSimNode(Node, GracefulNodeMixin):
         if n:
             log.info(f"{self.mode} run: {n} periods, {self.table.last('t'):.3f} s simulated in {wall:.2f} s wall "
                      f"({n / max(wall, 1e-9):.0f} steps/s); {'FALLEN' if self.fallen else 'upright'}")
-        if self.mode == "realtime" and len(self.tick_times) > 2:
-            summary["realtime"] = self._realtime_summary()
+        summary.update(self.runner.summary())
         log.info(f"rejected messages: {self.rejects.summary()}")
         if n:
             run = self.table.trajectory(NAME, self.fallen, self.h)
@@ -364,20 +304,6 @@ class PlantSimNode(Node, GracefulNodeMixin):
             with open(self.v["summary_json"], "w") as f:
                 json.dump(_jsonable(summary), f, indent=1, allow_nan=False)
             log.info(f"wrote {self.v['summary_json']}")
-
-    def _realtime_summary(self) -> dict:
-        per = np.diff(self.tick_times) * 1e3
-        rt = {"period_ms_p50": float(np.percentile(per, 50)), "period_ms_p99": float(np.percentile(per, 99)),
-              "period_ms_max": float(per.max()), "ticks": len(self.tick_times),
-              "period_max_at_s": float(np.argmax(per) + 1) * self.h,  # sim time of the tick that ended it
-              "missed_deadlines": self.missed, "stale_command_substitutions": self.stale,
-              "missed_at_s": [round(float(i + 1) * self.h, 6)  # sim time of the ticks that came late (first 50)
-                              for i in np.flatnonzero(per > 1.5 * self.h * 1e3)[:50]]}
-        self.get_logger().info(
-            f"realtime: loop period p50 = {rt['period_ms_p50']:.3f} ms, p99 = {rt['period_ms_p99']:.3f} ms, "
-            f"max = {rt['period_ms_max']:.3f} ms (nominal {self.h * 1e3:g} ms); missed deadlines = "
-            f"{self.missed}; stale-command substitutions = {self.stale}")
-        return rt
 
 
 def _jsonable(x):

@@ -39,7 +39,7 @@ from mwip_ros.msgs.qos import GRAPH_QOS, INPUT_QOS
 from mwip_ros.msgs.topics import leaf
 from mwip_ros.nodes.comparison import Stat, compare_stamped, diff
 from mwip_ros.nodes.guards import Rejects
-from mwip_ros.nodes.lockstep import LockstepDriver
+from mwip_ros.nodes.lockstep import CHAIN, LockstepDriver
 from mwip_ros.nodes.runtime import EXIT_ERROR, EXIT_OK
 from mwip_ros.params import ParamError
 
@@ -49,7 +49,7 @@ EXIT_DIFFERENT = 4          # outputs differ from the recording
 COLLECT_IDLE_S = 1.0        # after the last command, wait this long without news for stragglers
 COLLECT_MAX_S = 5.0
 OUTPUTS = ("wheel_torque_cmd", "disturbance_estimate", "controller_internals")
-LOOP_NODES = ("disturbance_observer", "dscndo_controller")   # whose recorded parameter changes resim applies
+LOOP_NODES = tuple(a.node for a in CHAIN)   # the answering nodes (core.loop.STAGES): their recorded changes apply
 
 
 def _estimate(data) -> Tuple[int, Dict[str, float]]:

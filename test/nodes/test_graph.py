@@ -13,6 +13,7 @@ import pytest
 from graphproc import PARAMS, Graph, run_lockstep
 from injector import Injector, health, plant_rejected, publish_until_rejected
 from mwip_ros import params as P
+from mwip_ros.core import laws
 from mwip_ros.core.sim import simulate
 from mwip_ros.runs import load_run, read_csv
 
@@ -21,7 +22,7 @@ pytestmark = pytest.mark.graph
 COLUMNS = ["t", "theta_w", "theta_b", "dtheta_w", "dtheta_b", "u", "tau_hat1", "tau_hat2", "tau_d1", "tau_d2"]
 
 
-@pytest.mark.parametrize("controller", ["dsc", "dscndo", "lqr", "lqr_ndo"])
+@pytest.mark.parametrize("controller", laws.names())   # every law the package registers
 def test_lockstep_graph_equals_offline_simulator(tmp_path, controller):
     from mwip_ros.core.sim import LAWS
     law, use_obs = LAWS[controller]

@@ -1,0 +1,158 @@
+"""One closed-loop period: its ordered stages, who runs each, and the offline loop that runs them all.
+
+The discrete-time contract (docs/theory.md, section 4) orders one control period k as
+
+1. ``sensors``   what the robot measures of state k (:mod:`.sensing`: the state, noisy, quantized,
+   delayed), with the torque that acted over period k - 1;
+2. ``estimator`` the state the loop believes, from the measurement (today the measurement *is* a
+   state: the stage passes it on; the raw IMU and encoder need a ``state_estimator`` here);
+3. ``observer``  tau_hat_k from the measured state and the reported torque (eq. 12-13, :mod:`.observer`);
+4. ``law``       u_k from the measured state and tau_hat_k (:mod:`.laws`);
+5. ``drive``     the torque limit and the actuator delay: the torque that acts over [t_k, t_{k+1});
+6. ``plant``     integrate to t_{k+1} (:mod:`.plant`), after recording row k and its true tau_d.
+
+:data:`STAGES` is that order, written once, with the graph node that runs each stage and the
+topics it answers on.  Everything that runs a period takes it from here:
+
+* the offline loop (:func:`.sim.simulate`, through :class:`Period`) and the ``plant_sim`` node share
+  :class:`PlantSide` (stages 1, 5 and 6: the plant with its sensors and drive); the offline loop runs
+  stages 2 to 4 itself (:meth:`Period.decide`), the graph in the nodes :data:`STAGES` names;
+* the lockstep driver is told the answering stages (:func:`answering`): the nodes that must be
+  there, the topic each answers on, the node to name when an answer is missing; re-simulation
+  and the graph tests wait on the same description;
+* the batch simulator runs the same stages over arrays (:mod:`.batch`, the same classes with
+  numpy) and compiled (:mod:`.compiled`); both mark each stage with a ``# stage: NAME`` comment,
+  and a test checks that they hold every stage of :data:`STAGES` in its order, so a stage added
+  here and not there fails.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Optional, Tuple
+
+from .plant import Plant, PlantConfig, make_plant, saturate
+from .sensing import Actuator, Sensors
+
+__all__ = ["Stage", "STAGES", "STAGE_NAMES", "PLANT_NODE", "Answer", "answering", "loop_nodes", "PlantSide",
+           "Period"]
+
+PLANT_NODE = "plant_sim"
+
+
+@dataclass(frozen=True)
+class Stage:
+    """One stage of a period: its name, the graph node that runs it, what it reads and answers with there."""
+
+    name: str
+    node: str                      # the node (its executable) that runs the stage in the graph
+    inputs: Tuple[str, ...]        # topics it reads in the graph
+    output: Optional[str]          # the topic it answers with (None: it ends the period, in the plant)
+    what: str                      # one line: what the stage does
+    optional: bool = False         # True: only some configurations run it
+    waits_for: str = ""            # when the lockstep chain waits for it (words, for the wait's log)
+
+
+STAGES: Tuple[Stage, ...] = (
+    Stage("sensors", PLANT_NODE, (), "joint_states",
+          "the measurement of state k and the torque that acted over period k - 1 (core.sensing)"),
+    Stage("estimator", "state_estimator", ("joint_states",), "joint_states",
+          "the state from the measurement: the identity while the plant measures a state", optional=True),
+    Stage("observer", "disturbance_observer", ("joint_states",), "disturbance_estimate",
+          "tau_hat_k (eq. 12-13)", waits_for="the controller waits for it when use_observer is true"),
+    Stage("law", "dscndo_controller", ("joint_states", "disturbance_estimate"), "wheel_torque_cmd",
+          "u_k from the state and tau_hat_k (core.laws)"),
+    Stage("drive", PLANT_NODE, ("wheel_torque_cmd",), None,
+          "torque_limit and the actuator delay: the torque that acts over [t_k, t_k+1)"),
+    Stage("plant", PLANT_NODE, (), None, "record row k and its true tau_d, integrate to t_k+1 (RK4)"),
+)
+STAGE_NAMES = tuple(s.name for s in STAGES)
+
+
+@dataclass(frozen=True)
+class Answer:
+    """A stage another node runs in the lockstep chain: ``node`` answers each state with one message on
+    ``topic`` (the last answer of the chain is the command that ends the wait)."""
+
+    stage: str
+    node: str
+    topic: str
+    why: str = ""
+
+
+def answering(estimator: bool = False) -> Tuple[Answer, ...]:
+    """The answering stages of the lockstep chain, in order: the stages the plant does not run itself
+    (``estimator``: whether the configuration has a state estimator)."""
+    return tuple(Answer(s.name, s.node, s.output, s.waits_for) for s in STAGES
+                 if s.node != PLANT_NODE and (estimator or not s.optional))
+
+
+def loop_nodes(estimator: bool = False) -> Tuple[str, ...]:
+    """The nodes of the closed loop (plant first), each once, in the order of their first stage."""
+    out = []
+    for s in STAGES:
+        if s.node not in out and (estimator or not s.optional):
+            out.append(s.node)
+    return tuple(out)
+
+
+class PlantSide:
+    """The stages the plant runs (``sensors``, ``drive``, ``plant``), one object for the offline loop and
+    the ``plant_sim`` node, so both take the same steps in the same order.
+
+    :meth:`sense` is stage 1, :meth:`act` stage 5 (the torque that acts, the true tau_d of row k),
+    :meth:`advance` stage 6.  ``extra`` is the external wrench held over the period (the node's
+    ``external_wrench``; the offline loop has none)."""
+
+    def __init__(self, cfg: PlantConfig):
+        self.cfg = cfg
+        sc = cfg.sensing
+        self.plant: Plant = make_plant(cfg)
+        self.sensors = Sensors.for_plant(sc, cfg.seed) if sc.measuring else None
+        self.actuator = Actuator(sc.actuator_delay_periods) if sc.actuator_delay_periods else None
+
+    def sense(self):
+        """Stage ``sensors``: (measured state k, the torque of period k - 1 as reported)."""
+        p = self.plant
+        return self.sensors.sample(p.x, p.u_prev) if self.sensors else (p.x, p.u_prev)
+
+    def act(self, u_cmd: float, extra=(0.0, 0.0)):
+        """Stage ``drive``: the torque acting over [t_k, t_k+1) for the command ``u_cmd``, and the true tau_d
+        at t_k with it (what row k records)."""
+        u = saturate(u_cmd, self.cfg.torque_limit)
+        if self.actuator is not None:
+            u = self.actuator.apply(u)
+        return u, self.plant.lumped_disturbance(u, extra)
+
+    def advance(self, u: float, extra=(0.0, 0.0)) -> None:
+        """Stage ``plant``: integrate t_k -> t_k+1 with the torque that acts."""
+        self.plant.step(u, extra)
+
+
+class Period:
+    """A whole period in one process (the offline loop): the plant's stages around the observer and the law."""
+
+    def __init__(self, side: PlantSide, observer, law):
+        self.side, self.observer, self.law = side, observer, law
+
+    def decide(self, x_m, u_m):
+        """Stages ``estimator`` (the identity: the measurement is a state), ``observer`` and ``law``: (u_k as the
+        law asks it, tau_hat_k, the law's internals)."""
+        tau_hat = self.observer.update(x_m, u_m)
+        u_law, internals = self.law.step(x_m, tau_hat)
+        return u_law, tau_hat, internals
+
+    def run(self, table) -> bool:
+        """Period k up to the integration: sense, decide, act, and row k into ``table`` (true state, the torque
+        that acts, tau_hat, the true tau_d, internals).  True when the robot has fallen (the period ends
+        there); else :meth:`advance` integrates it."""
+        side = self.side
+        x_m, u_m = side.sense()
+        u_law, tau_hat, internals = self.decide(x_m, u_m)
+        u, tau_d = side.act(u_law)
+        p = side.plant
+        table.append(p.t, p.x, u, tau_hat, tau_d, internals)
+        self.u = u
+        return p.fallen
+
+    def advance(self) -> None:
+        self.side.advance(self.u)

@@ -1,0 +1,178 @@
+"""``plant_sim``'s two modes as runners over one node: when a period of the plant's stages is finished.
+
+The node (:mod:`.plant_sim`) holds the plant's stages (:class:`mwip_ros.core.loop.PlantSide`), its
+topics, ``~/reset`` and the end-of-run report; a runner decides what starts a run, what a command
+does and what ends a period:
+
+* :class:`LockstepRunner`: publish ``/clock`` and state k, wait for the command that answers it
+  (the lockstep driver, :mod:`.lockstep`, told the answering stages of ``core.loop``), finish the
+  period, send the next state.  The graph then reproduces ``mwip_sim`` sample by sample.
+* :class:`RealtimeRunner`: a timer at ``control_rate_hz`` on the node's clock finishes the period
+  of the state published at the last tick with the newest command (zero torque once it is older
+  than ``stale_command_periods``) and publishes the next state.
+
+:data:`RUNNERS` maps the ``mode`` parameter to its runner.
+"""
+from __future__ import annotations
+
+import time
+from array import array
+from typing import Dict, Optional
+
+import numpy as np
+
+from mwip_ros.nodes.runtime import EXIT_ERROR
+
+__all__ = ["LockstepRunner", "RealtimeRunner", "RUNNERS"]
+
+
+class _Runner:
+    """What the node asks of its mode."""
+
+    mode = ""
+    publishes_clock = False
+    reset_when = ""    # when a ``~/reset`` takes effect, in words
+
+    def __init__(self, node):
+        self.node = node
+
+    def start(self) -> None:
+        raise NotImplementedError
+
+    def on_command(self, u: float) -> None:
+        raise NotImplementedError
+
+    def graph_timed_out(self) -> None:
+        raise NotImplementedError
+
+    def watch(self, crowded: Dict[str, list]) -> None:
+        """Between callbacks, once started (``crowded``: topics with more than one publisher)."""
+
+    def diagnostic_values(self) -> dict:
+        return {}
+
+    def diagnostic_problem(self) -> Optional[str]:
+        return None
+
+    def summary(self) -> dict:
+        return {}
+
+
+class LockstepRunner(_Runner):
+    mode = "lockstep"
+    publishes_clock = True
+    reset_when = "once the state in flight is answered"
+
+    def _send(self) -> None:
+        n = self.node
+        n.lockstep.send(n.plant.k, n._stamp(), n._state_bytes())
+
+    def start(self) -> None:
+        self._send()
+
+    def on_command(self, u: float) -> None:
+        n = self.node
+        if not n.lockstep.take_answer():
+            n.rejects("wheel_torque_cmd", "command while no state is waiting for one")
+            return
+        if n._reset_pending:   # pending only from k >= 1 on: the new state 0 goes back below the answered stamp
+            n._reset()
+            self._send()
+        elif not n._finish_period(u):
+            self._send()
+
+    def graph_timed_out(self) -> None:   # lockstep cannot run without the graph
+        self.node.finish(EXIT_ERROR, "lockstep timeout: " + self.node.lockstep.graph_timeout_text())
+
+    def watch(self, crowded: Dict[str, list]) -> None:
+        failure = self.node.lockstep.check()
+        if crowded:
+            failure = ("lockstep refuses mixed streams: " + "; ".join(
+                f"{len(names)} publishers on {topic} ({', '.join(names)})" for topic, names in crowded.items())
+                + "; run each graph in its own ROS_DOMAIN_ID or namespace")
+        if failure:
+            self.node.finish(EXIT_ERROR, failure)
+
+    def diagnostic_problem(self) -> Optional[str]:
+        d = self.node.lockstep
+        if d.awaiting is not None and time.monotonic() - d.sent_at > 1.0:
+            return f"no answer for over a second (missing: {d.missing()})"
+        return None
+
+
+class RealtimeRunner(_Runner):
+    mode = "realtime"
+    reset_when = "at the next tick"
+
+    def __init__(self, node):
+        super().__init__(node)
+        self.cmd: Optional[float] = None
+        self.cmd_at = 0.0
+        self.tick_times = array("d")
+        self.stale = 0
+        self.missed = 0
+
+    def start(self) -> None:
+        n = self.node
+        n.stamp0 = n.get_clock().now().nanoseconds
+        n.create_timer(n.h, self._tick)
+
+    def on_command(self, u: float) -> None:
+        self.cmd, self.cmd_at = u, time.monotonic()
+
+    def graph_timed_out(self) -> None:
+        n = self.node
+        n.get_logger().warning(f"graph not ready after {n.lockstep.timeout_s:g} s (missing: {n.lockstep.missing()}); "
+                               f"starting the realtime run anyway")
+        n._start("realtime without the whole graph")
+
+    def _tick(self) -> None:
+        n = self.node
+        now = time.monotonic()
+        if self.tick_times:
+            if now - self.tick_times[-1] > 1.5 * n.h:
+                self.missed += 1
+        else:
+            n.t_wall0 = now
+        self.tick_times.append(now)
+        if n.done:
+            return
+        if n._reset_pending:   # a period boundary: the new run's state 0 instead of the next state
+            n._reset()
+        elif len(self.tick_times) > 1:  # finish the period of the state published at the last tick
+            u = self.cmd
+            if u is None or now - self.cmd_at > n.v["stale_command_periods"] * n.h:
+                self.stale += 1
+                if self.stale <= 3 or self.stale % 200 == 0:
+                    n.get_logger().warning(f"no fresh wheel_torque_cmd (#{self.stale}); applying zero torque")
+                u = 0.0
+            if n._finish_period(u):
+                return
+        n.state_pub.publish(n._state_bytes())
+
+    def diagnostic_values(self) -> dict:
+        if len(self.tick_times) <= 2:
+            return {}
+        per = np.diff(self.tick_times[-400:]) * 1e3
+        return {"loop_period_p99_ms": f"{np.percentile(per, 99):.3f}", "missed_deadlines": self.missed,
+                "stale_commands": self.stale}
+
+    def summary(self) -> dict:
+        if len(self.tick_times) <= 2:
+            return {}
+        h = self.node.h
+        per = np.diff(self.tick_times) * 1e3
+        rt = {"period_ms_p50": float(np.percentile(per, 50)), "period_ms_p99": float(np.percentile(per, 99)),
+              "period_ms_max": float(per.max()), "ticks": len(self.tick_times),
+              "period_max_at_s": float(np.argmax(per) + 1) * h,  # sim time of the tick that ended it
+              "missed_deadlines": self.missed, "stale_command_substitutions": self.stale,
+              "missed_at_s": [round(float(i + 1) * h, 6)  # sim time of the ticks that came late (first 50)
+                              for i in np.flatnonzero(per > 1.5 * h * 1e3)[:50]]}
+        self.node.get_logger().info(
+            f"realtime: loop period p50 = {rt['period_ms_p50']:.3f} ms, p99 = {rt['period_ms_p99']:.3f} ms, "
+            f"max = {rt['period_ms_max']:.3f} ms (nominal {h * 1e3:g} ms); missed deadlines = "
+            f"{self.missed}; stale-command substitutions = {self.stale}")
+        return {"realtime": rt}
+
+
+RUNNERS = {r.mode: r for r in (LockstepRunner, RealtimeRunner)}
