@@ -44,6 +44,7 @@ setup(
             'mwip_bag_repair = mwip_ros.cli.bag_repair:main',
             'mwip_sweep = mwip_ros.cli.sweep:main',
             'mwip_tune = mwip_ros.cli.tune:main',
+            'mwip_identify = mwip_ros.cli.identify:main',
             'robot_markers = mwip_ros.nodes.entry:robot_markers',
             'foxglove_server = mwip_ros.nodes.entry:foxglove_server',
             'mwip_ctl = mwip_ros.cli.ctl:main',

@@ -1,0 +1,205 @@
+"""``mwip_identify``: the nominal body (m_b, I_b, l) identified from a recorded run (SPEC section 13).
+
+    mwip_identify runs/ident.csv --out identified.yaml
+    mwip_identify bags/2026-11-22_101500_ident --params config/paper.yaml --out identified.yaml --force
+    mwip_sim --params config/paper.yaml identified.yaml          # the overlay goes after the base file
+
+Reads a CSV written by ``mwip_sim --csv`` (or ``plant_sim``'s) or an MCAP bag written by the recorder
+(:func:`mwip_ros.runs.load_run`, as ``mwip_report`` reads them); the torque is the CSV's ``u_applied``
+column where it has one (the torque that acted, with a motor) else ``u``, and a bag's applied torque
+(the effort reported with the next state).  The base parameter file(s) give ``nominal.m_w``, ``I_w``,
+``r``, ``g`` (known); :func:`mwip_ros.core.identify.identify` fits eq. (1) by least squares.
+
+Prints every value with its 95 % interval, the residual RMS of each row of eq. (1), the condition
+number, D_w, D_b and the check of G_b against m_b g l; writes a ROS 2 parameter overlay with
+``nominal.m_b``, ``nominal.I_b``, ``nominal.l`` under ``/**`` (where the base file keeps the nominal model
+that the observer and the controller share), checked by merging it over the base file.
+
+Exit 0 when written; 2 (one line on stderr saying why) for a log that is too short or does not excite
+the parameters, for an unreadable log or parameter file, or for an existing ``--out`` without ``--force``
+(checked before the log is read).
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from mwip_ros import params as P
+from mwip_ros.cli.outputs import refuse_existing
+from mwip_ros.core import identify as ID
+from mwip_ros.params.paths import default_params_file
+
+PROG = "mwip_identify"
+EXIT_REFUSED = 2
+NEEDED = ("t", "theta_b", "dtheta_w", "dtheta_b")
+
+
+def _parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(
+        prog=PROG,
+        description="Identify the body's mass m_b, inertia I_b and centre of gravity l from a recorded balancing "
+                    "run with a known excitation (excitation.type chirp or prbs on the controller, no tau_ext): "
+                    "least squares on both rows of eq. (1), linear in m11, m12, m22, G_b, D_w, D_b, with m_w, I_w, "
+                    "r, g known from the base parameter file. Prints each value with its 95 % confidence interval, "
+                    "the residual RMS per row, the condition number, D_w, D_b and the G_b check; writes the "
+                    "nominal.m_b, nominal.I_b, nominal.l overlay. Refuses (exit 2) a log that is too short or does "
+                    "not excite the parameters.",
+        epilog="examples:\n  mwip_identify ident.csv --out identified.yaml\n"
+               "  mwip_identify bags/ident --params config/paper.yaml --out identified.yaml --force\n"
+               "  mwip_sim --params config/paper.yaml identified.yaml   (use the overlay after the base file)\n\n"
+               "exit status: 0 written; 2 refused (too short, not excited, unreadable input, --out exists)",
+        formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("log", type=Path, metavar="BAG_OR_CSV",
+                    help="a CSV written by mwip_sim --csv / plant_sim (columns t, theta_w, theta_b, dtheta_w, "
+                         "dtheta_b and u_applied or u), or a bag directory / .mcap file written by the recorder")
+    ap.add_argument("--params", type=Path, nargs="+", default=None, metavar="BASE",
+                    help="base ROS 2 parameter file(s), merged in order, for nominal.m_w, I_w, r, g (default: the "
+                         "package's config/paper.yaml)")
+    ap.add_argument("--out", type=Path, required=True, metavar="FILE.yaml",
+                    help="the parameter overlay to write (nominal.m_b, nominal.I_b, nominal.l under /**)")
+    ap.add_argument("--force", action="store_true", help="overwrite an --out file that exists")
+    ap.add_argument("--window", type=float, nargs=2, default=None, metavar=("T0", "T1"),
+                    help="use only the rows with T0 <= t <= T1 [s] (default: the whole log)")
+    ap.add_argument("--run", type=int, default=None, metavar="N",
+                    help="the run of a bag that holds several (1-based; a plant reset starts a new run)")
+    ap.add_argument("--cutoff", type=float, default=ID.CUTOFF_HZ, metavar="HZ",
+                    help=f"zero-phase low-pass on every regressor and the torque [Hz]; 0 = none "
+                         f"(default: {ID.CUTOFF_HZ:g})")
+    ap.add_argument("--max-condition", type=float, default=ID.MAX_CONDITION, metavar="X",
+                    help=f"refuse a regressor whose condition number passes X (default: {ID.MAX_CONDITION:g})")
+    ap.add_argument("--max-relative-ci", type=float, default=ID.MAX_RELATIVE_CI, metavar="F",
+                    help=f"refuse when the 95 %% interval of m_b, I_b or l is wider than F of its value "
+                         f"(default: {ID.MAX_RELATIVE_CI:g})")
+    ap.add_argument("--min-samples", type=int, default=ID.MIN_SAMPLES, metavar="N",
+                    help=f"refuse a log of fewer than N periods (default: {ID.MIN_SAMPLES})")
+    return ap
+
+
+def _fail(text: str) -> int:
+    print(f"{PROG}: error: {' '.join(str(text).split())}", file=sys.stderr)
+    return EXIT_REFUSED
+
+
+def _options_refusal(args):
+    if args.window is not None:
+        t0, t1 = args.window
+        if not (math.isfinite(t0) and math.isfinite(t1) and t0 < t1):
+            return f"--window: T0 < T1 and both finite, got {t0:g} {t1:g}"
+    if args.run is not None and args.run < 1:
+        return f"--run: 1 or more, got {args.run}"
+    if not (math.isfinite(args.cutoff) and args.cutoff >= 0):
+        return f"--cutoff: a frequency >= 0 Hz, got {args.cutoff:g}"
+    if not (args.max_condition > 1):
+        return f"--max-condition: more than 1, got {args.max_condition:g}"
+    if not (math.isfinite(args.max_relative_ci) and args.max_relative_ci > 0):
+        return f"--max-relative-ci: more than 0, got {args.max_relative_ci:g}"
+    if args.min_samples < len(ID.THETA) + 1:
+        return f"--min-samples: at least {len(ID.THETA) + 1}, got {args.min_samples}"
+    return None
+
+
+def _load(args):
+    """(columns, torque column name) of the log, or raise ValueError (one line)."""
+    from mwip_ros.runs import load_run, read_bag_run
+    p = args.log
+    if not p.exists():
+        raise ValueError(f"{p}: no such file or directory")
+    if p.is_file() and p.suffix == ".csv":
+        if args.run is not None:
+            raise ValueError("--run is for a bag of several runs; a CSV holds one")
+        run = load_run(p)
+    elif p.is_dir() or p.suffix == ".mcap":
+        run = read_bag_run(p, segment=None if args.run is None else args.run - 1)
+    else:
+        raise ValueError(f"{p}: not a bag directory, .mcap file or .csv file")
+    cols = run.columns
+    torque = "u_applied" if "u_applied" in cols else "u"
+    missing = [c for c in (*NEEDED, torque) if c not in cols]
+    if missing:
+        raise ValueError(f"{p}: no {', '.join(missing)} column(s)")
+    keep = np.ones(len(cols["t"]), dtype=bool)
+    if args.window is not None:
+        keep = (cols["t"] >= args.window[0]) & (cols["t"] <= args.window[1])
+    return {c: np.asarray(cols[c], dtype=float)[keep] for c in (*NEEDED, "theta_w", torque) if c in cols}, torque
+
+
+def main(argv=None) -> int:
+    """mwip_identify; returns the exit status."""
+    args = _parser().parse_args(argv)
+    reason = _options_refusal(args) or refuse_existing(args.out, args.force, "--out")
+    if reason:
+        return _fail(reason)
+    base = args.params or [default_params_file()]
+    try:
+        values = P.merged_values(P.load_param_files(base, option="--params"))
+    except P.ParamError as exc:
+        return _fail(str(exc))
+    known = P.physical(values, "nominal")
+    try:
+        cols, torque = _load(args)
+    except (ValueError, OSError) as exc:
+        return _fail(str(exc))
+    c = cols
+    try:
+        res = ID.identify(c["t"], c.get("theta_w", np.zeros_like(c["t"])), c["theta_b"], c["dtheta_w"],
+                          c["dtheta_b"], c[torque], known, cutoff_hz=args.cutoff, min_samples=args.min_samples,
+                          max_condition=args.max_condition, max_relative_ci=args.max_relative_ci)
+    except ID.IdentificationError as exc:
+        return _fail(f"{args.log}: {exc}")
+    _print(args, res, torque, known)
+    why = _write(args, base, res)
+    if why:
+        return _fail(why)
+    print(f"wrote {args.out}")
+    return 0
+
+
+def _print(args, res: ID.IdentificationResult, torque: str, known) -> None:
+    print(f"{args.log}: {res.samples} periods, torque from column {torque!r}; known m_w = {known.m_w:g} kg, "
+          f"I_w = {known.I_w:g} kg m^2, r = {known.r:g} m, g = {known.g:g} m/s^2")
+    rows = [("m_b", res.m_b, "kg"), ("I_b", res.I_b, "kg m^2"), ("l", res.l, "m"),
+            ("m11", res.m11, "kg m^2"), ("m12", res.m12, "kg m^2"), ("m22", res.m22, "kg m^2"),
+            ("G_b", res.G_b, "N m"), ("D_w", res.D_w, "N m s"), ("D_b", res.D_b, "N m s")]
+    for name, e, unit in rows:
+        print(f"  {name:<4} = {e.text(unit)}")
+    chk = res.G_b_check
+    within = "within" if chk.low <= 0.0 <= chk.high else "OUTSIDE"
+    print(f"  G_b check: fitted {res.G_b.value:.6g} N m vs m_b g l = {res.G_b_model.value:.6g} N m, difference "
+          f"{chk.value:+.4g} N m ({100 * chk.value / res.G_b_model.value:+.3g} %), {within} its 95 % interval "
+          f"+-{chk.half_width:.3g}")
+    print(f"  residual RMS: row 1 (wheel) {res.residual_rms[0]:.4g} N m, row 2 (body) {res.residual_rms[1]:.4g} N m; "
+          f"condition number {res.condition_number:.4g}; intervals widened x{res.inflation:.3g} for correlated "
+          f"residuals (delta method for m_b, I_b, l)")
+
+
+def _write(args, base, res: ID.IdentificationResult):
+    """Write the overlay atomically, checked by merging it over the base file; the reason it cannot, or None."""
+    from mwip_ros.sweep.scenarios import parameter_overlay
+    placed = {("/**", f"nominal.{k}"): float(f"{getattr(res, k).value:.6g}") for k in ("m_b", "I_b", "l")}
+    header = (f"# {PROG}: nominal body identified from {args.log} ({res.samples} periods)\n"
+              f"#   m_b {res.m_b.text('kg')}\n#   I_b {res.I_b.text('kg m^2')}\n#   l   {res.l.text('m')}\n"
+              f"#   residual RMS {res.residual_rms[0]:.4g} / {res.residual_rms[1]:.4g} N m, condition number "
+              f"{res.condition_number:.4g}\n"
+              f"# an overlay: pass it after the base file(s), e.g. mwip_sim --params "
+              f"{' '.join(map(str, base))} {args.out}\n")
+    out = Path(args.out)
+    tmp = out.with_name(f".{out.name}.{os.getpid()}.tmp")
+    try:
+        parameter_overlay(placed, tmp, header)
+        P.merged_values(P.load_param_files([*base, tmp], option="--out"))   # the base with it still makes a model
+        os.replace(tmp, out)
+    except (P.ParamError, OSError) as exc:
+        return f"--out {out}: the identified values do not make a valid parameter file ({exc})"
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+    return None
+
+
+if __name__ == "__main__":
+    sys.exit(main())

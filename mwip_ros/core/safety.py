@@ -1,0 +1,235 @@
+"""The driver's state machine (SPEC section 12): what stands between a controller and the motor.
+
+States:
+
+=============  ==============================================================================
+``disabled``   zero torque; the start state when ``require_enable`` is true
+``enabled``    the command acts; the start state when ``require_enable`` is false
+``fault``      zero torque, latched with its reason until ``reset``
+=============  ==============================================================================
+
+Events and their answers (every call answers, none raises; a call that changes the state returns
+and records a :class:`Transition`):
+
+==============  =============  ============================  ==================================
+event           disabled       enabled                       fault
+==============  =============  ============================  ==================================
+``enable``      -> enabled     ok, already enabled           refused: reset first (names the fault)
+``disable``     ok, already    -> disabled                   ok, torque already zero; stays latched
+``reset``       -> start       -> start                      -> start (clears the fault)
+``fault(r)``    -> fault(r)    -> fault(r)                   kept: the first reason stays
+==============  =============  ============================  ==================================
+
+Fault reasons (:data:`FAULT_REASONS`): ``watchdog`` (no new command for ``watchdog_s``; lockstep: the
+lockstep timeout), ``bad_command`` (non-finite or implausible, :meth:`DriverStateMachine.check_command`),
+``fall`` (|theta_b| > fall_angle), ``emergency_stop`` (std_msgs/Bool true), ``estimator_unhealthy`` (raw
+mode).  A fault is a fault whatever the enable state (a fall while disabled is latched too).
+
+**Latch**: while in fault, a later fault keeps the first reason and its detail, the cause (a watchdog
+expiry is typically followed by a fall, and the fall is not what went wrong).  Later faults are counted
+(``suppressed``) and the last one kept (``last_suppressed``) for diagnostics; they make no transition.
+
+``reset`` restores the start state (``disabled`` when ``require_enable`` else ``enabled``), as the
+plant's ``~/reset`` restores its initial state.  :meth:`DriverStateMachine.torque_gate` is the torque
+that acts: the command when enabled, else 0.0 (which is also what the observer must be told acted).
+Pure Python, no ROS: the ``plant_sim`` node maps the answers onto std_srvs/Trigger (``success``,
+``message``) and the transitions onto ``/diagnostics`` and the log.
+"""
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass
+from typing import Deque, Optional, Tuple
+
+__all__ = ["DISABLED", "ENABLED", "FAULT", "STATES", "FAULT_REASONS", "EVENTS", "Transition", "Answer",
+           "DriverStateMachine", "Watchdog", "HISTORY"]
+
+DISABLED, ENABLED, FAULT = "disabled", "enabled", "fault"
+STATES = (DISABLED, ENABLED, FAULT)
+FAULT_REASONS = ("watchdog", "bad_command", "fall", "emergency_stop", "estimator_unhealthy")
+EVENTS = ("enable", "disable", "reset") + FAULT_REASONS   # the ``reason`` a Transition can carry
+HISTORY = 1000     # transitions kept by a machine (older ones drop: a node that runs for days stays bounded)
+
+# /diagnostics levels (diagnostic_msgs/DiagnosticStatus): OK, WARN, ERROR
+_LEVEL = {ENABLED: 0, DISABLED: 1, FAULT: 2}
+
+
+@dataclass(frozen=True)
+class Transition:
+    """One change of state at time ``t`` [s]: ``reason`` is the event (``enable``, ``disable``, ``reset``) or
+    the fault's reason (:data:`FAULT_REASONS`); ``detail`` says more (a fault's figures), may be ''."""
+
+    t: float
+    from_state: str
+    to_state: str
+    reason: str
+    detail: str = ""
+
+    def text(self) -> str:
+        """One line for the log and /diagnostics, e.g. ``t = 1.250 s: enabled -> fault (fall: |theta_b| = ...)``."""
+        more = f": {self.detail}" if self.detail else ""
+        return f"t = {self.t:.3f} s: {self.from_state} -> {self.to_state} ({self.reason}{more})"
+
+
+@dataclass(frozen=True)
+class Answer:
+    """The answer to a service call (std_srvs/Trigger's ``success`` and ``message``) and the transition it
+    made, if any."""
+
+    success: bool
+    message: str
+    transition: Optional[Transition] = None
+
+
+class DriverStateMachine:
+    """The driver's state, fault latch and history (module doc).
+
+    Parameters
+    ----------
+    require_enable : bool
+        True: start (and reset to) ``disabled``, the torque acting only after ``enable``; False: ``enabled``.
+    max_command : float
+        A command whose magnitude passes this [N m] is implausible (:meth:`check_command`: a ``bad_command``
+        fault); 0 = only non-finite commands are bad.
+    """
+
+    def __init__(self, require_enable: bool = False, max_command: float = 0.0):
+        if not (isinstance(max_command, (int, float)) and math.isfinite(max_command) and max_command >= 0):
+            raise ValueError(f"max_command: must be finite and >= 0, got {max_command!r}")
+        self.require_enable = bool(require_enable)
+        self.max_command = float(max_command)
+        self.state = self.start_state
+        self.fault_reason: Optional[str] = None
+        self.fault_detail = ""
+        self.fault_t: Optional[float] = None
+        self.suppressed = 0                                    # faults raised while already in fault
+        self.last_suppressed: Optional[Tuple[float, str, str]] = None   # (t, reason, detail) of the last one
+        self.history: Deque[Transition] = deque(maxlen=HISTORY)
+
+    @property
+    def start_state(self) -> str:
+        return DISABLED if self.require_enable else ENABLED
+
+    @property
+    def enabled(self) -> bool:
+        return self.state == ENABLED
+
+    @property
+    def faulted(self) -> bool:
+        return self.state == FAULT
+
+    def _go(self, t: float, to: str, reason: str, detail: str = "") -> Transition:
+        tr = Transition(float(t), self.state, to, reason, detail)
+        self.state = to
+        self.history.append(tr)
+        return tr
+
+    def _fault_text(self) -> str:
+        more = f": {self.fault_detail}" if self.fault_detail else ""
+        return f"{self.fault_reason}{more}, since t = {self.fault_t:.3f} s"
+
+    # -- services -------------------------------------------------------------------------------------------
+
+    def enable(self, t: float) -> Answer:
+        """``~/enable``: disabled -> enabled; refused in fault (reset first)."""
+        if self.state == FAULT:
+            return Answer(False, f"refused: the driver is in fault ({self._fault_text()}); call ~/reset first")
+        if self.state == ENABLED:
+            return Answer(True, "already enabled")
+        return Answer(True, "enabled", self._go(t, ENABLED, "enable"))
+
+    def disable(self, t: float) -> Answer:
+        """``~/disable``: enabled -> disabled; in fault the torque is zero already and the fault stays latched."""
+        if self.state == FAULT:
+            return Answer(True, f"in fault ({self._fault_text()}): the torque is zero already; the fault stays "
+                                f"latched until ~/reset")
+        if self.state == DISABLED:
+            return Answer(True, "already disabled")
+        return Answer(True, "disabled", self._go(t, DISABLED, "disable"))
+
+    def reset(self, t: float) -> Answer:
+        """``~/reset``: clear any fault and return to the start state (from any state)."""
+        was = self._fault_text() if self.state == FAULT else None
+        self.fault_reason, self.fault_detail, self.fault_t = None, "", None
+        self.suppressed, self.last_suppressed = 0, None
+        text = f"fault cleared ({was}); " if was else ""
+        if self.state == self.start_state:
+            return Answer(True, f"{text}{self.state} (the start state)")
+        return Answer(True, f"{text}{self.start_state} (the start state)", self._go(t, self.start_state, "reset"))
+
+    # -- faults ---------------------------------------------------------------------------------------------
+
+    def fault(self, t: float, reason: str, detail: str = "") -> Optional[Transition]:
+        """Latch a fault with ``reason`` (one of :data:`FAULT_REASONS`; anything else is a programming error:
+        ValueError naming it).  Returns the transition, or None when already in fault (the first reason stays;
+        this one is counted in ``suppressed``)."""
+        if reason not in FAULT_REASONS:
+            raise ValueError(f"fault reason {reason!r}: not one of {', '.join(FAULT_REASONS)}")
+        if self.state == FAULT:
+            self.suppressed += 1
+            self.last_suppressed = (float(t), reason, detail)
+            return None
+        self.fault_reason, self.fault_detail, self.fault_t = reason, detail, float(t)
+        return self._go(t, FAULT, reason, detail)
+
+    def check_command(self, t: float, u) -> Optional[Transition]:
+        """A ``bad_command`` fault when ``u`` is not a finite number or (``max_command`` > 0) passes it in
+        magnitude; the transition, or None (a good command, or already in fault)."""
+        try:
+            v = float(u)
+        except (TypeError, ValueError):
+            return self.fault(t, "bad_command", f"not a number: {u!r}")
+        if not math.isfinite(v):
+            return self.fault(t, "bad_command", f"u = {v!r} is not finite")
+        if self.max_command > 0 and abs(v) > self.max_command:
+            return self.fault(t, "bad_command", f"|u| = {abs(v):.6g} N m > {self.max_command:g} N m, implausible")
+        return None
+
+    def check_fall(self, t: float, theta_b: float, fall_angle: float) -> Optional[Transition]:
+        """A ``fall`` fault when |theta_b| > ``fall_angle`` (or theta_b is not finite)."""
+        if not abs(theta_b) <= fall_angle:
+            return self.fault(t, "fall", f"|theta_b| = {abs(theta_b):.4f} rad > fall_angle {fall_angle:g} rad")
+        return None
+
+    # -- what acts ------------------------------------------------------------------------------------------
+
+    def torque_gate(self, u: float) -> float:
+        """The torque that acts: ``u`` when enabled, else 0.0."""
+        return u if self.state == ENABLED else 0.0
+
+    def diagnostic(self) -> Tuple[int, str]:
+        """(level, message) for /diagnostics: 0 OK (enabled), 1 WARN (disabled), 2 ERROR (fault, with its reason)."""
+        if self.state == FAULT:
+            extra = f" (+{self.suppressed} later fault(s), last: {self.last_suppressed[1]})" if self.suppressed else ""
+            return _LEVEL[FAULT], f"fault: {self._fault_text()}{extra}"
+        return _LEVEL[self.state], self.state
+
+
+@dataclass
+class Watchdog:
+    """The command watchdog: expired when no command came for more than ``timeout`` [s] (0 = off).
+
+    Not armed before the first command (``last`` None): a driver that waits for its controller to start
+    does not fault.  ``feed(now)`` at every command; ``expired(now)`` at every period."""
+
+    timeout: float
+    last: Optional[float] = None
+
+    def __post_init__(self):
+        if not (isinstance(self.timeout, (int, float)) and math.isfinite(self.timeout) and self.timeout >= 0):
+            raise ValueError(f"watchdog_s: must be finite and >= 0, got {self.timeout!r}")
+
+    def feed(self, now: float) -> None:
+        self.last = float(now)
+
+    def reset(self) -> None:
+        """Disarm (until the next command)."""
+        self.last = None
+
+    def expired(self, now: float) -> bool:
+        return self.timeout > 0 and self.last is not None and now - self.last > self.timeout
+
+    def silence(self, now: float) -> float:
+        """Seconds since the last command (0 before the first)."""
+        return 0.0 if self.last is None else now - self.last

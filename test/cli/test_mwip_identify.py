@@ -1,0 +1,129 @@
+"""mwip_identify on CSVs of the real plant written in a tmp dir (SPEC 13)."""
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from mathfixtures import P_FILE
+from mwip_ros import params as P
+from mwip_ros.cli.identify import main
+from mwip_ros.core.excitation import Excitation, ExcitationConfig
+from mwip_ros.core.lqr import lqr_gain, lqr_u
+from mwip_ros.core.model import Sinusoid
+from mwip_ros.core.plant import PlantSim
+from mwip_ros.core.trajectory import Trajectory
+from mwip_ros.runs import write_csv
+
+pytestmark = pytest.mark.unit
+
+VALUES = P.merged_values(P.load_param_files([P_FILE]))
+BASE = P.plant_config(VALUES)
+ROBOT = replace(BASE.actual, m_b=250.0, I_b=12.0, l=0.15)
+
+
+def write_log(path, exc, duration=12.0, extra=None):
+    """An LQR-balanced run of ROBOT with ``exc`` on the command and no tau_ext, as mwip_sim's CSV columns."""
+    cfg = replace(BASE, actual=ROBOT, tau_ext1=Sinusoid(0.0, 2.0, math.pi / 2), tau_ext2=Sinusoid(0.0, 1.0, 0.0),
+                  initial=BASE.initial._replace(theta_b=0.0))
+    K = lqr_gain(BASE.nominal, cfg.h, VALUES["lqr.Q"], VALUES["lqr.R"])
+    ex, plant, rows = Excitation(exc, cfg.h), PlantSim(cfg), []
+    for k in range(int(round(duration / cfg.h)) + 1):
+        u = lqr_u(K, plant.x) + ex.at(k)
+        rows.append((plant.t, *plant.x, u))
+        plant.step(u)
+    a = np.array(rows).T
+    cols = dict(zip(("t", "theta_w", "theta_b", "dtheta_w", "dtheta_b", "u"), a))
+    if extra:   # columns beyond the trajectory table's (u_applied, which the lead's plant adds): written here
+        cols.update(extra(cols))
+        np.savetxt(path, np.column_stack(list(cols.values())), delimiter=",", header=",".join(cols), comments="",
+                   fmt="%.17g")
+    else:
+        write_csv(Trajectory("ident", cols, False, cfg.h), path)
+    return path
+
+
+CHIRP = ExcitationConfig("chirp", 20.0, 0.1, 5.0, 12.0)
+
+
+@pytest.fixture(scope="module")
+def chirp_csv(tmp_path_factory):
+    return write_log(tmp_path_factory.mktemp("ident") / "ident.csv", CHIRP)
+
+
+def test_identifies_and_writes_the_overlay(chirp_csv, tmp_path, capsys):
+    out = tmp_path / "identified.yaml"
+    assert main([str(chirp_csv), "--params", str(P_FILE), "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    for word in ("m_b", "I_b", "l ", "95 % CI", "residual RMS", "row 1", "row 2", "condition number", "D_w", "D_b",
+                 "G_b check", "'u'", f"wrote {out}"):
+        assert word in text, word
+    doc = P.load_param_file(out)
+    assert set(doc.sections) == {"/**"}
+    got = doc.sections["/**"]
+    assert set(got) == {"nominal.m_b", "nominal.I_b", "nominal.l"}
+    assert got["nominal.m_b"] == pytest.approx(250.0, rel=0.03)
+    assert got["nominal.I_b"] == pytest.approx(12.0, rel=0.03)
+    assert got["nominal.l"] == pytest.approx(0.15, rel=0.03)
+    merged = P.merged_values(P.load_param_files([P_FILE, out]))   # the overlay over the base
+    assert merged["nominal.m_b"] == got["nominal.m_b"] and merged["nominal.m_w"] == 29.0
+
+
+def test_u_applied_is_preferred(tmp_path, capsys):
+    """A CSV with the torque that acted in u_applied: the command u (here wrong on purpose) is not used."""
+    log = write_log(tmp_path / "motor.csv", CHIRP, extra=lambda c: {"u_applied": c["u"], "u": 0.5 * c["u"]})
+    out = tmp_path / "o.yaml"
+    assert main([str(log), "--out", str(out)]) == 0
+    assert "'u_applied'" in capsys.readouterr().out
+    assert P.load_param_file(out).sections["/**"]["nominal.m_b"] == pytest.approx(250.0, rel=0.03)
+
+
+def _refused(argv, capsys):
+    code = main(argv)
+    err = capsys.readouterr().err.strip()
+    assert code == 2
+    assert len(err.splitlines()) == 1 and err.startswith("mwip_identify: error: ")
+    return err
+
+
+def test_a_log_without_excitation_is_refused(tmp_path, capsys):
+    log = write_log(tmp_path / "rest.csv", ExcitationConfig(), duration=5.0)
+    out = tmp_path / "o.yaml"
+    assert "not excited" in _refused([str(log), "--out", str(out)], capsys)
+    assert not out.exists()
+
+
+def test_a_short_log_is_refused(tmp_path, capsys):
+    log = write_log(tmp_path / "short.csv", CHIRP, duration=1.0)
+    assert "too short" in _refused([str(log), "--out", str(tmp_path / "o.yaml")], capsys)
+
+
+def test_a_window_too_short_is_refused(chirp_csv, tmp_path, capsys):
+    assert "too short" in _refused([str(chirp_csv), "--window", "0", "1", "--out", str(tmp_path / "o.yaml")],
+                                   capsys)
+
+
+def test_an_existing_out_needs_force(chirp_csv, tmp_path, capsys):
+    out = tmp_path / "o.yaml"
+    out.write_text("keep me\n")
+    err = _refused([str(tmp_path / "missing.csv"), "--out", str(out)], capsys)   # refused before the log is read
+    assert "exists" in err and "--force" in err and out.read_text() == "keep me\n"
+    assert main([str(chirp_csv), "--out", str(out), "--force"]) == 0
+    assert "nominal" in out.read_text()
+
+
+def test_bad_inputs_are_one_line(tmp_path, capsys):
+    assert "no such file" in _refused([str(tmp_path / "missing.csv"), "--out", str(tmp_path / "o.yaml")], capsys)
+    bad = tmp_path / "bad.csv"
+    bad.write_text("t,x\n0,1\n")
+    assert "theta_w" in _refused([str(bad), "--out", str(tmp_path / "o.yaml")], capsys)
+
+
+def test_help_is_complete(capsys):
+    with pytest.raises(SystemExit) as done:
+        main(["--help"])
+    assert done.value.code == 0
+    text = capsys.readouterr().out
+    for word in ("BAG_OR_CSV", "--params", "--out", "--force", "--window", "--run", "--cutoff", "u_applied",
+                 "exit status"):
+        assert word in text, word
