@@ -21,7 +21,7 @@ from typing import Dict, List, Optional
 
 import numpy as np
 
-from mwip_ros.core.trajectory import COLUMNS, TRAJECTORY_COLUMNS, Trajectory, TrajectoryTable, join_estimates
+from mwip_ros.core.trajectory import ALL_COLUMNS, TRAJECTORY_COLUMNS, Trajectory, TrajectoryTable, join_estimates
 from mwip_ros.msgs import BadMessage
 from mwip_ros.msgs import layouts as L
 from mwip_ros.msgs.topics import leaf
@@ -40,7 +40,7 @@ NAN = math.nan
 MAX_ROWS = 2_000_000           # rows (samples): 2.8 h at 200 Hz; ~16 columns of float64 = 256 MB
 MAX_CSV_BYTES = 1 << 30        # a CSV of MAX_ROWS full rows (16 repr floats, ~330 B a row) is ~660 MB
 MAX_BAG_BYTES = 2 << 30        # a bag of MAX_ROWS periods (state, command, estimate, truth: ~600 B) is ~1.2 GB
-MAX_CSV_COLUMNS = 64           # a trajectory has 17 at most (COLUMNS and stamp)
+MAX_CSV_COLUMNS = 64           # a trajectory has 27 at most (ALL_COLUMNS and stamp)
 MAX_T = 1e10   # [s] |t| beyond this is no run; a realtime observer's CSV holds wall-clock stamps (1.8e9 s in 2026)
 _HEADER_MAX = 1 << 16          # characters of a header line
 MAX_LOG_MESSAGES = 100_000     # /rosout, /parameter_events messages of a bag kept for plant_record
@@ -51,7 +51,7 @@ RUN_COLUMNS = ("t", "theta_w", "theta_b", "dtheta_w", "dtheta_b", "u")
 def write_csv(run: Trajectory, path) -> None:
     """The columns ``run`` has, in the trajectory table's order (then ``stamp``, a realtime plant's message
     stamps in seconds when they are not ``t``), floats written exactly (repr)."""
-    names = [c for c in (*COLUMNS, "stamp") if c in run.columns]
+    names = [c for c in (*ALL_COLUMNS, "stamp") if c in run.columns]
     with open(path, "w", newline="") as f:
         w = csv.writer(f, lineterminator="\n")
         w.writerow(names)

@@ -4,8 +4,9 @@ The discrete-time contract (docs/theory.md, section 4) orders one control period
 
 1. ``sensors``   what the robot measures of state k (:mod:`.sensing`: the state, noisy, quantized,
    delayed), with the torque that acted over period k - 1;
-2. ``estimator`` the state the loop believes, from the measurement (today the measurement *is* a
-   state: the stage passes it on; the raw IMU and encoder need a ``state_estimator`` here);
+2. ``estimator`` the state the loop believes, from the measurement: the identity when the plant
+   measures a state (``sensors.model: state``), a ``state_estimator`` (:mod:`.estimators`) when
+   it measures the raw IMU and encoder (``raw``, :mod:`.raw_sensors`);
 3. ``observer``  tau_hat_k from the measured state and the reported torque (eq. 12-13, :mod:`.observer`);
 4. ``law``       u_k from the measured state and tau_hat_k (:mod:`.laws`);
 5. ``drive``     the torque limit and the actuator delay: the torque that acts over [t_k, t_{k+1});
@@ -27,10 +28,12 @@ topics it answers on.  Everything that runs a period takes it from here:
 """
 from __future__ import annotations
 
+from collections import deque
 from dataclasses import dataclass
 from typing import Optional, Tuple
 
 from .plant import Plant, PlantConfig, make_plant, saturate
+from .raw_sensors import RawSensors
 from .sensing import Actuator, Sensors
 
 __all__ = ["Stage", "STAGES", "STAGE_NAMES", "PLANT_NODE", "Answer", "answering", "loop_nodes", "PlantSide",
@@ -107,12 +110,20 @@ class PlantSide:
         self.cfg = cfg
         sc = cfg.sensing
         self.plant: Plant = make_plant(cfg)
-        self.sensors = Sensors.for_plant(sc, cfg.seed) if sc.measuring else None
+        self.raw = None
+        if cfg.raw is not None:   # SPEC 10: the IMU and the relative encoder, delayed as the state would be
+            self.raw = RawSensors.for_plant(cfg.raw, cfg.seed, cfg.h, cfg.actual.r, cfg.actual.g)
+            self.raw_queue = deque(maxlen=sc.delay_periods + 1)
+        self.sensors = Sensors.for_plant(sc, cfg.seed) if sc.measuring and self.raw is None else None
         self.actuator = Actuator(sc.actuator_delay_periods) if sc.actuator_delay_periods else None
 
     def sense(self):
-        """Stage ``sensors``: (measured state k, the torque of period k - 1 as reported)."""
+        """Stage ``sensors``: (what is measured of state k, the torque of period k - 1 as reported).  The
+        measurement is a state (``sensors.model: state``) or a :class:`~.raw_sensors.RawSample` (``raw``)."""
         p = self.plant
+        if self.raw is not None:
+            self.raw_queue.append((self.raw.sample(p.x, p.sample_accel()), p.u_prev))
+            return self.raw_queue[0]   # the sample of step k - d (or the first one while k < d)
         return self.sensors.sample(p.x, p.u_prev) if self.sensors else (p.x, p.u_prev)
 
     def act(self, u_cmd: float, extra=(0.0, 0.0)):
@@ -129,28 +140,32 @@ class PlantSide:
 
 
 class Period:
-    """A whole period in one process (the offline loop): the plant's stages around the observer and the law."""
+    """A whole period in one process (the offline loop): the plant's stages around the estimator (when the
+    plant measures raw: :mod:`.estimators`), the observer and the law."""
 
-    def __init__(self, side: PlantSide, observer, law):
-        self.side, self.observer, self.law = side, observer, law
+    def __init__(self, side: PlantSide, observer, law, estimator=None):
+        self.side, self.observer, self.law, self.estimator = side, observer, law, estimator
+        if (side.raw is None) != (estimator is None):
+            raise ValueError("a raw plant needs a state estimator, and only a raw plant has one")
 
-    def decide(self, x_m, u_m):
-        """Stages ``estimator`` (the identity: the measurement is a state), ``observer`` and ``law``: (u_k as the
-        law asks it, tau_hat_k, the law's internals)."""
+    def decide(self, measured, u_m):
+        """Stages ``estimator`` (the identity when the measurement is a state), ``observer`` and ``law``:
+        (u_k as the law asks it, tau_hat_k, the law's internals, the state the loop believes)."""
+        x_m = measured if self.estimator is None else self.estimator.step(measured)
         tau_hat = self.observer.update(x_m, u_m)
         u_law, internals = self.law.step(x_m, tau_hat)
-        return u_law, tau_hat, internals
+        return u_law, tau_hat, internals, x_m
 
     def run(self, table) -> bool:
         """Period k up to the integration: sense, decide, act, and row k into ``table`` (true state, the torque
-        that acts, tau_hat, the true tau_d, internals).  True when the robot has fallen (the period ends
-        there); else :meth:`advance` integrates it."""
+        that acts, tau_hat, the true tau_d, internals; raw: the sample and the estimate).  True when the robot
+        has fallen (the period ends there); else :meth:`advance` integrates it."""
         side = self.side
-        x_m, u_m = side.sense()
-        u_law, tau_hat, internals = self.decide(x_m, u_m)
+        measured, u_m = side.sense()
+        u_law, tau_hat, internals, x_m = self.decide(measured, u_m)
         u, tau_d = side.act(u_law)
         p = side.plant
-        table.append(p.t, p.x, u, tau_hat, tau_d, internals)
+        table.append(p.t, p.x, u, tau_hat, tau_d, internals, (*measured, *x_m) if self.estimator else ())
         self.u = u
         return p.fallen
 

@@ -34,6 +34,8 @@ class Metrics:
     t_fall: Optional[float] = None    # the first t with |theta_b| > fall_angle (or the run's own record) [s]
     t_end: float = math.nan           # the run's last sample [s]
     covers_window: bool = True        # the run lasted to the window's end (a fallen run does not)
+    theta_b_est_err_rms: float = math.nan    # raw sensors: RMS of theta_b_hat - theta_b [rad] (NaN: no estimate)
+    dtheta_b_est_err_rms: float = math.nan   # RMS of dtheta_b_hat - dtheta_b [rad/s]
 
     def as_dict(self) -> dict:
         """The fields, NaN / infinite values as None (JSON null)."""
@@ -125,13 +127,15 @@ def compute(cols: Mapping[str, np.ndarray], window: Sequence[float], fall_angle:
            if f"tau_hat{i}" in cols and f"tau_d{i}" in cols else nan for i in (1, 2)]
     m = window_metrics(th[sel][None, :], np.asarray(cols["u"], dtype=float)[sel][None, :], err[0][None, :],
                        err[1][None, :])
+    est = {f"{c}_est_err_rms": float(_rms((np.asarray(cols[f"{c}_hat"], dtype=float) - np.asarray(cols[c]))[sel]))
+           for c in ("theta_b", "dtheta_b") if f"{c}_hat" in cols and c in cols}
     fell = fall_time(t, th, fall_angle)
     fell = t_fall if fell is None else fell
     t_end = float(t[-1]) if len(t) else math.nan
     return Metrics(window_start=float(window[0]), window_end=float(window[1]), samples=int(sel.sum()),
                    upright=fell is None, t_fall=fell, t_end=t_end,
                    covers_window=fell is None and t_end >= window[1] - 1e-9,
-                   **{k: float(v[0]) for k, v in m.items()})
+                   **{k: float(v[0]) for k, v in m.items()}, **est)
 
 
 HEADERS = [("run", "{}"), ("upright", "{}"), ("theta_b p2p [rad]", "{:.5f}"), ("theta_b RMS [rad]", "{:.5f}"),
@@ -146,18 +150,29 @@ def _cell(fmt: str, v) -> str:
     return fmt.format(v)
 
 
+EST_HEADERS = [("theta_b est err RMS [rad]", "{:.5f}"), ("theta_b' est err RMS [rad/s]", "{:.5f}")]
+
+
+def _headers(named: Sequence[tuple]) -> list:
+    """:data:`HEADERS`, and :data:`EST_HEADERS` when a run has a state estimator's estimate (raw sensors)."""
+    has_est = any(math.isfinite(m.theta_b_est_err_rms) for _, m in named)
+    return HEADERS + EST_HEADERS if has_est else HEADERS
+
+
 def table_rows(named: Sequence[tuple]) -> list:
+    headers = _headers(named)
     rows = []
     for name, m in named:
         vals = [name, "yes" if m.upright else "NO", m.theta_b_p2p, m.theta_b_rms, m.theta_b_max_abs, m.u_rms,
-                m.tau_err1_rms, m.tau_err2_rms, "-" if m.t_fall is None else f"{m.t_fall:.3f}"]
-        rows.append([_cell(fmt, v) for (_, fmt), v in zip(HEADERS, vals)])
+                m.tau_err1_rms, m.tau_err2_rms, "-" if m.t_fall is None else f"{m.t_fall:.3f}",
+                m.theta_b_est_err_rms, m.dtheta_b_est_err_rms]
+        rows.append([_cell(fmt, v) for (_, fmt), v in zip(headers, vals)])
     return rows
 
 
 def markdown_table(named: Sequence[tuple]) -> str:
     """A Markdown table, one row per (name, Metrics)."""
-    head = [h for h, _ in HEADERS]
+    head = [h for h, _ in _headers(named)]
     lines = ["| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in head) + "|"]
     lines += ["| " + " | ".join(r) + " |" for r in table_rows(named)]
     return "\n".join(lines)
@@ -165,7 +180,7 @@ def markdown_table(named: Sequence[tuple]) -> str:
 
 def text_table(named: Sequence[tuple]) -> str:
     """A fixed-width table for terminals."""
-    head = [h for h, _ in HEADERS]
+    head = [h for h, _ in _headers(named)]
     rows = table_rows(named)
     widths = [max(len(head[i]), *(len(r[i]) for r in rows)) for i in range(len(head))]
     fmt = "  ".join("{:<%d}" % w for w in widths)

@@ -15,6 +15,7 @@ from typing import Dict, Optional, Protocol, Tuple, runtime_checkable
 import numpy as np
 
 from .model import PhysicalParams, Sinusoid, State, accel, lumped_disturbance
+from .raw_sensors import RawSensorConfig
 from .sensing import NOISE_BLOCK, SensingConfig
 
 __all__ = ["Plant", "PLANTS", "make_plant", "PlantConfig", "PlantSim", "RK4Plant", "stage_torques", "rk4_period",
@@ -39,6 +40,7 @@ class PlantConfig:
     torque_limit: float              # 0 = none
     fall_angle: float                # |theta_b| beyond this is a fall [rad]
     sensing: SensingConfig = SensingConfig()   # measurement noise, encoder, delays (core.sensing); off
+    raw: Optional[RawSensorConfig] = None      # sensors.model raw: the IMU and the relative encoder (SPEC 10)
 
 
 def D_w_of(mean: float, sd: float, z: float) -> float:
@@ -71,6 +73,14 @@ class Plant(Protocol):
     @property
     def fallen(self) -> bool: ...
 
+    def sample_accel(self) -> Tuple[float, float]:
+        """(theta_w'', theta_b'') at t_k^-, the instant of a raw sample (SPEC 10): eq. (1) at x_k and t_k with what
+        acted over the previous period (its torque, its D_w, its external wrench) and tau_ext(t_k); at k = 0 zero
+        torque, the D_w of period 0 and no wrench."""
+        c = self.cfg
+        e1, e2 = self.tau_ext(self.t, self.extra_prev)
+        return accel(c.actual, self.D_w_prev, c.D_b, self.x, self.u_prev, e1, e2)
+
     def step(self, u: float, extra=(0.0, 0.0)) -> None: ...
 
     def lumped_disturbance(self, u: float, extra=(0.0, 0.0)) -> Tuple[float, float]: ...
@@ -90,13 +100,15 @@ class PlantSim:
     x: Optional[State] = None
     D_w: float = 0.0                 # ground friction over the current period
     u_prev: float = 0.0              # torque applied over the previous period (0 at k = 0)
+    D_w_prev: float = 0.0            # the previous period's D_w (period 0's at k = 0): a raw sample's instant
+    extra_prev: Tuple[float, float] = (0.0, 0.0)   # the external wrench held over the previous period
     _rng: np.random.Generator = field(default=None, repr=False)
     _noise: list = field(default_factory=list, repr=False)
 
     def __post_init__(self):
         self.x = State(*(float(v) for v in (self.cfg.initial if self.x is None else self.x)))
         self._rng = np.random.default_rng(self.cfg.seed)
-        self.D_w = self._draw_D_w()
+        self.D_w = self.D_w_prev = self._draw_D_w()
 
     @property
     def t(self) -> float:
@@ -127,6 +139,14 @@ class PlantSim:
         ddq = self.accel(self.t, self.x, u, extra)
         return lumped_disturbance(self.cfg.nominal, self.x, ddq, u)
 
+    def sample_accel(self) -> Tuple[float, float]:
+        """(theta_w'', theta_b'') at t_k^-, the instant of a raw sample (SPEC 10): eq. (1) at x_k and t_k with what
+        acted over the previous period (its torque, its D_w, its external wrench) and tau_ext(t_k); at k = 0 zero
+        torque, the D_w of period 0 and no wrench."""
+        c = self.cfg
+        e1, e2 = self.tau_ext(self.t, self.extra_prev)
+        return accel(c.actual, self.D_w_prev, c.D_b, self.x, self.u_prev, e1, e2)
+
     def step(self, u: float, extra=(0.0, 0.0)) -> None:
         """Integrate t_k -> t_{k+1} with u (already saturated) and D_w held; RK4, ``substeps`` steps."""
         c = self.cfg
@@ -134,6 +154,7 @@ class PlantSim:
         self.x = State(*rk4_period(c.actual, self.D_w, c.D_b, tau1, tau2, self.x, u, c.h, c.substeps))
         self.k += 1
         self.u_prev = u
+        self.D_w_prev, self.extra_prev = self.D_w, (float(extra[0]), float(extra[1]))
         self.D_w = self._draw_D_w()
 
 

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from typing import Any, Callable, Optional, Tuple
 
 from . import laws
+from .estimators import EstimatorConfig
 from .loop import Period, PlantSide
 from .observer import DiscreteObserver, gain_matrix
 from .plant import PlantConfig
@@ -55,6 +56,7 @@ class ClosedLoop:
     controller: str                        # a registered law (core.laws): 'dsc', 'dscndo', 'lqr', 'lqr_ndo', ...
     params: Any                            # its Params (core.laws.Law.design): DscGains, LqrGain, ...
     duration_s: float
+    estimator: Optional[EstimatorConfig] = None   # the state_estimator of a raw plant (plant.raw), else None
 
     @property
     def name(self) -> str:
@@ -80,9 +82,10 @@ def simulate(loop: ClosedLoop, label: str = "", progress: Optional[Callable[[flo
     pc = loop.plant
     h = pc.h
     n_steps = int(round(loop.duration_s / h))
+    estimator = loop.estimator.make(h, pc.nominal.r, pc.nominal.g) if pc.raw is not None else None
     period = Period(PlantSide(pc), DiscreteObserver(pc.nominal, gain_matrix(loop.X), h),
-                    loop.law_class(loop.params, pc.nominal, h))   # the stages of core.loop, in its order
-    table = TrajectoryTable(internals=True)   # the true state: the table and the metrics judge it
+                    loop.law_class(loop.params, pc.nominal, h), estimator)   # the stages of core.loop, in its order
+    table = TrajectoryTable(internals=True, raw=pc.raw is not None)   # the true state: the metrics judge it
     fallen = False
     every = max(1, n_steps // 10)
     for k in range(n_steps + 1):

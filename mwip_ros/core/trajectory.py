@@ -17,7 +17,8 @@ from typing import Any, Dict, Iterable, Sequence, Tuple
 
 import numpy as np
 
-__all__ = ["TRAJECTORY_COLUMNS", "INTERNAL_COLUMNS", "COLUMNS", "Trajectory", "TrajectoryTable",
+__all__ = ["TRAJECTORY_COLUMNS", "INTERNAL_COLUMNS", "COLUMNS", "RAW_COLUMNS", "ESTIMATE_COLUMNS", "ALL_COLUMNS",
+           "Trajectory", "TrajectoryTable",
            "join_estimates", "stamp_key"]
 
 # The trajectory every source has (simulator, plant_sim's CSV, a bag), then the controller's internals.
@@ -25,6 +26,10 @@ TRAJECTORY_COLUMNS = ["t", "theta_w", "theta_b", "dtheta_w", "dtheta_b", "u", "t
                       "tau_d1", "tau_d2"]
 INTERNAL_COLUMNS = ["u_dsc", "u_taud", "S1", "S2", "x4_bar", "x4d"]
 COLUMNS = TRAJECTORY_COLUMNS + INTERNAL_COLUMNS
+# with raw sensors (SPEC 10): the sample of the period and the state the estimator made of it
+RAW_COLUMNS = ["gyro", "accel_x", "accel_z", "encoder", "encoder_rate"]
+ESTIMATE_COLUMNS = ["theta_w_hat", "theta_b_hat", "dtheta_w_hat", "dtheta_b_hat"]
+ALL_COLUMNS = COLUMNS + RAW_COLUMNS + ESTIMATE_COLUMNS
 _NAN2 = (math.nan, math.nan)
 
 
@@ -66,21 +71,28 @@ class TrajectoryTable:
     about 6 ms per full collection).  ``internals=True`` adds :data:`INTERNAL_COLUMNS`.
     """
 
-    def __init__(self, internals: bool = False):
-        self.names = COLUMNS if internals else TRAJECTORY_COLUMNS
+    def __init__(self, internals: bool = False, raw: bool = False):
+        self.internals = internals
+        self.names = (COLUMNS if internals else TRAJECTORY_COLUMNS) + ((RAW_COLUMNS + ESTIMATE_COLUMNS) if raw
+                                                                        else [])
         self.width = len(self.names)
+        self.n_extra = len(RAW_COLUMNS + ESTIMATE_COLUMNS) if raw else 0
         self.rows = array("d")
 
     def append(self, t: float, x, u: float, tau_hat: Sequence[float] = _NAN2, tau_d: Sequence[float] = _NAN2,
-               out=None) -> None:
+               out=None, extra: Sequence[float] = ()) -> None:
         """Row of state ``x`` at ``t`` with command ``u``; ``out`` is the law's internals (a dict of its signals,
-        :meth:`mwip_ros.core.laws.Law.step`, or an object with them as attributes); one it lacks is NaN."""
+        :meth:`mwip_ros.core.laws.Law.step`, or an object with them as attributes); one it lacks is NaN.
+        ``extra``: with ``raw``, the raw sample and the estimate (:data:`RAW_COLUMNS`, :data:`ESTIMATE_COLUMNS`;
+        empty: NaN)."""
         self.rows.extend((t, x[0], x[1], x[2], x[3], u, tau_hat[0], tau_hat[1], tau_d[0], tau_d[1]))
-        if self.width > 10:
+        if self.internals:
             if isinstance(out, dict):
                 self.rows.extend([out.get(c, math.nan) for c in INTERNAL_COLUMNS])
             else:
                 self.rows.extend([getattr(out, c, math.nan) for c in INTERNAL_COLUMNS])
+        if self.n_extra:
+            self.rows.extend(extra if len(extra) == self.n_extra else (math.nan,) * self.n_extra)
 
     def __len__(self) -> int:
         return len(self.rows) // self.width

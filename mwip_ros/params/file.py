@@ -169,7 +169,7 @@ def load_param_files(paths, option: str = "--params-file") -> ParamFile:
 
 
 # the closed loop's nodes (core.loop.STAGES), the plant's values last (they win where sections share a key)
-NODES_OF_THE_LOOP = tuple(reversed(loop_nodes()))
+NODES_OF_THE_LOOP = tuple(reversed(loop_nodes(estimator=True)))
 
 
 def merged_values(pf: ParamFile, overrides: Optional[Mapping] = None) -> Dict[str, Any]:

@@ -241,6 +241,18 @@ def _law_parameters() -> List[ParamSpec]:
     return out
 
 
+def _estimator_parameters() -> List[ParamSpec]:
+    """The state_estimator parameters the registered estimators declare (core.estimators)."""
+    from mwip_ros.core import estimators
+    return [ParamSpec(p.name, p.type, p.default, p.description, lo=p.lo, hi=p.hi)
+            for name in estimators.names() for p in estimators.get(name).parameters]
+
+
+def _estimator_names() -> tuple:
+    from mwip_ros.core import estimators
+    return estimators.names()
+
+
 NODE_SPECS: Dict[str, List[ParamSpec]] = {
     "plant_sim": [
         ParamSpec("mode", "string", "lockstep", "lockstep (deterministic, waits for each command) or realtime "
@@ -283,8 +295,23 @@ NODE_SPECS: Dict[str, List[ParamSpec]] = {
                                   ("theta_b", "rad", MEASURED_LIMITS["theta_b"]),
                                   ("dtheta_w", "rad/s", MEASURED_LIMITS["rate"]),
                                   ("dtheta_b", "rad/s", MEASURED_LIMITS["rate"]))],
+        ParamSpec("sensors.model", "string", "state", "what the plant publishes: state (joint_states, the state "
+                  "itself, noisy with sensors.noise_std) or raw (imu/data_raw and wheel_encoder, what an IMU on the "
+                  "body and a motor encoder measure; a state_estimator publishes joint_states)",
+                  **_one_of("state", "raw")),
         ParamSpec("sensors.encoder_counts_per_rev", "integer", 0, "wheel encoder resolution: the published theta_w "
-                  "is quantized to 2 pi / counts; 0 = ideal", **_count_range(0, 1 << 30)),
+                  "(raw: the wheel's angle relative to the body) is quantized to 2 pi / counts; 0 = ideal",
+                  **_count_range(0, 1 << 30)),
+        ParamSpec("sensors.imu.offset", "double", 0.3, "raw: the IMU's distance from the axle along the body "
+                  "[m]", **_non_negative(100.0), unit="m"),
+        ParamSpec("sensors.imu.gyro_noise_std", "double", 0.0, "raw: white noise of the pitch rate per sample "
+                  "[rad/s]", **_non_negative(10.0), unit="rad/s"),
+        ParamSpec("sensors.imu.gyro_bias", "double", 0.0, "raw: the gyro's bias at the start [rad/s]",
+                  **_symmetric(10.0), unit="rad/s"),
+        ParamSpec("sensors.imu.gyro_bias_walk", "double", 0.0, "raw: random walk of the gyro's bias "
+                  "[rad/s/sqrt(s)]", **_non_negative(10.0)),
+        ParamSpec("sensors.imu.accel_noise_std", "double", 0.0, "raw: white noise of each accelerometer axis per "
+                  "sample [m/s^2]", **_non_negative(100.0), unit="m/s^2"),
         ParamSpec("sensors.delay_periods", "integer", 0, "measurement delay: the state published at step k is the "
                   "measurement of step k - d (the first d steps publish the first one)", **_count_range(0, 100000)),
         ParamSpec("actuator.delay_periods", "integer", 0, "actuator delay: the command answering state k acts "
@@ -315,6 +342,15 @@ NODE_SPECS: Dict[str, List[ParamSpec]] = {
                   **_lqr_q, dynamic=True),
         ParamSpec("lqr.R", "double", 0.01, "LQR input weight (> 0)", **_positive(), dynamic=True),
         *_law_parameters(),   # what a plug-in law declares itself (core.laws.Law.parameters)
+    ],
+    "state_estimator": [
+        _LOOP_MODE,
+        ParamSpec("method", "string", "kalman", "how the raw IMU and encoder become the state: complementary (the "
+                  "gyro integrated, blended with the accelerometer's pitch) or kalman (pitch, gyro bias and the "
+                  "IMU's horizontal motion; docs/theory.md 6.4)", **_one_of(*_estimator_names())),
+        ParamSpec("imu_offset", "double", 0.3, "the IMU's distance from the axle along the body as the estimator "
+                  "believes it [m] (the plant's sensors.imu.offset is the truth)", **_non_negative(100.0), unit="m"),
+        *_estimator_parameters(),
     ],
     "mcap_recorder": [
         ParamSpec("output", "string", "", "bag directory to create (refuses an existing one)"),
@@ -404,6 +440,11 @@ def check_derived(values: Mapping[str, Any], source: Optional[str] = None) -> No
             raise ParamError(f"{prefix}.m_b", f"the {prefix} model's inertia terms are not usable (m11 = {m11:g}, "
                                               f"m12 = {m12:g}, m22 = {m22:g}, A_bar = {a_bar:g}); check "
                                               f"{prefix}.{{m_b, m_w, I_b, I_w, l, r, g}}", source)
+    if values.get("sensors.model") == "raw":
+        for ch in ("theta_w", "theta_b", "dtheta_w", "dtheta_b"):
+            if values.get(f"sensors.noise_std.{ch}"):
+                raise ParamError(f"sensors.noise_std.{ch}", "applies to sensors.model: state only; a raw plant's "
+                                                            "noise is sensors.imu.* (set it to 0.0)", source)
     sd = values.get("sensors.noise_std.theta_b")
     if sd and "fall_angle" in values and values["fall_angle"] + NOISE_SIGMAS * sd > MEASURED_LIMITS["theta_b"]:
         most = (MEASURED_LIMITS["theta_b"] - values["fall_angle"]) / NOISE_SIGMAS

@@ -5,15 +5,17 @@ from typing import Any, Mapping, Optional
 
 from mwip_ros.core import laws
 from mwip_ros.core.controller import DscGains
+from mwip_ros.core.estimators import EstimatorConfig
 from mwip_ros.core.model import PhysicalParams, Sinusoid, State
 from mwip_ros.core.plant import PlantConfig
+from mwip_ros.core.raw_sensors import RawSensorConfig
 from mwip_ros.core.sensing import SensingConfig
 from mwip_ros.core.sim import ClosedLoop
 
 from .schema import PAPER_NOMINAL
 
-__all__ = ["physical", "sinusoid", "gains", "period", "observer_gain", "plant_config", "sensing", "lqr_gain",
-           "closed_loop"]
+__all__ = ["physical", "sinusoid", "gains", "period", "observer_gain", "plant_config", "sensing", "raw_sensors",
+           "estimator", "lqr_gain", "closed_loop"]
 
 
 def physical(values: Mapping[str, Any], prefix: str) -> PhysicalParams:
@@ -48,11 +50,32 @@ def plant_config(v: Mapping[str, Any]) -> PlantConfig:
         tau_ext1=sinusoid(v, "tau_ext1"), tau_ext2=sinusoid(v, "tau_ext2"),
         h=period(v), substeps=v["substeps"], seed=v["seed"],
         initial=State(v["initial.theta_w"], v["initial.theta_b"], v["initial.dtheta_w"], v["initial.dtheta_b"]),
-        torque_limit=v["torque_limit"], fall_angle=v["fall_angle"], sensing=sensing(v))
+        torque_limit=v["torque_limit"], fall_angle=v["fall_angle"], sensing=sensing(v), raw=raw_sensors(v))
+
+
+def raw_sensors(v: Mapping[str, Any]) -> Optional[RawSensorConfig]:
+    """The IMU and the relative encoder of ``sensors.model: raw`` (SPEC 10); None for ``state``."""
+    if v.get("sensors.model", "state") != "raw":
+        return None
+    return RawSensorConfig(offset=v["sensors.imu.offset"], gyro_noise_std=v["sensors.imu.gyro_noise_std"],
+                           gyro_bias=v["sensors.imu.gyro_bias"], gyro_bias_walk=v["sensors.imu.gyro_bias_walk"],
+                           accel_noise_std=v["sensors.imu.accel_noise_std"],
+                           encoder_counts_per_rev=v["sensors.encoder_counts_per_rev"])
+
+
+def estimator(v: Mapping[str, Any]) -> EstimatorConfig:
+    """The state_estimator's method, its parameters (every method's) and the IMU offset it believes."""
+    from mwip_ros.core import estimators
+    names = [p.name for m in estimators.names() for p in estimators.get(m).parameters]
+    return EstimatorConfig(v["method"], tuple((n, v[n]) for n in names if n in v), v["imu_offset"])
 
 
 def sensing(v: Mapping[str, Any]) -> SensingConfig:
-    """The plant's sensing and actuation options (all off by default)."""
+    """The plant's sensing and actuation options (all off by default); with raw sensors only the delays (the
+    encoder's counts quantize the relative angle: :func:`raw_sensors`)."""
+    if v.get("sensors.model", "state") == "raw":
+        return SensingConfig(delay_periods=v["sensors.delay_periods"],
+                             actuator_delay_periods=v["actuator.delay_periods"])
     return SensingConfig(noise_std=tuple(v[f"sensors.noise_std.{c}"] for c in ("theta_w", "theta_b", "dtheta_w",
                                                                                 "dtheta_b")),
                          encoder_counts_per_rev=v["sensors.encoder_counts_per_rev"],
@@ -87,4 +110,5 @@ def closed_loop(v: Mapping[str, Any], use_observer: Optional[bool] = None,
     plant = plant_config(v)
     return ClosedLoop(plant=plant, X=tuple(float(c) for c in v["X"]), controller=controller,
                       params=cls.design(v, plant.nominal, plant.h),
-                      duration_s=v["duration_s"] if duration is None else duration)
+                      duration_s=v["duration_s"] if duration is None else duration,
+                      estimator=estimator(v) if plant.raw is not None else None)

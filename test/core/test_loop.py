@@ -52,7 +52,8 @@ def test_the_answering_stages_are_those_the_plant_does_not_run():
 def test_the_driver_the_resim_and_the_parameter_merge_take_the_chain_from_the_stages():
     assert lockstep.CHAIN == loop.answering()
     assert resim.LOOP_NODES == ("disturbance_observer", "dscndo_controller")
-    assert param_file.NODES_OF_THE_LOOP == ("dscndo_controller", "disturbance_observer", "plant_sim")
+    assert param_file.NODES_OF_THE_LOOP == ("dscndo_controller", "disturbance_observer", "state_estimator",
+                                            "plant_sim")
 
 
 class _Graph:

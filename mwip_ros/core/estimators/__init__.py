@@ -18,7 +18,7 @@ from typing import Any, Dict, Mapping, NamedTuple, Optional, Tuple
 
 from ..model import State
 
-__all__ = ["EstimatorParam", "Health", "Estimator", "register", "get", "names", "NIS_WINDOW_S"]
+__all__ = ["EstimatorParam", "Health", "Estimator", "EstimatorConfig", "register", "get", "names", "NIS_WINDOW_S"]
 
 NIS_WINDOW_S = 1.0   # time constant [s] of the running mean of the normalized innovation squared (health)
 
@@ -33,6 +33,19 @@ class EstimatorParam(NamedTuple):
     description: str
     lo: Optional[float] = None    # lo <= value (numbers), None: unbounded
     hi: Optional[float] = None    # value <= hi
+
+
+class EstimatorConfig(NamedTuple):
+    """The ``state_estimator``'s choice, as plain data: its ``method``, its parameter values (``(name, value)``
+    pairs, every method's: :meth:`Estimator.checked` takes its own) and the IMU offset it believes [m]."""
+
+    method: str
+    values: Tuple[Tuple[str, Any], ...]
+    imu_offset: float
+
+    def make(self, h: float, r: float, g: float) -> "Estimator":
+        """The estimator for period ``h``, the nominal wheel radius ``r`` and gravity ``g``."""
+        return get(self.method)(dict(self.values), h, r, self.imu_offset, g)
 
 
 class Health(NamedTuple):
