@@ -14,6 +14,7 @@ from mwip_ros.cli.outputs import refuse_existing
 from mwip_ros.cli.theorem import theorem_report
 from mwip_ros.core import budget, metrics
 from mwip_ros.core import laws
+from mwip_ros.core.drive import torque_warning
 from mwip_ros.core.sim import simulate
 from mwip_ros.params.paths import default_params_file
 from mwip_ros.runs import write_csv
@@ -125,6 +126,9 @@ def _main(argv=None) -> int:
         reason = refuse_existing(path, args.force, option)
         if reason:
             return _fail(reason)
+    warning = torque_warning(P.motor(values), P.physical(values, "actual"), values["fall_angle"])
+    if warning:   # allowed (a weak drive is worth simulating), but said with the figure
+        print(f"mwip_sim: warning: {warning}", file=sys.stderr)
     if not args.quiet:
         print(theorem_report(values), file=sys.stderr)
         first = {laws.get(n).family: n for n in reversed(names)}   # a law per family: lqr, lqr_ndo share K

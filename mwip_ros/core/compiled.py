@@ -50,7 +50,7 @@ import numpy as np
 from numba.core.caching import (CompileResultCacheImpl, FunctionCache, InTreeCacheLocator, UserProvidedCacheLocator,
                                 UserWideCacheLocator)
 
-from . import controller, model, observer, plant, sensing
+from . import controller, drive, model, observer, plant, sensing
 from .controller import u_taud_of
 from .model import lumped_disturbance
 from .observer import tau_hat_of, z_next, z_start
@@ -59,7 +59,7 @@ from .sensing import quantize
 
 __all__ = ["Inertia", "RK4Periods", "SOURCES", "Sin", "kernel_for"]
 
-SOURCES = (Path(model.__file__), Path(plant.__file__), Path(__file__))   # what the compiled plant is made of
+SOURCES = (Path(model.__file__), Path(plant.__file__), Path(drive.__file__), Path(__file__))   # the compiled plant's
 _STAMP = hashlib.sha256(b"".join(p.read_bytes() for p in SOURCES)).hexdigest()
 # what the compiled batch loop is made of besides a law's own module
 LOOP_SOURCES = SOURCES + (Path(observer.__file__), Path(controller.__file__), Path(sensing.__file__))
@@ -130,7 +130,8 @@ def _compiled(fn, **calls):
 
 
 _accel = _compiled(model.accel)
-_rk4_period = _compiled(plant.rk4_period, accel=_accel)
+_rk4_driven = _compiled(plant.rk4_driven, accel=_accel, motor_torque=_compiled(drive.motor_torque))
+_rk4_period = _compiled(plant.rk4_period, rk4_driven=_rk4_driven)
 
 
 @_jit

@@ -169,5 +169,9 @@ class Period:
         self.u = u
         return p.fallen
 
-    def advance(self) -> None:
+    def advance(self, table=None) -> None:
+        """Stage ``plant``: integrate period k; ``table`` gets the torque that acted over it (motor model on)."""
         self.side.advance(self.u)
+        if table is not None:
+            p = self.side.plant
+            table.set_drive(p.u_prev, p.saturation)

@@ -36,6 +36,9 @@ class Metrics:
     covers_window: bool = True        # the run lasted to the window's end (a fallen run does not)
     theta_b_est_err_rms: float = math.nan    # raw sensors: RMS of theta_b_hat - theta_b [rad] (NaN: no estimate)
     dtheta_b_est_err_rms: float = math.nan   # RMS of dtheta_b_hat - dtheta_b [rad/s]
+    u_applied_rms: float = math.nan          # motor model: RMS of the torque that acted in the window [N m]
+    saturated_s: float = math.nan            # motor model: time the drive spent saturated (current or voltage
+                                             # limit) over the whole run [s]
 
     def as_dict(self) -> dict:
         """The fields, NaN / infinite values as None (JSON null)."""
@@ -129,6 +132,11 @@ def compute(cols: Mapping[str, np.ndarray], window: Sequence[float], fall_angle:
                        err[1][None, :])
     est = {f"{c}_est_err_rms": float(_rms((np.asarray(cols[f"{c}_hat"], dtype=float) - np.asarray(cols[c]))[sel]))
            for c in ("theta_b", "dtheta_b") if f"{c}_hat" in cols and c in cols}
+    if "u_applied" in cols and "drive_saturation" in cols:
+        sat = np.asarray(cols["drive_saturation"], dtype=float)
+        h = float(t[1] - t[0]) if len(t) > 1 else math.nan
+        est["u_applied_rms"] = float(_rms(np.asarray(cols["u_applied"], dtype=float)[sel]))
+        est["saturated_s"] = float(np.sum(np.nan_to_num(sat) > 0) * h)
     fell = fall_time(t, th, fall_angle)
     fell = t_fall if fell is None else fell
     t_end = float(t[-1]) if len(t) else math.nan
@@ -150,22 +158,28 @@ def _cell(fmt: str, v) -> str:
     return fmt.format(v)
 
 
-EST_HEADERS = [("theta_b est err RMS [rad]", "{:.5f}"), ("theta_b' est err RMS [rad/s]", "{:.5f}")]
+# columns a table shows when a run has them: (header, format, the Metrics field)
+OPTIONAL_HEADERS = [("theta_b est err RMS [rad]", "{:.5f}", "theta_b_est_err_rms"),
+                    ("theta_b' est err RMS [rad/s]", "{:.5f}", "dtheta_b_est_err_rms"),
+                    ("u applied RMS [N m]", "{:.2f}", "u_applied_rms"), ("saturated [s]", "{:.3f}", "saturated_s")]
+
+
+def _optional(named: Sequence[tuple]) -> list:
+    """The :data:`OPTIONAL_HEADERS` some run of ``named`` has a value of (raw sensors' estimate, the motor)."""
+    return [o for o in OPTIONAL_HEADERS if any(math.isfinite(getattr(m, o[2])) for _, m in named)]
 
 
 def _headers(named: Sequence[tuple]) -> list:
-    """:data:`HEADERS`, and :data:`EST_HEADERS` when a run has a state estimator's estimate (raw sensors)."""
-    has_est = any(math.isfinite(m.theta_b_est_err_rms) for _, m in named)
-    return HEADERS + EST_HEADERS if has_est else HEADERS
+    return HEADERS + [(h, f) for h, f, _ in _optional(named)]
 
 
 def table_rows(named: Sequence[tuple]) -> list:
-    headers = _headers(named)
+    headers, extra = _headers(named), _optional(named)
     rows = []
     for name, m in named:
         vals = [name, "yes" if m.upright else "NO", m.theta_b_p2p, m.theta_b_rms, m.theta_b_max_abs, m.u_rms,
                 m.tau_err1_rms, m.tau_err2_rms, "-" if m.t_fall is None else f"{m.t_fall:.3f}",
-                m.theta_b_est_err_rms, m.dtheta_b_est_err_rms]
+                *(getattr(m, f) for _, _, f in extra)]
         rows.append([_cell(fmt, v) for (_, fmt), v in zip(headers, vals)])
     return rows
 

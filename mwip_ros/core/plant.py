@@ -14,12 +14,13 @@ from typing import Dict, Optional, Protocol, Tuple, runtime_checkable
 
 import numpy as np
 
+from .drive import MotorConfig, motor_torque
 from .model import PhysicalParams, Sinusoid, State, accel, lumped_disturbance
 from .raw_sensors import RawSensorConfig
 from .sensing import NOISE_BLOCK, SensingConfig
 
 __all__ = ["Plant", "PLANTS", "make_plant", "PlantConfig", "PlantSim", "RK4Plant", "stage_torques", "rk4_period",
-           "saturate", "D_w_of"]
+           "rk4_driven", "NO_MOTOR", "saturate", "D_w_of"]
 
 
 @dataclass(frozen=True)
@@ -41,6 +42,13 @@ class PlantConfig:
     fall_angle: float                # |theta_b| beyond this is a fall [rad]
     sensing: SensingConfig = SensingConfig()   # measurement noise, encoder, delays (core.sensing); off
     raw: Optional[RawSensorConfig] = None      # sensors.model raw: the IMU and the relative encoder (SPEC 10)
+    motor: MotorConfig = MotorConfig()         # the DC motor and its driver (SPEC 11); off
+
+    @property
+    def motor_constants(self) -> Tuple[float, float, float, float]:
+        """(K_t, R, V_max, I_max) for :func:`rk4_driven`, or :data:`NO_MOTOR` when the motor is off."""
+        mc = self.motor
+        return (mc.torque_constant, mc.resistance, mc.voltage_limit, mc.current_limit) if mc.enabled else NO_MOTOR
 
 
 def D_w_of(mean: float, sd: float, z: float) -> float:
@@ -79,7 +87,10 @@ class Plant(Protocol):
         torque, the D_w of period 0 and no wrench."""
         c = self.cfg
         e1, e2 = self.tau_ext(self.t, self.extra_prev)
-        return accel(c.actual, self.D_w_prev, c.D_b, self.x, self.u_prev, e1, e2)
+        u = self.u_prev
+        if c.motor.enabled and self.k > 0:   # the motor's torque at x_k for the previous command
+            u = motor_torque(self.u_cmd_prev, self.x[2] - self.x[3], *c.motor_constants)[0]
+        return accel(c.actual, self.D_w_prev, c.D_b, self.x, u, e1, e2)
 
     def step(self, u: float, extra=(0.0, 0.0)) -> None: ...
 
@@ -99,7 +110,9 @@ class PlantSim:
     k: int = 0
     x: Optional[State] = None
     D_w: float = 0.0                 # ground friction over the current period
-    u_prev: float = 0.0              # torque applied over the previous period (0 at k = 0)
+    u_prev: float = 0.0              # the torque that acted over the previous period (0 at k = 0)
+    u_cmd_prev: float = 0.0          # the command held over the previous period (the motor's input)
+    saturation: int = 0              # the drive's worst saturation code over the previous period (core.drive)
     D_w_prev: float = 0.0            # the previous period's D_w (period 0's at k = 0): a raw sample's instant
     extra_prev: Tuple[float, float] = (0.0, 0.0)   # the external wrench held over the previous period
     _rng: np.random.Generator = field(default=None, repr=False)
@@ -145,15 +158,21 @@ class PlantSim:
         torque, the D_w of period 0 and no wrench."""
         c = self.cfg
         e1, e2 = self.tau_ext(self.t, self.extra_prev)
-        return accel(c.actual, self.D_w_prev, c.D_b, self.x, self.u_prev, e1, e2)
+        u = self.u_prev
+        if c.motor.enabled and self.k > 0:   # the motor's torque at x_k for the previous command
+            u = motor_torque(self.u_cmd_prev, self.x[2] - self.x[3], *c.motor_constants)[0]
+        return accel(c.actual, self.D_w_prev, c.D_b, self.x, u, e1, e2)
 
     def step(self, u: float, extra=(0.0, 0.0)) -> None:
-        """Integrate t_k -> t_{k+1} with u (already saturated) and D_w held; RK4, ``substeps`` steps."""
+        """Integrate t_k -> t_{k+1} with the command u (already saturated) and D_w held; RK4, ``substeps`` steps;
+        with the motor model on, the drive turns u into the torque at every stage (:func:`rk4_driven`)."""
         c = self.cfg
         tau1, tau2 = stage_torques(c.tau_ext1, c.tau_ext2, extra, self.t, c.h, c.substeps)
-        self.x = State(*rk4_period(c.actual, self.D_w, c.D_b, tau1, tau2, self.x, u, c.h, c.substeps))
+        w, b, dw, db, acted, self.saturation = rk4_driven(c.actual, self.D_w, c.D_b, tau1, tau2, self.x, u, c.h,
+                                                          c.substeps, c.motor_constants)
+        self.x = State(w, b, dw, db)
         self.k += 1
-        self.u_prev = u
+        self.u_prev, self.u_cmd_prev = acted, u
         self.D_w_prev, self.extra_prev = self.D_w, (float(extra[0]), float(extra[1]))
         self.D_w = self._draw_D_w()
 
@@ -168,30 +187,62 @@ def stage_torques(f1: Sinusoid, f2: Sinusoid, extra, t0: float, h: float, n: int
     return [f1.at(t, m) + extra[0] for t in times], [f2.at(t, m) + extra[1] for t in times]
 
 
+NO_MOTOR = (0.0, 0.0, 0.0, 0.0)   # rk4_driven's ``motor`` when the motor model is off: the torque is the command
+
+
 def rk4_period(p: PhysicalParams, D_w, D_b, tau1, tau2, x, u, h: float, n: int, m=math) -> Tuple:
-    """The state after one control period [t0, t0 + h]: classic RK4 of eq. (1) in ``n`` equal sub-steps, u and
+    """The state after one control period [t0, t0 + h] with the torque ``u`` held (the motor model off):
+    :func:`rk4_driven` without a motor.  The batch simulator runs this same function compiled by numba, once
+    per scenario (``core.compiled``), which is why it takes the stage torques as numbers and not the
+    ``Sinusoid`` objects."""
+    w, b, dw, db, _, _ = rk4_driven(p, D_w, D_b, tau1, tau2, x, u, h, n, NO_MOTOR, m)
+    return w, b, dw, db
+
+
+def rk4_driven(p: PhysicalParams, D_w, D_b, tau1, tau2, x, u, h: float, n: int, motor, m=math) -> Tuple:
+    """One control period [t0, t0 + h]: classic RK4 of eq. (1) in ``n`` equal sub-steps, the command ``u`` and
     D_w held; ``tau1[j]``, ``tau2[j]`` are tau_ext at stage time j (:func:`stage_torques`).
 
-    ``m`` is the math namespace of :func:`~.model.accel`.  The plant calls this with floats; the batch
-    simulator runs this same function compiled by numba, once per scenario (``core.compiled``), which is
-    why it takes the stage torques as numbers and not the ``Sinusoid`` objects."""
+    ``motor`` = (K_t, R, V_max, I_max) of the drive (SPEC 11, :func:`.drive.motor_torque`), evaluated at every
+    stage from that stage's state (w = th_w' - th_b'); K_t = 0 (:data:`NO_MOTOR`): no motor, the torque is ``u``
+    at every stage (the paper's numbers).  Returns (theta_w, theta_b, theta_w', theta_b', the torque that acted
+    over the period, the drive's worst saturation code): the torque that acted is the RK4-weighted mean of the
+    stage torques, ``sum (u1 + 2 u2 + 2 u3 + u4) / (6 n)`` (:func:`.drive.acted_torque`), and ``u`` itself
+    without a motor.  ``m`` is the math namespace of :func:`~.model.accel`."""
     dt = h / n
     half, sixth = dt / 2, dt / 6
     w, b, dw, db = x
+    driven = motor[0] > 0.0
+    u1 = u2 = u3 = u4 = u
+    acted = 0.0
+    sat = 0
     for i in range(n):
         j = 2 * i   # stage times t, t + dt/2 (twice), t + dt
-        a1w, a1b = accel(p, D_w, D_b, (w, b, dw, db), u, tau1[j], tau2[j], m)                  # k1
+        if driven:
+            u1, c1 = motor_torque(u, dw - db, motor[0], motor[1], motor[2], motor[3])
+            sat = max(sat, c1)
+        a1w, a1b = accel(p, D_w, D_b, (w, b, dw, db), u1, tau1[j], tau2[j], m)                 # k1
         b2, dw2, db2 = b + half * db, dw + half * a1w, db + half * a1b
-        a2w, a2b = accel(p, D_w, D_b, (w, b2, dw2, db2), u, tau1[j + 1], tau2[j + 1], m)       # k2
+        if driven:
+            u2, c2 = motor_torque(u, dw2 - db2, motor[0], motor[1], motor[2], motor[3])
+            sat = max(sat, c2)
+        a2w, a2b = accel(p, D_w, D_b, (w, b2, dw2, db2), u2, tau1[j + 1], tau2[j + 1], m)      # k2
         b3, dw3, db3 = b + half * db2, dw + half * a2w, db + half * a2b
-        a3w, a3b = accel(p, D_w, D_b, (w, b3, dw3, db3), u, tau1[j + 1], tau2[j + 1], m)       # k3
+        if driven:
+            u3, c3 = motor_torque(u, dw3 - db3, motor[0], motor[1], motor[2], motor[3])
+            sat = max(sat, c3)
+        a3w, a3b = accel(p, D_w, D_b, (w, b3, dw3, db3), u3, tau1[j + 1], tau2[j + 1], m)      # k3
         b4, dw4, db4 = b + dt * db3, dw + dt * a3w, db + dt * a3b
-        a4w, a4b = accel(p, D_w, D_b, (w, b4, dw4, db4), u, tau1[j + 2], tau2[j + 2], m)       # k4
+        if driven:
+            u4, c4 = motor_torque(u, dw4 - db4, motor[0], motor[1], motor[2], motor[3])
+            sat = max(sat, c4)
+            acted += u1 + 2.0 * u2 + 2.0 * u3 + u4
+        a4w, a4b = accel(p, D_w, D_b, (w, b4, dw4, db4), u4, tau1[j + 2], tau2[j + 2], m)      # k4
         w = w + sixth * (dw + 2 * dw2 + 2 * dw3 + dw4)
         b = b + sixth * (db + 2 * db2 + 2 * db3 + db4)
         dw = dw + sixth * (a1w + 2 * a2w + 2 * a3w + a4w)
         db = db + sixth * (a1b + 2 * a2b + 2 * a3b + a4b)
-    return w, b, dw, db
+    return w, b, dw, db, (acted / (6.0 * n) if driven else u), sat
 
 
 RK4Plant = PlantSim

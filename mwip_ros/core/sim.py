@@ -85,7 +85,8 @@ def simulate(loop: ClosedLoop, label: str = "", progress: Optional[Callable[[flo
     estimator = loop.estimator.make(h, pc.nominal.r, pc.nominal.g) if pc.raw is not None else None
     period = Period(PlantSide(pc), DiscreteObserver(pc.nominal, gain_matrix(loop.X), h),
                     loop.law_class(loop.params, pc.nominal, h), estimator)   # the stages of core.loop, in its order
-    table = TrajectoryTable(internals=True, raw=pc.raw is not None)   # the true state: the metrics judge it
+    # the true state: the metrics judge it
+    table = TrajectoryTable(internals=True, raw=pc.raw is not None, drive=pc.motor.enabled)
     fallen = False
     every = max(1, n_steps // 10)
     for k in range(n_steps + 1):
@@ -94,7 +95,7 @@ def simulate(loop: ClosedLoop, label: str = "", progress: Optional[Callable[[flo
             break
         if k == n_steps:
             break
-        period.advance()
+        period.advance(table)
         if progress is not None and k % every == 0:
             progress(k / n_steps)
     return table.trajectory(label or loop.name, fallen, h)

@@ -17,7 +17,8 @@ from typing import Any, Dict, Iterable, Sequence, Tuple
 
 import numpy as np
 
-__all__ = ["TRAJECTORY_COLUMNS", "INTERNAL_COLUMNS", "COLUMNS", "RAW_COLUMNS", "ESTIMATE_COLUMNS", "ALL_COLUMNS",
+__all__ = ["TRAJECTORY_COLUMNS", "INTERNAL_COLUMNS", "COLUMNS", "RAW_COLUMNS", "ESTIMATE_COLUMNS", "DRIVE_COLUMNS",
+           "ALL_COLUMNS",
            "Trajectory", "TrajectoryTable",
            "join_estimates", "stamp_key"]
 
@@ -29,7 +30,10 @@ COLUMNS = TRAJECTORY_COLUMNS + INTERNAL_COLUMNS
 # with raw sensors (SPEC 10): the sample of the period and the state the estimator made of it
 RAW_COLUMNS = ["gyro", "accel_x", "accel_z", "encoder", "encoder_rate"]
 ESTIMATE_COLUMNS = ["theta_w_hat", "theta_b_hat", "dtheta_w_hat", "dtheta_b_hat"]
-ALL_COLUMNS = COLUMNS + RAW_COLUMNS + ESTIMATE_COLUMNS
+# with the motor model (SPEC 11): the torque that acted over [t_k, t_k+1) beside the command u, and the drive's
+# worst saturation code of the period (core.drive: 0 none, 1 current, 2 voltage); NaN in a row no period followed
+DRIVE_COLUMNS = ["u_applied", "drive_saturation"]
+ALL_COLUMNS = COLUMNS + RAW_COLUMNS + ESTIMATE_COLUMNS + DRIVE_COLUMNS
 _NAN2 = (math.nan, math.nan)
 
 
@@ -71,12 +75,13 @@ class TrajectoryTable:
     about 6 ms per full collection).  ``internals=True`` adds :data:`INTERNAL_COLUMNS`.
     """
 
-    def __init__(self, internals: bool = False, raw: bool = False):
+    def __init__(self, internals: bool = False, raw: bool = False, drive: bool = False):
         self.internals = internals
-        self.names = (COLUMNS if internals else TRAJECTORY_COLUMNS) + ((RAW_COLUMNS + ESTIMATE_COLUMNS) if raw
-                                                                        else [])
+        self.names = ((COLUMNS if internals else TRAJECTORY_COLUMNS) + ((RAW_COLUMNS + ESTIMATE_COLUMNS) if raw
+                                                                         else []) + (DRIVE_COLUMNS if drive else []))
         self.width = len(self.names)
         self.n_extra = len(RAW_COLUMNS + ESTIMATE_COLUMNS) if raw else 0
+        self.drive = drive
         self.rows = array("d")
 
     def append(self, t: float, x, u: float, tau_hat: Sequence[float] = _NAN2, tau_d: Sequence[float] = _NAN2,
@@ -93,6 +98,14 @@ class TrajectoryTable:
                 self.rows.extend([getattr(out, c, math.nan) for c in INTERNAL_COLUMNS])
         if self.n_extra:
             self.rows.extend(extra if len(extra) == self.n_extra else (math.nan,) * self.n_extra)
+        if self.drive:
+            self.rows.extend(_NAN2)   # u_applied, drive_saturation: known once the period is integrated
+
+    def set_drive(self, u_applied: float, saturation: int) -> None:
+        """The last row's :data:`DRIVE_COLUMNS`, once its period has been integrated."""
+        if self.drive:
+            self.rows[len(self.rows) - 2] = u_applied
+            self.rows[len(self.rows) - 1] = float(saturation)
 
     def __len__(self) -> int:
         return len(self.rows) // self.width

@@ -316,6 +316,16 @@ NODE_SPECS: Dict[str, List[ParamSpec]] = {
                   "measurement of step k - d (the first d steps publish the first one)", **_count_range(0, 100000)),
         ParamSpec("actuator.delay_periods", "integer", 0, "actuator delay: the command answering state k acts "
                   "over [t_(k+d), t_(k+d+1)); zero torque before the first one", **_count_range(0, 100000)),
+        ParamSpec("motor.enabled", "bool", False, "a DC motor and its driver between the command and the wheel "
+                  "(SPEC 11: back-EMF, voltage and current limits, evaluated at every RK4 stage); false = the "
+                  "torque is the command"),
+        ParamSpec("motor.torque_constant", "double", 2.0, "K_t at the wheel [N m/A], also the back-EMF constant "
+                  "[V s/rad]", **_positive(1e4)),
+        ParamSpec("motor.resistance", "double", 0.15, "winding resistance R [ohm]", **_positive(1e4), unit="ohm"),
+        ParamSpec("motor.voltage_limit", "double", 48.0, "the driver's voltage limit V_max (battery) [V]",
+                  **_positive(1e5), unit="V"),
+        ParamSpec("motor.current_limit", "double", 60.0, "the driver's current limit I_max [A]", **_positive(1e5),
+                  unit="A"),
         ParamSpec("expected_subscribers", "integer", 2, "lockstep: wait until joint_states has this many "
                   "matched subscriptions before the first state (2 = observer + controller; +1 per recorder)",
                   **_at_least_zero),

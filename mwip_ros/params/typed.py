@@ -5,6 +5,7 @@ from typing import Any, Mapping, Optional
 
 from mwip_ros.core import laws
 from mwip_ros.core.controller import DscGains
+from mwip_ros.core.drive import MotorConfig
 from mwip_ros.core.estimators import EstimatorConfig
 from mwip_ros.core.model import PhysicalParams, Sinusoid, State
 from mwip_ros.core.plant import PlantConfig
@@ -15,7 +16,7 @@ from mwip_ros.core.sim import ClosedLoop
 from .schema import PAPER_NOMINAL
 
 __all__ = ["physical", "sinusoid", "gains", "period", "observer_gain", "plant_config", "sensing", "raw_sensors",
-           "estimator", "lqr_gain", "closed_loop"]
+           "estimator", "motor", "lqr_gain", "closed_loop"]
 
 
 def physical(values: Mapping[str, Any], prefix: str) -> PhysicalParams:
@@ -50,7 +51,15 @@ def plant_config(v: Mapping[str, Any]) -> PlantConfig:
         tau_ext1=sinusoid(v, "tau_ext1"), tau_ext2=sinusoid(v, "tau_ext2"),
         h=period(v), substeps=v["substeps"], seed=v["seed"],
         initial=State(v["initial.theta_w"], v["initial.theta_b"], v["initial.dtheta_w"], v["initial.dtheta_b"]),
-        torque_limit=v["torque_limit"], fall_angle=v["fall_angle"], sensing=sensing(v), raw=raw_sensors(v))
+        torque_limit=v["torque_limit"], fall_angle=v["fall_angle"], sensing=sensing(v), raw=raw_sensors(v),
+        motor=motor(v))
+
+
+def motor(v: Mapping[str, Any]) -> MotorConfig:
+    """The DC motor and its driver (SPEC 11), ``motor.enabled`` false by default."""
+    return MotorConfig(enabled=v.get("motor.enabled", False), **{
+        k: v.get(f"motor.{k}", getattr(MotorConfig, k))
+        for k in ("torque_constant", "resistance", "voltage_limit", "current_limit")})
 
 
 def raw_sensors(v: Mapping[str, Any]) -> Optional[RawSensorConfig]:

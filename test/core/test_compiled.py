@@ -7,7 +7,7 @@ import pytest
 
 from mathfixtures import P_FILE
 from mwip_ros import params as P
-from mwip_ros.core import compiled, metrics, model, plant
+from mwip_ros.core import compiled, drive, metrics, model, plant
 from mwip_ros.core.batch import simulate_batch
 from mwip_ros.core.model import PhysicalParams, Sinusoid
 from mwip_ros.core.sim import simulate
@@ -22,8 +22,11 @@ def test_the_compiled_functions_are_the_scalar_ones():
     # not a second copy of eq. (1) or of RK4: numba compiled these very code objects
     assert compiled._accel.py_func.__code__ is model.accel.__code__
     assert compiled._rk4_period.py_func.__code__ is plant.rk4_period.__code__
-    # and inside the compiled rk4_period, accel is the compiled accel
-    assert compiled._rk4_period.py_func.__globals__["accel"] is compiled._accel
+    assert compiled._rk4_driven.py_func.__code__ is plant.rk4_driven.__code__
+    # and inside the compiled RK4, accel and the motor are the compiled ones
+    assert compiled._rk4_period.py_func.__globals__["rk4_driven"] is compiled._rk4_driven
+    assert compiled._rk4_driven.py_func.__globals__["accel"] is compiled._accel
+    assert compiled._rk4_driven.py_func.__globals__["motor_torque"].py_func.__code__ is drive.motor_torque.__code__
 
 
 def _scenarios(n, seed=5):
