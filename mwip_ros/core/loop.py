@@ -37,7 +37,7 @@ from .raw_sensors import RawSensors
 from .sensing import Actuator, Sensors
 
 __all__ = ["Stage", "STAGES", "STAGE_NAMES", "PLANT_NODE", "Answer", "answering", "loop_nodes", "PlantSide",
-           "Period"]
+           "Period", "command"]
 
 PLANT_NODE = "plant_sim"
 
@@ -143,17 +143,19 @@ class Period:
     """A whole period in one process (the offline loop): the plant's stages around the estimator (when the
     plant measures raw: :mod:`.estimators`), the observer and the law."""
 
-    def __init__(self, side: PlantSide, observer, law, estimator=None):
+    def __init__(self, side: PlantSide, observer, law, estimator=None, excitation=None):
         self.side, self.observer, self.law, self.estimator = side, observer, law, estimator
+        self.excitation = excitation
         if (side.raw is None) != (estimator is None):
             raise ValueError("a raw plant needs a state estimator, and only a raw plant has one")
 
-    def decide(self, measured, u_m):
-        """Stages ``estimator`` (the identity when the measurement is a state), ``observer`` and ``law``:
-        (u_k as the law asks it, tau_hat_k, the law's internals, the state the loop believes)."""
+    def decide(self, measured, u_m, k: int = 0):
+        """Stages ``estimator`` (the identity when the measurement is a state), ``observer`` and ``law`` (with the
+        excitation of period ``k`` added, :func:`command`): (u_k, tau_hat_k, the law's internals, the state the
+        loop believes)."""
         x_m = measured if self.estimator is None else self.estimator.step(measured)
         tau_hat = self.observer.update(x_m, u_m)
-        u_law, internals = self.law.step(x_m, tau_hat)
+        u_law, internals = command(self.law, x_m, tau_hat, self.excitation, k)
         return u_law, tau_hat, internals, x_m
 
     def run(self, table) -> bool:
@@ -162,9 +164,9 @@ class Period:
         has fallen (the period ends there); else :meth:`advance` integrates it."""
         side = self.side
         measured, u_m = side.sense()
-        u_law, tau_hat, internals, x_m = self.decide(measured, u_m)
-        u, tau_d = side.act(u_law)
         p = side.plant
+        u_law, tau_hat, internals, x_m = self.decide(measured, u_m, p.k)
+        u, tau_d = side.act(u_law)
         table.append(p.t, p.x, u, tau_hat, tau_d, internals, (*measured, *x_m) if self.estimator else ())
         self.u = u
         return p.fallen
@@ -175,3 +177,15 @@ class Period:
         if table is not None:
             p = self.side.plant
             table.set_drive(p.u_prev, p.saturation)
+
+
+def command(law, x, tau_hat, excitation, k: int):
+    """Stage ``law``: the law's command for the state ``x`` and ``tau_hat``, plus the excitation of period ``k``
+    (:mod:`.excitation`; None: none) — the command sent, what the trajectory's ``u`` records; the excitation is
+    in the internals (``excitation``).  The controller node calls this too."""
+    u, internals = law.step(x, tau_hat)
+    if excitation is not None:
+        e = excitation.at(k)
+        u = u + e
+        internals = {**internals, "excitation": e} if isinstance(internals, dict) else internals
+    return u, internals

@@ -16,6 +16,7 @@ from typing import Any, Callable, Optional, Tuple
 
 from . import laws
 from .estimators import EstimatorConfig
+from .excitation import Excitation, ExcitationConfig
 from .loop import Period, PlantSide
 from .observer import DiscreteObserver, gain_matrix
 from .plant import PlantConfig
@@ -57,6 +58,7 @@ class ClosedLoop:
     params: Any                            # its Params (core.laws.Law.design): DscGains, LqrGain, ...
     duration_s: float
     estimator: Optional[EstimatorConfig] = None   # the state_estimator of a raw plant (plant.raw), else None
+    excitation: Optional[ExcitationConfig] = None   # the controller's excitation (identification), else None
 
     @property
     def name(self) -> str:
@@ -83,10 +85,12 @@ def simulate(loop: ClosedLoop, label: str = "", progress: Optional[Callable[[flo
     h = pc.h
     n_steps = int(round(loop.duration_s / h))
     estimator = loop.estimator.make(h, pc.nominal.r, pc.nominal.g) if pc.raw is not None else None
+    excitation = Excitation(loop.excitation, h) if loop.excitation is not None else None
     period = Period(PlantSide(pc), DiscreteObserver(pc.nominal, gain_matrix(loop.X), h),
-                    loop.law_class(loop.params, pc.nominal, h), estimator)   # the stages of core.loop, in its order
+                    loop.law_class(loop.params, pc.nominal, h), estimator, excitation)   # core.loop's stages
     # the true state: the metrics judge it
-    table = TrajectoryTable(internals=True, raw=pc.raw is not None, drive=pc.motor.enabled)
+    table = TrajectoryTable(internals=True, raw=pc.raw is not None, drive=pc.motor.enabled,
+                            excitation=excitation is not None)
     fallen = False
     every = max(1, n_steps // 10)
     for k in range(n_steps + 1):

@@ -18,7 +18,7 @@ from typing import Any, Dict, Iterable, Sequence, Tuple
 import numpy as np
 
 __all__ = ["TRAJECTORY_COLUMNS", "INTERNAL_COLUMNS", "COLUMNS", "RAW_COLUMNS", "ESTIMATE_COLUMNS", "DRIVE_COLUMNS",
-           "ALL_COLUMNS",
+           "EXCITATION_COLUMNS", "ALL_COLUMNS",
            "Trajectory", "TrajectoryTable",
            "join_estimates", "stamp_key"]
 
@@ -33,7 +33,8 @@ ESTIMATE_COLUMNS = ["theta_w_hat", "theta_b_hat", "dtheta_w_hat", "dtheta_b_hat"
 # with the motor model (SPEC 11): the torque that acted over [t_k, t_k+1) beside the command u, and the drive's
 # worst saturation code of the period (core.drive: 0 none, 1 current, 2 voltage); NaN in a row no period followed
 DRIVE_COLUMNS = ["u_applied", "drive_saturation"]
-ALL_COLUMNS = COLUMNS + RAW_COLUMNS + ESTIMATE_COLUMNS + DRIVE_COLUMNS
+EXCITATION_COLUMNS = ["excitation"]   # the controller's excitation, included in u (identification)
+ALL_COLUMNS = COLUMNS + RAW_COLUMNS + ESTIMATE_COLUMNS + DRIVE_COLUMNS + EXCITATION_COLUMNS
 _NAN2 = (math.nan, math.nan)
 
 
@@ -75,10 +76,12 @@ class TrajectoryTable:
     about 6 ms per full collection).  ``internals=True`` adds :data:`INTERNAL_COLUMNS`.
     """
 
-    def __init__(self, internals: bool = False, raw: bool = False, drive: bool = False):
+    def __init__(self, internals: bool = False, raw: bool = False, drive: bool = False, excitation: bool = False):
         self.internals = internals
+        self.excitation = excitation
         self.names = ((COLUMNS if internals else TRAJECTORY_COLUMNS) + ((RAW_COLUMNS + ESTIMATE_COLUMNS) if raw
-                                                                         else []) + (DRIVE_COLUMNS if drive else []))
+                                                                         else []) + (DRIVE_COLUMNS if drive else [])
+                      + (EXCITATION_COLUMNS if excitation else []))
         self.width = len(self.names)
         self.n_extra = len(RAW_COLUMNS + ESTIMATE_COLUMNS) if raw else 0
         self.drive = drive
@@ -100,12 +103,15 @@ class TrajectoryTable:
             self.rows.extend(extra if len(extra) == self.n_extra else (math.nan,) * self.n_extra)
         if self.drive:
             self.rows.extend(_NAN2)   # u_applied, drive_saturation: known once the period is integrated
+        if self.excitation:
+            self.rows.append(out.get("excitation", math.nan) if isinstance(out, dict) else math.nan)
 
     def set_drive(self, u_applied: float, saturation: int) -> None:
         """The last row's :data:`DRIVE_COLUMNS`, once its period has been integrated."""
         if self.drive:
-            self.rows[len(self.rows) - 2] = u_applied
-            self.rows[len(self.rows) - 1] = float(saturation)
+            at = len(self.rows) - self.width + self.names.index("u_applied")
+            self.rows[at] = u_applied
+            self.rows[at + 1] = float(saturation)
 
     def __len__(self) -> int:
         return len(self.rows) // self.width

@@ -29,6 +29,8 @@ from std_msgs.msg import Float64
 
 from mwip_ros import params as P
 from mwip_ros.core import laws
+from mwip_ros.core.excitation import Excitation
+from mwip_ros.core.loop import command
 from mwip_ros.msgs import BadMessage
 from mwip_ros.msgs import layouts as L
 from mwip_ros.msgs.qos import qos_for
@@ -52,6 +54,9 @@ class DscndoController(Node, GracefulNodeMixin):
         self._composed = {}
         for law in self.laws.values():
             self._warn(law)
+        exc = P.typed.excitation(self.v)   # identification's known torque (core.excitation), added to the command
+        self.excitation = Excitation(exc, self.h) if exc is not None else None
+        self.stamp0 = None    # the stamp of the run's first state: period k of the excitation counts from it
         self.states = {}      # stamp -> State waiting for an estimate
         self.estimates = {}   # stamp -> (tau_hat1, tau_hat2) waiting for a state
         self.last_answered = None
@@ -130,6 +135,9 @@ class DscndoController(Node, GracefulNodeMixin):
             self.states.clear()
             self.estimates = {s: e for s, e in self.estimates.items() if s >= stamp}
             self.last_answered = None
+            self.stamp0 = None
+        if self.stamp0 is None:
+            self.stamp0 = stamp
         self.states[stamp] = x
         self._try(stamp)
 
@@ -161,8 +169,9 @@ class DscndoController(Node, GracefulNodeMixin):
         x = self.states.pop(stamp)
         self.estimates.pop(stamp, None)
         before = ctrl.snapshot()
+        k = round((stamp - self.stamp0) / (self.h * 1e9)) if self.stamp0 is not None else 0
         try:
-            u, internals = ctrl.step(x, tau_hat)
+            u, internals = command(ctrl, x, tau_hat, self.excitation, k)   # the law (+ the excitation), core.loop
             ok = math.isfinite(u) and ctrl.finite()
         except (ArithmeticError, ValueError):
             ok = False
@@ -172,7 +181,8 @@ class DscndoController(Node, GracefulNodeMixin):
                                          f"({self._describe()}); nothing published")
             return
         self.cmd_pub.publish(L.encode_command(u))
-        self.int_pub.publish(L.encode_internals(stamp, internals, ctrl.internal_names))
+        names = ctrl.internal_names + (("excitation",) if self.excitation is not None else ())
+        self.int_pub.publish(L.encode_internals(stamp, internals, names))
         self.input.answered(stamp)
         self.last_answered = stamp
         self.count += 1

@@ -352,6 +352,20 @@ NODE_SPECS: Dict[str, List[ParamSpec]] = {
                   **_lqr_q, dynamic=True),
         ParamSpec("lqr.R", "double", 0.01, "LQR input weight (> 0)", **_positive(), dynamic=True),
         *_law_parameters(),   # what a plug-in law declares itself (core.laws.Law.parameters)
+        ParamSpec("excitation.type", "string", "none", "a known torque added to the law's command, recorded, for "
+                  "identification (mwip_identify): none, chirp (a linear sweep f0 -> f1) or prbs (+-amplitude, "
+                  "random bits)", **_one_of("none", "chirp", "prbs")),
+        ParamSpec("excitation.amplitude", "double", 0.0, "the excitation's amplitude [N m]", **_non_negative(1e5),
+                  unit="N m"),
+        ParamSpec("excitation.f0", "double", 0.1, "chirp: start frequency [Hz] (<= excitation.f1)",
+                  **_non_negative(1e4), unit="Hz"),
+        ParamSpec("excitation.f1", "double", 5.0, "chirp: end frequency; prbs: the band edge [Hz]", **_positive(1e4),
+                  unit="Hz"),
+        ParamSpec("excitation.duration_s", "double", 10.0, "the excitation lasts this long from t = 0 [s]",
+                  **_positive(1e7), unit="s"),
+        ParamSpec("excitation.bit_periods", "integer", 0, "prbs: control periods a bit is held; 0 = from f1 "
+                  "(round(0.443 / (f1 h)))", **_at_least_zero),
+        ParamSpec("excitation.seed", "integer", 0, "prbs: seed of the bits (stream [seed, 3])", **_at_least_zero),
     ],
     "state_estimator": [
         _LOOP_MODE,
@@ -450,6 +464,9 @@ def check_derived(values: Mapping[str, Any], source: Optional[str] = None) -> No
             raise ParamError(f"{prefix}.m_b", f"the {prefix} model's inertia terms are not usable (m11 = {m11:g}, "
                                               f"m12 = {m12:g}, m22 = {m22:g}, A_bar = {a_bar:g}); check "
                                               f"{prefix}.{{m_b, m_w, I_b, I_w, l, r, g}}", source)
+    if values.get("excitation.f0", 0.0) > values.get("excitation.f1", math.inf):
+        raise ParamError("excitation.f0", f"must be <= excitation.f1 ({values['excitation.f1']:g} Hz), got "
+                                          f"{values['excitation.f0']:g}", source)
     if values.get("sensors.model") == "raw":
         for ch in ("theta_w", "theta_b", "dtheta_w", "dtheta_b"):
             if values.get(f"sensors.noise_std.{ch}"):

@@ -7,6 +7,7 @@ from mwip_ros.core import laws
 from mwip_ros.core.controller import DscGains
 from mwip_ros.core.drive import MotorConfig
 from mwip_ros.core.estimators import EstimatorConfig
+from mwip_ros.core.excitation import ExcitationConfig
 from mwip_ros.core.model import PhysicalParams, Sinusoid, State
 from mwip_ros.core.plant import PlantConfig
 from mwip_ros.core.raw_sensors import RawSensorConfig
@@ -16,7 +17,7 @@ from mwip_ros.core.sim import ClosedLoop
 from .schema import PAPER_NOMINAL
 
 __all__ = ["physical", "sinusoid", "gains", "period", "observer_gain", "plant_config", "sensing", "raw_sensors",
-           "estimator", "motor", "lqr_gain", "closed_loop"]
+           "estimator", "motor", "excitation", "lqr_gain", "closed_loop"]
 
 
 def physical(values: Mapping[str, Any], prefix: str) -> PhysicalParams:
@@ -53,6 +54,15 @@ def plant_config(v: Mapping[str, Any]) -> PlantConfig:
         initial=State(v["initial.theta_w"], v["initial.theta_b"], v["initial.dtheta_w"], v["initial.dtheta_b"]),
         torque_limit=v["torque_limit"], fall_angle=v["fall_angle"], sensing=sensing(v), raw=raw_sensors(v),
         motor=motor(v))
+
+
+def excitation(v: Mapping[str, Any]) -> Optional[ExcitationConfig]:
+    """The controller's excitation (``excitation.*``), None when it is off (type none or amplitude 0)."""
+    if v.get("excitation.type", "none") == "none":
+        return None
+    cfg = ExcitationConfig(**{k: v[f"excitation.{k}"] for k in ("type", "amplitude", "f0", "f1", "duration_s",
+                                                                 "bit_periods", "seed")})
+    return cfg if cfg.active else None
 
 
 def motor(v: Mapping[str, Any]) -> MotorConfig:
@@ -120,4 +130,4 @@ def closed_loop(v: Mapping[str, Any], use_observer: Optional[bool] = None,
     return ClosedLoop(plant=plant, X=tuple(float(c) for c in v["X"]), controller=controller,
                       params=cls.design(v, plant.nominal, plant.h),
                       duration_s=v["duration_s"] if duration is None else duration,
-                      estimator=estimator(v) if plant.raw is not None else None)
+                      estimator=estimator(v) if plant.raw is not None else None, excitation=excitation(v))

@@ -1,0 +1,41 @@
+"""The controller's excitation (identification) in the graph: the lockstep graph equals mwip_sim with it on."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from graphproc import PARAMS, run_lockstep
+from mwip_ros import params as P
+from mwip_ros.core.sim import simulate
+from mwip_ros.runs import load_run
+
+pytestmark = pytest.mark.graph
+
+IDENTIFY = Path(__file__).resolve().parents[2] / "config" / "identify.yaml"
+
+
+def _merge(a: dict, b: dict) -> dict:
+    out = dict(a)
+    for k, v in b.items():
+        out[k] = _merge(out[k], v) if isinstance(v, dict) and isinstance(out.get(k), dict) else v
+    return out
+
+
+def test_lockstep_graph_with_a_chirp_equals_offline(tmp_path):
+    merged = _merge(yaml.safe_load(PARAMS.read_text()), yaml.safe_load(IDENTIFY.read_text()))
+    merged["plant_sim"]["ros__parameters"]["duration_s"] = 2.0
+    params = tmp_path / "identify_2s.yaml"
+    params.write_text(yaml.safe_dump(merged))
+    code, csv_path, logs = run_lockstep(tmp_path, True, params=params)
+    assert code == 0, logs["plant_sim"].output()
+    graph = load_run(csv_path)
+    loop = P.closed_loop(P.merged_values(P.load_param_file(params)), controller="dscndo")
+    assert loop.excitation is not None and loop.excitation.type == "chirp"
+    offline = simulate(loop)
+    assert len(graph) == len(offline) == 401
+    assert np.max(np.abs(offline["excitation"])) > 10.0   # the chirp is in the command
+    for c in ("theta_w", "theta_b", "dtheta_w", "dtheta_b", "u"):
+        np.testing.assert_allclose(graph[c], offline[c], rtol=0, atol=1e-9, err_msg=c)
