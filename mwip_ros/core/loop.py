@@ -9,7 +9,9 @@ The discrete-time contract (docs/theory.md, section 4) orders one control period
    it measures the raw IMU and encoder (``raw``, :mod:`.raw_sensors`);
 3. ``observer``  tau_hat_k from the measured state and the reported torque (eq. 12-13, :mod:`.observer`);
 4. ``law``       u_k from the measured state and tau_hat_k (:mod:`.laws`);
-5. ``drive``     the torque limit and the actuator delay: the torque that acts over [t_k, t_{k+1});
+5. ``drive``     the torque limit, the actuator delay and the driver's state machine (:mod:`.safety`:
+   zero torque unless enabled): the command that acts over [t_k, t_{k+1}) (with the motor model,
+   :mod:`.drive`, the drive turns it into the torque at every RK4 stage of the plant);
 6. ``plant``     integrate to t_{k+1} (:mod:`.plant`), after recording row k and its true tau_d.
 
 :data:`STAGES` is that order, written once, with the graph node that runs each stage and the
@@ -34,6 +36,7 @@ from typing import Optional, Tuple
 
 from .plant import Plant, PlantConfig, make_plant, saturate
 from .raw_sensors import RawSensors
+from .safety import DriverStateMachine
 from .sensing import Actuator, Sensors
 
 __all__ = ["Stage", "STAGES", "STAGE_NAMES", "PLANT_NODE", "Answer", "answering", "loop_nodes", "PlantSide",
@@ -116,6 +119,8 @@ class PlantSide:
             self.raw_queue = deque(maxlen=sc.delay_periods + 1)
         self.sensors = Sensors.for_plant(sc, cfg.seed) if sc.measuring and self.raw is None else None
         self.actuator = Actuator(sc.actuator_delay_periods) if sc.actuator_delay_periods else None
+        # the driver's state machine (SPEC 12): disabled or faulted, the torque that acts is zero
+        self.safety = DriverStateMachine(require_enable=cfg.require_enable)
 
     def sense(self):
         """Stage ``sensors``: (what is measured of state k, the torque of period k - 1 as reported).  The
@@ -132,6 +137,7 @@ class PlantSide:
         u = saturate(u_cmd, self.cfg.torque_limit)
         if self.actuator is not None:
             u = self.actuator.apply(u)
+        u = self.safety.torque_gate(u)   # zero unless the driver is enabled; the observer is told what acted
         return u, self.plant.lumped_disturbance(u, extra)
 
     def advance(self, u: float, extra=(0.0, 0.0)) -> None:

@@ -43,6 +43,7 @@ class PlantConfig:
     sensing: SensingConfig = SensingConfig()   # measurement noise, encoder, delays (core.sensing); off
     raw: Optional[RawSensorConfig] = None      # sensors.model raw: the IMU and the relative encoder (SPEC 10)
     motor: MotorConfig = MotorConfig()         # the DC motor and its driver (SPEC 11); off
+    require_enable: bool = False               # the driver starts disabled (SPEC 12)
 
     @property
     def motor_constants(self) -> Tuple[float, float, float, float]:

@@ -326,6 +326,14 @@ NODE_SPECS: Dict[str, List[ParamSpec]] = {
                   **_positive(1e5), unit="V"),
         ParamSpec("motor.current_limit", "double", 60.0, "the driver's current limit I_max [A]", **_positive(1e5),
                   unit="A"),
+        ParamSpec("require_enable", "bool", False, "the driver starts disabled (zero torque) until ~/enable "
+                  "(SPEC 12); false: enabled at once, as the paper's run"),
+        ParamSpec("watchdog_s", "double", 0.1, "realtime: no new wheel_torque_cmd for this long is a fault (zero "
+                  "torque, latched until ~/reset); lockstep: lockstep_timeout_s is the watchdog",
+                  **_positive_from(1e-3, 1e4, "a watchdog faster than a millisecond would fire between commands"),
+                  unit="s"),
+        ParamSpec("exit_on_fall", "bool", True, "end the process (exit code 3) when the robot falls; false: the "
+                  "driver holds zero torque in fault until ~/reset (realtime)"),
         ParamSpec("expected_subscribers", "integer", 2, "lockstep: wait until joint_states has this many "
                   "matched subscriptions before the first state (2 = observer + controller; +1 per recorder)",
                   **_at_least_zero),

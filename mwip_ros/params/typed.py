@@ -53,7 +53,7 @@ def plant_config(v: Mapping[str, Any]) -> PlantConfig:
         h=period(v), substeps=v["substeps"], seed=v["seed"],
         initial=State(v["initial.theta_w"], v["initial.theta_b"], v["initial.dtheta_w"], v["initial.dtheta_b"]),
         torque_limit=v["torque_limit"], fall_angle=v["fall_angle"], sensing=sensing(v), raw=raw_sensors(v),
-        motor=motor(v))
+        motor=motor(v), require_enable=v.get("require_enable", False))
 
 
 def excitation(v: Mapping[str, Any]) -> Optional[ExcitationConfig]:

@@ -94,3 +94,22 @@ def test_each_mode_is_a_runner():
     assert set(plant_runners.RUNNERS) == {"lockstep", "realtime"}
     src = inspect.getsource(plant_sim.PlantSimNode)
     assert 'self.mode == "' not in src and "self.mode ==" not in src   # no mode branches in the node
+
+
+def test_a_driver_that_is_not_enabled_applies_no_torque_and_reports_none():
+    """SPEC 12: disabled (require_enable, never enabled), the torque that acts is zero, and the observer is told
+    zero; enabled, the command acts."""
+    from dataclasses import replace
+
+    from mwip_ros.core.loop import PlantSide
+
+    cfg = exact_model_plant()
+    side = PlantSide(replace(cfg, require_enable=True))
+    assert side.safety.state == "disabled"
+    u, _ = side.act(50.0)
+    side.advance(u)
+    assert u == 0.0 and side.sense()[1] == 0.0
+    assert side.safety.enable(0.005).success
+    u, _ = side.act(50.0)
+    side.advance(u)
+    assert u == 50.0 and side.sense()[1] == 50.0
