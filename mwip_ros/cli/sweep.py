@@ -185,7 +185,7 @@ def _main(argv=None) -> int:
     if not args.quiet:
         print(f"{PROG}: {len(scenarios):,} scenarios x {len(spec.controllers)} law(s) = {total:,} runs of "
               f"{spec.duration_s:g} s in {len(chunks)} chunk(s), on {where}", file=sys.stderr)
-    writer = results.ResultsWriter(args.out / "results.csv", [a.key for a in spec.axes])
+    writer = results.ResultsWriter(args.out / "results.csv", [a.key for a in spec.axes], extra=_has_stages(spec))
     progress = _Progress(total, steps_per_run, args.quiet)
     try:
         for chunk, res in runner(chunks):
@@ -239,10 +239,18 @@ def _sweep_info(spec, args) -> dict:
                      for a in spec.axes]}
 
 
+def _has_stages(spec) -> bool:
+    """Whether the sweep's loop has raw sensors or the motor, in its base file or on an axis (their metrics)."""
+    v = spec.base_values
+    names = {a.name for a in spec.axes}
+    return v.get("sensors.model") == "raw" or bool(v.get("motor.enabled")) or bool(
+        {"sensors.model", "motor.enabled"} & names)
+
+
 def _figures(cols, spec, doc, out: Path) -> list:
     from mwip_ros.cli import plotting
     written = []
-    numeric = [(a.key, not a.random) for a in spec.axes if a.type != "double_array"]
+    numeric = [(a.key, not a.random) for a in spec.axes if a.type in ("double", "integer")]
     if plotting.sweep_upright_map(cols, numeric, out / "upright_map.png"):
         written.append("upright_map.png")
     plotting.sweep_rms_distribution(cols, out / "theta_b_rms.png")

@@ -38,6 +38,7 @@ import numpy as np
 
 from .budget import window_samples
 from . import laws
+from .metrics import compute as metrics_compute
 from .metrics import window_metrics
 from .model import PhysicalParams, Sinusoid, State, accel, lumped_disturbance
 from .observer import DiscreteObserver
@@ -203,6 +204,8 @@ def simulate_batch(loops: Sequence[ClosedLoop], window: Sequence[float], record:
     ``compiled`` (default :func:`compiled_default`): without ``record``, a law with a pure form
     (``Law.pure_step``) runs as one compiled loop (:func:`_simulate_compiled`); else, and for every other law,
     the loop runs over numpy arrays with the plant's RK4 compiled."""
+    if any(_beyond_arrays(lp) for lp in loops):
+        return _simulate_each(loops, window, record)
     if compiled is None:
         compiled = compiled_default()
     if compiled and not record:
@@ -215,6 +218,30 @@ def simulate_batch(loops: Sequence[ClosedLoop], window: Sequence[float], record:
             if kernel is not None:
                 return _simulate_compiled(loops, window, law, kernel)
     return _simulate_numpy(loops, window, record)
+
+
+def _beyond_arrays(loop: ClosedLoop) -> bool:
+    """Stages the array forms do not run yet: the raw sensors and their estimator, the motor, the excitation."""
+    pc = loop.plant
+    return pc.raw is not None or pc.motor.enabled or loop.excitation is not None
+
+
+def _simulate_each(loops: Sequence[ClosedLoop], window: Sequence[float], record: bool = False) -> BatchResult:
+    """The scalar loop (:func:`.sim.simulate`) scenario by scenario, its metrics as the batch gives them: the
+    form for the stages the array forms do not run (:func:`_beyond_arrays`), the same numbers by construction."""
+    from .sim import simulate
+    runs = [simulate(lp) for lp in loops]
+    named = [metrics_compute(r.columns, window, lp.plant.fall_angle) for r, lp in zip(runs, loops)]
+    fallen = np.array([r.fallen for r in runs], dtype=bool)
+    t_fall = np.array([m.t_fall if m.t_fall is not None else np.nan for m in named])
+    n_steps = [int(round(lp.duration_s / lp.plant.h)) for lp in loops]
+    upright = ~fallen & np.array([n * lp.plant.h >= window[1] - 1e-9 for n, lp in zip(n_steps, loops)])
+    keys = ("theta_b_p2p", "theta_b_rms", "theta_b_max_abs", "u_rms", "tau_err1_rms", "tau_err2_rms",
+            "theta_b_est_err_rms", "dtheta_b_est_err_rms", "u_applied_rms", "saturated_s")
+    out = {k: np.array([getattr(m, k) for m in named], dtype=float) for k in keys}
+    out = {k: v for k, v in out.items() if k in keys[:6] or np.isfinite(v).any()}
+    steps = sum(len(r) - 1 for r in runs)
+    return BatchResult(fallen, t_fall, upright, out, steps, runs if record else None)
 
 
 def _simulate_numpy(loops: Sequence[ClosedLoop], window: Sequence[float], record: bool = False) -> BatchResult:

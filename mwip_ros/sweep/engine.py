@@ -97,7 +97,8 @@ def run_chunk(chunk: Chunk, batch_bytes: Optional[int] = None) -> ChunkResult:
     for i, ov in enumerate(chunk.overrides):
         v = values(ov)
         key = (1.0 / v["control_rate_hz"], int(v["substeps"]), v["sensors.encoder_counts_per_rev"],
-               v["sensors.delay_periods"], v["actuator.delay_periods"])   # PlantConfig's h, substeps, sensing
+               v["sensors.delay_periods"], v["actuator.delay_periods"],   # PlantConfig's h, substeps, sensing
+               v.get("sensors.model"), v.get("motor.enabled"), v.get("excitation.type"))   # the stages it has
         groups.setdefault(key, []).append(i)
     upright, t_fall = np.zeros(n, dtype=bool), np.full(n, np.nan)
     metrics: Dict[str, np.ndarray] = {}

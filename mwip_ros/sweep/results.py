@@ -17,12 +17,14 @@ import csv
 import io
 import json
 import math
+import re
 from pathlib import Path
 from typing import Dict, List, Optional
 
 import numpy as np
 
-__all__ = ["METRICS", "UNITS", "RATIO_METRICS", "median_ratios", "ResultsWriter", "laws", "sort_file", "read_results",
+__all__ = ["METRICS", "EXTRA_METRICS", "ALL_METRICS", "UNITS", "RATIO_METRICS", "run_labels",
+            "median_ratios", "ResultsWriter", "laws", "sort_file", "read_results",
            "summarize", "summary_markdown", "region_of_attraction", "write_summary", "THETA0_KEY"]
 
 # results.csv name -> the batch simulator's metric name
@@ -33,6 +35,13 @@ UNITS = {"theta_b_p2p": "rad", "theta_b_rms": "rad", "max_abs_theta_b": "rad", "
          "tau_hat1_err_rms": "N m", "tau_hat2_err_rms": "N m"}
 REFERENCE = "dscndo"          # the law each law's medians are compared to (else the last law)
 RATIO_METRICS = ("theta_b_p2p", "theta_b_rms", "u_rms")
+# what a run has beside them when its loop has the stage (raw sensors' estimator, the motor): written always (NaN
+# without the stage), summarized where some run has a value; a results.csv of before them still reads
+EXTRA_METRICS = {"theta_b_est_err_rms": "theta_b_est_err_rms", "dtheta_b_est_err_rms": "dtheta_b_est_err_rms",
+                 "u_applied_rms": "u_applied_rms", "saturated_s": "saturated_s"}
+UNITS.update({"theta_b_est_err_rms": "rad", "dtheta_b_est_err_rms": "rad/s", "u_applied_rms": "N m",
+              "saturated_s": "s"})
+ALL_METRICS = {**METRICS, **EXTRA_METRICS}
 
 
 def _fmt(v) -> str:
@@ -48,10 +57,13 @@ def _fmt(v) -> str:
 class ResultsWriter:
     """Append rows to ``results.csv`` chunk by chunk (header first), flushing after each chunk."""
 
-    def __init__(self, path: Path, varied: List[str]):
+    def __init__(self, path: Path, varied: List[str], extra: bool = False):
+        """``extra``: the loop has a stage whose metrics are :data:`EXTRA_METRICS` (raw sensors, the motor), and
+        the table gets their columns."""
         self.path = path
         self.varied = list(varied)
-        self.header = ["scenario", "seed", "controller", *self.varied, "upright", "t_fall", *METRICS]
+        self.metrics = ALL_METRICS if extra else METRICS
+        self.header = ["scenario", "seed", "controller", *self.varied, "upright", "t_fall", *self.metrics]
         self._f = open(path, "w", newline="")
         self._w = csv.writer(self._f)
         self._w.writerow(self.header)
@@ -67,7 +79,8 @@ class ResultsWriter:
             i = chunk.first + j
             row = [i, scenarios.seeds[i], chunk.controller, *(scenarios.values[k][i] for k in self.varied),
                    bool(result.upright[j]), float(result.t_fall[j]),
-                   *(float(result.metrics[m][j]) for m in METRICS.values())]
+                   *(float(result.metrics[m][j]) if m in result.metrics else math.nan
+                     for m in self.metrics.values())]
             w.writerow([_fmt(v) for v in row])
         self._f.write(text.getvalue())
         self._f.flush()
@@ -159,7 +172,12 @@ def _value(h: str, v: str):
         if not isinstance(x, list) or not all(isinstance(e, (int, float)) and not isinstance(e, bool) for e in x):
             raise ValueError("not a list of numbers")
         return x
+    if h not in ALL_METRICS and h != "t_fall" and _CHOICE.match(v) and v.lower() not in ("nan", "inf", "infinity"):
+        return v   # a varied choice (sensors.model, state_estimator.method, ...)
     return float(v)
+
+
+_CHOICE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 
 
 def region_of_attraction(theta0: np.ndarray, upright: np.ndarray) -> Optional[float]:
@@ -182,22 +200,40 @@ def _stats(x: np.ndarray) -> Dict[str, Optional[float]]:
     return {"median": float(np.median(x)), "p90": float(np.percentile(x, 90)), "max": float(np.max(x))}
 
 
+def _present(cols: Dict[str, list]) -> List[str]:
+    """:data:`METRICS`, and the :data:`EXTRA_METRICS` some run of the table has a value of."""
+    return list(METRICS) + [m for m in EXTRA_METRICS if m in cols and np.isfinite(np.array(cols[m], dtype=float)).any()]
+
+
+def run_labels(cols: Dict[str, list], spec_info: dict) -> List[str]:
+    """Each row's group in the summary: its law, and the values of the varied choices (string and bool axes:
+    ``sensors.model``, ``state_estimator.method``, ``motor.enabled``, ...), e.g. ``dscndo (raw, kalman)``."""
+    keys = [a["key"] for a in spec_info.get("axes", []) if a.get("type") in ("string", "bool") and a["key"] in cols]
+    if not keys:
+        return list(cols["controller"])
+    return [f"{c} ({', '.join(str(cols[k][i]) for k in keys)})" for i, c in enumerate(cols["controller"])]
+
+
 def summarize(cols: Dict[str, list], spec_info: dict) -> dict:
-    """The summary document of a results table (``read_results``)."""
-    ctrl = np.array(cols["controller"])
+    """The summary document of a results table (``read_results``): a row per law, or per law and choice
+    (:func:`run_labels`)."""
+    labels = run_labels(cols, spec_info)
+    ctrl = np.array(labels)
     upright = np.array(cols["upright"], dtype=bool)
     out = {"spec": spec_info, "scenarios": len(set(cols["scenario"])), "controllers": {}}
-    for c in laws(cols):
+    order = {c: i for i, c in enumerate(laws(cols))}
+    groups = sorted(set(labels), key=lambda g: (order.get(g.split(" (")[0], len(order)), labels.index(g)))
+    for c in groups:
         sel = ctrl == c
         entry = {"runs": int(sel.sum()), "upright": int(upright[sel].sum()),
                  "upright_share": float(upright[sel].mean()) if sel.any() else math.nan,
                  "metrics_over": "upright runs",
-                 "metrics": {m: _stats(np.array(cols[m], dtype=float)[sel & upright]) for m in METRICS}}
+                 "metrics": {m: _stats(np.array(cols[m], dtype=float)[sel & upright]) for m in _present(cols)}}
         if THETA0_KEY in cols:
             entry["region_of_attraction_theta_b0"] = region_of_attraction(np.array(cols[THETA0_KEY])[sel],
                                                                           upright[sel])
         out["controllers"][c] = entry
-    out["units"] = dict(UNITS)
+    out["units"] = {m: UNITS[m] for m in _present(cols)}
     out["ratios"] = median_ratios(out["controllers"])
     return out
 
@@ -208,8 +244,10 @@ def median_ratios(controllers: Dict[str, dict]) -> dict:
     names = list(controllers)
     if not names:
         return {"reference": None, "why": "", "laws": {}}
-    ref = REFERENCE if REFERENCE in controllers else names[-1]
-    why = "the DSCNDO law" if ref == REFERENCE else f"the last law, as the sweep did not run {REFERENCE}"
+    firsts = [c for c in names if c.split(" (")[0] == REFERENCE]
+    ref = REFERENCE if REFERENCE in controllers else (firsts[0] if firsts else names[-1])
+    why = ("the DSCNDO law" if ref == REFERENCE else "DSCNDO's first group" if firsts
+           else f"the last law, as the sweep did not run {REFERENCE}")
     out = {}
     for c in names:
         if c == ref:
@@ -233,11 +271,12 @@ def summary_markdown(doc: dict) -> str:
              f"runs that stayed upright).", ""]
     if spec.get("varied"):
         lines += ["Varied: " + ", ".join(f"`{k}` ({d})" for k, d in spec["varied"].items()), ""]
-    head = ["law", "upright", *(f"{m} [{UNITS[m]}]" for m in METRICS)]
+    shown = [m for m in ALL_METRICS if all(m in e["metrics"] for e in doc["controllers"].values())]
+    head = ["law", "upright", *(f"{m} [{UNITS[m]}]" for m in shown)]
     lines += ["| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in head) + "|"]
     for c, e in doc["controllers"].items():
         cells = [c, f"{e['upright']}/{e['runs']} ({100 * e['upright_share']:.1f} %)"]
-        for m in METRICS:
+        for m in shown:
             s = e["metrics"][m]
             cells.append(" / ".join(_num(s[k]) for k in ("median", "p90", "max")))
         lines.append("| " + " | ".join(cells) + " |")

@@ -53,6 +53,8 @@ NOT_SIMULATED = {
     "csv": "an output file", "summary_json": "an output file",
     "lockstep_timeout_s": "wall-clock time of the ROS graph", "expected_subscribers": "the ROS graph's set-up",
     "stale_command_periods": "realtime runs only", "realtime_priority": "process scheduling",
+    "watchdog_s": "realtime runs only", "exit_on_fall": "the offline loop ends at a fall",
+    "require_enable": "the offline loop has nobody to enable the driver",
 }
 
 
@@ -322,7 +324,7 @@ def _axis(key: str, dist: Any, base_values: Dict[str, Any], source: str) -> Axis
     where = f"vary.{key}"
     if name in NOT_SIMULATED:
         raise SpecError(where, f"does not change the offline closed loop ({NOT_SIMULATED[name]})", source)
-    if ps.type not in ("double", "integer", "double_array"):
+    if ps.type not in ("double", "integer", "double_array", "string", "bool"):
         raise SpecError(where, f"a {ps.type} parameter cannot be varied", source)
     kinds = GRID_KINDS + RANDOM_KINDS
     if not isinstance(dist, dict) or len(dist) != 1:
@@ -342,6 +344,9 @@ def _axis(key: str, dist: Any, base_values: Dict[str, Any], source: str) -> Axis
         elif ps.type == "integer":
             if isinstance(v, bool) or not isinstance(v, int):
                 raise SpecError(where, f"expected integers, got {shown(v)}", source)
+        elif ps.type in ("string", "bool"):   # a choice: sensors.model, method, motor.enabled, ...
+            if ps.type == "bool" and not isinstance(v, bool):
+                raise SpecError(where, f"expected true or false, got {shown(v)}", source)
         else:
             if not isinstance(v, list) or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v):
                 raise SpecError(where, f"expected lists of numbers such as {base}, got {shown(v)}", source)
