@@ -113,7 +113,7 @@ def test_the_plugin_hook_gives_the_law_to_the_schema_and_to_mwip_sim(tmp_path):
             "print(s['law'].choices, s['trivial.k'].default, s['trivial.k'].dynamic)")
     r = subprocess.run([sys.executable, "-c", code], env=_with_plugin(), capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr
-    assert r.stdout.split() == ["('dsc',", "'lqr',", "'smc',", "'trivial')", "2000.0", "True"]
+    assert r.stdout.split() == ["('dsc',", "'lqr',", "'smc',", "'mpc',", "'trivial')", "2000.0", "True"]
     out = tmp_path / "trivial.csv"
     r = subprocess.run([sys.executable, "-m", "mwip_ros.cli.sim", "--controller", "trivial", "--duration", "1",
                         "--csv", str(out), "-q"], env=_with_plugin(), capture_output=True, text=True, timeout=120)

@@ -11,7 +11,7 @@ from graphproc import PARAMS, Graph
 from mwip_ros import params as P
 
 NODES = ("plant_sim", "disturbance_observer", "dscndo_controller", "mcap_recorder", "bag_replay", "robot_markers",
-         "foxglove_server")
+         "foxglove_server", "state_estimator")
 
 PAPER = PARAMS.read_text()
 
@@ -174,7 +174,7 @@ def test_help_shows_defaults_ranges_topics_and_exit_codes(tmp_path):
                                       text=True, timeout=30).stdout
                        for n, flag in (("dscndo_controller", "-h"), ("foxglove_server", "--help"), ("plant_sim", "-h")))
     assert "  tau4  (double, default 0.1, [1e-06, 1e+06], changeable at run time)" in ctl
-    assert "  law  (string, default 'dsc', one of 'dsc', 'lqr', 'smc', changeable at run time)" in ctl
+    assert "  law  (string, default 'dsc', one of 'dsc', 'lqr', 'smc', 'mpc', changeable at run time)" in ctl
     assert "  publishes: wheel_torque_cmd, controller_internals, /diagnostics" in ctl
     assert "  subscribes: joint_states, disturbance_estimate" in ctl
     assert "  port  (integer, default 8765, 1..65535)" in fox and "  topics  (string_array, default [])" in fox

@@ -16,7 +16,8 @@ the observer term).
   with :func:`register`.  So a process started with it (a node, ``mwip_sim``) knows them.
 
 Today's laws: ``dsc`` and ``dscndo`` (:mod:`.dsc`, eq. 16-28 and 19-21), ``lqr`` and
-``lqr_ndo`` (:mod:`.lqr`, the baseline), ``smc`` and ``smc_ndo`` (:mod:`.smc`, sliding-mode control).
+``lqr_ndo`` (:mod:`.lqr`, the baseline), ``smc`` and ``smc_ndo`` (:mod:`.smc`, sliding-mode control),
+``mpc`` and ``mpc_ndo`` (:mod:`.mpc`, model predictive control with the torque limit as a constraint).
 """
 from __future__ import annotations
 
@@ -238,10 +239,11 @@ def load_plugins(spec: Optional[str] = None) -> List[str]:
 
 
 def _builtins() -> None:
-    from . import dsc, lqr, smc
+    from . import dsc, lqr, mpc, smc
     register(dsc.DscLaw, with_observer="dscndo", title="DSCNDO")   # eq. 16-28; eq. 19-21
     register(lqr.LqrLaw, with_observer="lqr_ndo", title="LQR+NDO")  # the baseline (docs/theory.md 6.1)
     register(smc.SmcLaw, with_observer="smc_ndo", title="SMC+NDO")  # sliding-mode control (docs/theory.md 6.5)
+    register(mpc.MpcLaw, with_observer="mpc_ndo", title="MPC+NDO")  # model predictive control (docs/theory.md 6.6)
 
 
 _builtins()
