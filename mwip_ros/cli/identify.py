@@ -63,6 +63,10 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--out", type=Path, required=True, metavar="FILE.yaml",
                     help="the parameter overlay to write (nominal.m_b, nominal.I_b, nominal.l under /**)")
     ap.add_argument("--force", action="store_true", help="overwrite an --out file that exists")
+    ap.add_argument("--state", choices=("auto", "estimate", "true"), default="auto",
+                    help="the motion to fit: the state estimator's (theta_b_hat, ...: what a robot with raw sensors "
+                         "knows of itself), the true state (a simulator's), or auto: the estimate when the log has "
+                         "one (default)")
     ap.add_argument("--window", type=float, nargs=2, default=None, metavar=("T0", "T1"),
                     help="use only the rows with T0 <= t <= T1 [s] (default: the whole log)")
     ap.add_argument("--run", type=int, default=None, metavar="N",
@@ -117,7 +121,14 @@ def _load(args):
         run = read_bag_run(p, segment=None if args.run is None else args.run - 1)
     else:
         raise ValueError(f"{p}: not a bag directory, .mcap file or .csv file")
-    cols = run.columns
+    cols = dict(run.columns)
+    estimated = "theta_b_hat" in cols
+    if args.state == "estimate" and not estimated:
+        raise ValueError(f"{p}: no estimate columns (theta_b_hat, ...): --state estimate is for a raw-sensor run")
+    if args.state == "estimate" or (args.state == "auto" and estimated):
+        # what a real robot knows of itself: the state estimator's output, not the simulator's truth
+        for c in ("theta_w", "theta_b", "dtheta_w", "dtheta_b"):
+            cols[c] = cols[f"{c}_hat"]
     torque = "u_applied" if "u_applied" in cols else "u"
     missing = [c for c in (*NEEDED, torque) if c not in cols]
     if missing:
