@@ -48,6 +48,7 @@ setup(
             'robot_markers = mwip_ros.nodes.entry:robot_markers',
             'foxglove_server = mwip_ros.nodes.entry:foxglove_server',
             'mwip_ctl = mwip_ros.cli.ctl:main',
+            'state_estimator = mwip_ros.nodes.entry:state_estimator',
         ],
     },
 )

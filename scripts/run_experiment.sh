@@ -3,16 +3,21 @@
 #
 #   scripts/run_experiment.sh [--params FILE [FILE ...]] [--mode lockstep|realtime] [--duration S]
 #                             [--no-record] [--out DIR] [--name NAME] [--laws dsc,dscndo,lqr,lqr_ndo]
+#                             [--sensors state|raw]
 #
 # --params takes a base file, then overlays (config/sensing_realistic.yaml, a tuned overlay), merged
 # in order as ROS merges repeated --params-file; every node's section is checked before anything starts.
 # --laws picks the runs (default dsc,dscndo): dsc and dscndo are DSC without and with the
 # observer term, lqr and lqr_ndo the LQR baseline without and with it.
+# --sensors raw adds config/sensors_raw_realistic.yaml after the --params files: the plant publishes what an
+# IMU on the body and a motor encoder measure, and a state_estimator (started here, with the same files) turns
+# them into joint_states. A parameter file that sets sensors.model: raw itself starts the estimator too.
 #
 # Bags, logs and the report go to DIR (default: bags/) as NAME_<law>, NAME_logs and NAME_report, NAME
 # being the date and time (or --name NAME); a second experiment with the same NAME (started in the
 # same second) gets its own names with a suffix (NAME-2_...) instead of sharing or overwriting files.
-# Each node is its own process (plant_sim, disturbance_observer, dscndo_controller, mcap_recorder)
+# Each node is its own process (plant_sim, disturbance_observer, dscndo_controller, mcap_recorder, and
+# state_estimator with raw sensors)
 # with localhost-only discovery, on your ROS_DOMAIN_ID if set, else on a free domain in 1..101
 # (printed first); two experiments never share one. Every process started here is stopped by PID when the run ends, fails, or is interrupted.
 #
@@ -28,6 +33,7 @@ RECORD=1
 OUT="$ROOT/bags"
 LAWS="dsc,dscndo"
 NAME=""
+SENSORS=state
 
 usage() { awk 'NR > 1 && /^#/ { sub(/^# ?/, ""); print; next } NR > 1 { exit }' "$0"; }
 die() { echo "run_experiment: $*" >&2; exit 2; }
@@ -49,6 +55,7 @@ while [ $# -gt 0 ]; do
         --out) OUT="$(value_of "$@")"; shift 2
                [ ! -e "$OUT" ] || [ -d "$OUT" ] || die "--out: $OUT exists and is not a directory" ;;
         --laws) LAWS="$(value_of "$@")"; shift 2 ;;
+        --sensors) SENSORS="$(value_of "$@")"; shift 2 ;;
         --name) NAME="$(value_of "$@")"; shift 2
                 [[ "$NAME" =~ ^[A-Za-z0-9][A-Za-z0-9._-]*$ ]] || die "--name takes letters, digits, '.', '_' and '-', got '$NAME'" ;;
         -h|--help) usage; exit 0 ;;
@@ -56,11 +63,13 @@ while [ $# -gt 0 ]; do
     esac
 done
 case "$MODE" in lockstep|realtime) ;; *) die "--mode must be lockstep or realtime, got '$MODE'" ;; esac
+case "$SENSORS" in state|raw) ;; *) die "--sensors must be state or raw, got '$SENSORS'" ;; esac
 if [ -n "$DURATION" ]; then
     [[ "$DURATION" =~ ^[0-9]+([.][0-9]*)?$ ]] || die "--duration must be seconds >= 0, got '$DURATION'"
     [[ "$DURATION" == *.* ]] || DURATION="$DURATION.0"   # ROS 2 reads 60 as an integer
 fi
 [ ${#PARAMS[@]} -gt 0 ] || PARAMS=("$ROOT/config/paper.yaml")
+[ "$SENSORS" = raw ] && PARAMS+=("$ROOT/config/sensors_raw_realistic.yaml")
 PF=()   # --params-file FILE for each
 for f in "${PARAMS[@]}"; do PF+=(--params-file "$f"); done
 IFS=',' read -r -a LAW_LIST <<< "$LAWS"
@@ -87,6 +96,9 @@ case "$theorem" in
     1) echo "run_experiment: warning: the gains break Theorem 2 (see above); running anyway" >&2 ;;
     *) exit 2 ;;
 esac
+# the plant's sensors.model as the files merge it: raw needs a state_estimator in the loop
+MODEL="$(python -c 'import sys; from mwip_ros import params as P
+print(P.merged_values(P.load_param_files(sys.argv[1:])).get("sensors.model", "state"))' "${PARAMS[@]}")" || exit 2
 
 # Output names: date and time, made unique by creating the logs folder (mkdir is atomic): a second
 # experiment started in the same second takes the next suffix instead of sharing or overwriting files.
@@ -138,7 +150,7 @@ for CTRL in "${LAW_LIST[@]}"; do
     USE_OBS=false; case "$CTRL" in dscndo|lqr_ndo) USE_OBS=true ;; esac
     LAW=dsc; case "$CTRL" in lqr|lqr_ndo) LAW=lqr ;; esac
     echo "=== $CTRL: $MODE run, ROS_DOMAIN_ID=$ROS_DOMAIN_ID, logs in ${LOGS#$ROOT/}/ ==="
-    SUBS=2
+    SUBS=2   # expected_subscribers as without an estimator; with one, the plant counts it instead (README)
     if [ "$RECORD" = 1 ]; then
         BAG="$OUT/${STAMP}_${CTRL}"
         mcap_recorder --ros-args "${PF[@]}" -p "mcap_recorder:output:=$BAG" "${SIMTIME[@]}" \
@@ -153,6 +165,11 @@ for CTRL in "${LAW_LIST[@]}"; do
     disturbance_observer --ros-args "${PF[@]}" -p "disturbance_observer:mode:=$MODE" -p "disturbance_observer:csv:=$LOGS/${CTRL}_estimates.csv" \
         > "$LOGS/${CTRL}_disturbance_observer.log" 2>&1 &
     PIDS+=($!)
+    if [ "$MODEL" = raw ]; then   # the first stage of the chain: imu/data_raw + wheel_encoder -> joint_states
+        state_estimator --ros-args "${PF[@]}" -p "state_estimator:mode:=$MODE" \
+            > "$LOGS/${CTRL}_state_estimator.log" 2>&1 &
+        PIDS+=($!)
+    fi
     dscndo_controller --ros-args "${PF[@]}" -p "dscndo_controller:mode:=$MODE" -p "dscndo_controller:use_observer:=$USE_OBS" -p "dscndo_controller:law:=$LAW" \
         > "$LOGS/${CTRL}_dscndo_controller.log" 2>&1 &
     PIDS+=($!)

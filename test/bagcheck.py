@@ -104,6 +104,12 @@ def make_msg(type_name: str, i: int):
             force=vec(i, 0, 1), torque=vec(0, i, 2)))
     if type_name == "rosgraph_msgs/msg/Clock":
         return T[type_name](clock=stamp())
+    if type_name == "sensor_msgs/msg/Imu":   # imu/data_raw (raw sensors): no orientation
+        return T[type_name](header=header(), orientation=T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=0.0),
+                            orientation_covariance=np.array([-1.0] + [0.0] * 8),
+                            angular_velocity=vec(0, 0.1 * i, 0), angular_velocity_covariance=np.eye(3).ravel() * 1e-5,
+                            linear_acceleration=vec(0.5 * i, 0, 9.81),
+                            linear_acceleration_covariance=np.eye(3).ravel() * 4e-4)
     if type_name == "visualization_msgs/msg/MarkerArray":
         return T[type_name](markers=[_marker(T, header(), i, k) for k in range(2)])
     raise AssertionError(type_name)

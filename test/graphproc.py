@@ -187,6 +187,25 @@ def node_rules(node: str, ros_args) -> List[str]:
     return out
 
 
+def param_files(params) -> List[Path]:
+    """``params`` (None, one file or several) as a list of files."""
+    if params is None:
+        return []
+    return [Path(params)] if isinstance(params, (str, Path)) else [Path(p) for p in params]
+
+
+def loop_chain(params, *plant_args: str):
+    """The answering stages of the loop these parameter files (and ``-p`` rules for the plant) configure
+    (:func:`mwip_ros.core.loop.answering`): a raw plant's chain starts with the state estimator."""
+    from mwip_ros import params as P
+    from mwip_ros.core.loop import answering
+    model = P.merged_values(P.load_param_files(param_files(params))).get("sensors.model", "state")
+    for i, a in enumerate(plant_args):   # a -p sensors.model:=... rule for the plant wins
+        if i > 0 and plant_args[i - 1] in ("-p", "--param") and a.split(":=", 1)[0].endswith("sensors.model"):
+            model = a.split(":=", 1)[1]
+    return answering(estimator=model == "raw")
+
+
 class Graph:
     """A set of node processes on one private ROS domain."""
 
@@ -197,16 +216,17 @@ class Graph:
         self.env = ros_env(self.domain_id)
         self.procs: List[Proc] = []
 
-    def start(self, node: str, *ros_args: str, params: Optional[Path] = PARAMS, label: Optional[str] = None,
+    def start(self, node: str, *ros_args: str, params=PARAMS, label: Optional[str] = None,
               module: Optional[str] = None, cmd: Optional[List[str]] = None, as_given: bool = False) -> Proc:
         """Start ``python -m mwip_ros.nodes <node>`` (as its console script starts it: mwip_ros.nodes.entry; or
         ``python -m module``, or the command ``cmd``) --ros-args ... (each ``-p`` rule for that node, see
-        :func:`node_rules`, unless ``as_given``)."""
+        :func:`node_rules`, unless ``as_given``).  ``params``: a parameter file, several (a base file and
+        overlays, one ``--params-file`` each, in order) or None."""
         label = label or node
         default = ["mwip_ros.nodes", node] if node in NODE_ENTRIES else [f"mwip_ros.nodes.{node}"]
         cmd = list(cmd or [sys.executable, "-m", *([module] if module else default)]) + ["--ros-args"]
-        if params is not None:
-            cmd += ["--params-file", str(params)]
+        for f in param_files(params):
+            cmd += ["--params-file", str(f)]
         cmd += list(ros_args) if as_given else node_rules(node, ros_args)
         log = self.workdir / f"{label}.log"
         f = open(log, "wb")
@@ -230,17 +250,26 @@ class Graph:
 
 
 def run_lockstep(workdir: Path, use_observer: bool, *plant_args: str, timeout: float = 180.0,
-                 params: Path = PARAMS, law: str = "dsc"):
-    """Observer, controller and plant (lockstep) as three processes; returns (plant exit, csv path, graph logs).
+                 params=PARAMS, law: str = "dsc", wait=None, domain_id: Optional[int] = None):
+    """The loop's nodes and the plant (lockstep), each a process; returns (plant exit, csv path, graph logs).
 
-    The plant writes ``graph.csv``, the observer its estimates to ``estimates.csv`` beside it."""
-    from mwip_ros.nodes.lockstep import CHAIN   # the answering stages the plant's driver waits for (core.loop)
+    The nodes are the answering stages of the chain the parameters configure (:func:`loop_chain`: the
+    observer and the controller; a raw plant's state estimator first).  ``params``: one file or several
+    (a base file and overlays).  The plant writes ``graph.csv``, the observer its estimates to
+    ``estimates.csv`` beside it (and the estimator, if it has a ``csv`` parameter, to ``estimator.csv``).
+    ``wait(plant, timeout)``, if given, waits for the plant instead of ``plant.wait`` and returns its exit
+    code (e.g. spinning a test's own subscriber meanwhile); ``domain_id``: the graph's domain (default a fresh
+    one), for such a subscriber made before the graph."""
+    from mwip_ros import params as P
     csv_path = workdir / "graph.csv"
     args = {"disturbance_observer": ("-p", f"csv:={workdir / 'estimates.csv'}"),
             "dscndo_controller": ("-p", f"use_observer:={'true' if use_observer else 'false'}", "-p", f"law:={law}")}
-    with Graph(workdir) as g:
-        procs = [g.start(a.node, "-p", "use_sim_time:=true", *args.get(a.node, ()), params=params) for a in CHAIN]
+    if "csv" in P.specs_for("state_estimator"):
+        args["state_estimator"] = ("-p", f"csv:={workdir / 'estimator.csv'}")
+    with Graph(workdir, domain_id) as g:
+        procs = [g.start(a.node, "-p", "use_sim_time:=true", *args.get(a.node, ()), params=params)
+                 for a in loop_chain(params, *plant_args)]
         plant = g.start("plant_sim", "-p", f"csv:={csv_path}", *plant_args, params=params)
-        code = plant.wait(timeout)
+        code = plant.wait(timeout) if wait is None else wait(plant, timeout)
         logs = {p.name: p for p in (*procs, plant)}
     return code, csv_path, logs

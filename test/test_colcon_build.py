@@ -28,6 +28,7 @@ CONSOLE_SCRIPTS = [
     'robot_markers',
     'foxglove_server',
     'mwip_ctl',
+    'state_estimator',
 ]
 PACKAGE_FILES = ['package.xml', 'setup.py', 'setup.cfg']
 PACKAGE_DIRS = ['resource', PACKAGE, 'config']

@@ -185,6 +185,7 @@ def _first_line_domain(stdout: str) -> int:
     (["--duration", "-1"], "--duration"),
     (["--laws", "dsc,pid"], "--laws"),
     (["--name", "a/b"], "--name"),
+    (["--sensors", "imu"], "--sensors"),
     (["--params", "no_such_file.yaml"], "no_such_file.yaml"),
 ])
 def test_command_line_mistakes_are_one_line_and_exit_2_before_anything_starts(tmp_path, args, names):
@@ -269,3 +270,21 @@ def test_a_fall_ends_the_job_with_exit_3_after_every_run_and_the_report(tmp_path
     assert "the robot fell in: dsc dscndo (exit 3)" in r.stderr
     report = next((tmp_path / "out").glob("*_report"))
     assert (report / "metrics.md").is_file()
+
+
+@pytest.mark.e2e
+def test_raw_sensors_run_the_state_estimator_in_the_loop_and_record_its_topics(tmp_path):
+    """--sensors raw: the realistic IMU and encoder overlay, a state_estimator started beside the observer; the
+    bag holds the raw samples, the estimator's joint_states and the true state, every one of the 401 stamps."""
+    r = subprocess.run([*RUN_EXPERIMENT, "--sensors", "raw", "--laws", "dscndo", "--duration", "2",
+                        "--out", str(tmp_path), "--name", "raw"], capture_output=True, text=True, timeout=600,
+                       env=script_env())
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+    logs = tmp_path / "raw_logs"
+    est = (logs / "dscndo_state_estimator.log").read_text()
+    assert "Kalman filter state estimator ready" in est and "estimated 401 samples" in est, est
+    assert "publishing imu/data_raw and wheel_encoder" in (logs / "dscndo_plant_sim.log").read_text()
+    topics = ("/imu/data_raw", "/wheel_encoder", "/joint_states", "/true_joint_states", "/disturbance_estimate")
+    assert distinct_stamps(tmp_path / "raw_dscndo", topics) == {t: 401 for t in topics}
+    m = json.loads((tmp_path / "raw_report" / "metrics.json").read_text())["runs"]
+    assert m["dscndo"]["upright"]

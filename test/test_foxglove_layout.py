@@ -154,7 +154,8 @@ def test_every_topic_and_message_path_exists(doc):
 
 
 def test_the_layout_shows_what_the_readme_says(doc):
-    """The robot in frame world; theta_b, theta_w', u, and each tau_hat beside the true tau_d (layouts.py:
+    """The robot in frame world; theta_b, theta_w', u, each tau_hat beside the true tau_d and the estimated
+    pitch beside the true one (layouts.py:
     joint_states holds [wheel, body_pitch]; torque.x / torque.y are components 1 / 2)."""
     from mwip_ros.nodes.robot_markers import FRAME
     three_d = [cfg for panel, cfg in doc["configById"].items() if panel.startswith("3D!")]
@@ -168,7 +169,11 @@ def test_the_layout_shows_what_the_readme_says(doc):
         ("/wheel_torque_cmd.data",),
         ("/disturbance_estimate.wrench.torque.x", "/lumped_disturbance.wrench.torque.x"),
         ("/disturbance_estimate.wrench.torque.y", "/lumped_disturbance.wrench.torque.y"),
+        # raw sensors (SPEC 10): the true pitch beside the state_estimator's, matched by their stamps
+        (f"/true_joint_states.position[{b}]", f"/joint_states.position[{b}]"),
     }
+    pitch = doc["configById"]["Plot!pitch_estimate"]["paths"]
+    assert {s["timestampMethod"] for s in pitch} == {"headerStamp"}
 
 
 @pytest.mark.parametrize("path, reason", [

@@ -61,7 +61,7 @@ class Stage:
 STAGES: Tuple[Stage, ...] = (
     Stage("sensors", PLANT_NODE, (), "joint_states",
           "the measurement of state k and the torque that acted over period k - 1 (core.sensing)"),
-    Stage("estimator", "state_estimator", ("joint_states",), "joint_states",
+    Stage("estimator", "state_estimator", ("imu/data_raw", "wheel_encoder"), "joint_states",
           "the state from the measurement: the identity while the plant measures a state", optional=True),
     Stage("observer", "disturbance_observer", ("joint_states",), "disturbance_estimate",
           "tau_hat_k (eq. 12-13)", waits_for="the controller waits for it when use_observer is true"),

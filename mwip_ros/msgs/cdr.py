@@ -15,6 +15,9 @@ Layouts (alignment counts from the first byte after the 4-byte encapsulation hea
     std_msgs/Header              Time stamp, string frame_id
     sensor_msgs/JointState       Header, string[] name, float64[] position, float64[] velocity, float64[] effort
     geometry_msgs/WrenchStamped  Header, Vector3 force, Vector3 torque     (Vector3: float64 x, y, z)
+    sensor_msgs/Imu              Header, Quaternion orientation (x, y, z, w), float64[9] orientation_covariance,
+                                 Vector3 angular_velocity, float64[9] angular_velocity_covariance,
+                                 Vector3 linear_acceleration, float64[9] linear_acceleration_covariance
     std_msgs/Float64             float64 data
     rosgraph_msgs/Clock          Time clock
 
@@ -34,9 +37,11 @@ from typing import Dict, List, Sequence, Tuple
 from .errors import CdrError
 from .stamps import NS_PER_S as _NS, join_ns, split_ns
 
-__all__ = ["CDR_LE", "CdrError", "JointStateEncoder", "WrenchStampedEncoder", "decode_clock", "decode_float64",
-           "decode_joint_state", "decode_wrench", "decode_wrench_stamped", "peek_stamp", "encode_clock",
-           "encode_float64", "encode_wrench", "split_ns"]
+__all__ = ["CDR_LE", "CdrError", "JointStateEncoder", "WrenchStampedEncoder", "ImuEncoder", "IMU_DOUBLES",
+           "decode_clock", "decode_float64", "decode_joint_state", "decode_wrench", "decode_wrench_stamped",
+           "decode_imu", "peek_stamp", "encode_clock", "encode_float64", "encode_wrench", "split_ns"]
+
+IMU_DOUBLES = 4 + 9 + 3 + 9 + 3 + 9   # sensor_msgs/Imu after its Header: every field a float64, no sequence
 
 CDR_LE = b"\x00\x01\x00\x00"
 
@@ -193,6 +198,23 @@ def decode_wrench_stamped(data) -> Tuple[int, str, Tuple[float, float, float], T
     return stamp, frame, v[:3], v[3:]
 
 
+def decode_imu(data) -> Tuple[int, str, Tuple[float, ...], Tuple[float, ...], Tuple[float, ...], Tuple[float, ...],
+                               Tuple[float, ...], Tuple[float, ...]]:
+    """sensor_msgs/Imu -> (stamp_ns, frame_id, orientation xyzw, orientation_covariance (9), angular_velocity xyz,
+    angular_velocity_covariance (9), linear_acceleration xyz, linear_acceleration_covariance (9))."""
+    hit = _fast("Imu", data)
+    if hit is not None:
+        stamp, (frame,), v = hit
+    else:
+        r = _Reader(data, "Imu")
+        stamp = r.time_ns()
+        frame = r.string()
+        body_at = r.pos
+        v = r.doubles(IMU_DOUBLES)
+        _learn("Imu", data, body_at, f"{r.e}{-(body_at - 4) % 8}x{IMU_DOUBLES}d", (), (frame,))
+    return stamp, frame, v[0:4], v[4:13], v[13:16], v[16:25], v[25:28], v[28:37]
+
+
 def decode_wrench(data) -> Tuple[Tuple[float, float, float], Tuple[float, float, float]]:
     """geometry_msgs/Wrench -> (force xyz, torque xyz)."""
     v = _Reader(data, "Wrench").doubles(6)
@@ -289,6 +311,22 @@ class WrenchStampedEncoder:
 
     def __call__(self, stamp_ns: int, force: Sequence[float], torque: Sequence[float]) -> bytes:
         return CDR_LE + self._stamp.pack(*split_ns(stamp_ns)) + self._tail + self._body.pack(*force, *torque)
+
+
+class ImuEncoder:
+    """Encode sensor_msgs/Imu messages with a fixed ``frame_id``."""
+
+    def __init__(self, frame_id: str = ""):
+        self._tail, pos = _header_tail(frame_id)
+        self._body = struct.Struct(f"<{-pos % 8}x{IMU_DOUBLES}d")
+        self._stamp = _st("<iI")
+
+    def __call__(self, stamp_ns: int, orientation: Sequence[float], orientation_cov: Sequence[float],
+                 angular_velocity: Sequence[float], angular_velocity_cov: Sequence[float],
+                 linear_acceleration: Sequence[float], linear_acceleration_cov: Sequence[float]) -> bytes:
+        return (CDR_LE + self._stamp.pack(*split_ns(stamp_ns)) + self._tail
+                + self._body.pack(*orientation, *orientation_cov, *angular_velocity, *angular_velocity_cov,
+                                  *linear_acceleration, *linear_acceleration_cov))
 
 
 _F64 = struct.Struct("<4sd")

@@ -11,10 +11,20 @@
 
     external_wrench       geometry_msgs/Wrench      torque.x, torque.y added to tau_ext1, tau_ext2
 
+    raw sensors (plant_sim with sensors.model: raw, SPEC 10; the state_estimator reads them):
+    imu/data_raw          sensor_msgs/Imu           frame_id imu_link; no orientation (all 0,
+                                                    orientation_covariance[0] = -1, REP-145);
+                                                    angular_velocity (0, gyro, 0), linear_acceleration
+                                                    (accel_x, 0, accel_z); covariances diagonal
+                                                    (gyro_noise_std^2, accel_noise_std^2); stamp t_k
+    wheel_encoder         sensor_msgs/JointState    name [wheel], position [phi = theta_w - theta_b],
+                                                    velocity [phi rate], effort [torque that acted
+                                                    over the previous period]; stamp t_k
+
 The nodes publish these as bytes and parse the bytes they receive (:mod:`.cdr`), and the
 bag readers use the same parsers.  ``parse_*`` raise :class:`~.errors.BadMessage` for
 anything that must not be used: bytes that are not the type, joints missing, non-finite
-values, and values no robot of this kind can have (:data:`LIMITS`).
+values, and values no robot of this kind can have (:data:`LIMITS`; the raw sensors' :data:`RAW_LIMITS`).
 """
 from __future__ import annotations
 
@@ -26,9 +36,11 @@ from mwip_ros.core.model import State
 from . import cdr
 from .errors import BadMessage, CdrError
 
-__all__ = ["JOINT_NAMES", "INTERNAL_NAMES", "LIMITS", "encode_state", "encode_wrench", "encode_internals",
+__all__ = ["JOINT_NAMES", "INTERNAL_NAMES", "LIMITS", "RAW_LIMITS", "IMU_FRAME", "ENCODER_JOINT", "encode_state",
+           "encode_wrench", "encode_internals",
            "encode_command", "encode_clock", "encode_external_wrench", "parse_joint_state", "parse_wrench",
-           "parse_command", "parse_clock", "parse_internals", "parse_external_wrench"]
+           "parse_command", "parse_clock", "parse_internals", "parse_external_wrench", "encode_imu", "parse_imu",
+           "encode_encoder", "parse_encoder", "check_state"]
 
 JOINT_NAMES = ("wheel", "body_pitch")
 INTERNAL_NAMES = ("S1", "S2", "x4d", "x4_bar", "u_dsc", "u_taud", "u", "x1")
@@ -44,7 +56,25 @@ LIMITS = {
     "torque": 1e6,             # u, tau_hat, tau_d, tau_ext [N m]
 }
 
+# The raw sensors' plausible readings (SPEC 10), far beyond a balancing robot (the paper's run: |gyro| < 5 rad/s,
+# |accel| < 30 m/s^2) and far inside what the estimators' arithmetic survives.  A reading beyond them is rejected
+# like a NaN.  (A missing orientation, orientation_covariance[0] = -1, is what the plant sends, and an IMU that
+# does give one is not an error: the estimators never read it.)
+RAW_LIMITS = {
+    "gyro": 1e3,               # |angular_velocity| per axis [rad/s]
+    "accel": 1e3,              # |linear_acceleration| per axis [m/s^2]: about 100 g
+    "phi": LIMITS["theta_w"],  # |encoder angle| [rad]
+    "rate": LIMITS["rate"],    # |encoder rate| [rad/s]
+    "torque": LIMITS["torque"],   # |reported torque| [N m]
+}
+IMU_FRAME = "imu_link"         # REP-145: the IMU's own frame (the body frame at the IMU, core.raw_sensors)
+ENCODER_JOINT = "wheel"        # the encoder's joint: the wheel relative to the body
+
 _STATE = cdr.JointStateEncoder(JOINT_NAMES)
+_IMU = cdr.ImuEncoder(IMU_FRAME)
+_ENCODER = cdr.JointStateEncoder((ENCODER_JOINT,))
+_NO_ORIENTATION = (0.0, 0.0, 0.0, 0.0)
+_NO_ORIENTATION_COV = (-1.0,) + (0.0,) * 8
 _INTERNALS = cdr.JointStateEncoder(INTERNAL_NAMES)
 _WRENCH = cdr.WrenchStampedEncoder()
 _ZERO3 = (0.0, 0.0, 0.0)
@@ -87,6 +117,24 @@ def encode_wrench(stamp: int, t1: float, t2: float) -> bytes:
     return _WRENCH(stamp, _ZERO3, (float(t1), float(t2), 0.0))
 
 
+def _diagonal(variance: float) -> Tuple[float, ...]:
+    v = float(variance)
+    return (v, 0.0, 0.0, 0.0, v, 0.0, 0.0, 0.0, v)
+
+
+def encode_imu(stamp: int, gyro: float, accel_x: float, accel_z: float, gyro_variance: float = 0.0,
+               accel_variance: float = 0.0) -> bytes:
+    """imu/data_raw: no orientation (orientation_covariance[0] = -1), angular_velocity (0, gyro, 0),
+    linear_acceleration (accel_x, 0, accel_z), each covariance ``variance`` times the identity (0 = unknown)."""
+    return _IMU(stamp, _NO_ORIENTATION, _NO_ORIENTATION_COV, (0.0, float(gyro), 0.0), _diagonal(gyro_variance),
+                (float(accel_x), 0.0, float(accel_z)), _diagonal(accel_variance))
+
+
+def encode_encoder(stamp: int, phi: float, rate: float, torque: float) -> bytes:
+    """wheel_encoder: name [wheel], position [phi], velocity [phi rate], effort [the torque that acted]."""
+    return _ENCODER(stamp, (float(phi),), (float(rate),), (float(torque),))
+
+
 _INTERNAL_ENCODERS = {INTERNAL_NAMES: _INTERNALS}
 
 
@@ -126,13 +174,54 @@ def parse_joint_state(data) -> Tuple[int, State, float]:
         raise BadMessage(f"effort {list(effort)} has no entry for 'wheel' (name index {iw})")
     x = State(position[iw], position[ib], velocity[iw], velocity[ib])
     u_prev = effort[iw]
+    check_state(x, u_prev)
+    return stamp, x, u_prev
+
+
+def check_state(x, u_prev: float = 0.0) -> None:
+    """BadMessage unless the state ``x`` and the torque ``u_prev`` are finite and plausible (:data:`LIMITS`): what
+    :func:`parse_joint_state` accepts (a node checks what it would publish with it)."""
     _finite((*x, u_prev), "joint state")
     _within(x[1], "theta_b", "theta_b")
     _within(x[0], "theta_w", "theta_w")
     _within(x[2], "rate", "theta_w'")
     _within(x[3], "rate", "theta_b'")
     _within(u_prev, "torque", "effort")
-    return stamp, x, u_prev
+
+
+def _raw_within(values: Sequence[float], limit: str, what: str) -> None:
+    for v in values:
+        if abs(v) > RAW_LIMITS[limit]:
+            raise BadMessage(f"implausible {what} {v:g} (|{what}| must be <= {RAW_LIMITS[limit]:g})")
+
+
+def parse_imu(data) -> Tuple[int, float, float, float]:
+    """(stamp_ns, gyro = angular_velocity.y, accel_x, accel_z) of an imu/data_raw message, or BadMessage (every
+    axis of angular_velocity and linear_acceleration must be finite and plausible; the orientation and the
+    covariances are not read)."""
+    stamp, _frame, _q, _qc, w, _wc, a, _ac = _decoded(cdr.decode_imu, data, "sensor_msgs/Imu")
+    _finite((*w, *a), "IMU reading")
+    _raw_within(w, "gyro", "angular_velocity")
+    _raw_within(a, "accel", "linear_acceleration")
+    return stamp, w[1], a[0], a[2]
+
+
+def parse_encoder(data) -> Tuple[int, float, float, float]:
+    """(stamp_ns, phi, phi rate, torque) of a wheel_encoder message, or BadMessage (name [wheel], one value in
+    each of position, velocity and effort, finite and plausible)."""
+    stamp, _frame, names, position, velocity, effort = _decoded(cdr.decode_joint_state, data,
+                                                                "sensor_msgs/JointState")
+    if list(names) != [ENCODER_JOINT]:
+        raise BadMessage(f"joint names {list(names)}, expected [{ENCODER_JOINT!r}]")
+    if len(position) != 1 or len(velocity) != 1 or len(effort) != 1:
+        raise BadMessage(f"array lengths position={len(position)} velocity={len(velocity)} effort={len(effort)}, "
+                         f"expected 1, 1, 1")
+    phi, rate, torque = position[0], velocity[0], effort[0]
+    _finite((phi, rate, torque), "encoder reading")
+    _raw_within((phi,), "phi", "encoder angle")
+    _raw_within((rate,), "rate", "encoder rate")
+    _raw_within((torque,), "torque", "effort")
+    return stamp, phi, rate, torque
 
 
 def parse_wrench(data) -> Tuple[int, float, float]:

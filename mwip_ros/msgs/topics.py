@@ -14,7 +14,9 @@ __all__ = ["GRAPH_TOPICS", "USER_TOPICS", "SYSTEM_TOPICS", "topic_type", "split_
 
 GRAPH_TOPICS: Dict[str, str] = {
     "joint_states": "sensor_msgs/msg/JointState",
-    "true_joint_states": "sensor_msgs/msg/JointState",   # only with sensing or actuation options on
+    "true_joint_states": "sensor_msgs/msg/JointState",   # with sensing or actuation options on, or raw sensors
+    "imu/data_raw": "sensor_msgs/msg/Imu",               # raw sensors (sensors.model: raw): the body's IMU
+    "wheel_encoder": "sensor_msgs/msg/JointState",       # raw sensors: the wheel's angle relative to the body
     "wheel_torque_cmd": "std_msgs/msg/Float64",
     "disturbance_estimate": "geometry_msgs/msg/WrenchStamped",
     "lumped_disturbance": "geometry_msgs/msg/WrenchStamped",
@@ -77,6 +79,9 @@ def graph_type(topic: str) -> Optional[str]:
     last = stripped.rsplit("/", 1)[-1]
     if last in GRAPH_TOPICS:
         return GRAPH_TOPICS[last]
+    for name, type_name in GRAPH_TOPICS.items():   # a name of several levels under a namespace: /robot1/imu/data_raw
+        if "/" in name.strip("/") and stripped.endswith("/" + name.strip("/")):
+            return type_name
     return None
 
 

@@ -18,10 +18,10 @@ from typing import Optional, Sequence
 
 __all__ = ["NODES", "M_ARENA_MAX", "bound_malloc_arenas", "run", "main", *(
     "plant_sim", "disturbance_observer", "dscndo_controller", "mcap_recorder", "bag_replay", "robot_markers",
-    "foxglove_server")]
+    "foxglove_server", "state_estimator")]
 
 NODES = ("plant_sim", "disturbance_observer", "dscndo_controller", "mcap_recorder", "bag_replay", "robot_markers",
-         "foxglove_server")
+         "foxglove_server", "state_estimator")
 M_ARENA_MAX = -8   # glibc's mallopt() parameter number for the arena limit
 
 
@@ -76,6 +76,10 @@ def robot_markers(argv=None) -> int:
 
 def foxglove_server(argv=None) -> int:
     return run("foxglove_server", argv)
+
+
+def state_estimator(argv=None) -> int:
+    return run("state_estimator", argv)
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:

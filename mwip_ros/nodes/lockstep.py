@@ -17,9 +17,10 @@ states the way the plant drives them with simulated ones.
    it logs progress: "waiting for the graph to come up" at once (discovery takes a moment:
    the normal start), then, after ``WAIT_GRACE_S``, every 2 s the nodes still missing; after
    ``timeout_s`` it reports the wait as failed, naming them and why.
-2. **Step** (:meth:`send`, :meth:`take_answer`): publish ``/clock`` and the state, then
-   exactly one ``wheel_torque_cmd`` answers it.  A command while no state waits is the
-   caller's to reject.
+2. **Step** (:meth:`send`, :meth:`take_answer`): publish ``/clock`` and the state (the bytes for
+   ``state_pub``, or several messages, e.g. a raw plant's ``imu/data_raw`` and ``wheel_encoder``:
+   a list of (publisher, bytes), published in order), then exactly one ``wheel_torque_cmd`` answers it.
+   A command while no state waits is the caller's to reject.
 3. **Watch** (:meth:`check`): a state nobody answered within ``RESEND_S`` is published
    again (only states sent before every subscription matched are lost; the observer
    answers a repeated stamp again and the controller answers each stamp once, so a
@@ -31,18 +32,21 @@ states the way the plant drives them with simulated ones.
 
 The chain is data (``answers``, :func:`mwip_ros.core.loop.answering`, from
 :data:`mwip_ros.core.loop.STAGES`): the nodes that answer a state, in order, and the topic each
-answers on.  The plant, the re-simulation and the tests' graph wait all use it.
+answers on.  The plant, the re-simulation and the tests' graph wait all use it.  With a state
+estimator in the chain (``answering(estimator=True)``: a raw plant), the estimator alone listens to the
+plant's measurement and the observer and the controller to the estimator's ``joint_states``: the
+floor of matched subscriptions then counts the estimator instead of them (:func:`subscriber_floor`).
 """
 from __future__ import annotations
 
 import time
-from typing import Optional, Sequence, Tuple
+from typing import Optional, Sequence, Tuple, Union
 
-from mwip_ros.core.loop import Answer, answering
+from mwip_ros.core.loop import STAGES, Answer, answering
 from mwip_ros.msgs.cdr import peek_stamp
 from mwip_ros.msgs.layouts import encode_clock
 
-__all__ = ["LockstepDriver", "RESEND_S", "graph_missing", "CHAIN"]
+__all__ = ["LockstepDriver", "RESEND_S", "graph_missing", "CHAIN", "measurement_listeners", "subscriber_floor"]
 
 CHAIN = answering()   # the answering stages of today's loop: the observer, then the law (core.loop.STAGES)
 
@@ -51,6 +55,24 @@ WAIT_GRACE_S = 2.0      # discovery takes a moment: until then a wait for the gr
 WAIT_LOG_PERIOD_S = 2.0
 COMPLETE_WAIT_S = 3.0   # once the required nodes are there, wait at most this long for every discovered subscriber
 NOT_FOUND_HINT = "started? same ROS_DOMAIN_ID?"
+
+
+def measurement_listeners(answers: Sequence[Answer]) -> int:
+    """How many of the chain's nodes subscribe to the plant's first published topic: a state estimator alone
+    when the chain has one (it reads the raw sensors; the others read its ``joint_states``), else every
+    answering stage that reads ``joint_states`` (the observer and the controller)."""
+    if any(a.stage == "estimator" for a in answers):
+        return 1
+    inputs = {s.name: s.inputs for s in STAGES}
+    return sum(1 for a in answers if "joint_states" in inputs.get(a.stage, ()))
+
+
+def subscriber_floor(expected: int, answers: Sequence[Answer]) -> int:
+    """The matched subscriptions the plant's first published topic needs before the first state, for the
+    ``expected_subscribers`` of the chain without an estimator (default 2: the observer and the controller,
+    +1 per recorder): what it counts beyond those loop nodes (recorders, viewers) plus the chain's own
+    listeners (:func:`measurement_listeners`).  Without an estimator that is ``expected`` itself."""
+    return max(0, int(expected) - measurement_listeners(CHAIN) + measurement_listeners(answers))
 
 
 def _graph_gaps(node, state_pub, need_subs: int, answers: Sequence[Answer]) -> list:
@@ -204,11 +226,17 @@ class LockstepDriver:
         stamp, data = self._last
         if self.clock_pub is not None:
             self.clock_pub.publish(encode_clock(stamp))
-        self.state_pub.publish(data)
+        if isinstance(data, (bytes, bytearray, memoryview)):
+            self.state_pub.publish(data)
+        else:
+            for pub, message in data:
+                pub.publish(message)
 
-    def send(self, k: int, stamp: int, state: bytes) -> None:
-        """Publish ``/clock`` and state k (serialized) and wait for its command."""
-        self._last = (stamp, state)
+    def send(self, k: int, stamp: int, state: Union[bytes, Sequence[Tuple[object, bytes]]]) -> None:
+        """Publish ``/clock`` and state k and wait for its command: ``state`` is the serialized state for
+        ``state_pub``, or the period's messages as (publisher, bytes) pairs, published in order (a resend
+        publishes them all again)."""
+        self._last = (stamp, state if isinstance(state, (bytes, bytearray, memoryview)) else tuple(state))
         self._publish()
         self.awaiting = (k, stamp)
         self.sent_at = self.resent_at = time.monotonic()

@@ -65,7 +65,7 @@ class LockstepRunner(_Runner):
 
     def _send(self) -> None:
         n = self.node
-        n.lockstep.send(n.plant.k, n._stamp(), n._state_bytes())
+        n.lockstep.send(n.plant.k, n._stamp(), n._sample_messages())
 
     def start(self) -> None:
         self._send()
@@ -148,7 +148,8 @@ class RealtimeRunner(_Runner):
                 u = 0.0
             if n._finish_period(u):
                 return
-        n.state_pub.publish(n._state_bytes())
+        for pub, data in n._sample_messages():
+            pub.publish(data)
 
     def diagnostic_values(self) -> dict:
         if len(self.tick_times) <= 2:

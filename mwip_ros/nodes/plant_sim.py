@@ -24,6 +24,13 @@ never repeats it (a repeat would be taken for a resend).  The service keeps ever
 the robot, publish ``external_wrench`` (``geometry_msgs/Wrench``: ``torque.x`` adds to
 tau_ext1, ``torque.y`` to tau_ext2, until the next one; a zero wrench clears it).
 
+With ``sensors.model: raw`` (SPEC 10) the plant publishes what its sensors measure instead of a state:
+per state k ``imu/data_raw`` (sensor_msgs/Imu, frame ``imu_link``, no orientation, the pitch rate and the
+specific force) and ``wheel_encoder`` (sensor_msgs/JointState ``[wheel]``: the wheel's angle relative to
+the body, its rate and the torque that acted), both stamped t_k, and the truth on ``true_joint_states``;
+a ``state_estimator`` publishes ``joint_states`` (the lockstep chain waits for it first).  The sample is
+the plant's stage ``sensors`` (:meth:`mwip_ros.core.loop.PlantSide.sense`).
+
 The plant's trajectory table (its ``csv``) has the states, the commands it applied and
 the true disturbance; it does not listen to the observer: estimates join the
 trajectory by stamp where a report needs them (the bag, or the observer's own ``csv``).
@@ -45,19 +52,19 @@ from geometry_msgs.msg import Wrench, WrenchStamped
 from rclpy.duration import Duration
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
-from sensor_msgs.msg import JointState
+from sensor_msgs.msg import Imu, JointState
 from std_msgs.msg import Float64
 from std_srvs.srv import Trigger
 
 from mwip_ros.core import metrics
-from mwip_ros.core.loop import PlantSide
+from mwip_ros.core.loop import PlantSide, answering
 from mwip_ros.core.trajectory import TrajectoryTable
 from mwip_ros.msgs import BadMessage
 from mwip_ros.msgs import layouts as L
 from mwip_ros.msgs.qos import INPUT_QOS, SERVICE_QOS, qos_for
 from mwip_ros.nodes.diagnostics import ERROR, OK, WARN
 from mwip_ros.nodes.guards import PublisherWatch, Rejects
-from mwip_ros.nodes.lockstep import LockstepDriver
+from mwip_ros.nodes.lockstep import LockstepDriver, subscriber_floor
 from mwip_ros.nodes.params import declare
 from mwip_ros.nodes.plant_runners import RUNNERS
 from mwip_ros.nodes.runtime import EXIT_ERROR, EXIT_FALLEN, GracefulNodeMixin, run_node
@@ -96,27 +103,52 @@ class PlantSimNode(Node, GracefulNodeMixin):
         runner = RUNNERS[self.mode]
 
         pub_qos, in_qos = qos_for(self.mode)   # msgs.qos: lockstep loses nothing, realtime keeps the newest
-        self.state_pub = self.create_publisher(JointState, "joint_states", pub_qos)
-        # with sensing or actuation options on, joint_states is the measurement: the truth goes here
-        self.true_pub = self.create_publisher(JointState, "true_joint_states", pub_qos) if sc.active else None
+        self.raw = self.cfg.raw is not None    # sensors.model: raw: the IMU and the encoder, not the state
+        self.state_pub = self.imu_pub = self.encoder_pub = None
+        if self.raw:
+            r = self.cfg.raw
+            self.imu_pub = self.create_publisher(Imu, "imu/data_raw", pub_qos)
+            self.encoder_pub = self.create_publisher(JointState, "wheel_encoder", pub_qos)
+            self.imu_variances = (r.gyro_noise_std ** 2, r.accel_noise_std ** 2)
+        else:
+            self.state_pub = self.create_publisher(JointState, "joint_states", pub_qos)
+        # with sensing or actuation options on, or raw sensors, what the loop reads is a measurement: the truth
+        # goes here
+        self.true_pub = (self.create_publisher(JointState, "true_joint_states", pub_qos)
+                         if sc.active or self.raw else None)
         self.truth_pub = self.create_publisher(WrenchStamped, "lumped_disturbance", pub_qos)
         self.clock_pub = self.create_publisher(Clock, "/clock", pub_qos) if runner.publishes_clock else None
         cmd_sub = self.create_subscription(Float64, "wheel_torque_cmd", self._on_cmd, in_qos, raw=True)
         self.create_subscription(Wrench, "external_wrench", self._on_wrench, INPUT_QOS, raw=True)
         self.create_service(Trigger, "~/reset", self._on_reset, qos_profile=SERVICE_QOS)
         # one graph, one controller: a second publisher of commands or states means mixed streams
-        self.watch = PublisherWatch(self, ["wheel_torque_cmd", "joint_states"])
-        # both runners wait for the graph of core.loop.STAGES' answering stages (lockstep also steps with it)
+        self.watch = PublisherWatch(self, ["wheel_torque_cmd", "joint_states",
+                                           *(("imu/data_raw", "wheel_encoder") if self.raw else ())])
+        # both runners wait for the graph of core.loop.STAGES' answering stages (lockstep also steps with it):
+        # a raw plant's chain starts with the state estimator, the one node listening to the first topic
+        answers = answering(estimator=self.raw)
+        first_pub = self.imu_pub if self.raw else self.state_pub
         self.lockstep = LockstepDriver(
-            self, self.state_pub, self.clock_pub, cmd_sub, need_subs=self.v["expected_subscribers"],
+            self, first_pub, self.clock_pub, cmd_sub,
+            need_subs=subscriber_floor(self.v["expected_subscribers"], answers),
             timeout_s=self.v["lockstep_timeout_s"], timeout_param="lockstep_timeout_s", settle_s=SETTLE_S,
             idle_hint="a wheel_torque_cmd (the controller is running but did not answer)",
-            also_published=tuple(p for p in (self.truth_pub, self.true_pub) if p is not None))
+            also_published=tuple(p for p in (self.encoder_pub, self.truth_pub, self.true_pub) if p is not None),
+            answers=answers)
         self.runner = runner(self)
         dur = f"{self.v['duration_s']:g} s" if self.n_steps is not None else "until stopped"
         self.get_logger().info(f"{self.mode} plant: h = {self.h * 1e3:.3f} ms, {self.cfg.substeps} RK4 sub-steps, "
                                f"{dur}, seed {self.cfg.seed}")
-        if sc.active:
+        if self.raw:
+            r = self.cfg.raw
+            self.get_logger().info(
+                f"raw sensors: IMU {r.offset:g} m above the axle (gyro noise {r.gyro_noise_std:g} rad/s, bias "
+                f"{r.gyro_bias:g} rad/s walking {r.gyro_bias_walk:g} rad/s/sqrt(s), accelerometer noise "
+                f"{r.accel_noise_std:g} m/s^2), encoder {r.encoder_counts_per_rev or 'ideal'} counts/rev, "
+                f"measurement delay {sc.delay_periods}, actuator delay {sc.actuator_delay_periods} period(s); "
+                f"publishing imu/data_raw and wheel_encoder, the true state on true_joint_states (a "
+                f"state_estimator publishes joint_states)")
+        elif sc.active:
             self.get_logger().info(
                 f"sensing: noise std {list(sc.noise_std)} (theta_w, theta_b, theta_w', theta_b'), encoder "
                 f"{sc.encoder_counts_per_rev or 'ideal'} counts/rev, measurement delay {sc.delay_periods}, actuator "
@@ -184,14 +216,22 @@ class PlantSimNode(Node, GracefulNodeMixin):
         """The stamp of state ``k`` (default: the current one) [ns]."""
         return self.stamp0 + (self.plant.k if k is None else k) * self.period_ns
 
-    def _state_bytes(self) -> bytes:
-        """State k as published (stage ``sensors``): the measurement (core.sensing), once per step; the truth
-        beside it when sensing or actuation options are on."""
+    def _sample_messages(self):
+        """Period k's messages as published (stage ``sensors``, once per step): [(publisher, bytes)], the
+        measured state (core.sensing) on ``joint_states``, or a raw plant's sample (core.raw_sensors) on
+        ``imu/data_raw`` and ``wheel_encoder``; the truth beside them when sensing or actuation options or
+        raw sensors are on."""
         p = self.plant
+        stamp = self._stamp()
         if self.true_pub is not None:
-            self.true_pub.publish(L.encode_state(self._stamp(), p.x, p.u_prev))
-        x, u_prev = self.side.sense()
-        return L.encode_state(self._stamp(), x, u_prev)
+            self.true_pub.publish(L.encode_state(stamp, p.x, p.u_prev))
+        measured, u_prev = self.side.sense()
+        if not self.raw:
+            return [(self.state_pub, L.encode_state(stamp, measured, u_prev))]
+        gyro_var, accel_var = self.imu_variances
+        return [(self.imu_pub, L.encode_imu(stamp, measured.gyro, measured.accel_x, measured.accel_z, gyro_var,
+                                            accel_var)),
+                (self.encoder_pub, L.encode_encoder(stamp, measured.encoder, measured.encoder_rate, u_prev))]
 
     def _finish_period(self, u_cmd: float) -> bool:
         """Stages ``drive`` and ``plant`` for the command answering state k: record row k with the torque that
@@ -274,7 +314,7 @@ class PlantSimNode(Node, GracefulNodeMixin):
             log.warning(f"interrupted at t = {self.plant.t:.3f} s of {self.n_steps * self.h:g} s")
         wall = (time.monotonic() - self.t_wall0) if self.t_wall0 else 0.0
         n = len(self.table)
-        for pub in (self.state_pub, self.truth_pub, self.clock_pub, self.true_pub):
+        for pub in (self.state_pub, self.imu_pub, self.encoder_pub, self.truth_pub, self.clock_pub, self.true_pub):
             if pub is not None:  # let a recorder receive the last states before this process exits
                 pub.wait_for_all_acked(Duration(seconds=2.0))
         summary = {"mode": self.mode, "control_rate_hz": 1.0 / self.h, "periods": n, "wall_s": wall,

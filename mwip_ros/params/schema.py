@@ -334,9 +334,10 @@ NODE_SPECS: Dict[str, List[ParamSpec]] = {
                   unit="s"),
         ParamSpec("exit_on_fall", "bool", True, "end the process (exit code 3) when the robot falls; false: the "
                   "driver holds zero torque in fault until ~/reset (realtime)"),
-        ParamSpec("expected_subscribers", "integer", 2, "lockstep: wait until joint_states has this many "
-                  "matched subscriptions before the first state (2 = observer + controller; +1 per recorder)",
-                  **_at_least_zero),
+        ParamSpec("expected_subscribers", "integer", 2, "lockstep: matched subscriptions the plant's first "
+                  "published topic needs before the first state (joint_states, or imu/data_raw with sensors.model "
+                  "raw), counted as without an estimator: 2 = observer + controller, +1 per recorder; with raw "
+                  "sensors the state_estimator alone listens, so the floor is this - 1", **_at_least_zero),
     ],
     "disturbance_observer": [
         _LOOP_MODE,
@@ -382,6 +383,8 @@ NODE_SPECS: Dict[str, List[ParamSpec]] = {
                   "IMU's horizontal motion; docs/theory.md 6.4)", **_one_of(*_estimator_names())),
         ParamSpec("imu_offset", "double", 0.3, "the IMU's distance from the axle along the body as the estimator "
                   "believes it [m] (the plant's sensors.imu.offset is the truth)", **_non_negative(100.0), unit="m"),
+        ParamSpec("csv", "string", "", "write the estimates (t, theta_w_hat, theta_b_hat, dtheta_w_hat, "
+                  "dtheta_b_hat) to this file at the end; '' = none"),
         *_estimator_parameters(),
     ],
     "mcap_recorder": [

@@ -61,3 +61,86 @@ def test_stamps_convert_both_ways_and_refuse_what_time_cannot_hold():
     with pytest.raises(CdrError, match="int32"):
         split_ns(2 ** 31 * 10 ** 9)
     assert issubclass(CdrError, MessageError) and issubclass(BadMessage, MessageError)
+
+
+# --- the raw sensors' topics (SPEC 10): imu/data_raw, wheel_encoder ---------------------------------------
+
+def test_imu_round_trip_says_it_has_no_orientation():
+    from rclpy.serialization import deserialize_message
+    from sensor_msgs.msg import Imu
+    data = L.encode_imu(5_000_000, 0.125, -1.5, 9.75, gyro_variance=1.6e-5, accel_variance=4e-4)
+    assert L.parse_imu(data) == (5_000_000, 0.125, -1.5, 9.75)
+    m = deserialize_message(data, Imu)
+    assert m.header.frame_id == L.IMU_FRAME == "imu_link"
+    assert (m.orientation.x, m.orientation.y, m.orientation.z, m.orientation.w) == (0.0, 0.0, 0.0, 0.0)
+    assert list(m.orientation_covariance) == [-1.0] + [0.0] * 8          # REP-145: no orientation
+    assert (m.angular_velocity.x, m.angular_velocity.y, m.angular_velocity.z) == (0.0, 0.125, 0.0)
+    assert (m.linear_acceleration.x, m.linear_acceleration.y, m.linear_acceleration.z) == (-1.5, 0.0, 9.75)
+    assert list(m.angular_velocity_covariance) == [1.6e-5, 0, 0, 0, 1.6e-5, 0, 0, 0, 1.6e-5]
+    assert list(m.linear_acceleration_covariance) == [4e-4, 0, 0, 0, 4e-4, 0, 0, 0, 4e-4]
+
+
+def test_encoder_round_trip():
+    data = L.encode_encoder(7, 0.25, -3.5, 42.0)
+    assert cdr.decode_joint_state(data)[2:] == (["wheel"], (0.25,), (-3.5,), (42.0,))
+    assert L.parse_encoder(data) == (7, 0.25, -3.5, 42.0)
+
+
+def _imu(w=(0.0, 0.1, 0.0), a=(0.0, 0.0, 9.81), orientation_cov=(-1.0,) + (0.0,) * 8, q=(0.0,) * 4):
+    return cdr.ImuEncoder("imu_link")(1, q, orientation_cov, w, (0.0,) * 9, a, (0.0,) * 9)
+
+
+def test_an_imu_that_gives_an_orientation_is_not_an_error():
+    """orientation_covariance[0] != -1 (a fused IMU) is read all the same: the estimators never read it."""
+    assert L.parse_imu(_imu(orientation_cov=(0.01,) * 9, q=(0.0, 0.05, 0.0, 1.0))) == (1, 0.1, 0.0, 9.81)
+    assert L.parse_imu(_imu(q=(math.nan,) * 4)) == (1, 0.1, 0.0, 9.81)   # what is not read is not judged
+
+
+@pytest.mark.parametrize("data, words", [
+    (_imu(w=(0.0, math.nan, 0.0)), "non-finite IMU reading"),
+    (_imu(w=(math.inf, 0.0, 0.0)), "non-finite IMU reading"),     # every axis, the unused ones too
+    (_imu(a=(0.0, 0.0, -math.inf)), "non-finite IMU reading"),
+    (_imu(w=(0.0, 1001.0, 0.0)), "implausible angular_velocity 1001"),
+    (_imu(w=(0.0, 0.0, -2e3)), "implausible angular_velocity"),
+    (_imu(a=(1.5e3, 0.0, 9.81)), "implausible linear_acceleration 1500"),
+    (_imu()[:-30], "not a sensor_msgs/Imu: message ends"),
+    (b"\x00\x01\x00\x00" + bytes(8), "not a sensor_msgs/Imu"),
+])
+def test_bad_imu_samples_are_refused_with_the_reason(data, words):
+    with pytest.raises(BadMessage, match=words):
+        L.parse_imu(data)
+
+
+def test_the_raw_limits_are_the_documented_bounds():
+    assert L.parse_imu(_imu(w=(1e3, -1e3, 1e3), a=(-1e3, 1e3, 1e3)))[1:] == (-1e3, -1e3, 1e3)   # on the bound: kept
+    assert L.RAW_LIMITS == {"gyro": 1e3, "accel": 1e3, "phi": 1e9, "rate": 1e3, "torque": 1e6}
+    assert L.parse_encoder(L.encode_encoder(1, -1e9, 1e3, -1e6))[1:] == (-1e9, 1e3, -1e6)
+
+
+@pytest.mark.parametrize("data, words", [
+    (cdr.JointStateEncoder(("left",))(1, (0.0,), (0.0,), (0.0,)), r"joint names \['left'\], expected \['wheel'\]"),
+    (cdr.JointStateEncoder(L.JOINT_NAMES)(1, (0.0, 0.0), (0.0, 0.0), (0.0, 0.0)), "joint names"),
+    (cdr.JointStateEncoder(("wheel",))(1, (0.0,), (), (0.0,)), "array lengths"),
+    (cdr.JointStateEncoder(("wheel",))(1, (0.0, 1.0), (0.0,), (0.0,)), "array lengths"),
+    (L.encode_encoder(1, math.nan, 0.0, 0.0), "non-finite encoder reading"),
+    (L.encode_encoder(1, 0.0, 0.0, math.inf), "non-finite encoder reading"),
+    (L.encode_encoder(1, 2e9, 0.0, 0.0), "implausible encoder angle"),
+    (L.encode_encoder(1, 0.0, -1e4, 0.0), "implausible encoder rate"),
+    (L.encode_encoder(1, 0.0, 0.0, 1e7), "implausible effort"),
+    (L.encode_encoder(1, 0.0, 0.0, 0.0)[:-4], "not a sensor_msgs/JointState"),
+    (L.encode_imu(1, 0.0, 0.0, 9.81), "not a sensor_msgs/JointState|joint names"),   # another type's bytes
+])
+def test_bad_encoder_samples_are_refused_with_the_reason(data, words):
+    with pytest.raises(BadMessage, match=words):
+        L.parse_encoder(data)
+
+
+def test_check_state_is_what_parse_joint_state_accepts():
+    L.check_state(State(0.0, 3.0, 999.0, -999.0), 1e6)
+    for x, u, words in ((State(0.0, 3.2, 0.0, 0.0), 0.0, "implausible theta_b"),
+                        (State(0.0, 0.0, math.nan, 0.0), 0.0, "non-finite joint state"),
+                        (State(0.0, 0.0, 0.0, 0.0), 2e6, "implausible effort")):
+        with pytest.raises(BadMessage, match=words):
+            L.check_state(x, u)
+        with pytest.raises(BadMessage, match=words):
+            L.parse_joint_state(L.encode_state(1, x, u))

@@ -32,6 +32,25 @@ def test_a_killed_observer_is_named_not_the_controller(tmp_path):
     assert "the controller is running but did not answer" not in failure
 
 
+def test_a_killed_state_estimator_is_named(tmp_path):
+    """Raw sensors: the chain is estimator, observer, controller; the first that stops answering is named."""
+    from graphproc import PARAMS
+    raw = (PARAMS, PARAMS.parent / "sensors_raw_realistic.yaml")
+    with Graph(tmp_path) as g:
+        est = g.start("state_estimator", params=raw)
+        g.start("disturbance_observer", params=raw)
+        g.start("dscndo_controller", params=raw)
+        plant = g.start("plant_sim", *LOCKSTEP, params=raw)
+        assert plant.wait_for_output("steps/s", 60), plant.output()  # running (progress every 2 s)
+        os.kill(est.pid, signal.SIGKILL)
+        code = plant.wait(60)
+        out = plant.output()
+    assert code == 1, out
+    failure = out.split("lockstep timeout:")[1]
+    assert "state_estimator" in failure, failure
+    assert "disturbance_observer (it did not answer" not in failure and "controller is running" not in failure
+
+
 def test_a_paused_controller_is_named(tmp_path):
     with Graph(tmp_path) as g:
         obs, (ctl,) = _lockstep_graph(g, ("dscndo_controller", ()))

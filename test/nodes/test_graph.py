@@ -2,6 +2,7 @@
 import json
 import math
 import os
+import re
 import signal
 import sys
 import time
@@ -76,6 +77,122 @@ def test_lockstep_graph_runs_a_law_registered_by_a_test_equal_to_offline(tmp_pat
             g, o = g[ok], o[ok]
         np.testing.assert_array_equal(g, o, err_msg=c)   # bit for bit
     assert "answered 401 states" in logs["dscndo_controller"].output()
+
+
+RAW = (PARAMS, PARAMS.parent / "sensors_raw_realistic.yaml")   # SPEC 10: the IMU and the encoder, an estimator
+
+
+def _estimates_by_stamp(messages) -> dict:
+    """{stamp: (x, u_prev)} of recorded joint_states bytes (a resent state counts once)."""
+    from mwip_ros.msgs import layouts as L
+    out = {}
+    for data in messages:
+        stamp, x, u_prev = L.parse_joint_state(data)
+        out.setdefault(stamp, (x, u_prev))
+    return out
+
+
+def test_lockstep_graph_with_raw_sensors_and_the_estimator_equals_mwip_sim(tmp_path):
+    """sensors.model raw: the plant publishes imu/data_raw and wheel_encoder, the state_estimator joint_states
+    (the chain core.loop.answering(estimator=True)); the plant's true states and torques and the estimator's
+    published estimates equal mwip_sim's to 1e-9, and the estimator's joint_states carry the encoder's torque."""
+    from sensor_msgs.msg import JointState
+
+    from graphproc import fresh_domain_id, release_domain_id
+    offline = simulate(P.closed_loop(P.merged_values(P.load_param_files(RAW)), controller="dscndo"))
+    assert not offline.fallen and len(offline) == 2001
+    from rclpy.experimental import EventsExecutor
+    domain = fresh_domain_id()
+    try:
+        with Injector(domain) as inj:
+            published = inj.record("joint_states", JointState)   # the estimator's answers, as the loop hears them
+            # the test's own reader must keep up with the lockstep rate (it keeps the last 1000): the events
+            # executor takes a message for a fraction of what the single-threaded one spends
+            inj.ex.remove_node(inj.node)
+            ex = EventsExecutor(context=inj.ctx)
+            ex.add_node(inj.node)
+
+            def spin_until_done(plant, timeout):
+                end = time.monotonic() + timeout
+                while plant.popen.poll() is None and time.monotonic() < end:
+                    ex.spin_once(timeout_sec=0.05)
+                code = plant.wait(5)
+                end = time.monotonic() + 10
+                while len(_estimates_by_stamp(published)) < 2001 and time.monotonic() < end:   # the last in flight
+                    ex.spin_once(timeout_sec=0.05)
+                return code
+
+            try:
+                code, csv_path, logs = run_lockstep(tmp_path, True, params=RAW, domain_id=domain,
+                                                    wait=spin_until_done)
+            finally:
+                ex.remove_node(inj.node)
+                ex.shutdown()
+                inj.ex.add_node(inj.node)
+    finally:
+        release_domain_id(domain)
+    out = logs["plant_sim"].output()
+    assert code == 0, out + logs["state_estimator"].output()
+    assert "publishing imu/data_raw and wheel_encoder" in out
+    graph = load_run(csv_path, estimates=tmp_path / "estimates.csv")
+    assert len(graph) == 2001
+    for c in COLUMNS:   # the true state, the torque that acted, tau_hat (joined by stamp), the true tau_d
+        np.testing.assert_allclose(graph[c], offline[c], rtol=0, atol=1e-9, err_msg=c)
+    est = _estimates_by_stamp(published)
+    assert len(est) == 2001
+    stamps = sorted(est)
+    np.testing.assert_allclose(np.array(stamps) * 1e-9, offline.t, rtol=0, atol=1e-12)
+    for i, c in enumerate(("theta_w_hat", "theta_b_hat", "dtheta_w_hat", "dtheta_b_hat")):
+        np.testing.assert_allclose([est[s][0][i] for s in stamps], offline[c], rtol=0, atol=1e-9, err_msg=c)
+    # effort: the torque that acted over the previous period, as the encoder's driver reported it (0 at k = 0)
+    np.testing.assert_allclose([est[s][1] for s in stamps], np.r_[0.0, offline["u"][:-1]], rtol=0, atol=1e-9)
+    if (tmp_path / "estimator.csv").exists():   # the estimator's own csv, when the schema gives it one
+        mine = read_csv(tmp_path / "estimator.csv")
+        for c in ("gyro", "accel_x", "accel_z", "encoder", "encoder_rate", "theta_b_hat", "dtheta_b_hat"):
+            np.testing.assert_allclose(mine[c], offline[c], rtol=0, atol=1e-9, err_msg=c)
+    e_out = logs["state_estimator"].output()
+    assert logs["state_estimator"].popen.returncode == 0, e_out
+    assert "estimated 2001 samples" in e_out and "unpaired dropped: 0" in e_out and "rejected: none" in e_out
+    assert "answered 2001 states" in logs["dscndo_controller"].output()
+    # the estimator in the loop costs lockstep rate: the plant's steps/s (reported, not asserted)
+    rate = re.search(r"wall \((\d+) steps/s\)", out)
+    assert rate, out
+    print(f"lockstep with the state estimator: {rate.group(1)} steps/s")
+
+
+def test_lockstep_without_estimator_times_out_naming_it(tmp_path):
+    """A raw plant's chain starts with the state estimator: without it the wait for the graph names it."""
+    with Graph(tmp_path) as g:
+        ctl = g.start("dscndo_controller", params=RAW)
+        obs = g.start("disturbance_observer", params=RAW)
+        assert ctl.wait_for_output("ready", 30) and obs.wait_for_output("ready", 30)
+        plant = g.start("plant_sim", "-p", "lockstep_timeout_s:=4.0", params=RAW)
+        code = plant.wait(60)
+    out = plant.output()
+    assert code == 1, out
+    failure = out.split("lockstep timeout:")[1]
+    assert "state_estimator (nothing publishes joint_states)" in failure, failure
+    assert "1 subscribers on imu/data_raw" in failure, failure   # the floor counts the estimator, not 2
+
+
+def test_realtime_graph_with_raw_sensors_balances(tmp_path):
+    from mwip_ros.runs import read_csv as read
+    with Graph(tmp_path) as g:
+        est = g.start("state_estimator", "-p", "mode:=realtime", params=RAW)
+        g.start("disturbance_observer", "-p", "mode:=realtime", params=RAW)
+        g.start("dscndo_controller", "-p", "mode:=realtime", params=RAW)
+        plant = g.start("plant_sim", "-p", "mode:=realtime", "-p", "duration_s:=2.0",
+                        "-p", f"csv:={tmp_path / 'rt.csv'}", params=RAW)
+        code = plant.wait(90)
+        g.close()
+    out = plant.output()
+    assert code == 0, out + est.output()
+    run = read(tmp_path / "rt.csv")
+    assert run.t[-1] == pytest.approx(2.0)
+    assert np.abs(run["theta_b"]).max() < 0.5 and abs(run["theta_b"][-1]) < 0.1   # recovering from -10 deg
+    e_out = est.output()
+    assert "estimated " in e_out and "diverged" not in e_out, e_out
+    assert int(e_out.split("estimated ")[1].split()[0]) > 300   # most of the 400 periods
 
 
 SENSING = {"sensors.noise_std.theta_b": 0.002, "sensors.noise_std.dtheta_w": 0.3, "sensors.noise_std.dtheta_b": 0.02,

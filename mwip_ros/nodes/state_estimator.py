@@ -1,0 +1,222 @@
+"""``state_estimator``: the raw IMU and encoder of a ``sensors.model: raw`` plant to the state (SPEC 10) as a node.
+
+Subscribes ``imu/data_raw`` and ``wheel_encoder``, pairs the two samples of one stamp, runs the configured
+estimator (``method``: complementary or kalman, :mod:`mwip_ros.core.estimators`; ``imu_offset`` and the
+method's own parameters) and publishes ``joint_states`` in the layout of section 7 (the estimate's positions
+and velocities, effort = the torque the encoder's driver reported) with the sample's stamp.
+
+In lockstep each stamp is answered once; a repeated stamp (the plant resending a sample nobody answered) is
+answered again with the same message and integrated nothing.  A sample it cannot use (malformed, non-finite,
+implausible: ``mwip_ros.msgs.layouts.RAW_LIMITS``, a wrong joint name; a stamp outside the stream's window or
+older than the last: :mod:`.guards`) is rejected, counted and logged, and never integrated; a sample whose
+partner of the other stream has not come when a later pair is complete, or within ``PAIR_WAIT_S`` of wall
+time, is dropped and counted.  A stream that restarted (a new plant, a reset) re-initialises the estimator.
+A realtime gap (lost samples) is one step of the estimator's period: it does not integrate over the gap.
+Its health (innovation, normalized innovation squared and its running mean, diverged) is on
+``/diagnostics``: ERROR while the estimator says it diverged.  With ``csv`` set (when the schema has the
+parameter) it writes the samples and the estimates (``t``, ``gyro``, ``accel_x``, ``accel_z``, ``encoder``,
+``encoder_rate``, ``theta_w_hat``, ``theta_b_hat``, ``dtheta_w_hat``, ``dtheta_b_hat``: mwip_sim's raw
+columns) at the end.
+"""
+from __future__ import annotations
+
+import sys
+import time
+from array import array
+
+from rclpy.node import Node
+from sensor_msgs.msg import Imu, JointState
+
+from mwip_ros import params as P
+from mwip_ros.core.raw_sensors import RawSample
+from mwip_ros.core.trajectory import ESTIMATE_COLUMNS, RAW_COLUMNS, Trajectory
+from mwip_ros.msgs import BadMessage
+from mwip_ros.msgs import layouts as L
+from mwip_ros.msgs.qos import qos_for
+from mwip_ros.nodes.diagnostics import ERROR, OK
+from mwip_ros.nodes.guards import NEW, REPEAT, RESTART, STAMP_WINDOW_PERIODS, PublisherWatch, Rejects, StampGuard
+from mwip_ros.nodes.params import declare
+from mwip_ros.nodes.runtime import GracefulNodeMixin, run_node
+from mwip_ros.runs import write_csv
+
+NAME = "state_estimator"
+IMU_TOPIC, ENCODER_TOPIC = "imu/data_raw", "wheel_encoder"
+PARTNER = {IMU_TOPIC: ENCODER_TOPIC, ENCODER_TOPIC: IMU_TOPIC}
+PAIR_WAIT_S = 1.0       # wall time a sample waits for its partner of the other stream before it is dropped
+_MAX_PENDING = 64       # samples of one stream waiting for their partner, at most
+_CSV_COLUMNS = ("t", *RAW_COLUMNS, *ESTIMATE_COLUMNS)
+
+
+class StateEstimatorNode(Node, GracefulNodeMixin):
+    def __init__(self, context=None, argv=()):
+        super().__init__(NAME, context=context)
+        self.v = declare(self, NAME, argv)
+        self.h = P.period(self.v)
+        self.period_ns = round(self.h * 1e9)
+        nominal = P.physical(self.v, "nominal")
+        self.config = P.typed.estimator(self.v)   # the method, its parameters, the IMU offset it believes
+        try:
+            self.est = self.config.make(self.h, nominal.r, nominal.g)
+        except (KeyError, ValueError) as exc:   # the schema checked them; a plug-in estimator's own check
+            raise P.ParamError("method", str(exc).strip("'\"")) from None
+        window = STAMP_WINDOW_PERIODS * self.period_ns
+        self.stamp_guards = {t: StampGuard(window, f"{t} stamp") for t in (IMU_TOPIC, ENCODER_TOPIC)}
+        self.pending = {IMU_TOPIC: {}, ENCODER_TOPIC: {}}   # topic -> {stamp: (parsed, arrival, restarted)}
+        self.answered = None      # the stamp of the last sample pair answered
+        self.last_msg = None      # its joint_states message (answered again for a resent sample)
+        self.count = 0
+        self.unpaired = 0
+        self.was_diverged = False
+        self.rejects = Rejects(self.get_logger())
+        csv_path = self.v.get("csv") or ""
+        self.csv_path = csv_path
+        self.written = array("d") if csv_path else None
+        pub_qos, in_qos = qos_for(self.v["mode"])   # msgs.qos: lockstep loses nothing, realtime keeps the newest
+        self.pub = self.create_publisher(JointState, "joint_states", pub_qos)
+        self.create_subscription(Imu, "imu/data_raw", self._on_imu, in_qos, raw=True)
+        self.create_subscription(JointState, "wheel_encoder", self._on_encoder, in_qos, raw=True)
+        self.watch = PublisherWatch(self, [IMU_TOPIC, ENCODER_TOPIC, "joint_states"])
+        own = ", ".join(f"{k} = {v!r}" for k, v in self.est.values.items())
+        self.get_logger().info(f"{self.est.title} state estimator ready: imu_offset = {self.config.imu_offset:g} m, "
+                               f"h = {self.h * 1e3:.3f} ms{'; ' + own if own else ''}")
+
+    # --- inputs ---------------------------------------------------------------------------------------
+    def _on_imu(self, data: bytes) -> None:
+        self._take(IMU_TOPIC, L.parse_imu, data)
+
+    def _on_encoder(self, data: bytes) -> None:
+        self._take(ENCODER_TOPIC, L.parse_encoder, data)
+
+    def _take(self, topic: str, parse, data) -> None:
+        try:
+            parsed = parse(data)
+        except BadMessage as exc:
+            self.rejects(topic, str(exc))
+            return
+        stamp = parsed[0]
+        guard = self.stamp_guards[topic]
+        last = guard.last
+        verdict = guard.check(stamp)
+        if verdict == REPEAT:
+            # a resent sample: its pair answered, answer it again (once per resend: on the IMU's copy)
+            if topic == IMU_TOPIC and stamp == self.answered and self.last_msg is not None:
+                self.pub.publish(self.last_msg)
+            return
+        if verdict == RESTART:
+            self.get_logger().warning(f"{topic} restarted at t = {stamp * 1e-9:.3f} s (the last sample was "
+                                      f"t = {last * 1e-9:.3f} s)")
+            self._drop(topic, self.pending[topic], "its stream restarted")
+        elif verdict != NEW:
+            self.rejects(topic, verdict)
+            return
+        self.pending[topic][stamp] = (parsed, time.monotonic(), verdict == RESTART)
+        self._pair(stamp)
+
+    def _drop(self, topic: str, stamps, why: str) -> None:
+        """Drop the waiting samples of ``topic`` at ``stamps`` (counted: rejected on ``topic``)."""
+        waiting = self.pending[topic]
+        for s in list(stamps):
+            if waiting.pop(s, None) is not None:
+                self.unpaired += 1
+                self.rejects(topic, f"the sample of t = {s * 1e-9:.6f} s had no {PARTNER[topic]} sample ({why}); "
+                                    "dropped, not integrated")
+
+    def _expire(self) -> None:
+        """The bounded wait for a partner: at most PAIR_WAIT_S of wall time, at most _MAX_PENDING samples."""
+        now = time.monotonic()
+        for topic, waiting in self.pending.items():
+            if waiting:
+                old = [s for s, (_p, at, _r) in waiting.items() if now - at > PAIR_WAIT_S]
+                if old:
+                    self._drop(topic, old, f"none within {PAIR_WAIT_S:g} s")
+                if len(waiting) > _MAX_PENDING:
+                    self._drop(topic, sorted(waiting)[:len(waiting) - _MAX_PENDING],
+                               f"more than {_MAX_PENDING} samples waiting")
+
+    def _pair(self, stamp: int) -> None:
+        imu = self.pending[IMU_TOPIC].get(stamp)
+        enc = self.pending[ENCODER_TOPIC].get(stamp)
+        if imu is None or enc is None:
+            self._expire()
+            return
+        del self.pending[IMU_TOPIC][stamp], self.pending[ENCODER_TOPIC][stamp]
+        for topic, waiting in self.pending.items():   # a later pair is complete: an older sample's partner is lost
+            if waiting:
+                self._drop(topic, [s for s in waiting if s < stamp], "a later pair came first")
+        restart = imu[2] or enc[2] or (self.answered is not None and stamp <= self.answered)
+        self._estimate(stamp, imu[0], enc[0], restart)
+
+    # --- the core's step ------------------------------------------------------------------------------
+    def _estimate(self, stamp: int, imu, enc, restart: bool) -> None:
+        _s, gyro, accel_x, accel_z = imu
+        _s, phi, phi_rate, torque = enc
+        sample = RawSample(gyro, accel_x, accel_z, phi, phi_rate)
+        snap = self.est.snapshot()
+        if restart:
+            self.get_logger().warning(f"the raw samples restarted at t = {stamp * 1e-9:.3f} s: re-initialising the "
+                                      f"{self.est.title} estimator")
+            self.est.reset()
+        try:
+            x = self.est.step(sample)
+            L.check_state(x, torque)   # what the observer and the controller would refuse, never published
+            problem = None
+        except BadMessage as exc:
+            problem = str(exc)
+        except (ArithmeticError, ValueError) as exc:
+            problem = f"the step failed ({exc})"
+        if problem is not None:
+            self.est.restore(snap)
+            self.rejects(IMU_TOPIC, f"the estimate for t = {stamp * 1e-9:.3f} s is not usable: {problem}; the "
+                                    "sample is not integrated, nothing published")
+            return
+        self.last_msg = L.encode_state(stamp, x, torque)
+        self.pub.publish(self.last_msg)
+        self.answered = stamp
+        self.count += 1
+        if self.written is not None:
+            self.written.extend((stamp * 1e-9, *sample, *x))
+        diverged = self.est.health.diverged
+        if diverged != self.was_diverged:
+            self.was_diverged = diverged
+            health = self.est.health
+            if diverged:
+                self.get_logger().error(f"the {self.est.title} estimator diverged at t = {stamp * 1e-9:.3f} s "
+                                        f"(innovation {health.innovation:.3g}, NIS mean {health.nis_mean:.3g})")
+            else:
+                self.get_logger().warning(f"the {self.est.title} estimator recovered at t = {stamp * 1e-9:.3f} s")
+
+    def spin_step(self, executor) -> None:
+        super().spin_step(executor)
+        self._expire()
+
+    # --- health (nodes.diagnostics) -------------------------------------------------------------------
+    def diagnostic_count(self) -> int:
+        return self.count
+
+    def diagnostic_status(self):
+        hl = self.est.health
+        values = {"method": self.est.name, "estimates": self.count, "unpaired_dropped": self.unpaired,
+                  "innovation": f"{hl.innovation:.6g}", "nis": f"{hl.nis:.4g}", "nis_mean": f"{hl.nis_mean:.4g}",
+                  "diverged": str(hl.diverged).lower()}
+        if hl.diverged:
+            return ERROR, f"the {self.est.title} estimator diverged (NIS mean {hl.nis_mean:.3g})", values
+        return OK, f"{self.est.title} estimating", values
+
+    def on_shutdown(self) -> None:
+        waiting = sum(len(w) for w in self.pending.values())
+        self.get_logger().info(f"estimated {self.count} samples ({self.est.title}); unpaired dropped: "
+                               f"{self.unpaired} (+{waiting} still waiting at the end); rejected: "
+                               f"{self.rejects.summary()}")
+        if self.written is not None:
+            n = len(_CSV_COLUMNS)
+            cols = {name: self.written[i::n] for i, name in enumerate(_CSV_COLUMNS)}
+            write_csv(Trajectory(NAME, cols, False, self.h), self.csv_path)
+            self.get_logger().info(f"wrote {self.csv_path}")
+
+
+def main(argv=None) -> int:
+    return run_node(StateEstimatorNode, argv)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
