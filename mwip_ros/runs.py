@@ -189,6 +189,7 @@ def read_bag_run(bag, label: Optional[str] = None, segment: Optional[int] = None
         messages = segs.select(segment)
         label = label or f"{Path(bag).name} [run {range(len(segs))[segment] + 1} of {len(segs)}]"
     states, true_states = _Stamped(5, "joint_states"), _Stamped(5, "true_joint_states")   # x (4), u_prev
+    imu, enc = _Stamped(3, "imu/data_raw"), _Stamped(2, "wheel_encoder")   # raw sensors: gyro, f_x, f_z; phi, rate
     est, truth = _Stamped(2, "disturbance_estimate"), _Stamped(2, "lumped_disturbance")
     cmds: List[float] = []
     logs: List[bytes] = []
@@ -215,10 +216,19 @@ def read_bag_run(bag, label: Optional[str] = None, segment: Optional[int] = None
                 truth.put(bag, stamp, (a, b))
             elif name == "wheel_torque_cmd":
                 cmds[:] = [L.parse_command(data)]   # only the last one is used
+            elif name == "data_raw" and topic.endswith("imu/data_raw"):
+                stamp, g, fx, fz = L.parse_imu(data)
+                imu.put(bag, stamp, (g, fx, fz))
+            elif name == "wheel_encoder":
+                stamp, phi, rate, _torque = L.parse_encoder(data)
+                enc.put(bag, stamp, (phi, rate))
         except BadMessage:
             continue  # not the graph's message (a foreign publisher): not part of the run
+    estimates = None
     if len(true_states):   # the measurement is what the loop saw; the truth is what happened
         # the torque that acted over the last period is in no message (an actuator delay holds it back)
+        if len(imu):   # raw sensors: joint_states is the state_estimator's estimate (its columns *_hat)
+            estimates = states
         states, cmds = true_states, []
     if not len(states):
         raise ValueError(f"{bag}: no joint_states messages (is this an mwip_ros bag?)")
@@ -228,11 +238,12 @@ def read_bag_run(bag, label: Optional[str] = None, segment: Optional[int] = None
     applied = [abs(u) for u in (states.value(s, 4) for s in stamps[1:]) if math.isfinite(u)]
     last_u = _last_torque(cmds[-1] if cmds else NAN, record.get("torque_limit"), max(applied, default=NAN))
     del applied
-    table = TrajectoryTable()
-    nan2 = (NAN, NAN)
+    table = TrajectoryTable(raw=estimates is not None)
+    nan2, nan3, nan5 = (NAN, NAN), (NAN,) * 3, (NAN,) * 5
     for i, s in enumerate(stamps):
         u = states.value(stamps[i + 1], 4) if i + 1 < len(stamps) else last_u
-        table.append((s - t0) * 1e-9, states.get(s), u, est.get(s, nan2), truth.get(s, nan2))
+        extra = () if estimates is None else (*imu.get(s, nan3), *enc.get(s, nan2), *estimates.get(s, nan5)[:4])
+        table.append((s - t0) * 1e-9, states.get(s), u, est.get(s, nan2), truth.get(s, nan2), extra=extra)
     run = table.trajectory(label or Path(bag).name, "t_fall" in record, NAN)
     check_times(run.t, bag)
     run.h = float(np.median(np.diff(run.t))) if len(run) > 1 else NAN

@@ -288,3 +288,6 @@ def test_raw_sensors_run_the_state_estimator_in_the_loop_and_record_its_topics(t
     assert distinct_stamps(tmp_path / "raw_dscndo", topics) == {t: 401 for t in topics}
     m = json.loads((tmp_path / "raw_report" / "metrics.json").read_text())["runs"]
     assert m["dscndo"]["upright"]
+    # the report judges the estimator from the bag: its joint_states against true_joint_states
+    assert 0 < m["dscndo"]["theta_b_est_err_rms"] < 0.01 and 0 < m["dscndo"]["dtheta_b_est_err_rms"] < 0.05
+    assert (tmp_path / "raw_report" / "pitch_estimate.png").stat().st_size > 10_000

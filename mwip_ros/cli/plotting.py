@@ -166,6 +166,37 @@ def observer_plot(runs: Sequence, path, window=None) -> None:
     plt.close(fig)
 
 
+def pitch_estimate_plot(runs: Sequence, path, window=None) -> bool:
+    """The state estimator's pitch against the true pitch, and the error, a column per run with raw sensors
+    (``theta_b_hat``); False (nothing written) when no run has an estimate."""
+    runs = [r for r in runs if "theta_b_hat" in r.columns and _finite(r["theta_b_hat"])]
+    if not runs:
+        return False
+    plt = _plt()
+    n = len(runs)
+    fig, axes = plt.subplots(2, n, sharex=True, figsize=(5.2 * n, 6), squeeze=False)
+    for j, run in enumerate(runs):
+        top, bottom = axes[0][j], axes[1][j]
+        for ax in (top, bottom):
+            if window is not None:
+                ax.axvspan(window[0], window[1], **WINDOW_SHADE, label=_window_label(window))
+            ax.grid(True, alpha=0.3)
+        top.plot(*decimate(run["t"], run["theta_b"]), color="C0", lw=1.2, label=r"$\theta_b$ (true)")
+        top.plot(*decimate(run["t"], run["theta_b_hat"]), "--", color="C1", lw=1.0, label=r"$\hat\theta_b$ (estimator)")
+        bottom.plot(*decimate(run["t"], run["theta_b_hat"] - run["theta_b"]), color="C3", lw=0.9,
+                    label=r"$\hat\theta_b - \theta_b$")
+        top.set_ylabel(r"$\theta_b$ [rad]")
+        bottom.set_ylabel("estimation error [rad]")
+        top.set_title(f"{run.label}: body pitch")
+        bottom.set_xlabel("t [s]")
+    top = _legend_outside(fig, axes.ravel())
+    fig.suptitle(title_of(runs, "Body pitch and its estimate (raw IMU and encoder)"))
+    fig.tight_layout(rect=(0, 0, 1, top))
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return True
+
+
 # --- sweeps ------------------------------------------------------------------------------------
 
 def _axis_values(values, is_grid: bool, bins: int = 8):

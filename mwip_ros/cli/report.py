@@ -174,6 +174,8 @@ def write_report(runs: List[Trajectory], out: Path, window=metrics.WINDOW, fall_
     plotting.fig3(runs, out / "fig3.png", window=window, falls=fallen)
     plotting.observer_plot(runs, out / "observer.png", window=window)
     files = ["fig3.png", "observer.png"]
+    if plotting.pitch_estimate_plot(runs, out / "pitch_estimate.png", window=window):   # raw sensors' runs
+        files.append("pitch_estimate.png")
     if gif_fps:   # None: no animation; the robot sized by the schema's nominal model (no run records its own)
         animation.write_gif(runs, out / "animation.gif", fps=gif_fps, fall_angle=fall_angle)
         files.append("animation.gif")
@@ -188,6 +190,7 @@ def write_report(runs: List[Trajectory], out: Path, window=metrics.WINDOW, fall_
     ratios = ratio_table(named)
     md += ratios + ([""] if ratios else [])
     md += ["![Fig. 3 layout](fig3.png)", "", "![observer](observer.png)", ""]
+    md += ["![pitch and its estimate](pitch_estimate.png)", ""] if "pitch_estimate.png" in files else []
     md += ["![animation](animation.gif)", ""] if gif_fps else []
     (out / "metrics.md").write_text("\n".join(md))
     ref, why, rows = ratio_rows(named) if len(named) >= 2 else (None, "", [])
