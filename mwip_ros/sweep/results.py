@@ -208,10 +208,13 @@ def _present(cols: Dict[str, list]) -> List[str]:
 def run_labels(cols: Dict[str, list], spec_info: dict) -> List[str]:
     """Each row's group in the summary: its law, and the values of the varied choices (string and bool axes:
     ``sensors.model``, ``state_estimator.method``, ``motor.enabled``, ...), e.g. ``dscndo (raw, kalman)``."""
-    keys = [a["key"] for a in spec_info.get("axes", []) if a.get("type") in ("string", "bool") and a["key"] in cols]
-    if not keys:
+    axes = [a for a in spec_info.get("axes", []) if a.get("type") in ("string", "bool") and a["key"] in cols]
+    if not axes:
         return list(cols["controller"])
-    return [f"{c} ({', '.join(str(cols[k][i]) for k in keys)})" for i, c in enumerate(cols["controller"])]
+
+    def shown(a, v) -> str:   # a bool reads back as 1.0 / 0.0: say it as the parameter file does
+        return f"{a['name']} {'true' if float(v) else 'false'}" if a["type"] == "bool" else str(v)
+    return [f"{c} ({', '.join(shown(a, cols[a['key']][i]) for a in axes)})" for i, c in enumerate(cols["controller"])]
 
 
 def summarize(cols: Dict[str, list], spec_info: dict) -> dict:
