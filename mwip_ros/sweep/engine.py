@@ -16,6 +16,7 @@ Runners yield ``(chunk, result)`` as chunks finish:
 """
 from __future__ import annotations
 
+import gc
 import os
 from dataclasses import dataclass
 from typing import Any, Dict, Iterator, List, Optional, Sequence, Tuple
@@ -82,7 +83,28 @@ def run_chunk(chunk: Chunk, batch_bytes: Optional[int] = None) -> ChunkResult:
     """Simulate one chunk (scenarios that differ in control period, RK4 sub-steps, encoder or delays run as
     separate batches).  A batch whose estimated memory (core.budget) is above ``batch_bytes`` (default: the
     budget's :func:`~mwip_ros.core.budget.batch_budget`) runs as several, each within it; the scenarios'
-    ClosedLoops are built a batch at a time."""
+    ClosedLoops are built a batch at a time.  Python's cyclic garbage collector is off meanwhile (:func:`_gc_held`).
+    """
+    with _gc_held():
+        return _run_chunk(chunk, batch_bytes)
+
+
+class _gc_held:
+    """Python's cyclic garbage collector off inside (as it was after): building a chunk's thousands of ClosedLoops
+    triggers its collections, each full one going over every object of the process (numba's compiler is a large
+    heap), 0.2 to 0.3 s a chunk of 5,000 (BENCHMARKS.md); nothing a chunk makes is cyclic garbage that has to
+    wait for it, and a collection that falls due runs after."""
+
+    def __enter__(self):
+        self.was = gc.isenabled()
+        gc.disable()
+
+    def __exit__(self, *exc):
+        if self.was:
+            gc.enable()
+
+
+def _run_chunk(chunk: Chunk, batch_bytes: Optional[int]) -> ChunkResult:
     from mwip_ros import params as P
     from mwip_ros.core.batch import simulate_batch
     cap = budget.batch_budget() if batch_bytes is None else batch_bytes
