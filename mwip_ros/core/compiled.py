@@ -17,17 +17,20 @@ after another, with the scalar plant's own functions:
 * ``error_model="numpy"``: a diverging scenario gives inf or NaN as numpy would, instead of an
   exception (the batch freezes it at its fall).
 
-The whole loop (:func:`_loop`, one kernel per law, :func:`kernel_for`) runs every period of
-:func:`.sim.simulate` the same way: the sensors (noise from draws handed in, the encoder
-:func:`.sensing.quantize`, the delay queues), the observer (:func:`.observer.z_start`, ``z_next``,
-``tau_hat_of``), the law (its ``pure_step``, :mod:`.laws`) and the observer term
-(:func:`.controller.u_taud_of`), :func:`.plant.saturate`, the actuator delay, the true tau_d in the
-metrics window (``accel``, :func:`.model.lumped_disturbance`, ``Sinusoid.at``), the fall check and
-the RK4 period; the window's sums, minimum and maximum accumulate as it goes.  Each of those
-functions is compiled from its own code object (:func:`_deep`: the plain functions it calls by a
-global name are compiled alike); the loop's own code is the glue between them.  The normal draws stay
-numpy's (each scenario's own generators, in the scalar loop's order), made by the caller
-(``core.batch``) a block of periods at a time.
+The whole loop (:func:`_loop`, one kernel per law, :func:`kernel_for`) runs every period of :func:`.sim.simulate`
+the same way: the sensors (noise from draws handed in, the encoder :func:`.sensing.quantize`, the delay queues), the
+observer (:func:`.observer.z_start`, ``z_next``, ``tau_hat_of``), the law (its ``pure_step``, :mod:`.laws`) and the
+observer term (:func:`.controller.u_taud_of`), :func:`.plant.saturate`, the actuator delay, the true tau_d in the
+metrics window (``accel``, :func:`.model.lumped_disturbance`, ``Sinusoid.at``), the fall check and the RK4 period;
+the window's sums, minimum and maximum accumulate as it goes. Each of those functions is compiled from its own code
+object (:func:`_deep`: the plain functions it calls by a global name are compiled alike); the loop's own code is the
+glue between them. The scenarios go :data:`LANES` at a time, period by period: the RK4 period (when the scenarios
+share tau_ext) and the observer and the law (``Law.pure_lanes``) run for all the lanes at once, as
+:func:`.plant.rk4_period`, :func:`.model.accel`, :func:`.observer.z_next` and the law's ``pure_step`` compiled with
+:data:`.simd.lanes` for their numbers and :mod:`.simd` for their math namespace (:func:`_lanes_of`: the same code
+objects; libmvec's vector sin, cos and exp, within a few ulp of libm's); the rest runs lane by lane. The normal
+draws stay numpy's (each scenario's own generators, in the scalar loop's order), made by the caller (``core.batch``)
+a block of periods at a time.
 
 numba compiles on first use (about a second for the RK4, a few for a loop) and caches the machine code
 where numba would (``NUMBA_CACHE_DIR`` if set, else ``__pycache__`` next to the sources, else numba's
@@ -50,19 +53,20 @@ import numpy as np
 from numba.core.caching import (CompileResultCacheImpl, FunctionCache, InTreeCacheLocator, UserProvidedCacheLocator,
                                 UserWideCacheLocator)
 
-from . import controller, drive, model, observer, plant, sensing
+from . import controller, drive, model, observer, plant, sensing, simd
 from .controller import u_taud_of
 from .model import lumped_disturbance
 from .observer import tau_hat_of, z_next, z_start
 from .plant import D_w_of, saturate
 from .sensing import quantize
 
-__all__ = ["Inertia", "RK4Periods", "SOURCES", "Sin", "kernel_for"]
+__all__ = ["Inertia", "RK4Periods", "SOURCES", "Sin", "kernel_for", "load_cached"]
 
 SOURCES = (Path(model.__file__), Path(plant.__file__), Path(drive.__file__), Path(__file__))   # the compiled plant's
 _STAMP = hashlib.sha256(b"".join(p.read_bytes() for p in SOURCES)).hexdigest()
 # what the compiled batch loop is made of besides a law's own module
-LOOP_SOURCES = SOURCES + (Path(observer.__file__), Path(controller.__file__), Path(sensing.__file__))
+LOOP_SOURCES = SOURCES + (Path(observer.__file__), Path(controller.__file__), Path(sensing.__file__),
+                         Path(simd.__file__))
 
 
 def _stamp_of(paths) -> str:
@@ -130,7 +134,8 @@ def _compiled(fn, **calls):
 
 
 _accel = _compiled(model.accel)
-_rk4_driven = _compiled(plant.rk4_driven, accel=_accel, motor_torque=_compiled(drive.motor_torque))
+_stage_torque = _compiled(plant.stage_torque, motor_torque=_compiled(drive.motor_torque))
+_rk4_driven = _compiled(plant.rk4_driven, accel=_accel, stage_torque=_stage_torque)
 _rk4_period = _compiled(plant.rk4_period, rk4_driven=_rk4_driven)
 
 
@@ -196,6 +201,55 @@ class Sin(NamedTuple):
 # step, which depends on the law)
 accel, rk4_period, at = model.accel, plant.rk4_period, model.Sinusoid.at
 law_step = None
+load, store = simd.load, simd.store
+SIMD = simd.WIDTH > 0
+LANES = simd.WIDTH or 8   # scenarios taken together (with SIMD == False: one after another, LANES at a time)
+
+
+def _lanes_of(fn, **calls):
+    """``fn``'s own code compiled by numba with ``m`` (its math namespace, the last default) :mod:`.simd`: called with
+    :data:`.simd.lanes` for the per-scenario values, it runs :data:`.simd.WIDTH` scenarios at once."""
+    bound = dict(calls)
+    for name in fn.__code__.co_names:
+        g = fn.__globals__.get(name)
+        if name not in bound and isinstance(g, types.FunctionType):
+            bound[name] = _deep(g)
+    same = types.FunctionType(fn.__code__, {**fn.__globals__, **bound}, fn.__name__, fn.__defaults__[:-1] + (simd,))
+    same.__qualname__ = fn.__qualname__ + "__lanes"
+    return _jit(same, _cache_for((fn.__code__.co_filename,)))
+
+
+def _no_lanes(p, D_w, D_b, tau1, tau2, x, u, h, n):   # pragma: no cover
+    return x   # SIMD is False: never called (and no vector sin or cos to link)
+
+
+def _held(u, w, motor):   # pragma: no cover
+    """:func:`.plant.stage_torque` without a motor, on lanes: the command (the lanes' RK4 runs motorless loops)."""
+    return u, 0
+
+
+def rk4_lanes(p, D_w, D_b, tau1, tau2, x, u, h, n):   # pragma: no cover
+    return x
+
+
+def _no_z_lanes(nominal, c, prev, u_prev, z, step):   # pragma: no cover
+    return z   # SIMD is False: never called
+
+
+z_next_lanes = _no_z_lanes
+LAW_LANES = False   # the law's pure_step runs on lanes (Law.pure_lanes): bound per law by kernel_for
+
+
+def _no_law_lanes(P, p, h, x, s, first):   # pragma: no cover
+    return s, s, s   # LAW_LANES is False: never called
+
+
+def _params3(Pg):   # pragma: no cover
+    """The law's three numbers (``P``), a lane each."""
+    return load(Pg[0], 0), load(Pg[1], 0), load(Pg[2], 0)
+
+
+law_lanes, params_lanes = _no_law_lanes, _params3
 
 _CACHES: dict = {}
 _DONE: dict = {}   # code object -> its compiled function
@@ -204,7 +258,7 @@ _DONE: dict = {}   # code object -> its compiled function
 def _cache_for(extra=()) -> type:
     paths = LOOP_SOURCES + tuple(Path(p) for p in extra if Path(p) not in LOOP_SOURCES)
     if paths not in _CACHES:
-        _CACHES[paths] = _stamped_cache(_stamp_of(paths))
+        _CACHES[paths] = _stamped_cache(f"{_stamp_of(paths)}-lanes{simd.WIDTH}")   # a kernel per lane width
     return _CACHES[paths]
 
 
@@ -241,11 +295,13 @@ def _stage(tau1, tau2, f1, f2, t, dt, substeps):   # pragma: no cover
 def _loop(k0, k1, n_steps, h, substeps, first_w, n_window, counts, delay, act_delay, observer_law,
           act, nom, D_b, sins, shared, limit, fall, X, P, use_obs, noisy, std, D_w_mean, D_w_sd, D_w_random,
           Nw, Z, x, u_prev, z, prev, s, qx, qa, active, t_fall, steps, acc, ext, T, tau1, tau2):   # pragma: no cover
-    """Periods k0 .. k1 - 1 of every active scenario, one scenario after another: the scalar loop of
-    :func:`.sim.simulate` (sensors, observer, law, saturation, actuator, true tau_d in the window, fall, RK4),
-    calling its own functions compiled; the per-scenario state lives in the arrays between calls.  ``shared``:
-    every scenario has the same tau_ext (``sins`` row 0), whose stage values are computed once per period
-    into ``T`` (periods, 2, 2 substeps + 1)."""
+    """Periods k0 .. k1 - 1 of every active scenario: the scalar loop of :func:`.sim.simulate` (sensors, observer,
+    law, saturation, actuator, true tau_d in the window, fall, RK4), calling its own functions compiled; the
+    per-scenario state lives in the arrays between calls.  The scenarios go ``LANES`` at a time, period by period:
+    each one's sensors to fall check in turn, then, when they share tau_ext (``shared``: ``sins`` row 0, whose stage
+    values are computed once per period into ``T`` (periods, 2, 2 substeps + 1)) and :data:`.simd.WIDTH` is not 0,
+    one RK4 period of all of them at once (``rk4_lanes``: :func:`.plant.rk4_period` on :data:`.simd.lanes`), else
+    each one's own."""
     n = x.shape[0]
     dt = h / substeps
     if shared and n > 0:
@@ -253,94 +309,200 @@ def _loop(k0, k1, n_steps, h, substeps, first_w, n_window, counts, delay, act_de
         g2 = Sin(sins[0, 3], sins[0, 4], sins[0, 5])
         for k in range(k0, k1):
             _stage(T[k - k0, 0], T[k - k0, 1], g1, g2, k * h, dt, substeps)
-    for i in range(n):
-        if not active[i]:
+    together = shared and SIMD
+    L = LANES
+    xs = np.zeros((4, L))      # the lanes' states, a row per component
+    xn = np.zeros((4, L))      # their states one period later
+    us = np.zeros(L)
+    dws = np.zeros(L)
+    pg = np.zeros((4, L))      # the actual plant's eq. (2) terms
+    ng = np.zeros((4, L))      # the nominal model's
+    cg = np.zeros((4, L))      # the observer's gains
+    xmg = np.zeros((4, L))     # what the loop measures of the state
+    umg = np.zeros(L)          # and of the previous torque
+    zg = np.zeros((2, L))      # the observer's z
+    pvg = np.zeros((4, L))     # the previous measured state
+    thg = np.zeros((2, L))     # tau_hat
+    dbg = np.zeros(L)
+    Pg = np.zeros((max(3, P.shape[1]), L))   # the law's numbers
+    sg = np.zeros(L)           # its state
+    ug = np.zeros(L)           # its torque
+    uog = np.zeros(L)          # and with the observer term
+    live = np.zeros(L, dtype=np.bool_)
+    for i0 in range(0, n, L):
+        width = min(L, n - i0)
+        any_live = False
+        for lane in range(L):
+            i = i0 + min(lane, width - 1)   # past the last scenario: a copy of it, never stored
+            live[lane] = lane < width and active[i]
+            any_live = any_live or live[lane]
+            for j in range(4):
+                xs[j, lane] = x[i, j]
+                pg[j, lane] = act[i, j]
+                ng[j, lane] = nom[i, j]
+                cg[j, lane] = X[i, j]
+                pvg[j, lane] = prev[i, j]
+                xmg[j, lane] = x[i, j]
+            zg[0, lane], zg[1, lane] = z[i, 0], z[i, 1]
+            for j in range(P.shape[1]):
+                Pg[j, lane] = P[i, j]
+            sg[lane] = s[i]
+            dbg[lane] = D_b[i]
+            us[lane] = u_prev[i]
+            umg[lane] = u_prev[i]
+        if not any_live:
             continue
-        pa = Inertia(act[i, 0], act[i, 1], act[i, 2], act[i, 3])
-        pn = Inertia(nom[i, 0], nom[i, 1], nom[i, 2], nom[i, 3])
-        f1 = Sin(sins[i, 0], sins[i, 1], sins[i, 2])
-        f2 = Sin(sins[i, 3], sins[i, 4], sins[i, 5])
-        c = (X[i, 0], X[i, 1], X[i, 2], X[i, 3])
-        Pi = P[i]
-        xt = (x[i, 0], x[i, 1], x[i, 2], x[i, 3])
-        up = u_prev[i]
-        zz = (z[i, 0], z[i, 1])
-        pv = (prev[i, 0], prev[i, 1], prev[i, 2], prev[i, 3])
-        si = s[i]
-        measuring = noisy[i] or counts > 0 or delay > 0
+        pv_lanes = Inertia(load(pg[0], 0), load(pg[1], 0), load(pg[2], 0), load(pg[3], 0))
+        pn_lanes = Inertia(load(ng[0], 0), load(ng[1], 0), load(ng[2], 0), load(ng[3], 0))
+        c_lanes = (load(cg[0], 0), load(cg[1], 0), load(cg[2], 0), load(cg[3], 0))
+        db_lanes = load(dbg, 0)
         for k in range(k0, k1):
             t = k * h
+            if shared:
+                tau1k = T[k - k0, 0]
+                tau2k = T[k - k0, 1]
+            else:
+                tau1k = tau1
+                tau2k = tau2
             # the stages of core.loop.STAGES, in its order
             # stage: sensors
-            if measuring:   # core.sensing.Sensors.sample
-                w, b, dw, db = xt
-                if noisy[i]:
-                    zk = Z[i, k - k0]
-                    w, b, dw, db = w + std[i, 0] * zk[0], b + std[i, 1] * zk[1], dw + std[i, 2] * zk[2], \
-                        db + std[i, 3] * zk[3]
-                if counts > 0:
-                    w = quantize(w, counts)
-                slot = k % (delay + 1)
-                qx[i, slot, 0], qx[i, slot, 1], qx[i, slot, 2], qx[i, slot, 3], qx[i, slot, 4] = w, b, dw, db, up
-                r = (k - delay) % (delay + 1) if k >= delay else 0
-                xm = (qx[i, r, 0], qx[i, r, 1], qx[i, r, 2], qx[i, r, 3])
-                um = qx[i, r, 4]
-            else:
-                xm = xt
-                um = up
+            for lane in range(width):   # the sensors (core.sensing.Sensors.sample)
+                if not live[lane]:
+                    continue
+                i = i0 + lane
+                if noisy[i] or counts > 0 or delay > 0:
+                    w, b, dw, db = xs[0, lane], xs[1, lane], xs[2, lane], xs[3, lane]
+                    if noisy[i]:
+                        zk = Z[i, k - k0]
+                        w, b, dw, db = w + std[i, 0] * zk[0], b + std[i, 1] * zk[1], dw + std[i, 2] * zk[2], \
+                            db + std[i, 3] * zk[3]
+                    if counts > 0:
+                        w = quantize(w, counts)
+                    slot = k % (delay + 1)
+                    qx[i, slot, 0], qx[i, slot, 1], qx[i, slot, 2], qx[i, slot, 3], qx[i, slot, 4] = \
+                        w, b, dw, db, u_prev[i]
+                    r = (k - delay) % (delay + 1) if k >= delay else 0
+                    for j in range(4):
+                        xmg[j, lane] = qx[i, r, j]
+                    umg[lane] = qx[i, r, 4]
+                else:
+                    for j in range(4):
+                        xmg[j, lane] = xs[j, lane]
+                    umg[lane] = u_prev[i]
             # stage: estimator (the identity: the measurement is a state)
             # stage: observer
-            if k == 0:   # core.observer.DiscreteObserver.update
-                zz = z_start(c, xm[2], xm[3])
+            # the observer (core.observer.DiscreteObserver.update): every lane at once, or one after another
+            if SIMD:
+                xm_lanes = (load(xmg[0], 0), load(xmg[1], 0), load(xmg[2], 0), load(xmg[3], 0))
+                if k == 0:
+                    zl = z_start(c_lanes, xm_lanes[2], xm_lanes[3])
+                else:
+                    zl = z_next_lanes(pn_lanes, c_lanes, (load(pvg[0], 0), load(pvg[1], 0), load(pvg[2], 0),
+                                                          load(pvg[3], 0)), load(umg, 0),
+                                      (load(zg[0], 0), load(zg[1], 0)), h)
+                tl = tau_hat_of(c_lanes, zl, xm_lanes[2], xm_lanes[3])
+                store(zg[0], 0, zl[0])
+                store(zg[1], 0, zl[1])
+                store(thg[0], 0, tl[0])
+                store(thg[1], 0, tl[1])
+                if LAW_LANES:   # the law (its pure_step) and the observer term (core.laws.ndo.WithObserver.step)
+                    ul, sl, _ = law_lanes(params_lanes(Pg), pn_lanes, h, xm_lanes, load(sg, 0), k == 0)
+                    store(ug, 0, ul)
+                    store(sg, 0, sl)
+                    if observer_law:
+                        store(uog, 0, ul - u_taud_of(pn_lanes, pn_lanes.m12 * simd.cos(xm_lanes[1]), tl))
             else:
-                zz = z_next(pn, c, pv, um, zz, h)
-            pv = xm
-            th = tau_hat_of(c, zz, xm[2], xm[3])
-            # stage: law
-            u, si, _ = law_step(Pi, pn, h, xm, si, k == 0)
-            if observer_law and use_obs[i]:   # core.laws.ndo.WithObserver.step
-                u = u - u_taud_of(pn, pn.m12 * math.cos(xm[1]), th)
-            # stage: drive
-            u = saturate(u, limit[i])
-            if act_delay > 0:   # core.sensing.Actuator.apply
-                qa[i, k % (act_delay + 1)] = u
-                u = qa[i, (k - act_delay) % (act_delay + 1)] if k >= act_delay else 0.0
-            # stage: plant (row k's true tau_d in the window, the fall check, then RK4)
-            # D_w of this period from its own draw z, as core.plant.PlantSim._draw_D_w
-            D_w = D_w_of(D_w_mean[i], D_w_sd[i], Nw[i, k - k0]) if D_w_random[i] else D_w_mean[i]
-            if shared:
-                tau1[:] = T[k - k0, 0]
-                tau2[:] = T[k - k0, 1]
-            else:
-                _stage(tau1, tau2, f1, f2, t, dt, substeps)
-            if first_w <= k < first_w + n_window:   # the true tau_d (core.plant.PlantSim.lumped_disturbance)
-                ddq = accel(pa, D_w, D_b[i], xt, u, tau1[0], tau2[0])
-                td = lumped_disturbance(pn, xt, ddq, u)
-                v = xt[1]
-                if math.isfinite(v):
-                    acc[i, 0] += v * v
-                    acc[i, 1] += 1.0
-                    ext[i, 0] = max(ext[i, 0], v)
-                    ext[i, 1] = min(ext[i, 1], v)
-                    ext[i, 2] = max(ext[i, 2], abs(v))
-                for j, v in enumerate((u, th[0] - td[0], th[1] - td[1])):
+                for lane in range(width):
+                    if live[lane]:
+                        c = (cg[0, lane], cg[1, lane], cg[2, lane], cg[3, lane])
+                        if k == 0:
+                            zs = z_start(c, xmg[2, lane], xmg[3, lane])
+                        else:
+                            zs = z_next(Inertia(ng[0, lane], ng[1, lane], ng[2, lane], ng[3, lane]), c,
+                                        (pvg[0, lane], pvg[1, lane], pvg[2, lane], pvg[3, lane]), umg[lane],
+                                        (zg[0, lane], zg[1, lane]), h)
+                        ts = tau_hat_of(c, zs, xmg[2, lane], xmg[3, lane])
+                        zg[0, lane], zg[1, lane] = zs
+                        thg[0, lane], thg[1, lane] = ts
+            any_live = False
+            for lane in range(width):
+                if not live[lane]:
+                    continue
+                i = i0 + lane
+                pa = Inertia(act[i, 0], act[i, 1], act[i, 2], act[i, 3])
+                pn = Inertia(nom[i, 0], nom[i, 1], nom[i, 2], nom[i, 3])
+                xt = (xs[0, lane], xs[1, lane], xs[2, lane], xs[3, lane])
+                xm = (xmg[0, lane], xmg[1, lane], xmg[2, lane], xmg[3, lane])
+                th = (thg[0, lane], thg[1, lane])
+                z[i, 0], z[i, 1] = zg[0, lane], zg[1, lane]
+                for j in range(4):
+                    prev[i, j] = pvg[j, lane] = xm[j]
+                # stage: law
+                if LAW_LANES:   # computed above for every lane
+                    u = uog[lane] if observer_law and use_obs[i] else ug[lane]
+                    s[i] = sg[lane]
+                else:
+                    u, si, _ = law_step(P[i], pn, h, xm, s[i], k == 0)
+                    s[i] = si
+                    if observer_law and use_obs[i]:   # core.laws.ndo.WithObserver.step
+                        u = u - u_taud_of(pn, pn.m12 * math.cos(xm[1]), th)
+                # stage: drive
+                u = saturate(u, limit[i])
+                if act_delay > 0:   # core.sensing.Actuator.apply
+                    qa[i, k % (act_delay + 1)] = u
+                    u = qa[i, (k - act_delay) % (act_delay + 1)] if k >= act_delay else 0.0
+                # stage: plant (row k's true tau_d in the window, the fall check, then RK4)
+                # D_w of this period from its own draw z, as core.plant.PlantSim._draw_D_w
+                D_w = D_w_of(D_w_mean[i], D_w_sd[i], Nw[i, k - k0]) if D_w_random[i] else D_w_mean[i]
+                if not shared:
+                    f1 = Sin(sins[i, 0], sins[i, 1], sins[i, 2])
+                    f2 = Sin(sins[i, 3], sins[i, 4], sins[i, 5])
+                    _stage(tau1k, tau2k, f1, f2, t, dt, substeps)
+                if first_w <= k < first_w + n_window:   # the true tau_d (core.plant.PlantSim.lumped_disturbance)
+                    ddq = accel(pa, D_w, D_b[i], xt, u, tau1k[0], tau2k[0])
+                    td = lumped_disturbance(pn, xt, ddq, u)
+                    v = xt[1]
                     if math.isfinite(v):
-                        acc[i, 2 * j + 2] += v * v
-                        acc[i, 2 * j + 3] += 1.0
-            if abs(xt[1]) > fall[i]:
-                t_fall[i] = t
-                active[i] = False
+                        acc[i, 0] += v * v
+                        acc[i, 1] += 1.0
+                        ext[i, 0] = max(ext[i, 0], v)
+                        ext[i, 1] = min(ext[i, 1], v)
+                        ext[i, 2] = max(ext[i, 2], abs(v))
+                    for j, v in enumerate((u, th[0] - td[0], th[1] - td[1])):
+                        if math.isfinite(v):
+                            acc[i, 2 * j + 2] += v * v
+                            acc[i, 2 * j + 3] += 1.0
+                if abs(xt[1]) > fall[i]:
+                    t_fall[i] = t
+                    active[i] = False
+                    live[lane] = False
+                    continue
+                if k == n_steps:
+                    live[lane] = False
+                    continue
+                steps[i] += 1
+                u_prev[i] = u
+                us[lane] = u
+                dws[lane] = D_w
+                any_live = True
+                if not together:
+                    xs[0, lane], xs[1, lane], xs[2, lane], xs[3, lane] = rk4_period(pa, D_w, D_b[i], tau1k, tau2k,
+                                                                                    xt, u, h, substeps)
+            if not any_live:
                 break
-            if k == n_steps:
-                break
-            steps[i] += 1
-            xt = rk4_period(pa, D_w, D_b[i], tau1, tau2, xt, u, h, substeps)
-            up = u
-        x[i, 0], x[i, 1], x[i, 2], x[i, 3] = xt
-        u_prev[i] = up
-        z[i, 0], z[i, 1] = zz
-        prev[i, 0], prev[i, 1], prev[i, 2], prev[i, 3] = pv
-        s[i] = si
+            if together:   # the lanes' RK4 period at once; a lane that fell or ended keeps its state
+                xv = rk4_lanes(pv_lanes, load(dws, 0), db_lanes, tau1k, tau2k,
+                               (load(xs[0], 0), load(xs[1], 0), load(xs[2], 0), load(xs[3], 0)), load(us, 0), h,
+                               substeps)
+                for j in range(4):
+                    store(xn[j], 0, xv[j])
+                for lane in range(width):
+                    if live[lane]:
+                        for j in range(4):
+                            xs[j, lane] = xn[j, lane]
+        for lane in range(width):
+            i = i0 + lane
+            x[i, 0], x[i, 1], x[i, 2], x[i, 3] = xs[0, lane], xs[1, lane], xs[2, lane], xs[3, lane]
 
 
 _KERNELS: dict = {}
@@ -349,6 +511,30 @@ _KERNELS: dict = {}
 def _owner(cls: type, name: str):
     """The class of ``cls``' MRO that defines ``name``."""
     return next((c for c in cls.__mro__ if name in c.__dict__), None)
+
+
+def load_cached(kernel, args) -> None:
+    """Load ``kernel``'s machine code for ``args``' types from numba's cache, if there and not yet loaded, without
+    the refresh of its whole compiler that numba's own first call makes (about 0.2 s of a sweep worker's start-up:
+    numba's lowering modules and, through them, scipy.linalg); the machine code needs only numba's runtime.  Anything
+    else (nothing cached, numba's internals changed) is left to the first call, which loads or compiles as usual."""
+    try:
+        from numba.core.compiler_lock import global_compiler_lock
+        from numba.core.runtime import rtsys
+        if kernel.overloads:
+            return
+        cache = kernel._cache
+        if not hasattr(cache, "_load_overload"):
+            return   # no cache (no writable directory)
+        with global_compiler_lock:   # as numba's own loading
+            ctx = kernel.targetctx
+            sig = tuple(kernel.typeof_pyval(a) for a in args)
+            rtsys.initialize(ctx)
+            cres = cache._load_overload(sig, ctx)   # numba's Cache.load_overload but for its ctx.refresh()
+            if cres is not None and not kernel.overloads:
+                kernel.add_overload(cres)
+    except Exception:  # noqa: BLE001 - the first call loads it the usual way
+        pass
 
 
 def kernel_for(law: type):
@@ -361,7 +547,15 @@ def kernel_for(law: type):
     if fn not in _KERNELS:
         step = _deep(fn)
         at = _deep(model.Sinusoid.at)
+        lanes = (_lanes_of(plant.rk4_period, rk4_driven=_lanes_of(plant.rk4_driven, accel=_lanes_of(model.accel),
+                                                                  stage_torque=_jit(_held, _cache_for())))
+                 if SIMD else _jit(_no_lanes, _cache_for()))
+        z_lanes = _lanes_of(observer.z_next) if SIMD else _jit(_no_z_lanes, _cache_for())
+        by_lanes = SIMD and getattr(core, "pure_lanes", 0) == 3   # a law whose pure_step runs on lanes
         _KERNELS[fn] = _deep(_loop, f"__{fn.__module__}.{fn.__qualname__}".replace(".", "_"), law_step=step,
                              Inertia=Inertia, Sin=Sin, at=at, _stage=_deep(_stage, at=at), accel=_accel,
-                             rk4_period=_rk4_period)
+                             rk4_period=_rk4_period, rk4_lanes=lanes, load=load, store=store,
+                             z_next_lanes=z_lanes, LAW_LANES=by_lanes,
+                             law_lanes=_lanes_of(fn) if by_lanes else _jit(_no_law_lanes, _cache_for()),
+                             params_lanes=_jit(_params3, _cache_for()))
     return _KERNELS[fn]

@@ -78,6 +78,10 @@ class Law:
         ``first``, the first step).  When a law has one, its :meth:`step` calls it, and the batch simulator runs
         it compiled by numba inside one compiled loop (``core.compiled``); None: the batch runs :meth:`step`
         over numpy arrays.
+    pure_lanes : int
+        3 when ``pure_step`` is plain arithmetic and ``m``'s functions on its numbers, with ``P`` three numbers:
+        the compiled loop then runs it for several scenarios at once (``core.simd``); 0 (the default): one
+        scenario after another.
     """
 
     name: str = ""
@@ -90,6 +94,7 @@ class Law:
     Params: type = type(None)
     announce: bool = False
     pure_step = None
+    pure_lanes = 0
 
     @staticmethod
     def pure_params(params) -> tuple:

@@ -64,6 +64,7 @@ class DscLaw(Law):
                    "u_taud": 0.0, "u": u, "x1": x1}   # u_taud: 0, the term is off
 
     pure_step = staticmethod(dsc_step)
+    pure_lanes = 3   # P = (k1, k2, tau4)
 
     @staticmethod
     def pure_params(params: DscGains):

@@ -50,6 +50,7 @@ class LqrLaw(Law):
         return u, {"u_dsc": u_lqr, "u_taud": 0.0, "S1": S1, "u": u}   # u_taud: 0, off
 
     pure_step = staticmethod(lqr_step)
+    pure_lanes = 3   # P = K
 
     @staticmethod
     def pure_params(params: LqrGain):
