@@ -97,6 +97,10 @@ def make_msg(type_name: str, i: int):
                             velocity=np.array([1.0 * i, 2.0]), effort=effort)
     if type_name == "std_msgs/msg/Float64":
         return T[type_name](data=0.25 * i)
+    if type_name == "std_msgs/msg/Bool":   # emergency_stop
+        return T[type_name](data=bool(i % 2))
+    if type_name == "std_msgs/msg/String":   # driver_state: a transition, JSON
+        return T[type_name](data=f'{{"state": "fault", "reason": "watchdog", "t": {0.005 * i:.3f}}}')
     if type_name == "geometry_msgs/msg/Wrench":
         return T[type_name](force=vec(i, 2 * i, 3), torque=vec(-i, 0, 0.5))
     if type_name == "geometry_msgs/msg/WrenchStamped":

@@ -252,10 +252,14 @@ def sweep_upright_map(cols: dict, axes: Sequence, path) -> bool:
         _share_figure(plt, cols, kx, gx, names, "Share of scenarios upright", path)
         return True
     ky, gy = rest[0]
-    fig, panels = plt.subplots(1, len(names), figsize=(5.4 * len(names) + 1.2, 4.6), squeeze=False,
+    ncols = min(4, len(names))   # at most four panels a row: eight groups (law x choice) in two
+    nrows = -(-len(names) // ncols)
+    fig, panels = plt.subplots(nrows, ncols, figsize=(5.4 * ncols + 1.2, 4.6 * nrows), squeeze=False,
                                constrained_layout=True)
+    for ax in panels.ravel()[len(names):]:
+        ax.set_visible(False)
     im = None
-    for ax, law in zip(panels[0], names):
+    for ax, law in zip(panels.ravel(), names):
         sel = ctrl == law
         lx, ix = _axis_values(np.asarray(cols[kx])[sel], gx)
         ly, iy = _axis_values(np.asarray(cols[ky])[sel], gy)
@@ -276,7 +280,7 @@ def sweep_upright_map(cols: dict, axes: Sequence, path) -> bool:
         ax.set_xlabel(xlabel)
         ax.set_title(f"{law}: share upright")
     if im is not None:
-        fig.colorbar(im, ax=list(panels[0]), label="share upright [-]")
+        fig.colorbar(im, ax=list(panels.ravel()), label="share upright [-]")
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return True

@@ -251,6 +251,8 @@ def _figures(cols, spec, doc, out: Path) -> list:
     from mwip_ros.cli import plotting
     written = []
     numeric = [(a.key, not a.random) for a in spec.axes if a.type in ("double", "integer")]
+    # a panel (a line, a histogram) per group of the summary: per law, and per choice (sensors.model, ...)
+    cols = dict(cols, controller=results.run_labels(cols, doc["spec"]))
     if plotting.sweep_upright_map(cols, numeric, out / "upright_map.png"):
         written.append("upright_map.png")
     plotting.sweep_rms_distribution(cols, out / "theta_b_rms.png")

@@ -20,13 +20,22 @@
   **keep all**: every request is kept until the node takes it, so a burst of calls (1,000
   at once) is answered call by call.  ROS's default (keep last 10) drops the requests that
   find ten waiting; a client that sends many at once wants the same profile for its answers.
+  ``~/enable`` and ``~/disable`` have it too.
+* The driver's state (:data:`DRIVER_STATE_QOS`, ``plant_sim``'s ``driver_state``): reliable,
+  transient local, keep last 100: latched, a reader that joins late (a recorder, a viewer,
+  ``ros2 topic echo --qos-durability transient_local``) gets the recent transitions, the
+  current state last.
+* ``emergency_stop``, which users publish with any QoS: the plant subscribes twice, with
+  :data:`INPUT_QOS` (reliable: nothing a reliable publisher sends is lost) and with
+  :data:`BEST_EFFORT_INPUT_QOS` (which also matches a best-effort publisher); a message that
+  comes twice latches the same fault.
 """
 from __future__ import annotations
 
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-__all__ = ["GRAPH_QOS", "INPUT_QOS", "RECORD_QOS", "REALTIME_QOS", "REALTIME_INPUT_QOS", "SERVICE_QOS", "DEPTH",
-           "qos_for", "recorded_qos"]
+__all__ = ["GRAPH_QOS", "INPUT_QOS", "RECORD_QOS", "REALTIME_QOS", "REALTIME_INPUT_QOS", "SERVICE_QOS",
+           "DRIVER_STATE_QOS", "BEST_EFFORT_INPUT_QOS", "DEPTH", "qos_for", "recorded_qos"]
 
 DEPTH = 1000
 
@@ -43,6 +52,10 @@ REALTIME_INPUT_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliab
 
 SERVICE_QOS = QoSProfile(history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPolicy.RELIABLE,
                          durability=DurabilityPolicy.VOLATILE)
+DRIVER_STATE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100, reliability=ReliabilityPolicy.RELIABLE,
+                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
+BEST_EFFORT_INPUT_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.BEST_EFFORT,
+                                   durability=DurabilityPolicy.VOLATILE)
 
 
 def qos_for(mode: str):

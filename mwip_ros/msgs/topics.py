@@ -21,11 +21,14 @@ GRAPH_TOPICS: Dict[str, str] = {
     "disturbance_estimate": "geometry_msgs/msg/WrenchStamped",
     "lumped_disturbance": "geometry_msgs/msg/WrenchStamped",
     "external_wrench": "geometry_msgs/msg/Wrench",
+    "emergency_stop": "std_msgs/msg/Bool",               # plant_sim: true latches the driver's fault (SPEC 12)
+    "driver_state": "std_msgs/msg/String",               # plant_sim: each driver transition, JSON, latched
     "controller_internals": "sensor_msgs/msg/JointState",
     "/clock": "rosgraph_msgs/msg/Clock",
     "robot_markers": "visualization_msgs/msg/MarkerArray",  # robot_markers: the robot to look at
 }
-USER_TOPICS = {"external_wrench"}   # published by users (any QoS), not by the graph's nodes with GRAPH_QOS
+# published by users (any QoS), not by the graph's nodes with GRAPH_QOS
+USER_TOPICS = {"external_wrench", "emergency_stop"}
 SYSTEM_TOPICS: Dict[str, str] = {    # ROS's own topics, which every node publishes (absolute names)
     "/rosout": "rcl_interfaces/msg/Log",
     "/parameter_events": "rcl_interfaces/msg/ParameterEvent",

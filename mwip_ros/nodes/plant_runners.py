@@ -11,6 +11,13 @@ does and what ends a period:
   of the state published at the last tick with the newest command (zero torque once it is older
   than ``stale_command_periods``) and publishes the next state.
 
+Both feed the driver's state machine (SPEC 12, the node's ``safety``) what only the mode knows: the
+lockstep timeout is the lockstep watchdog (a ``watchdog`` fault recorded, then exit 1 as before); the
+realtime runner checks the command watchdog (``watchdog_s``) at every tick (a late tick defers the verdict
+by one tick: the controller first gets the state the plant was late with).  A bad command (non-finite or
+implausible, a ``bad_command`` fault) answers the lockstep state it came for with zero torque (the driver
+is in fault), so the run goes on; in realtime it is dropped, as before.
+
 :data:`RUNNERS` maps the ``mode`` parameter to its runner.
 """
 from __future__ import annotations
@@ -44,6 +51,9 @@ class _Runner:
 
     def graph_timed_out(self) -> None:
         raise NotImplementedError
+
+    def on_bad_command(self) -> None:
+        """A command the driver refused (non-finite, implausible: already a fault)."""
 
     def watch(self, crowded: Dict[str, list]) -> None:
         """Between callbacks, once started (``crowded``: topics with more than one publisher)."""
@@ -81,11 +91,17 @@ class LockstepRunner(_Runner):
         elif not n._finish_period(u):
             self._send()
 
+    def on_bad_command(self) -> None:
+        if self.node.lockstep.awaiting is not None:   # it answers the state: zero torque acts (in fault)
+            self.on_command(0.0)
+
     def graph_timed_out(self) -> None:   # lockstep cannot run without the graph
         self.node.finish(EXIT_ERROR, "lockstep timeout: " + self.node.lockstep.graph_timeout_text())
 
     def watch(self, crowded: Dict[str, list]) -> None:
         failure = self.node.lockstep.check()
+        if failure:   # the lockstep timeout is the watchdog: recorded as the driver's fault, then the run ends
+            self.node._fault("watchdog", failure)
         if crowded:
             failure = ("lockstep refuses mixed streams: " + "; ".join(
                 f"{len(names)} publishers on {topic} ({', '.join(names)})" for topic, names in crowded.items())
@@ -129,8 +145,9 @@ class RealtimeRunner(_Runner):
     def _tick(self) -> None:
         n = self.node
         now = time.monotonic()
+        late = bool(self.tick_times) and now - self.tick_times[-1] > 1.5 * n.h
         if self.tick_times:
-            if now - self.tick_times[-1] > 1.5 * n.h:
+            if late:
                 self.missed += 1
         else:
             n.t_wall0 = now
@@ -140,6 +157,7 @@ class RealtimeRunner(_Runner):
         if n._reset_pending:   # a period boundary: the new run's state 0 instead of the next state
             n._reset()
         elif len(self.tick_times) > 1:  # finish the period of the state published at the last tick
+            n.check_watchdog(now, late, self.tick_times)
             u = self.cmd
             if u is None or now - self.cmd_at > n.v["stale_command_periods"] * n.h:
                 self.stale += 1

@@ -24,6 +24,29 @@ never repeats it (a repeat would be taken for a resend).  The service keeps ever
 the robot, publish ``external_wrench`` (``geometry_msgs/Wrench``: ``torque.x`` adds to
 tau_ext1, ``torque.y`` to tau_ext2, until the next one; a zero wrench clears it).
 
+The driver's state machine (SPEC 12, :mod:`mwip_ros.core.safety`, one machine for the node's life: a
+``~/reset`` does not re-create it): ``disabled`` (the start state with ``require_enable: true``), ``enabled``
+(the start state by default: the paper's run starts at once) and ``fault`` (latched with its reason until
+``~/reset``); disabled or in fault the torque that acts, what the plant reports as ``effort`` and records in
+its ``u`` column, is zero.  Faults: ``watchdog`` (realtime: no good ``wheel_torque_cmd`` for ``watchdog_s``,
+checked at every tick once the first command came; lockstep: the lockstep timeout, which still ends the run
+with exit 1), ``bad_command`` (a Float64 that is non-finite or beyond 1e6 N m: still rejected and counted,
+and in lockstep it answers the state, with zero torque; bytes that are no Float64 are rejected only),
+``fall`` (|theta_b| > ``fall_angle``: with ``exit_on_fall: true`` the run ends, exit 3; with false the robot
+lies where it fell, at rest, its time going on, zero torque, until ``~/reset``), ``emergency_stop``
+(std_msgs/Bool true on ``emergency_stop``, any QoS; false does nothing: only ``~/reset`` clears it) and, with
+raw sensors, ``estimator_unhealthy`` (the state estimator's own ``/diagnostics`` status at level ERROR, its
+divergence; WARN is not a fault, and an estimator that stops is caught by the watchdog since the commands
+stop).  A fault while in fault keeps the first reason (the cause).  Services ``~/enable`` and ``~/disable``
+(std_srvs/Trigger) answer every call in every state with core.safety's answer; ``~/reset`` also clears a
+fault (at once: no period runs between the call and the reset, which comes at the next boundary).  Each
+transition is logged (one line with its reason), counted on ``/diagnostics`` (``driver_state``,
+``fault_reason``; ERROR in fault, WARN disabled) and published on ``driver_state`` (std_msgs/String, JSON
+``{"state", "from", "reason", "detail", "t", "stamp_ns", "text"}`` plus ``silence_s`` for a watchdog
+fault (and ``max_tick_gap_s``, the plant's own longest tick interval meanwhile); transient local,
+:data:`~mwip_ros.msgs.qos.DRIVER_STATE_QOS`; the start state is the first
+message, reason ``start``); the summary JSON lists them (``transitions``).
+
 With ``sensors.model: raw`` (SPEC 10) the plant publishes what its sensors measure instead of a state:
 per state k ``imu/data_raw`` (sensor_msgs/Imu, frame ``imu_link``, no orientation, the pitch rate and the
 specific force) and ``wheel_encoder`` (sensor_msgs/JointState ``[wheel]``: the wheel's angle relative to
@@ -36,7 +59,8 @@ the true disturbance; it does not listen to the observer: estimates join the
 trajectory by stamp where a report needs them (the bag, or the observer's own ``csv``).
 
 Exit code 0 when the run completed (or, with ``duration_s: 0``, was stopped), 3 when
-the robot fell, 1 on a lockstep timeout, 2 on bad parameters, 128 + the signal (130,
+the robot fell (with ``exit_on_fall: false``: when the run reached ``duration_s`` with the robot down), 1 on
+a lockstep timeout, 2 on bad parameters, 128 + the signal (130,
 143) when SIGINT/SIGTERM stopped it before ``duration_s``.
 """
 from __future__ import annotations
@@ -45,6 +69,7 @@ import json
 import math
 import sys
 import time
+from collections import deque
 from typing import Optional
 
 import numpy as np
@@ -53,15 +78,16 @@ from rclpy.duration import Duration
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import Imu, JointState
-from std_msgs.msg import Float64
+from std_msgs.msg import Bool, Float64, String
 from std_srvs.srv import Trigger
 
 from mwip_ros.core import metrics
 from mwip_ros.core.loop import PlantSide, answering
+from mwip_ros.core.safety import FAULT, HISTORY, DriverStateMachine, Transition, Watchdog
 from mwip_ros.core.trajectory import TrajectoryTable
-from mwip_ros.msgs import BadMessage
+from mwip_ros.msgs import BadMessage, cdr
 from mwip_ros.msgs import layouts as L
-from mwip_ros.msgs.qos import INPUT_QOS, SERVICE_QOS, qos_for
+from mwip_ros.msgs.qos import BEST_EFFORT_INPUT_QOS, DRIVER_STATE_QOS, INPUT_QOS, SERVICE_QOS, qos_for
 from mwip_ros.nodes.diagnostics import ERROR, OK, WARN
 from mwip_ros.nodes.guards import PublisherWatch, Rejects
 from mwip_ros.nodes.lockstep import LockstepDriver, subscriber_floor
@@ -73,6 +99,7 @@ from mwip_ros.runs import write_csv
 
 NAME = "plant_sim"
 SETTLE_S = 0.3  # the discovered graph must be unchanged this long before the first state
+ESTIMATOR = "state_estimator"   # the node whose /diagnostics status a raw plant watches (its namespace's)
 
 
 class PlantSimNode(Node, GracefulNodeMixin):
@@ -84,6 +111,12 @@ class PlantSimNode(Node, GracefulNodeMixin):
         self.v = declare(self, NAME, argv)
         self.cfg = plant_config(self.v)
         sc = self.cfg.sensing
+        # the driver's state machine (SPEC 12): one for the node's life, handed to every PlantSide (_initial_state)
+        self.safety = DriverStateMachine(require_enable=self.cfg.require_enable, max_command=L.LIMITS["torque"])
+        self.watchdog = Watchdog(self.v["watchdog_s"])   # realtime: fed by every good command, checked per tick
+        self._watchdog_deferred = False
+        self.transitions: deque = deque(maxlen=HISTORY)   # what driver_state published (the summary's list)
+        self.fell_at: Optional[float] = None
         self._initial_state()
         self.mode = self.v["mode"]
         self.h = self.cfg.h
@@ -121,6 +154,19 @@ class PlantSimNode(Node, GracefulNodeMixin):
         cmd_sub = self.create_subscription(Float64, "wheel_torque_cmd", self._on_cmd, in_qos, raw=True)
         self.create_subscription(Wrench, "external_wrench", self._on_wrench, INPUT_QOS, raw=True)
         self.create_service(Trigger, "~/reset", self._on_reset, qos_profile=SERVICE_QOS)
+        self.create_service(Trigger, "~/enable", self._on_enable, qos_profile=SERVICE_QOS)
+        self.create_service(Trigger, "~/disable", self._on_disable, qos_profile=SERVICE_QOS)
+        self.driver_pub = self.create_publisher(String, "driver_state", DRIVER_STATE_QOS)
+        # users publish it with any QoS: reliable (nothing lost) and best effort (matches a best-effort publisher)
+        for qos in (INPUT_QOS, BEST_EFFORT_INPUT_QOS):
+            self.create_subscription(Bool, "emergency_stop", self._on_estop, qos, raw=True)
+        self.estimator_status = None
+        if self.raw:   # the estimator reports its health on /diagnostics (ERROR: diverged)
+            from diagnostic_msgs.msg import DiagnosticArray
+            from rclpy.qos import QoSProfile
+            self.estimator_status = f"{self.get_namespace().rstrip('/')}/{ESTIMATOR}"
+            self.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, QoSProfile(depth=10),
+                                     raw=True)
         # one graph, one controller: a second publisher of commands or states means mixed streams
         self.watch = PublisherWatch(self, ["wheel_torque_cmd", "joint_states",
                                            *(("imu/data_raw", "wheel_encoder") if self.raw else ())])
@@ -153,6 +199,8 @@ class PlantSimNode(Node, GracefulNodeMixin):
                 f"sensing: noise std {list(sc.noise_std)} (theta_w, theta_b, theta_w', theta_b'), encoder "
                 f"{sc.encoder_counts_per_rev or 'ideal'} counts/rev, measurement delay {sc.delay_periods}, actuator "
                 f"delay {sc.actuator_delay_periods} period(s); the true state is on true_joint_states")
+        self._publish_transition(Transition(0.0, "", self.safety.state, "start",
+                                            f"require_enable: {str(self.cfg.require_enable).lower()}"), start=True)
 
     @property
     def plant(self):
@@ -169,14 +217,63 @@ class PlantSimNode(Node, GracefulNodeMixin):
         self.get_logger().info(f"external wrench: tau_ext1 += {e[0]:g}, tau_ext2 += {e[1]:g} N m"
                                if any(e) else "external wrench cleared")
 
+    def _on_estop(self, data: bytes) -> None:
+        try:
+            stop = _parse_bool(data)
+        except BadMessage as exc:
+            self.rejects("emergency_stop", str(exc))
+            return
+        if stop and not (self.safety.faulted and self.safety.fault_reason == "emergency_stop"):  # (heard twice)
+            self._fault("emergency_stop", "a std_msgs/Bool true")
+
+    def _on_diagnostics(self, data: bytes) -> None:
+        """A raw plant's watch on its state estimator's health: its status at level ERROR is a fault."""
+        from diagnostic_msgs.msg import DiagnosticArray
+        from rclpy.serialization import deserialize_message
+        try:
+            arr = deserialize_message(bytes(data), DiagnosticArray)
+        except Exception:   # another node's report that does not decode: not ours to judge
+            return
+        for st in arr.status:
+            if st.name != self.estimator_status:
+                continue
+            level = st.level[0] if isinstance(st.level, (bytes, bytearray)) else int(st.level)
+            if level == ERROR and not (self.safety.faulted and self.safety.fault_reason == "estimator_unhealthy"):
+                self._fault("estimator_unhealthy", f"{st.name}: {st.message}")
+
+    def _answer(self, response, answer):
+        """A std_srvs/Trigger response from core.safety's answer (and its transition published)."""
+        self._publish_transition(answer.transition)
+        response.success, response.message = answer.success, answer.message
+        return response
+
+    def _on_enable(self, request, response):
+        return self._answer(response, self.safety.enable(self.plant.t))
+
+    def _on_disable(self, request, response):
+        return self._answer(response, self.safety.disable(self.plant.t))
+
     def _on_reset(self, request, response):
-        """``~/reset``: the initial state at the run's start time, at the next period boundary (module doc)."""
+        """``~/reset``: the initial state at the run's start time, at the next period boundary (module doc); the
+        driver's fault, if any, is cleared at once and the driver goes back to its start state."""
         self.reset_calls += 1
         response.success = True
         if self.done:
             response.success = False
             response.message = "the run has ended; nothing to reset"
-        elif self.plant.k == 0:   # state 0 is in flight (or not sent yet): a new state 0 would repeat its stamp
+            return response
+        faulted = self.safety.faulted
+        driver = self.safety.reset(self.plant.t)
+        self._publish_transition(driver.transition)
+        if faulted:
+            self.watchdog.reset()   # disarmed until the next command
+        self._plant_reset_answer(response)
+        response.message += f"; driver: {driver.message}"
+        return response
+
+    def _plant_reset_answer(self, response) -> None:
+        """The plant's part of a ``~/reset`` answer (module doc), the reset made pending if there is one to make."""
+        if self.plant.k == 0:   # state 0 is in flight (or not sent yet): a new state 0 would repeat its stamp
             response.message = ("already at the initial state (t = 0: no period has run since the "
                                 + ("last reset" if self.resets else "start") + "); nothing to reset")
         elif self._reset_pending:
@@ -185,11 +282,11 @@ class PlantSimNode(Node, GracefulNodeMixin):
             self._reset_pending = True
             response.message = (f"reset #{self.resets + 1} at t = {self.plant.t:.3f} s: back to the initial state "
                                 f"{self.runner.reset_when}; stamps restart at the run's start")
-        return response
 
     def _initial_state(self) -> None:
         """The robot at its initial state, with fresh noise streams (sensors, D_w) and an empty actuator delay."""
         self.side = PlantSide(self.cfg)
+        self.side.safety = self.safety   # the one machine: a reset restores the plant, ~/reset the driver
 
     def _reset(self) -> str:
         dropped, t = len(self.table), self.plant.t
@@ -197,6 +294,8 @@ class PlantSimNode(Node, GracefulNodeMixin):
         self.table = TrajectoryTable()
         self.resets += 1
         self._reset_pending = False
+        self.fallen, self.fell_at = False, None
+        self.watchdog.reset()
         text = (f"reset #{self.resets} at t = {t:.3f} s: back to the initial state at t = 0; stamps restart at "
                 f"the run's start (the csv keeps the run from here; {dropped} periods before it are only in a "
                 f"recording, as a segment of their own)")
@@ -208,8 +307,53 @@ class PlantSimNode(Node, GracefulNodeMixin):
             u = L.parse_command(data)
         except BadMessage as exc:
             self.rejects("wheel_torque_cmd", str(exc))
+            try:
+                value = cdr.decode_float64(data)
+            except cdr.CdrError:   # not a Float64 at all: not a command, only rejected
+                return
+            self._publish_transition(self.safety.check_command(self.plant.t, value))   # non-finite or implausible
+            self.runner.on_bad_command()
             return
+        self.watchdog.feed(time.monotonic())
         self.runner.on_command(u)
+
+    # --- the driver's state machine (SPEC 12) ----------------------------------------------------
+    def _fault(self, reason: str, detail: str, **extra) -> None:
+        self._publish_transition(self.safety.fault(self.plant.t, reason, detail), **extra)
+
+    def check_watchdog(self, now: float, late: bool = False, ticks=()) -> None:
+        """Realtime, at every tick: no good command for ``watchdog_s`` (once one came) is a fault.  A tick that
+        came late (``late``: a missed deadline, the plant itself stalled) defers the verdict to the next tick,
+        once: the controller cannot answer states the plant did not publish, so it first gets the one this
+        tick publishes (a dead controller is then caught one period later)."""
+        wd = self.watchdog
+        if self.safety.faulted or not wd.expired(now):
+            self._watchdog_deferred = False
+        elif late and not self._watchdog_deferred:
+            self._watchdog_deferred = True
+        else:
+            silence = wd.silence(now)
+            since = [t for t in ticks[-(int(silence / self.h) + 3):] if t >= wd.last] + [now]   # the plant's ticks
+            gap = max((b - a for a, b in zip(since, since[1:])), default=0.0)   # meanwhile: its longest stall
+            self._fault("watchdog", f"no wheel_torque_cmd for {silence * 1e3:.1f} ms > watchdog_s = "
+                                    f"{wd.timeout * 1e3:g} ms", silence_s=round(silence, 6),
+                        max_tick_gap_s=round(gap, 6))
+
+    def _publish_transition(self, tr: Optional[Transition], start: bool = False, **extra) -> None:
+        """Log a transition (one line), publish it on ``driver_state`` and keep it for the summary."""
+        if tr is None:
+            return
+        record = {"state": tr.to_state, "from": tr.from_state or None, "reason": tr.reason, "detail": tr.detail,
+                  "t": round(tr.t, 9), "stamp_ns": self._stamp(), "text": tr.text(), **extra}
+        if start:
+            self.get_logger().info(f"driver: {tr.to_state} at the start ({tr.detail})")
+        else:
+            self.transitions.append(record)
+            if tr.to_state == FAULT:   # (one call site per severity: rclpy's logger wants that)
+                self.get_logger().error(f"driver: {tr.text()}")
+            else:
+                self.get_logger().warning(f"driver: {tr.text()}")
+        self.driver_pub.publish(String(data=json.dumps(record, allow_nan=False)))
 
     # --- the plant's stages, the same for both runners ------------------------------------------
     def _stamp(self, k: Optional[int] = None) -> int:
@@ -240,14 +384,25 @@ class PlantSimNode(Node, GracefulNodeMixin):
         u, tau_d = self.side.act(u_cmd, self.extra)
         self.truth_pub.publish(L.encode_wrench(self._stamp(), tau_d[0], tau_d[1]))
         self.table.append(p.t, p.x, u, tau_d=tau_d)
-        if p.fallen:
-            self.fallen = True
-            self.finish(EXIT_FALLEN, f"FALLEN at t = {p.t:.3f} s: |theta_b| = {abs(p.x[1]):.4f} > fall_angle "
-                                     f"{self.cfg.fall_angle}")
-            return True
+        if p.fallen and not self.fallen:
+            self.fallen, self.fell_at = True, p.t
+            self._publish_transition(self.safety.check_fall(p.t, p.x[1], self.cfg.fall_angle))
+            text = f"FALLEN at t = {p.t:.3f} s: |theta_b| = {abs(p.x[1]):.4f} > fall_angle {self.cfg.fall_angle}"
+            if self.v["exit_on_fall"]:
+                self.finish(EXIT_FALLEN, text)
+                return True
+            self.get_logger().error(f"{text}; the robot lies where it fell, the driver holds zero torque in fault "
+                                    f"until ~/reset (exit_on_fall: false)")
         if self.n_steps is not None and p.k >= self.n_steps:
-            self.finish()
+            if self.fallen:
+                self.finish(EXIT_FALLEN, f"the run ended with the robot down (FALLEN at t = {self.fell_at:.3f} s, "
+                                         f"no ~/reset since)")
+            else:
+                self.finish()
             return True
+        if self.fallen:
+            self._lie()
+            return False
         try:
             self.side.advance(u, self.extra)
             finite = all(map(math.isfinite, p.x))
@@ -257,6 +412,15 @@ class PlantSimNode(Node, GracefulNodeMixin):
             self.finish(EXIT_ERROR, f"state became non-finite at t = {p.t:.3f} s; stopping")
             return True
         return False
+
+    def _lie(self) -> None:
+        """A fallen robot (``exit_on_fall: false``) lies where it fell, at rest: the model has no ground (its body
+        would swing through the floor), so the period passes without integrating, no torque acting."""
+        p = self.plant
+        p.x = type(p.x)(p.x[0], p.x[1], 0.0, 0.0)
+        p.k += 1
+        p.u_prev = p.u_cmd_prev = 0.0
+        p.saturation = 0
 
     def _start(self, why: str) -> None:
         self.started = True
@@ -297,13 +461,21 @@ class PlantSimNode(Node, GracefulNodeMixin):
         p = self.plant
         values = {"mode": self.mode, "t_sim_s": f"{p.t:.3f}", "theta_b_rad": f"{p.x[1]:+.5f}"}
         values.update(self.runner.diagnostic_values())
+        sm = self.safety
+        values.update({"driver_state": sm.state, "fault_reason": sm.fault_reason or "none"})
+        level, driver = sm.diagnostic()
         if self.fallen:
-            return ERROR, f"FALLEN at t = {p.t:.3f} s", values
+            down = "" if self.done else "; lying in fault until ~/reset"
+            return ERROR, f"FALLEN at t = {self.fell_at:.3f} s{down}", values
+        if level == ERROR:
+            return ERROR, f"driver {driver}", values
         if not self.started:
             return WARN, f"waiting for the graph (missing: {self.lockstep.missing()})", values
         problem = self.runner.diagnostic_problem()
         if problem:
             return ERROR, problem, values
+        if level == WARN:
+            return WARN, f"driver disabled (zero torque until ~/enable); {self.mode} run at t = {p.t:.2f} s", values
         return OK, f"{self.mode} run at t = {p.t:.2f} s", values
 
     # --- end of run: the one report of both runners -------------------------------------------------
@@ -314,13 +486,16 @@ class PlantSimNode(Node, GracefulNodeMixin):
             log.warning(f"interrupted at t = {self.plant.t:.3f} s of {self.n_steps * self.h:g} s")
         wall = (time.monotonic() - self.t_wall0) if self.t_wall0 else 0.0
         n = len(self.table)
-        for pub in (self.state_pub, self.imu_pub, self.encoder_pub, self.truth_pub, self.clock_pub, self.true_pub):
+        for pub in (self.state_pub, self.imu_pub, self.encoder_pub, self.truth_pub, self.clock_pub, self.true_pub,
+                    self.driver_pub):
             if pub is not None:  # let a recorder receive the last states before this process exits
                 pub.wait_for_all_acked(Duration(seconds=2.0))
         summary = {"mode": self.mode, "control_rate_hz": 1.0 / self.h, "periods": n, "wall_s": wall,
                    "steps_per_s": n / wall if wall > 0 else None, "fallen": self.fallen,
                    "exit_code": self.exit_code, "rejected": dict(self.rejects.counts),
-                   "resets": self.resets, "reset_calls": self.reset_calls}
+                   "resets": self.resets, "reset_calls": self.reset_calls,
+                   "driver_state": self.safety.state, "fault_reason": self.safety.fault_reason,
+                   "transitions": list(self.transitions)}
         if n:
             log.info(f"{self.mode} run: {n} periods, {self.table.last('t'):.3f} s simulated in {wall:.2f} s wall "
                      f"({n / max(wall, 1e-9):.0f} steps/s); {'FALLEN' if self.fallen else 'upright'}")
@@ -344,6 +519,17 @@ class PlantSimNode(Node, GracefulNodeMixin):
             with open(self.v["summary_json"], "w") as f:
                 json.dump(_jsonable(summary), f, indent=1, allow_nan=False)
             log.info(f"wrote {self.v['summary_json']}")
+
+
+def _parse_bool(data) -> bool:
+    """std_msgs/Bool's value from its CDR bytes (encapsulation CDR_LE or CDR_BE, then one byte 0 or 1), or
+    BadMessage."""
+    b = bytes(data[:5])
+    if len(b) < 5 or b[0] != 0 or b[1] not in (0, 1):
+        raise BadMessage(f"not a std_msgs/Bool: {len(data)} bytes, encapsulation {b[:2].hex() or 'missing'}")
+    if b[4] > 1:
+        raise BadMessage(f"not a std_msgs/Bool: data byte {b[4]} is neither 0 nor 1")
+    return b[4] == 1
 
 
 def _jsonable(x):

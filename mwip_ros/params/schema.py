@@ -329,11 +329,13 @@ NODE_SPECS: Dict[str, List[ParamSpec]] = {
         ParamSpec("require_enable", "bool", False, "the driver starts disabled (zero torque) until ~/enable "
                   "(SPEC 12); false: enabled at once, as the paper's run"),
         ParamSpec("watchdog_s", "double", 0.1, "realtime: no new wheel_torque_cmd for this long is a fault (zero "
-                  "torque, latched until ~/reset); lockstep: lockstep_timeout_s is the watchdog",
+                  "torque, latched until ~/reset; checked every period once the first command came); lockstep: "
+                  "lockstep_timeout_s is the watchdog",
                   **_positive_from(1e-3, 1e4, "a watchdog faster than a millisecond would fire between commands"),
                   unit="s"),
         ParamSpec("exit_on_fall", "bool", True, "end the process (exit code 3) when the robot falls; false: the "
-                  "driver holds zero torque in fault until ~/reset (realtime)"),
+                  "process stays up, the robot lying where it fell and the driver holding zero torque in fault "
+                  "until ~/reset (exit code 3 only if duration_s ends the run with it down)"),
         ParamSpec("expected_subscribers", "integer", 2, "lockstep: matched subscriptions the plant's first "
                   "published topic needs before the first state (joint_states, or imu/data_raw with sensors.model "
                   "raw), counted as without an estimator: 2 = observer + controller, +1 per recorder; with raw "

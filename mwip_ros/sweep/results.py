@@ -95,7 +95,12 @@ def laws(cols: Dict[str, list]) -> List[str]:
     finished in)."""
     from mwip_ros.core import laws as registry
     known = registry.names()
-    return sorted(set(cols["controller"]), key=lambda c: known.index(c) if c in known else len(known) + len(c))
+    labels = list(dict.fromkeys(cols["controller"]))   # a law, or a law and its choices ('dscndo (raw, kalman)')
+
+    def order(c):
+        law = c.split(" (")[0]
+        return (known.index(law) if law in known else len(known) + len(law), labels.index(c))
+    return sorted(labels, key=order)
 
 
 def sort_file(path: Path, order: List[str]) -> None:

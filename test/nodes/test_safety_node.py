@@ -1,0 +1,374 @@
+"""The driver's state machine in ``plant_sim`` (SPEC 12): states, faults, services, driver_state, the watchdog.
+
+* in-process (a PlantSimNode in this process, its callbacks called directly): every service call in every
+  state is answered with core.safety's answer (f); a NaN or implausible command is a ``bad_command`` fault
+  that answers the lockstep state with zero torque, bytes that are no Float64 are rejected only (d);
+* graphs: ``require_enable`` holds zero torque, the robot at rest, until ``~/enable``, then the loop balances
+  (a); ``emergency_stop`` (best-effort and reliable publishers) latches a fault, ``~/enable`` is refused
+  naming it, ``~/reset`` clears it (b); the realtime watchdog's reaction to a SIGSTOPped controller, measured
+  over several runs (c); ``exit_on_fall: false`` in realtime keeps the plant up, the robot lying at zero
+  torque, and ``~/reset`` restores the run (e).
+"""
+import json
+import math
+import os
+import signal
+import time
+
+import numpy as np
+import pytest
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Bool, Float64, String
+
+from graphproc import PARAMS, Graph, fresh_domain_id, release_domain_id
+from injector import Injector
+from mwip_ros.msgs import layouts as L
+from mwip_ros.msgs.qos import DRIVER_STATE_QOS, SERVICE_QOS
+
+pytestmark = pytest.mark.graph
+
+H = 0.005                   # the paper's control period [s]
+WATCHDOG_S = 0.1            # plant_sim's default watchdog_s
+# The watchdog is checked at every realtime tick: a fault comes at most one period after watchdog_s has
+# passed, plus how late the tick runs.  On this 2-core machine, shared by the plant, the observer, the
+# controller and the test, a realtime tick is a few ms late at its worst in a minute without SCHED_FIFO
+# (BENCHMARKS.md: a few periods of 8 ms per minute); 20 ms covers that twice over.
+SCHEDULING_MARGIN_S = 0.020
+BALANCED = 0.05             # |theta_b| [rad] a balancing loop stays within here
+
+
+# --- helpers --------------------------------------------------------------------------------------------
+def _driver_states(inj):
+    """[(arrival monotonic s, record)] of driver_state (transient local: the start record too)."""
+    got = []
+    inj.node.create_subscription(String, "/driver_state",
+                                 lambda m: got.append((time.monotonic(), json.loads(m.data))), DRIVER_STATE_QOS)
+    return got
+
+
+def _arrivals(inj, topic, msg_type):
+    """[(arrival monotonic s, raw bytes)] of ``topic``."""
+    from mwip_ros.msgs.qos import GRAPH_QOS
+    got = []
+    inj.node.create_subscription(msg_type, topic, lambda d: got.append((time.monotonic(), bytes(d))), GRAPH_QOS,
+                                 raw=True)
+    return got
+
+
+def _clients(inj):
+    from std_srvs.srv import Trigger
+    out = {}
+    for name in ("enable", "disable", "reset"):
+        out[name] = inj.node.create_client(Trigger, f"/plant_sim/{name}", qos_profile=SERVICE_QOS)
+        assert out[name].wait_for_service(timeout_sec=30), name
+    return out
+
+
+def _call(inj, client, timeout=30.0):
+    from std_srvs.srv import Trigger
+    future = client.call_async(Trigger.Request())
+    assert inj.wait(future.done, timeout), "no answer"
+    return future.result()
+
+
+def _wait_record(inj, ds, plant, timeout=30.0, after=0, **match):
+    """The first driver_state record after index ``after`` whose fields equal ``match``; its index too."""
+    def find():
+        return next(((i, r) for i, (_, r) in enumerate(ds) if i >= after
+                     and all(r.get(k) == v for k, v in match.items())), None)
+    assert inj.wait(lambda: find() is not None or plant.poll() is not None, timeout), \
+        (match, ds, plant.output()[-3000:])
+    found = find()
+    assert found is not None, (match, [r for _, r in ds], plant.output()[-3000:])
+    return found
+
+
+def _states(data):
+    return [L.parse_joint_state(d) for d in data]   # (stamp, x, u_prev)
+
+
+# --- in-process -----------------------------------------------------------------------------------------
+@pytest.fixture
+def make_plant():
+    import rclpy
+
+    from mwip_ros.nodes.plant_sim import PlantSimNode
+    made = []
+
+    def make(*rules):
+        domain = fresh_domain_id()
+        ctx = rclpy.Context()
+        argv = ["plant_sim", "--ros-args", "--params-file", str(PARAMS), "-p", "plant_sim:duration_s:=0.0",
+                *(x for r in rules for x in ("-p", f"plant_sim:{r}"))]
+        rclpy.init(args=argv, context=ctx, domain_id=domain)
+        node = PlantSimNode(context=ctx, argv=argv)
+        made.append((node, ctx, domain))
+        return node
+    try:
+        yield make
+    finally:
+        for node, ctx, domain in made:
+            node.destroy_node()
+            rclpy.shutdown(context=ctx)
+            release_domain_id(domain)
+
+
+def _trigger(handler):
+    from std_srvs.srv import Trigger
+    r = handler(Trigger.Request(), Trigger.Response())
+    return r.success, r.message
+
+
+def _estop():
+    from rclpy.serialization import serialize_message
+    return serialize_message(Bool(data=True))
+
+
+def test_every_service_call_in_every_state_gets_an_answer(make_plant):
+    node = make_plant("require_enable:=true")
+    sm = node.safety
+    assert sm.state == "disabled" and node.side.safety is sm
+    assert node.diagnostic_status()[2]["driver_state"] == "disabled"
+    enable, disable, reset = node._on_enable, node._on_disable, node._on_reset
+    assert _trigger(disable) == (True, "already disabled")
+    assert _trigger(enable) == (True, "enabled") and sm.state == "enabled"
+    assert _trigger(enable) == (True, "already enabled")                       # enable twice
+    assert _trigger(disable) == (True, "disabled") and sm.state == "disabled"
+    assert _trigger(enable) == (True, "enabled")
+    ok, text = _trigger(reset)                                                 # reset while enabled: start state
+    assert ok and text.startswith("already at the initial state") and text.endswith("driver: disabled (the start "
+                                                                                     "state)"), text
+    assert sm.state == "disabled"
+    assert _trigger(enable)[0] and sm.state == "enabled"
+    node._on_estop(_estop())
+    assert sm.state == "fault" and sm.fault_reason == "emergency_stop"
+    level, message, values = node.diagnostic_status()
+    assert level == 2 and "emergency_stop" in message and values["fault_reason"] == "emergency_stop", message
+    ok, text = _trigger(enable)                                                # refused, naming the fault
+    assert not ok and "emergency_stop" in text and "~/reset" in text, text
+    ok, text = _trigger(disable)                                               # disable while faulted
+    assert ok and "stays latched" in text and sm.state == "fault", text
+    node._on_estop(_estop())                                                   # heard twice: the same fault
+    node._on_cmd(L.encode_command(math.nan))                                   # a later fault: counted, not made
+    assert sm.fault_reason == "emergency_stop" and sm.suppressed == 1
+    ok, text = _trigger(reset)
+    assert ok and "fault cleared (emergency_stop" in text and sm.state == "disabled", text
+    ok, text = _trigger(reset)                                                 # reset while disabled
+    assert ok and text.endswith("driver: disabled (the start state)"), text
+    assert [(r["from"], r["state"], r["reason"]) for r in node.transitions] == [
+        ("disabled", "enabled", "enable"), ("enabled", "disabled", "disable"), ("disabled", "enabled", "enable"),
+        ("enabled", "disabled", "reset"), ("disabled", "enabled", "enable"), ("enabled", "fault", "emergency_stop"),
+        ("fault", "disabled", "reset")]
+    assert all(r["text"].startswith("t = 0.000 s: ") for r in node.transitions)
+
+
+def test_a_bad_command_is_a_fault_that_answers_the_lockstep_state_with_zero_torque(make_plant):
+    node = make_plant()
+    sm = node.safety
+    node._start("test")
+    assert node.lockstep.awaiting == (0, 0)
+    node._on_cmd(b"\x00\x01\x00\x00\x01")                  # no Float64: rejected only, the state still waits
+    assert sm.state == "enabled" and node.lockstep.awaiting == (0, 0) and node.rejects.counts["wheel_torque_cmd"] == 1
+    for _ in range(5):
+        node._on_cmd(L.encode_command(10.0))               # good commands: the torque acts
+    assert node.table.last("u") == 10.0
+    node._on_cmd(L.encode_command(math.nan))               # NaN: fault, and it answers state 5 with zero torque
+    assert sm.state == "fault" and sm.fault_reason == "bad_command" and "not finite" in sm.fault_detail
+    assert node.plant.k == 6 and node.table.last("u") == 0.0 and node.lockstep.awaiting[0] == 6
+    node._on_cmd(L.encode_command(10.0))                   # in fault: zero torque whatever the command
+    assert node.table.last("u") == 0.0 and node.plant.u_prev == 0.0
+    assert _trigger(node._on_reset)[0] and sm.state == "enabled"
+    node._on_cmd(L.encode_command(10.0))                   # answers the state in flight: the reset happens
+    assert node.plant.k == 0 and node.resets == 1
+    node._on_cmd(L.encode_command(1e7))                    # implausible (> 1e6 N m)
+    assert sm.state == "fault" and sm.fault_reason == "bad_command" and "implausible" in sm.fault_detail
+    assert node.table.last("u") == 0.0 and node.rejects.counts["wheel_torque_cmd"] == 3
+    assert [r["reason"] for r in node.transitions] == ["bad_command", "reset", "bad_command"]
+
+
+# --- graphs ---------------------------------------------------------------------------------------------
+AT_REST = ("initial.theta_b:=0.0", "tau_ext1.amplitude:=0.0", "tau_ext2.amplitude:=0.0", "actual.D_w_variance:=0.0")
+
+
+def _rules(*rules):
+    return [x for r in rules for x in ("-p", r)]
+
+
+def test_require_enable_holds_zero_torque_until_enable_then_the_loop_balances(tmp_path):
+    """Upright at rest with no disturbance, the controller adds a 5 N m chirp (excitation): while disabled its
+    commands are nonzero but the torque that acts is 0 (csv u, joint_states effort) and the robot stays exactly
+    at rest; enabled, the chirp and the law act and the loop keeps the body up."""
+    csv_path, summary = tmp_path / "plant.csv", tmp_path / "summary.json"
+    with Graph(tmp_path) as g:
+        g.start("disturbance_observer")
+        ctl = g.start("dscndo_controller", *_rules("excitation.type:=chirp", "excitation.amplitude:=5.0",
+                                                   "excitation.f0:=0.5", "excitation.f1:=1.0",
+                                                   "excitation.duration_s:=1000.0"))
+        plant = g.start("plant_sim", *_rules("require_enable:=true", "duration_s:=0.0", "expected_subscribers:=3",
+                                             f"csv:={csv_path}", f"summary_json:={summary}", *AT_REST))
+        with Injector(g.domain_id) as inj:
+            ds = _driver_states(inj)
+            cmds = _arrivals(inj, "wheel_torque_cmd", Float64)
+            states = _arrivals(inj, "joint_states", JointState)
+            clients = _clients(inj)
+            _wait_record(inj, ds, plant, state="disabled", reason="start")
+            assert inj.wait(lambda: len(states) > 200, 120), plant.output()[-2000:]
+            before = _states(d for _, d in states)
+            assert all(x == (0.0, 0.0, 0.0, 0.0) and u == 0.0 for _, x, u in before)   # at rest, no torque
+            assert max(abs(L.parse_command(d)) for _, d in cmds) > 0.1                  # though commanded
+            answer = _call(inj, clients["enable"])
+            assert answer.success and answer.message == "enabled", answer.message
+            _, enabled = _wait_record(inj, ds, plant, state="enabled", reason="enable")
+            n = len(states)
+            assert inj.wait(lambda: len(states) > n + 800, 120), plant.output()[-2000:]
+        assert plant.stop() == 0, plant.output()[-3000:]
+        assert ctl.stop() == 0
+    run = np.genfromtxt(csv_path, delimiter=",", names=True)
+    t_on = enabled["t"]
+    off, on = run[run["t"] < t_on - 1e-9], run[run["t"] >= t_on - 1e-9]
+    assert len(off) >= 200 and len(on) >= 800, (len(off), len(on))
+    assert np.all(off["u"] == 0.0) and np.all(off["theta_b"] == 0.0)
+    assert np.abs(on["u"]).max() > 1.0 and np.abs(on["theta_b"]).max() > 1e-4     # the torque acts, it moves
+    assert np.abs(on["theta_b"]).max() < BALANCED                                 # and the loop balances
+    s = json.loads(summary.read_text())
+    assert [(r["from"], r["state"], r["reason"]) for r in s["transitions"]] == [("disabled", "enabled", "enable")]
+    assert s["driver_state"] == "enabled" and s["fault_reason"] is None and not s["fallen"]
+
+
+def test_emergency_stop_latches_a_fault_enable_is_refused_and_reset_clears_it(tmp_path):
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    summary = tmp_path / "summary.json"
+    with Graph(tmp_path) as g:
+        g.start("disturbance_observer")
+        g.start("dscndo_controller")
+        plant = g.start("plant_sim", *_rules("duration_s:=0.0", "exit_on_fall:=false", "expected_subscribers:=3",
+                                             f"summary_json:={summary}"))
+        with Injector(g.domain_id) as inj:
+            ds = _driver_states(inj)
+            states = _arrivals(inj, "joint_states", JointState)
+            clients = _clients(inj)
+            best_effort = QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
+            stops = [inj.publisher("emergency_stop", Bool, best_effort),   # any QoS: best effort, then reliable
+                     inj.publisher("emergency_stop", Bool)]
+            assert inj.wait(lambda: all(p.get_subscription_count() >= 1 for p in stops), 30)
+            for round_, pub in enumerate(stops):
+                assert inj.wait(lambda: len(states) > 100, 120), plant.output()[-2000:]
+                mark = len(ds)
+                end = time.monotonic() + 30
+                while not any(r["state"] == "fault" for _, r in ds[mark:]) and time.monotonic() < end:
+                    pub.publish(Bool(data=True))   # best effort may drop one: again until it latched
+                    inj.spin(0.2)
+                i, fault = _wait_record(inj, ds, plant, after=mark, state="fault")
+                assert fault["reason"] == "emergency_stop" and fault["from"] == "enabled", fault
+                n = len(states)
+                assert inj.wait(lambda: len(states) > n + 100, 60)
+                after = [(stamp, u) for stamp, _, u in _states(d for _, d in states[n:])]
+                assert all(u == 0.0 for stamp, u in after if stamp > fault["stamp_ns"]), after[:5]   # zero torque
+                answer = _call(inj, clients["enable"])
+                assert not answer.success and "emergency_stop" in answer.message and "~/reset" in answer.message
+                answer = _call(inj, clients["disable"])
+                assert answer.success and "stays latched" in answer.message, answer.message
+                states.clear()
+                answer = _call(inj, clients["reset"])
+                assert answer.success and "fault cleared (emergency_stop" in answer.message, answer.message
+                _wait_record(inj, ds, plant, after=i, state="enabled", reason="reset")
+                # the run restarts at t = 0 and the torque acts again once the loop follows the restart
+                assert inj.wait(lambda: any(u != 0.0 for _, _, u in _states(d for _, d in states)), 60), \
+                    plant.output()[-2000:]
+                assert _call(inj, clients["enable"]).message == "already enabled"
+                states.clear()
+        assert plant.stop() == 0, plant.output()[-3000:]
+    s = json.loads(summary.read_text())
+    assert [r["reason"] for r in s["transitions"]] == ["emergency_stop", "reset"] * 2, s["transitions"]
+    out = plant.output()
+    assert out.count("driver: t = ") == 4 and "enabled -> fault (emergency_stop: a std_msgs/Bool true)" in out
+
+
+def test_the_realtime_watchdog_faults_within_watchdog_s_and_one_period_of_the_last_command(tmp_path):
+    """The controller SIGSTOPped: the plant's watchdog faults; the reaction, from the plant's receipt of the last
+    command to the tick that faulted (driver_state's silence_s), and as this test saw it (the last command's
+    arrival here to the fault's), over several runs, each followed by SIGCONT and ~/reset."""
+    runs = 5
+    summary = tmp_path / "summary.json"
+    measured = []
+    with Graph(tmp_path) as g:
+        g.start("disturbance_observer", "-p", "mode:=realtime")
+        ctl = g.start("dscndo_controller", "-p", "mode:=realtime")
+        plant = g.start("plant_sim", *_rules("mode:=realtime", "duration_s:=0.0", "exit_on_fall:=false",
+                                             "expected_subscribers:=3", f"summary_json:={summary}"))
+        with Injector(g.domain_id) as inj:
+            ds = _driver_states(inj)
+            cmds = _arrivals(inj, "wheel_torque_cmd", Float64)
+            inj.record("joint_states", JointState)
+            clients = _clients(inj)
+            mark = 0
+            for _ in range(runs):
+                n = len(cmds)
+                assert inj.wait(lambda: len(cmds) > n + 60, 60), plant.output()[-2000:]   # commands flowing
+                assert ds[-1][1]["state"] == "enabled", ds[-1]
+                mark = len(ds)
+                os.kill(ctl.pid, signal.SIGSTOP)
+                try:
+                    i, fault = _wait_record(inj, ds, plant, after=mark, timeout=10, state="fault")
+                finally:
+                    os.kill(ctl.pid, signal.SIGCONT)
+                arrived = ds[i][0]
+                last_cmd = max(t for t, _ in cmds if t < arrived)
+                measured.append((fault["silence_s"], arrived - last_cmd, fault["max_tick_gap_s"]))
+                assert fault["reason"] == "watchdog", fault
+                answer = _call(inj, clients["reset"])
+                assert answer.success and "fault cleared (watchdog" in answer.message, answer.message
+                _wait_record(inj, ds, plant, after=i, state="enabled", reason="reset")
+        assert plant.stop() == 0, plant.output()[-3000:]
+    print("watchdog reaction times [ms] (plant: last command received -> fault; test: last command seen -> "
+          "fault seen; the plant's longest tick interval meanwhile): "
+          + ", ".join(f"{a * 1e3:.1f} / {b * 1e3:.1f} ({g * 1e3:.1f})" for a, b, g in measured))
+    for plant_side, test_side, gap in measured:
+        assert plant_side > WATCHDOG_S, measured                                  # never early
+        # a plant that kept its deadlines faults within a period of watchdog_s; one that stalled itself meanwhile
+        # (a loaded machine) is late by its stall and, deferring a late tick's verdict, one more period
+        stall = 0.0 if gap <= 1.5 * H else gap + H
+        assert plant_side <= WATCHDOG_S + H + stall + SCHEDULING_MARGIN_S, measured
+        assert test_side <= WATCHDOG_S + H + stall + 2 * SCHEDULING_MARGIN_S, measured   # delivery on top
+    assert sum(gap <= 1.5 * H for *_, gap in measured) >= 1, measured   # at least one run measured unstalled
+    s = json.loads(summary.read_text())
+    assert [r["reason"] for r in s["transitions"]] == ["watchdog", "reset"] * runs, s["transitions"]
+
+
+def test_exit_on_fall_false_keeps_the_realtime_plant_up_at_zero_torque_until_reset(tmp_path):
+    """No controller: the robot falls from the paper's tilt; the plant stays up, in fault, the robot lying where
+    it fell with zero torque, and ~/reset brings back the initial state and a driver that faults again."""
+    csv_path, summary = tmp_path / "plant.csv", tmp_path / "summary.json"
+    with Graph(tmp_path) as g:
+        plant = g.start("plant_sim", *_rules("mode:=realtime", "duration_s:=0.0", "exit_on_fall:=false",
+                                             "lockstep_timeout_s:=1.0", f"csv:={csv_path}",
+                                             f"summary_json:={summary}"))
+        with Injector(g.domain_id) as inj:
+            ds = _driver_states(inj)
+            states = _arrivals(inj, "joint_states", JointState)
+            clients = _clients(inj)
+            i, fall = _wait_record(inj, ds, plant, timeout=60, state="fault")
+            assert fall["reason"] == "fall" and "fall_angle" in fall["detail"], fall
+            n = len(states)
+            assert inj.wait(lambda: len(states) > n + 60, 30) and plant.poll() is None, plant.output()[-2000:]
+            lying = [(x, u) for stamp, x, u in _states(d for _, d in states) if stamp > fall["stamp_ns"] + 1e7]
+            assert len(lying) > 40
+            assert all(u == 0.0 and x[2] == 0.0 and x[3] == 0.0 and x[1] == lying[0][0][1] for x, u in lying)
+            assert abs(lying[0][0][1]) > 1.0472
+            answer = _call(inj, clients["enable"])
+            assert not answer.success and "fall" in answer.message, answer.message
+            states.clear()
+            answer = _call(inj, clients["reset"])
+            assert answer.success and answer.message.startswith("reset #1") and "fault cleared (fall" in answer.message
+            _wait_record(inj, ds, plant, after=i, state="enabled", reason="reset")
+            assert inj.wait(lambda: any(x == (0.0, -0.1745, 0.0, 0.0) for _, x, _ in _states(d for _, d in states)),
+                            30), plant.output()[-2000:]   # the initial state again
+            _wait_record(inj, ds, plant, after=i + 1, timeout=60, state="fault", reason="fall")   # and again down
+        assert plant.stop() == 0, plant.output()[-3000:]
+    s = json.loads(summary.read_text())
+    assert [r["reason"] for r in s["transitions"]] == ["fall", "reset", "fall"], s["transitions"]
+    assert s["fallen"] and s["driver_state"] == "fault" and s["fault_reason"] == "fall" and s["resets"] == 1
+    run = np.genfromtxt(csv_path, delimiter=",", names=True)   # the run since the reset: falls, then lies
+    down = np.flatnonzero(np.abs(run["theta_b"]) > 1.0472)
+    assert len(down) >= 1 and np.all(run["u"] == 0.0) and np.all(run["theta_b"][down] == run["theta_b"][down[0]])
+    assert np.all(run["dtheta_b"][down[1:]] == 0.0) and np.all(run["dtheta_w"][down[1:]] == 0.0)   # at rest
