@@ -82,16 +82,7 @@ class Plant(Protocol):
     @property
     def fallen(self) -> bool: ...
 
-    def sample_accel(self) -> Tuple[float, float]:
-        """(theta_w'', theta_b'') at t_k^-, the instant of a raw sample (SPEC 10): eq. (1) at x_k and t_k with what
-        acted over the previous period (its torque, its D_w, its external wrench) and tau_ext(t_k); at k = 0 zero
-        torque, the D_w of period 0 and no wrench."""
-        c = self.cfg
-        e1, e2 = self.tau_ext(self.t, self.extra_prev)
-        u = self.u_prev
-        if c.motor.enabled and self.k > 0:   # the motor's torque at x_k for the previous command
-            u = motor_torque(self.u_cmd_prev, self.x[2] - self.x[3], *c.motor_constants)[0]
-        return accel(c.actual, self.D_w_prev, c.D_b, self.x, u, e1, e2)
+    def sample_accel(self) -> Tuple[float, float]: ...
 
     def step(self, u: float, extra=(0.0, 0.0)) -> None: ...
 

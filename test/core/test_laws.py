@@ -1,5 +1,6 @@
 """The laws' registry: the four laws, the observer term composed, and a law added by a test (test/trivial_law.py)
 runs offline, in a batch (equal to the scalar loop) and, through the plug-in hook, in mwip_sim and the schema."""
+import copy
 import math
 import os
 import subprocess
@@ -8,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 
 from mathfixtures import NOM, P_FILE, PAPER_GAINS, RNG, assert_batch_equals_scalar, random_state
 from mwip_ros import params as P
@@ -122,3 +124,40 @@ def test_the_plugin_hook_gives_the_law_to_the_schema_and_to_mwip_sim(tmp_path):
     offline = simulate(P.closed_loop(dict(BASE, **{"trivial.k": 2000.0}), controller="trivial", duration=1.0))
     graph = read_csv(out)
     np.testing.assert_allclose(graph["u"], offline["u"], rtol=0, atol=1e-9)
+
+
+# --- the parameters a law declares itself (smc, mpc): the node has them, ranges refused naming the key -----------
+def _declaring():
+    from mwip_ros.core.laws import mpc, smc
+    return {"smc": smc, "mpc": mpc}
+
+
+@pytest.mark.parametrize("name", ["smc", "mpc"])
+def test_a_law_declares_its_parameters_and_the_node_has_them(name):
+    module = _declaring()[name]
+    base = P.merged_values(P.load_param_file(P_FILE))
+    specs = P.specs_for("dscndo_controller")
+    assert name in specs["law"].choices
+    for p in module.PARAMETERS:
+        spec = specs[p.name]
+        assert spec.dynamic and (spec.lo, spec.hi, spec.default) == (p.lo, p.hi, p.default)
+        assert base[p.name] == p.default                   # config/paper.yaml holds the defaults
+    assert set(laws.get(name).param_keys) == {p.name for p in module.PARAMETERS}
+
+
+@pytest.mark.parametrize("key, value, words", [
+    ("smc.boundary_layer", -0.1, ">= 0"), ("smc.k", -1.0, ">= 0"), ("smc.q", 151.0, "<= 150"),
+    ("smc.pole1", 0.0, ">= 0.01"), ("smc.pole2", 2000.0, "<= 1000"), ("smc.k", 40, "floating-point"),
+    ("mpc.horizon", 0, "from 1 to 200"), ("mpc.horizon", 201, "from 1 to 200"), ("mpc.horizon", 20.0, "integer"),
+    ("mpc.R", 0.0, ">= 1e-06"), ("mpc.R", 2e6, "<= 1e+06"), ("mpc.u_max", 0.0, ">= 0.1"),
+    ("mpc.u_max", 120, "floating-point")])
+def test_a_declared_parameter_out_of_range_is_refused_naming_the_key(key, value, words):
+    pf = P.load_param_file(P_FILE)
+    with pytest.raises(P.ParamError) as ei:                  # an override (-p smc.k:=-1.0), as the node checks it
+        pf.for_node("dscndo_controller", {key: value})
+    assert ei.value.key == key and words in str(ei.value)
+    doc = copy.deepcopy(yaml.safe_load(P_FILE.read_text()))  # and in a file
+    doc["dscndo_controller"]["ros__parameters"][key.split(".")[0]][key.split(".")[1]] = value
+    with pytest.raises(P.ParamError) as ei:
+        P.parse_param_dict(doc, "p.yaml")
+    assert ei.value.key == f"dscndo_controller.{key}" and words in str(ei.value)

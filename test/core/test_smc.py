@@ -1,13 +1,11 @@
 """The sliding-mode laws ``smc`` and ``smc_ndo`` (core/laws/smc.py, docs/theory.md 6.5): the surface and the control
 equal the formula computed here, the law balances the paper's scenario, the batch (numpy and compiled) equals the
 scalar loop, the boundary layer removes the chattering, and out-of-range parameters are refused."""
-import copy
 import functools
 import math
 
 import numpy as np
 import pytest
-import yaml
 
 from mathfixtures import NOM, P_FILE, RNG, assert_batch_equals_scalar, random_state
 from mwip_ros import params as P
@@ -189,26 +187,3 @@ def test_the_compiled_batch_runs_the_laws_pure_step_and_equals_the_scalar_loop()
 
 # --- parameters --------------------------------------------------------------------------------------------------
 
-def test_the_law_declares_its_parameters_and_the_node_has_them():
-    specs = P.specs_for("dscndo_controller")
-    assert "smc" in specs["law"].choices
-    for p in smc.PARAMETERS:
-        spec = specs[p.name]
-        assert spec.dynamic and (spec.lo, spec.hi, spec.default) == (p.lo, p.hi, p.default)
-        assert BASE[p.name] == p.default                   # config/paper.yaml holds the defaults
-    assert set(laws.get("smc").param_keys) == {p.name for p in smc.PARAMETERS}
-
-
-@pytest.mark.parametrize("key, value, words", [
-    ("smc.boundary_layer", -0.1, ">= 0"), ("smc.k", -1.0, ">= 0"), ("smc.q", 151.0, "<= 150"),
-    ("smc.pole1", 0.0, ">= 0.01"), ("smc.pole2", 2000.0, "<= 1000"), ("smc.k", 40, "floating-point")])
-def test_out_of_range_parameters_are_refused_naming_the_key(key, value, words):
-    pf = P.load_param_file(P_FILE)
-    with pytest.raises(P.ParamError) as ei:                  # an override (-p smc.k:=-1.0), as the node checks it
-        pf.for_node("dscndo_controller", {key: value})
-    assert ei.value.key == key and words in str(ei.value)
-    doc = copy.deepcopy(yaml.safe_load(P_FILE.read_text()))  # and in a file
-    doc["dscndo_controller"]["ros__parameters"]["smc"][key.split(".")[1]] = value
-    with pytest.raises(P.ParamError) as ei:
-        P.parse_param_dict(doc, "p.yaml")
-    assert ei.value.key == f"dscndo_controller.{key}" and words in str(ei.value)
