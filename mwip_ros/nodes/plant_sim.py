@@ -82,6 +82,7 @@ from std_msgs.msg import Bool, Float64, String
 from std_srvs.srv import Trigger
 
 from mwip_ros.core import metrics
+from mwip_ros.core.drive import torque_warning
 from mwip_ros.core.loop import PlantSide, answering
 from mwip_ros.core.safety import FAULT, HISTORY, DriverStateMachine, Transition, Watchdog
 from mwip_ros.core.trajectory import TrajectoryTable
@@ -127,7 +128,7 @@ class PlantSimNode(Node, GracefulNodeMixin):
         self.resets = 0
         self.reset_calls = 0
         self._reset_pending = False   # reset at the next period boundary (lockstep: the state in flight answered)
-        self.table = TrajectoryTable()
+        self.table = TrajectoryTable(drive=self.cfg.motor.enabled)   # the motor: u_applied beside u
         self.rejects = Rejects(self.get_logger())
         self.fallen = False
         self.started = False
@@ -199,6 +200,14 @@ class PlantSimNode(Node, GracefulNodeMixin):
                 f"sensing: noise std {list(sc.noise_std)} (theta_w, theta_b, theta_w', theta_b'), encoder "
                 f"{sc.encoder_counts_per_rev or 'ideal'} counts/rev, measurement delay {sc.delay_periods}, actuator "
                 f"delay {sc.actuator_delay_periods} period(s); the true state is on true_joint_states")
+        if self.cfg.motor.enabled:
+            mc = self.cfg.motor
+            self.get_logger().info(f"motor: K_t = {mc.torque_constant:g} N m/A, R = {mc.resistance:g} ohm, V_max = "
+                                   f"{mc.voltage_limit:g} V, I_max = {mc.current_limit:g} A ({mc.peak_torque:g} N m at "
+                                   f"most); the torque that acted is joint_states' effort")
+        warning = torque_warning(self.cfg.motor, self.cfg.actual, self.cfg.fall_angle)
+        if warning:   # allowed: a weak drive is worth simulating
+            self.get_logger().warning(warning)
         self._publish_transition(Transition(0.0, "", self.safety.state, "start",
                                             f"require_enable: {str(self.cfg.require_enable).lower()}"), start=True)
 
@@ -291,7 +300,7 @@ class PlantSimNode(Node, GracefulNodeMixin):
     def _reset(self) -> str:
         dropped, t = len(self.table), self.plant.t
         self._initial_state()
-        self.table = TrajectoryTable()
+        self.table = TrajectoryTable(drive=self.cfg.motor.enabled)   # the motor: u_applied beside u
         self.resets += 1
         self._reset_pending = False
         self.fallen, self.fell_at = False, None
@@ -405,6 +414,7 @@ class PlantSimNode(Node, GracefulNodeMixin):
             return False
         try:
             self.side.advance(u, self.extra)
+            self.table.set_drive(p.u_prev, p.saturation)   # the torque that acted over period k (motor model)
             finite = all(map(math.isfinite, p.x))
         except (ArithmeticError, ValueError):  # e.g. sin of an infinite angle
             finite = False

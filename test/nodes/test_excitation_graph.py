@@ -39,3 +39,24 @@ def test_lockstep_graph_with_a_chirp_equals_offline(tmp_path):
     assert np.max(np.abs(offline["excitation"])) > 10.0   # the chirp is in the command
     for c in ("theta_w", "theta_b", "dtheta_w", "dtheta_b", "u"):
         np.testing.assert_allclose(graph[c], offline[c], rtol=0, atol=1e-9, err_msg=c)
+
+
+MOTOR = Path(__file__).resolve().parents[2] / "config" / "motor_realistic.yaml"
+
+
+def test_lockstep_graph_with_the_drive_equals_offline_and_records_the_torque_that_acted(tmp_path):
+    """The motor model on (config/motor_realistic.yaml): the plant's csv equals mwip_sim's to 1e-9, u_applied (the
+    torque that acted) beside the command u, and the drive saturates in the first periods, so the two differ."""
+    merged = _merge(yaml.safe_load(PARAMS.read_text()), yaml.safe_load(MOTOR.read_text()))
+    merged["plant_sim"]["ros__parameters"]["duration_s"] = 2.0
+    params = tmp_path / "motor_2s.yaml"
+    params.write_text(yaml.safe_dump(merged))
+    code, csv_path, logs = run_lockstep(tmp_path, True, params=params)
+    assert code == 0, logs["plant_sim"].output()
+    assert "motor: K_t = 2 N m/A" in logs["plant_sim"].output()
+    graph = load_run(csv_path)
+    offline = simulate(P.closed_loop(P.merged_values(P.load_param_file(params)), controller="dscndo"))
+    assert len(graph) == len(offline) == 401
+    for c in ("theta_w", "theta_b", "dtheta_w", "dtheta_b", "u", "u_applied", "drive_saturation"):
+        np.testing.assert_allclose(graph[c][:-1], offline[c][:-1], rtol=0, atol=1e-9, err_msg=c)
+    assert np.max(np.abs(graph["u"][:-1] - graph["u_applied"][:-1])) > 10.0
