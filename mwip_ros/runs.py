@@ -238,12 +238,15 @@ def read_bag_run(bag, label: Optional[str] = None, segment: Optional[int] = None
     applied = [abs(u) for u in (states.value(s, 4) for s in stamps[1:]) if math.isfinite(u)]
     last_u = _last_torque(cmds[-1] if cmds else NAN, record.get("torque_limit"), max(applied, default=NAN))
     del applied
-    table = TrajectoryTable(raw=estimates is not None)
+    # raw sensors: the torque that acted (the encoder's effort, as joint_states' is) is u_applied too
+    table = TrajectoryTable(raw=estimates is not None, drive=estimates is not None)
     nan2, nan3, nan5 = (NAN, NAN), (NAN,) * 3, (NAN,) * 5
     for i, s in enumerate(stamps):
         u = states.value(stamps[i + 1], 4) if i + 1 < len(stamps) else last_u
         extra = () if estimates is None else (*imu.get(s, nan3), *enc.get(s, nan2), *estimates.get(s, nan5)[:4])
         table.append((s - t0) * 1e-9, states.get(s), u, est.get(s, nan2), truth.get(s, nan2), extra=extra)
+        if estimates is not None:
+            table.set_drive(u, math.nan)   # the drive's saturation is in no message
     run = table.trajectory(label or Path(bag).name, "t_fall" in record, NAN)
     check_times(run.t, bag)
     run.h = float(np.median(np.diff(run.t))) if len(run) > 1 else NAN

@@ -136,7 +136,8 @@ def compute(cols: Mapping[str, np.ndarray], window: Sequence[float], fall_angle:
         sat = np.asarray(cols["drive_saturation"], dtype=float)
         h = float(t[1] - t[0]) if len(t) > 1 else math.nan
         est["u_applied_rms"] = float(_rms(np.asarray(cols["u_applied"], dtype=float)[sel]))
-        est["saturated_s"] = float(np.sum(np.nan_to_num(sat) > 0) * h)
+        known = np.isfinite(sat)   # a bag's rows know the torque that acted, not the drive's saturation
+        est["saturated_s"] = float(np.sum(sat[known] > 0) * h) if known.any() else math.nan
     fell = fall_time(t, th, fall_angle)
     fell = t_fall if fell is None else fell
     t_end = float(t[-1]) if len(t) else math.nan

@@ -89,7 +89,7 @@ def simulate(loop: ClosedLoop, label: str = "", progress: Optional[Callable[[flo
     period = Period(PlantSide(pc), DiscreteObserver(pc.nominal, gain_matrix(loop.X), h),
                     loop.law_class(loop.params, pc.nominal, h), estimator, excitation)   # core.loop's stages
     # the true state: the metrics judge it
-    table = TrajectoryTable(internals=True, raw=pc.raw is not None, drive=pc.motor.enabled,
+    table = TrajectoryTable(internals=True, raw=pc.raw is not None, drive=pc.motor.enabled or pc.raw is not None,
                             excitation=excitation is not None)
     fallen = False
     every = max(1, n_steps // 10)

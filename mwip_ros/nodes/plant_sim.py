@@ -128,7 +128,7 @@ class PlantSimNode(Node, GracefulNodeMixin):
         self.resets = 0
         self.reset_calls = 0
         self._reset_pending = False   # reset at the next period boundary (lockstep: the state in flight answered)
-        self.table = TrajectoryTable(drive=self.cfg.motor.enabled)   # the motor: u_applied beside u
+        self.table = TrajectoryTable(drive=self.cfg.motor.enabled or self.cfg.raw is not None)   # u_applied
         self.rejects = Rejects(self.get_logger())
         self.fallen = False
         self.started = False
@@ -300,7 +300,7 @@ class PlantSimNode(Node, GracefulNodeMixin):
     def _reset(self) -> str:
         dropped, t = len(self.table), self.plant.t
         self._initial_state()
-        self.table = TrajectoryTable(drive=self.cfg.motor.enabled)   # the motor: u_applied beside u
+        self.table = TrajectoryTable(drive=self.cfg.motor.enabled or self.cfg.raw is not None)   # u_applied
         self.resets += 1
         self._reset_pending = False
         self.fallen, self.fell_at = False, None

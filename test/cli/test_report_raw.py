@@ -5,6 +5,7 @@ import json
 import math
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from mwip_ros import params as P
@@ -30,6 +31,11 @@ def test_a_raw_run_is_judged_on_its_estimate_too(tmp_path):
     want = math.sqrt(float((err[sel] ** 2).mean()))
     assert m["theta_b_est_err_rms"] == pytest.approx(want, rel=1e-12)
     assert (out / "pitch_estimate.png").stat().st_size > 10_000
+    # the table carries the raw samples, the estimate, the command and the torque that acted (no motor: equal)
+    for c in ("gyro", "accel_x", "accel_z", "encoder", "encoder_rate", "theta_b_hat", "dtheta_b_hat", "theta_w_hat",
+              "dtheta_w_hat", "u", "u_applied"):
+        assert c in run.columns, c
+    np.testing.assert_array_equal(run["u_applied"][:-1], run["u"][:-1])
     assert "pitch_estimate.png" in (out / "metrics.md").read_text()
 
 
