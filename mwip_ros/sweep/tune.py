@@ -56,6 +56,13 @@ KNOBS: Dict[str, List[Knob]] = {
     "lqr.R": [Knob("lqr.R", "dscndo_controller", "lqr.R", None, (1e-4, 1.0))],
     "lqr.Q": [Knob(f"lqr.Q.{s}", "dscndo_controller", "lqr.Q", i, (0.1, 1e4))
               for i, s in enumerate(("theta_b", "dtheta_b", "dtheta_w"))],
+    "smc.k": [Knob("smc.k", "dscndo_controller", "smc.k", None, (1.0, 500.0))],
+    "smc.boundary_layer": [Knob("smc.boundary_layer", "dscndo_controller", "smc.boundary_layer", None, (0.01, 20.0))],
+    # the state estimator (sensors.model: raw), as any other knob
+    "complementary.tau": [Knob("complementary.tau", "state_estimator", "complementary.tau", None, (0.05, 10.0))],
+    "kalman.bias_walk": [Knob("kalman.bias_walk", "state_estimator", "kalman.bias_walk", None, (1e-5, 0.01))],
+    "kalman.accel_noise_std": [Knob("kalman.accel_noise_std", "state_estimator", "kalman.accel_noise_std", None,
+                                    (1e-3, 1.0))],
 }
 
 

@@ -82,3 +82,14 @@ def test_the_search_is_seeded_and_keeps_the_best_it_saw():
         assert 2.0 <= x[0] <= 6.0 and j == obj.best[0] and gens >= 1
     assert runs[0] == runs[1]
     assert math.isfinite(runs[0][1])
+
+
+def test_the_state_estimator_is_tunable_like_any_other_knob():
+    """A raw-sensor loop's estimator parameter: a knob of the state_estimator section, set in the merged values
+    and written to the overlay under state_estimator."""
+    from mwip_ros.sweep.tune import overlay
+    (k,) = knobs_for(["kalman.bias_walk"], "dscndo")
+    assert (k.section, k.param) == ("state_estimator", "kalman.bias_walk")
+    base = P.merged_values(P.load_param_file(default_params_file()))
+    assert apply([k], [0.002], base) == {"kalman.bias_walk": 0.002}
+    assert overlay([k], [0.002], base) == {("state_estimator", "kalman.bias_walk"): 0.002}
