@@ -10,7 +10,10 @@ Two forms of the one loop:
   (:func:`.compiled.kernel_for`), scenario by scenario; the normal draws are numpy's, made here a
   block at a time and handed in; the metrics come from the window's running sums
   (:func:`window_sums_metrics`, the arithmetic of :func:`.metrics.window_metrics`).
-  ``MWIP_BATCH_COMPILED=0`` (or ``compiled=False``) turns it off.
+  ``MWIP_BATCH_COMPILED=0`` (or ``compiled=False``) turns it off.  The raw sensors with their estimator, the
+  motor and the excitation run there too (the scenarios sharing whether they measure raw and the estimator's
+  method); with ``record``, or a law without a pure form, those loops run the scalar loop per scenario
+  (:func:`_simulate_each`).
 * over numpy arrays (a law without a pure form, a plug-in; ``record=True``): the observer, the law and
   the true tau_d are called with the math namespace ``numpy`` and parameters whose fields are arrays;
   the plant's RK4 period runs as the same ``plant.rk4_period`` compiled by numba (:mod:`.compiled`).
@@ -203,9 +206,11 @@ def simulate_batch(loops: Sequence[ClosedLoop], window: Sequence[float], record:
 
     ``compiled`` (default :func:`compiled_default`): without ``record``, a law with a pure form
     (``Law.pure_step``) runs as one compiled loop (:func:`_simulate_compiled`); else, and for every other law,
-    the loop runs over numpy arrays with the plant's RK4 compiled."""
-    if any(_beyond_arrays(lp) for lp in loops):
-        return _simulate_each(loops, window, record)
+    the loop runs over numpy arrays with the plant's RK4 compiled.  The raw sensors and their estimator, the motor
+    and the excitation (:func:`_beyond_arrays`) run compiled too when the scenarios share whether they have raw
+    sensors and the estimator's method (:func:`_raw_stage`); else, with ``record`` or a law without a pure form,
+    the scalar loop scenario by scenario (:func:`_simulate_each`)."""
+    beyond = any(_beyond_arrays(lp) for lp in loops)
     if compiled is None:
         compiled = compiled_default()
     if compiled and not record:
@@ -213,11 +218,30 @@ def simulate_batch(loops: Sequence[ClosedLoop], window: Sequence[float], record:
         family = _same((lp.law for lp in loops), "the law")
         use_obs = [lp.use_observer for lp in loops]
         law = laws.lookup(family, any(use_obs)) or laws.lookup(family, not any(use_obs))
-        if law is not None and (not any(use_obs) or law.observer):
-            kernel = kernel_for(law)
+        stage = _raw_stage(loops) if beyond else (False, None)
+        if law is not None and (not any(use_obs) or law.observer) and stage is not None:
+            kernel = kernel_for(law, stage[1])
             if kernel is not None:
-                return _simulate_compiled(loops, window, law, kernel)
+                return _simulate_compiled(loops, window, law, kernel, *stage)   # raw, the estimator
+    if beyond:
+        return _simulate_each(loops, window, record)
     return _simulate_numpy(loops, window, record)
+
+
+def _raw_stage(loops: Sequence[ClosedLoop]):
+    """(raw sensors or not, the estimator class or None) when the scenarios share both (the compiled loop is
+    specialised per estimator); None when they do not, or the estimator has no pure step."""
+    from . import estimators
+    raws = {lp.plant.raw is not None for lp in loops}
+    if len(raws) != 1:
+        return None
+    if not raws.pop():
+        return False, None
+    methods = {lp.estimator.method if lp.estimator is not None else None for lp in loops}
+    if len(methods) != 1 or None in methods:
+        return None
+    cls = estimators.get(methods.pop())
+    return (True, cls) if getattr(cls, "pure_step", None) is not None else None
 
 
 def _beyond_arrays(loop: ClosedLoop) -> bool:
@@ -330,10 +354,15 @@ def _simulate_numpy(loops: Sequence[ClosedLoop], window: Sequence[float], record
     return BatchResult(fallen, t_fall, upright, m, steps, _trajectories(rows, loops, h) if record else None)
 
 
-def _simulate_compiled(loops: Sequence[ClosedLoop], window: Sequence[float], law: type, kernel) -> BatchResult:
+def _simulate_compiled(loops: Sequence[ClosedLoop], window: Sequence[float], law: type, kernel, raw: bool = False,
+                       estimator: Optional[type] = None) -> BatchResult:
     """The whole loop compiled (``core.compiled._loop``), NOISE_BLOCK periods per call, the normal draws made
-    here by each scenario's own generators in the scalar loop's order and handed in as blocks."""
+    here by each scenario's own generators in the scalar loop's order and handed in as blocks.  ``raw``: the
+    plants measure raw (every one), ``estimator`` the class of their state estimator; the motor and the
+    excitation are per scenario."""
     from .compiled import Inertia, load_cached
+    from .excitation import Excitation
+    from .raw_sensors import raw_rng
     n = len(loops)
     pcs = [lp.plant for lp in loops]
     h = float(_same((pc.h for pc in pcs), "the control period"))
@@ -363,14 +392,16 @@ def _simulate_compiled(loops: Sequence[ClosedLoop], window: Sequence[float], law
     X = arr([[float(v) for v in np.asarray(lp.X, dtype=float).ravel()] for lp in loops])
     P = arr([[float(v) for v in core.pure_params(lp.params)] for lp in loops]) if n else np.zeros((0, 0))
     use_obs = np.array([lp.use_observer for lp in loops], dtype=bool)
-    noisy = np.array([sc.noisy for sc in scs], dtype=bool)
+    noisy = np.array([sc.noisy and not raw for sc in scs], dtype=bool)   # raw: no state-mode sensors
     std = arr([list(sc.noise_std) for sc in scs])
     mean = np.array([pc.D_w_mean for pc in pcs], dtype=float)
     var = np.array([pc.D_w_variance for pc in pcs], dtype=float)
     random = np.flatnonzero(var != 0.0)
     dw_gens = [np.random.default_rng(int(pcs[i].seed)) for i in random]
-    z_idx = np.flatnonzero(noisy)
-    z_gens = [sensor_rng(int(pcs[i].seed)) for i in z_idx]
+    raw_noisy = np.array([raw and pc.raw.noisy for pc in pcs], dtype=bool)
+    # the four normals of a period: the state-mode sensors' (core.sensing.Normals) or the raw sensors' (raw_rng)
+    z_idx = np.flatnonzero(raw_noisy if raw else noisy)
+    z_gens = [(raw_rng if raw else sensor_rng)(int(pcs[i].seed)) for i in z_idx]
     block = NOISE_BLOCK * BLOCKS   # periods per call: a generator's one draw of several blocks is the same sequence
     # the normal draws, a row per scenario (the compiled loop runs one scenario after another), filled in place
     Nw = np.zeros((n, block)) if len(random) else np.zeros((1, 1))
@@ -382,16 +413,44 @@ def _simulate_compiled(loops: Sequence[ClosedLoop], window: Sequence[float], law
     z = np.zeros((n, 2))
     prev = np.zeros((n, 4))
     s = np.zeros(n)
-    qx = np.zeros((n, delay + 1, 5))
+    qx = np.zeros((n, delay + 1, 6))
     qa = np.zeros((n, act_delay + 1))
     active = np.ones(n, dtype=bool)
     t_fall = np.full(n, np.nan)
     steps = np.zeros(n, dtype=np.int64)
-    acc = np.zeros((n, 8))   # sum of squares and count of theta_b, u, e1, e2 (finite samples)
+    acc = np.zeros((n, 15))   # sum of squares and count of theta_b, u, e1, e2, the estimate's errors, u applied
+    # (finite samples); the periods saturated
     ext = np.empty((n, 3))   # max, min, max |.| of theta_b
     ext[:, 0], ext[:, 1], ext[:, 2] = -np.inf, np.inf, -np.inf
     tau1, tau2 = np.zeros(2 * substeps + 1), np.zeros(2 * substeps + 1)
     first_w, n_window = window_samples(n_steps, h, window)
+    # the raw sensors (r, d, g, gyro_noise_std, gyro_bias_walk, accel_noise_std, counts) and their state (bias,
+    # phi, D_w and the command of the previous period); the estimator's numbers and state
+    RW = arr([[pc.actual.r, pc.raw.offset, pc.actual.g, pc.raw.gyro_noise_std, pc.raw.gyro_bias_walk,
+               pc.raw.accel_noise_std, pc.raw.encoder_counts_per_rev] for pc in pcs]) if raw else np.zeros((1, 7))
+    RS = np.zeros((n, 4))
+    if raw:
+        RS[:, 0] = [pc.raw.gyro_bias for pc in pcs]
+        made = {}
+
+        def numbers(lp):
+            key = (lp.estimator, lp.plant.nominal.r, lp.plant.nominal.g)
+            if key not in made:
+                made[key] = [float(v) for v in lp.estimator.make(h, key[1], key[2]).P]
+            return made[key]
+        PE = arr([numbers(lp) for lp in loops])
+        ES = np.zeros((n, estimator.state_size))
+    else:
+        PE, ES = np.zeros((1, 1)), np.zeros((1, 1))
+    MC = arr([pc.motor_constants for pc in pcs])
+    motor = MC[:, 0] > 0.0
+    # the excitations: a row per distinct one, every period of the run (core.excitation.Excitation.series)
+    series: Dict = {}
+    exi = np.array([-1 if lp.excitation is None else series.setdefault(lp.excitation, len(series)) for lp in loops],
+                   dtype=np.int64)
+    EXT = np.zeros((max(1, len(series)), n_steps + 1))
+    for cfg, row in series.items():
+        EXT[row] = Excitation(cfg, h).series(n_steps + 1)
     with np.errstate(all="ignore"):
         for k0 in range(0, n_steps + 1, block):
             if not active.any():
@@ -403,11 +462,16 @@ def _simulate_compiled(loops: Sequence[ClosedLoop], window: Sequence[float], law
                 gen.standard_normal(out=Z[z_idx[row], :k1 - k0])
             args = (k0, k1, n_steps, h, substeps, first_w, n_window, counts, delay, act_delay, bool(law.observer),
                     act, nom, D_b, sins, shared, limit, fall, X, P, use_obs, noisy, std, mean, sd, rnd, Nw, Z,
-                    x, u_prev, z, prev, s, qx, qa, active, t_fall, steps, acc, ext, T, tau1, tau2)
+                    x, u_prev, z, prev, s, qx, qa, active, t_fall, steps, acc, ext, T, tau1, tau2,
+                    raw, RW, RS, raw_noisy, PE, ES, bool(motor.any()), MC, EXT, exi)
             if k0 == 0:
                 load_cached(kernel, args)
             kernel(*args)
         m = window_sums_metrics(acc, ext)
+        if raw:
+            m.update(_stage_metrics(acc, steps, h, motor, raw=True, motor_on=False))
+        if motor.any():
+            m.update(_stage_metrics(acc, steps, h, motor, raw=False, motor_on=True))
     fallen = ~np.isnan(t_fall)
     upright = ~fallen & (n_steps * h >= window[1] - 1e-9)
     return BatchResult(fallen, t_fall, upright, m, int(steps.sum()))
@@ -423,6 +487,23 @@ def window_sums_metrics(acc: np.ndarray, ext: np.ndarray) -> dict:
     return {"theta_b_p2p": np.where(any_, ext[:, 0] - ext[:, 1], np.nan), "theta_b_rms": rms(0),
             "theta_b_max_abs": np.where(any_, ext[:, 2], np.nan), "u_rms": rms(2), "tau_err1_rms": rms(4),
             "tau_err2_rms": rms(6)}
+
+
+def _stage_metrics(acc: np.ndarray, steps: np.ndarray, h: float, motor: np.ndarray, raw: bool, motor_on: bool) -> dict:
+    """The optional stages' metrics of :func:`.metrics.compute` from the compiled loop's sums (``acc`` columns 8 to
+    14): the estimate's errors (raw sensors), the torque that acted and the time saturated (the scenarios with the
+    motor; NaN for the others)."""
+    def rms(j):
+        ok = acc[:, j + 1] > 0
+        return np.where(ok, np.sqrt(acc[:, j] / np.where(ok, acc[:, j + 1], 1.0)), np.nan)
+    out = {}
+    if raw:
+        out["theta_b_est_err_rms"], out["dtheta_b_est_err_rms"] = rms(8), rms(10)
+    if motor_on:
+        out["u_applied_rms"] = np.where(motor, rms(12), np.nan)
+        # whole run: the periods integrated with the drive saturated, times h (NaN for a run of one row)
+        out["saturated_s"] = np.where(motor & (steps > 0), acc[:, 14] * h, np.nan)
+    return out
 
 
 def _trajectories(rows, loops, h) -> List[Trajectory]:

@@ -32,6 +32,13 @@ objects; libmvec's vector sin, cos and exp, within a few ulp of libm's); the res
 draws stay numpy's (each scenario's own generators, in the scalar loop's order), made by the caller (``core.batch``)
 a block of periods at a time.
 
+The optional stages of :mod:`.loop` run there too, scenario by scenario: the raw sensors
+(:func:`.raw_sensors.raw_sample` at t_k^-, as ``PlantSim.sample_accel``, their normals handed in like the state-mode
+ones, the same delay queue) and the estimator (its ``pure_step``: one kernel per law and estimator,
+``kernel_for(law, estimator)``, its state a row of an array), the motor (:func:`.plant.rk4_driven` per scenario, the
+torque that acted reported to the observer, the saturated periods counted; the lanes' RK4 is motorless) and the
+excitation (a table of each distinct one's periods, added to the law's command before the torque limit).
+
 numba compiles on first use (about a second for the RK4, a few for a loop) and caches the machine code
 where numba would (``NUMBA_CACHE_DIR`` if set, else ``__pycache__`` next to the sources, else numba's
 user-wide cache directory), so later processes (sweep workers) only load it.  numba would renew a cached
@@ -53,11 +60,13 @@ import numpy as np
 from numba.core.caching import (CompileResultCacheImpl, FunctionCache, InTreeCacheLocator, UserProvidedCacheLocator,
                                 UserWideCacheLocator)
 
-from . import controller, drive, model, observer, plant, sensing, simd
+from . import controller, drive, model, observer, plant, raw_sensors, sensing, simd
 from .controller import u_taud_of
+from .drive import motor_torque
 from .model import lumped_disturbance
 from .observer import tau_hat_of, z_next, z_start
 from .plant import D_w_of, saturate
+from .raw_sensors import raw_sample
 from .sensing import quantize
 
 __all__ = ["Inertia", "RK4Periods", "SOURCES", "Sin", "kernel_for", "load_cached"]
@@ -66,7 +75,7 @@ SOURCES = (Path(model.__file__), Path(plant.__file__), Path(drive.__file__), Pat
 _STAMP = hashlib.sha256(b"".join(p.read_bytes() for p in SOURCES)).hexdigest()
 # what the compiled batch loop is made of besides a law's own module
 LOOP_SOURCES = SOURCES + (Path(observer.__file__), Path(controller.__file__), Path(sensing.__file__),
-                         Path(simd.__file__))
+                         Path(simd.__file__), Path(raw_sensors.__file__))
 
 
 def _stamp_of(paths) -> str:
@@ -199,8 +208,16 @@ class Sin(NamedTuple):
 
 # the names the loop calls that :func:`kernel_for` binds to compiled functions (here: the scalar ones, and the law's
 # step, which depends on the law)
-accel, rk4_period, at = model.accel, plant.rk4_period, model.Sinusoid.at
+accel, rk4_period, rk4_driven, at = model.accel, plant.rk4_period, plant.rk4_driven, model.Sinusoid.at
 law_step = None
+
+
+def _no_est(P, h, sample, s, first):   # pragma: no cover
+    """The estimator of a loop without raw sensors: never called (``raw`` is False)."""
+    return (0.0, 0.0, 0.0, 0.0), (0.0,), (0.0, 0.0, 0.0, False)
+
+
+est_step = _no_est   # the estimator's pure_step (core.estimators): bound per estimator by kernel_for
 load, store = simd.load, simd.store
 SIMD = simd.WIDTH > 0
 LANES = simd.WIDTH or 8   # scenarios taken together (with SIMD == False: one after another, LANES at a time)
@@ -262,10 +279,10 @@ def _cache_for(extra=()) -> type:
     return _CACHES[paths]
 
 
-def _deep(fn, suffix: str = "", **calls):
+def _deep(fn, suffix: str = "", _sources=(), **calls):
     """``fn``'s own code compiled by numba (as :func:`_compiled`), every plain Python function it calls by a global
     name compiled alike, recursively: the scalar loop's own functions, no copy.  Cached under the stamp of
-    :data:`LOOP_SOURCES` and ``fn``'s own file."""
+    :data:`LOOP_SOURCES`, ``fn``'s own file and ``_sources`` (the files of the functions bound in ``calls``)."""
     key = (fn.__code__, suffix)
     if key in _DONE:
         return _DONE[key]
@@ -276,7 +293,7 @@ def _deep(fn, suffix: str = "", **calls):
             bound[name] = _deep(g)
     same = types.FunctionType(fn.__code__, {**fn.__globals__, **bound}, fn.__name__, fn.__defaults__)
     same.__qualname__ = fn.__qualname__ + suffix
-    _DONE[key] = out = _jit(same, _cache_for((fn.__code__.co_filename,)))
+    _DONE[key] = out = _jit(same, _cache_for((fn.__code__.co_filename,) + tuple(_sources)))
     return out
 
 
@@ -294,14 +311,25 @@ def _stage(tau1, tau2, f1, f2, t, dt, substeps):   # pragma: no cover
 
 def _loop(k0, k1, n_steps, h, substeps, first_w, n_window, counts, delay, act_delay, observer_law,
           act, nom, D_b, sins, shared, limit, fall, X, P, use_obs, noisy, std, D_w_mean, D_w_sd, D_w_random,
-          Nw, Z, x, u_prev, z, prev, s, qx, qa, active, t_fall, steps, acc, ext, T, tau1, tau2):   # pragma: no cover
+          Nw, Z, x, u_prev, z, prev, s, qx, qa, active, t_fall, steps, acc, ext, T, tau1, tau2,
+          raw, RW, RS, raw_noisy, PE, ES, motor_any, MC, EXT, exi):   # pragma: no cover
     """Periods k0 .. k1 - 1 of every active scenario: the scalar loop of :func:`.sim.simulate` (sensors, observer,
     law, saturation, actuator, true tau_d in the window, fall, RK4), calling its own functions compiled; the
     per-scenario state lives in the arrays between calls.  The scenarios go ``LANES`` at a time, period by period:
     each one's sensors to fall check in turn, then, when they share tau_ext (``shared``: ``sins`` row 0, whose stage
     values are computed once per period into ``T`` (periods, 2, 2 substeps + 1)) and :data:`.simd.WIDTH` is not 0,
     one RK4 period of all of them at once (``rk4_lanes``: :func:`.plant.rk4_period` on :data:`.simd.lanes`), else
-    each one's own."""
+    each one's own.
+
+    The optional stages: ``raw`` (the raw sensors, :func:`.raw_sensors.raw_sample` at t_k^-, their normals in ``Z``
+    for the scenarios with ``raw_noisy``, delayed in ``qx``, then the estimator's ``pure_step``, ``est_step``;
+    ``RW`` a row per scenario: r, d, g, gyro_noise_std, gyro_bias_walk, accel_noise_std, counts of the true plant
+    and its sensors; ``RS``: the bias, the previous phi, D_w of the previous period and the previous command;
+    ``PE``, ``ES``: the estimator's numbers and state), the motor (``MC`` a row per scenario, K_t, R, V_max, I_max,
+    K_t = 0: none; ``motor_any``: some scenario has it, and the RK4 runs per scenario, :func:`.plant.rk4_driven`)
+    and the excitation (``EXT[exi[i], k]`` added to the law's command, ``exi[i]`` < 0: none).  ``acc`` columns 8 to
+    13: the sums of squares and counts of the estimate's theta_b and theta_b' errors and of the torque that acted
+    (window), 14: the periods with the drive saturated (whole run)."""
     n = x.shape[0]
     dt = h / substeps
     if shared and n > 0:
@@ -309,7 +337,7 @@ def _loop(k0, k1, n_steps, h, substeps, first_w, n_window, counts, delay, act_de
         g2 = Sin(sins[0, 3], sins[0, 4], sins[0, 5])
         for k in range(k0, k1):
             _stage(T[k - k0, 0], T[k - k0, 1], g1, g2, k * h, dt, substeps)
-    together = shared and SIMD
+    together = shared and SIMD and not motor_any   # the lanes' RK4 is motorless
     L = LANES
     xs = np.zeros((4, L))      # the lanes' states, a row per component
     xn = np.zeros((4, L))      # their states one period later
@@ -370,7 +398,42 @@ def _loop(k0, k1, n_steps, h, substeps, first_w, n_window, counts, delay, act_de
                 if not live[lane]:
                     continue
                 i = i0 + lane
-                if noisy[i] or counts > 0 or delay > 0:
+                if raw:   # core.loop.PlantSide.sense with raw sensors (core.plant.PlantSim.sample_accel)
+                    xt = (xs[0, lane], xs[1, lane], xs[2, lane], xs[3, lane])
+                    if k == 0:   # D_w of period 0
+                        RS[i, 2] = D_w_of(D_w_mean[i], D_w_sd[i], Nw[i, 0]) if D_w_random[i] else D_w_mean[i]
+                    ua = u_prev[i]
+                    if MC[i, 0] > 0.0 and k > 0:   # the motor's torque at x_k for the previous command
+                        ua = motor_torque(RS[i, 3], xt[2] - xt[3], MC[i, 0], MC[i, 1], MC[i, 2], MC[i, 3])[0]
+                    if shared:
+                        e1, e2 = tau1k[0], tau2k[0]
+                    else:
+                        e1 = at(Sin(sins[i, 0], sins[i, 1], sins[i, 2]), t) + 0.0
+                        e2 = at(Sin(sins[i, 3], sins[i, 4], sins[i, 5]), t) + 0.0
+                    ddq = accel(Inertia(act[i, 0], act[i, 1], act[i, 2], act[i, 3]), RS[i, 2], D_b[i], xt, ua, e1, e2)
+                    if raw_noisy[i]:
+                        zk = Z[i, k - k0]
+                        zr = (zk[0], zk[1], zk[2], zk[3])
+                    else:
+                        zr = (0.0, 0.0, 0.0, 0.0)
+                    gy, fx, fz, phi, rate, bias = raw_sample(xt, ddq, zr, RS[i, 0], RS[i, 1], k == 0, h, RW[i, 0],
+                                                             RW[i, 1], RW[i, 2], RW[i, 3], RW[i, 4], RW[i, 5],
+                                                             int(RW[i, 6]))
+                    RS[i, 0], RS[i, 1] = bias, phi
+                    slot = k % (delay + 1)
+                    qx[i, slot, 0], qx[i, slot, 1], qx[i, slot, 2], qx[i, slot, 3], qx[i, slot, 4] = \
+                        gy, fx, fz, phi, rate
+                    qx[i, slot, 5] = u_prev[i]
+                    r = (k - delay) % (delay + 1) if k >= delay else 0
+                    umg[lane] = qx[i, r, 5]
+                    # the estimator (the delayed raw sample to a state, core.estimators: its pure_step)
+                    est, sn, _ = est_step(PE[i], h, (qx[i, r, 0], qx[i, r, 1], qx[i, r, 2], qx[i, r, 3], qx[i, r, 4]),
+                                          ES[i], k == 0)
+                    for j in range(len(sn)):
+                        ES[i, j] = sn[j]
+                    for j in range(4):
+                        xmg[j, lane] = est[j]
+                elif noisy[i] or counts > 0 or delay > 0:
                     w, b, dw, db = xs[0, lane], xs[1, lane], xs[2, lane], xs[3, lane]
                     if noisy[i]:
                         zk = Z[i, k - k0]
@@ -389,7 +452,7 @@ def _loop(k0, k1, n_steps, h, substeps, first_w, n_window, counts, delay, act_de
                     for j in range(4):
                         xmg[j, lane] = xs[j, lane]
                     umg[lane] = u_prev[i]
-            # stage: estimator (the identity: the measurement is a state)
+            # stage: estimator (raw: run above, each scenario's right after its sample; else the identity)
             # stage: observer
             # the observer (core.observer.DiscreteObserver.update): every lane at once, or one after another
             if SIMD:
@@ -446,6 +509,8 @@ def _loop(k0, k1, n_steps, h, substeps, first_w, n_window, counts, delay, act_de
                     s[i] = si
                     if observer_law and use_obs[i]:   # core.laws.ndo.WithObserver.step
                         u = u - u_taud_of(pn, pn.m12 * math.cos(xm[1]), th)
+                if exi[i] >= 0:   # the excitation (core.loop.command)
+                    u = u + EXT[exi[i], k]
                 # stage: drive
                 u = saturate(u, limit[i])
                 if act_delay > 0:   # core.sensing.Actuator.apply
@@ -472,6 +537,11 @@ def _loop(k0, k1, n_steps, h, substeps, first_w, n_window, counts, delay, act_de
                         if math.isfinite(v):
                             acc[i, 2 * j + 2] += v * v
                             acc[i, 2 * j + 3] += 1.0
+                    if raw:   # the estimate's errors (core.metrics.compute: theta_b_hat - theta_b, ...)
+                        for j, v in enumerate((xm[1] - xt[1], xm[3] - xt[3])):
+                            if math.isfinite(v):
+                                acc[i, 2 * j + 8] += v * v
+                                acc[i, 2 * j + 9] += 1.0
                 if abs(xt[1]) > fall[i]:
                     t_fall[i] = t
                     active[i] = False
@@ -484,8 +554,18 @@ def _loop(k0, k1, n_steps, h, substeps, first_w, n_window, counts, delay, act_de
                 u_prev[i] = u
                 us[lane] = u
                 dws[lane] = D_w
+                RS[i, 2], RS[i, 3] = D_w, u   # what acted over this period: the next raw sample's instant
                 any_live = True
-                if not together:
+                if MC[i, 0] > 0.0:   # the motor (core.plant.PlantSim.step): the drive's torque at every RK4 stage
+                    xs[0, lane], xs[1, lane], xs[2, lane], xs[3, lane], acted, code = rk4_driven(
+                        pa, D_w, D_b[i], tau1k, tau2k, xt, u, h, substeps, (MC[i, 0], MC[i, 1], MC[i, 2], MC[i, 3]))
+                    u_prev[i] = acted   # what the observer is told next
+                    if code > 0:
+                        acc[i, 14] += 1.0
+                    if first_w <= k < first_w + n_window and math.isfinite(acted):
+                        acc[i, 12] += acted * acted
+                        acc[i, 13] += 1.0
+                elif not together:
                     xs[0, lane], xs[1, lane], xs[2, lane], xs[3, lane] = rk4_period(pa, D_w, D_b[i], tau1k, tau2k,
                                                                                     xt, u, h, substeps)
             if not any_live:
@@ -537,14 +617,18 @@ def load_cached(kernel, args) -> None:
         pass
 
 
-def kernel_for(law: type):
+def kernel_for(law: type, estimator: type = None):
     """The compiled batch loop of the law class ``law`` (its ``pure_step``, or its base's for an observer
-    variant), or None when it has no pure form (the batch then runs over numpy arrays)."""
+    variant) and, for raw sensors, of the estimator class ``estimator`` (:mod:`.estimators`: its ``pure_step``),
+    or None when either has no pure form (the batch then runs over numpy arrays, or the scalar loop)."""
     core = getattr(law, "base", law)
     fn = getattr(core, "pure_step", None)
     if fn is None or _owner(core, "step") is not _owner(core, "pure_step"):
         return None   # none, or a subclass that steps otherwise than the pure form it inherits
-    if fn not in _KERNELS:
+    est = getattr(estimator, "pure_step", None) if estimator is not None else _no_est
+    if est is None:
+        return None
+    if (fn, est) not in _KERNELS:
         step = _deep(fn)
         at = _deep(model.Sinusoid.at)
         lanes = (_lanes_of(plant.rk4_period, rk4_driven=_lanes_of(plant.rk4_driven, accel=_lanes_of(model.accel),
@@ -552,10 +636,17 @@ def kernel_for(law: type):
                  if SIMD else _jit(_no_lanes, _cache_for()))
         z_lanes = _lanes_of(observer.z_next) if SIMD else _jit(_no_z_lanes, _cache_for())
         by_lanes = SIMD and getattr(core, "pure_lanes", 0) == 3   # a law whose pure_step runs on lanes
-        _KERNELS[fn] = _deep(_loop, f"__{fn.__module__}.{fn.__qualname__}".replace(".", "_"), law_step=step,
+        suffix = f"__{fn.__module__}.{fn.__qualname__}".replace(".", "_")
+        if est is not _no_est:
+            suffix += f"__{est.__module__}.{est.__qualname__}".replace(".", "_")
+        sources = tuple(sorted({fn.__code__.co_filename, est.__code__.co_filename}))   # one order: one stamp
+        _KERNELS[fn, est] = _deep(_loop, suffix, _sources=sources, law_step=step,
+                             est_step=_deep(est) if est is not _no_est else _jit(_no_est, _cache_for()),
+                             raw_sample=_deep(raw_sample), motor_torque=_compiled(drive.motor_torque),
+                             rk4_driven=_rk4_driven,
                              Inertia=Inertia, Sin=Sin, at=at, _stage=_deep(_stage, at=at), accel=_accel,
                              rk4_period=_rk4_period, rk4_lanes=lanes, load=load, store=store,
                              z_next_lanes=z_lanes, LAW_LANES=by_lanes,
                              law_lanes=_lanes_of(fn) if by_lanes else _jit(_no_law_lanes, _cache_for()),
                              params_lanes=_jit(_params3, _cache_for()))
-    return _KERNELS[fn]
+    return _KERNELS[fn, est]
