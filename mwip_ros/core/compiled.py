@@ -143,8 +143,8 @@ def _compiled(fn, **calls):
 
 
 _accel = _compiled(model.accel)
-_stage_torque = _compiled(plant.stage_torque, motor_torque=_compiled(drive.motor_torque))
-_rk4_driven = _compiled(plant.rk4_driven, accel=_accel, stage_torque=_stage_torque)
+_motor_torque = _compiled(drive.motor_torque)
+_rk4_driven = _compiled(plant.rk4_driven, accel=_accel, motor_torque=_motor_torque)
 _rk4_period = _compiled(plant.rk4_period, rk4_driven=_rk4_driven)
 
 
@@ -240,8 +240,8 @@ def _no_lanes(p, D_w, D_b, tau1, tau2, x, u, h, n):   # pragma: no cover
     return x   # SIMD is False: never called (and no vector sin or cos to link)
 
 
-def _held(u, w, motor):   # pragma: no cover
-    """:func:`.plant.stage_torque` without a motor, on lanes: the command (the lanes' RK4 runs motorless loops)."""
+def _held(u, w, K_t, R, V_max, I_max):   # pragma: no cover
+    """:func:`.drive.motor_torque` on lanes, never entered (the lanes' RK4 runs motorless loops): the command."""
     return u, 0
 
 
@@ -632,7 +632,7 @@ def kernel_for(law: type, estimator: type = None):
         step = _deep(fn)
         at = _deep(model.Sinusoid.at)
         lanes = (_lanes_of(plant.rk4_period, rk4_driven=_lanes_of(plant.rk4_driven, accel=_lanes_of(model.accel),
-                                                                  stage_torque=_jit(_held, _cache_for())))
+                                                                  motor_torque=_jit(_held, _cache_for())))
                  if SIMD else _jit(_no_lanes, _cache_for()))
         z_lanes = _lanes_of(observer.z_next) if SIMD else _jit(_no_z_lanes, _cache_for())
         by_lanes = SIMD and getattr(core, "pure_lanes", 0) == 3   # a law whose pure_step runs on lanes

@@ -20,7 +20,7 @@ from .raw_sensors import RawSensorConfig
 from .sensing import NOISE_BLOCK, SensingConfig
 
 __all__ = ["Plant", "PLANTS", "make_plant", "PlantConfig", "PlantSim", "RK4Plant", "stage_torques", "rk4_period",
-           "rk4_driven", "stage_torque", "NO_MOTOR", "saturate", "D_w_of"]
+           "rk4_driven", "NO_MOTOR", "saturate", "D_w_of"]
 
 
 @dataclass(frozen=True)
@@ -191,50 +191,52 @@ def rk4_period(p: PhysicalParams, D_w, D_b, tau1, tau2, x, u, h: float, n: int, 
     return w, b, dw, db
 
 
-def stage_torque(u, w, motor):
-    """The torque at one RK4 stage for the command ``u`` held over the period and the stage's rotor speed ``w`` =
-    th_w' - th_b': without a motor (``motor[0]``, K_t, = 0: :data:`NO_MOTOR`) the command itself, with one the
-    drive's (:func:`.drive.motor_torque`); and the drive's saturation code (0 without a motor)."""
-    if motor[0] > 0.0:
-        return motor_torque(u, w, motor[0], motor[1], motor[2], motor[3])
-    return u, 0
-
-
 def rk4_driven(p: PhysicalParams, D_w, D_b, tau1, tau2, x, u, h: float, n: int, motor, m=math) -> Tuple:
     """One control period [t0, t0 + h]: classic RK4 of eq. (1) in ``n`` equal sub-steps, the command ``u`` and
     D_w held; ``tau1[j]``, ``tau2[j]`` are tau_ext at stage time j (:func:`stage_torques`).
 
-    ``motor`` = (K_t, R, V_max, I_max) of the drive (SPEC 11), evaluated at every stage from that stage's state
-    (:func:`stage_torque`); :data:`NO_MOTOR`: the torque is ``u`` at every stage (the paper's numbers).  Returns
-    (theta_w, theta_b, theta_w', theta_b', the torque that acted over the period, the drive's worst saturation
-    code): the torque that acted is the RK4-weighted mean of the stage torques, ``sum (u1 + 2 u2 + 2 u3 + u4) /
-    (6 n)`` (:func:`.drive.acted_torque`), and ``u`` itself without a motor.  ``m`` is the math namespace of
-    :func:`~.model.accel` (``core.compiled`` also runs it on SIMD lanes of scenarios)."""
+    ``motor`` = (K_t, R, V_max, I_max) of the drive (SPEC 11, :func:`.drive.motor_torque`), evaluated at every
+    stage from that stage's state (w = th_w' - th_b'); :data:`NO_MOTOR` (K_t = 0): the torque is ``u`` at every
+    stage (the paper's numbers; the drive's branch is not entered, so the loop costs what it did without a
+    motor).  Returns (theta_w, theta_b, theta_w', theta_b', the torque that acted over the period, the drive's
+    worst saturation code): the torque that acted is the RK4-weighted mean of the stage torques,
+    ``sum (u1 + 2 u2 + 2 u3 + u4) / (6 n)`` (:func:`.drive.acted_torque`), and ``u`` itself without a motor.
+    ``m`` is the math namespace of :func:`~.model.accel` (``core.compiled`` also runs it on SIMD lanes of
+    scenarios, motorless)."""
     dt = h / n
     half, sixth = dt / 2, dt / 6
     w, b, dw, db = x
+    driven = motor[0] > 0.0
+    u1 = u2 = u3 = u4 = u
     acted = u * 0.0
     sat = 0
     for i in range(n):
         j = 2 * i   # stage times t, t + dt/2 (twice), t + dt
-        u1, c1 = stage_torque(u, dw - db, motor)
+        if driven:
+            u1, c = motor_torque(u, dw - db, motor[0], motor[1], motor[2], motor[3])
+            sat = max(sat, c)
         a1w, a1b = accel(p, D_w, D_b, (w, b, dw, db), u1, tau1[j], tau2[j], m)                 # k1
         b2, dw2, db2 = b + half * db, dw + half * a1w, db + half * a1b
-        u2, c2 = stage_torque(u, dw2 - db2, motor)
+        if driven:
+            u2, c = motor_torque(u, dw2 - db2, motor[0], motor[1], motor[2], motor[3])
+            sat = max(sat, c)
         a2w, a2b = accel(p, D_w, D_b, (w, b2, dw2, db2), u2, tau1[j + 1], tau2[j + 1], m)      # k2
         b3, dw3, db3 = b + half * db2, dw + half * a2w, db + half * a2b
-        u3, c3 = stage_torque(u, dw3 - db3, motor)
+        if driven:
+            u3, c = motor_torque(u, dw3 - db3, motor[0], motor[1], motor[2], motor[3])
+            sat = max(sat, c)
         a3w, a3b = accel(p, D_w, D_b, (w, b3, dw3, db3), u3, tau1[j + 1], tau2[j + 1], m)      # k3
         b4, dw4, db4 = b + dt * db3, dw + dt * a3w, db + dt * a3b
-        u4, c4 = stage_torque(u, dw4 - db4, motor)
+        if driven:
+            u4, c = motor_torque(u, dw4 - db4, motor[0], motor[1], motor[2], motor[3])
+            sat = max(sat, c)
+            acted = acted + (u1 + 2.0 * u2 + 2.0 * u3 + u4)
         a4w, a4b = accel(p, D_w, D_b, (w, b4, dw4, db4), u4, tau1[j + 2], tau2[j + 2], m)      # k4
         w = w + sixth * (dw + 2 * dw2 + 2 * dw3 + dw4)
         b = b + sixth * (db + 2 * db2 + 2 * db3 + db4)
         dw = dw + sixth * (a1w + 2 * a2w + 2 * a3w + a4w)
         db = db + sixth * (a1b + 2 * a2b + 2 * a3b + a4b)
-        acted = acted + (u1 + 2.0 * u2 + 2.0 * u3 + u4)
-        sat = max(sat, c1, c2, c3, c4)
-    return w, b, dw, db, (acted / (6.0 * n) if motor[0] > 0.0 else u), sat
+    return w, b, dw, db, (acted / (6.0 * n) if driven else u), sat
 
 RK4Plant = PlantSim
 PLANTS: Dict[str, type] = {"rk4": PlantSim}   # backend name -> class implementing :class:`Plant`

@@ -26,9 +26,8 @@ def test_the_compiled_functions_are_the_scalar_ones():
     # and inside the compiled RK4, accel and the motor are the compiled ones
     assert compiled._rk4_period.py_func.__globals__["rk4_driven"] is compiled._rk4_driven
     assert compiled._rk4_driven.py_func.__globals__["accel"] is compiled._accel
-    assert compiled._rk4_driven.py_func.__globals__["stage_torque"] is compiled._stage_torque
-    assert compiled._stage_torque.py_func.__code__ is plant.stage_torque.__code__
-    assert compiled._stage_torque.py_func.__globals__["motor_torque"].py_func.__code__ is drive.motor_torque.__code__
+    assert compiled._rk4_driven.py_func.__globals__["motor_torque"] is compiled._motor_torque
+    assert compiled._motor_torque.py_func.__code__ is drive.motor_torque.__code__
 
 
 def _scenarios(n, seed=5):
