@@ -238,14 +238,15 @@ def read_bag_run(bag, label: Optional[str] = None, segment: Optional[int] = None
     applied = [abs(u) for u in (states.value(s, 4) for s in stamps[1:]) if math.isfinite(u)]
     last_u = _last_torque(cmds[-1] if cmds else NAN, record.get("torque_limit"), max(applied, default=NAN))
     del applied
-    # raw sensors: the torque that acted (the encoder's effort, as joint_states' is) is u_applied too
-    table = TrajectoryTable(raw=estimates is not None, drive=estimates is not None)
+    # raw sensors or the motor: the torque that acted (joint_states' effort, the encoder's) is u_applied too
+    drive = estimates is not None or bool(record.get("motor.enabled"))
+    table = TrajectoryTable(raw=estimates is not None, drive=drive)
     nan2, nan3, nan5 = (NAN, NAN), (NAN,) * 3, (NAN,) * 5
     for i, s in enumerate(stamps):
         u = states.value(stamps[i + 1], 4) if i + 1 < len(stamps) else last_u
         extra = () if estimates is None else (*imu.get(s, nan3), *enc.get(s, nan2), *estimates.get(s, nan5)[:4])
         table.append((s - t0) * 1e-9, states.get(s), u, est.get(s, nan2), truth.get(s, nan2), extra=extra)
-        if estimates is not None:
+        if drive:
             table.set_drive(u, math.nan)   # the drive's saturation is in no message
     run = table.trajectory(label or Path(bag).name, "t_fall" in record, NAN)
     check_times(run.t, bag)
@@ -306,7 +307,8 @@ def _last_torque(cmd: float, limit: Optional[float], largest_applied: float) -> 
 def plant_record(logs: List[bytes], param_events: List[bytes]) -> dict:
     """What the plant said of its run, from a bag's ``/rosout`` (rcl_interfaces/Log) and
     ``/parameter_events`` messages (CDR): ``t_fall`` and ``fall_text`` (its "FALLEN at t = ..." line),
-    ``fall_angle``, ``duration_s`` (configured; 0 = until stopped), ``interrupted_at``, ``torque_limit``.
+    ``fall_angle``, ``duration_s`` (configured; 0 = until stopped), ``interrupted_at``, ``torque_limit``,
+    ``motor.enabled``.
     Only the keys the bag holds (a recorder that started late has none of the start)."""
     out: dict = {}
     try:
@@ -324,6 +326,8 @@ def plant_record(logs: List[bytes], param_events: List[bytes]) -> dict:
         for p in list(ev.new_parameters) + list(ev.changed_parameters):
             if p.name in ("torque_limit", "duration_s", "fall_angle") and p.value.type == 3:   # PARAMETER_DOUBLE
                 out[p.name] = float(p.value.double_value)
+            elif p.name == "motor.enabled" and p.value.type == 1:   # PARAMETER_BOOL
+                out[p.name] = bool(p.value.bool_value)
     for data in logs:
         try:
             msg = deserialize_message(data, Log)
