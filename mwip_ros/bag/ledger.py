@@ -4,8 +4,9 @@ In lockstep the plant steps on a grid, t_k = k h from 0, and every state gets ex
 answer on every topic of the loop.  So a complete recording has, for every stamp of that
 grid up to the last one recorded, one message of that stamp on each stamped topic
 (``joint_states``, ``/clock``, ``disturbance_estimate``, ``lumped_disturbance``,
-``controller_internals``) and as many ``wheel_torque_cmd`` as states; ``external_wrench``
-is whatever a user sent, ``robot_markers`` a view of the states and ``/rosout``,
+``controller_internals``; with raw sensors ``imu/data_raw`` and ``wheel_encoder`` too) and as many
+``wheel_torque_cmd`` as states; ``external_wrench`` and ``emergency_stop`` are whatever a user sent,
+``robot_markers`` a view of the states, ``driver_state`` the driver's transitions and ``/rosout``,
 ``/parameter_events``, ``/diagnostics`` ROS's own: those are not compared.  A recorder that joined
 late lacks the first stamps everywhere: the grid from 0 still shows it.  A state the plant resent
 before the graph had matched shows as a repeated stamp: it counts once.  :class:`Ledger` keeps the
@@ -23,9 +24,12 @@ __all__ = ["Ledger", "GAPS_KEY", "MAX_STAMPS"]
 
 GAPS_KEY = "mwip_ros.lockstep_gaps"    # the bag's custom_data entry that says what a lockstep recording lacks
 STAMPED = {"sensor_msgs/msg/JointState", "geometry_msgs/msg/WrenchStamped", "rosgraph_msgs/msg/Clock"}
-NOT_COMPARED = {"external_wrench", "robot_markers",     # what a user sent; a view, not the loop;
+NOT_COMPARED = {"external_wrench", "emergency_stop",     # what a user sent;
+                "robot_markers", "driver_state",          # a view, not the loop; the driver's transitions;
                 "rosout", "parameter_events", "diagnostics"}   # ROS's own topics
-OPTIONAL = {"true_joint_states"}   # published only with sensing options on: judged when it has messages
+# published only with sensing options on (the truth) or raw sensors (the IMU, the encoder): judged when they have
+# messages
+OPTIONAL = {"true_joint_states", "data_raw", "wheel_encoder"}
 MAX_STAMPS = 10_000_000     # per topic (80 MB); past it a topic is only counted
 
 

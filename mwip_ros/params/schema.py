@@ -328,7 +328,7 @@ NODE_SPECS: Dict[str, List[ParamSpec]] = {
                   unit="A"),
         ParamSpec("require_enable", "bool", False, "the driver starts disabled (zero torque) until ~/enable "
                   "(SPEC 12); false: enabled at once, as the paper's run"),
-        ParamSpec("watchdog_s", "double", 0.1, "realtime: no new wheel_torque_cmd for this long is a fault (zero "
+        ParamSpec("watchdog_s", "double", 0.5, "realtime: no new wheel_torque_cmd for this long is a fault (zero "
                   "torque, latched until ~/reset; checked every period once the first command came); lockstep: "
                   "lockstep_timeout_s is the watchdog",
                   **_positive_from(1e-3, 1e4, "a watchdog faster than a millisecond would fire between commands"),

@@ -23,7 +23,8 @@ pytestmark = pytest.mark.graph
 COLUMNS = ["t", "theta_w", "theta_b", "dtheta_w", "dtheta_b", "u", "tau_hat1", "tau_hat2", "tau_d1", "tau_d2"]
 
 
-@pytest.mark.parametrize("controller", laws.names())   # every law the package registers
+@pytest.mark.parametrize("controller", [n for n in laws.names()   # every law the package itself registers
+                                        if laws.get(n).__module__.startswith("mwip_ros.")])
 def test_lockstep_graph_equals_offline_simulator(tmp_path, controller):
     from mwip_ros.core.sim import LAWS
     law, use_obs = LAWS[controller]
@@ -138,18 +139,22 @@ def test_lockstep_graph_with_raw_sensors_and_the_estimator_equals_mwip_sim(tmp_p
     assert len(graph) == 2001
     for c in COLUMNS:   # the true state, the torque that acted, tau_hat (joined by stamp), the true tau_d
         np.testing.assert_allclose(graph[c], offline[c], rtol=0, atol=1e-9, err_msg=c)
+    # every estimate the estimator made (its own csv: all 2001) equals mwip_sim's
+    mine = read_csv(tmp_path / "estimator.csv")
+    assert len(mine) == 2001
+    for c in ("gyro", "accel_x", "accel_z", "encoder", "encoder_rate", "theta_b_hat", "dtheta_b_hat"):
+        np.testing.assert_allclose(mine[c], offline[c], rtol=0, atol=1e-9, err_msg=c)
+    # and what the loop heard of them on joint_states (this test's reader, which under load may fall more than its
+    # history behind the lockstep rate and lose the oldest: every one it heard), with the encoder's torque as effort
     est = _estimates_by_stamp(published)
-    assert len(est) == 2001
-    stamps = sorted(est)
-    np.testing.assert_allclose(np.array(stamps) * 1e-9, offline.t, rtol=0, atol=1e-12)
+    assert len(est) >= 500, len(est)
+    index = {round(t * 1e9): k for k, t in enumerate(offline.t)}
+    ks = [index[s] for s in sorted(est)]
     for i, c in enumerate(("theta_w_hat", "theta_b_hat", "dtheta_w_hat", "dtheta_b_hat")):
-        np.testing.assert_allclose([est[s][0][i] for s in stamps], offline[c], rtol=0, atol=1e-9, err_msg=c)
+        np.testing.assert_allclose([est[s][0][i] for s in sorted(est)], offline[c][ks], rtol=0, atol=1e-9, err_msg=c)
     # effort: the torque that acted over the previous period, as the encoder's driver reported it (0 at k = 0)
-    np.testing.assert_allclose([est[s][1] for s in stamps], np.r_[0.0, offline["u"][:-1]], rtol=0, atol=1e-9)
-    if (tmp_path / "estimator.csv").exists():   # the estimator's own csv, when the schema gives it one
-        mine = read_csv(tmp_path / "estimator.csv")
-        for c in ("gyro", "accel_x", "accel_z", "encoder", "encoder_rate", "theta_b_hat", "dtheta_b_hat"):
-            np.testing.assert_allclose(mine[c], offline[c], rtol=0, atol=1e-9, err_msg=c)
+    np.testing.assert_allclose([est[s][1] for s in sorted(est)], np.r_[0.0, offline["u"][:-1]][ks], rtol=0,
+                               atol=1e-9)
     e_out = logs["state_estimator"].output()
     assert logs["state_estimator"].popen.returncode == 0, e_out
     assert "estimated 2001 samples" in e_out and "unpaired dropped: 0" in e_out and "rejected: none" in e_out
@@ -329,7 +334,10 @@ def test_bad_messages_are_rejected_and_counted(tmp_path):
     with Graph(tmp_path) as g:
         obs = g.start("disturbance_observer")
         ctl = g.start("dscndo_controller")
-        plant = g.start("plant_sim", "-p", "mode:=realtime", "-p", "duration_s:=0.0", "-p", "initial.theta_b:=0.0")
+        # a NaN command faults the driver (zero torque, SPEC 12): the robot falls, and the plant must stay up to
+        # count the inputs after it (exit_on_fall: false)
+        plant = g.start("plant_sim", "-p", "mode:=realtime", "-p", "duration_s:=0.0", "-p", "initial.theta_b:=0.0",
+                        "-p", "exit_on_fall:=false")
         ctx, node = _publisher_node(g.domain_id)
         try:
             ex = SingleThreadedExecutor(context=ctx)
@@ -346,7 +354,7 @@ def test_bad_messages_are_rejected_and_counted(tmp_path):
             wr = node.create_publisher(Wrench, "external_wrench", GRAPH_QOS)
             end = time.monotonic() + 20
             while time.monotonic() < end and (js.get_subscription_count() < 3 or cmd.get_subscription_count() < 2
-                                               or est.get_subscription_count() < 3):
+                                               or est.get_subscription_count() < 3 or wr.get_subscription_count() < 1):
                 ex.spin_once(timeout_sec=0.05)
             bad_states = []
             m = joint_state(10**12, (0.0, float("nan")), (0.0, 0.0), 0.0)
@@ -390,6 +398,7 @@ def test_bad_messages_are_rejected_and_counted(tmp_path):
     rejected = plant_rejected(p)
     assert rejected["wheel_torque_cmd"] >= 2 and rejected["external_wrench"] == 1, rejected
     assert "not a std_msgs/Float64" in p
+    assert "enabled -> fault (bad_command: u = nan is not finite)" in p   # the NaN command latched a fault
     # nothing non-finite came out, and no estimate or command answered a bad state
     # (the test hears its own injected NaN estimate and NaN command: leave those out)
     est = [(s, v) for s, v in got["est"] if s != 10**12 + 4]

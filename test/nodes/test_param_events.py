@@ -30,7 +30,10 @@ def changed_bag(tmp_path_factory):
         with Injector(g.domain_id) as inj:
             states = inj.record("joint_states", JointState)
             plant = g.start("plant_sim", "-p", "duration_s:=10.0", "-p", "expected_subscribers:=5")
-            assert inj.wait(lambda: any(L.parse_joint_state(d)[0] >= CHANGE_AFTER_NS for d in states[-5:]), 120), \
+            # a state one period past CHANGE_AFTER_NS: the plant sent it only once the controller had answered the one
+            # before, so the controller's clock (the last state it answered) is at CHANGE_AFTER_NS at least
+            past = CHANGE_AFTER_NS + 5_000_000
+            assert inj.wait(lambda: any(L.parse_joint_state(d)[0] >= past for d in states[-5:]), 120), \
                 plant.output()[-2000:]
             client = inj.node.create_client(SetParameters, "/dscndo_controller/set_parameters")
             assert client.wait_for_service(timeout_sec=30)
