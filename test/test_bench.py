@@ -49,7 +49,9 @@ def test_bench_quick_prints_every_row(tmp_path):
     assert md.read_text() == r.stdout
     # the realtime rows come from 2 s runs of 400 and 2000 periods (+1: the first state)
     ticks = [int(x) for x in re.findall(r"of (\d+) periods", r.stdout)]
-    assert all(380 <= t <= 402 for t in ticks[:2]) and all(1800 <= t <= 2002 for t in ticks[2:]), ticks
+    assert len(ticks) == 5, ticks   # 200 Hz twice, 1 kHz twice, then MPC+NDO at 200 Hz beside DSCNDO
+    assert all(380 <= t <= 402 for t in ticks[:2] + ticks[4:]) and all(1800 <= t <= 2002 for t in ticks[2:4]), ticks
+    assert re.search(r"realtime 200 Hz, .*law mpc \(\+NDO\): missed deadlines", r.stdout), r.stdout
     assert "bench: lockstep run 1/1" in r.stderr  # progress goes to stderr
 
 
