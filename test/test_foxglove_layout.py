@@ -169,7 +169,7 @@ def test_the_layout_shows_what_the_readme_says(doc):
         ("/wheel_torque_cmd.data",),
         ("/disturbance_estimate.wrench.torque.x", "/lumped_disturbance.wrench.torque.x"),
         ("/disturbance_estimate.wrench.torque.y", "/lumped_disturbance.wrench.torque.y"),
-        # raw sensors (SPEC 10): the true pitch beside the state_estimator's, matched by their stamps
+        # raw sensors (docs/theory.md 6.4): the true pitch beside the state_estimator's, matched by their stamps
         (f"/true_joint_states.position[{b}]", f"/joint_states.position[{b}]"),
     }
     pitch = doc["configById"]["Plot!pitch_estimate"]["paths"]

@@ -1,4 +1,4 @@
-"""``mwip_identify``: the nominal body (m_b, I_b, l) identified from a recorded run (SPEC section 13).
+"""``mwip_identify``: the nominal body (m_b, I_b, l) identified from a recorded run (docs/theory.md 6.9).
 
     mwip_identify runs/ident.csv --out identified.yaml
     mwip_identify bags/2026-11-22_101500_ident --params config/paper.yaml --out identified.yaml --force

@@ -1,4 +1,4 @@
-"""The motor and its driver between the body and the wheel (SPEC section 11; docs/theory.md, motor), off by default.
+"""The motor and its driver between the body and the wheel (docs/theory.md 6.7), off by default.
 
 Both wheels' motors lumped, gears included, every quantity at the wheel.  The electrical model is
 quasi-static (L/R is far below the control period): at each RK4 stage the driver turns the command
@@ -37,7 +37,7 @@ SATURATION_NAMES = ("none", "current", "voltage")
 
 @dataclass(frozen=True)
 class MotorConfig:
-    """``motor.*`` of the plant (SPEC 11).  Every value must be finite and > 0 (ValueError naming the key)."""
+    """``motor.*`` of the plant (theory.md 6.7).  Every value must be finite and > 0 (ValueError naming the key)."""
 
     enabled: bool = False
     torque_constant: float = 2.0    # K_t [N m/A] at the wheel; also the back-EMF constant [V s/rad]
@@ -62,7 +62,7 @@ class MotorConfig:
 
 
 def motor_torque(u_cmd, w, K_t, R, V_max, I_max):
-    """The torque the drive puts on the wheel for the command ``u_cmd`` at relative speed ``w`` (SPEC 11).
+    """The torque the drive puts on the wheel for the command ``u_cmd`` at relative speed ``w`` (docs/theory.md 6.7).
 
     Parameters
     ----------

@@ -1,4 +1,4 @@
-"""A known excitation torque added to the controller's command, for identification (SPEC section 13); off by default.
+"""A known excitation torque added to the controller's command, for identification (docs/theory.md 6.9); off by default.
 
 ``excitation.type``:
 

@@ -1,4 +1,4 @@
-"""Identification of the body's mass, inertia and centre of gravity from a log (SPEC section 13).
+"""Identification of the body's mass, inertia and centre of gravity from a log (docs/theory.md 6.9).
 
 Eq. (1) is linear in ``theta = [m11, m12, m22, G_b, D_w, D_b]`` given the recorded motion and torque::
 

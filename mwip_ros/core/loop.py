@@ -114,12 +114,12 @@ class PlantSide:
         sc = cfg.sensing
         self.plant: Plant = make_plant(cfg)
         self.raw = None
-        if cfg.raw is not None:   # SPEC 10: the IMU and the relative encoder, delayed as the state would be
+        if cfg.raw is not None:   # docs/theory.md 6.4: the IMU and the relative encoder, delayed as the state would be
             self.raw = RawSensors.for_plant(cfg.raw, cfg.seed, cfg.h, cfg.actual.r, cfg.actual.g)
             self.raw_queue = deque(maxlen=sc.delay_periods + 1)
         self.sensors = Sensors.for_plant(sc, cfg.seed) if sc.measuring and self.raw is None else None
         self.actuator = Actuator(sc.actuator_delay_periods) if sc.actuator_delay_periods else None
-        # the driver's state machine (SPEC 12): disabled or faulted, the torque that acts is zero
+        # the driver's state machine (docs/theory.md 6.8): disabled or faulted, the torque that acts is zero
         self.safety = DriverStateMachine(require_enable=cfg.require_enable)
 
     def sense(self):

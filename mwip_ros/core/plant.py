@@ -41,9 +41,9 @@ class PlantConfig:
     torque_limit: float              # 0 = none
     fall_angle: float                # |theta_b| beyond this is a fall [rad]
     sensing: SensingConfig = SensingConfig()   # measurement noise, encoder, delays (core.sensing); off
-    raw: Optional[RawSensorConfig] = None      # sensors.model raw: the IMU and the relative encoder (SPEC 10)
-    motor: MotorConfig = MotorConfig()         # the DC motor and its driver (SPEC 11); off
-    require_enable: bool = False               # the driver starts disabled (SPEC 12)
+    raw: Optional[RawSensorConfig] = None      # sensors.model raw: the IMU and the relative encoder (theory.md 6.4)
+    motor: MotorConfig = MotorConfig()         # the DC motor and its driver (docs/theory.md 6.7); off
+    require_enable: bool = False               # the driver starts disabled (docs/theory.md 6.8)
 
     @property
     def motor_constants(self) -> Tuple[float, float, float, float]:
@@ -145,7 +145,7 @@ class PlantSim:
         return lumped_disturbance(self.cfg.nominal, self.x, ddq, u)
 
     def sample_accel(self) -> Tuple[float, float]:
-        """(theta_w'', theta_b'') at t_k^-, the instant of a raw sample (SPEC 10): eq. (1) at x_k and t_k with what
+        """(theta_w'', theta_b'') at t_k^-, the instant of a raw sample (theory 6.4): eq. (1) at x_k and t_k with what
         acted over the previous period (its torque, its D_w, its external wrench) and tau_ext(t_k); at k = 0 zero
         torque, the D_w of period 0 and no wrench."""
         c = self.cfg
@@ -195,7 +195,7 @@ def rk4_driven(p: PhysicalParams, D_w, D_b, tau1, tau2, x, u, h: float, n: int, 
     """One control period [t0, t0 + h]: classic RK4 of eq. (1) in ``n`` equal sub-steps, the command ``u`` and
     D_w held; ``tau1[j]``, ``tau2[j]`` are tau_ext at stage time j (:func:`stage_torques`).
 
-    ``motor`` = (K_t, R, V_max, I_max) of the drive (SPEC 11, :func:`.drive.motor_torque`), evaluated at every
+    ``motor`` = (K_t, R, V_max, I_max) of the drive (theory.md 6.7, :func:`.drive.motor_torque`), evaluated at every
     stage from that stage's state (w = th_w' - th_b'); :data:`NO_MOTOR` (K_t = 0): the torque is ``u`` at every
     stage (the paper's numbers; the drive's branch is not entered, so the loop costs what it did without a
     motor).  Returns (theta_w, theta_b, theta_w', theta_b', the torque that acted over the period, the drive's

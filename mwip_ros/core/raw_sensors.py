@@ -1,4 +1,4 @@
-"""Raw sensors (SPEC section 10, docs/theory.md 6.4): what a real MWIP measures instead of its state.
+"""Raw sensors (docs/theory.md 6.4): what a real MWIP measures instead of its state.
 
 An IMU rigid on the body, ``offset`` = d metres from the axle along the body axis z_b, gives the
 pitch rate (with a bias that walks) and the specific force in the body frame; an encoder on the
@@ -54,7 +54,7 @@ RAW_STREAM = 2   # the raw sensors' generator is default_rng([seed, RAW_STREAM])
 
 
 def raw_rng(seed: int) -> np.random.Generator:
-    """The raw sensors' own generator, ``numpy.random.default_rng([seed, 2])`` (SPEC 10)."""
+    """The raw sensors' own generator, ``numpy.random.default_rng([seed, 2])`` (docs/theory.md 6.4)."""
     return np.random.default_rng([int(seed), RAW_STREAM])
 
 
@@ -87,7 +87,7 @@ class RawSample(NamedTuple):
 
 
 def specific_force(x, ddq, r, d, g, m=math) -> Tuple[float, float]:
-    """(f_x, f_z): the specific force at the IMU, ``d`` metres up the body axis, in the body frame (SPEC 10).
+    """(f_x, f_z): the specific force at the IMU, ``d`` metres up the body axis, in the body frame (docs/theory.md 6.4).
 
     Parameters
     ----------

@@ -1,4 +1,4 @@
-"""The driver's state machine (SPEC section 12): what stands between a controller and the motor.
+"""The driver's state machine (docs/theory.md 6.8): what stands between a controller and the motor.
 
 States:
 

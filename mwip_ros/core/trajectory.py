@@ -27,10 +27,10 @@ TRAJECTORY_COLUMNS = ["t", "theta_w", "theta_b", "dtheta_w", "dtheta_b", "u", "t
                       "tau_d1", "tau_d2"]
 INTERNAL_COLUMNS = ["u_dsc", "u_taud", "S1", "S2", "x4_bar", "x4d"]
 COLUMNS = TRAJECTORY_COLUMNS + INTERNAL_COLUMNS
-# with raw sensors (SPEC 10): the sample of the period and the state the estimator made of it
+# with raw sensors (docs/theory.md 6.4): the sample of the period and the state the estimator made of it
 RAW_COLUMNS = ["gyro", "accel_x", "accel_z", "encoder", "encoder_rate"]
 ESTIMATE_COLUMNS = ["theta_w_hat", "theta_b_hat", "dtheta_w_hat", "dtheta_b_hat"]
-# with the motor model (SPEC 11): the torque that acted over [t_k, t_k+1) beside the command u, and the drive's
+# with the motor model (theory.md 6.7): the torque that acted over [t_k, t_k+1) beside the command u, and the drive's
 # worst saturation code of the period (core.drive: 0 none, 1 current, 2 voltage); NaN in a row no period followed
 DRIVE_COLUMNS = ["u_applied", "drive_saturation"]
 EXCITATION_COLUMNS = ["excitation"]   # the controller's excitation, included in u (identification)

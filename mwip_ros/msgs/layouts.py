@@ -11,7 +11,7 @@
 
     external_wrench       geometry_msgs/Wrench      torque.x, torque.y added to tau_ext1, tau_ext2
 
-    raw sensors (plant_sim with sensors.model: raw, SPEC 10; the state_estimator reads them):
+    raw sensors (plant_sim with sensors.model: raw, docs/theory.md 6.4; the state_estimator reads them):
     imu/data_raw          sensor_msgs/Imu           frame_id imu_link; no orientation (all 0,
                                                     orientation_covariance[0] = -1, REP-145);
                                                     angular_velocity (0, gyro, 0), linear_acceleration
@@ -56,7 +56,7 @@ LIMITS = {
     "torque": 1e6,             # u, tau_hat, tau_d, tau_ext [N m]
 }
 
-# The raw sensors' plausible readings (SPEC 10), far beyond a balancing robot (the paper's run: |gyro| < 5 rad/s,
+# The raw sensors' plausible readings (theory.md 6.4), far beyond a balancing robot (the paper's run: |gyro| < 5 rad/s,
 # |accel| < 30 m/s^2) and far inside what the estimators' arithmetic survives.  A reading beyond them is rejected
 # like a NaN.  (A missing orientation, orientation_covariance[0] = -1, is what the plant sends, and an IMU that
 # does give one is not an error: the estimators never read it.)

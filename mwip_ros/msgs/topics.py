@@ -21,7 +21,7 @@ GRAPH_TOPICS: Dict[str, str] = {
     "disturbance_estimate": "geometry_msgs/msg/WrenchStamped",
     "lumped_disturbance": "geometry_msgs/msg/WrenchStamped",
     "external_wrench": "geometry_msgs/msg/Wrench",
-    "emergency_stop": "std_msgs/msg/Bool",               # plant_sim: true latches the driver's fault (SPEC 12)
+    "emergency_stop": "std_msgs/msg/Bool",               # plant_sim: true latches the driver's fault (theory.md 6.8)
     "driver_state": "std_msgs/msg/String",               # plant_sim: each driver transition, JSON, latched
     "controller_internals": "sensor_msgs/msg/JointState",
     "/clock": "rosgraph_msgs/msg/Clock",

@@ -11,7 +11,7 @@ does and what ends a period:
   of the state published at the last tick with the newest command (zero torque once it is older
   than ``stale_command_periods``) and publishes the next state.
 
-Both feed the driver's state machine (SPEC 12, the node's ``safety``) what only the mode knows: the
+Both feed the driver's state machine (docs/theory.md 6.8, the node's ``safety``) what only the mode knows: the
 lockstep timeout is the lockstep watchdog (a ``watchdog`` fault recorded, then exit 1 as before); the
 realtime runner checks the command watchdog (``watchdog_s``) at every tick (a late tick defers the verdict
 by one tick: the controller first gets the state the plant was late with).  A bad command (non-finite or

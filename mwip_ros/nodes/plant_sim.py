@@ -24,7 +24,7 @@ never repeats it (a repeat would be taken for a resend).  The service keeps ever
 the robot, publish ``external_wrench`` (``geometry_msgs/Wrench``: ``torque.x`` adds to
 tau_ext1, ``torque.y`` to tau_ext2, until the next one; a zero wrench clears it).
 
-The driver's state machine (SPEC 12, :mod:`mwip_ros.core.safety`, one machine for the node's life: a
+The driver's state machine (docs/theory.md 6.8, :mod:`mwip_ros.core.safety`, one machine for the node's life: a
 ``~/reset`` does not re-create it): ``disabled`` (the start state with ``require_enable: true``), ``enabled``
 (the start state by default: the paper's run starts at once) and ``fault`` (latched with its reason until
 ``~/reset``); disabled or in fault the torque that acts, what the plant reports as ``effort`` and records in
@@ -47,7 +47,7 @@ fault (and ``max_tick_gap_s``, the plant's own longest tick interval meanwhile);
 :data:`~mwip_ros.msgs.qos.DRIVER_STATE_QOS`; the start state is the first
 message, reason ``start``); the summary JSON lists them (``transitions``).
 
-With ``sensors.model: raw`` (SPEC 10) the plant publishes what its sensors measure instead of a state:
+With ``sensors.model: raw`` (docs/theory.md 6.4) the plant publishes what its sensors measure instead of a state:
 per state k ``imu/data_raw`` (sensor_msgs/Imu, frame ``imu_link``, no orientation, the pitch rate and the
 specific force) and ``wheel_encoder`` (sensor_msgs/JointState ``[wheel]``: the wheel's angle relative to
 the body, its rate and the torque that acted), both stamped t_k, and the truth on ``true_joint_states``;
@@ -112,7 +112,7 @@ class PlantSimNode(Node, GracefulNodeMixin):
         self.v = declare(self, NAME, argv)
         self.cfg = plant_config(self.v)
         sc = self.cfg.sensing
-        # the driver's state machine (SPEC 12): one for the node's life, handed to every PlantSide (_initial_state)
+        # the driver's state machine (theory 6.8): one for the node's life, handed to every PlantSide (_initial_state)
         self.safety = DriverStateMachine(require_enable=self.cfg.require_enable, max_command=L.LIMITS["torque"])
         self.watchdog = Watchdog(self.v["watchdog_s"])   # realtime: fed by every good command, checked per tick
         self._watchdog_deferred = False
@@ -326,7 +326,7 @@ class PlantSimNode(Node, GracefulNodeMixin):
         self.watchdog.feed(time.monotonic())
         self.runner.on_command(u)
 
-    # --- the driver's state machine (SPEC 12) ----------------------------------------------------
+    # --- the driver's state machine (docs/theory.md 6.8) ----------------------------------------------------
     def _fault(self, reason: str, detail: str, **extra) -> None:
         self._publish_transition(self.safety.fault(self.plant.t, reason, detail), **extra)
 

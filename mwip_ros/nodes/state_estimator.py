@@ -1,4 +1,4 @@
-"""``state_estimator``: the raw IMU and encoder of a ``sensors.model: raw`` plant to the state (SPEC 10) as a node.
+"""``state_estimator``: the raw IMU and encoder of a ``sensors.model: raw`` plant to the state (theory 6.4), a node.
 
 Subscribes ``imu/data_raw`` and ``wheel_encoder``, pairs the two samples of one stamp, runs the configured
 estimator (``method``: complementary or kalman, :mod:`mwip_ros.core.estimators`; ``imu_offset`` and the

@@ -317,7 +317,7 @@ NODE_SPECS: Dict[str, List[ParamSpec]] = {
         ParamSpec("actuator.delay_periods", "integer", 0, "actuator delay: the command answering state k acts "
                   "over [t_(k+d), t_(k+d+1)); zero torque before the first one", **_count_range(0, 100000)),
         ParamSpec("motor.enabled", "bool", False, "a DC motor and its driver between the command and the wheel "
-                  "(SPEC 11: back-EMF, voltage and current limits, evaluated at every RK4 stage); false = the "
+                  "(theory.md 6.7: back-EMF, voltage and current limits, evaluated at every RK4 stage); false = the "
                   "torque is the command"),
         ParamSpec("motor.torque_constant", "double", 2.0, "K_t at the wheel [N m/A], also the back-EMF constant "
                   "[V s/rad]", **_positive(1e4)),
@@ -327,7 +327,7 @@ NODE_SPECS: Dict[str, List[ParamSpec]] = {
         ParamSpec("motor.current_limit", "double", 60.0, "the driver's current limit I_max [A]", **_positive(1e5),
                   unit="A"),
         ParamSpec("require_enable", "bool", False, "the driver starts disabled (zero torque) until ~/enable "
-                  "(SPEC 12); false: enabled at once, as the paper's run"),
+                  "(docs/theory.md 6.8); false: enabled at once, as the paper's run"),
         ParamSpec("watchdog_s", "double", 0.5, "realtime: no new wheel_torque_cmd for this long is a fault (zero "
                   "torque, latched until ~/reset; checked every period once the first command came); lockstep: "
                   "lockstep_timeout_s is the watchdog",

@@ -66,14 +66,14 @@ def excitation(v: Mapping[str, Any]) -> Optional[ExcitationConfig]:
 
 
 def motor(v: Mapping[str, Any]) -> MotorConfig:
-    """The DC motor and its driver (SPEC 11), ``motor.enabled`` false by default."""
+    """The DC motor and its driver (docs/theory.md 6.7), ``motor.enabled`` false by default."""
     return MotorConfig(enabled=v.get("motor.enabled", False), **{
         k: v.get(f"motor.{k}", getattr(MotorConfig, k))
         for k in ("torque_constant", "resistance", "voltage_limit", "current_limit")})
 
 
 def raw_sensors(v: Mapping[str, Any]) -> Optional[RawSensorConfig]:
-    """The IMU and the relative encoder of ``sensors.model: raw`` (SPEC 10); None for ``state``."""
+    """The IMU and the relative encoder of ``sensors.model: raw`` (docs/theory.md 6.4); None for ``state``."""
     if v.get("sensors.model", "state") != "raw":
         return None
     return RawSensorConfig(offset=v["sensors.imu.offset"], gyro_noise_std=v["sensors.imu.gyro_noise_std"],

@@ -1,4 +1,4 @@
-"""mwip_identify on CSVs of the real plant written in a tmp dir (SPEC 13)."""
+"""mwip_identify on CSVs of the real plant written in a tmp dir (docs/theory.md 6.9)."""
 import math
 from dataclasses import replace
 

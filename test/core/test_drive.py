@@ -1,4 +1,4 @@
-"""The motor and driver (SPEC 11): hand-computed torques at each branch, the RK4-weighted mean, the holding torque."""
+"""The motor and driver (theory.md 6.7): hand-computed torques per branch, the RK4-weighted mean, the holding torque."""
 import math
 
 import numpy as np
@@ -11,7 +11,7 @@ from mwip_ros.core.model import accel
 
 pytestmark = pytest.mark.unit
 
-K, R, V, I = 2.0, 0.15, 48.0, 60.0   # SPEC 11's example drive
+K, R, V, I = 2.0, 0.15, 48.0, 60.0   # docs/theory.md 6.7's example drive
 
 
 @pytest.mark.parametrize("u_cmd, w, u, code", [
@@ -95,6 +95,6 @@ def test_torque_warning():
     assert torque_warning(MotorConfig(), TRUE, FALL_ANGLE) is None                 # motor off
     assert torque_warning(MotorConfig(enabled=True, current_limit=1000.0), TRUE, FALL_ANGLE) is None
     a = recoverable_angle(TRUE, on.peak_torque)
-    assert 0.1745 < a < FALL_ANGLE   # the paper's initial tilt is recoverable with SPEC 11's drive
+    assert 0.1745 < a < FALL_ANGLE   # the paper's initial tilt is recoverable with docs/theory.md 6.7's drive
     assert holding_torque(TRUE, a) == pytest.approx(120.0, rel=1e-9)
     assert f"{a:.4f} rad" in text

@@ -1,4 +1,4 @@
-"""State estimators (SPEC 10): the registry, convergence with an unknown gyro bias, the kalman's bias and motion
+"""State estimators (theory.md 6.4): the registry, convergence with an unknown gyro bias, the kalman's bias and motion
 compensation, health, and the pure step compiled by numba."""
 import math
 
@@ -39,7 +39,7 @@ _SCENARIO = {}
 
 def _scenario(duration=8.0):
     """(t, true state, raw sample, true gyro bias) of the paper's DSCNDO run (fed the true state) with the realistic
-    raw sensors: the accelerations at t_k^- with the previous period's torque and D_w (SPEC 10)."""
+    raw sensors: the accelerations at t_k^- with the previous period's torque and D_w (docs/theory.md 6.4)."""
     if duration in _SCENARIO:
         return _SCENARIO[duration]
     loop = P.closed_loop(P.merged_values(P.load_param_file(P_FILE)), duration=duration, controller="dscndo")
@@ -122,7 +122,7 @@ def test_the_kalman_filter_finds_a_still_pitch_and_the_unknown_bias():
 
 
 def test_in_the_paper_s_motion_the_kalman_compensates_the_acceleration_the_complementary_cannot():
-    """The accelerometer's pitch is wrong by milliradians while the robot swings (SPEC 10); the kalman tracks the
+    """The accelerometer's pitch is wrong by milliradians while the robot swings (theory.md 6.4); the kalman tracks the
     pitch to a fraction of a milliradian without being told the bias, the complementary (bias known) only to
     milliradians."""
     rows = _scenario()

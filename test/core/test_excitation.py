@@ -1,4 +1,4 @@
-"""The identification excitation: none, chirp, prbs (SPEC 13)."""
+"""The identification excitation: none, chirp, prbs (docs/theory.md 6.9)."""
 import math
 
 import numpy as np

@@ -1,4 +1,4 @@
-"""Identification from a log (SPEC 13): the real plant, a stabilizing LQR and an excitation; the truth comes back."""
+"""Identification from a log (theory.md 6.9): the real plant, a stabilizing LQR, an excitation: the truth back."""
 import math
 from dataclasses import replace
 

@@ -97,7 +97,7 @@ def test_each_mode_is_a_runner():
 
 
 def test_a_driver_that_is_not_enabled_applies_no_torque_and_reports_none():
-    """SPEC 12: disabled (require_enable, never enabled), the torque that acts is zero, and the observer is told
+    """theory.md 6.8: disabled (require_enable, never enabled), the torque that acts is zero, and the observer is told
     zero; enabled, the command acts."""
     from dataclasses import replace
 

@@ -1,4 +1,4 @@
-"""The motor in the closed loop (SPEC 11): a run recomputed period by period from its own rows, and the observer
+"""The motor in the closed loop (theory.md 6.7): a run recomputed period by period from its own rows, and the observer
 fed the torque that acted."""
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ from mwip_ros.core.sim import simulate
 pytestmark = pytest.mark.unit
 
 CONFIG = Path(__file__).resolve().parents[2] / "config"
-MOTOR = {"motor.enabled": True}   # SPEC 11's drive: K_t 2, R 0.15, V_max 48, I_max 60 (120 N m)
+MOTOR = {"motor.enabled": True}   # docs/theory.md 6.7's drive: K_t 2, R 0.15, V_max 48, I_max 60 (120 N m)
 
 
 def _values(**over):
@@ -27,7 +27,7 @@ def _values(**over):
 
 
 def _drive(u_cmd, w, K_t=2.0, R=0.15, V_max=48.0, I_max=60.0):
-    """SPEC 11 written out here (not the code under test)."""
+    """docs/theory.md 6.7 written out here (not the code under test)."""
     i_set = min(max(u_cmd / K_t, -I_max), I_max)
     V = min(max(R * i_set + K_t * w, -V_max), V_max)
     return K_t * min(max((V - K_t * w) / R, -I_max), I_max)
@@ -69,7 +69,7 @@ def test_each_period_of_a_run_recomputed_from_its_rows():
 
 
 def test_the_observer_integrates_the_torque_that_acted_not_the_command(monkeypatch):
-    """The observer's torque at state k is row k - 1's u_applied; fed the command instead (the mistake SPEC 11
+    """The observer's torque at state k is row k - 1's u_applied; fed the command instead (the mistake theory.md 6.7
     warns of), DSCNDO winds up and falls from the paper's initial tilt."""
     seen = []
     update = DiscreteObserver.update

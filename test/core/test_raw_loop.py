@@ -1,4 +1,4 @@
-"""The raw sensors in the closed loop (SPEC 10): a run's IMU and encoder samples recomputed from its own rows."""
+"""The raw sensors in the closed loop (theory.md 6.4): a run's IMU and encoder samples recomputed from its own rows."""
 from __future__ import annotations
 
 import math
@@ -26,7 +26,7 @@ def _values(**over):
 def test_the_samples_of_a_run_recomputed_from_its_true_rows():
     """gyro, accel_x, accel_z, encoder, encoder_rate of every row from the row's true state, the previous row's
     torque, the D_w draws of default_rng(seed) and the sensor draws of default_rng([seed, 2]), written out here
-    from SPEC 10's formulas."""
+    from docs/theory.md 6.4's formulas."""
     v = _values(**{"sensors.imu.gyro_bias_walk": 0.01})   # a walk large enough to matter
     loop = P.closed_loop(v, controller="dscndo", duration=2.0)
     run = simulate(loop)

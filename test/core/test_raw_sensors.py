@@ -1,4 +1,4 @@
-"""Raw sensors (SPEC 10): the IMU's specific force in the body frame, the gyro's bias, the relative encoder,
+"""Raw sensors (docs/theory.md 6.4): the IMU's specific force in the body frame, the gyro's bias, the relative encoder,
 the draws on their own stream in blocks."""
 import math
 
@@ -107,7 +107,7 @@ def test_the_encoder_is_relative_to_the_body_quantized_and_differenced():
 def test_the_draws_in_blocks_equal_one_call_per_period_in_the_order_of_the_spec():
     n, seed = NOISE_BLOCK * 2 + 17, 11
     s = RawSensors.for_plant(NOISY, seed=seed, h=H, r=R, g=G)
-    rng = np.random.default_rng([seed, 2])   # SPEC 10: the raw sensors' own stream
+    rng = np.random.default_rng([seed, 2])   # docs/theory.md 6.4: the raw sensors' own stream
     bias = NOISY.gyro_bias
     x, ddq = (0.0, 0.1, 0.0, 0.5), (0.2, -0.3)
     f_x, f_z = _imu_expected(x, ddq, R, D, G)

@@ -1,4 +1,4 @@
-"""The driver's state machine (SPEC 12): every transition, the latch, reset, refusals, the watchdog."""
+"""The driver's state machine (docs/theory.md 6.8): every transition, the latch, reset, refusals, the watchdog."""
 import math
 
 import pytest

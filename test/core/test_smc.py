@@ -31,7 +31,7 @@ def _values(**smc_values):
 # --- the formula, computed here --------------------------------------------------------------------------------
 
 def _surface(nominal, p1, p2):
-    """c on [theta_b, theta_b', theta_w'] from the linearization written out (SPEC section 8) and Ackermann's
+    """c on [theta_b, theta_b', theta_w'] from the linearization written out (docs/theory.md 6.1) and Ackermann's
     formula for sliding surfaces: c^T = e^T (A + p1 I)(A + p2 I), e^T = [0, 0, 1] [B, AB, A^2 B]^-1."""
     m11, m12, m22, G_b = nominal.m11, nominal.m12, nominal.m22, nominal.G_b
     det = m11 * m22 - m12 ** 2

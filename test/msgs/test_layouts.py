@@ -63,7 +63,7 @@ def test_stamps_convert_both_ways_and_refuse_what_time_cannot_hold():
     assert issubclass(CdrError, MessageError) and issubclass(BadMessage, MessageError)
 
 
-# --- the raw sensors' topics (SPEC 10): imu/data_raw, wheel_encoder ---------------------------------------
+# --- the raw sensors' topics (docs/theory.md 6.4): imu/data_raw, wheel_encoder ---------------------------------------
 
 def test_imu_round_trip_says_it_has_no_orientation():
     from rclpy.serialization import deserialize_message

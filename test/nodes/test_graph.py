@@ -80,7 +80,7 @@ def test_lockstep_graph_runs_a_law_registered_by_a_test_equal_to_offline(tmp_pat
     assert "answered 401 states" in logs["dscndo_controller"].output()
 
 
-RAW = (PARAMS, PARAMS.parent / "sensors_raw_realistic.yaml")   # SPEC 10: the IMU and the encoder, an estimator
+RAW = (PARAMS, PARAMS.parent / "sensors_raw_realistic.yaml")   # theory.md 6.4: the IMU and the encoder, an estimator
 
 
 def _estimates_by_stamp(messages) -> dict:
@@ -334,7 +334,7 @@ def test_bad_messages_are_rejected_and_counted(tmp_path):
     with Graph(tmp_path) as g:
         obs = g.start("disturbance_observer")
         ctl = g.start("dscndo_controller")
-        # a NaN command faults the driver (zero torque, SPEC 12): the robot falls, and the plant must stay up to
+        # a NaN command faults the driver (zero torque, theory.md 6.8): the robot falls, and the plant must stay up to
         # count the inputs after it (exit_on_fall: false)
         plant = g.start("plant_sim", "-p", "mode:=realtime", "-p", "duration_s:=0.0", "-p", "initial.theta_b:=0.0",
                         "-p", "exit_on_fall:=false")

@@ -1,4 +1,4 @@
-"""The driver's state machine in ``plant_sim`` (SPEC 12): states, faults, services, driver_state, the watchdog.
+"""The driver's state machine in ``plant_sim`` (theory.md 6.8): states, faults, services, driver_state, the watchdog.
 
 * in-process (a PlantSimNode in this process, its callbacks called directly): every service call in every
   state is answered with core.safety's answer (f); a NaN or implausible command is a ``bad_command`` fault

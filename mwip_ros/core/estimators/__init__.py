@@ -1,6 +1,6 @@
 """State estimators: the raw sensors (:mod:`..raw_sensors`) to the state the observer and the law consume.
 
-SPEC section 10, docs/theory.md 6.4.  An estimator is a class (:class:`Estimator`) with its own
+docs/theory.md 6.4.  An estimator is a class (:class:`Estimator`) with its own
 parameters, a ``reset`` and a ``step`` from one :class:`~..raw_sensors.RawSample` to the estimated
 :class:`~..model.State`; its period is one pure function of numbers (:attr:`Estimator.pure_step`), which
 ``step`` calls and the batch simulator can compile with numba.  ``theta_b`` and ``theta_b'`` come from the

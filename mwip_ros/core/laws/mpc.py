@@ -1,7 +1,7 @@
 """The law ``mpc``: linear model predictive control with the torque limit as a hard constraint (docs/theory.md
 6.6); ``mpc_ndo`` is it with DSCNDO's observer term (composed by :mod:`.ndo`, eq. 19-21).
 
-The model is the LQR baseline's (SPEC section 8, :mod:`mwip_ros.core.lqr`): the nominal linearization at the
+The model is the LQR baseline's (docs/theory.md 6.1, :mod:`mwip_ros.core.lqr`): the nominal linearization at the
 upright, z = [theta_b, theta_b', theta_w'], held over the control period h (zero-order hold), ``z+ = A_d z + B_d u``.
 Each period, from the measured z_0, the law solves
 
@@ -46,7 +46,7 @@ command is not finite).  A solve that ends without a solution (the cap hit, a nu
 clip(-K z_0, +-u_max), the saturated LQR command, and a cold start next period.
 
 The limit.  ``mpc.u_max`` [N m] is the law's own parameter: the law does not see the plant's ``torque_limit``
-nor the motor model.  With the motor model on (SPEC section 11) the torque is capped at I_max K_t
+nor the motor model.  With the motor model on (docs/theory.md 6.7) the torque is capped at I_max K_t
 (``motor.current_limit`` times ``motor.torque_constant``: 60 A x 2 N m/A = 120 N m by default, the default of
 ``mpc.u_max``, a Segway-class drive's peak); set ``mpc.u_max`` to it.  The back-EMF's lower limit at speed
 (V_max - K_t w) K_t / R is not modelled.  ``mpc_ndo`` subtracts u_taud from the constrained u_0 (the observer term

@@ -5,7 +5,7 @@ disturbances", its drawback "chattering") as the alternative to DSC.  This is th
 regulation of an underactuated MWIP, on the states the other laws regulate, z = [theta_b, theta_b', theta_w']:
 
 * a linear sliding surface ``s = c1 theta_b + c2 theta_b' + c3 theta_w'`` designed on the nominal
-  linearized model (:func:`mwip_ros.core.lqr.linearization`, SPEC section 8) by Ackermann's formula for
+  linearized model (:func:`mwip_ros.core.lqr.linearization`, docs/theory.md 6.1) by Ackermann's formula for
   sliding surfaces (Ackermann & Utkin 1998): ``c^T = e^T (A + p1 I)(A + p2 I)``, ``e^T`` the last row of the
   inverse controllability matrix, so that on ``s = 0`` the linearized motion has the eigenvalues -p1, -p2 and
   ``c^T B = 1`` (``s`` is scaled so that ``s' = ... + u`` near the upright);
