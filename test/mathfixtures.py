@@ -43,3 +43,17 @@ def assert_batch_equals_scalar(loops, window, batch=None, scalar=None):
         for c in COLUMNS:
             np.testing.assert_allclose(b[c], s[c], rtol=0, atol=1e-9, err_msg=f"scenario {i}, {c}")
     return batch, scalar
+
+
+def assert_ndo_is_law_minus_u_taud(plain, ndo, rng, n: int = 50, each=None):
+    """``ndo`` (a law with the observer term) commands ``plain``'s u minus u_taud of eq. (20)-(21), on ``n`` random
+    states and estimates, and reports that u_taud; ``each(internals)``, when given, checks every step's internals
+    (a law's own rule)."""
+    for _ in range(n):
+        x, tau_hat = random_state(rng), tuple(rng.uniform(-30, 30, 2))
+        mc = NOM.m12 * math.cos(x[1])
+        u_taud = tau_hat[0] - mc / (NOM.m22 + mc) * tau_hat[1]              # eq. (20)-(21)
+        u, internals = ndo.step(x, tau_hat)
+        assert u == plain.step(x)[0] - u_taud and internals["u_taud"] == u_taud   # eq. (19)
+        if each is not None:
+            each(internals)

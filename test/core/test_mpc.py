@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from mathfixtures import NOM, P_FILE, RNG, assert_batch_equals_scalar, random_state
+from mathfixtures import NOM, P_FILE, RNG, assert_batch_equals_scalar, random_state, assert_ndo_is_law_minus_u_taud
 from mwip_ros import params as P
 from mwip_ros.core import compiled, laws, metrics
 from mwip_ros.core.batch import simulate_batch
@@ -105,14 +105,9 @@ def test_mpc_ndo_is_mpc_minus_the_observer_term():
     assert issubclass(cls, WithObserver) and cls.base is laws.get("mpc") and cls.observer and cls.title == "MPC+NDO"
     assert laws.variant("mpc", True) is cls and laws.variant("mpc", False) is laws.get("mpc")
     assert compiled.kernel_for(cls) is None and laws.get("mpc").pure_step is None   # the batch steps it over arrays
-    plain, ndo = _law(), _law("mpc_ndo")
-    for _ in range(50):
-        x, tau_hat = random_state(RNG), tuple(RNG.uniform(-30, 30, 2))
-        mc = NOM.m12 * math.cos(x[1])
-        u_taud = tau_hat[0] - mc / (NOM.m22 + mc) * tau_hat[1]              # eq. (20)-(21)
-        u, internals = ndo.step(x, tau_hat)
-        assert u == plain.step(x)[0] - u_taud and internals["u_taud"] == u_taud   # eq. (19)
+    def within_the_bound(internals):
         assert abs(internals["u_dsc"]) <= BASE["mpc.u_max"]
+    assert_ndo_is_law_minus_u_taud(_law(), _law("mpc_ndo"), RNG, each=within_the_bound)
 
 
 # --- the paper's scenario ---------------------------------------------------------------------------------------

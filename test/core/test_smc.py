@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from mathfixtures import NOM, P_FILE, RNG, assert_batch_equals_scalar, random_state
+from mathfixtures import NOM, P_FILE, RNG, assert_batch_equals_scalar, random_state, assert_ndo_is_law_minus_u_taud
 from mwip_ros import params as P
 from mwip_ros.core import compiled, laws, metrics
 from mwip_ros.core.batch import simulate_batch
@@ -96,13 +96,7 @@ def test_smc_ndo_is_smc_minus_the_observer_term():
     cls = laws.get("smc_ndo")
     assert issubclass(cls, WithObserver) and cls.base is laws.get("smc") and cls.observer
     assert laws.variant("smc", True) is cls and laws.variant("smc", False) is laws.get("smc")
-    plain, ndo = laws.get("smc").from_params(BASE, NOM, H), cls.from_params(BASE, NOM, H)
-    for _ in range(50):
-        x, tau_hat = random_state(RNG), tuple(RNG.uniform(-30, 30, 2))
-        mc = NOM.m12 * math.cos(x[1])
-        u_taud = tau_hat[0] - mc / (NOM.m22 + mc) * tau_hat[1]              # eq. (20)-(21)
-        u, internals = ndo.step(x, tau_hat)
-        assert u == plain.step(x)[0] - u_taud and internals["u_taud"] == u_taud   # eq. (19)
+    assert_ndo_is_law_minus_u_taud(laws.get("smc").from_params(BASE, NOM, H), cls.from_params(BASE, NOM, H), RNG)
 
 
 # --- the paper's scenario ---------------------------------------------------------------------------------------

@@ -24,11 +24,17 @@ def _merge(a: dict, b: dict) -> dict:
     return out
 
 
-def test_lockstep_graph_with_a_chirp_equals_offline(tmp_path):
-    merged = _merge(yaml.safe_load(PARAMS.read_text()), yaml.safe_load(IDENTIFY.read_text()))
+def _overlaid_for_2_s(tmp_path, overlay: Path) -> Path:
+    """The paper's file with ``overlay`` over it and the plant's duration 2 s, as one file (a node takes one)."""
+    merged = _merge(yaml.safe_load(PARAMS.read_text()), yaml.safe_load(overlay.read_text()))
     merged["plant_sim"]["ros__parameters"]["duration_s"] = 2.0
-    params = tmp_path / "identify_2s.yaml"
+    params = tmp_path / f"{overlay.stem}_2s.yaml"
     params.write_text(yaml.safe_dump(merged))
+    return params
+
+
+def test_lockstep_graph_with_a_chirp_equals_offline(tmp_path):
+    params = _overlaid_for_2_s(tmp_path, IDENTIFY)
     code, csv_path, logs = run_lockstep(tmp_path, True, params=params)
     assert code == 0, logs["plant_sim"].output()
     graph = load_run(csv_path)
@@ -47,10 +53,7 @@ MOTOR = Path(__file__).resolve().parents[2] / "config" / "motor_realistic.yaml"
 def test_lockstep_graph_with_the_drive_equals_offline_and_records_the_torque_that_acted(tmp_path):
     """The motor model on (config/motor_realistic.yaml): the plant's csv equals mwip_sim's to 1e-9, u_applied (the
     torque that acted) beside the command u, and the drive saturates in the first periods, so the two differ."""
-    merged = _merge(yaml.safe_load(PARAMS.read_text()), yaml.safe_load(MOTOR.read_text()))
-    merged["plant_sim"]["ros__parameters"]["duration_s"] = 2.0
-    params = tmp_path / "motor_2s.yaml"
-    params.write_text(yaml.safe_dump(merged))
+    params = _overlaid_for_2_s(tmp_path, MOTOR)
     code, csv_path, logs = run_lockstep(tmp_path, True, params=params)
     assert code == 0, logs["plant_sim"].output()
     assert "motor: K_t = 2 N m/A" in logs["plant_sim"].output()
