@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Set up .venv (if needed) and run the test suite: every tier (CI). Extra args go to pytest, e.g.
-# `scripts/test.sh -m unit` (the fast loop), `-m "unit or graph"`, `-m e2e`; the tiers: test/conftest.py.
+# `scripts/test.sh -m unit -n 2` (the fast loop, two workers), `-m "unit or graph"`, `-m e2e`; the tiers: test/conftest.py.
 set -euo pipefail
 
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"

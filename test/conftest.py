@@ -6,8 +6,9 @@ Every test is in exactly one tier (pytest.ini registers the markers; a module sa
 - ``unit``: no ROS middleware and no project script. In this process (no ``rclpy.init``, no ``Graph``),
   or a short-lived child process that starts no ROS node: a project CLI (``python -m mwip_ros.cli...``,
   a small local worker pool of mwip_sweep's or mwip_tune's included), ``python -c`` that imports the
-  package, ``colcon list``. Each finishes in a few seconds (``--durations``: at most about 4 s here);
-  the tier is the developer's fast loop (``scripts/test.sh -m unit``, under 2 minutes).
+  package, ``colcon list``. Each finishes in a few seconds (``--durations``: at most about 4 s here,
+  but about 14 s for the one that compiles the batch loop twice into an empty cache); the tier is the
+  developer's fast loop (``scripts/test.sh -m unit -n 2``: about 75 s on two workers, under 2 minutes on one).
 - ``graph``: brings up ROS: starts a node process (``Graph``, ``run_lockstep``, ``python -m
   mwip_ros.nodes.X``, even one that is expected to refuse its start-up or to answer ``--help``), runs
   ``mwip_ctl`` against a graph, or calls ``rclpy.init`` in the test process (a node in-process).
@@ -18,7 +19,7 @@ Every test is in exactly one tier (pytest.ini registers the markers; a module sa
   (test/cli/test_sigterm.py), or several whole sweeps in one test.
 - ``bench``: ``scripts/bench.sh``.
 
-``scripts/test.sh`` runs every tier (CI); ``scripts/test.sh -m unit`` is the fast loop,
+``scripts/test.sh`` runs every tier (CI); ``scripts/test.sh -m unit -n 2`` is the fast loop,
 ``-m "unit or graph"`` adds the ROS graphs. A test with no tier or more than one fails collection.
 """
 import os

@@ -109,10 +109,18 @@ class _Cache(FunctionCache):
     _impl_class = _CacheImpl
 
 
-def _stamped_cache(stamp: str) -> type:
-    """A :class:`_Cache` whose locators stamp with ``stamp``."""
+def _stamped_cache(stamp: str, tag: str = "") -> type:
+    """A :class:`_Cache` whose locators stamp with ``stamp``, in files of their own for ``tag``.
+
+    numba keeps one index file per function and renews it whenever the stamp differs, so two builds of one
+    function (one per lane width) under one file name would each throw the other's machine code away: a
+    process without lanes after one with lanes (the tests run both) compiled everything again."""
     locs = [type(c.__name__, (c,), {"stamp": stamp}) for c in _CacheImpl._locator_classes]
-    impl = type("_Impl", (CompileResultCacheImpl,), {"_locator_classes": locs})
+
+    def get_filename_base(self, fullname, abiflags):
+        return CompileResultCacheImpl.get_filename_base(self, f"{fullname}__{tag}" if tag else fullname, abiflags)
+    impl = type("_Impl", (CompileResultCacheImpl,), {"_locator_classes": locs,
+                                                     "get_filename_base": get_filename_base})
     return type("_StampedCache", (FunctionCache,), {"_impl_class": impl})
 
 
@@ -275,7 +283,7 @@ _DONE: dict = {}   # code object -> its compiled function
 def _cache_for(extra=()) -> type:
     paths = LOOP_SOURCES + tuple(Path(p) for p in extra if Path(p) not in LOOP_SOURCES)
     if paths not in _CACHES:
-        _CACHES[paths] = _stamped_cache(f"{_stamp_of(paths)}-lanes{simd.WIDTH}")   # a kernel per lane width
+        _CACHES[paths] = _stamped_cache(_stamp_of(paths), f"lanes{simd.WIDTH}")   # a kernel per lane width
     return _CACHES[paths]
 
 

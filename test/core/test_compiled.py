@@ -95,6 +95,26 @@ print(repr(want[3]), repr(float(got[3][0])))
 """
 
 
+def test_each_lane_width_caches_its_kernels_in_files_of_its_own(tmp_path, monkeypatch):
+    """numba renews a function's cache file whenever its stamp differs: one file for both lane widths made each
+    process of the other width compile the whole loop again (the tests run both, about 30 s a run)."""
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
+
+    def z_next_like(z, step):   # a function of a file numba can cache (this one)
+        return z + step
+    names = {}
+    for width in (0, 8):
+        monkeypatch.setattr(compiled.simd, "WIDTH", width)
+        monkeypatch.setattr(compiled, "_CACHES", {})
+        impl = compiled._cache_for()(z_next_like)._impl
+        names[width] = impl.filename_base
+        assert compiled._cache_for() is compiled._cache_for()   # one cache class per width and sources
+    assert names[0] != names[8] and "lanes0" in names[0] and "lanes8" in names[8], names
+    assert compiled._stamped_cache("s")(z_next_like)._impl.filename_base.startswith(
+        "test_compiled.test_each_lane_width_caches_its_kernels_in_files_of_its_own.<locals>.z_next_like-".replace(
+            "<", "").replace(">", ""))   # no tag: numba's own name
+
+
 @pytest.mark.parametrize("cache_dir", [None, "numba_cache"])
 def test_an_edit_to_the_equations_is_compiled_afresh(tmp_path, cache_dir):
     """numba renews a cached function only when its own file changes; the compiled RK4 period must follow an
