@@ -246,14 +246,15 @@ def lockstep(plan: Plan, work: Path) -> dict:
                          "peak_rss_mib": max(r["peak_rss_mib"]["foxglove_server"] for r in fox_runs)}}
 
 
-def realtime(plan: Plan, rate_hz: float, priority: int, work: Path, law: str = "dsc") -> dict:
+def realtime(plan: Plan, rate_hz: float, priority: int, work: Path, law: str = "dsc", run: str = "") -> dict:
     """The realtime graph at ``rate_hz``; ``law``: the controller's family (with the observer term: DSCNDO,
-    MPC+NDO), the row of a law beside DSCNDO's in the same run."""
+    MPC+NDO), the row of a law beside DSCNDO's in the same run; ``run``: which of several runs."""
     sched = f"SCHED_FIFO {priority}" if priority else "normal scheduling"
-    progress(f"realtime {rate_hz:g} Hz, {sched}, law {law}, for {plan.realtime_s:g} s ...")
+    progress(f"realtime {rate_hz:g} Hz, {sched}, law {law}{run and f' ({run})'}, for {plan.realtime_s:g} s ...")
     shared = ["-p", f"control_rate_hz:={rate_hz:.1f}", "-p", f"realtime_priority:={priority}",
               "-p", f"dscndo_controller:law:={law}"]   # the controller's own rule: the file's section cannot beat it
-    r = run_graph(work / f"realtime{rate_hz:g}_{priority}_{law}", f"realtime {rate_hz:g} Hz ({law})",
+    r = run_graph(work / f"realtime{rate_hz:g}_{priority}_{law}{run and '_' + run.replace(' ', '_')}",
+                  f"realtime {rate_hz:g} Hz ({law})",
                   ["-p", "mode:=realtime", "-p", f"duration_s:={plan.realtime_s}"], shared,
                   timeout=plan.realtime_s + 120)
     rt = r.get("realtime")
@@ -264,6 +265,20 @@ def realtime(plan: Plan, rate_hz: float, priority: int, work: Path, law: str = "
              f"max {rt['period_ms_max']:.3f} ms, missed {rt['missed_deadlines']}, "
              f"stale {rt['stale_command_substitutions']}")
     return rt
+
+
+def beside(plan: Plan, law: str, work: Path) -> List[tuple]:
+    """``law`` (+NDO) and DSCNDO at 200 Hz with normal scheduling, ``plan.repeat`` runs each, alternating (DSCNDO
+    first, then the other first, ...): a missed deadline is the machine's wake-up latency under load (SCHED_FIFO
+    removes nearly all of them), which drifts within minutes, so one run of each, minutes apart, compares the
+    drift rather than the laws.  Returns (DSCNDO's run, ``law``'s run) pairs."""
+    pairs = []
+    for i in range(plan.repeat):
+        run = f"run {i + 1} of {plan.repeat}"
+        order = ("dsc", law) if i % 2 == 0 else (law, "dsc")
+        got = {name: realtime(plan, 200.0, 0, work, law=name, run=run) for name in order}
+        pairs.append((got["dsc"], got[law]))
+    return pairs
 
 
 SLEEP_LOOP = """
@@ -429,7 +444,7 @@ def sweep_cli(plan: Plan) -> dict:
 # --- the table ------------------------------------------------------------------------------------
 
 def table(plan: Plan, quick: bool, m: Dict[str, str], floor: dict, typed: dict, ls: dict,
-          rts: Dict[tuple, dict], sleep: List[dict], off: dict) -> str:
+          rts: Dict[tuple, dict], sleep: List[dict], off: dict, pairs: Dict[str, List[tuple]]) -> str:
     rows = []
 
     def row(item, measured, target="", met=None):
@@ -450,15 +465,8 @@ def table(plan: Plan, quick: bool, m: Dict[str, str], floor: dict, typed: dict, 
         f"{fox['per_s']:,.0f} steps/s ({fox['periods']} steps in {fox['wall_s']:.2f} s wall; "
         f"{fox['per_s'] / ls['per_s']:.0%} of the rate without it; the client, subscribed to every channel, "
         f"received {fox['client']['messages']:,} messages, {fox['client']['bytes'] / 2 ** 20:.1f} MiB)")
-    dscndo_missed = rts[(200.0, 0)]["missed_deadlines"]
     for key, rt in rts.items():
-        hz, law = key[0], (key[2] if len(key) > 2 else None)
-        if law is not None:   # another law in the same run: no more missed deadlines than DSCNDO's
-            row(f"3. realtime {hz:g} Hz, {rt['sched']}, law {law} (+NDO): missed deadlines / stale commands; loop "
-                f"period p99 / max", f"{rt['missed_deadlines']} / {rt['stale_command_substitutions']} of "
-                f"{rt['ticks']} periods; {rt['period_ms_p99']:.3f} / {rt['period_ms_max']:.3f} ms",
-                f"<= DSCNDO's {dscndo_missed}", rt["missed_deadlines"] <= dscndo_missed)
-            continue
+        hz = key[0]
         target = "0 missed" if hz == 200 else ""
         row(f"3. realtime {hz:g} Hz, {plan.realtime_s:g} s, 4 processes, {rt['sched']}: loop period p50 / p99 / max",
             f"{rt['period_ms_p50']:.3f} / {rt['period_ms_p99']:.3f} / {rt['period_ms_max']:.3f} ms "
@@ -466,6 +474,15 @@ def table(plan: Plan, quick: bool, m: Dict[str, str], floor: dict, typed: dict, 
         row(f"3. realtime {hz:g} Hz, {rt['sched']}: missed deadlines / stale-command substitutions",
             f"{rt['missed_deadlines']} / {rt['stale_command_substitutions']} of {rt['ticks']} periods", target,
             (rt["missed_deadlines"] == 0) if hz == 200 else None)
+    for law, runs in pairs.items():   # another law beside DSCNDO, alternating: no more missed deadlines
+        mine, ref = ([r[j]["missed_deadlines"] for r in runs] for j in (1, 0))
+        last = runs[-1][1]
+        row(f"3. realtime 200 Hz, {last['sched']}, law {law} (+NDO) beside DSCNDO, {len(runs)} run(s) each, "
+            f"alternating: missed deadlines, median (each run); stale commands, loop period p99 / max of its last "
+            f"run", f"{statistics.median(mine):g} ({', '.join(map(str, mine))}) against DSCNDO's "
+            f"{statistics.median(ref):g} ({', '.join(map(str, ref))}); {last['stale_command_substitutions']} stale "
+            f"of {last['ticks']} periods; {last['period_ms_p99']:.3f} / {last['period_ms_max']:.3f} ms",
+            "<= DSCNDO's median", statistics.median(mine) <= statistics.median(ref))
     for f in sleep:
         row(f"3. for comparison: a bare Python loop sleeping to {f['h_ms']:g} ms deadlines beside a second one, "
             f"no ROS: worst wake-up lateness / periods > h/2 late",
@@ -530,10 +547,10 @@ def main() -> int:
         progress(f"lockstep graph: {plan.repeat} x {plan.lockstep_s:g} s ...")
         ls = lockstep(plan, work)
         rts = {(hz, prio): realtime(plan, hz, prio, work) for hz in (200.0, 1000.0) for prio in (0, RT_PRIORITY)}
-        rts[(200.0, 0, "mpc")] = realtime(plan, 200.0, 0, work, law="mpc")   # MPC+NDO beside DSCNDO (issue 25)
+        pairs = {"mpc": beside(plan, "mpc", work)}   # MPC+NDO beside DSCNDO
         sleep = os_floor(plan)
         off = offline(plan)
-    text = table(plan, args.quick, m, floor, typed, ls, rts, sleep, off)
+    text = table(plan, args.quick, m, floor, typed, ls, rts, sleep, off, pairs)
     print(text, end="")
     if args.markdown:
         Path(args.markdown).write_text(text)

@@ -51,7 +51,11 @@ def test_bench_quick_prints_every_row(tmp_path):
     ticks = [int(x) for x in re.findall(r"of (\d+) periods", r.stdout)]
     assert len(ticks) == 5, ticks   # 200 Hz twice, 1 kHz twice, then MPC+NDO at 200 Hz beside DSCNDO
     assert all(380 <= t <= 402 for t in ticks[:2] + ticks[4:]) and all(1800 <= t <= 2002 for t in ticks[2:4]), ticks
-    assert re.search(r"realtime 200 Hz, .*law mpc \(\+NDO\): missed deadlines", r.stdout), r.stdout
+    # MPC+NDO beside DSCNDO: one run of each in the quick bench, their missed deadlines side by side
+    assert re.search(r"realtime 200 Hz, .*law mpc \(\+NDO\) beside DSCNDO, 1 run\(s\) each, alternating: missed "
+                     r"deadlines.* \| (\d+) \(\1\) against DSCNDO's (\d+) \(\2\); \d+ stale of \d+ periods",
+                     r.stdout), r.stdout
+    assert r.stderr.count("law dsc (run 1 of 1)") == 1 and r.stderr.count("law mpc (run 1 of 1)") == 1, r.stderr
     assert "bench: lockstep run 1/1" in r.stderr  # progress goes to stderr
 
 

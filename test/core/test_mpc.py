@@ -212,6 +212,26 @@ def test_reset_is_a_cold_start_and_new_parameters_a_new_qp():
     assert "N = 8" in law.summary() and "|u| <= 30 N m" in law.design_text()
 
 
+def test_one_scenarios_qp_is_built_with_its_parameters_not_in_the_first_step(monkeypatch):
+    """Building the QP takes longer than a 200 Hz period: the node's law (one scenario) has it before the first
+    state, and after new parameters; a batch's QPs (one per scenario) wait for its first step."""
+    xs = _states()
+    for name in ("mpc", "mpc_ndo"):
+        law, ref = _law(name, u_max=100.0), _law(name, u_max=100.0)
+        want = [ref.step(x, (3.0, -1.0))[0] for x in xs[:10]]
+        built = []
+        monkeypatch.setattr(mpc.MpcLaw, "_scenario_qp", lambda self, i: built.append(i))
+        assert [law.step(x, (3.0, -1.0))[0] for x in xs[:10]] == want and built == []   # built beforehand
+        monkeypatch.undo()
+    law = _law(u_max=100.0)
+    law.params = mpc.MpcLaw.design(_values(u_max=30.0, horizon=8), NOM, H)
+    assert len(law._qps) == 1 and law._qps[0].N == 8            # the new QP, before any step
+    batch = mpc.MpcLaw(law.params._replace(u_max=np.array([30.0, 40.0])), NOM, H)
+    assert batch._qps is None                                    # one per scenario: on the batch's first step
+    u, _ = batch.step((np.zeros(2), np.array([0.5, 0.5]), np.zeros(2), np.zeros(2)))
+    assert len(batch._qps) == 2 and u.tolist() == [30.0, 40.0]   # each scenario on its own limit
+
+
 # --- parameters --------------------------------------------------------------------------------------------------
 
 def test_law_mpc_in_the_node_with_the_observer_is_mpc_ndo():

@@ -192,6 +192,9 @@ def _at(v, i):
     return v if np.ndim(v) == 0 else v[i]
 
 
+_NOMINAL = ("m_b", "m_w", "I_b", "I_w", "l", "r", "g")   # the nominal model's fields (one value or one per scenario)
+
+
 class MpcLaw(Law):
     """Linear MPC on the LQR baseline's ZOH model; the torque limit a hard constraint (state: the warm start)."""
 
@@ -206,7 +209,7 @@ class MpcLaw(Law):
 
     def __init__(self, params, nominal, h: float, m=math):
         self.nominal, self.h, self.m = nominal, h, m
-        self.params = params                 # the property: the QP is built on the first step
+        self.params = params                 # the property: one scenario's QP is built here
 
     @property
     def params(self) -> MpcParams:
@@ -214,9 +217,15 @@ class MpcLaw(Law):
 
     @params.setter
     def params(self, value) -> None:
-        """New parameters (the node re-designs at run time): a new QP, a cold start."""
+        """New parameters (the node re-designs at run time): a new QP, a cold start.  One scenario's QP (the
+        node's) is built now, the batch's (one per scenario) on its first step: building it (the Riccati
+        terminal weight, DAQP's workspace) takes about 7 ms, more than a 200 Hz period, and in the controller's
+        first period it made the plant apply zero torque for the first few periods of a realtime run."""
         self._params = value
-        self._qps = None                     # one _Qp per scenario, built on the next step
+        self._qps = None
+        nominal = self.nominal
+        if all(np.ndim(v) == 0 for v in (*value, *(getattr(nominal, f) for f in _NOMINAL))):
+            self._qps = [self._scenario_qp(None)]
 
     @classmethod
     def design(cls, values, nominal, h) -> MpcParams:
@@ -248,7 +257,7 @@ class MpcLaw(Law):
         p, nom = self._params, self.nominal
         if i is not None:                    # the batch: a field holds one value for all or one per scenario
             p = MpcParams(*(_at(v, i) for v in p))
-            nom = type(nom)(**{f: float(_at(getattr(nom, f), i)) for f in ("m_b", "m_w", "I_b", "I_w", "l", "r", "g")})
+            nom = type(nom)(**{f: float(_at(getattr(nom, f), i)) for f in _NOMINAL})
         qp = qp_matrices(nom, float(self.h), int(round(p.horizon)),
                          (float(p.q_theta_b), float(p.q_dtheta_b), float(p.q_dtheta_w)), float(p.r))
         return _Qp(qp, p.u_max)
