@@ -58,10 +58,11 @@ class Plan:
     lockstep_s: float
     realtime_s: float
     repeat: int
+    pairs: int   # realtime runs of another law beside DSCNDO's, each (alternating)
 
 
-FULL = Plan(pings=20000, lockstep_s=10.0, realtime_s=30.0, repeat=3)
-QUICK = Plan(pings=1000, lockstep_s=1.0, realtime_s=2.0, repeat=1)
+FULL = Plan(pings=20000, lockstep_s=10.0, realtime_s=30.0, repeat=3, pairs=5)
+QUICK = Plan(pings=1000, lockstep_s=1.0, realtime_s=2.0, repeat=1, pairs=1)
 
 
 def progress(text: str) -> None:
@@ -268,13 +269,13 @@ def realtime(plan: Plan, rate_hz: float, priority: int, work: Path, law: str = "
 
 
 def beside(plan: Plan, law: str, work: Path) -> List[tuple]:
-    """``law`` (+NDO) and DSCNDO at 200 Hz with normal scheduling, ``plan.repeat`` runs each, alternating (DSCNDO
-    first, then the other first, ...): a missed deadline is the machine's wake-up latency under load (SCHED_FIFO
-    removes nearly all of them), which drifts within minutes, so one run of each, minutes apart, compares the
-    drift rather than the laws.  Returns (DSCNDO's run, ``law``'s run) pairs."""
+    """``law`` (+NDO) and DSCNDO at 200 Hz with normal scheduling, ``plan.pairs`` runs each, alternating (DSCNDO
+    first, then the other first, ...): a missed deadline is the machine's wake-up latency under load, which
+    drifts within minutes (4 to 46 in 30 s runs of one law within ten minutes here), so one run of each,
+    minutes apart, compares the drift rather than the laws.  Returns (DSCNDO's run, ``law``'s run) pairs."""
     pairs = []
-    for i in range(plan.repeat):
-        run = f"run {i + 1} of {plan.repeat}"
+    for i in range(plan.pairs):
+        run = f"run {i + 1} of {plan.pairs}"
         order = ("dsc", law) if i % 2 == 0 else (law, "dsc")
         got = {name: realtime(plan, 200.0, 0, work, law=name, run=run) for name in order}
         pairs.append((got["dsc"], got[law]))
@@ -478,9 +479,10 @@ def table(plan: Plan, quick: bool, m: Dict[str, str], floor: dict, typed: dict, 
         mine, ref = ([r[j]["missed_deadlines"] for r in runs] for j in (1, 0))
         last = runs[-1][1]
         row(f"3. realtime 200 Hz, {last['sched']}, law {law} (+NDO) beside DSCNDO, {len(runs)} run(s) each, "
-            f"alternating: missed deadlines, median (each run); stale commands, loop period p99 / max of its last "
-            f"run", f"{statistics.median(mine):g} ({', '.join(map(str, mine))}) against DSCNDO's "
-            f"{statistics.median(ref):g} ({', '.join(map(str, ref))}); {last['stale_command_substitutions']} stale "
+            f"alternating: missed deadlines, median (each run; in all); stale commands, loop period p99 / max of its "
+            f"last run", f"{statistics.median(mine):g} ({', '.join(map(str, mine))}; {sum(mine)}) against DSCNDO's "
+            f"{statistics.median(ref):g} ({', '.join(map(str, ref))}; {sum(ref)}); "
+            f"{last['stale_command_substitutions']} stale "
             f"of {last['ticks']} periods; {last['period_ms_p99']:.3f} / {last['period_ms_max']:.3f} ms",
             "<= DSCNDO's median", statistics.median(mine) <= statistics.median(ref))
     for f in sleep:
@@ -536,7 +538,7 @@ def main() -> int:
     if args.repeat is not None:
         if args.repeat < 1:
             ap.error("--repeat must be at least 1")
-        plan = Plan(plan.pings, plan.lockstep_s, plan.realtime_s, args.repeat)
+        plan = Plan(plan.pings, plan.lockstep_s, plan.realtime_s, args.repeat, plan.pairs)
     m = machine()
     with tempfile.TemporaryDirectory(prefix="mwip_bench_") as tmp:
         work = Path(args.keep).resolve() if args.keep else Path(tmp)

@@ -1,7 +1,8 @@
 #!/usr/bin/env python3
 """The law ``mpc``'s QP: solve time per control period, measured on this machine.
 
-    scripts/bench_mpc.py [--horizon N] [--duration S] [--solvers daqp,osqp,proxqp] [--batch N] [--json FILE]
+    scripts/bench_mpc.py [--horizon N] [--duration S] [--solvers daqp,osqp,proxqp] [--paced] [--batch N]
+                         [--json FILE]
 
 1. Runs the paper's scenario (config/paper.yaml, 200 Hz) offline with the law ``mpc`` (its solver, DAQP) and keeps
    the state z = [theta_b, theta_b', theta_w'] of every period.
@@ -11,7 +12,8 @@
    [us], the iterations, and the largest |u_0 - u_0 of DAQP| [N m].  ``daqp`` is the law's own solver
    (``MpcLaw``'s workspace, as the law steps it); ``osqp`` (1.x: eps 1e-8, polishing off, adaptive rho every 25
    iterations, no time limit) and ``proxqp`` (proxsuite, dense, eps 1e-9, warm start given by hand) are measured
-   when installed, and skipped with a note when not.
+   when installed, and skipped with a note when not.  ``--paced``: idle a control period before each solve, as
+   the controller node does between states; the caches are cold at every solve, as they are there.
 3. ``--batch N``: the batch simulator (``core.batch.simulate_batch``, the numpy loop: ``mpc`` has no compiled
    form) over N copies of the scenario with different seeds, 2 s: scenario-steps/s.
 
@@ -90,11 +92,13 @@ def _proxqp(qp, u_max):
 SOLVERS = {"daqp": _daqp, "osqp": _osqp, "proxqp": _proxqp}
 
 
-def _replay(make, qp, u_max, Z):
+def _replay(make, qp, u_max, Z, pause: float = 0.0):
     solve = make(qp, u_max)
     times, us, iters = np.empty(len(Z)), np.empty(len(Z)), np.empty(len(Z), dtype=int)
     clock = time.perf_counter
     for k, z in enumerate(Z):
+        if pause:
+            time.sleep(pause)   # idle between solves, as a node at its rate: the caches go cold
         t0 = clock()
         u, it = solve(tuple(float(c) for c in z))
         times[k] = clock() - t0
@@ -121,6 +125,8 @@ def main(argv=None) -> int:
     ap.add_argument("--solvers", default="daqp,osqp,proxqp", help="comma-separated: daqp, osqp, proxqp")
     ap.add_argument("--repeat", type=int, default=3, help="replays per solver; the fastest per period is kept "
                                                           "(default 3)")
+    ap.add_argument("--paced", action="store_true", help="sleep a control period before each solve, as the "
+                                                          "controller node runs it: the cold-cache cost")
     ap.add_argument("--batch", type=int, default=0, help="also the batch simulator over N scenarios (0: no)")
     ap.add_argument("--json", default=None, help="write the numbers to this file too")
     args = ap.parse_args(argv)
@@ -139,12 +145,14 @@ def main(argv=None) -> int:
     Z = _states(values, args.duration)
     out, ref = {"horizon": law.horizon, "periods": len(Z), "law_solver": SOLVER, "solvers": {}}, None
     print(f"QP: N = {law.horizon} inputs, {law.horizon} box constraints |u_k| <= {law.u_max:g} N m; "
-          f"{len(Z)} periods, the same warm-started sequence for every solver")
+          f"{len(Z)} periods, the same warm-started sequence for every solver"
+          + ("; a control period idle before each solve (--paced)" if args.paced else ""))
     print(f"{'solver':8s} {'p50 [us]':>9s} {'p99 [us]':>9s} {'max [us]':>9s} {'iter p50':>8s} {'iter max':>8s} "
           f"{'max |du0| [N m]':>16s}")
     for name in [s.strip() for s in args.solvers.split(",") if s.strip()]:
         try:
-            runs = [_replay(SOLVERS[name], qp, law.u_max, Z) for _ in range(max(1, args.repeat))]
+            pause = P.period(values) if args.paced else 0.0
+            runs = [_replay(SOLVERS[name], qp, law.u_max, Z, pause) for _ in range(max(1, args.repeat))]
         except ImportError as exc:
             print(f"{name:8s} skipped: {exc}")
             continue

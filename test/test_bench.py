@@ -53,7 +53,7 @@ def test_bench_quick_prints_every_row(tmp_path):
     assert all(380 <= t <= 402 for t in ticks[:2] + ticks[4:]) and all(1800 <= t <= 2002 for t in ticks[2:4]), ticks
     # MPC+NDO beside DSCNDO: one run of each in the quick bench, their missed deadlines side by side
     assert re.search(r"realtime 200 Hz, .*law mpc \(\+NDO\) beside DSCNDO, 1 run\(s\) each, alternating: missed "
-                     r"deadlines.* \| (\d+) \(\1\) against DSCNDO's (\d+) \(\2\); \d+ stale of \d+ periods",
+                     r"deadlines.* \| (\d+) \(\1; \1\) against DSCNDO's (\d+) \(\2; \2\); \d+ stale of \d+ periods",
                      r.stdout), r.stdout
     assert r.stderr.count("law dsc (run 1 of 1)") == 1 and r.stderr.count("law mpc (run 1 of 1)") == 1, r.stderr
     assert "bench: lockstep run 1/1" in r.stderr  # progress goes to stderr

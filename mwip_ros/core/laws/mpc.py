@@ -71,8 +71,8 @@ __all__ = ["MpcParams", "MpcLaw", "QpMatrices", "qp_matrices", "PARAMETERS", "IT
 
 SOLVER = "daqp"
 ITER_LIMIT = 1000      # DAQP's cap on active-set changes per solve (2 N would do; never reached in the tests)
-# DAQP's sense flags by sign(lam) + 1: ACTIVE (1) | LOWER (2) for u = -u_max, none, ACTIVE for u = +u_max
-_SENSE = np.array([3, 0, 1], dtype=np.int32)
+# DAQP's sense flags: ACTIVE (1) | LOWER (2) for u = -u_max (lam < 0), ACTIVE for u = +u_max (lam > 0), else none
+_AT_LOWER, _AT_UPPER = 3, 1
 
 PARAMETERS = (
     LawParam("mpc.horizon", "integer", 20, "model predictive control: prediction horizon N [control periods] "
@@ -157,34 +157,37 @@ class _Qp:
         # DAQP may keep pointers to the arrays it is given: they are this object's, kept alive with the workspace
         self._H, self._A = qp.H.copy(), np.zeros((0, self.N))
         self._f, self._hi, self._lo = np.zeros(self.N), np.full(self.N, self.u_max), np.full(self.N, -self.u_max)
-        self._start, self._z = np.zeros(self.N, dtype=np.int32), np.zeros(3)
-        self.model.setup(self._H, self._f, self._A, self._hi, self._lo, self._start)
+        self._z = np.zeros(3)
+        self.sense = np.zeros(self.N, dtype=np.int32)               # the warm start: the active set to start from
+        self.model.setup(self._H, self._f, self._A, self._hi, self._lo, self.sense)
         self.model.settings = dict(iter_limit=ITER_LIMIT, time_limit=0.0, eps_prox=0.0)
-        self.sense = np.zeros(self.N, dtype=np.int32)
         self.iterations = 0
 
     def solve(self, theta_b: float, dtheta_b: float, dtheta_w: float) -> float:
-        """u_0 for the state z = (theta_b, theta_b', theta_w'), warm-started; the warm start moves on."""
+        """u_0 for the state z = (theta_b, theta_b', theta_w'), warm-started; the warm start moves on.
+
+        Few calls into numpy and DAQP, the rest on Python floats: in a node each call comes to cold caches
+        once a period, and there it costs tens of microseconds (the shift of the active set through numpy,
+        four calls, took 60 us a period of the 170 us the whole solve took; it takes a list now)."""
         u_max = self.u_max
         if not (math.isfinite(theta_b) and math.isfinite(dtheta_b) and math.isfinite(dtheta_w)):
             return math.nan                                          # nothing solved, the warm start stays
         z = self._z
         z[0], z[1], z[2] = theta_b, dtheta_b, dtheta_w
         np.dot(self.qp.F, z, out=self._f)                            # the QP's linear term F z_0
-        self._start[:] = self.sense
-        self.model.update(f=self._f, sense=self._start)
+        self.model.update(f=self._f, sense=self.sense)
         U, _, flag, info = self.model.solve()
         self.iterations = int(info["iterations"])
         u0 = float(U[0])
         if flag <= 0 or not math.isfinite(u0):                      # the cap, or no solution: saturated LQR
-            self.sense = np.zeros(self.N, dtype=np.int32)
+            self.sense[:] = 0
             K = self.qp.K
             return min(max(-float(K[0] * theta_b + K[1] * dtheta_b + K[2] * dtheta_w), -u_max), u_max)
         # the active set (lam < 0: the lower bound, > 0: the upper), shifted by one period
-        sense = _SENSE.take((np.sign(info["lam"]) + 1.0).astype(np.intp))
-        self.sense = np.concatenate((sense[1:], sense[-1:]))
-        if sense[0]:                                                 # u_0 on its bound: the bound exactly
-            return -u_max if sense[0] == _SENSE[0] else u_max
+        active = [(_AT_LOWER if lam < 0.0 else _AT_UPPER) if lam != 0.0 else 0 for lam in info["lam"].tolist()]
+        self.sense[:] = active[1:] + active[-1:]
+        if active[0]:                                                # u_0 on its bound: the bound exactly
+            return -u_max if active[0] == _AT_LOWER else u_max
         return min(max(u0, -u_max), u_max)                           # (DAQP's primal_tol is 1e-6)
 
 
@@ -267,7 +270,7 @@ class MpcLaw(Law):
     def reset(self) -> None:
         """A cold start: no constraint assumed active."""
         for qp in self._qps or ():
-            qp.sense = np.zeros(qp.N, dtype=np.int32)
+            qp.sense[:] = 0                  # in place: DAQP may hold the array it was set up with
 
     def snapshot(self):
         return None if self._qps is None else [qp.sense.copy() for qp in self._qps]
@@ -278,7 +281,7 @@ class MpcLaw(Law):
             return
         if self._qps is not None and len(self._qps) == len(snap):
             for qp, sense in zip(self._qps, snap):
-                qp.sense = sense.copy()
+                qp.sense[:] = sense
 
     def finite(self) -> bool:
         return True                          # the warm start is an active set: always valid
