@@ -100,6 +100,29 @@ def test_a_tight_limit_is_never_exceeded_and_the_command_is_the_qps_optimum(u_ma
     assert binding > 50                           # the limit did bind, mostly
 
 
+def test_within_the_bounds_the_unconstrained_optimum_is_taken_without_daqp_and_equals_its_solution():
+    """The unconstrained optimum -H^-1 F z_0, when within the bounds, is the QP's: DAQP is not called (its
+    iterations stay 0, no constraint active) and it equals DAQP's own solution of the same QP."""
+    import daqp
+    qp = mpc.qp_matrices(NOM, H, 20, tuple(BASE["mpc.Q"]), BASE["mpc.R"])
+    solver = mpc._Qp(qp, 60.0)
+    free = bound = 0
+    for k in range(300):
+        z = tuple(float(c) for c in _z(random_state(RNG)) * (0.05 if k % 2 else 1.0))
+        u = solver.solve(*z)
+        U_free = -np.linalg.solve(qp.H, qp.F @ np.array(z))
+        want, _, flag, _ = daqp.solve(qp.H.copy(), qp.F @ np.array(z), np.zeros((0, 20)), np.full(20, 60.0),
+                                      np.full(20, -60.0), np.zeros(20, dtype=np.int32))
+        assert flag > 0 and u == pytest.approx(want[0], abs=1e-9)
+        if np.all(np.abs(U_free) <= 60.0):
+            free += 1
+            assert solver.iterations == 0 and solver.cold and not solver.sense.any()
+        else:
+            bound += 1
+            assert solver.iterations >= 1
+    assert free > 50 and bound > 50                   # both paths taken
+
+
 def test_mpc_ndo_is_mpc_minus_the_observer_term():
     cls = laws.get("mpc_ndo")
     assert issubclass(cls, WithObserver) and cls.base is laws.get("mpc") and cls.observer and cls.title == "MPC+NDO"
