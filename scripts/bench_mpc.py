@@ -10,10 +10,12 @@
    (:func:`mwip_ros.core.laws.mpc.qp_matrices`), each warm-started from its own previous solution shifted by one
    period, and prints the solve time per period (update + solve + the warm start's bookkeeping) p50 / p99 / max
    [us], the iterations, and the largest |u_0 - u_0 of DAQP| [N m].  ``daqp`` is the law's own solver
-   (``MpcLaw``'s workspace, as the law steps it); ``osqp`` (1.x: eps 1e-8, polishing off, adaptive rho every 25
-   iterations, no time limit) and ``proxqp`` (proxsuite, dense, eps 1e-9, warm start given by hand) are measured
-   when installed, and skipped with a note when not.  ``--paced``: idle a control period before each solve, as
-   the controller node does between states; the caches are cold at every solve, as they are there.
+   (``MpcLaw``'s workspace) called in every period; ``law`` is the law as it steps: the unconstrained optimum
+   first, DAQP only where that leaves the bounds (0 iterations in the periods DAQP is not called); ``osqp``
+   (1.x: eps 1e-8, polishing off, adaptive rho every 25 iterations, no time limit) and ``proxqp`` (proxsuite,
+   dense, eps 1e-9, warm start given by hand) are measured when installed, and skipped with a note when not.
+   ``--paced``: idle a control period before each solve, as the controller node does between states; the caches
+   are cold at every solve, as they are there.
 3. ``--batch N``: the batch simulator (``core.batch.simulate_batch``, the numpy loop: ``mpc`` has no compiled
    form) over N copies of the scenario with different seeds, 2 s: scenario-steps/s.
 
@@ -36,13 +38,17 @@ def _states(values, duration: float):
     return np.column_stack([traj["theta_b"], traj["dtheta_b"], traj["dtheta_w"]])
 
 
-def _daqp(qp, u_max):
+def _daqp(qp, u_max, free_first=False):
     from mwip_ros.core.laws.mpc import _Qp
-    solver = _Qp(qp, u_max)
+    solver = _Qp(qp, u_max, free_first=free_first)
 
     def solve(z):
         return solver.solve(*z), solver.iterations
     return solve
+
+
+def _law(qp, u_max):
+    return _daqp(qp, u_max, free_first=True)
 
 
 def _osqp(qp, u_max):
@@ -89,7 +95,7 @@ def _proxqp(qp, u_max):
     return solve
 
 
-SOLVERS = {"daqp": _daqp, "osqp": _osqp, "proxqp": _proxqp}
+SOLVERS = {"daqp": _daqp, "law": _law, "osqp": _osqp, "proxqp": _proxqp}
 
 
 def _replay(make, qp, u_max, Z, pause: float = 0.0):
@@ -122,7 +128,8 @@ def main(argv=None) -> int:
                                  formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
     ap.add_argument("--horizon", type=int, default=None, help="mpc.horizon (default: the file's, 20)")
     ap.add_argument("--duration", type=float, default=10.0, help="the scenario's length [s] (default 10)")
-    ap.add_argument("--solvers", default="daqp,osqp,proxqp", help="comma-separated: daqp, osqp, proxqp")
+    ap.add_argument("--solvers", default="daqp,law,osqp,proxqp",
+                    help="comma-separated: daqp, law, osqp, proxqp (default: all)")
     ap.add_argument("--repeat", type=int, default=3, help="replays per solver; the fastest per period is kept "
                                                           "(default 3)")
     ap.add_argument("--paced", action="store_true", help="sleep a control period before each solve, as the "

@@ -121,6 +121,10 @@ def test_within_the_bounds_the_unconstrained_optimum_is_taken_without_daqp_and_e
             bound += 1
             assert solver.iterations >= 1
     assert free > 50 and bound > 50                   # both paths taken
+    every = mpc._Qp(qp, 60.0, free_first=False)      # as scripts/bench_mpc.py times DAQP: a solve in every period
+    z = (0.001, 0.0, 0.0)
+    assert every.solve(*z) == pytest.approx(solver.solve(*z), abs=1e-9) and every.iterations >= 1
+    assert solver.iterations == 0
 
 
 def test_mpc_ndo_is_mpc_minus_the_observer_term():

@@ -150,7 +150,9 @@ def qp_matrices(nominal, h: float, horizon: int, Q: Tuple[float, float, float], 
 class _Qp:
     """One scenario's QP: a DAQP workspace and the warm start (the starting active set, DAQP's sense flags)."""
 
-    def __init__(self, qp: QpMatrices, u_max: float):
+    def __init__(self, qp: QpMatrices, u_max: float, free_first: bool = True):
+        """``free_first``: try the unconstrained optimum before DAQP (the law always does; False makes every
+        period a DAQP solve, as ``scripts/bench_mpc.py`` times the solvers)."""
         import daqp
         self.qp, self.u_max, self.N = qp, float(u_max), qp.H.shape[0]
         self.model = daqp.Model()
@@ -164,7 +166,7 @@ class _Qp:
         self.iterations = 0
         # the unconstrained optimum U = -H^-1 F z_0, row by row (Python floats): where it is within the bounds it
         # is the QP's optimum (H is positive definite), with no constraint active, and DAQP is not called
-        self._free = [tuple(row) for row in (-np.linalg.solve(qp.H, qp.F)).tolist()]
+        self._free = [tuple(row) for row in (-np.linalg.solve(qp.H, qp.F)).tolist()] if free_first else []
         self.cold = True                                            # the warm start is empty (sense all 0)
 
     def solve(self, theta_b: float, dtheta_b: float, dtheta_w: float) -> float:
@@ -181,12 +183,19 @@ class _Qp:
             if abs(g0 * theta_b + g1 * dtheta_b + g2 * dtheta_w) > u_max:
                 break
         else:                                                        # within the bounds: the optimum, none active
+            if not self._free:
+                return self._daqp(theta_b, dtheta_b, dtheta_w)
             if not self.cold:
                 self.sense[:] = 0
                 self.cold = True
             self.iterations = 0
             g0, g1, g2 = self._free[0]
             return g0 * theta_b + g1 * dtheta_b + g2 * dtheta_w
+        return self._daqp(theta_b, dtheta_b, dtheta_w)
+
+    def _daqp(self, theta_b: float, dtheta_b: float, dtheta_w: float) -> float:
+        """DAQP's solve from the warm start; the warm start moves on."""
+        u_max = self.u_max
         z = self._z
         z[0], z[1], z[2] = theta_b, dtheta_b, dtheta_w
         np.dot(self.qp.F, z, out=self._f)                            # the QP's linear term F z_0
