@@ -169,6 +169,16 @@ class _Qp:
         self._free = [tuple(row) for row in (-np.linalg.solve(qp.H, qp.F)).tolist()] if free_first else []
         self.cold = True                                            # the warm start is empty (sense all 0)
 
+    def warm(self, sense=None) -> None:
+        """Set the warm start to ``sense`` (None: empty, a cold start), in place: DAQP may hold the array it was
+        set up with.  ``cold`` follows it, so a period within the bounds writes nothing when it is empty."""
+        if sense is None:
+            self.sense[:] = 0
+            self.cold = True
+        else:
+            self.sense[:] = sense
+            self.cold = not any(sense)
+
     def solve(self, theta_b: float, dtheta_b: float, dtheta_w: float) -> float:
         """u_0 for the state z = (theta_b, theta_b', theta_w'), warm-started; the warm start moves on.
 
@@ -179,18 +189,16 @@ class _Qp:
         u_max = self.u_max
         if not (math.isfinite(theta_b) and math.isfinite(dtheta_b) and math.isfinite(dtheta_w)):
             return math.nan                                          # nothing solved, the warm start stays
-        for g0, g1, g2 in self._free:
-            if abs(g0 * theta_b + g1 * dtheta_b + g2 * dtheta_w) > u_max:
-                break
-        else:                                                        # within the bounds: the optimum, none active
-            if not self._free:
-                return self._daqp(theta_b, dtheta_b, dtheta_w)
-            if not self.cold:
-                self.sense[:] = 0
-                self.cold = True
-            self.iterations = 0
-            g0, g1, g2 = self._free[0]
-            return g0 * theta_b + g1 * dtheta_b + g2 * dtheta_w
+        if self._free:
+            for g0, g1, g2 in self._free:                            # a plain loop: cheaper than all() over a generator
+                if abs(g0 * theta_b + g1 * dtheta_b + g2 * dtheta_w) > u_max:
+                    break
+            else:                                                    # within the bounds: the optimum, none active
+                if not self.cold:
+                    self.warm()
+                self.iterations = 0
+                g0, g1, g2 = self._free[0]
+                return g0 * theta_b + g1 * dtheta_b + g2 * dtheta_w
         return self._daqp(theta_b, dtheta_b, dtheta_w)
 
     def _daqp(self, theta_b: float, dtheta_b: float, dtheta_w: float) -> float:
@@ -204,14 +212,12 @@ class _Qp:
         self.iterations = int(info["iterations"])
         u0 = float(U[0])
         if flag <= 0 or not math.isfinite(u0):                      # the cap, or no solution: saturated LQR
-            self.sense[:] = 0
-            self.cold = True
+            self.warm()
             K = self.qp.K
             return min(max(-float(K[0] * theta_b + K[1] * dtheta_b + K[2] * dtheta_w), -u_max), u_max)
         # the active set (lam < 0: the lower bound, > 0: the upper), shifted by one period
         active = [(_AT_LOWER if lam < 0.0 else _AT_UPPER) if lam != 0.0 else 0 for lam in info["lam"].tolist()]
-        self.sense[:] = active[1:] + active[-1:]
-        self.cold = not any(active[1:])
+        self.warm(active[1:] + active[-1:])
         if active[0]:                                                # u_0 on its bound: the bound exactly
             return -u_max if active[0] == _AT_LOWER else u_max
         return min(max(u0, -u_max), u_max)                           # (DAQP's primal_tol is 1e-6)
@@ -296,8 +302,7 @@ class MpcLaw(Law):
     def reset(self) -> None:
         """A cold start: no constraint assumed active."""
         for qp in self._qps or ():
-            qp.sense[:] = 0                  # in place: DAQP may hold the array it was set up with
-            qp.cold = True
+            qp.warm()
 
     def snapshot(self):
         return None if self._qps is None else [qp.sense.copy() for qp in self._qps]
@@ -308,8 +313,7 @@ class MpcLaw(Law):
             return
         if self._qps is not None and len(self._qps) == len(snap):
             for qp, sense in zip(self._qps, snap):
-                qp.sense[:] = sense
-                qp.cold = not sense.any()
+                qp.warm(sense)
 
     def finite(self) -> bool:
         return True                          # the warm start is an active set: always valid
