@@ -153,7 +153,7 @@ def test_every_topic_and_message_path_exists(doc):
     assert kinds["DiagnosticSummary"] == kinds["DiagnosticStatusPanel"] == ["diagnostic_msgs/msg/DiagnosticArray"]
 
 
-def test_the_layout_shows_what_the_readme_says(doc):
+def test_the_layout_shows_what_the_docs_say(doc):
     """The robot in frame world; theta_b, theta_w', u, each tau_hat beside the true tau_d and the estimated
     pitch beside the true one (layouts.py:
     joint_states holds [wheel, body_pitch]; torque.x / torque.y are components 1 / 2)."""

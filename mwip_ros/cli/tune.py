@@ -146,7 +146,7 @@ def _tune(args, spec, holdout, knobs, bounds, base_x, runner) -> int:
             before, after = held.judge(base_x), held.judge(best_x)
         except KeyboardInterrupt:
             before = after = None
-    _write_overlay(args, spec, knobs, best_x, best_j, before, after)
+    _write_overlay(args, spec, holdout, knobs, best_x, best_j, before, after, generations, search.evaluations)
     _print_table(args, names, base_x, best_x, before, after, len(held.scenarios), holdout.seed)
     return 130 if tuner.interrupted else 0
 
@@ -164,9 +164,22 @@ def _base_values(knobs, base) -> np.ndarray:
     return np.array(out)
 
 
-def _write_overlay(args, spec, knobs, x, j, before, after) -> None:
+def settings_of(args, holdout_seed: int) -> str:
+    """The options that decide a search's result, as ``mwip_tune`` takes them (the overlay's ``# settings:`` line:
+    the command that made a file, less its spec and ``--out``; ``--holdout-seed`` resolved)."""
+    words = ["--controller", args.controller, "--tune", *args.tune, "--maxiter", str(args.maxiter),
+             "--popsize", str(args.popsize), "--seed", str(args.seed), "--weight", f"{args.weight:g}",
+             "--holdout-seed", str(holdout_seed)]
+    if args.bounds:
+        words += ["--bounds", *args.bounds]
+    return " ".join(words)
+
+
+def _write_overlay(args, spec, holdout, knobs, x, j, before, after, generations, candidates) -> None:
     lines = [f"# {PROG}: {args.controller} tuned on {args.spec} ({', '.join(k.name for k in knobs)}), "
              f"J = {j:.6g} on the search set",
+             f"# settings: {settings_of(args, holdout.seed)}",
+             f"# search: {generations} generations, {candidates} candidates",
              "# J = mean over scenarios of theta_b RMS + weight * u RMS over the window (a fall costs 1.0), "
              f"weight {args.weight:g}"]
     if after is not None:

@@ -440,7 +440,7 @@ ROS_OWN_PREFIXES = ()
 # nodes set each topic's QoS themselves (msgs.qos: lockstep must lose nothing), so such a key is refused,
 # never silently ignored.
 QOS_OVERRIDES = "qos_overrides."
-QOS_OVERRIDES_REFUSED = ("QoS overrides are not supported: mwip_ros chooses each topic's QoS itself (README: "
+QOS_OVERRIDES_REFUSED = ("QoS overrides are not supported: mwip_ros chooses each topic's QoS itself (docs/graph.md: "
                          "QoS; lockstep must lose nothing); remove the key")
 
 

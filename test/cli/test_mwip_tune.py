@@ -37,6 +37,12 @@ def test_tuning_writes_an_overlay_and_judges_it_on_the_held_out_set(tmp_path):
     doc = yaml.safe_load(out.read_text())
     tuned = doc["dscndo_controller"]["ros__parameters"]
     assert set(tuned) == {"k1", "tau4"} and "generation 3/3" in r.stderr
+    # the overlay says how it was made: the options that decide the result (the held-out seed resolved: the spec's
+    # 4 + 1), and the search's length: 4 x 2 numbers judged in the first population and in each of 3 generations
+    head = [ln for ln in out.read_text().splitlines() if ln.startswith("#")]
+    assert "# settings: --controller dscndo --tune k1 tau4 --maxiter 3 --popsize 4 --seed 1 --weight 0.0001 " \
+           "--holdout-seed 5" in head, head
+    assert "# search: 3 generations, 32 candidates" in head, head
     # the overlay goes after the base file wherever a parameter file goes
     v = P.merged_values(P.load_param_files([default_params_file(), out]))
     assert (v["k1"], v["tau4"], v["k2"]) == (tuned["k1"], tuned["tau4"], 6.0)

@@ -86,7 +86,7 @@ def test_a_six_column_csv_without_estimates_or_disturbance_is_reported(tmp_path,
 
 def test_rows_beyond_the_limit_are_refused_before_the_rest_is_read(tmp_path, capsys, monkeypatch):
     """A 10-million-row CSV once took > 3 GiB: at most MAX_ROWS (+1) rows are parsed, then one line."""
-    assert R.MAX_ROWS == 2_000_000   # 2.8 h at 200 Hz, what README states
+    assert R.MAX_ROWS == 2_000_000   # 2.8 h at 200 Hz, what docs/graph.md states (Sizes and files)
     monkeypatch.setattr(R, "MAX_ROWS", 1000)
     f = write(tmp_path / "long.csv", HEADER + "\n" + rows(*range(1001)))
     assert report.main([f, "--out", str(tmp_path / "rep")]) == 2

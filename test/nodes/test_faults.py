@@ -128,8 +128,8 @@ def test_the_plant_rejects_absurd_commands_and_cut_wrenches_and_keeps_running(tm
 
 
 def test_two_namespaced_graphs_in_one_domain_do_not_hear_each_other(tmp_path):
-    """Each graph under its namespace, /clock remapped into it (README): both runs equal the offline simulator,
-    each recorder records its own graph only."""
+    """Each graph under its namespace, /clock remapped into it (docs/graph.md, Namespaces): both runs equal the
+    offline simulator, each recorder records its own graph only."""
     import numpy as np
 
     from bagcheck import decoded_messages

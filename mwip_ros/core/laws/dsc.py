@@ -15,7 +15,7 @@ from . import Law
 
 __all__ = ["DscLaw", "INTERNALS", "dsc_step"]
 
-# controller_internals of DSC and DSCNDO (README: plot them): msgs.layouts.INTERNAL_NAMES
+# controller_internals of DSC and DSCNDO (docs/graph.md: plot them): msgs.layouts.INTERNAL_NAMES
 INTERNALS = ("S1", "S2", "x4d", "x4_bar", "u_dsc", "u_taud", "u", "x1")
 
 

@@ -1,8 +1,9 @@
-"""README's "Toward a real robot" tables are what the code computes, to their printed digits.
+"""The tables of docs/real-robot.md and the rival laws' of docs/laws.md are what the code computes, to their digits.
 
 The rival laws (ideal, and with the realistic raw sensors and drive), the estimators, the drive and the
-identification: each row is simulated offline as ``mwip_sim --params ...`` would, every printed cell compared
-with the computed value formatted with the cell's own number of decimals (strings: an edited digit fails).
+identification, each found by its header on the one page that has it (test_docs_numbers.page_with): each row is
+simulated offline as ``mwip_sim --params ...`` would, every printed cell compared with the computed value formatted
+with the cell's own number of decimals (strings: an edited digit fails).
 """
 from __future__ import annotations
 
@@ -17,11 +18,10 @@ from mwip_ros.cli import identify
 from mwip_ros.core import metrics
 from mwip_ros.core.sim import simulate
 from mwip_ros.runs import write_csv
-from test_readme_numbers import table_after
+from test_docs_numbers import page_with, table_after
 
 pytestmark = pytest.mark.unit
 
-README = REPO / "README.md"
 CONFIG = REPO / "config"
 PAPER, RAW, MOTOR, IDENT = (CONFIG / f for f in ("paper.yaml", "sensors_raw_realistic.yaml", "motor_realistic.yaml",
                                                   "identify.yaml"))
@@ -50,12 +50,13 @@ def _same(printed: str, value) -> bool:
 
 def _check(header_start: str, rows_expected, cell):
     """Every cell of the table whose header starts with ``header_start``: ``cell(row label, column) -> value``."""
-    head, rows = table_after(README.read_text(), header_start)
+    page = page_with(header_start)
+    head, rows = table_after(page.read_text(), header_start)
     assert sorted(r[0] for r in rows) == sorted(rows_expected), [r[0] for r in rows]
     bad = [(r[0], col, printed, cell(r[0], col)) for r in rows for col, printed in zip(head[1:], r[1:])
            if not _same(printed, cell(r[0], col))]
-    assert not bad, "README.md differs from what the code computes: " + "; ".join(
-        f"{row} / {col}: README {p!r}, computed {w!r}" for row, col, p, w in bad)
+    assert not bad, f"{page.name} differs from what the code computes: " + "; ".join(
+        f"{row} / {col}: printed {p!r}, computed {w!r}" for row, col, p, w in bad)
 
 
 def test_the_rival_laws_table():
@@ -122,10 +123,11 @@ def test_the_identification_table(tmp_path):
 
 def test_an_edited_cell_is_caught(monkeypatch):
     """Not vacuous: one digit changed in the estimators table is a mismatch."""
-    text = README.read_text()
+    text = page_with("| estimator | pitch error RMS").read_text()
     line = next(ln for ln in text.splitlines() if ln.startswith("| kalman, bias unknown |"))
     edited = line.replace("0.00035", "0.00036")
     assert edited != line
-    monkeypatch.setattr(Path, "read_text", lambda self, *a, **k: text.replace(line, edited))
+    read = Path.read_text
+    monkeypatch.setattr(Path, "read_text", lambda self, *a, **k: read(self, *a, **k).replace(line, edited))
     with pytest.raises(AssertionError, match="kalman, bias unknown / pitch error RMS"):
         test_the_estimators_table()
