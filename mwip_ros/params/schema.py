@@ -461,11 +461,32 @@ def spelling_hint(name: str, names: Iterable[str]) -> str:
     return f" (did you mean '{close[0]}'?)" if close else ""
 
 
+def _check_designs(values: Mapping[str, Any], nominal, source: Optional[str]) -> None:
+    """Each registered law's :meth:`~mwip_ros.core.laws.Law.design` from ``values`` (those whose parameters are
+    all in ``values``); its error becomes a ParamError naming its key (``LqrDesignError.key``), or the law's first
+    parameter when it names none (a plug-in's)."""
+    laws, h = _registry(), 1.0 / values["control_rate_hz"]
+    for family in laws.families():
+        cls = laws.lookup(family, False) or laws.lookup(family, True)
+        if not cls.param_keys or not all(k in values for k in cls.param_keys):
+            continue
+        try:
+            cls.design(values, nominal, h)
+        except (ArithmeticError, ValueError) as exc:
+            key = getattr(exc, "key", None)
+            if key is None:
+                key, reason = cls.param_keys[0], f"the law {cls.name!r} has no design from its parameters ({exc})"
+            else:
+                reason = getattr(exc, "reason", str(exc))
+            raise ParamError(key, reason, source) from None
+
+
 def check_derived(values: Mapping[str, Any], source: Optional[str] = None) -> None:
     """Raise ParamError when values that pass their own checks give a model no arithmetic can run:
-    inertia terms that are not finite or an A_bar that is not positive (eq. 2, 38); or LQR weights that
-    give no stabilizing gain for the nominal model (checked whatever the law, so a switch to lqr at run
-    time cannot fail).  The inertia terms are the model's (:class:`mwip_ros.core.model.PhysicalParams`)."""
+    inertia terms that are not finite or an A_bar that is not positive (eq. 2, 38); or a law's parameters
+    that give it no design (LQR or MPC weights with no stabilizing gain for the nominal model, ...: every
+    registered law's design, whatever the law in use, so a switch of law at run time cannot fail).  The
+    inertia terms are the model's (:class:`mwip_ros.core.model.PhysicalParams`)."""
     from mwip_ros.core.model import PhysicalParams
 
     for prefix in ("nominal", "actual"):
@@ -493,13 +514,8 @@ def check_derived(values: Mapping[str, Any], source: Optional[str] = None) -> No
                                                       f"{NOISE_SIGMAS:g} standard deviations passes |theta_b| <= pi, "
                                                       f"which the observer refuses; at most {most:.4g} rad with this "
                                                       f"fall_angle", source)
-    if "lqr.Q" in values and "nominal.m_b" in values:
-        from mwip_ros.core.lqr import LqrDesignError, lqr_gain
-        try:
-            lqr_gain(PhysicalParams(**{k: values[f"nominal.{k}"] for k in PAPER_NOMINAL}),
-                     1.0 / values["control_rate_hz"], values["lqr.Q"], values["lqr.R"])
-        except LqrDesignError as exc:
-            raise ParamError(exc.key, exc.reason, source) from None
+    if "nominal.m_b" in values and "control_rate_hz" in values:
+        _check_designs(values, PhysicalParams(**{k: values[f"nominal.{k}"] for k in PAPER_NOMINAL}), source)
     if isinstance(values.get("law"), str) and isinstance(values.get("use_observer"), bool):
         laws = _registry()   # a law registered without its observer variant cannot take use_observer: true
         if values["law"] in laws.families() and laws.lookup(values["law"], values["use_observer"]) is None:

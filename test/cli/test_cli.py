@@ -125,3 +125,18 @@ def test_mwip_sim_checks_its_outputs_before_simulating_and_overwrites_only_with_
     r = run("mwip_ros.cli.sim", *short, "--csv", str(old_csv), "--force")
     assert r.returncode == 0, r.stderr
     assert len(read_csv(old_csv)) == 101
+
+
+@pytest.mark.parametrize("Q, words", [("[-1.0, 10.0, 1.0]", ">= 0"), ("[0.0, 0.0, 0.0]", "stabilize"),
+                                      ("[1.0e300, 10.0, 1.0]", "<= 1e+12")])
+def test_a_bad_mpc_state_weight_is_one_line_naming_the_key_and_exit_2_whatever_the_law(tmp_path, Q, words):
+    """mpc.Q is checked at start-up by every registered law's design (as lqr.Q is), not when MPC first steps:
+    old code ended in exit 1 with an LqrDesignError traceback (--controller mpc) or ran on (--controller dsc)."""
+    f = tmp_path / "q.yaml"
+    f.write_text(default_params_file().read_text().replace("      Q: [100.0, 10.0, 1.0]  # weights on theta_b, "
+                                                           "theta_b', theta_w' (the diagonal, >= 0), as lqr.Q",
+                                                           f"      Q: {Q}"))
+    assert Q in f.read_text()
+    for law in ("mpc", "dsc"):
+        r = run("mwip_ros.cli.sim", "--params", str(f), "--controller", law, "--duration", "0.1", "-q")
+        _one_error_line(r, "'mpc.Q'", words)

@@ -63,13 +63,14 @@ SOLVER = "daqp"
 ITER_LIMIT = 1000      # DAQP's cap on active-set changes per solve (2 N would do)
 # DAQP's sense flags: ACTIVE (1) | LOWER (2) for u = -u_max (lam < 0), ACTIVE for u = +u_max (lam > 0), else none
 _AT_LOWER, _AT_UPPER = 3, 1
+Q_MAX = 1e12           # mpc.Q's entries at most this (lqr.Q's bound): beyond, the Riccati solution overflows
 
 PARAMETERS = (
     LawParam("mpc.horizon", "integer", 20, "model predictive control: prediction horizon N [control periods] "
              "(the QP has N inputs; at 200 Hz, N = 20 looks 0.1 s ahead, the terminal weight covers the rest)",
              lo=1, hi=200),
     LawParam("mpc.Q", "double_array", [100.0, 10.0, 1.0], "model predictive control: state weight on [theta_b, "
-             "theta_b', theta_w'], the diagonal (3 entries, >= 0); the terminal weight is the Riccati solution of "
+             "theta_b', theta_w'], the diagonal (3 entries, 0 .. 1e12); the terminal weight is the Riccati solution of "
              "mpc.Q and mpc.R (as lqr.Q)"),
     LawParam("mpc.R", "double", 0.01, "model predictive control: input weight R (> 0), as lqr.R",
              lo=1e-6, hi=1e6),
@@ -267,8 +268,8 @@ class MpcLaw(Law):
         Q = values["mpc.Q"]
         if len(Q) != 3:
             raise _design_error("mpc.Q", f"give the diagonal (3 entries), got {len(Q)} entries")
-        if not all(isinstance(q, (int, float)) and math.isfinite(q) and q >= 0 for q in Q):
-            raise _design_error("mpc.Q", f"entries must be finite and >= 0, got {list(Q)}")
+        if not all(isinstance(q, (int, float)) and math.isfinite(q) and 0 <= q <= Q_MAX for q in Q):
+            raise _design_error("mpc.Q", f"entries must be >= 0 and <= {Q_MAX:g} (as lqr.Q's), got {list(Q)}")
         N, R, u_max = values["mpc.horizon"], values["mpc.R"], values["mpc.u_max"]
         if not (isinstance(N, (int, np.integer)) and not isinstance(N, bool) and N >= 1):
             raise _design_error("mpc.horizon", f"must be an integer >= 1, got {N!r}")
