@@ -14,7 +14,6 @@ from mwip_ros.cli.outputs import refuse_existing
 from mwip_ros.cli.theorem import theorem_report
 from mwip_ros.core import budget, metrics
 from mwip_ros.core import laws
-from mwip_ros.core.drive import torque_warning
 from mwip_ros.core.sim import simulate
 from mwip_ros.params.paths import default_params_file
 from mwip_ros.runs import write_csv
@@ -126,8 +125,7 @@ def _main(argv=None) -> int:
         reason = refuse_existing(path, args.force, option)
         if reason:
             return _fail(reason)
-    warning = torque_warning(P.motor(values), P.physical(values, "actual"), values["fall_angle"])
-    if warning:   # allowed (a weak drive is worth simulating), but said with the figure
+    for warning in P.typed.limit_warnings(values, names):   # allowed (a weak drive is worth simulating), but said
         print(f"mwip_sim: warning: {warning}", file=sys.stderr)
     if not args.quiet:
         print(theorem_report(values), file=sys.stderr)

@@ -200,12 +200,22 @@ def _type_error(kind: str, v: Any) -> Optional[str]:
     raise AssertionError(kind)
 
 
+# The robot's physical values: each > 0 with a floor (a value below it is no robot of this kind, and a model built
+# from it has inertia terms that round away: test/params/test_physical_ranges.py runs the model at every range end).
+BODY_FLOORS = {"m_b": (1e-3, "a body lighter than a gram"), "m_w": (1e-3, "wheels lighter than a gram"),
+               "I_b": (1e-6, "a body inertia below 1e-6 kg m^2"), "I_w": (1e-6, "a wheel inertia below 1e-6 kg m^2"),
+               "l": (1e-3, "a centre of gravity within a millimetre of the axle"),
+               "r": (1e-3, "a wheel radius below a millimetre"), "g": (1e-3, "gravity below 1e-3 m/s^2")}
+
+
 def _body(prefix: str, values: Mapping[str, float], what: str) -> List[ParamSpec]:
     units = {"m_b": "kg", "m_w": "kg", "I_b": "kg m^2", "I_w": "kg m^2", "l": "m", "r": "m", "g": "m/s^2"}
     text = {"m_b": "body mass", "m_w": "wheel mass", "I_b": "body moment of inertia",
             "I_w": "wheel moment of inertia", "l": "axle to body centre of gravity",
             "r": "wheel radius", "g": "gravitational acceleration"}
-    return [ParamSpec(f"{prefix}.{k}", "double", v, f"{what} {text[k]} [{units[k]}]", **_positive(), unit=units[k])
+    return [ParamSpec(f"{prefix}.{k}", "double", v, f"{what} {text[k]} [{units[k]}]",
+                      **_positive_from(BODY_FLOORS[k][0], 1e6, f"{BODY_FLOORS[k][1]} is no robot of this kind"),
+                      unit=units[k])
             for k, v in values.items()]
 
 
@@ -320,12 +330,15 @@ NODE_SPECS: Dict[str, List[ParamSpec]] = {
                   "(theory.md 6.7: back-EMF, voltage and current limits, evaluated at every RK4 stage); false = the "
                   "torque is the command"),
         ParamSpec("motor.torque_constant", "double", 2.0, "K_t at the wheel [N m/A], also the back-EMF constant "
-                  "[V s/rad]", **_positive(1e4)),
-        ParamSpec("motor.resistance", "double", 0.15, "winding resistance R [ohm]", **_positive(1e4), unit="ohm"),
+                  "[V s/rad]", **_positive_from(1e-3, 1e4, "a motor of less than 1 mN m per ampere"),
+                  unit="N m/A"),
+        ParamSpec("motor.resistance", "double", 0.15, "winding resistance R [ohm]",
+                  **_positive_from(1e-3, 1e4, "a winding below a milliohm: R i* rounds away against the back-EMF "
+                                   "and the drive gives no torque at speed"), unit="ohm"),
         ParamSpec("motor.voltage_limit", "double", 48.0, "the driver's voltage limit V_max (battery) [V]",
-                  **_positive(1e5), unit="V"),
-        ParamSpec("motor.current_limit", "double", 60.0, "the driver's current limit I_max [A]", **_positive(1e5),
-                  unit="A"),
+                  **_positive_from(0.1, 1e5, "a battery below 0.1 V"), unit="V"),
+        ParamSpec("motor.current_limit", "double", 60.0, "the driver's current limit I_max [A]",
+                  **_positive_from(1e-3, 1e5, "a current limit below a milliampere"), unit="A"),
         ParamSpec("require_enable", "bool", False, "the driver starts disabled (zero torque) until ~/enable "
                   "(docs/theory.md 6.8); false: enabled at once, as the paper's run"),
         ParamSpec("watchdog_s", "double", 0.5, "realtime: no new wheel_torque_cmd for this long is a fault (zero "
