@@ -514,6 +514,13 @@ def check_derived(values: Mapping[str, Any], source: Optional[str] = None) -> No
     if values.get("excitation.f0", 0.0) > values.get("excitation.f1", math.inf):
         raise ParamError("excitation.f0", f"must be <= excitation.f1 ({values['excitation.f1']:g} Hz), got "
                                           f"{values['excitation.f0']:g}", source)
+    if values.get("excitation.type", "none") != "none" and "control_rate_hz" in values:
+        nyquist = values["control_rate_hz"] / 2.0   # the command is sampled at the control rate (held over h)
+        if not values["excitation.f1"] < nyquist:
+            raise ParamError("excitation.f1", f"{values['excitation.f1']:g} Hz is at or above the Nyquist frequency "
+                                              f"control_rate_hz / 2 = {nyquist:g} Hz: the {values['excitation.type']} "
+                                              f"would come out aliased; keep excitation.f0 <= excitation.f1 below "
+                                              f"it", source)
     if values.get("sensors.model") == "raw":
         for ch in ("theta_w", "theta_b", "dtheta_w", "dtheta_b"):
             if values.get(f"sensors.noise_std.{ch}"):
