@@ -125,13 +125,16 @@ def _main(argv=None) -> int:
         reason = refuse_existing(path, args.force, option)
         if reason:
             return _fail(reason)
-    for warning in P.typed.limit_warnings(values, names):   # allowed (a weak drive is worth simulating), but said
+    first = {laws.get(n).family: n for n in reversed(names)}   # a law per family: lqr, lqr_ndo share K
+    designed = [laws.get(n).from_params(values, P.physical(values, "nominal"), P.period(values))
+                for n in reversed(list(first.values()))]
+    # allowed (a weak drive is worth simulating, a chattering law too), but said with the figures
+    for warning in [*P.typed.limit_warnings(values, names), *(w for law in designed for w in law.warnings())]:
         print(f"mwip_sim: warning: {warning}", file=sys.stderr)
     if not args.quiet:
         print(theorem_report(values), file=sys.stderr)
-        first = {laws.get(n).family: n for n in reversed(names)}   # a law per family: lqr, lqr_ndo share K
-        for n in reversed(list(first.values())):
-            text = laws.get(n).from_params(values, P.physical(values, "nominal"), P.period(values)).design_text(values)
+        for law in designed:
+            text = law.design_text(values)
             if text:
                 print(text, file=sys.stderr)
     runs, written = [], []
