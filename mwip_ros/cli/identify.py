@@ -171,7 +171,8 @@ def main(argv=None) -> int:
 
 
 def _print(args, res: ID.IdentificationResult, torque: str, known) -> None:
-    print(f"{args.log}: {res.samples} periods, torque from column {torque!r}; known m_w = {known.m_w:g} kg, "
+    once = f" ({res.duplicates} repeated row(s) counted once)" if res.duplicates else ""
+    print(f"{args.log}: {res.samples} periods{once}, torque from column {torque!r}; known m_w = {known.m_w:g} kg, "
           f"I_w = {known.I_w:g} kg m^2, r = {known.r:g} m, g = {known.g:g} m/s^2")
     rows = [("m_b", res.m_b, "kg"), ("I_b", res.I_b, "kg m^2"), ("l", res.l, "m"),
             ("m11", res.m11, "kg m^2"), ("m12", res.m12, "kg m^2"), ("m22", res.m22, "kg m^2"),

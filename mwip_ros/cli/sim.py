@@ -14,7 +14,6 @@ from mwip_ros.cli.outputs import refuse_existing
 from mwip_ros.cli.theorem import theorem_report
 from mwip_ros.core import budget, metrics
 from mwip_ros.core import laws
-from mwip_ros.core.drive import torque_warning
 from mwip_ros.core.sim import simulate
 from mwip_ros.params.paths import default_params_file
 from mwip_ros.runs import write_csv
@@ -126,14 +125,16 @@ def _main(argv=None) -> int:
         reason = refuse_existing(path, args.force, option)
         if reason:
             return _fail(reason)
-    warning = torque_warning(P.motor(values), P.physical(values, "actual"), values["fall_angle"])
-    if warning:   # allowed (a weak drive is worth simulating), but said with the figure
+    first = {laws.get(n).family: n for n in reversed(names)}   # a law per family: lqr, lqr_ndo share K
+    designed = [laws.get(n).from_params(values, P.physical(values, "nominal"), P.period(values))
+                for n in reversed(list(first.values()))]
+    # allowed (a weak drive is worth simulating, a chattering law too), but said with the figures
+    for warning in [*P.typed.limit_warnings(values, names), *(w for law in designed for w in law.warnings())]:
         print(f"mwip_sim: warning: {warning}", file=sys.stderr)
     if not args.quiet:
         print(theorem_report(values), file=sys.stderr)
-        first = {laws.get(n).family: n for n in reversed(names)}   # a law per family: lqr, lqr_ndo share K
-        for n in reversed(list(first.values())):
-            text = laws.get(n).from_params(values, P.physical(values, "nominal"), P.period(values)).design_text(values)
+        for law in designed:
+            text = law.design_text(values)
             if text:
                 print(text, file=sys.stderr)
     runs, written = [], []

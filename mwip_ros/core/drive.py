@@ -15,8 +15,8 @@ is a pure function of floats (numba compiles it as it is: ``core.compiled`` may 
 and says which limit bound (:data:`SAT_NONE`, :data:`SAT_CURRENT`, :data:`SAT_VOLTAGE`), so the
 metrics can count the time the drive spent saturated.  :func:`acted_torque` is the RK4-weighted mean of
 a period's stage torques, the torque that acted over the period (what the plant reports as ``effort``
-and the observer must integrate).  :func:`holding_torque` and :func:`torque_warning` tell when the
-drive is too weak for the robot it moves.
+and the observer must integrate).  :func:`holding_torque`, :func:`limit_warning` and :func:`torque_warning`
+tell when the drive (or any torque limit) is too weak for the robot it moves.
 """
 from __future__ import annotations
 
@@ -27,7 +27,7 @@ from typing import Optional, Sequence, Tuple
 from .model import PhysicalParams
 
 __all__ = ["MotorConfig", "SAT_NONE", "SAT_CURRENT", "SAT_VOLTAGE", "SATURATION_NAMES", "motor_torque",
-           "acted_torque", "holding_torque", "recoverable_angle", "torque_warning"]
+           "acted_torque", "holding_torque", "recoverable_angle", "limit_warning", "torque_warning"]
 
 SAT_NONE = 0      # the torque is the command
 SAT_CURRENT = 1   # the command asks more than I_max K_t: the set-point is clipped, the voltage suffices
@@ -53,8 +53,9 @@ class MotorConfig:
 
     @property
     def peak_torque(self) -> float:
-        """I_max K_t [N m]: the most the drive gives (at low speed)."""
-        return self.current_limit * self.torque_constant
+        """The most the drive gives [N m], at rest: K_t min(I_max, V_max / R) (:func:`motor_torque` at w = 0;
+        I_max K_t unless the battery cannot drive I_max through the winding)."""
+        return self.torque_constant * min(self.current_limit, self.voltage_limit / self.resistance)
 
     def torque(self, u_cmd: float, w: float) -> Tuple[float, int]:
         """:func:`motor_torque` with this drive's constants."""
@@ -156,18 +157,24 @@ def recoverable_angle(p: PhysicalParams, torque: float) -> float:
     return lo
 
 
+def limit_warning(what: str, limit: float, p: PhysicalParams, angle: float, where: str) -> Optional[str]:
+    """A one-line warning when the torque ``limit`` (``what``: the words naming it) is below :func:`holding_torque`
+    of the robot ``p`` at the tilt ``angle`` (``where``: the words naming it), with both figures and the tilt beyond
+    which the limit cannot turn the body back; None when it is not.  At rest: a bound, not a promise."""
+    need = holding_torque(p, angle)
+    if limit >= need:
+        return None
+    a = recoverable_angle(p, limit)
+    return (f"{what} = {limit:.4g} N m is below the {need:.4g} N m that holds the body at {where} (at rest, G_b sin(a) "
+            f"m11 / (m11 + m12 cos a), G_b = {p.G_b:.4g} N m): beyond |theta_b| = {a:.4f} rad "
+            f"({math.degrees(a):.1f} deg) it cannot turn the body back")
+
+
 def torque_warning(motor: MotorConfig, p: PhysicalParams, fall_angle: float) -> Optional[str]:
-    """A one-line warning when the drive's peak torque I_max K_t is below :func:`holding_torque` at the fall
-    angle (the robot ``p``: the true one for the plant), with both figures and the tilt beyond which the drive
-    cannot turn the body back; None when it is not (or the motor is off).  The peak is at rest: the back-EMF
-    lowers it at speed, so the figure is a bound, not a promise."""
+    """:func:`limit_warning` of the drive's peak torque (:attr:`MotorConfig.peak_torque`) at the fall angle (the
+    robot ``p``: the true one for the plant); None when the motor is off.  The back-EMF lowers the peak at speed."""
     if not motor.enabled:
         return None
-    peak, need = motor.peak_torque, holding_torque(p, fall_angle)
-    if peak >= need:
-        return None
-    a = recoverable_angle(p, peak)
-    return (f"motor: the drive's peak torque I_max K_t = {motor.current_limit:g} A x {motor.torque_constant:g} N m/A "
-            f"= {peak:.4g} N m is below the {need:.4g} N m that holds the body at fall_angle {fall_angle:g} rad "
-            f"(at rest, G_b sin(a) m11 / (m11 + m12 cos a), G_b = {p.G_b:.4g} N m): beyond |theta_b| = {a:.4f} rad "
-            f"({math.degrees(a):.1f} deg) it cannot turn the body back")
+    amps = min(motor.current_limit, motor.voltage_limit / motor.resistance)
+    return limit_warning(f"motor: the drive's peak torque K_t min(I_max, V_max / R) = {motor.torque_constant:g} N m/A "
+                         f"x {amps:.4g} A", motor.peak_torque, p, fall_angle, f"fall_angle {fall_angle:g} rad")

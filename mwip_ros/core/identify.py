@@ -45,6 +45,11 @@ so instead of overstating the precision.  95 % intervals are +-1.96 standard dev
 their covariance propagated by the **delta method** (the Jacobian of these maps at the estimate), and
 ``G_b = m_b g l = g m12 / r`` compared with the fitted ``G_b`` as a check.
 
+**Repeated periods** count once: a row whose time an earlier row has (a row written twice, a log appended
+to itself) is dropped when its values are the same, and refused (``bad_data``) when they differ; else the
+fit would take one period for two independent samples and its interval would shrink (with every row twice,
+the stretches between the zero-length periods are one period long: no filter, no autocorrelation inflation).
+
 **Refusals** (:class:`IdentificationError`, its ``cause`` one of ``too_short``, ``not_excited``,
 ``unresolved``, ``unphysical``, ``bad_data``): fewer than ``min_samples`` periods; a condition number of
 the regressor (its columns scaled to unit norm, after weighting) above ``max_condition`` or a regressor
@@ -137,6 +142,7 @@ class IdentificationResult:
     inflation: float       # the autocorrelation factor the covariance was multiplied by
     known: PhysicalParams  # m_w, I_w, r, g used (its m_b, I_b, l are not)
     covariance: np.ndarray = field(repr=False, compare=False, default=None)   # of THETA, 6 x 6
+    duplicates: int = 0    # rows that repeated an earlier row's time and values, counted once (dropped)
 
     def physical(self) -> PhysicalParams:
         """``known`` with the identified m_b, I_b, l."""
@@ -182,6 +188,34 @@ def regression(t, theta_w, theta_b, dtheta_w, dtheta_b, u) -> Tuple[np.ndarray, 
                           zero,
                           _mean2(db - dw)])                       # D_b: th_b' - th_w'
     return A1, A2, u[:-1].copy()
+
+
+def _once(*columns) -> Tuple[Tuple[np.ndarray, ...], int]:
+    """The columns (t first) with every row that repeats an earlier row's time dropped, and how many were: a period
+    is one sample however often a log holds it (a row written twice, a log appended to itself), else the fit
+    would count it twice and its interval shrink.  A repeated time whose values differ is refused (``bad_data``)."""
+    cols = [np.asarray(a, dtype=float) for a in columns]
+    t = cols[0]
+    if any(len(a) != len(t) for a in cols):
+        raise IdentificationError("bad_data", "the columns t, theta_w, theta_b, dtheta_w, dtheta_b, u differ in "
+                                              "length")
+    finite = np.flatnonzero(np.isfinite(t))
+    _, first, inverse = np.unique(t[finite], return_index=True, return_inverse=True)
+    first = finite[first[inverse.ravel()]]               # each row's first row with the same time
+    later = finite[first != finite]
+    if len(later) == 0:
+        return tuple(cols), 0
+    table = np.column_stack(cols)
+    a, b = table[later], table[first[first != finite]]
+    same = (a == b) | (np.isnan(a) & np.isnan(b))
+    if not same.all():
+        k = int(np.flatnonzero(~same.all(axis=1))[0])
+        raise IdentificationError("bad_data", f"rows {int(first[first != finite][k])} and {int(later[k])} have the "
+                                              f"same time t = {t[later[k]]:.9g} s and different values: a log "
+                                              f"with two records of one period cannot be identified")
+    keep = np.ones(len(t), dtype=bool)
+    keep[later] = False
+    return tuple(a[keep] for a in cols), int(len(later))
 
 
 def _lowpass(a: np.ndarray, cutoff_hz: float, h: float) -> np.ndarray:
@@ -234,7 +268,9 @@ def identify(t: Sequence[float], theta_w: Sequence[float], theta_b: Sequence[flo
         With its ``cause``: the log is too short, does not excite the parameters, leaves one unresolved, or
         gives a non-physical body.
     """
-    A1, A2, U = regression(t, theta_w, theta_b, dtheta_w, dtheta_b, u)
+    cols, duplicates = _once(t, theta_w, theta_b, dtheta_w, dtheta_b, u)
+    t = cols[0]
+    A1, A2, U = regression(*cols)
     ok = np.isfinite(A1).all(axis=1) & np.isfinite(A2).all(axis=1) & np.isfinite(U)
     with np.errstate(invalid="ignore"):
         ok &= np.diff(np.asarray(t, dtype=float)) > 0
@@ -283,10 +319,11 @@ def identify(t: Sequence[float], theta_w: Sequence[float], theta_b: Sequence[flo
     G = np.linalg.inv((Aw / wnorms).T @ (Aw / wnorms))
     cov = s2 * inflation * G / np.outer(wnorms, wnorms)
     return _result(theta, cov, known, (float(np.sqrt(np.mean(r1 ** 2))), float(np.sqrt(np.mean(r2 ** 2)))), cond,
-                   n, inflation, max_relative_ci)
+                   n, inflation, max_relative_ci, duplicates)
 
 
-def _result(theta, cov, known: PhysicalParams, rms, cond, n, inflation, max_relative_ci) -> IdentificationResult:
+def _result(theta, cov, known: PhysicalParams, rms, cond, n, inflation, max_relative_ci,
+            duplicates) -> IdentificationResult:
     m11, m12, m22 = theta[0], theta[1], theta[2]
     r, g = known.r, known.g
     m_b = (m11 - known.I_w) / r ** 2 - known.m_w
@@ -324,4 +361,4 @@ def _result(theta, cov, known: PhysicalParams, rms, cond, n, inflation, max_rela
     G_b_check = Estimate(float(theta[3] - g * m12 / r), float(math.sqrt(max(gc @ cov @ gc, 0.0))))
     return IdentificationResult(**est, **der, G_b_model=G_b_model, G_b_check=G_b_check, residual_rms=rms,
                                 condition_number=cond, samples=n, inflation=float(inflation), known=known,
-                                covariance=cov)
+                                covariance=cov, duplicates=duplicates)

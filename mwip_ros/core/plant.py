@@ -94,8 +94,8 @@ class PlantSim:
     """The true state ``x`` (a :class:`State`) at t_k = k h.
 
     The state is four Python floats: the plant evaluates eq. (1) 4 x ``substeps``
-    times per period, and scalar float arithmetic is several times faster than
-    4-element numpy arrays.
+    times per period, on scalars rather than 4-element numpy arrays (the cheaper of
+    the two for so few numbers).
     """
 
     cfg: PlantConfig

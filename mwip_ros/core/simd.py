@@ -7,11 +7,10 @@ numba with every per-scenario value a :data:`lanes` (an LLVM ``<WIDTH x double>`
 the same code integrates ``WIDTH`` scenarios in one pass: the same operations in the same order on each lane, IEEE
 arithmetic, no contraction into fused multiply-adds, so each lane's result is the scalar result bit for bit but for
 ``sin``, ``cos`` and ``exp``. Those are glibc's vector math library (``libmvec``: ``_ZGVeN8v_sin`` and
-``_ZGVeN8v_cos`` with AVX-512, the 4-lane AVX2 ones otherwise), within 4 ulp of libm's (measured on 1,024 angles of
-|x| < 0.15, 1.5 and 50: at most 2 ulp, one value in five to two in three differing by 1 or 2 ulp), instead of libm's
-scalar ``sin``/``cos``: about 1.1 ns per lane instead of 9 to 10 (AMD EPYC, AVX-512). libmvec's ``sincos`` (both
-from one call) measured slower here than the two calls. numba's own vectorizer cannot do this: llvmlite's LLVM has
-no vector library (SVML) to map ``sin`` to, so a loop over scenarios stays a loop of scalar calls.
+``_ZGVeN8v_cos`` with AVX-512, the 4-lane AVX2 ones otherwise; glibc documents them within 4 ulp of libm's) instead
+of libm's scalar ``sin``/``cos`` (their accuracy and cost here: BENCHMARKS.md, "Measurements moved out of the core's
+docstrings"). numba's own vectorizer cannot do this: llvmlite's LLVM has no vector library (SVML) to map ``sin`` to,
+so a loop over scenarios stays a loop of scalar calls.
 
 :data:`WIDTH` is 0 (and the batch kernel stays scalar) where there is no libmvec (not glibc, not x86-64) or the
 CPU has neither AVX-512F nor AVX2, or when ``MWIP_BATCH_SIMD=0`` (``MWIP_BATCH_SIMD=4``: the AVX2 functions, 4

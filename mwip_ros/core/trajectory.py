@@ -72,8 +72,8 @@ class TrajectoryTable:
     """Rows appended period by period into one flat array of doubles.
 
     No Python object per row: a node that runs for hours keeps 80 bytes per period and
-    gives the garbage collector nothing to scan (lists of rows cost a realtime plant
-    about 6 ms per full collection).  ``internals=True`` adds :data:`INTERNAL_COLUMNS`.
+    gives the garbage collector nothing to scan (BENCHMARKS.md, "Measurements moved out of
+    the core's docstrings").  ``internals=True`` adds :data:`INTERNAL_COLUMNS`.
     """
 
     def __init__(self, internals: bool = False, raw: bool = False, drive: bool = False, excitation: bool = False):

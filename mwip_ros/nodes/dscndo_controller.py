@@ -106,11 +106,11 @@ class DscndoController(Node, GracefulNodeMixin):
 
     def _on_change(self, changed):
         changed = set(changed)
-        for law in self.laws.values():   # the LQR design was checked before the change was accepted
+        for law in self.laws.values():   # every law's design was checked before the change was accepted
             if set(law.param_keys) & changed:
                 try:
                     law.params = type(law).design(self.v, self.nominal, self.h)
-                except (ArithmeticError, ValueError) as exc:   # a plug-in's design the schema does not check
+                except (ArithmeticError, ValueError) as exc:   # not expected: params.schema.check_derived designed it
                     self.get_logger().error(f"{law.title}: {exc}; its parameters stay as they were")
                     continue
                 self._warn(law)

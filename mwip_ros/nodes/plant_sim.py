@@ -82,7 +82,6 @@ from std_msgs.msg import Bool, Float64, String
 from std_srvs.srv import Trigger
 
 from mwip_ros.core import metrics
-from mwip_ros.core.drive import torque_warning
 from mwip_ros.core.loop import PlantSide, answering
 from mwip_ros.core.safety import FAULT, HISTORY, DriverStateMachine, Transition, Watchdog
 from mwip_ros.core.trajectory import TrajectoryTable
@@ -96,6 +95,7 @@ from mwip_ros.nodes.params import declare
 from mwip_ros.nodes.plant_runners import RUNNERS
 from mwip_ros.nodes.runtime import EXIT_ERROR, EXIT_FALLEN, GracefulNodeMixin, run_node
 from mwip_ros.params import plant_config
+from mwip_ros.params.typed import limit_warnings
 from mwip_ros.runs import write_csv
 
 NAME = "plant_sim"
@@ -205,8 +205,7 @@ class PlantSimNode(Node, GracefulNodeMixin):
             self.get_logger().info(f"motor: K_t = {mc.torque_constant:g} N m/A, R = {mc.resistance:g} ohm, V_max = "
                                    f"{mc.voltage_limit:g} V, I_max = {mc.current_limit:g} A ({mc.peak_torque:g} N m at "
                                    f"most); the torque that acted is joint_states' effort")
-        warning = torque_warning(self.cfg.motor, self.cfg.actual, self.cfg.fall_angle)
-        if warning:   # allowed: a weak drive is worth simulating
+        for warning in limit_warnings(self.v):   # allowed: a weak drive (or torque_limit) is worth simulating
             self.get_logger().warning(warning)
         self._publish_transition(Transition(0.0, "", self.safety.state, "start",
                                             f"require_enable: {str(self.cfg.require_enable).lower()}"), start=True)

@@ -200,12 +200,22 @@ def _type_error(kind: str, v: Any) -> Optional[str]:
     raise AssertionError(kind)
 
 
+# The robot's physical values: each > 0 with a floor (a value below it is no robot of this kind, and a model built
+# from it has inertia terms that round away: test/params/test_physical_ranges.py runs the model at every range end).
+BODY_FLOORS = {"m_b": (1e-3, "a body lighter than a gram"), "m_w": (1e-3, "wheels lighter than a gram"),
+               "I_b": (1e-6, "a body inertia below 1e-6 kg m^2"), "I_w": (1e-6, "a wheel inertia below 1e-6 kg m^2"),
+               "l": (1e-3, "a centre of gravity within a millimetre of the axle"),
+               "r": (1e-3, "a wheel radius below a millimetre"), "g": (1e-3, "gravity below 1e-3 m/s^2")}
+
+
 def _body(prefix: str, values: Mapping[str, float], what: str) -> List[ParamSpec]:
     units = {"m_b": "kg", "m_w": "kg", "I_b": "kg m^2", "I_w": "kg m^2", "l": "m", "r": "m", "g": "m/s^2"}
     text = {"m_b": "body mass", "m_w": "wheel mass", "I_b": "body moment of inertia",
             "I_w": "wheel moment of inertia", "l": "axle to body centre of gravity",
             "r": "wheel radius", "g": "gravitational acceleration"}
-    return [ParamSpec(f"{prefix}.{k}", "double", v, f"{what} {text[k]} [{units[k]}]", **_positive(), unit=units[k])
+    return [ParamSpec(f"{prefix}.{k}", "double", v, f"{what} {text[k]} [{units[k]}]",
+                      **_positive_from(BODY_FLOORS[k][0], 1e6, f"{BODY_FLOORS[k][1]} is no robot of this kind"),
+                      unit=units[k])
             for k, v in values.items()]
 
 
@@ -320,12 +330,15 @@ NODE_SPECS: Dict[str, List[ParamSpec]] = {
                   "(theory.md 6.7: back-EMF, voltage and current limits, evaluated at every RK4 stage); false = the "
                   "torque is the command"),
         ParamSpec("motor.torque_constant", "double", 2.0, "K_t at the wheel [N m/A], also the back-EMF constant "
-                  "[V s/rad]", **_positive(1e4)),
-        ParamSpec("motor.resistance", "double", 0.15, "winding resistance R [ohm]", **_positive(1e4), unit="ohm"),
+                  "[V s/rad]", **_positive_from(1e-3, 1e4, "a motor of less than 1 mN m per ampere"),
+                  unit="N m/A"),
+        ParamSpec("motor.resistance", "double", 0.15, "winding resistance R [ohm]",
+                  **_positive_from(1e-3, 1e4, "a winding below a milliohm: R i* rounds away against the back-EMF "
+                                   "and the drive gives no torque at speed"), unit="ohm"),
         ParamSpec("motor.voltage_limit", "double", 48.0, "the driver's voltage limit V_max (battery) [V]",
-                  **_positive(1e5), unit="V"),
-        ParamSpec("motor.current_limit", "double", 60.0, "the driver's current limit I_max [A]", **_positive(1e5),
-                  unit="A"),
+                  **_positive_from(0.1, 1e5, "a battery below 0.1 V"), unit="V"),
+        ParamSpec("motor.current_limit", "double", 60.0, "the driver's current limit I_max [A]",
+                  **_positive_from(1e-3, 1e5, "a current limit below a milliampere"), unit="A"),
         ParamSpec("require_enable", "bool", False, "the driver starts disabled (zero torque) until ~/enable "
                   "(docs/theory.md 6.8); false: enabled at once, as the paper's run"),
         ParamSpec("watchdog_s", "double", 0.5, "realtime: no new wheel_torque_cmd for this long is a fault (zero "
@@ -461,11 +474,32 @@ def spelling_hint(name: str, names: Iterable[str]) -> str:
     return f" (did you mean '{close[0]}'?)" if close else ""
 
 
+def _check_designs(values: Mapping[str, Any], nominal, source: Optional[str]) -> None:
+    """Each registered law's :meth:`~mwip_ros.core.laws.Law.design` from ``values`` (those whose parameters are
+    all in ``values``); its error becomes a ParamError naming its key (``LqrDesignError.key``), or the law's first
+    parameter when it names none (a plug-in's)."""
+    laws, h = _registry(), 1.0 / values["control_rate_hz"]
+    for family in laws.families():
+        cls = laws.lookup(family, False) or laws.lookup(family, True)
+        if not cls.param_keys or not all(k in values for k in cls.param_keys):
+            continue
+        try:
+            cls.design(values, nominal, h)
+        except (ArithmeticError, ValueError) as exc:
+            key = getattr(exc, "key", None)
+            if key is None:
+                key, reason = cls.param_keys[0], f"the law {cls.name!r} has no design from its parameters ({exc})"
+            else:
+                reason = getattr(exc, "reason", str(exc))
+            raise ParamError(key, reason, source) from None
+
+
 def check_derived(values: Mapping[str, Any], source: Optional[str] = None) -> None:
     """Raise ParamError when values that pass their own checks give a model no arithmetic can run:
-    inertia terms that are not finite or an A_bar that is not positive (eq. 2, 38); or LQR weights that
-    give no stabilizing gain for the nominal model (checked whatever the law, so a switch to lqr at run
-    time cannot fail).  The inertia terms are the model's (:class:`mwip_ros.core.model.PhysicalParams`)."""
+    inertia terms that are not finite or an A_bar that is not positive (eq. 2, 38); or a law's parameters
+    that give it no design (LQR or MPC weights with no stabilizing gain for the nominal model, ...: every
+    registered law's design, whatever the law in use, so a switch of law at run time cannot fail).  The
+    inertia terms are the model's (:class:`mwip_ros.core.model.PhysicalParams`)."""
     from mwip_ros.core.model import PhysicalParams
 
     for prefix in ("nominal", "actual"):
@@ -480,6 +514,13 @@ def check_derived(values: Mapping[str, Any], source: Optional[str] = None) -> No
     if values.get("excitation.f0", 0.0) > values.get("excitation.f1", math.inf):
         raise ParamError("excitation.f0", f"must be <= excitation.f1 ({values['excitation.f1']:g} Hz), got "
                                           f"{values['excitation.f0']:g}", source)
+    if values.get("excitation.type", "none") != "none" and "control_rate_hz" in values:
+        nyquist = values["control_rate_hz"] / 2.0   # the command is sampled at the control rate (held over h)
+        if not values["excitation.f1"] < nyquist:
+            raise ParamError("excitation.f1", f"{values['excitation.f1']:g} Hz is at or above the Nyquist frequency "
+                                              f"control_rate_hz / 2 = {nyquist:g} Hz: the {values['excitation.type']} "
+                                              f"would come out aliased; keep excitation.f0 <= excitation.f1 below "
+                                              f"it", source)
     if values.get("sensors.model") == "raw":
         for ch in ("theta_w", "theta_b", "dtheta_w", "dtheta_b"):
             if values.get(f"sensors.noise_std.{ch}"):
@@ -493,13 +534,8 @@ def check_derived(values: Mapping[str, Any], source: Optional[str] = None) -> No
                                                       f"{NOISE_SIGMAS:g} standard deviations passes |theta_b| <= pi, "
                                                       f"which the observer refuses; at most {most:.4g} rad with this "
                                                       f"fall_angle", source)
-    if "lqr.Q" in values and "nominal.m_b" in values:
-        from mwip_ros.core.lqr import LqrDesignError, lqr_gain
-        try:
-            lqr_gain(PhysicalParams(**{k: values[f"nominal.{k}"] for k in PAPER_NOMINAL}),
-                     1.0 / values["control_rate_hz"], values["lqr.Q"], values["lqr.R"])
-        except LqrDesignError as exc:
-            raise ParamError(exc.key, exc.reason, source) from None
+    if "nominal.m_b" in values and "control_rate_hz" in values:
+        _check_designs(values, PhysicalParams(**{k: values[f"nominal.{k}"] for k in PAPER_NOMINAL}), source)
     if isinstance(values.get("law"), str) and isinstance(values.get("use_observer"), bool):
         laws = _registry()   # a law registered without its observer variant cannot take use_observer: true
         if values["law"] in laws.families() and laws.lookup(values["law"], values["use_observer"]) is None:

@@ -1,11 +1,11 @@
 """Typed configurations of the core, built from a node's (or a merged) parameter dict."""
 from __future__ import annotations
 
-from typing import Any, Mapping, Optional
+from typing import Any, Iterable, List, Mapping, Optional
 
 from mwip_ros.core import laws
 from mwip_ros.core.controller import DscGains
-from mwip_ros.core.drive import MotorConfig
+from mwip_ros.core.drive import MotorConfig, limit_warning, torque_warning
 from mwip_ros.core.estimators import EstimatorConfig
 from mwip_ros.core.excitation import ExcitationConfig
 from mwip_ros.core.model import PhysicalParams, Sinusoid, State
@@ -17,7 +17,7 @@ from mwip_ros.core.sim import ClosedLoop
 from .schema import PAPER_NOMINAL
 
 __all__ = ["physical", "sinusoid", "gains", "period", "observer_gain", "plant_config", "sensing", "raw_sensors",
-           "estimator", "motor", "excitation", "lqr_gain", "closed_loop"]
+           "estimator", "motor", "excitation", "lqr_gain", "closed_loop", "limit_warnings"]
 
 
 def physical(values: Mapping[str, Any], prefix: str) -> PhysicalParams:
@@ -70,6 +70,24 @@ def motor(v: Mapping[str, Any]) -> MotorConfig:
     return MotorConfig(enabled=v.get("motor.enabled", False), **{
         k: v.get(f"motor.{k}", getattr(MotorConfig, k))
         for k in ("torque_constant", "resistance", "voltage_limit", "current_limit")})
+
+
+def limit_warnings(v: Mapping[str, Any], law_names: Iterable[str] = ()) -> List[str]:
+    """The torque limits too weak for the true robot (:func:`mwip_ros.core.drive.limit_warning`, one line each):
+    the motor's peak torque at ``fall_angle`` (:func:`~mwip_ros.core.drive.torque_warning`); ``torque_limit``
+    (when > 0) and the own limit of each law of ``law_names`` (``Law.limit_key``: ``mpc.u_max``) at the initial
+    tilt, where a limit below the holding torque starts the run beyond what it can turn back."""
+    actual = physical(v, "actual")
+    out = [torque_warning(motor(v), actual, v["fall_angle"])]
+    limits = {"torque_limit": v["torque_limit"]} if v.get("torque_limit", 0.0) > 0.0 else {}
+    for name in law_names:
+        key = laws.get(name).limit_key
+        if key and key in v:
+            limits[key] = v[key]
+    tilt = abs(v["initial.theta_b"])
+    out += [limit_warning(key, lim, actual, tilt, f"the initial tilt |initial.theta_b| = {tilt:g} rad")
+            for key, lim in limits.items()]
+    return [w for w in out if w]
 
 
 def raw_sensors(v: Mapping[str, Any]) -> Optional[RawSensorConfig]:

@@ -125,3 +125,41 @@ def test_mwip_sim_checks_its_outputs_before_simulating_and_overwrites_only_with_
     r = run("mwip_ros.cli.sim", *short, "--csv", str(old_csv), "--force")
     assert r.returncode == 0, r.stderr
     assert len(read_csv(old_csv)) == 101
+
+
+@pytest.mark.parametrize("Q, words", [("[-1.0, 10.0, 1.0]", ">= 0"), ("[0.0, 0.0, 0.0]", "stabilize"),
+                                      ("[1.0e300, 10.0, 1.0]", "<= 1e+12")])
+def test_a_bad_mpc_state_weight_is_one_line_naming_the_key_and_exit_2_whatever_the_law(tmp_path, Q, words):
+    """mpc.Q is checked at start-up by every registered law's design (as lqr.Q is), not when MPC first steps:
+    old code ended in exit 1 with an LqrDesignError traceback (--controller mpc) or ran on (--controller dsc)."""
+    f = tmp_path / "q.yaml"
+    f.write_text(default_params_file().read_text().replace("      Q: [100.0, 10.0, 1.0]  # weights on theta_b, "
+                                                           "theta_b', theta_w' (the diagonal, >= 0), as lqr.Q",
+                                                           f"      Q: {Q}"))
+    assert Q in f.read_text()
+    for law in ("mpc", "dsc"):
+        r = run("mwip_ros.cli.sim", "--params", str(f), "--controller", law, "--duration", "0.1", "-q")
+        _one_error_line(r, "'mpc.Q'", words)
+
+
+@pytest.mark.parametrize("section, key, value, law, warned", [
+    ("dscndo_controller", "mpc", "{u_max: 1.0}", "mpc", True),
+    ("dscndo_controller", "mpc", "{u_max: 20.0}", "mpc_ndo", True),
+    ("dscndo_controller", "mpc", "{u_max: 20.0}", "dscndo", False),   # not the law that runs: its limit says nothing
+    ("dscndo_controller", "mpc", "{u_max: 120.0}", "mpc", False),
+    ("plant_sim", "torque_limit", "20.0", "dscndo", True)])
+def test_a_torque_limit_too_weak_for_the_initial_tilt_is_warned_of_as_the_motor_is(tmp_path, section, key, value, law,
+                                                                                   warned):
+    """mpc.u_max and torque_limit below the torque that holds the body at the initial tilt: the run falls, and
+    mwip_sim says so first with the motor overlay's figures (core.drive.limit_warning); old code: no warning."""
+    f = tmp_path / "w.yaml"
+    f.write_text(f"{section}:\n  ros__parameters:\n    {key}: {value}\n")
+    r = run("mwip_ros.cli.sim", "--params", str(default_params_file()), str(f), "--controller", law,
+            "--duration", "1.0", "-q")
+    lines = [ln for ln in r.stderr.splitlines() if "warning" in ln]
+    name = "mpc.u_max" if key == "mpc" else key
+    if warned:
+        assert len(lines) == 1 and f"warning: {name} = " in lines[0] and "initial tilt" in lines[0], r.stderr
+        assert "80.08 N m that holds the body" in lines[0] and "cannot turn the body back" in lines[0]
+    else:
+        assert lines == [], r.stderr

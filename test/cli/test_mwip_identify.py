@@ -127,3 +127,19 @@ def test_help_is_complete(capsys):
     for word in ("BAG_OR_CSV", "--params", "--out", "--force", "--window", "--run", "--cutoff", "u_applied",
                  "exit status"):
         assert word in text, word
+
+
+def test_a_log_with_every_row_twice_gives_the_logs_own_result(chirp_csv, tmp_path, capsys):
+    """Repeated periods count once: the same m_b line as the log itself, and the count said (old code: the
+    interval shrank, the rows counted as independent periods)."""
+    assert main([str(chirp_csv), "--params", str(P_FILE), "--out", str(tmp_path / "a.yaml")]) == 0
+    once = capsys.readouterr().out
+    lines = chirp_csv.read_text().splitlines()
+    twice = tmp_path / "twice.csv"
+    twice.write_text("\n".join([lines[0]] + [ln for ln in lines[1:] for _ in range(2)]) + "\n")
+    assert main([str(twice), "--params", str(P_FILE), "--out", str(tmp_path / "b.yaml")]) == 0
+    text = capsys.readouterr().out
+    n = len(lines) - 1
+    assert f"({n} repeated row(s) counted once)" in text
+    m_b = [ln for ln in once.splitlines() if ln.strip().startswith("m_b")]
+    assert len(m_b) == 1 and m_b[0] in text.splitlines()

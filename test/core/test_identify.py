@@ -124,3 +124,25 @@ def test_wrong_known_values_are_unphysical(chirp_log):
     with pytest.raises(IdentificationError) as err:
         identify(*chirp_log, known=replace(BASE.actual, m_w=400.0))
     assert err.value.cause == "unphysical" and "m_b" in str(err.value)
+
+
+@pytest.mark.parametrize("how", ["each row twice", "the log twice"])
+def test_repeated_periods_count_once(chirp_log, how):
+    """A log whose rows all appear twice gives the fit of the log itself (old code: every row twice left only
+    one-period stretches between zero-length periods, no filter and no autocorrelation inflation: the 95 % interval
+    of m_b shrank from +-0.21 % to +-0.015 %; the log appended to itself doubled the samples)."""
+    once = identify(*chirp_log, known=BASE.actual)
+    log = np.repeat(chirp_log, 2, axis=1) if how == "each row twice" else np.concatenate([chirp_log] * 2, axis=1)
+    res = identify(*log, known=BASE.actual)
+    assert res.samples == once.samples == 4000 and res.duplicates == 4001 and once.duplicates == 0
+    for name in ("m_b", "l", "I_b"):
+        assert getattr(res, name) == getattr(once, name), name
+    assert res.m_b.low <= 250.0 <= res.m_b.high
+
+
+def test_a_repeated_time_with_other_values_is_refused(chirp_log):
+    log = np.repeat(chirp_log, 2, axis=1)
+    log[2, 11] += 1e-3                         # row 11 repeats row 10's time, with another pitch
+    with pytest.raises(IdentificationError) as err:
+        identify(*log, known=BASE.actual)
+    assert err.value.cause == "bad_data" and "rows 10 and 11" in str(err.value) and "t = 0.025 s" in str(err.value)

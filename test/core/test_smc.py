@@ -181,3 +181,45 @@ def test_the_compiled_batch_runs_the_laws_pure_step_and_equals_the_scalar_loop()
 
 # --- parameters --------------------------------------------------------------------------------------------------
 
+
+
+# --- discrete time: s_k+1 = (1 - a h) s_k, a = q outside the layer, q + k / phi inside (docs/theory.md 6.5) ---------
+
+def test_q_h_at_or_above_2_is_refused_naming_smc_q_and_the_rate():
+    """The reaching law's proportional part diverges when |1 - q h| >= 1: refused by the design, so at start-up
+    and for a run-time change whatever the law in use (old code: smc.q <= 150 at any control rate)."""
+    v = dict(_values(q=100.0), control_rate_hz=50.0)                  # q h = 2
+    with pytest.raises(ValueError) as ei:
+        smc.SmcLaw.design(v, NOM, 1.0 / 50.0)
+    assert ei.value.key == "smc.q" and "control_rate_hz 50 Hz" in str(ei.value) and "q h = 2" in str(ei.value)
+    with pytest.raises(P.ParamError) as ei:
+        P.check_derived(dict(v, law="dsc"))
+    assert ei.value.key == "smc.q"
+    smc.SmcLaw.design(dict(v, **{"smc.q": 99.0}), NOM, 1.0 / 50.0)  # q h = 1.98: accepted
+
+
+@pytest.mark.parametrize("phi, warned", [(1.0, False), (0.2, False), (0.1, True), (0.01, True), (0.0, False)])
+def test_an_unstable_boundary_layer_is_warned_of_naming_the_keys_and_the_rate(phi, warned):
+    """(q + k / phi) h >= 2: phi = 0.01 gives 20.1 at 200 Hz (the pure sign, phi = 0, is chattering by choice)."""
+    law = laws.get("smc").from_params(_values(boundary_layer=phi), NOM, H)
+    text = law.warnings()
+    assert bool(text) == warned and laws.get("smc_ndo").from_params(_values(boundary_layer=phi), NOM, H).warnings() \
+        == text
+    if warned:
+        assert len(text) == 1
+        for word in ("smc.q", "smc.k", "smc.boundary_layer", "control_rate_hz 200 Hz",
+                     f"= {(20.0 + 40.0 / phi) * H:.3g}", "> k h / (2 - q h) = 0.105 N m s"):
+            assert word in text[0], (word, text[0])
+
+
+def _rms_du(phi):
+    traj = simulate(P.closed_loop(_values(boundary_layer=phi), controller="smc", duration=3.0))
+    return float(np.sqrt(np.mean(np.diff(traj["u"][400:]) ** 2)))       # over [2, 3] s
+
+
+def test_the_discrete_limit_is_where_the_layer_starts_to_chatter():
+    """In the paper's scenario: a h = 1.70 (phi = 0.125) keeps the layer's smooth torque (RMS du 0.21 N m, as
+    phi = 1), a h = 2.10 (phi = 0.1) chatters as the pure sign does (about 50 N m per period).  The true input
+    gain is 1.04 times the nominal one, so the true limit is a h < 2 / 1.04 = 1.92 (measured: 1.88 smooth, 1.92
+    chatters)."""
+    assert _rms_du(0.125) < 1.0 and _rms_du(0.1) > 20.0

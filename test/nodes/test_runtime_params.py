@@ -42,11 +42,15 @@ def test_absurd_wrong_type_and_unknown_updates_are_refused_naming_the_key(tmp_pa
             x_huge = _set(node, ex, "disturbance_observer", "X", [1e308, 0.0, 0.0, 1e308])
             x_ok = _set(node, ex, "disturbance_observer", "X", [90.0, 0.0, 0.0, 90.0])
             ok = _set(node, ex, "dscndo_controller", "k1", 7.0)
+            mpc_bad = [_set(node, ex, "dscndo_controller", "mpc.Q", q)    # MPC's design, as lqr.Q's
+                       for q in ([-1.0, 10.0, 1.0], [0.0, 0.0, 0.0], [1e300, 10.0, 1.0])]
         finally:
             node.destroy_node()
             rclpy.shutdown(context=ctx)
     for result, key in ((huge, "k1"), (tiny, "tau4"), (wrong, "k2"), (unknown, "tau5"), (x_huge, "X")):
         assert not result.successful and key in result.reason, (key, result.reason)
+    for result in mpc_bad:
+        assert not result.successful and "mpc.Q" in result.reason, result.reason
     assert "did you mean" in unknown.reason
     assert x_ok.successful and ok.successful
     assert ctl.wait_for_output("k1: 6.0 -> 7.0") and "1e+308" not in ctl.output().split("parameters changed")[-1]

@@ -44,6 +44,10 @@ CASES = [  # (id, node, file maker or None, extra ros args, words the one line m
      lambda d: _file(d, "nom.yaml", "m_b: 210.6", "m_b: 1.0e+308"), (), ("'nominal.m_b'", "must be <=")),
     ("vanishing tau4", "dscndo_controller", None, ("-p", "tau4:=1e-300"), ("'tau4'", "must be >= 1e-06")),
     ("not a rule", "dscndo_controller", None, ("-p", "k1"), ("'k1'", "not a 'name:=value' rule")),
+    # every law's design at start-up, whatever the law in use (old code: exit 1, an LqrDesignError traceback)
+    ("mpc.Q negative", "dscndo_controller", None, ("-p", "mpc.Q:=[-1.0, 10.0, 1.0]"), ("'mpc.Q'", ">= 0")),
+    ("mpc.Q zero", "dscndo_controller", None, ("-p", "mpc.Q:=[0.0, 0.0, 0.0]"), ("'mpc.Q'", "stabilize")),
+    ("mpc.Q huge", "dscndo_controller", None, ("-p", "mpc.Q:=[1.0e300, 10.0, 1.0]"), ("'mpc.Q'", "<= 1e+12")),
     # QoS overrides would be ignored (the nodes set their QoS): refused, not silently dropped
     ("qos override by -p", "dscndo_controller", None, ("-p", "qos_overrides./joint_states.subscription.depth:=10"),
      ("'qos_overrides./joint_states.subscription.depth'", "QoS overrides are not supported")),

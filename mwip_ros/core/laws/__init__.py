@@ -78,6 +78,9 @@ class Law:
         ``first``, the first step).  When a law has one, its :meth:`step` calls it, and the batch simulator runs
         it compiled by numba inside one compiled loop (``core.compiled``); None: the batch runs :meth:`step`
         over numpy arrays.
+    limit_key : str or None
+        The parameter of the law's own torque limit, when it has one (``mpc.u_max``): its command, the observer
+        term included, holds |u| <= that value at every step (:meth:`step_observed`); None: no limit.
     pure_lanes : int
         3 when ``pure_step`` is plain arithmetic and ``m``'s functions on its numbers, with ``P`` three numbers:
         the compiled loop then runs it for several scenarios at once (``core.simd``); 0 (the default): one
@@ -95,6 +98,7 @@ class Law:
     announce: bool = False
     pure_step = None
     pure_lanes = 0
+    limit_key: Optional[str] = None
 
     @staticmethod
     def pure_params(params) -> tuple:
@@ -134,6 +138,14 @@ class Law:
 
         ``internals`` is a dict of the law's own signals (names from :attr:`internal_names`)."""
         raise NotImplementedError
+
+    def step_observed(self, x, u_taud):
+        """``(u, internals)`` with the observer term ``u_taud`` of eq. (20) taken in: ``u = u_law - u_taud``
+        (eq. 19), ``internals["u_dsc"]`` the law's own u_law.  The default subtracts it from :meth:`step`'s
+        command; a law with a torque limit overrides it to hold the limit on u itself (``mpc``: the QP's bounds
+        shifted by u_taud, docs/theory.md 6.6).  :class:`~.ndo.WithObserver` calls it."""
+        u_law, internals = self.step(x, None)
+        return u_law - u_taud, internals
 
     def finite(self) -> bool:
         """False when the law's state went non-finite (the node then undoes the step)."""

@@ -17,26 +17,17 @@ are eliminated (condensed form): with Z = [z_1; ...; z_N] = Phi z_0 + Gamma U, t
 
 (the cost halved; N box constraints, no other).  Always feasible: only the input is constrained.
 
-The solver is DAQP (the dual active-set solver of Arnstroem, Bemporad and Axehill, 2022; ``daqp`` on PyPI, C with a
-Python wheel, no dependencies).  Measured on this problem (N = 20, the paper's scenario, the same warm-started
-sequence of the 10 s run's 2001 periods, this machine, ``scripts/bench_mpc.py``: update + solve + the warm start's
-bookkeeping), solve time per period p50 / p99 / max: DAQP 7.2 / 7.4 / 19 us, 1 iteration at p50 (3 at most);
-OSQP 1.1.3 (ADMM, eps 1e-8, polishing off, adaptive rho every 25 iterations, warm-started with the shifted
-primal and dual) 31 / 44 / 174 us, 25 iterations at p50 (one termination check), within 3e-11 N m of DAQP;
-ProxQP 0.8.0 (proxsuite, dense, eps 1e-9, warm-started by hand) 25 / 37 / 75 us, within 6e-9 N m.  DAQP is chosen
-because it is the fastest, 3-6x at p99, because it is exact (an active-set method ends on the solution of its
-final active set, to rounding: ``mpc`` equals ``lqr`` to ~1e-11 N m when no constraint binds, and the command
-sits exactly on the bound when u_0's constraint is active), and because its warm start is plain data (the
-active set) that the law keeps, shifts, snapshots and restores.  Against the others: OSQP 1.1.3 prints "Polishing
-not needed" on stdout at solves with polishing on even with ``verbose=False``, and its adaptive rho is state
-inside the solver that, with the default ``adaptive_rho_interval = 0``, adapts on a wall-clock fraction (not
-deterministic); ProxQP 0.8.0 crashes (segmentation fault) with ``WARM_START_WITH_PREVIOUS_RESULT`` after
-``update`` and with box constraints warm-started by hand.
+The solver is DAQP (the dual active-set solver of Arnstroem, Bemporad and Axehill, 2022; ``daqp`` on PyPI): an
+active-set method ends on the solution of its final active set, to rounding, so ``mpc`` equals ``lqr`` when no
+constraint binds and the command sits exactly on the bound when u_0's constraint is active; its warm start is
+plain data (the active set) that the law keeps, shifts, snapshots and restores.  (Its timings, and why not OSQP or
+ProxQP: BENCHMARKS.md, "MPC's QP solver".)
 
-Determinism.  A solve is a pure function of (H, f = F z_0, the starting active set): the law passes the starting
-active set explicitly at every solve (``Model.update(f=..., sense=...)``), so nothing of the workspace's history
-counts.  Settings: ``iter_limit = ITER_LIMIT`` (a fixed cap on active-set changes, no time limit: ``time_limit =
-0``), ``eps_prox = 0`` (H is positive definite: no proximal regularization), the rest DAQP's defaults.  The same
+Determinism.  A solve is a pure function of (H, f = F z_0, the bounds, the starting active set): the law passes the
+starting active set explicitly at every solve (``Model.update(f=..., sense=...)``, the bounds when they moved), so
+nothing of the workspace's history counts.  Settings: ``iter_limit = ITER_LIMIT`` (a fixed cap on active-set
+changes, no time limit: ``time_limit = 0``), ``eps_prox = 0`` (H is positive definite: no proximal
+regularization), the rest DAQP's defaults.  The same
 states give the same commands bit for bit in the offline loop, the batch simulator and the lockstep graph.
 
 Warm start.  The active set of the previous solution shifted by one period (u_1 .. u_{N-1} become u_0 .. u_{N-2};
@@ -47,11 +38,10 @@ clip(-K z_0, +-u_max), the saturated LQR command, and a cold start next period.
 
 The limit.  ``mpc.u_max`` [N m] is the law's own parameter: the law does not see the plant's ``torque_limit``
 nor the motor model.  With the motor model on (docs/theory.md 6.7) the torque is capped at I_max K_t
-(``motor.current_limit`` times ``motor.torque_constant``: 60 A x 2 N m/A = 120 N m by default, the default of
-``mpc.u_max``, a Segway-class drive's peak); set ``mpc.u_max`` to it.  The back-EMF's lower limit at speed
-(V_max - K_t w) K_t / R is not modelled.  ``mpc_ndo`` subtracts u_taud from the constrained u_0 (the observer term
-is composed outside the law), so its command can exceed ``mpc.u_max`` by |u_taud|; the drive's own limit
-(``torque_limit``, the motor's current limit) caps that.
+(``motor.current_limit`` times ``motor.torque_constant``); set ``mpc.u_max`` to it.  The back-EMF's lower limit at
+speed (V_max - K_t w) K_t / R is not modelled.  ``mpc_ndo`` takes the observer term u_taud (eq. 20) into the QP
+as a known input offset held over the horizon: the command is u_0 - u_taud and the bounds are shifted,
+``-u_max + u_taud <= u_k <= u_max + u_taud`` (docs/theory.md 6.6), so |u| <= u_max holds with the term too.
 
 No pure form (``pure_step`` is None: a QP solver does not run inside numba): in the batch simulator :meth:`step`
 gets arrays of scenarios and solves them one by one, each scenario with its own DAQP workspace and warm start.
@@ -70,16 +60,17 @@ from .dsc import INTERNALS
 __all__ = ["MpcParams", "MpcLaw", "QpMatrices", "qp_matrices", "PARAMETERS", "ITER_LIMIT", "SOLVER"]
 
 SOLVER = "daqp"
-ITER_LIMIT = 1000      # DAQP's cap on active-set changes per solve (2 N would do; never reached in the tests)
+ITER_LIMIT = 1000      # DAQP's cap on active-set changes per solve (2 N would do)
 # DAQP's sense flags: ACTIVE (1) | LOWER (2) for u = -u_max (lam < 0), ACTIVE for u = +u_max (lam > 0), else none
 _AT_LOWER, _AT_UPPER = 3, 1
+Q_MAX = 1e12           # mpc.Q's entries at most this (lqr.Q's bound): beyond, the Riccati solution overflows
 
 PARAMETERS = (
     LawParam("mpc.horizon", "integer", 20, "model predictive control: prediction horizon N [control periods] "
              "(the QP has N inputs; at 200 Hz, N = 20 looks 0.1 s ahead, the terminal weight covers the rest)",
              lo=1, hi=200),
     LawParam("mpc.Q", "double_array", [100.0, 10.0, 1.0], "model predictive control: state weight on [theta_b, "
-             "theta_b', theta_w'], the diagonal (3 entries, >= 0); the terminal weight is the Riccati solution of "
+             "theta_b', theta_w'], the diagonal (3 entries, 0 .. 1e12); the terminal weight is the Riccati solution of "
              "mpc.Q and mpc.R (as lqr.Q)"),
     LawParam("mpc.R", "double", 0.01, "model predictive control: input weight R (> 0), as lqr.R",
              lo=1e-6, hi=1e6),
@@ -160,6 +151,7 @@ class _Qp:
         self._H, self._A = qp.H.copy(), np.zeros((0, self.N))
         self._f, self._hi, self._lo = np.zeros(self.N), np.full(self.N, self.u_max), np.full(self.N, -self.u_max)
         self._z = np.zeros(3)
+        self._offset = 0.0                                          # the bounds' shift the workspace holds
         self.sense = np.zeros(self.N, dtype=np.int32)               # the warm start: the active set to start from
         self.model.setup(self._H, self._f, self._A, self._hi, self._lo, self.sense)
         self.model.settings = dict(iter_limit=ITER_LIMIT, time_limit=0.0, eps_prox=0.0)
@@ -179,19 +171,20 @@ class _Qp:
             self.sense[:] = sense
             self.cold = not any(sense)
 
-    def solve(self, theta_b: float, dtheta_b: float, dtheta_w: float) -> float:
-        """u_0 for the state z = (theta_b, theta_b', theta_w'), warm-started; the warm start moves on.
+    def solve(self, theta_b: float, dtheta_b: float, dtheta_w: float, offset: float = 0.0) -> float:
+        """u_0 for the state z = (theta_b, theta_b', theta_w') with the bounds ``offset`` -+ u_max (the observer
+        term taken in: |u_0 - offset| <= u_max, docs/theory.md 6.6), warm-started; the warm start moves on.
 
-        Few calls into numpy and DAQP, the rest on Python floats: in a node each call comes to cold caches
-        once a period, and there each costs tens of microseconds (the solve took 170 us a period there, against
-        7 us in a loop).  So the unconstrained optimum is tried first, on floats; DAQP only when it leaves the
-        bounds, and the shift of the active set is a list."""
+        Few calls into numpy and DAQP, the rest on Python floats (a node calls it once a period, on cold
+        caches): the unconstrained optimum is tried first, on floats; DAQP only when it leaves the bounds, and
+        the shift of the active set is a list."""
         u_max = self.u_max
-        if not (math.isfinite(theta_b) and math.isfinite(dtheta_b) and math.isfinite(dtheta_w)):
+        if not (math.isfinite(theta_b) and math.isfinite(dtheta_b) and math.isfinite(dtheta_w)
+                and math.isfinite(offset)):
             return math.nan                                          # nothing solved, the warm start stays
         if self._free:
             for g0, g1, g2 in self._free:                            # a plain loop: cheaper than all() over a generator
-                if abs(g0 * theta_b + g1 * dtheta_b + g2 * dtheta_w) > u_max:
+                if abs(g0 * theta_b + g1 * dtheta_b + g2 * dtheta_w - offset) > u_max:
                     break
             else:                                                    # within the bounds: the optimum, none active
                 if not self.cold:
@@ -199,28 +192,33 @@ class _Qp:
                 self.iterations = 0
                 g0, g1, g2 = self._free[0]
                 return g0 * theta_b + g1 * dtheta_b + g2 * dtheta_w
-        return self._daqp(theta_b, dtheta_b, dtheta_w)
+        return self._daqp(theta_b, dtheta_b, dtheta_w, offset)
 
-    def _daqp(self, theta_b: float, dtheta_b: float, dtheta_w: float) -> float:
-        """DAQP's solve from the warm start; the warm start moves on."""
-        u_max = self.u_max
+    def _daqp(self, theta_b: float, dtheta_b: float, dtheta_w: float, offset: float) -> float:
+        """DAQP's solve from the warm start, the bounds ``offset`` -+ u_max; the warm start moves on."""
+        lo, hi = offset - self.u_max, offset + self.u_max
         z = self._z
         z[0], z[1], z[2] = theta_b, dtheta_b, dtheta_w
         np.dot(self.qp.F, z, out=self._f)                            # the QP's linear term F z_0
-        self.model.update(f=self._f, sense=self.sense)
+        if offset != self._offset:                                   # the bounds shifted by the observer term
+            self._offset = offset
+            self._hi[:], self._lo[:] = hi, lo
+            self.model.update(f=self._f, bupper=self._hi, blower=self._lo, sense=self.sense)
+        else:
+            self.model.update(f=self._f, sense=self.sense)
         U, _, flag, info = self.model.solve()
         self.iterations = int(info["iterations"])
         u0 = float(U[0])
         if flag <= 0 or not math.isfinite(u0):                      # the cap, or no solution: saturated LQR
             self.warm()
             K = self.qp.K
-            return min(max(-float(K[0] * theta_b + K[1] * dtheta_b + K[2] * dtheta_w), -u_max), u_max)
+            return min(max(-float(K[0] * theta_b + K[1] * dtheta_b + K[2] * dtheta_w), lo), hi)
         # the active set (lam < 0: the lower bound, > 0: the upper), shifted by one period
         active = [(_AT_LOWER if lam < 0.0 else _AT_UPPER) if lam != 0.0 else 0 for lam in info["lam"].tolist()]
         self.warm(active[1:] + active[-1:])
         if active[0]:                                                # u_0 on its bound: the bound exactly
-            return -u_max if active[0] == _AT_LOWER else u_max
-        return min(max(u0, -u_max), u_max)                           # (DAQP's primal_tol is 1e-6)
+            return lo if active[0] == _AT_LOWER else hi
+        return min(max(u0, lo), hi)                                  # (DAQP's primal_tol is 1e-6)
 
 
 def _at(v, i):
@@ -241,6 +239,7 @@ class MpcLaw(Law):
     internal_names = INTERNALS
     Params = MpcParams
     announce = False
+    limit_key = "mpc.u_max"
 
     def __init__(self, params, nominal, h: float, m=math):
         self.nominal, self.h, self.m = nominal, h, m
@@ -253,9 +252,8 @@ class MpcLaw(Law):
     @params.setter
     def params(self, value) -> None:
         """New parameters (the node re-designs at run time): a new QP, a cold start.  One scenario's QP (the
-        node's) is built now, the batch's (one per scenario) on its first step: building it (the Riccati
-        terminal weight, DAQP's workspace) takes about 7 ms, more than a 200 Hz period, and in the controller's
-        first period it made the plant apply zero torque for the first few periods of a realtime run."""
+        node's) is built now, not in the first step (building it, the Riccati terminal weight and DAQP's
+        workspace, takes longer than a control period); the batch's (one per scenario) on its first step."""
         self._params = value
         self._qps = None
         nominal = self.nominal
@@ -270,8 +268,8 @@ class MpcLaw(Law):
         Q = values["mpc.Q"]
         if len(Q) != 3:
             raise _design_error("mpc.Q", f"give the diagonal (3 entries), got {len(Q)} entries")
-        if not all(isinstance(q, (int, float)) and math.isfinite(q) and q >= 0 for q in Q):
-            raise _design_error("mpc.Q", f"entries must be finite and >= 0, got {list(Q)}")
+        if not all(isinstance(q, (int, float)) and math.isfinite(q) and 0 <= q <= Q_MAX for q in Q):
+            raise _design_error("mpc.Q", f"entries must be >= 0 and <= {Q_MAX:g} (as lqr.Q's), got {list(Q)}")
         N, R, u_max = values["mpc.horizon"], values["mpc.R"], values["mpc.u_max"]
         if not (isinstance(N, (int, np.integer)) and not isinstance(N, bool) and N >= 1):
             raise _design_error("mpc.horizon", f"must be an integer >= 1, got {N!r}")
@@ -319,19 +317,35 @@ class MpcLaw(Law):
         return True                          # the warm start is an active set: always valid
 
     def step(self, x, tau_hat=None):
+        u = self._solve(x, 0.0)
+        return u, {"u_dsc": u, "u_taud": 0.0, "S1": x[1], "u": u}   # u_taud: 0, the term is off
+
+    def step_observed(self, x, u_taud):
+        """``mpc_ndo``: u = u_0 - u_taud (eq. 19) with the observer term inside the QP, the bounds shifted by it
+        (-u_max <= u_k - u_taud <= u_max, u_taud held over the horizon; docs/theory.md 6.6): |u| <= u_max holds
+        (clamped to it against rounding; NaN stays NaN)."""
+        u0 = self._solve(x, u_taud)
+        u_max = self._params.u_max
+        if np.ndim(u0) == 0:
+            u = u0 - u_taud
+            u = u if not math.isfinite(u) else min(max(u, -u_max), u_max)
+        else:
+            u = np.clip(u0 - u_taud, -u_max, u_max)
+        return u, {"u_dsc": u0, "S1": x[1]}
+
+    def _solve(self, x, offset):
+        """u_0 of the QP (bounds ``offset`` -+ u_max) for the state ``x``: one scenario, or arrays of them."""
         theta_b, dtheta_w, dtheta_b = x[1], x[2], x[3]
         if np.ndim(theta_b) == 0:            # one scenario
             if self._qps is None or len(self._qps) != 1:
                 self._qps = [self._scenario_qp(None)]
-            u = self._qps[0].solve(float(theta_b), float(dtheta_b), float(dtheta_w))
-        else:                                # the batch: arrays of scenarios, solved one by one
-            n = len(theta_b)
-            if self._qps is None or len(self._qps) != n:
-                self._qps = [self._scenario_qp(i) for i in range(n)]
-            tb, dtb, dtw = (np.broadcast_to(np.asarray(a, dtype=float), (n,)).tolist()
-                            for a in (theta_b, dtheta_b, dtheta_w))
-            u = np.array([qp.solve(tb[i], dtb[i], dtw[i]) for i, qp in enumerate(self._qps)])
-        return u, {"u_dsc": u, "u_taud": 0.0, "S1": theta_b, "u": u}   # u_taud: 0, the term is off
+            return self._qps[0].solve(float(theta_b), float(dtheta_b), float(dtheta_w), float(offset))
+        n = len(theta_b)                     # the batch: arrays of scenarios, solved one by one
+        if self._qps is None or len(self._qps) != n:
+            self._qps = [self._scenario_qp(i) for i in range(n)]
+        tb, dtb, dtw, off = (np.broadcast_to(np.asarray(a, dtype=float), (n,)).tolist()
+                             for a in (theta_b, dtheta_b, dtheta_w, offset))
+        return np.array([qp.solve(tb[i], dtb[i], dtw[i], off[i]) for i, qp in enumerate(self._qps)])
 
     # --- text -------------------------------------------------------------------------------------------------
 

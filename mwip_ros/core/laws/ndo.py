@@ -53,11 +53,11 @@ class WithObserver(Law):
         return cls.base.stability_margin(nominal, params, X, observer=True)
 
     def step(self, x, tau_hat=None):
-        """u = u_law - u_taud (eq. 19) with u_taud = tau_hat1 - M_C12 / (m22 + M_C12) tau_hat2 (eq. 20-21)."""
-        u_law, internals = self.inner.step(x, None)
+        """u = u_law - u_taud (eq. 19) with u_taud = tau_hat1 - M_C12 / (m22 + M_C12) tau_hat2 (eq. 20-21); the law
+        takes the term in (:meth:`~mwip_ros.core.laws.Law.step_observed`: a law with a limit holds it on u)."""
         p, m = self.inner.nominal, self.inner.m
         u_taud = u_taud_of(p, p.m12 * m.cos(x[1]), tau_hat)   # eq. (20)-(21), M_C12 = m12 cos theta_b
-        u = u_law - u_taud                                     # eq. (19)
+        u, internals = self.inner.step_observed(x, u_taud)     # eq. (19)
         internals["u_taud"], internals["u"] = u_taud, u
         return u, internals
 
@@ -93,6 +93,7 @@ def with_observer(base: type, name: str, title: Optional[str] = None) -> type:
         "base": base, "name": name, "family": base.family or base.name, "title": title or name,
         "param_keys": base.param_keys, "parameters": base.parameters, "Params": base.Params,
         "internal_names": tuple(base.internal_names) + extra, "announce": base.announce,
+        "limit_key": base.limit_key,
         "__module__": base.__module__, "__doc__": f"{base.__name__} with the observer term (eq. 19-21)."})
     base._with_observer = cls
     return cls

@@ -16,16 +16,22 @@ regulation of an underactuated MWIP, on the states the other laws regulate, z = 
 
 so that ``u = (-(c1 theta_b' + c2 f_b + c3 f_w) - q s - k sat(s / phi)) / (c2 g_b + c3 g_w)``.
 u_taud (eq. 20) is added by :mod:`.ndo`, not here.
+
+In discrete time (the command held over the period h) s_k+1 = (1 - a h) s_k, with a = q outside the layer and
+a = q + k / phi inside it (docs/theory.md 6.5): q h >= 2 is refused, (q + k / phi) h >= 2 warned of.
 """
 from __future__ import annotations
 
 import math
-from typing import NamedTuple, Tuple
+from typing import NamedTuple, Optional, Tuple
 
 from . import Law, LawParam
 from .dsc import INTERNALS
 
-__all__ = ["SmcGains", "SmcLaw", "smc_step", "sliding_surface", "sat", "PARAMETERS"]
+__all__ = ["SmcGains", "SmcLaw", "smc_step", "sliding_surface", "sat", "layer_rate", "boundary_layer_warning",
+           "DISCRETE_LIMIT", "PARAMETERS"]
+
+DISCRETE_LIMIT = 2.0   # s_k+1 = (1 - a h) s_k is stable for 0 < a h < 2 (a = q outside the layer, q + k/phi inside)
 
 PARAMETERS = (
     LawParam("smc.pole1", "double", 3.0, "sliding-mode control: the linearized motion on s = 0 has the "
@@ -35,7 +41,7 @@ PARAMETERS = (
     LawParam("smc.k", "double", 40.0, "sliding-mode control: switching gain k of the reaching law "
              "s' = -q s - k sat(s / boundary_layer) [N m] (s' = ... + u)", lo=0.0, hi=1e5),
     LawParam("smc.q", "double", 20.0, "sliding-mode control: proportional rate q of the reaching law [1/s] "
-             "(q h well below 2 at the control period h)", lo=0.0, hi=150.0),
+             "(q h below 2 at the control period h, refused otherwise)", lo=0.0, hi=150.0),
     LawParam("smc.boundary_layer", "double", 1.0, "sliding-mode control: boundary-layer width phi of "
              "sat(s / phi) [N m s]; 0 = the pure sign (chattering)", lo=0.0, hi=1e4),
 )
@@ -65,6 +71,25 @@ def sliding_surface(nominal, pole1: float, pole2: float) -> Tuple[float, float, 
     I = np.eye(3)
     c = e @ (A + pole1 * I) @ (A + pole2 * I)
     return float(c[0]), float(c[1]), float(c[2])
+
+
+def layer_rate(gains: SmcGains, h: float) -> float:
+    """(q + k / phi) h: the discrete rate of s inside the boundary layer, s_k+1 = (1 - (q + k / phi) h) s_k
+    (docs/theory.md 6.5); inf for phi = 0 (the pure sign: no layer)."""
+    return (gains.q + gains.k / gains.phi) * h if gains.phi > 0 else math.inf
+
+
+def boundary_layer_warning(gains: SmcGains, h: float) -> Optional[str]:
+    """One line when the boundary layer is unstable in discrete time, (q + k / phi) h >= 2, naming the keys and
+    the rate, and the smallest stable smc.boundary_layer; None when it is stable or phi = 0 (the pure sign)."""
+    a = layer_rate(gains, h)
+    if gains.phi == 0 or a < DISCRETE_LIMIT:
+        return None
+    least = gains.k * h / (DISCRETE_LIMIT - gains.q * h)
+    return (f"smc: the boundary layer is unstable at control_rate_hz {1.0 / h:g} Hz: (smc.q + smc.k / "
+            f"smc.boundary_layer) h = ({gains.q:g} + {gains.k:g} / {gains.phi:g}) x {h:g} s = {a:.3g}, not below "
+            f"{DISCRETE_LIMIT:g}; s alternates across the layer and the torque chatters as with the pure sign "
+            f"(docs/theory.md 6.5); a stable layer needs smc.boundary_layer > k h / (2 - q h) = {least:.3g} N m s")
 
 
 def sat(y):
@@ -109,9 +134,21 @@ class SmcLaw(Law):
 
     @classmethod
     def design(cls, values, nominal, h) -> SmcGains:
+        """The surface and the reaching law's gains; refused (a ValueError naming ``smc.q``) when q h >= 2, where
+        the reaching law's proportional part diverges in discrete time (docs/theory.md 6.5)."""
+        q = float(values["smc.q"])
+        if not q * h < DISCRETE_LIMIT:
+            from ..lqr import LqrDesignError
+            raise LqrDesignError("smc.q", f"{q:g} /s at control_rate_hz {1.0 / h:g} Hz gives q h = {q * h:.3g}, "
+                                          f"not below {DISCRETE_LIMIT:g}: the reaching law diverges in discrete time "
+                                          f"(|1 - q h| >= 1); keep smc.q < {DISCRETE_LIMIT / h:.4g} /s at this rate")
         c1, c2, c3 = sliding_surface(nominal, values["smc.pole1"], values["smc.pole2"])
-        return SmcGains(c1, c2, c3, float(values["smc.q"]), float(values["smc.k"]),
-                        float(values["smc.boundary_layer"]))
+        return SmcGains(c1, c2, c3, q, float(values["smc.k"]), float(values["smc.boundary_layer"]))
+
+    def warnings(self):
+        """The boundary layer unstable in discrete time: (q + k / phi) h >= 2 (docs/theory.md 6.5)."""
+        text = boundary_layer_warning(self.params, self.h)
+        return [text] if text else []
 
     def step(self, x, tau_hat=None):
         u, _, (sigma, u_eq, u_sw, u_smc) = smc_step(self.pure_params(self.params), self.nominal, self.h, x, 0.0,
