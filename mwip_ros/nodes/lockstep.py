@@ -164,15 +164,17 @@ class LockstepDriver:
                     break
         return "; ".join(what) or self.idle_hint
 
-    def silent_stage(self, since_stamp: int) -> Tuple[str, str]:
+    def silent_stage(self, since_stamp: int, stamp0: int = 0) -> Tuple[str, str]:
         """(the stage, in words why) of the first answering stage of the chain from which no answer to a state
         stamped ``since_stamp`` or later was heard (:meth:`listen` first); the last stage (the command's) when
-        every other one answered.  The realtime watchdog names it (lockstep names it in :meth:`missing`)."""
+        every other one answered.  The realtime watchdog names it (lockstep names it in :meth:`missing`); times
+        are said from ``stamp0`` (the run's first stamp) [ns]."""
         for a in self.answers[:-1]:
             heard = self._heard.get(a.topic)
             if heard is None or heard < since_stamp:
-                said = "none ever" if heard is None else f"the last for t = {heard * 1e-9:.3f} s"
-                return a.stage, f"{a.stage} ({a.node}: no {a.topic} since t = {since_stamp * 1e-9:.3f} s, {said})"
+                said = "none ever" if heard is None else f"the last for t = {(heard - stamp0) * 1e-9:.3f} s"
+                return a.stage, (f"{a.stage} ({a.node}: no {a.topic} for a state since t = "
+                                 f"{(since_stamp - stamp0) * 1e-9:.3f} s, {said})")
         a = self.answers[-1]
         gaps = graph_missing(self.node, self.state_pub, 0, (a,))
         return a.stage, f"{a.stage} ({a.node}: {gaps[0] if gaps else 'every earlier stage answered'})"

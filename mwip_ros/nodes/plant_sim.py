@@ -376,7 +376,7 @@ class PlantSimNode(Node, GracefulNodeMixin):
             silence = wd.silence(now)
             since = [t for t in ticks[-(int(silence / self.h) + 3):] if t >= wd.last] + [now]   # the plant's ticks
             gap = max((b - a for a, b in zip(since, since[1:])), default=0.0)   # meanwhile: its longest stall
-            stage, why = self.lockstep.silent_stage(self._watch_stamp)
+            stage, why = self.lockstep.silent_stage(self._watch_stamp, self.stamp0)
             what = ("since the last" if wd.answered else "since the first state: none ever came")
             self._fault("watchdog", f"no wheel_torque_cmd for {silence * 1e3:.1f} ms > watchdog_s = "
                                     f"{wd.timeout * 1e3:g} ms ({what}); the stage that did not answer: {why}",

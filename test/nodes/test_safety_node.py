@@ -473,6 +473,7 @@ def test_the_realtime_watchdog_names_the_stage_that_never_answered(tmp_path):
             ds = _driver_states(inj)
             _, fault = _wait_record(inj, ds, plant, timeout=60, state="fault")
         assert plant.stop() == 0, plant.output()[-3000:]
+    print(f"the fault: {fault['text']} (silence {fault['silence_s'] * 1e3:.1f} ms)")
     assert fault["reason"] == "watchdog", fault
     assert fault["silent_stage"] == "estimator" and "state_estimator" in fault["detail"], fault
     assert "none ever came" in fault["detail"], fault
