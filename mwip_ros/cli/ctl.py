@@ -1,10 +1,20 @@
-"""``mwip_ctl``: the README's live actions without a ``ros2`` CLI: set a parameter, reset the plant, push it.
+"""``mwip_ctl``: the README's live actions without a ``ros2`` CLI: set a parameter, reset the plant, push it,
+drive its driver's state machine (docs/theory.md 6.8).
 
     mwip_ctl param set NODE NAME VALUE     # /NODE/set_parameters; VALUE is YAML, as in -p NAME:=VALUE
     mwip_ctl param get NODE NAME           # /NODE/get_parameters
     mwip_ctl param list NODE               # /NODE/list_parameters
     mwip_ctl reset [--node plant_sim]      # std_srvs/Trigger /plant_sim/reset
+    mwip_ctl enable [--node plant_sim]     # std_srvs/Trigger /plant_sim/enable
+    mwip_ctl disable [--node plant_sim]    # std_srvs/Trigger /plant_sim/disable
+    mwip_ctl estop [--release]             # std_msgs/Bool true (false: --release) on emergency_stop
     mwip_ctl push [--wheel NM] [--body NM] [--duration S] [--rate HZ]   # external_wrench, then a zero one
+
+The e-stop is a level that the plant holds (core.safety): ``estop`` publishes true once, waits until the plant
+has acknowledged it and exits; the plant keeps it asserted (its driver in fault, ``~/reset`` and ``~/enable``
+refused) until a false comes, ``estop --release``, which does not clear the fault: ``reset`` (and, with
+``require_enable: true``, ``enable``) follow.  So the command needs no process that stays up to hold the level,
+and a Ctrl-C or a lost terminal cannot release an e-stop.  Restarting the plant forgets it (a new process).
 
 Unlike ``ros2 param set``, a whole number for a ``double`` parameter is sent as a double (the type of
 its current value, from ``/NODE/get_parameters``): ``mwip_ctl param set dscndo_controller k1 8``.
@@ -154,11 +164,49 @@ def _param(ros: Ros, args) -> int:
     return 0
 
 
-def _reset(ros: Ros, args) -> int:
+def _trigger(ros: Ros, args) -> int:
+    """``reset``, ``enable``, ``disable``: the plant's std_srvs/Trigger service of that name; its answer printed
+    (stdout when it succeeded, else stderr and exit 1: e.g. a reset refused while the e-stop is asserted)."""
     from std_srvs.srv import Trigger
-    response = ros.call(Trigger, args.node, "reset", Trigger.Request())
+    response = ros.call(Trigger, args.node, args.command, Trigger.Request())
+    if not response.success:
+        raise Failure(f"{args.node} refused {args.command}: {response.message}")
     print(f"{args.node}: {response.message}")
-    return 0 if response.success else 1
+    return 0
+
+
+def _plant_listens(ros: Ros, pub, node: str) -> bool:
+    plant = node.rstrip("/").rsplit("/", 1)[-1]
+    return pub.get_subscription_count() > 0 and any(
+        s.node_name == plant for s in ros.node.get_subscriptions_info_by_topic(pub.topic_name))
+
+
+def _estop(ros: Ros, args) -> int:
+    """``estop``: std_msgs/Bool true on ``emergency_stop`` (``--release``: false), published until the plant's
+    reliable subscription acknowledges it, then exit; the plant holds the level (module doc)."""
+    from rclpy.duration import Duration
+    from std_msgs.msg import Bool
+
+    from mwip_ros.msgs.qos import REALTIME_INPUT_QOS
+    value = not args.release
+    pub = ros.node.create_publisher(Bool, "emergency_stop", REALTIME_INPUT_QOS)   # reliable, volatile, keep last 1
+    topic, plant = pub.topic_name, args.node.rstrip("/").rsplit("/", 1)[-1]
+    if not ros.until(lambda: _plant_listens(ros, pub, args.node), args.timeout):
+        raise Failure(f"no {plant} subscribes {topic} after {args.timeout:g} s: is it running ({_domain()})?")
+    # the plant hears it on a reliable and a best-effort subscription: a few copies 50 ms apart, so the best-effort
+    # one (which may drop a message) holds the same value; the reliable one acknowledges
+    for i in range(3):
+        pub.publish(Bool(data=value))
+        if i < 2:
+            ros.until(lambda: False, 0.05)
+    if not pub.wait_for_all_acked(Duration(seconds=args.timeout)):
+        raise Failure(f"{plant} did not acknowledge the emergency stop on {topic} within {args.timeout:g} s")
+    if value:
+        print(f"{plant}: emergency stop asserted on {topic}; the driver holds zero torque in fault until "
+              f"'{PROG} estop --release' and '{PROG} reset'")
+    else:
+        print(f"{plant}: emergency stop released on {topic}; the fault stays latched until '{PROG} reset'")
+    return 0
 
 
 def _push(ros: Ros, args) -> int:
@@ -172,11 +220,7 @@ def _push(ros: Ros, args) -> int:
     push = L.encode_external_wrench(t1, t2)
     pub = ros.node.create_publisher(Wrench, "external_wrench", REALTIME_INPUT_QOS)
     topic, plant = pub.topic_name, args.node.rstrip("/").rsplit("/", 1)[-1]
-
-    def plant_listens() -> bool:
-        return pub.get_subscription_count() > 0 and any(
-            s.node_name == plant for s in ros.node.get_subscriptions_info_by_topic(topic))
-    if not ros.until(plant_listens, args.timeout):
+    if not ros.until(lambda: _plant_listens(ros, pub, args.node), args.timeout):
         raise Failure(f"no {plant} subscribes {topic} after {args.timeout:g} s: is it running ({_domain()})?")
     sent, start = 0, time.monotonic()
     try:
@@ -237,9 +281,11 @@ def parser() -> argparse.ArgumentParser:
                         help="how long to wait for the service or the subscriber, and for an answer (default 5)")
     common.add_argument("--namespace", default="", metavar="NS",
                         help="where relative names resolve (the graph's -r __ns:=NS); default /")
-    ap = _Parser(prog=PROG, description="Set parameters, reset and push a running mwip_ros graph, without a ros2 "
-                 "CLI, on the environment's ROS_DOMAIN_ID.")
-    sub = ap.add_subparsers(dest="command", required=True, metavar="{param,reset,push}")
+    ap = _Parser(prog=PROG, description="Set parameters, reset, enable, disable, emergency-stop and push a running "
+                 "mwip_ros graph, without a ros2 CLI, on the environment's ROS_DOMAIN_ID. Exit codes: 0 done, 1 "
+                 "nothing answered within --timeout or the node refused (one line on stderr), 2 a usage error, "
+                 "130 Ctrl-C.")
+    sub = ap.add_subparsers(dest="command", required=True, metavar="{param,reset,enable,disable,estop,push}")
     psub = sub.add_parser("param", help="set, get or list a node's parameters").add_subparsers(
         dest="action", required=True, metavar="{set,get,list}")
     s = psub.add_parser("set", parents=[common], help="set a parameter (the node checks it; a refusal exits 1)",
@@ -252,7 +298,25 @@ def parser() -> argparse.ArgumentParser:
     for p in (s, g):
         p.add_argument("name", metavar="NAME")
     s.add_argument("value", metavar="VALUE")
-    r = sub.add_parser("reset", parents=[common], help="put the robot back in its initial state (plant's ~/reset)")
+    r = sub.add_parser("reset", parents=[common], help="put the robot back in its initial state and clear the "
+                       "driver's fault (plant's ~/reset; refused, exit 1, while the e-stop is asserted)",
+                       description="Call the plant's ~/reset: the robot back at its initial state, the driver's fault "
+                       "cleared and the driver at its start state (disabled with require_enable: true). Refused "
+                       "(exit 1, the plant's reason on stderr) while the emergency stop is asserted or the state "
+                       "estimator reports ERROR.")
+    en = sub.add_parser("enable", parents=[common], help="let the command act (plant's ~/enable; refused in fault)",
+                        description="Call the plant's ~/enable: disabled -> enabled. Refused (exit 1) in fault: "
+                        "reset first.")
+    dis = sub.add_parser("disable", parents=[common], help="zero torque, the bridge open (plant's ~/disable)",
+                         description="Call the plant's ~/disable: enabled -> disabled (no torque until enable); in "
+                         "fault the fault stays latched.")
+    es = sub.add_parser("estop", parents=[common], help="assert the emergency stop (--release: release it)",
+                        description="Publish std_msgs/Bool true on emergency_stop (--release: false) until the plant "
+                        "acknowledges it, then exit. The e-stop is a level the plant holds: asserted, the driver "
+                        "is in fault with zero torque and ~/reset and ~/enable are refused, until a release; a "
+                        "release does not clear the fault, 'mwip_ctl reset' (and with require_enable: true, "
+                        "'mwip_ctl enable') brings the torque back.")
+    es.add_argument("--release", action="store_true", help="release the e-stop (publish false)")
     p = sub.add_parser("push", parents=[common], help="push the robot: external_wrench for a while, then zero",
                        description="Publish external_wrench (geometry_msgs/Wrench) for --duration, then a zero "
                        "wrench. The plant adds torque.x to tau_ext1 (the wheel row of eq. 1) and torque.y to "
@@ -266,7 +330,7 @@ def parser() -> argparse.ArgumentParser:
                    "(default 0.5)")
     p.add_argument("--rate", type=_number, default=10.0, metavar="HZ", help="resend the push at this rate while "
                    "it lasts; 0 = once (default 10)")
-    for q in (r, p):
+    for q in (r, en, dis, es, p):
         q.add_argument("--node", default="plant_sim", help="the plant node (default plant_sim)")
     return ap
 
@@ -277,7 +341,8 @@ def main(argv=None) -> int:
         args = _checked(ap, ap.parse_args(argv))
         ros = Ros(args.namespace, args.timeout)
         try:
-            return {"param": _param, "reset": _reset, "push": _push}[args.command](ros, args)
+            return {"param": _param, "reset": _trigger, "enable": _trigger, "disable": _trigger, "estop": _estop,
+                    "push": _push}[args.command](ros, args)
         finally:
             ros.close()
     except Failure as exc:

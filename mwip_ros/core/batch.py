@@ -209,7 +209,11 @@ def simulate_batch(loops: Sequence[ClosedLoop], window: Sequence[float], record:
     the loop runs over numpy arrays with the plant's RK4 compiled.  The raw sensors and their estimator, the motor
     and the excitation (:func:`_beyond_arrays`) run compiled too when the scenarios share whether they have raw
     sensors and the estimator's method (:func:`_raw_stage`); else, with ``record`` or a law without a pure form,
-    the scalar loop scenario by scenario (:func:`_simulate_each`)."""
+    the scalar loop scenario by scenario (:func:`_simulate_each`).  The array and compiled forms have no driver
+    state machine (docs/theory.md 6.8): they always run enabled, so scenarios with ``require_enable: true`` (a
+    driver nobody enables: its bridge open, no torque) run the scalar loop, which has it."""
+    if any(lp.plant.require_enable for lp in loops):
+        return _simulate_each(loops, window, record)
     beyond = any(_beyond_arrays(lp) for lp in loops)
     if compiled is None:
         compiled = compiled_default()

@@ -11,7 +11,8 @@ The discrete-time contract (docs/theory.md, section 4) orders one control period
 4. ``law``       u_k from the measured state and tau_hat_k (:mod:`.laws`);
 5. ``drive``     the torque limit, the actuator delay and the driver's state machine (:mod:`.safety`:
    zero torque unless enabled): the command that acts over [t_k, t_{k+1}) (with the motor model,
-   :mod:`.drive`, the drive turns it into the torque at every RK4 stage of the plant);
+   :mod:`.drive`, the drive turns it into the torque at every RK4 stage of the plant; not enabled, the
+   bridge is open and no current flows, :func:`.plant.gated_drive`);
 6. ``plant``     integrate to t_{k+1} (:mod:`.plant`), after recording row k and its true tau_d.
 
 :data:`STAGES` is that order, written once, with the graph node that runs each stage and the
@@ -121,6 +122,7 @@ class PlantSide:
         self.actuator = Actuator(sc.actuator_delay_periods) if sc.actuator_delay_periods else None
         # the driver's state machine (docs/theory.md 6.8): disabled or faulted, the torque that acts is zero
         self.safety = DriverStateMachine(require_enable=cfg.require_enable)
+        self.enabled = self.safety.enabled   # the bridge over the period :meth:`act` decided (closed: enabled)
 
     def sense(self):
         """Stage ``sensors``: (what is measured of state k, the torque of period k - 1 as reported).  The
@@ -137,12 +139,13 @@ class PlantSide:
         u = saturate(u_cmd, self.cfg.torque_limit)
         if self.actuator is not None:
             u = self.actuator.apply(u)
+        self.enabled = self.safety.enabled   # the gate of this period: not enabled, the bridge is open (no current)
         u = self.safety.torque_gate(u)   # zero unless the driver is enabled; the observer is told what acted
         return u, self.plant.lumped_disturbance(u, extra)
 
     def advance(self, u: float, extra=(0.0, 0.0)) -> None:
-        """Stage ``plant``: integrate t_k -> t_k+1 with the torque that acts."""
-        self.plant.step(u, extra)
+        """Stage ``plant``: integrate t_k -> t_k+1 with the torque that acts (the bridge as :meth:`act` found it)."""
+        self.plant.step(u, extra, enabled=self.enabled)
 
 
 class Period:

@@ -5,6 +5,8 @@ per control period, holding ``u`` and ``D_w`` over the period and evaluating
 tau_ext at each stage time.  ``D_w`` is drawn once per period from a seeded
 generator (Gaussian, clipped at 0).  The offline simulator and the
 ``plant_sim`` node both drive this class, so they integrate the same numbers.
+A period integrated with the driver not enabled (docs/theory.md 6.8) has its bridge open:
+no current, no torque, whatever the command or the wheel's speed (:func:`gated_drive`).
 """
 from __future__ import annotations
 
@@ -20,7 +22,7 @@ from .raw_sensors import RawSensorConfig
 from .sensing import NOISE_BLOCK, SensingConfig
 
 __all__ = ["Plant", "PLANTS", "make_plant", "PlantConfig", "PlantSim", "RK4Plant", "stage_torques", "rk4_period",
-           "rk4_driven", "NO_MOTOR", "saturate", "D_w_of"]
+           "rk4_driven", "NO_MOTOR", "saturate", "D_w_of", "gated_drive"]
 
 
 @dataclass(frozen=True)
@@ -84,7 +86,7 @@ class Plant(Protocol):
 
     def sample_accel(self) -> Tuple[float, float]: ...
 
-    def step(self, u: float, extra=(0.0, 0.0)) -> None: ...
+    def step(self, u: float, extra=(0.0, 0.0), enabled: bool = True) -> None: ...
 
     def lumped_disturbance(self, u: float, extra=(0.0, 0.0)) -> Tuple[float, float]: ...
 
@@ -107,6 +109,7 @@ class PlantSim:
     saturation: int = 0              # the drive's worst saturation code over the previous period (core.drive)
     D_w_prev: float = 0.0            # the previous period's D_w (period 0's at k = 0): a raw sample's instant
     extra_prev: Tuple[float, float] = (0.0, 0.0)   # the external wrench held over the previous period
+    enabled_prev: bool = True        # the driver was enabled over the previous period (its bridge closed)
     _rng: np.random.Generator = field(default=None, repr=False)
     _noise: list = field(default_factory=list, repr=False)
 
@@ -151,20 +154,23 @@ class PlantSim:
         c = self.cfg
         e1, e2 = self.tau_ext(self.t, self.extra_prev)
         u = self.u_prev
-        if c.motor.enabled and self.k > 0:   # the motor's torque at x_k for the previous command
+        if c.motor.enabled and self.k > 0 and self.enabled_prev:   # the motor's torque at x_k for the previous command
             u = motor_torque(self.u_cmd_prev, self.x[2] - self.x[3], *c.motor_constants)[0]
         return accel(c.actual, self.D_w_prev, c.D_b, self.x, u, e1, e2)
 
-    def step(self, u: float, extra=(0.0, 0.0)) -> None:
+    def step(self, u: float, extra=(0.0, 0.0), enabled: bool = True) -> None:
         """Integrate t_k -> t_{k+1} with the command u (already saturated) and D_w held; RK4, ``substeps`` steps;
-        with the motor model on, the drive turns u into the torque at every stage (:func:`rk4_driven`)."""
+        with the motor model on, the drive turns u into the torque at every stage (:func:`rk4_driven`).
+        ``enabled`` False: the driver is disabled or in fault over this period, its bridge open
+        (:func:`gated_drive`): no torque at all."""
         c = self.cfg
         tau1, tau2 = stage_torques(c.tau_ext1, c.tau_ext2, extra, self.t, c.h, c.substeps)
+        u, motor = gated_drive(u, c.motor_constants, enabled)
         w, b, dw, db, acted, self.saturation = rk4_driven(c.actual, self.D_w, c.D_b, tau1, tau2, self.x, u, c.h,
-                                                          c.substeps, c.motor_constants)
+                                                          c.substeps, motor)
         self.x = State(w, b, dw, db)
         self.k += 1
-        self.u_prev, self.u_cmd_prev = acted, u
+        self.u_prev, self.u_cmd_prev, self.enabled_prev = acted, u, bool(enabled)
         self.D_w_prev, self.extra_prev = self.D_w, (float(extra[0]), float(extra[1]))
         self.D_w = self._draw_D_w()
 
@@ -180,6 +186,16 @@ def stage_torques(f1: Sinusoid, f2: Sinusoid, extra, t0: float, h: float, n: int
 
 
 NO_MOTOR = (0.0, 0.0, 0.0, 0.0)   # rk4_driven's ``motor`` when the motor model is off: the torque is the command
+
+
+def gated_drive(u: float, motor, enabled: bool) -> Tuple[float, Tuple[float, float, float, float]]:
+    """The command and the drive (:func:`rk4_driven`'s ``u`` and ``motor``) of a period through the driver's gate
+    (docs/theory.md 6.7 and 6.8): enabled, as they are; disabled or in fault, the driver's bridge is open, so no
+    current flows (i = 0) whatever the back-EMF: (0.0, :data:`NO_MOTOR`), a torque of exactly zero.  Fed the zero
+    command instead, the drive model would apply V = K_t w and, once the wheel turns faster than V_max / K_t,
+    drive a braking current (up to I_max K_t) through a bridge that is meant to be open.  The batch simulator
+    has no driver state machine (it always runs enabled) and calls :func:`rk4_driven` as it is."""
+    return (u, motor) if enabled else (0.0, NO_MOTOR)
 
 
 def rk4_period(p: PhysicalParams, D_w, D_b, tau1, tau2, x, u, h: float, n: int, m=math) -> Tuple:

@@ -3,9 +3,9 @@
 States:
 
 =============  ==============================================================================
-``disabled``   zero torque; the start state when ``require_enable`` is true
+``disabled``   no torque (the bridge open, no current); the start state when ``require_enable`` is true
 ``enabled``    the command acts; the start state when ``require_enable`` is false
-``fault``      zero torque, latched with its reason until ``reset``
+``fault``      no torque (the bridge open, no current), latched with its reason until ``reset``
 =============  ==============================================================================
 
 Events and their answers (every call answers, none raises; a call that changes the state returns
@@ -16,22 +16,43 @@ event           disabled       enabled                       fault
 ==============  =============  ============================  ==================================
 ``enable``      -> enabled     ok, already enabled           refused: reset first (names the fault)
 ``disable``     ok, already    -> disabled                   ok, torque already zero; stays latched
-``reset``       -> start       -> start                      -> start (clears the fault)
+``reset``       -> start       -> start                      -> start, refused while a level is held
 ``fault(r)``    -> fault(r)    -> fault(r)                   kept: the first reason stays
 ==============  =============  ============================  ==================================
 
 Fault reasons (:data:`FAULT_REASONS`): ``watchdog`` (no new command for ``watchdog_s``; lockstep: the
 lockstep timeout), ``bad_command`` (non-finite or implausible, :meth:`DriverStateMachine.check_command`),
-``fall`` (|theta_b| > fall_angle), ``emergency_stop`` (std_msgs/Bool true), ``estimator_unhealthy`` (raw
-mode).  A fault is a fault whatever the enable state (a fall while disabled is latched too).
+``fall`` (|theta_b| > fall_angle), ``emergency_stop`` (std_msgs/Bool true) and ``estimator_unhealthy``
+(raw mode: the state estimator reports ERROR).  A fault is a fault whatever the enable state (a fall while
+disabled is latched too).
+
+**Levels.** ``emergency_stop`` and ``estimator_unhealthy`` are inputs with a level (:data:`LEVEL_INPUTS`,
+:meth:`DriverStateMachine.set_level`), not events: the e-stop is pressed (true) until it is released
+(false), the estimator unhealthy while its latest status is ERROR (OK or WARN clears it).  Asserting one
+latches the fault (as :meth:`~DriverStateMachine.fault`), and the machine remembers that it is held
+(``held``): while any level is held, ``reset`` is refused, naming it (the state stays ``fault``), and so
+``enable`` is too (it is refused in fault).  Releasing a level does not clear the fault: it makes the
+next ``reset`` possible.  So no reset and no enable brings torque back while the e-stop is pressed or the
+estimator's fault condition holds.  A level asserted during another fault is held the same way: the
+fault keeps its first reason, and the reset is still refused until the level is released.
 
 **Latch**: while in fault, a later fault keeps the first reason and its detail, the cause (a watchdog
 expiry is typically followed by a fall, and the fall is not what went wrong).  Later faults are counted
-(``suppressed``) and the last one kept (``last_suppressed``) for diagnostics; they make no transition.
+(``suppressed``) and the last one kept (``last_suppressed``) for diagnostics; they make no transition.  An
+event fault (``watchdog``, ``bad_command``, ``fall``) that comes during another fault needs no memory: its
+condition is checked again after the reset (the watchdog counts again from the reset, a fall is checked
+every period) and faults again if it still holds.
 
-``reset`` restores the start state (``disabled`` when ``require_enable`` else ``enabled``), as the
-plant's ``~/reset`` restores its initial state.  :meth:`DriverStateMachine.torque_gate` is the torque
-that acts: the command when enabled, else 0.0 (which is also what the observer must be told acted).
+**Reset policy** (stop first, as Upkie's spine and ros2_control's lifecycle do): ``reset`` restores the
+start state, never more.  With ``require_enable: true`` (a robot's setting) that is ``disabled``: a reset
+from a fault brings no torque back, an explicit ``enable`` must follow.  With ``require_enable: false``
+(the paper's runs and the simulations: nobody to enable the driver) the start state is ``enabled``, and the
+reset itself is the explicit act that brings the torque back; it is refused while a level is held.
+
+:meth:`DriverStateMachine.torque_gate` is the command that acts: the command when enabled, else 0.0
+(which is also what the observer must be told acted); :attr:`DriverStateMachine.enabled` is the bridge:
+disabled or in fault it is open and no current flows, so the torque is exactly zero also with the motor
+model and the wheel spinning faster than V_max / K_t (:func:`mwip_ros.core.plant.gated_drive`).
 Pure Python, no ROS: the ``plant_sim`` node maps the answers onto std_srvs/Trigger (``success``,
 ``message``) and the transitions onto ``/diagnostics`` and the log.
 """
@@ -40,14 +61,20 @@ from __future__ import annotations
 import math
 from collections import deque
 from dataclasses import dataclass
-from typing import Deque, Optional, Tuple
+from typing import Deque, Dict, Optional, Tuple
 
-__all__ = ["DISABLED", "ENABLED", "FAULT", "STATES", "FAULT_REASONS", "EVENTS", "Transition", "Answer",
-           "DriverStateMachine", "Watchdog", "HISTORY"]
+__all__ = ["DISABLED", "ENABLED", "FAULT", "STATES", "FAULT_REASONS", "LEVEL_INPUTS", "EVENTS", "Transition",
+           "Answer", "DriverStateMachine", "Watchdog", "HISTORY"]
 
 DISABLED, ENABLED, FAULT = "disabled", "enabled", "fault"
 STATES = (DISABLED, ENABLED, FAULT)
 FAULT_REASONS = ("watchdog", "bad_command", "fall", "emergency_stop", "estimator_unhealthy")
+LEVEL_INPUTS = ("emergency_stop", "estimator_unhealthy")   # faults that are held while their input is asserted
+# how a refused reset names a held level, and what releases it
+_HELD_TEXT = {"emergency_stop": ("the emergency stop is still asserted",
+                                 "release it (std_msgs/Bool false on emergency_stop: mwip_ctl estop --release)"),
+              "estimator_unhealthy": ("the state estimator still reports ERROR",
+                                      "wait for its status to return to OK or WARN")}
 EVENTS = ("enable", "disable", "reset") + FAULT_REASONS   # the ``reason`` a Transition can carry
 HISTORY = 1000     # transitions kept by a machine (older ones drop: a node that runs for days stays bounded)
 
@@ -106,6 +133,7 @@ class DriverStateMachine:
         self.suppressed = 0                                    # faults raised while already in fault
         self.last_suppressed: Optional[Tuple[float, str, str]] = None   # (t, reason, detail) of the last one
         self.history: Deque[Transition] = deque(maxlen=HISTORY)
+        self.held: Dict[str, Tuple[float, str]] = {}          # level input -> (t asserted, detail) while asserted
 
     @property
     def start_state(self) -> str:
@@ -149,7 +177,13 @@ class DriverStateMachine:
         return Answer(True, "disabled", self._go(t, DISABLED, "disable"))
 
     def reset(self, t: float) -> Answer:
-        """``~/reset``: clear any fault and return to the start state (from any state)."""
+        """``~/reset``: clear any fault and return to the start state (from any state); refused, the state unchanged,
+        while a level input is held (:meth:`set_level`), naming it."""
+        if self.held:
+            why = "; ".join(f"{_HELD_TEXT[r][0]} (since t = {since:.3f} s{': ' + d if d else ''}): {_HELD_TEXT[r][1]}"
+                            for r, (since, d) in self.held.items())
+            where = f" ({self._fault_text()})" if self.state == FAULT else ""
+            return Answer(False, f"refused: {why}; the driver stays in {self.state}{where}")
         was = self._fault_text() if self.state == FAULT else None
         self.fault_reason, self.fault_detail, self.fault_t = None, "", None
         self.suppressed, self.last_suppressed = 0, None
@@ -172,6 +206,21 @@ class DriverStateMachine:
             return None
         self.fault_reason, self.fault_detail, self.fault_t = reason, detail, float(t)
         return self._go(t, FAULT, reason, detail)
+
+    def set_level(self, t: float, reason: str, asserted: bool, detail: str = "") -> Optional[Transition]:
+        """A level input (:data:`LEVEL_INPUTS`; anything else: ValueError) is asserted or released (module doc).
+        Asserted: held, and the fault latched (its transition, or None when already in fault: counted as a later
+        fault, unless it was held already: a repeat of the same level is no new fault).  Released: no longer
+        held; the fault stays latched until :meth:`reset`.  Returns the transition, if any."""
+        if reason not in LEVEL_INPUTS:
+            raise ValueError(f"level input {reason!r}: not one of {', '.join(LEVEL_INPUTS)}")
+        if not asserted:
+            self.held.pop(reason, None)
+            return None
+        if reason in self.held:
+            return None
+        self.held[reason] = (float(t), detail)
+        return self.fault(t, reason, detail)
 
     def check_command(self, t: float, u) -> Optional[Transition]:
         """A ``bad_command`` fault when ``u`` is not a finite number or (``max_command`` > 0) passes it in
@@ -202,7 +251,8 @@ class DriverStateMachine:
         """(level, message) for /diagnostics: 0 OK (enabled), 1 WARN (disabled), 2 ERROR (fault, with its reason)."""
         if self.state == FAULT:
             extra = f" (+{self.suppressed} later fault(s), last: {self.last_suppressed[1]})" if self.suppressed else ""
-            return _LEVEL[FAULT], f"fault: {self._fault_text()}{extra}"
+            held = f"; held: {', '.join(self.held)} (reset refused until released)" if self.held else ""
+            return _LEVEL[FAULT], f"fault: {self._fault_text()}{extra}{held}"
         return _LEVEL[self.state], self.state
 
 
@@ -210,26 +260,36 @@ class DriverStateMachine:
 class Watchdog:
     """The command watchdog: expired when no command came for more than ``timeout`` [s] (0 = off).
 
-    Not armed before the first command (``last`` None): a driver that waits for its controller to start
-    does not fault.  ``feed(now)`` at every command; ``expired(now)`` at every period."""
+    It counts from the first state the plant publishes (:meth:`arm`, at the start of a run and again after a
+    reset): a controller that never answers (not started, its input remapped away) is a fault within
+    ``timeout`` of that state, not an open loop that runs until the robot falls.  Before the first state it is
+    not armed (the plant waits for its graph).  ``feed(now)`` at every command; ``expired(now)`` at every
+    period; ``answered`` says whether a command came since it was armed (the fault then names the stage that
+    never answered)."""
 
     timeout: float
     last: Optional[float] = None
+    answered: bool = False
 
     def __post_init__(self):
         if not (isinstance(self.timeout, (int, float)) and math.isfinite(self.timeout) and self.timeout >= 0):
             raise ValueError(f"watchdog_s: must be finite and >= 0, got {self.timeout!r}")
 
+    def arm(self, now: float) -> None:
+        """The first state of a run is out: count from ``now`` unless already armed."""
+        if self.last is None:
+            self.last, self.answered = float(now), False
+
     def feed(self, now: float) -> None:
-        self.last = float(now)
+        self.last, self.answered = float(now), True
 
     def reset(self) -> None:
-        """Disarm (until the next command)."""
-        self.last = None
+        """Disarm (until the next :meth:`arm` or command)."""
+        self.last, self.answered = None, False
 
     def expired(self, now: float) -> bool:
         return self.timeout > 0 and self.last is not None and now - self.last > self.timeout
 
     def silence(self, now: float) -> float:
-        """Seconds since the last command (0 before the first)."""
+        """Seconds since the last command, or since it was armed when none came (0 when not armed)."""
         return 0.0 if self.last is None else now - self.last

@@ -22,9 +22,12 @@
   find ten waiting; a client that sends many at once wants the same profile for its answers.
   ``~/enable`` and ``~/disable`` have it too.
 * The driver's state (:data:`DRIVER_STATE_QOS`, ``plant_sim``'s ``driver_state``): reliable,
-  transient local, keep last 100: latched, a reader that joins late (a recorder, a viewer,
-  ``ros2 topic echo --qos-durability transient_local``) gets the recent transitions, the
-  current state last.
+  transient local, keep last **1**: latched, a reader that joins late (a recorder, a viewer,
+  ``ros2 topic echo --once --qos-durability transient_local``) gets the current state only (at
+  depth 100 it got the oldest of the kept transitions first: the start state while in fault).
+  Every message carries the whole state, so a reader needs no history to know it.  A reader
+  that wants each transition while it runs subscribes with :data:`DRIVER_STATE_READER_QOS`
+  (the same, keep last 100 on its side: a burst is not overwritten before its callback runs).
 * ``emergency_stop``, which users publish with any QoS: the plant subscribes twice, with
   :data:`INPUT_QOS` (reliable: nothing a reliable publisher sends is lost) and with
   :data:`BEST_EFFORT_INPUT_QOS` (which also matches a best-effort publisher); a message that
@@ -35,7 +38,8 @@ from __future__ import annotations
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 __all__ = ["GRAPH_QOS", "INPUT_QOS", "RECORD_QOS", "REALTIME_QOS", "REALTIME_INPUT_QOS", "SERVICE_QOS",
-           "DRIVER_STATE_QOS", "BEST_EFFORT_INPUT_QOS", "DEPTH", "qos_for", "recorded_qos"]
+           "DRIVER_STATE_QOS", "DRIVER_STATE_READER_QOS", "BEST_EFFORT_INPUT_QOS", "DEPTH", "qos_for",
+           "recorded_qos"]
 
 DEPTH = 1000
 
@@ -52,8 +56,11 @@ REALTIME_INPUT_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliab
 
 SERVICE_QOS = QoSProfile(history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPolicy.RELIABLE,
                          durability=DurabilityPolicy.VOLATILE)
-DRIVER_STATE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100, reliability=ReliabilityPolicy.RELIABLE,
+DRIVER_STATE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
                               durability=DurabilityPolicy.TRANSIENT_LOCAL)
+DRIVER_STATE_READER_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
+                                     reliability=ReliabilityPolicy.RELIABLE,
+                                     durability=DurabilityPolicy.TRANSIENT_LOCAL)
 BEST_EFFORT_INPUT_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.BEST_EFFORT,
                                    durability=DurabilityPolicy.VOLATILE)
 

@@ -11,9 +11,10 @@ lockstep peer is missing, WARN when it rejected messages in the last second.
 from __future__ import annotations
 
 import time
-from typing import Dict, Tuple
+from collections import deque
+from typing import Dict, Optional, Tuple
 
-__all__ = ["OK", "WARN", "ERROR", "Diagnostics", "PERIOD_S"]
+__all__ = ["OK", "WARN", "ERROR", "Diagnostics", "PERIOD_S", "StepRate"]
 
 OK, WARN, ERROR = 0, 1, 2      # diagnostic_msgs/DiagnosticStatus levels (bytes 0, 1, 2)
 PERIOD_S = 1.0
@@ -78,3 +79,25 @@ class Diagnostics:
         if failure:
             return ERROR, failure, values
         return level, message, values
+
+
+class StepRate:
+    """Steps per second over a sliding window of wall time, for a node's progress line.
+
+    ``add(now, steps)`` takes the wall time [s] and a count that only grows (the periods stepped since the start,
+    across resets: a reset sends the plant's k back to 0, and k over the time since the start then read 4 steps/s
+    where the loop ran at 199 Hz); it answers (steps - steps then) / (now - then), ``then`` the oldest sample
+    kept: the newest one at least ``window_s`` old (so the rate covers at least that long once it can), or None
+    with no time elapsed.  It keeps the samples of one window only."""
+
+    def __init__(self, window_s: float = 5.0):
+        self.window_s = float(window_s)
+        self.samples: deque = deque()
+
+    def add(self, now: float, steps: int) -> Optional[float]:
+        s = self.samples
+        s.append((float(now), int(steps)))
+        while len(s) > 2 and now - s[1][0] >= self.window_s:
+            s.popleft()
+        t0, n0 = s[0]
+        return (steps - n0) / (now - t0) if now > t0 else None

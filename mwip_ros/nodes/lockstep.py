@@ -164,11 +164,32 @@ class LockstepDriver:
                     break
         return "; ".join(what) or self.idle_hint
 
-    def _listen_to_answers(self) -> None:
+    def silent_stage(self, since_stamp: int, stamp0: int = 0) -> Tuple[str, str]:
+        """(the stage, in words why) of the first answering stage of the chain from which no answer to a state
+        stamped ``since_stamp`` or later was heard (:meth:`listen` first); the last stage (the command's) when
+        every other one answered.  The realtime watchdog names it (lockstep names it in :meth:`missing`); times
+        are said from ``stamp0`` (the run's first stamp) [ns]."""
+        for a in self.answers[:-1]:
+            heard = self._heard.get(a.topic)
+            if heard is None or heard < since_stamp:
+                said = "none ever" if heard is None else f"the last for t = {(heard - stamp0) * 1e-9:.3f} s"
+                return a.stage, (f"{a.stage} ({a.node}: no {a.topic} for a state since t = "
+                                 f"{(since_stamp - stamp0) * 1e-9:.3f} s, {said})")
+        a = self.answers[-1]
+        gaps = graph_missing(self.node, self.state_pub, 0, (a,))
+        return a.stage, f"{a.stage} ({a.node}: {gaps[0] if gaps else 'every earlier stage answered'})"
+
+    def listen(self, qos=None) -> None:
+        """Hear the chain's intermediate answers from now on (once; ``qos`` default INPUT_QOS)."""
+        if self._listening is None:
+            self._listen_to_answers(qos)
+
+    def _listen_to_answers(self, qos=None) -> None:
         """Hear the chain's intermediate answers (the observer's estimate, ...): a node that died keeps its place
         in the graph for a while, so this is how the driver learns which one stopped answering."""
         from mwip_ros.msgs.qos import INPUT_QOS
         from mwip_ros.msgs.topics import graph_type, msg_class
+        qos = INPUT_QOS if qos is None else qos
 
         def on_answer(topic):
             def heard(data) -> None:
@@ -178,7 +199,7 @@ class LockstepDriver:
             return heard
 
         self._listening = [self.node.create_subscription(msg_class(graph_type(a.topic)), a.topic, on_answer(a.topic),
-                                                         INPUT_QOS, raw=True) for a in self.answers[:-1]]
+                                                         qos, raw=True) for a in self.answers[:-1]]
 
     def wait_for_graph(self) -> Optional[bool]:
         """True once the graph is ready, complete and settled; False when ``timeout_s`` passed; else None."""

@@ -14,9 +14,11 @@ does and what ends a period:
 Both feed the driver's state machine (docs/theory.md 6.8, the node's ``safety``) what only the mode knows: the
 lockstep timeout is the lockstep watchdog (a ``watchdog`` fault recorded, then exit 1 as before); the
 realtime runner checks the command watchdog (``watchdog_s``) at every tick (a late tick defers the verdict
-by one tick: the controller first gets the state the plant was late with).  A bad command (non-finite or
-implausible, a ``bad_command`` fault) answers the lockstep state it came for with zero torque (the driver
-is in fault), so the run goes on; in realtime it is dropped, as before.
+by one tick: the controller first gets the state the plant was late with), counting from the first state
+it publishes, so a controller that never answers is a ``watchdog`` fault that names the first stage of the chain
+(``core.loop.STAGES``) from which no answer came, not an open loop that runs until the robot falls.  A bad
+command (non-finite or implausible, a ``bad_command`` fault) answers the lockstep state it came for with zero
+torque (the driver is in fault), so the run goes on; in realtime it is dropped, as before.
 
 :data:`RUNNERS` maps the ``mode`` parameter to its runner.
 """
@@ -129,8 +131,10 @@ class RealtimeRunner(_Runner):
         self.missed = 0
 
     def start(self) -> None:
+        from mwip_ros.msgs.qos import REALTIME_INPUT_QOS
         n = self.node
         n.stamp0 = n.get_clock().now().nanoseconds
+        n.lockstep.listen(REALTIME_INPUT_QOS)   # the chain's intermediate answers: a watchdog fault names who is silent
         n.create_timer(n.h, self._tick)
 
     def on_command(self, u: float) -> None:
@@ -149,8 +153,9 @@ class RealtimeRunner(_Runner):
         if self.tick_times:
             if late:
                 self.missed += 1
-        else:
+        else:   # state 0 goes out at this tick: the watchdog counts from it, a controller that never answers faults
             n.t_wall0 = now
+            n._arm_watchdog()
         self.tick_times.append(now)
         if n.done:
             return

@@ -25,27 +25,31 @@ the robot, publish ``external_wrench`` (``geometry_msgs/Wrench``: ``torque.x`` a
 tau_ext1, ``torque.y`` to tau_ext2, until the next one; a zero wrench clears it).
 
 The driver's state machine (docs/theory.md 6.8, :mod:`mwip_ros.core.safety`, one machine for the node's life: a
-``~/reset`` does not re-create it): ``disabled`` (the start state with ``require_enable: true``), ``enabled``
-(the start state by default: the paper's run starts at once) and ``fault`` (latched with its reason until
-``~/reset``); disabled or in fault the torque that acts, what the plant reports as ``effort`` and records in
-its ``u`` column, is zero.  Faults: ``watchdog`` (realtime: no good ``wheel_torque_cmd`` for ``watchdog_s``,
-checked at every tick once the first command came; lockstep: the lockstep timeout, which still ends the run
-with exit 1), ``bad_command`` (a Float64 that is non-finite or beyond 1e6 N m: still rejected and counted,
-and in lockstep it answers the state, with zero torque; bytes that are no Float64 are rejected only),
-``fall`` (|theta_b| > ``fall_angle``: with ``exit_on_fall: true`` the run ends, exit 3; with false the robot
-lies where it fell, at rest, its time going on, zero torque, until ``~/reset``), ``emergency_stop``
-(std_msgs/Bool true on ``emergency_stop``, any QoS; false does nothing: only ``~/reset`` clears it) and, with
-raw sensors, ``estimator_unhealthy`` (the state estimator's own ``/diagnostics`` status at level ERROR, its
-divergence; WARN is not a fault, and an estimator that stops is caught by the watchdog since the commands
-stop).  A fault while in fault keeps the first reason (the cause).  Services ``~/enable`` and ``~/disable``
-(std_srvs/Trigger) answer every call in every state with core.safety's answer; ``~/reset`` also clears a
-fault (at once: no period runs between the call and the reset, which comes at the next boundary).  Each
-transition is logged (one line with its reason), counted on ``/diagnostics`` (``driver_state``,
-``fault_reason``; ERROR in fault, WARN disabled) and published on ``driver_state`` (std_msgs/String, JSON
-``{"state", "from", "reason", "detail", "t", "stamp_ns", "text"}`` plus ``silence_s`` for a watchdog
-fault (and ``max_tick_gap_s``, the plant's own longest tick interval meanwhile); transient local,
-:data:`~mwip_ros.msgs.qos.DRIVER_STATE_QOS`; the start state is the first
-message, reason ``start``); the summary JSON lists them (``transitions``).
+``~/reset`` does not re-create it): ``disabled`` (the start state with ``require_enable: true``), ``enabled`` (the
+start state by default: the paper's run starts at once) and ``fault`` (latched with its reason until ``~/reset``);
+disabled or in fault the driver's bridge is open: no current, no torque (with the motor model too, whatever the
+wheel's speed), and what the plant reports as ``effort`` and records in its ``u`` and ``u_applied`` columns is exactly
+zero. Faults: ``watchdog`` (realtime: no good ``wheel_torque_cmd`` for ``watchdog_s``, counted from the first state
+published (and again from a reset), so a controller that never answers is a fault too, its detail naming the first
+stage of the chain that did not answer; lockstep: the lockstep timeout, which still ends the run with exit 1),
+``bad_command`` (a Float64 that is non-finite or beyond 1e6 N m: still rejected and counted, and in lockstep it
+answers the state, with zero torque; bytes that are no Float64 are rejected only), ``fall`` (|theta_b| >
+``fall_angle``: with ``exit_on_fall: true`` the run ends, exit 3; with false the robot lies where it fell, at rest,
+its time going on, zero torque, until ``~/reset``), ``emergency_stop`` and, with raw sensors, ``estimator_unhealthy``,
+two levels (core.safety): the e-stop (std_msgs/Bool, any QoS) asserted by true, released by false (the latest message
+on each of the node's two subscriptions; asserted while either holds true), the estimator unhealthy while its latest
+``/diagnostics`` status is ERROR (OK or WARN: healthy again; one that stops is caught by the watchdog). While a level
+is asserted, ``~/reset`` answers ``success: false`` naming it (the driver stays in fault; the robot's own reset, which
+applies no torque, is still done: an estimator re-initialises on it) and ``~/enable`` is refused. A fault while in
+fault keeps the first reason; a level asserted meanwhile is held all the same. ``~/enable`` and ``~/disable``
+(std_srvs/Trigger) answer every call in every state with core.safety's answer; ``~/reset`` clears a fault at once and
+returns the driver to its start state (``require_enable: true``: ``disabled``). Each transition is logged (one line
+with its reason), counted on ``/diagnostics`` (``driver_state``, ``fault_reason``, ``held``; ERROR in fault, WARN
+disabled) and published on ``driver_state`` (std_msgs/String, JSON ``{"state", "from", "reason", "detail", "t",
+"stamp_ns", "text"}`` plus ``silence_s`` for a watchdog fault (and ``max_tick_gap_s``, the plant's own longest tick
+interval meanwhile, and ``silent_stage``, the stage named); latched, transient local with depth 1,
+:data:`~mwip_ros.msgs.qos.DRIVER_STATE_QOS`: a reader that joins late gets the current state only; the start state is
+the first message, reason ``start``); the summary JSON lists them (``transitions``).
 
 With ``sensors.model: raw`` (docs/theory.md 6.4) the plant publishes what its sensors measure instead of a state:
 per state k ``imu/data_raw`` (sensor_msgs/Imu, frame ``imu_link``, no orientation, the pitch rate and the
@@ -88,7 +92,7 @@ from mwip_ros.core.trajectory import TrajectoryTable
 from mwip_ros.msgs import BadMessage, cdr
 from mwip_ros.msgs import layouts as L
 from mwip_ros.msgs.qos import BEST_EFFORT_INPUT_QOS, DRIVER_STATE_QOS, INPUT_QOS, SERVICE_QOS, qos_for
-from mwip_ros.nodes.diagnostics import ERROR, OK, WARN
+from mwip_ros.nodes.diagnostics import ERROR, OK, WARN, StepRate
 from mwip_ros.nodes.guards import PublisherWatch, Rejects
 from mwip_ros.nodes.lockstep import LockstepDriver, subscriber_floor
 from mwip_ros.nodes.params import declare
@@ -114,8 +118,11 @@ class PlantSimNode(Node, GracefulNodeMixin):
         sc = self.cfg.sensing
         # the driver's state machine (theory 6.8): one for the node's life, handed to every PlantSide (_initial_state)
         self.safety = DriverStateMachine(require_enable=self.cfg.require_enable, max_command=L.LIMITS["torque"])
-        self.watchdog = Watchdog(self.v["watchdog_s"])   # realtime: fed by every good command, checked per tick
-        self._watchdog_deferred = False
+        self.watchdog = Watchdog(self.v["watchdog_s"])   # realtime: armed at the first state, fed by every good
+        self._watchdog_deferred = False                   # command, checked per tick
+        self._watch_stamp = 0                             # the stamp of the newest state when it was armed or fed
+        self.steps = 0                                    # periods stepped since the start, across resets
+        self.rate = StepRate()
         self.transitions: deque = deque(maxlen=HISTORY)   # what driver_state published (the summary's list)
         self.fell_at: Optional[float] = None
         self._initial_state()
@@ -158,9 +165,12 @@ class PlantSimNode(Node, GracefulNodeMixin):
         self.create_service(Trigger, "~/enable", self._on_enable, qos_profile=SERVICE_QOS)
         self.create_service(Trigger, "~/disable", self._on_disable, qos_profile=SERVICE_QOS)
         self.driver_pub = self.create_publisher(String, "driver_state", DRIVER_STATE_QOS)
-        # users publish it with any QoS: reliable (nothing lost) and best effort (matches a best-effort publisher)
-        for qos in (INPUT_QOS, BEST_EFFORT_INPUT_QOS):
-            self.create_subscription(Bool, "emergency_stop", self._on_estop, qos, raw=True)
+        # users publish it with any QoS: reliable (nothing lost) and best effort (matches a best-effort publisher);
+        # the e-stop is a level (core.safety): the latest value heard on each subscription, asserted while one is true
+        self.estop_heard: dict = {}
+        for via, qos in (("reliable", INPUT_QOS), ("best_effort", BEST_EFFORT_INPUT_QOS)):
+            self.create_subscription(Bool, "emergency_stop", lambda data, via=via: self._on_estop(data, via), qos,
+                                     raw=True)
         self.estimator_status = None
         if self.raw:   # the estimator reports its health on /diagnostics (ERROR: diverged)
             from diagnostic_msgs.msg import DiagnosticArray
@@ -225,17 +235,23 @@ class PlantSimNode(Node, GracefulNodeMixin):
         self.get_logger().info(f"external wrench: tau_ext1 += {e[0]:g}, tau_ext2 += {e[1]:g} N m"
                                if any(e) else "external wrench cleared")
 
-    def _on_estop(self, data: bytes) -> None:
+    def _on_estop(self, data: bytes, via: str = "reliable") -> None:
+        """``emergency_stop``, a level (module doc): true asserts it (a fault, held), false releases it."""
         try:
             stop = _parse_bool(data)
         except BadMessage as exc:
             self.rejects("emergency_stop", str(exc))
             return
-        if stop and not (self.safety.faulted and self.safety.fault_reason == "emergency_stop"):  # (heard twice)
-            self._fault("emergency_stop", "a std_msgs/Bool true")
+        was = "emergency_stop" in self.safety.held
+        self.estop_heard[via] = stop
+        asserted = any(self.estop_heard.values())
+        self._publish_transition(self.safety.set_level(self.plant.t, "emergency_stop", asserted,
+                                                       "a std_msgs/Bool true"))
+        if was and not asserted:
+            self.get_logger().warning("driver: emergency stop released; the fault stays latched until ~/reset")
 
     def _on_diagnostics(self, data: bytes) -> None:
-        """A raw plant's watch on its state estimator's health: its status at level ERROR is a fault."""
+        """A raw plant's state estimator's health, a level (module doc): ERROR asserts it, OK or WARN releases it."""
         from diagnostic_msgs.msg import DiagnosticArray
         from rclpy.serialization import deserialize_message
         try:
@@ -246,8 +262,13 @@ class PlantSimNode(Node, GracefulNodeMixin):
             if st.name != self.estimator_status:
                 continue
             level = st.level[0] if isinstance(st.level, (bytes, bytearray)) else int(st.level)
-            if level == ERROR and not (self.safety.faulted and self.safety.fault_reason == "estimator_unhealthy"):
-                self._fault("estimator_unhealthy", f"{st.name}: {st.message}")
+            if level not in (OK, WARN, ERROR):   # STALE: no news of its health, the level stays as it was
+                continue
+            was = "estimator_unhealthy" in self.safety.held
+            self._publish_transition(self.safety.set_level(self.plant.t, "estimator_unhealthy", level == ERROR,
+                                                           f"{st.name}: {st.message}"))
+            if was and level != ERROR:
+                self.get_logger().warning(f"driver: {st.name} is healthy again; the fault stays latched until ~/reset")
 
     def _answer(self, response, answer):
         """A std_srvs/Trigger response from core.safety's answer (and its transition published)."""
@@ -273,9 +294,12 @@ class PlantSimNode(Node, GracefulNodeMixin):
         faulted = self.safety.faulted
         driver = self.safety.reset(self.plant.t)
         self._publish_transition(driver.transition)
-        if faulted:
-            self.watchdog.reset()   # disarmed until the next command
-        self._plant_reset_answer(response)
+        if faulted and driver.success:   # the watchdog counts again from the reset
+            self.watchdog.reset()
+            if self.started:
+                self._arm_watchdog()
+        self._plant_reset_answer(response)   # the robot's reset applies no torque: done even if the driver's is refused
+        response.success = driver.success
         response.message += f"; driver: {driver.message}"
         return response
 
@@ -303,7 +327,8 @@ class PlantSimNode(Node, GracefulNodeMixin):
         self.resets += 1
         self._reset_pending = False
         self.fallen, self.fell_at = False, None
-        self.watchdog.reset()
+        self.watchdog.reset()   # armed again by the new run's state 0
+        self._arm_watchdog()
         text = (f"reset #{self.resets} at t = {t:.3f} s: back to the initial state at t = 0; stamps restart at "
                 f"the run's start (the csv keeps the run from here; {dropped} periods before it are only in a "
                 f"recording, as a segment of their own)")
@@ -323,17 +348,24 @@ class PlantSimNode(Node, GracefulNodeMixin):
             self.runner.on_bad_command()
             return
         self.watchdog.feed(time.monotonic())
+        self._watch_stamp = self._stamp()
         self.runner.on_command(u)
 
     # --- the driver's state machine (docs/theory.md 6.8) ----------------------------------------------------
     def _fault(self, reason: str, detail: str, **extra) -> None:
         self._publish_transition(self.safety.fault(self.plant.t, reason, detail), **extra)
 
+    def _arm_watchdog(self) -> None:
+        """A run's first state is out (the start, a reset): the watchdog counts from now (core.safety.Watchdog)."""
+        self.watchdog.arm(time.monotonic())
+        self._watch_stamp = self._stamp()
+
     def check_watchdog(self, now: float, late: bool = False, ticks=()) -> None:
-        """Realtime, at every tick: no good command for ``watchdog_s`` (once one came) is a fault.  A tick that
-        came late (``late``: a missed deadline, the plant itself stalled) defers the verdict to the next tick,
-        once: the controller cannot answer states the plant did not publish, so it first gets the one this
-        tick publishes (a dead controller is then caught one period later)."""
+        """Realtime, at every tick: no good command for ``watchdog_s`` (counted from the first state) is a fault.
+        A tick that came late (``late``: a missed deadline, the plant itself stalled) defers the verdict to the
+        next tick, once: the controller cannot answer states the plant did not publish, so it first gets the one
+        this tick publishes (a dead controller is then caught one period later).  The detail names the first
+        stage of the chain that answered no state since then (the lockstep driver's :meth:`silent_stage`)."""
         wd = self.watchdog
         if self.safety.faulted or not wd.expired(now):
             self._watchdog_deferred = False
@@ -343,9 +375,11 @@ class PlantSimNode(Node, GracefulNodeMixin):
             silence = wd.silence(now)
             since = [t for t in ticks[-(int(silence / self.h) + 3):] if t >= wd.last] + [now]   # the plant's ticks
             gap = max((b - a for a, b in zip(since, since[1:])), default=0.0)   # meanwhile: its longest stall
+            stage, why = self.lockstep.silent_stage(self._watch_stamp, self.stamp0)
+            what = ("since the last" if wd.answered else "since the first state: none ever came")
             self._fault("watchdog", f"no wheel_torque_cmd for {silence * 1e3:.1f} ms > watchdog_s = "
-                                    f"{wd.timeout * 1e3:g} ms", silence_s=round(silence, 6),
-                        max_tick_gap_s=round(gap, 6))
+                                    f"{wd.timeout * 1e3:g} ms ({what}); the stage that did not answer: {why}",
+                        silence_s=round(silence, 6), max_tick_gap_s=round(gap, 6), silent_stage=stage)
 
     def _publish_transition(self, tr: Optional[Transition], start: bool = False, **extra) -> None:
         """Log a transition (one line), publish it on ``driver_state`` and keep it for the summary."""
@@ -389,6 +423,7 @@ class PlantSimNode(Node, GracefulNodeMixin):
         """Stages ``drive`` and ``plant`` for the command answering state k: record row k with the torque that
         acts, publish tau_d at t_k; integrate unless the run ends. True = ended."""
         p = self.plant
+        self.steps += 1
         u, tau_d = self.side.act(u_cmd, self.extra)
         self.truth_pub.publish(L.encode_wrench(self._stamp(), tau_d[0], tau_d[1]))
         self.table.append(p.t, p.x, u, tau_d=tau_d)
@@ -429,11 +464,12 @@ class PlantSimNode(Node, GracefulNodeMixin):
         p.x = type(p.x)(p.x[0], p.x[1], 0.0, 0.0)
         p.k += 1
         p.u_prev = p.u_cmd_prev = 0.0
-        p.saturation = 0
+        p.saturation, p.enabled_prev = 0, False
 
     def _start(self, why: str) -> None:
         self.started = True
         self.t_wall0 = time.monotonic()
+        self.rate.add(self.t_wall0, self.steps)
         self.get_logger().info(f"{why}; starting {self.mode} run")
         self.runner.start()
 
@@ -458,20 +494,21 @@ class PlantSimNode(Node, GracefulNodeMixin):
             return
         self.last_progress = now
         total = f" / {self.n_steps * self.h:g}" if self.n_steps is not None else ""
+        rate = self.rate.add(now, self.steps)   # over the last seconds of wall time: a reset restarts k, not this
         self.get_logger().info(f"t = {self.plant.t:.2f}{total} s simulated, "
-                               f"{self.plant.k / max(now - self.t_wall0, 1e-9):.0f} steps/s, "
-                               f"theta_b = {self.plant.x[1]:+.4f} rad")
+                               f"{rate or 0.0:.0f} steps/s, theta_b = {self.plant.x[1]:+.4f} rad")
 
     # --- health (nodes.diagnostics) -------------------------------------------------------------
     def diagnostic_count(self) -> int:
-        return self.plant.k
+        return self.steps   # grows across resets (plant.k goes back to 0)
 
     def diagnostic_status(self):
         p = self.plant
         values = {"mode": self.mode, "t_sim_s": f"{p.t:.3f}", "theta_b_rad": f"{p.x[1]:+.5f}"}
         values.update(self.runner.diagnostic_values())
         sm = self.safety
-        values.update({"driver_state": sm.state, "fault_reason": sm.fault_reason or "none"})
+        values.update({"driver_state": sm.state, "fault_reason": sm.fault_reason or "none",
+                       "held": ", ".join(sm.held) or "none"})
         level, driver = sm.diagnostic()
         if self.fallen:
             down = "" if self.done else "; lying in fault until ~/reset"
@@ -494,20 +531,21 @@ class PlantSimNode(Node, GracefulNodeMixin):
             self.finish(128 + self.stop_signal)  # interrupted: the run did not reach duration_s
             log.warning(f"interrupted at t = {self.plant.t:.3f} s of {self.n_steps * self.h:g} s")
         wall = (time.monotonic() - self.t_wall0) if self.t_wall0 else 0.0
-        n = len(self.table)
+        n, steps = len(self.table), self.steps   # the table holds the run since the last reset; steps all of it
         for pub in (self.state_pub, self.imu_pub, self.encoder_pub, self.truth_pub, self.clock_pub, self.true_pub,
                     self.driver_pub):
             if pub is not None:  # let a recorder receive the last states before this process exits
                 pub.wait_for_all_acked(Duration(seconds=2.0))
-        summary = {"mode": self.mode, "control_rate_hz": 1.0 / self.h, "periods": n, "wall_s": wall,
-                   "steps_per_s": n / wall if wall > 0 else None, "fallen": self.fallen,
+        summary = {"mode": self.mode, "control_rate_hz": 1.0 / self.h, "periods": n, "steps": steps, "wall_s": wall,
+                   "steps_per_s": steps / wall if wall > 0 else None, "fallen": self.fallen,
                    "exit_code": self.exit_code, "rejected": dict(self.rejects.counts),
                    "resets": self.resets, "reset_calls": self.reset_calls,
                    "driver_state": self.safety.state, "fault_reason": self.safety.fault_reason,
                    "transitions": list(self.transitions)}
         if n:
-            log.info(f"{self.mode} run: {n} periods, {self.table.last('t'):.3f} s simulated in {wall:.2f} s wall "
-                     f"({n / max(wall, 1e-9):.0f} steps/s); {'FALLEN' if self.fallen else 'upright'}")
+            since = f" since the last of {self.resets} reset(s), {steps} in all" if self.resets else ""
+            log.info(f"{self.mode} run: {n} periods{since}, {self.table.last('t'):.3f} s simulated in {wall:.2f} s "
+                     f"wall ({steps / max(wall, 1e-9):.0f} steps/s); {'FALLEN' if self.fallen else 'upright'}")
         summary.update(self.runner.summary())
         log.info(f"rejected messages: {self.rejects.summary()}")
         if n:

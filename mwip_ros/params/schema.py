@@ -342,8 +342,8 @@ NODE_SPECS: Dict[str, List[ParamSpec]] = {
         ParamSpec("require_enable", "bool", False, "the driver starts disabled (zero torque) until ~/enable "
                   "(docs/theory.md 6.8); false: enabled at once, as the paper's run"),
         ParamSpec("watchdog_s", "double", 0.5, "realtime: no new wheel_torque_cmd for this long is a fault (zero "
-                  "torque, latched until ~/reset; checked every period once the first command came); lockstep: "
-                  "lockstep_timeout_s is the watchdog",
+                  "torque, latched until ~/reset; checked every period, counted from the first state published, "
+                  "so a controller that never answers faults too); lockstep: lockstep_timeout_s is the watchdog",
                   **_positive_from(1e-3, 1e4, "a watchdog faster than a millisecond would fire between commands"),
                   unit="s"),
         ParamSpec("exit_on_fall", "bool", True, "end the process (exit code 3) when the robot falls; false: the "

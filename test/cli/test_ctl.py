@@ -103,10 +103,51 @@ def test_ctrl_c_ends_a_push_with_a_zero_wrench_and_exits_130_quietly(graph):
 
 
 @pytest.mark.graph
+def test_estop_holds_the_level_reset_is_refused_until_release_then_disable_and_enable(tmp_path):
+    """estop publishes true once and exits; the plant holds the e-stop: reset is refused (exit 1, one line naming
+    it) until estop --release; then reset clears the fault, and disable and enable switch the driver.  A plant of
+    its own, at rest and upright with nothing to push it (no controller: a long watchdog), stays up in fault."""
+    with Graph(tmp_path) as graph:
+        graph.plant = graph.start("plant_sim", "-p", "mode:=realtime", "-p", "duration_s:=0.0", "-p",
+                                  "initial.theta_b:=0.0", "-p", "tau_ext1.amplitude:=0.0", "-p",
+                                  "tau_ext2.amplitude:=0.0", "-p", "actual.D_w_variance:=0.0", "-p",
+                                  "lockstep_timeout_s:=0.5", "-p", "watchdog_s:=1000.0", "-p", "exit_on_fall:=false")
+        assert graph.plant.wait_for_output("starting realtime run", 60), graph.plant.output()[-2000:]
+        _estop_sequence(graph)
+
+
+def _estop_sequence(graph):
+    plant = graph.plant
+    r = ctl(graph, "estop")
+    assert r.returncode == 0 and "emergency stop asserted" in r.stdout, (r.stdout, r.stderr)
+    assert plant.wait_for_output("-> fault (emergency_stop", 10), plant.output()[-2000:]
+    r = ctl(graph, "reset")
+    assert r.returncode == 1 and r.stdout == "", (r.stdout, r.stderr)
+    line, = r.stderr.strip().splitlines()
+    assert "refused reset" in line and "emergency stop is still asserted" in line, line
+    r = ctl(graph, "enable")
+    assert r.returncode == 1 and "call ~/reset first" in r.stderr, (r.stdout, r.stderr)
+    r = ctl(graph, "estop", "--release")
+    assert r.returncode == 0 and "emergency stop released" in r.stdout, (r.stdout, r.stderr)
+    assert plant.wait_for_output("emergency stop released; the fault stays latched", 10), plant.output()[-2000:]
+    r = ctl(graph, "reset")
+    assert r.returncode == 0 and "fault cleared (emergency_stop" in r.stdout, (r.stdout, r.stderr)
+    r = ctl(graph, "disable")
+    assert r.returncode == 0 and r.stdout.strip() == "plant_sim: disabled", (r.stdout, r.stderr)
+    r = ctl(graph, "enable")
+    assert r.returncode == 0 and r.stdout.strip() == "plant_sim: enabled", (r.stdout, r.stderr)
+    assert plant.poll() is None
+
+
+@pytest.mark.graph
 @pytest.mark.parametrize("args,service", [
     (["param", "get", "no_such_node", "k1"], "no_such_node/get_parameters"),
     (["reset", "--node", "no_such_plant"], "no_such_plant/reset"),
     (["push", "--node", "no_such_plant", "--wheel", "1"], "no_such_plant subscribes /external_wrench"),
+    (["enable", "--node", "no_such_plant"], "no_such_plant/enable"),
+    (["disable", "--node", "no_such_plant"], "no_such_plant/disable"),
+    (["estop", "--node", "no_such_plant"], "no_such_plant subscribes /emergency_stop"),
+    (["estop", "--release", "--node", "no_such_plant"], "no_such_plant subscribes /emergency_stop"),
 ])
 def test_nothing_answering_exits_1_within_the_timeout_naming_the_node_and_the_domain(graph, args, service):
     r = ctl(graph, *args, "--timeout", "1")
@@ -121,7 +162,7 @@ def test_help_of_every_subcommand_exits_0_without_ros_and_usage_errors_exit_2_in
     script = ("import sys, contextlib, io\n"
               "from mwip_ros.cli.ctl import main\n"
               "for argv in ([], ['param'], ['param', 'set'], ['param', 'get'], ['param', 'list'], ['reset'],\n"
-              "             ['push']):\n"
+              "             ['push'], ['enable'], ['disable'], ['estop']):\n"
               "    with contextlib.redirect_stdout(io.StringIO()) as out:\n"
               "        code = main(argv + ['--help'])\n"
               "    assert code == 0 and 'usage: mwip_ctl' in out.getvalue(), (argv, code)\n"

@@ -143,3 +143,14 @@ def test_the_compiled_form_is_the_default_and_the_switch_turns_it_off(monkeypatc
     assert simulate_batch(loops, WINDOW) == "n"
     assert simulate_batch(loops, WINDOW, compiled=True) == "c"
     assert compiled.kernel_for(type("NoPure", (), {})) is None
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+def test_a_driver_nobody_enables_applies_no_torque_in_a_batch_as_in_the_scalar_loop(compiled):
+    """require_enable: true offline (theory.md 6.8): the batch has no driver state machine of its own, so such
+    scenarios run the scalar loop: no torque, the motor's back-EMF included (the wheel at 40 rad/s > V_max / K_t)."""
+    v = dict(BASE, **{"require_enable": True, "motor.enabled": True, "initial.theta_b": 0.0,
+                      "initial.dtheta_w": 40.0})
+    loops = [P.closed_loop(v, duration=0.5)]
+    r = simulate_batch(loops, (0.0, 0.5), compiled=compiled)
+    assert r.metrics["u_rms"][0] == 0.0 and r.metrics["u_applied_rms"][0] == 0.0, r.metrics

@@ -104,3 +104,16 @@ def test_motor_off_is_the_paper_bit_for_bit():
 def test_motor_parameters_out_of_range_are_refused_naming_the_key():
     with pytest.raises(P.ParamError, match="motor.resistance"):
         P.specs_for("plant_sim")["motor.resistance"].validate(0.0)
+
+
+def test_a_disabled_driver_applies_no_torque_with_the_wheel_spinning_faster_than_v_max_over_k_t():
+    """require_enable: true and nobody to enable (the offline loop): the bridge is open, no current flows, so
+    u_applied is exactly 0 in every row although the wheel turns at 40 rad/s > V_max / K_t = 24 rad/s (fed the
+    gated zero command, the drive model drove the back-EMF's braking current: -120 N m in 100 of 101 rows)."""
+    loop = P.closed_loop(_values(**{"require_enable": True, "initial.theta_b": 0.0, "initial.dtheta_w": 40.0}),
+                         controller="dscndo", duration=0.5)
+    run = simulate(loop)
+    w_rel = run["dtheta_w"] - run["dtheta_b"]
+    assert len(run) == 101 and np.all(w_rel > 48.0 / 2.0)     # spinning faster than V_max / K_t in every row
+    assert np.all(run["u"] == 0.0)                              # the gated command
+    assert np.all(run["u_applied"][:-1] == 0.0), run["u_applied"][:5]   # and no torque: the bridge is open

