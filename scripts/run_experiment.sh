@@ -1,17 +1,25 @@
 #!/usr/bin/env bash
-# The main job: run the ROS graph for DSC and then DSCNDO, record both runs, write the report.
+# The main job: run the ROS graph for DSC and then DSCNDO (or the laws you pick), record each run, write the report.
 #
 #   scripts/run_experiment.sh [--params FILE [FILE ...]] [--mode lockstep|realtime] [--duration S]
-#                             [--no-record] [--out DIR] [--name NAME] [--laws dsc,dscndo,lqr,lqr_ndo]
+#                             [--no-record] [--out DIR] [--name NAME] [--laws LAW[,LAW...]]
 #                             [--sensors state|raw]
 #
 # --params takes a base file, then overlays (config/sensing_realistic.yaml, a tuned overlay), merged
 # in order as ROS merges repeated --params-file; every node's section is checked before anything starts.
-# --laws picks the runs (default dsc,dscndo): dsc and dscndo are DSC without and with the
-# observer term, lqr and lqr_ndo the LQR baseline without and with it.
-# --sensors raw adds config/sensors_raw_realistic.yaml after the --params files: the plant publishes what an
-# IMU on the body and a motor encoder measure, and a state_estimator (started here, with the same files) turns
-# them into joint_states. A parameter file that sets sensors.model: raw itself starts the estimator too.
+# --laws picks the runs, one after the other: any registered law (mwip_sim --help lists them: dsc, dscndo,
+# lqr, lqr_ndo, smc, smc_ndo, mpc, mpc_ndo, and plug-ins named in MWIP_ROS_LAWS); NAME_ndo (dscndo for dsc)
+# is the law with the observer term. Without --laws: the files' law (dscndo_controller.law; config/paper.yaml's
+# is dsc) without and with the observer term, so dsc,dscndo by default and smc,smc_ndo for a file with law: smc.
+# With --laws, a law the files name other than dsc is replaced, and a note says so.
+# --duration S: simulated seconds of each run, as mwip_sim --duration takes them (10, 2.5, 1e3): > 0 and at
+# most 1e7 (default: the files' plant_sim.duration_s, 10 s in config/paper.yaml). 0 is refused, and so is a
+# file's duration_s: 0 (until stopped): every run must end for the next law and the report.
+# --sensors raw puts config/sensors_raw_realistic.yaml BEFORE the --params files (your files overlay it, so
+# what they set wins, e.g. state_estimator method: complementary): the plant publishes what an IMU on the body
+# and a motor encoder measure, and a state_estimator (started here, with the same files) turns them into
+# joint_states. Files that set sensors.model: state contradict it (refused). A parameter file that sets
+# sensors.model: raw itself starts the estimator too.
 #
 # Bags, logs and the report go to DIR (default: bags/) as NAME_<law>, NAME_logs and NAME_report, NAME
 # being the date and time (or --name NAME); a second experiment with the same NAME (started in the
@@ -31,7 +39,7 @@ MODE=lockstep
 DURATION=""
 RECORD=1
 OUT="$ROOT/bags"
-LAWS="dsc,dscndo"
+LAWS=""    # --laws; empty: the files' law without and with the observer term (mwip_ros.cli.experiment)
 NAME=""
 SENSORS=state
 
@@ -64,19 +72,11 @@ while [ $# -gt 0 ]; do
 done
 case "$MODE" in lockstep|realtime) ;; *) die "--mode must be lockstep or realtime, got '$MODE'" ;; esac
 case "$SENSORS" in state|raw) ;; *) die "--sensors must be state or raw, got '$SENSORS'" ;; esac
-if [ -n "$DURATION" ]; then
-    [[ "$DURATION" =~ ^[0-9]+([.][0-9]*)?$ ]] || die "--duration must be seconds >= 0, got '$DURATION'"
-    [[ "$DURATION" == *.* ]] || DURATION="$DURATION.0"   # ROS 2 reads 60 as an integer
-fi
 [ ${#PARAMS[@]} -gt 0 ] || PARAMS=("$ROOT/config/paper.yaml")
-[ "$SENSORS" = raw ] && PARAMS+=("$ROOT/config/sensors_raw_realistic.yaml")
+# the overlay first: the user's files are overlays on it, so every key they set wins (their estimator, noise)
+[ "$SENSORS" = raw ] && PARAMS=("$ROOT/config/sensors_raw_realistic.yaml" "${PARAMS[@]}")
 PF=()   # --params-file FILE for each
 for f in "${PARAMS[@]}"; do PF+=(--params-file "$f"); done
-IFS=',' read -r -a LAW_LIST <<< "$LAWS"
-[ ${#LAW_LIST[@]} -gt 0 ] || die "--laws needs at least one of dsc, dscndo, lqr, lqr_ndo"
-for CTRL in "${LAW_LIST[@]}"; do
-    case "$CTRL" in dsc|dscndo|lqr|lqr_ndo) ;; *) die "--laws takes dsc, dscndo, lqr, lqr_ndo; got '$CTRL'" ;; esac
-done
 
 # One ROS domain for the whole experiment, the user's if set, held (locked) until every node has stopped.
 # shellcheck disable=SC1091
@@ -88,6 +88,22 @@ bash "$ROOT/scripts/setup.sh"
 source "$ROOT/scripts/env.sh"
 cd "$ROOT"
 
+# The plan (mwip_ros/cli/experiment.py): --laws and --duration checked against the registry and the merged files,
+# the laws to run (NAME FAMILY USE_OBSERVER), the plant's sensors.model (raw needs a state_estimator in the loop).
+PLAN_ARGS=(--params "${PARAMS[@]}" --sensors "$SENSORS")
+[ -n "$LAWS" ] && PLAN_ARGS+=(--laws "$LAWS")
+[ -n "$DURATION" ] && PLAN_ARGS+=(--duration "$DURATION")
+PLAN="$(python -m mwip_ros.cli.experiment "${PLAN_ARGS[@]}")" || exit 2
+MODEL=state
+LAW_LIST=(); FAMILY_OF=(); OBSERVER_OF=()
+while read -r what a b c; do
+    case "$what" in
+        duration) DURATION="$a" ;;   # as Python writes a float (1000.0): ROS 2 reads it as a double, 60 as an integer
+        model) MODEL="$a" ;;
+        run) LAW_LIST+=("$a"); FAMILY_OF+=("$b"); OBSERVER_OF+=("$c") ;;
+    esac
+done <<< "$PLAN"
+
 # The parameter files, every node's section, checked before anything starts: a mistake is one line, exit 2.
 theorem=0
 mwip_theorem --params "${PARAMS[@]}" || theorem=$?
@@ -96,9 +112,6 @@ case "$theorem" in
     1) echo "run_experiment: warning: the gains break Theorem 2 (see above); running anyway" >&2 ;;
     *) exit 2 ;;
 esac
-# the plant's sensors.model as the files merge it: raw needs a state_estimator in the loop
-MODEL="$(python -c 'import sys; from mwip_ros import params as P
-print(P.merged_values(P.load_param_files(sys.argv[1:])).get("sensors.model", "state"))' "${PARAMS[@]}")" || exit 2
 
 # Output names: date and time, made unique by creating the logs folder (mkdir is atomic): a second
 # experiment started in the same second takes the next suffix instead of sharing or overwriting files.
@@ -146,9 +159,8 @@ PLANT_EXTRA=(-p "plant_sim:mode:=$MODE")
 RUNS=()
 FELL=()        # the laws whose robot fell: the script then ends with exit 3, as plant_sim does
 ESTIMATES=()   # the observer's estimates (CSV), for a report from the plant's CSVs (--no-record)
-for CTRL in "${LAW_LIST[@]}"; do
-    USE_OBS=false; case "$CTRL" in dscndo|lqr_ndo) USE_OBS=true ;; esac
-    LAW=dsc; case "$CTRL" in lqr|lqr_ndo) LAW=lqr ;; esac
+for i in "${!LAW_LIST[@]}"; do
+    CTRL="${LAW_LIST[$i]}"; LAW="${FAMILY_OF[$i]}"; USE_OBS="${OBSERVER_OF[$i]}"
     echo "=== $CTRL: $MODE run, ROS_DOMAIN_ID=$ROS_DOMAIN_ID, logs in ${LOGS#$ROOT/}/ ==="
     SUBS=2   # expected_subscribers as without an estimator; with one, the plant counts it instead (README)
     if [ "$RECORD" = 1 ]; then

@@ -291,3 +291,82 @@ def test_raw_sensors_run_the_state_estimator_in_the_loop_and_record_its_topics(t
     # the report judges the estimator from the bag: its joint_states against true_joint_states
     assert 0 < m["dscndo"]["theta_b_est_err_rms"] < 0.01 and 0 < m["dscndo"]["dtheta_b_est_err_rms"] < 0.05
     assert (tmp_path / "raw_report" / "pitch_estimate.png").stat().st_size > 10_000
+
+
+def _controller_ready(logs: Path, ctrl: str) -> str:
+    """The controller's start-up message in a run's log ('<law title> ready: ...'), without the log prefix."""
+    text = (logs / f"{ctrl}_dscndo_controller.log").read_text()
+    return next((line.split("[dscndo_controller]: ", 1)[-1] for line in text.splitlines() if " ready: " in line),
+                text[-2000:])
+
+
+@pytest.mark.e2e
+def test_raw_sensors_keep_the_estimator_the_users_file_chooses(tmp_path):
+    """--sensors raw puts its overlay before the user's files: their state_estimator method: complementary is the
+    estimator that runs (it was replaced by the overlay's kalman)."""
+    mine = tmp_path / "complementary.yaml"
+    mine.write_text("state_estimator:\n  ros__parameters:\n    method: complementary\n")
+    r = subprocess.run([*RUN_EXPERIMENT, "--params", str(REPO / "config" / "paper.yaml"), str(mine),
+                        "--sensors", "raw", "--laws", "dscndo", "--duration", "0.5", "--no-record",
+                        "--out", str(tmp_path / "out"), "--name", "c"], capture_output=True, text=True, timeout=600,
+                       env=script_env())
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+    est = (tmp_path / "out" / "c_logs" / "dscndo_state_estimator.log").read_text()
+    assert "complementary filter state estimator ready" in est and "Kalman" not in est, est
+
+
+@pytest.mark.e2e
+def test_the_files_law_runs_without_and_with_the_observer_when_laws_is_not_given(tmp_path):
+    """A user's file with law: smc runs SMC and SMC+NDO (the script's -p law:=dsc replaced it); a duration in
+    scientific notation is taken as mwip_sim takes it."""
+    from mwip_ros.core import laws
+    mine = tmp_path / "smc.yaml"
+    mine.write_text("dscndo_controller:\n  ros__parameters:\n    law: smc\n")
+    r = subprocess.run([*RUN_EXPERIMENT, "--params", str(REPO / "config" / "paper.yaml"), str(mine),
+                        "--duration", "5e-1", "--no-record", "--out", str(tmp_path / "out"), "--name", "s"],
+                       capture_output=True, text=True, timeout=600, env=script_env())
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+    logs = tmp_path / "out" / "s_logs"
+    for ctrl in ("smc", "smc_ndo"):
+        assert _controller_ready(logs, ctrl).startswith(f"{laws.get(ctrl).title} ready: "), ctrl
+    runs = json.loads((tmp_path / "out" / "s_report" / "metrics.json").read_text())["runs"]
+    assert list(runs) == ["smc", "smc_ndo"] and all(m["upright"] for m in runs.values())
+    assert "the parameter files' law 'smc'" in r.stderr   # said, not silent
+    assert (logs / "smc.csv").read_text().count("\n") == 1 + 101   # 0.5 s at 200 Hz: 101 states
+
+
+@pytest.mark.e2e
+def test_laws_mpc_runs_through_the_script_and_says_what_it_replaces(tmp_path):
+    from mwip_ros.core import laws
+    mine = tmp_path / "smc.yaml"
+    mine.write_text("dscndo_controller:\n  ros__parameters:\n    law: smc\n")
+    r = subprocess.run([*RUN_EXPERIMENT, "--params", str(REPO / "config" / "paper.yaml"), str(mine),
+                        "--laws", "mpc", "--duration", "0.5", "--no-record", "--out", str(tmp_path / "out"),
+                        "--name", "m"], capture_output=True, text=True, timeout=600, env=script_env())
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+    ready = _controller_ready(tmp_path / "out" / "m_logs", "mpc")
+    assert ready.startswith(f"{laws.get('mpc').title} ready: "), ready
+    assert "--laws mpc runs in place of the parameter files' law 'smc'" in r.stderr
+    runs = json.loads((tmp_path / "out" / "m_report" / "metrics.json").read_text())["runs"]
+    assert list(runs) == ["mpc"] and runs["mpc"]["upright"]
+
+
+@pytest.mark.e2e
+@pytest.mark.parametrize("duration", ["0", "0.0", "inf", "nan", "1e8", "ten"])
+def test_a_duration_mwip_sim_refuses_is_refused_in_one_line(tmp_path, duration):
+    r = subprocess.run([*RUN_EXPERIMENT, "--duration", duration, "--out", str(tmp_path / "out")],
+                       capture_output=True, text=True, timeout=120, env=script_env())
+    assert r.returncode == 2, r.stdout + r.stderr
+    err = [line for line in r.stderr.splitlines() if line.startswith("run_experiment: --duration")]
+    assert len(err) == 1 and "Traceback" not in r.stderr, r.stderr
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.e2e
+def test_a_files_duration_0_until_stopped_is_refused_not_run_forever(tmp_path):
+    forever = tmp_path / "forever.yaml"
+    forever.write_text("plant_sim:\n  ros__parameters:\n    duration_s: 0.0\n")
+    r = subprocess.run([*RUN_EXPERIMENT, "--params", str(REPO / "config" / "paper.yaml"), str(forever),
+                        "--out", str(tmp_path / "out")], capture_output=True, text=True, timeout=120, env=script_env())
+    assert r.returncode == 2 and "plant_sim.duration_s is 0" in r.stderr and "give --duration" in r.stderr, r.stderr
+    assert not (tmp_path / "out").exists()

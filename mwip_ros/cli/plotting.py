@@ -6,6 +6,7 @@ the title and the axes (they cover no curve); sweep axes are labelled with their
 """
 from __future__ import annotations
 
+import textwrap
 from typing import Optional, Sequence
 
 import numpy as np
@@ -290,9 +291,10 @@ _STYLES = [dict(marker="o", ls="-"), dict(marker="s", ls="--"), dict(marker="^",
 
 
 def _share_lines(ax, cols: dict, key: str, is_grid: bool, names, roa: Optional[dict] = None) -> str:
-    """Share upright against ``key``, a line per law, each with its own marker and line style and drawn a little
-    higher than the one before (:data:`OFFSET` each), so laws with equal shares stay distinguishable.  Returns
-    a note naming the laws whose curves are identical ('' when none are)."""
+    """Share upright against ``key``, a line per law at its true share (0 to 1), each with its own marker and line
+    style, the markers of the ``n`` laws on every ``n``-th level, each law's starting one level after the one before
+    (``markevery``): laws with equal shares, drawn one over another, stay distinguishable by their markers.
+    Returns a note naming the laws whose curves are identical ('' when none are)."""
     ctrl = np.asarray(cols["controller"])
     up = np.asarray(cols["upright"], dtype=float)
     curves = {}
@@ -316,17 +318,15 @@ def _share_lines(ax, cols: dict, key: str, is_grid: bool, names, roa: Optional[d
         label = law
         if roa is not None:
             label += f" (ROA {roa[law]:.3f} rad)" if roa.get(law) is not None else " (no ROA)"
-        line, = ax.plot(lx, share + j * OFFSET, ms=4, lw=1.2, alpha=0.85, markevery=(j, len(names)),
+        line, = ax.plot(lx, share, ms=4, lw=1.2, alpha=0.85, markevery=(j % max(1, len(lx)), len(names)),
                         label=label, **_STYLES[j % len(_STYLES)])
         if roa is not None and roa.get(law) is not None:
             a = roa[law]
             ax.plot([-a, a], [-0.03 - 0.015 * j] * 2, color=line.get_color(), lw=3, solid_capstyle="butt")
     if not groups:
         return ""
-    return "identical curves: " + "; ".join(" = ".join(g) for g in groups) + f" (drawn {OFFSET:g} apart)"
-
-
-OFFSET = 0.015   # share upright: each law's curve this much above the one before
+    same = "; ".join(" = ".join(g) for g in groups)
+    return f"identical curves: {same} (drawn one over another; see the markers)"
 
 
 def _share_figure(plt, cols, key, is_grid, names, title, path, roa=None) -> None:
@@ -334,8 +334,8 @@ def _share_figure(plt, cols, key, is_grid, names, title, path, roa=None) -> None
     note = _share_lines(ax, cols, key, is_grid, names, roa)
     ax.set_xlabel(axis_label(key) + ("" if is_grid else " (binned)"))
     ax.set_ylabel("share upright [-]")
-    ax.set_ylim(-0.05 - (0.015 * len(names) if roa is not None else 0.0), 1.03 + OFFSET * len(names))
-    ax.set_title(title + (f"\n{note}" if note else ""), fontsize=10)
+    ax.set_ylim(-0.05 - (0.015 * len(names) if roa is not None else 0.0), 1.05)
+    ax.set_title(title + ("\n" + textwrap.fill(note, 95) if note else ""), fontsize=10)
     ax.grid(True, alpha=0.3)
     ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=min(len(names), 2 if roa else 4), fontsize=9,
               frameon=False)
@@ -344,24 +344,42 @@ def _share_figure(plt, cols, key, is_grid, names, title, path, roa=None) -> None
     plt.close(fig)
 
 
-def _rms_histogram(ax, cols: dict, bins) -> None:
+def _upright_rms(cols: dict, law: str) -> np.ndarray:
+    """theta_b RMS of ``law``'s upright runs (finite, > 0: a log axis)."""
     ctrl = np.asarray(cols["controller"])
     up = np.asarray(cols["upright"], dtype=bool)
     rms = np.asarray(cols["theta_b_rms"], dtype=float)
-    ok = up & np.isfinite(rms) & (rms > 0)
+    return rms[up & np.isfinite(rms) & (rms > 0) & (ctrl == law)]
+
+
+def rms_histograms(cols: dict, bins) -> dict:
+    """Per law: (its upright runs' theta_b RMS, counts in ``bins``, the laws before it with the same counts).
+
+    Laws whose histograms are the same bar for bar (LQR, LQR+NDO and an unconstrained MPC: the same gain) would
+    be drawn one exactly under the other; the figure says so instead."""
+    out = {}
     for law in laws(cols):
-        sel = ok & (ctrl == law)
-        ax.hist(rms[sel], bins=bins, histtype="step", lw=1.5, label=f"{law} ({sel.sum()} upright)")
+        vals = _upright_rms(cols, law)
+        counts = np.histogram(vals, bins=bins)[0]
+        same = [o for o, (_, c, _) in out.items() if len(vals) and np.array_equal(c, counts)]
+        out[law] = (vals, counts, same)
+    return out
+
+
+def _rms_panel(ax, law: str, hist, bins, colour) -> None:
+    vals, counts, same = hist
+    ax.hist(vals, bins=bins, histtype="stepfilled", color=colour, alpha=0.35, edgecolor=colour, lw=1.2)
+    note = f", the same histogram as {' and '.join(same)}" if same else ""
+    ax.text(0.01, 0.92, f"{law}: {len(vals)} upright{note}", transform=ax.transAxes, va="top", fontsize=8)
     ax.set_xscale("log")
-    ax.set_xlabel(r"$\theta_b$ RMS over the window [rad]")
-    ax.legend(fontsize=8, loc="best")
+    ax.grid(True, alpha=0.3)
 
 
 def _rms_bins(all_cols):
     vals = np.concatenate([np.asarray(c["theta_b_rms"], dtype=float)[np.asarray(c["upright"], dtype=bool)]
                            for c in all_cols])
     vals = vals[np.isfinite(vals) & (vals > 0)]
-    return np.geomspace(vals.min(), vals.max() * 1.0001, 50) if len(vals) else 10
+    return np.geomspace(vals.min(), vals.max() * 1.0001, 50) if len(vals) else np.geomspace(1e-3, 1.0, 50)
 
 
 def sweep_rms_distribution(cols: dict, path) -> None:
@@ -370,15 +388,27 @@ def sweep_rms_distribution(cols: dict, path) -> None:
 
 
 def sweep_rms_panels(named: Sequence, path) -> None:
-    """One panel per (title, results columns), side by side with a shared axis: e.g. ideal and realistic
-    sensing."""
+    """The theta_b RMS distributions as small multiples: a row per law, a column per (title, results columns)
+    (e.g. ideal and realistic sensing), every panel on the same bins and axes, so no law's histogram hides
+    under another's; a law whose histogram equals an earlier law's says so in its panel."""
     plt = _plt()
-    fig, axes = plt.subplots(1, len(named), figsize=(7 * len(named), 4), sharex=True, sharey=True, squeeze=False)
+    rows = list(dict.fromkeys(law for _, cols in named for law in laws(cols)))
+    fig, axes = plt.subplots(max(1, len(rows)), len(named), figsize=(7 * len(named), 0.6 + 1.25 * max(1, len(rows))),
+                             sharex=True, sharey=True, squeeze=False)
     bins = _rms_bins([c for _, c in named])
-    for ax, (title, cols) in zip(axes[0], named):
-        _rms_histogram(ax, cols, bins)
-        ax.set_title(title)
-    axes[0][0].set_ylabel("scenarios")
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for j, (title, cols) in enumerate(named):
+        hists = rms_histograms(cols, bins)
+        for i, law in enumerate(rows):
+            if law in hists:
+                _rms_panel(axes[i][j], law, hists[law], bins, colours[i % len(colours)])
+            else:
+                axes[i][j].text(0.01, 0.92, f"{law}: not in this sweep", transform=axes[i][j].transAxes,
+                                va="top", fontsize=8)
+        axes[0][j].set_title(title)
+        axes[-1][j].set_xlabel(r"$\theta_b$ RMS over the window [rad]")
+    for i in range(len(axes)):
+        axes[i][0].set_ylabel("runs", fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

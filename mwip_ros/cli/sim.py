@@ -62,6 +62,14 @@ def _fail(text: str) -> int:
 DURATION_MAX_S = P.specs_for("plant_sim")["duration_s"].hi   # the parameter file's own limit
 
 
+def duration_error(seconds: float):
+    """The one-line refusal of a ``--duration`` (mwip_sim's, run_experiment.sh's), or None when it is finite,
+    > 0 and within ``plant_sim.duration_s``'s range."""
+    if math.isfinite(seconds) and 0 < seconds <= DURATION_MAX_S:
+        return None
+    return f"--duration must be > 0 and <= {DURATION_MAX_S:g} s (plant_sim.duration_s's range), got {seconds:g}"
+
+
 def _memory_refusal(values, duration, n_runs: int):
     """Why the runs would not fit the memory budget (core.budget: every law's trajectory is kept), or None."""
     try:
@@ -104,9 +112,9 @@ def _main(argv=None) -> int:
         values = P.merged_values(P.load_param_files(paths, option="--params"))
     except P.ParamError as exc:
         return _fail(str(exc))
-    if args.duration is not None and not (math.isfinite(args.duration) and 0 < args.duration <= DURATION_MAX_S):
-        return _fail(f"--duration must be > 0 and <= {DURATION_MAX_S:g} s (plant_sim.duration_s's range), "
-                     f"got {args.duration:g}")
+    err = duration_error(args.duration) if args.duration is not None else None
+    if err:
+        return _fail(err)
     if args.compare is not None:
         names = list(dict.fromkeys(args.compare or ["dsc", "dscndo"]))
     else:

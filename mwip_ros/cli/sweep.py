@@ -15,6 +15,7 @@ from pathlib import Path
 from mwip_ros import params as P
 from mwip_ros.cli import interrupts, outputs
 from mwip_ros.sweep import engine, results
+from mwip_ros.sweep import progress as sweep_progress
 from mwip_ros.sweep.scenarios import expand, parameter_file
 from mwip_ros.core import laws as registry
 from mwip_ros.sweep.spec import SpecError, load_spec
@@ -84,7 +85,9 @@ def add_runner_arguments(ap: argparse.ArgumentParser) -> None:
                     help="run the chunks on a dask.distributed scheduler (tcp://host:8786), or 'local:N' for a "
                          "local cluster of N >= 1 workers (capped like --workers); --workers is then ignored")
     ap.add_argument("--chunk", type=int, default=engine.DEFAULT_CHUNK, metavar="N",
-                    help="runs per chunk (default %(default)s); the chunking, not the runner, fixes the results")
+                    help="runs per chunk (default %(default)s; at most " + str(engine.SLOW_CHUNK) + " for a law the "
+                         "batch cannot compile, MPC: its chunks would take minutes); the laws take turns, so the time "
+                         "left knows each law's cost early")
     ap.add_argument("--oversubscribe", action="store_true",
                     help="allow more local workers (--workers, --dask local:N) than cores")
 
@@ -180,17 +183,16 @@ def _main(argv=None) -> int:
 
     chunks = engine.make_chunks(spec, scenarios, args.chunk)
     total = sum(len(c) for c in chunks)
-    steps_per_run = int(round(spec.duration_s * spec.base_values["control_rate_hz"]))
     where = runner.describe(len(chunks))
     if not args.quiet:
         print(f"{PROG}: {len(scenarios):,} scenarios x {len(spec.controllers)} law(s) = {total:,} runs of "
               f"{spec.duration_s:g} s in {len(chunks)} chunk(s), on {where}", file=sys.stderr)
     writer = results.ResultsWriter(args.out / "results.csv", [a.key for a in spec.axes], extra=_has_stages(spec))
-    progress = _Progress(total, steps_per_run, args.quiet)
+    progress = _Progress(chunks, args.quiet, workers=lambda: runner.started or 1)
     try:
         for chunk, res in runner(chunks):
             writer.add(chunk, res, scenarios)
-            progress.update(len(chunk), res.steps)
+            progress.update(chunk, res)
     except KeyboardInterrupt:
         runner.close(stop=True)   # before the message: no worker is left when the line is read
         progress.close()
@@ -265,29 +267,41 @@ def _figures(cols, spec, doc, out: Path) -> list:
 
 
 class _Progress:
-    """tqdm on a terminal (runs done, scenario-steps/s, time left); a plain line every 5 s otherwise."""
+    """tqdm on a terminal (runs done, scenario-steps/s, time left); a plain line every 5 s otherwise.
 
-    def __init__(self, total: int, steps_per_run: int, quiet: bool):
-        self.total, self.done, self.steps = total, 0, 0
+    The time left is each law's scenarios left at its own measured cost (:class:`progress.Eta`), not the runs
+    left at the average rate: MPC's chunks cost ~100 times a compiled law's.  ``workers()`` is how many chunks
+    run at once."""
+
+    EVERY_S = 5.0   # a plain line at most this often
+
+    def __init__(self, chunks, quiet: bool, workers=lambda: 1):
+        self.total, self.done, self.steps = sum(len(c) for c in chunks), 0, 0
+        self.eta = sweep_progress.Eta(chunks)
+        self.workers = workers
         self.t0 = self._last = time.monotonic()
         self.quiet = quiet
         self.bar = None
         if not quiet and sys.stderr.isatty():
-            from tqdm import tqdm
-            self.bar = tqdm(total=total, unit="run", file=sys.stderr, dynamic_ncols=True, smoothing=0.1)
+            from tqdm import tqdm   # its own remaining time assumes every run costs the same: ours instead
+            self.bar = tqdm(total=self.total, unit="run", file=sys.stderr, dynamic_ncols=True, smoothing=0.1,
+                            bar_format="{l_bar}{bar}| {n_fmt}/{total_fmt} [{elapsed}{postfix}]")
 
-    def update(self, runs: int, steps: int) -> None:
-        self.done += runs
-        self.steps += steps
+    def left(self) -> str:
+        return sweep_progress.describe_left(*self.eta.estimate(self.workers()))
+
+    def update(self, chunk, result) -> None:
+        self.done += len(chunk)
+        self.steps += result.steps
+        self.eta.done(chunk.controller, len(chunk), result.seconds)
         rate = self.steps / max(1e-9, time.monotonic() - self.t0)
         if self.bar is not None:
-            self.bar.set_postfix_str(f"{rate / 1e6:.2f} M scenario-steps/s", refresh=False)
-            self.bar.update(runs)
-        elif not self.quiet and (time.monotonic() - self._last >= 5.0 or self.done == self.total):
+            self.bar.set_postfix_str(f"{rate / 1e6:.2f} M scenario-steps/s, {self.left()}", refresh=False)
+            self.bar.update(len(chunk))
+        elif not self.quiet and (time.monotonic() - self._last >= self.EVERY_S or self.done == self.total):
             self._last = time.monotonic()
-            left = (time.monotonic() - self.t0) * (self.total - self.done) / max(1, self.done)
             print(f"{PROG}: {self.done:,}/{self.total:,} runs ({100 * self.done / self.total:.0f} %), "
-                  f"{rate:,.0f} scenario-steps/s, {left:.0f} s left", file=sys.stderr, flush=True)
+                  f"{rate:,.0f} scenario-steps/s, {self.left()}", file=sys.stderr, flush=True)
 
     def close(self) -> None:
         if self.bar is not None:

@@ -601,6 +601,14 @@ def _owner(cls: type, name: str):
     return next((c for c in cls.__mro__ if name in c.__dict__), None)
 
 
+def pure_form(law: type):
+    """The pure step the compiled loop runs for the law class ``law`` (its ``pure_step``, or its base's for an
+    observer variant), or None: it has none, or it is a subclass that steps otherwise than the form it inherits."""
+    core = getattr(law, "base", law)
+    fn = getattr(core, "pure_step", None)
+    return None if fn is None or _owner(core, "step") is not _owner(core, "pure_step") else fn
+
+
 def load_cached(kernel, args) -> None:
     """Load ``kernel``'s machine code for ``args``' types from numba's cache, if there and not yet loaded, without
     the refresh of its whole compiler that numba's own first call makes (about 0.2 s of a sweep worker's start-up:
@@ -630,9 +638,9 @@ def kernel_for(law: type, estimator: type = None):
     variant) and, for raw sensors, of the estimator class ``estimator`` (:mod:`.estimators`: its ``pure_step``),
     or None when either has no pure form (the batch then runs over numpy arrays, or the scalar loop)."""
     core = getattr(law, "base", law)
-    fn = getattr(core, "pure_step", None)
-    if fn is None or _owner(core, "step") is not _owner(core, "pure_step"):
-        return None   # none, or a subclass that steps otherwise than the pure form it inherits
+    fn = pure_form(law)
+    if fn is None:
+        return None
     est = getattr(estimator, "pure_step", None) if estimator is not None else _no_est
     if est is None:
         return None

@@ -1,10 +1,13 @@
 """Run a sweep's chunks: in this process, on local worker processes, or on a Dask cluster.
 
-A :class:`Chunk` is up to ``chunk_size`` consecutive scenarios under one law; :func:`run_chunk`
+A :class:`Chunk` is up to ``chunk_size`` consecutive scenarios under one law (fewer, :data:`SLOW_CHUNK`, for a
+law the batch cannot compile: its chunks take minutes otherwise, and progress would stand still); :func:`run_chunk`
 (a plain function of plain data, so any process or Dask worker can run it) builds each
 scenario's :class:`~mwip_ros.core.sim.ClosedLoop` from the base values and the scenario's
 overrides and runs them through :func:`~mwip_ros.core.batch.simulate_batch`.  The chunks are
-cut the same way whatever runs them, so the results are identical however the sweep ran.
+cut the same way whatever runs them, so the results are identical however the sweep ran.  :func:`make_chunks`
+takes the laws in turn (each law's first chunk, the slow laws' first, then each law's second, ...), so every
+law's cost per scenario is measured early (:class:`ChunkResult.seconds`; the time left, :mod:`mwip_ros.sweep.progress`).
 
 Runners yield ``(chunk, result)`` as chunks finish:
 
@@ -18,6 +21,7 @@ from __future__ import annotations
 
 import gc
 import os
+import time
 from dataclasses import dataclass
 from typing import Any, Dict, Iterator, List, Optional, Sequence, Tuple
 
@@ -27,11 +31,14 @@ from mwip_ros.core import budget
 from mwip_ros.core.budget import window_samples
 from mwip_ros.sweep.workers import signals_held, stop_resource_tracker, worker_init
 
-__all__ = ["Chunk", "ChunkResult", "make_chunks", "chunks_of", "run_chunk", "Runner", "run_local", "run_dask",
-           "DEFAULT_CHUNK"]
+__all__ = ["Chunk", "ChunkResult", "make_chunks", "chunks_of", "chunk_size_for", "run_chunk", "Runner", "run_local",
+           "run_dask", "DEFAULT_CHUNK", "SLOW_CHUNK"]
 
 DEFAULT_CHUNK = 5000   # scenarios per chunk: numpy's per-call cost is small against 5,000 elements, and a
                        # 10 s run's window (4 x 1,001 samples per scenario) takes 160 MB (BENCHMARKS.md)
+SLOW_CHUNK = 50        # scenarios per chunk of a law without a pure form (Law.pure_step: MPC, a plug-in): the batch
+                       # runs it over numpy arrays or scenario by scenario, about 100 times slower per scenario
+                       # than a compiled law (BENCHMARKS.md), so a chunk is seconds, not minutes, of a worker
 
 
 @dataclass(frozen=True)
@@ -53,13 +60,26 @@ class ChunkResult:
     t_fall: np.ndarray
     metrics: Dict[str, np.ndarray]
     steps: int
+    seconds: float = 0.0   # wall time the chunk took where it ran (a worker): the law's cost, for the time left
+
+
+def chunk_size_for(controller: str, chunk_size: int = DEFAULT_CHUNK) -> int:
+    """Scenarios per chunk of ``controller``: ``chunk_size``, at most :data:`SLOW_CHUNK` for a law without a pure
+    form (:func:`~mwip_ros.core.compiled.pure_form`: the batch cannot compile it)."""
+    from mwip_ros.core import laws
+    from mwip_ros.core.compiled import pure_form
+    return chunk_size if pure_form(laws.get(controller)) is not None else max(1, min(chunk_size, SLOW_CHUNK))
 
 
 def make_chunks(spec, scenarios, chunk_size: int = DEFAULT_CHUNK) -> List[Chunk]:
-    """Law by law, ``chunk_size`` scenarios at a time."""
+    """Every law's runs, :func:`chunk_size_for` scenarios at a time, the laws taken in turn: each law's first
+    chunk, then each law's second, ..., the slow laws (small chunks) first in each turn, so every law's cost is
+    measured early, the slowest first."""
     overrides = [scenarios.overrides(i) for i in range(len(scenarios))]
-    return [c for ctrl in spec.controllers
-            for c in chunks_of(ctrl, spec.base_values, overrides, spec.duration_s, spec.window, chunk_size)]
+    sizes = {ctrl: chunk_size_for(ctrl, chunk_size) for ctrl in spec.controllers}
+    per_law = [chunks_of(ctrl, spec.base_values, overrides, spec.duration_s, spec.window, sizes[ctrl])
+               for ctrl in sorted(spec.controllers, key=lambda c: sizes[c] == chunk_size)]   # stable: slow ones first
+    return [law[k] for k in range(max((len(law) for law in per_law), default=0)) for law in per_law if k < len(law)]
 
 
 def chunks_of(controller: str, base: Dict[str, Any], overrides: Sequence[Dict[str, Any]], duration_s: float,
@@ -85,8 +105,11 @@ def run_chunk(chunk: Chunk, batch_bytes: Optional[int] = None) -> ChunkResult:
     budget's :func:`~mwip_ros.core.budget.batch_budget`) runs as several, each within it; the scenarios'
     ClosedLoops are built a batch at a time.  Python's cyclic garbage collector is off meanwhile
     (:class:`_gc_held`)."""
+    t0 = time.perf_counter()
     with _gc_held():
-        return _run_chunk(chunk, batch_bytes)
+        result = _run_chunk(chunk, batch_bytes)
+    result.seconds = time.perf_counter() - t0
+    return result
 
 
 class _gc_held:

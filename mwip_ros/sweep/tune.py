@@ -216,7 +216,8 @@ class Objective:
         up, th, u = np.zeros(len(overrides), dtype=bool), np.full(len(overrides), np.nan), np.full(len(overrides),
                                                                                                   np.nan)
         for chunk, res in self.runner(engine.chunks_of(self.law_name, self.spec.base_values, overrides,
-                                                       self.spec.duration_s, self.spec.window, self.chunk_size)):
+                                                       self.spec.duration_s, self.spec.window,
+                                                       engine.chunk_size_for(self.law_name, self.chunk_size))):
             sl = slice(chunk.first, chunk.first + len(chunk))
             up[sl], th[sl], u[sl] = res.upright, res.metrics["theta_b_rms"], res.metrics["u_rms"]
             self.steps += res.steps

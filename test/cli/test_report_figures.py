@@ -126,17 +126,68 @@ def test_a_one_axis_sweep_draws_lines_not_a_one_row_image_and_identical_curves_s
     (ax,) = fig.axes
     assert not ax.images and len(ax.lines) == 4
     assert ax.get_xlabel() == "plant_sim.initial.theta_b [rad]"          # the unit from the schema
-    ys = [tuple(np.round(line.get_ydata(), 6)) for line in ax.lines]
-    assert len(set(ys)) == 4                                            # four visible curves, not one
+    truth = (np.abs(levels) <= 0.5).astype(float)
+    for line in ax.lines:   # each law at its true share, never above 1 (the curves were offset up to 1.045)
+        np.testing.assert_allclose(line.get_ydata(), truth, atol=1e-12)
+    # four curves told apart: each its own marker and line style, the markers on staggered levels
     styles = {(line.get_marker(), line.get_linestyle()) for line in ax.lines}
-    assert len(styles) == 4
+    assert len(styles) == 4 and len({line.get_markevery() for line in ax.lines}) == 4
     assert "identical" in ax.get_title() and "dsc = dscndo = lqr = lqr_ndo" in ax.get_title()
     plotting.sweep_roa(cols, plotting_key(), {k: 0.5 for k in ("dsc", "dscndo", "lqr", "lqr_ndo")},
                        tmp_path / "roa.png")
     ax = saved[-1].axes[0]
     assert "identical" in ax.get_title() and ax.get_xlabel().endswith("[rad]")
     curves = [line for line in ax.lines if len(line.get_xdata()) == len(levels)]
-    assert len({tuple(np.round(c.get_ydata(), 6)) for c in curves}) == 4
+    assert len(curves) == 4 and len({c.get_markevery() for c in curves}) == 4
+    for line in ax.lines:   # the share curves and the ROA bars below them: nothing drawn above 1
+        assert np.max(line.get_ydata()) <= 1.0, line.get_label()
+    for c in curves:
+        np.testing.assert_allclose(c.get_ydata(), truth, atol=1e-12)
+    assert ax.get_ylim()[1] <= 1.06
+
+
+def test_the_roa_share_of_eight_laws_never_rises_above_1_and_each_law_has_markers(tmp_path, saved):
+    """8 laws every one upright on 5 levels: shares of exactly 1 (the offsets drew them up to 1.105)."""
+    names = ("dsc", "dscndo", "lqr", "lqr_ndo", "smc", "smc_ndo", "mpc", "mpc_ndo")
+    cols = _sweep_cols(np.linspace(-0.4, 0.4, 5), laws=names)
+    plotting.sweep_roa(cols, plotting_key(), {k: 0.4 for k in names}, tmp_path / "roa.png")
+    ax = saved[-1].axes[0]
+    shares = [line for line in ax.lines if len(line.get_xdata()) == 5]
+    assert len(shares) == 8
+    for line in shares:
+        assert np.all(np.asarray(line.get_ydata()) <= 1.0) and np.all(np.asarray(line.get_ydata()) == 1.0)
+        start, step = line.get_markevery()
+        assert start < 5   # a marker on one of the 5 levels: no law drawn without one
+
+
+def _rms_cols(per_law):
+    """results columns from {law: theta_b RMS of its upright runs}."""
+    cols = {"controller": [], "upright": [], "theta_b_rms": []}
+    for law, vals in per_law.items():
+        for v in vals:
+            cols["controller"].append(law)
+            cols["upright"].append(True)
+            cols["theta_b_rms"].append(float(v))
+    return cols
+
+
+def test_the_rms_distribution_gives_each_law_its_own_panel_and_names_identical_histograms(tmp_path, saved):
+    """LQR, LQR+NDO and MPC with the same distribution were drawn exactly under MPC's histogram on one axis."""
+    rng = np.random.default_rng(0)
+    same = rng.uniform(0.01, 0.02, 50)
+    cols = _rms_cols({"dsc": rng.uniform(0.05, 0.1, 50), "dscndo": rng.uniform(0.005, 0.01, 50), "lqr": same,
+                      "lqr_ndo": same, "mpc": same})
+    plotting.sweep_rms_distribution(cols, tmp_path / "rms.png")
+    fig = saved[-1]
+    panels = [ax for ax in fig.axes if ax.patches]
+    assert len(panels) == 5                                   # one panel per law, none hidden under another
+    texts = [" ".join(t.get_text() for t in ax.texts) for ax in fig.axes]
+    assert [t.split(":")[0] for t in texts] == ["dsc", "dscndo", "lqr", "lqr_ndo", "mpc"]
+    assert "same histogram" not in texts[2]
+    assert "the same histogram as lqr" in texts[3] and "the same histogram as lqr and lqr_ndo" in texts[4]
+    assert "same histogram" not in texts[0] + texts[1]
+    assert all("50 upright" in t for t in texts)
+    assert len({ax.get_xlim() for ax in fig.axes}) == 1      # one x axis for every panel: comparable
 
 
 def test_a_two_axis_map_thins_its_ticks_and_labels_axes_with_units(tmp_path, saved):

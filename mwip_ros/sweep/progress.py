@@ -1,0 +1,63 @@
+"""The time left of a sweep, from each law's own measured cost.
+
+The laws of one sweep differ in cost per scenario by two orders of magnitude (a compiled law against MPC's QP
+per period), so the time left is not the elapsed time scaled by the runs left: :class:`Eta` keeps, per law,
+the scenarios left and the seconds per scenario its finished chunks took where they ran
+(:attr:`~mwip_ros.sweep.engine.ChunkResult.seconds`), and the time left is the sum over the laws of scenarios
+left x seconds per scenario, divided by the workers running in parallel.  A law's first chunk also pays the
+process's one-off costs (numba compiling the loop: seconds), so once a second chunk of the law has finished the
+first is left out.  A law with scenarios left and no chunk finished yet is *untimed*: the estimate then covers
+the timed laws only, a lower bound, and says which laws it leaves out.
+"""
+from __future__ import annotations
+
+from typing import Dict, Iterable, List, Tuple
+
+__all__ = ["Eta", "describe_left"]
+
+
+class Eta:
+    """Time left of the chunks given (each with ``controller`` and a length), updated as each one finishes."""
+
+    def __init__(self, chunks: Iterable):
+        self.left: Dict[str, int] = {}
+        for c in chunks:
+            self.left[c.controller] = self.left.get(c.controller, 0) + len(c)
+        self._timed: Dict[str, List[Tuple[float, int]]] = {}   # law -> (seconds, scenarios) per finished chunk
+
+    def done(self, controller: str, scenarios: int, seconds: float) -> None:
+        """A chunk of ``scenarios`` runs of ``controller`` finished after ``seconds`` of its worker's time."""
+        self.left[controller] = max(0, self.left.get(controller, 0) - scenarios)
+        if scenarios > 0 and seconds >= 0:
+            self._timed.setdefault(controller, []).append((float(seconds), int(scenarios)))
+
+    def cost(self, controller: str):
+        """Seconds per scenario of ``controller`` (its first chunk left out once there is a second), or None."""
+        chunks = self._timed.get(controller)
+        if not chunks:
+            return None
+        use = chunks[1:] if len(chunks) > 1 else chunks
+        return sum(s for s, _ in use) / sum(n for _, n in use)
+
+    def estimate(self, workers: int = 1) -> Tuple[float, List[str]]:
+        """(seconds left for the timed laws on ``workers`` in parallel, the untimed laws with runs left)."""
+        work, untimed = 0.0, []
+        for law, n in self.left.items():
+            if n <= 0:
+                continue
+            c = self.cost(law)
+            if c is None:
+                untimed.append(law)
+            else:
+                work += n * c
+        return work / max(1, int(workers)), untimed
+
+
+def describe_left(seconds: float, untimed: List[str]) -> str:
+    """'85 s left', 'more than 12 s left (mpc_ndo not timed yet)', or 'time left not known yet (mpc not timed
+    yet)' while only untimed laws have runs left."""
+    if not untimed:
+        return f"{seconds:.0f} s left"
+    if seconds < 0.5:
+        return f"time left not known yet ({', '.join(untimed)} not timed yet)"
+    return f"more than {seconds:.0f} s left ({', '.join(untimed)} not timed yet)"
