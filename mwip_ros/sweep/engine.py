@@ -162,6 +162,11 @@ class Runner:
                                  f"machine's {os.cpu_count() or 1} CPUs: more run no faster, and each takes about "
                                  f"{budget.fmt_bytes(budget.WORKER_PROCESS)} plus up to "
                                  f"{budget.fmt_bytes(budget.batch_budget())} of batch arrays)")
+        if dask:   # optional (mwip_ros.optional): without it --dask is refused in one line, before any work
+            from mwip_ros.optional import missing
+            text = missing("dask.distributed", "--dask")
+            if text:
+                raise ValueError(text)
         self.started = 0   # the worker processes actually started (at most one per chunk)
         self._pool = self._client = self._cluster = None
 
