@@ -298,7 +298,7 @@ class ConnectionWatch:
                 return None
             if s.type != socket.SOCK_STREAM or s.family not in (socket.AF_INET, socket.AF_INET6):
                 return _OTHER
-            if s.getsockname()[1] != self.node.port:
+            if s.getsockname()[1] != self.node.server.port:   # the SDK's own port (behind the relay)
                 return _OTHER
             if s.getsockopt(socket.SOL_SOCKET, socket.SO_ACCEPTCONN):
                 return _LISTEN
@@ -501,13 +501,14 @@ def raise_descriptor_limit(log) -> int:
     return soft
 
 
-def check_room(log, max_clients: int) -> None:
+def check_room(log, max_clients: int, per_client: int = 1) -> None:
     """The soft descriptor limit raised (:func:`raise_descriptor_limit`); ParamError naming ``max_clients`` when
-    that many connections would not leave :data:`OWN_DESCRIPTORS` for the node itself."""
+    that many connections, ``per_client`` descriptors each, would not leave :data:`OWN_DESCRIPTORS` for the node
+    itself."""
     limit = raise_descriptor_limit(log)
     in_use = len(os.listdir("/proc/self/fd"))
-    room = limit - in_use - OWN_DESCRIPTORS
+    room = (limit - in_use - OWN_DESCRIPTORS) // per_client
     if max_clients > room:
         raise ParamError("max_clients", f"must be at most {max(room, 0)} here: the descriptor limit is {limit}, "
-                         f"{in_use} are in use and {OWN_DESCRIPTORS} are kept for the node itself "
-                         f"(got {max_clients})")
+                         f"{in_use} are in use, {OWN_DESCRIPTORS} are kept for the node itself and each connection "
+                         f"takes {per_client} (got {max_clients})")

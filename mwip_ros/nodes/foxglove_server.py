@@ -30,9 +30,10 @@ idle_timeout_s : float
 
 Notes
 -----
-The server is the ``foxglove-sdk``'s (``foxglove.start_server``, subprotocol
-``foxglove.sdk.v1``, the successor of ``foxglove.websocket.v1`` with the same binary
-message frames; a client that offers only ``foxglove.websocket.v1`` is refused by the SDK).
+The server is the ``foxglove-sdk``'s (``foxglove.start_server``, subprotocol ``foxglove.sdk.v1``,
+the successor of ``foxglove.websocket.v1`` with the same frames), behind the node's own port
+(:mod:`.foxglove_relay`), which accepts both subprotocols: a client that offers only the classic
+``foxglove.websocket.v1`` (Lichtblick, older Foxglove apps, tools on @foxglove/ws-protocol) gets it.
 Every message is forwarded as the exact CDR bytes received (raw subscriptions through
 :class:`mwip_ros.nodes.tap.TopicTap`, the recorder's: the loop's topics at once with the
 graph's QoS, ``external_wrench`` and the system topics with a QoS adapted to their
@@ -69,6 +70,7 @@ connection kept the node from ever ending): the node shuts its connections down 
 from __future__ import annotations
 
 import os
+import socket
 import sys
 import time
 
@@ -76,6 +78,7 @@ from rclpy.node import Node
 
 from mwip_ros.bag import message_definition
 from mwip_ros.nodes.diagnostics import OK, WARN
+from mwip_ros.nodes.foxglove_relay import CLASSIC_SUBPROTOCOL, DESCRIPTORS_PER_CLIENT, SDK_SUBPROTOCOL, Relay
 from mwip_ros.nodes.params import declare
 from mwip_ros.nodes.runtime import EXIT_ERROR, GracefulNodeMixin, for_every_thread, run_node
 from mwip_ros.nodes.tap import TopicTap, resolve_topics
@@ -85,6 +88,7 @@ from mwip_ros.params import ParamError
 NAME = "foxglove_server"
 SCHEMA_ENCODING = "ros2msg"
 MESSAGE_ENCODING = "cdr"
+SDK_HOST = "127.0.0.1"        # the SDK's server listens here, on a port of its own, behind the relay
 
 
 def _renice(log, value: int) -> None:
@@ -124,18 +128,23 @@ class FoxgloveServer(Node, GracefulNodeMixin):
 
         self.max_clients = int(self.v["max_clients"])
         self.idle_timeout_s = float(self.v["idle_timeout_s"])
-        conns.check_room(self.get_logger(), self.max_clients)
+        conns.check_room(self.get_logger(), self.max_clients, DESCRIPTORS_PER_CLIENT)
 
         self.fx = self.sdk.Context()                       # this node's own channels and server only
         self.sdk_log = conns.SdkLog()
         self.sdk_log.install()
         self.listener = conns.Subscriptions(self.get_logger(), self.sdk_log)
-        try:
+        self.relay = None
+        try:   # the port the clients see is the relay's (both subprotocols), the SDK's server is behind it
+            self.relay = Relay(self.host, self.port, lambda: (SDK_HOST, self.server.port), self.get_logger())
             self.server = self.start_server()
         except (RuntimeError, OSError, OverflowError, ValueError) as exc:
             self.sdk_log.uninstall()
+            if self.relay is not None:
+                self.relay.close()
             text = str(exc).replace("FoxgloveError: ", "")
-            about_host = any(s in text for s in ("lookup address", "assign requested address", "invalid"))
+            about_host = isinstance(exc, socket.gaierror) or any(
+                s in text for s in ("lookup address", "assign requested address", "invalid"))
             raise ParamError("host" if about_host else "port",
                              f"cannot serve on {self.host}:{self.port}: {text}"
                              + ("" if about_host else " (choose a free port, e.g. -p port:=8766)")) from None
@@ -151,14 +160,16 @@ class FoxgloveServer(Node, GracefulNodeMixin):
         self.tap = TopicTap(self, wanted, self._on_message, what="forwarded")
         self.watch = conns.ConnectionWatch(self, self.max_clients, self.idle_timeout_s)
         self.watch.start()   # after _renice: the thread inherits the main thread's nice value
+        self.relay.start()
         self.get_logger().info(
-            f"serving {len(self.tap.types)} topic(s) on ws://{self.host}:{self.server.port} (subprotocol "
-            f"foxglove.sdk.v1): " + ", ".join(sorted(self.tap.types))
+            f"serving {len(self.tap.types)} topic(s) on ws://{self.host}:{self.relay.port} (subprotocols "
+            f"{SDK_SUBPROTOCOL} and {CLASSIC_SUBPROTOCOL}): " + ", ".join(sorted(self.tap.types))
             + f"; at most {self.max_clients} connections, idle ones closed after {self.idle_timeout_s:g} s")
 
     def start_server(self):
-        return self.sdk.start_server(name=f"mwip_ros {self.get_fully_qualified_name()}", host=self.host,
-                                     port=self.port, context=self.fx, server_listener=self.listener)
+        """The SDK's server, on this machine on a port of its own: the clients reach it through the relay."""
+        return self.sdk.start_server(name=f"mwip_ros {self.get_fully_qualified_name()}", host=SDK_HOST,
+                                     port=0, context=self.fx, server_listener=self.listener)
 
     # --- forwarding ------------------------------------------------------------------------------
 
@@ -202,7 +213,8 @@ class FoxgloveServer(Node, GracefulNodeMixin):
                   "channel_subscriptions": subscribed, "topics_subscribed": len(self.tap.subs),
                   "topics_waiting_for_a_publisher": len(self.tap.pending),
                   "max_clients": self.max_clients, "idle_timeout_s": f"{self.idle_timeout_s:g}", **watch,
-                  "descriptor_limit": self.watch.limit, "sdk_warnings": self.sdk_log.problems_total}
+                  "descriptor_limit": self.watch.limit, "sdk_warnings": self.sdk_log.problems_total,
+                  **self.relay.counts()}
         message = (f"serving ws://{self.host}:{self.port} to {clients} subscribed client(s), "
                    f"{watch['connections']} connection(s)")
         last = getattr(self, "_last_watch", None)
@@ -222,6 +234,7 @@ class FoxgloveServer(Node, GracefulNodeMixin):
     def on_shutdown(self) -> None:
         clients, _ = self.listener.counts()
         self.watch.stop()   # first: a stopped server has no listening socket, which the watch would restart
+        self.relay.close()  # the clients' connections end, and so the SDK's ends of them
         self.watch.stop_servers([self.server] + [server for server, _ in self.watch.retired])
         self.sdk_log.uninstall()
         for channel in self.channels.values():
