@@ -188,7 +188,8 @@ def _main(argv=None) -> int:
               f"{spec.duration_s:g} s in {len(chunks)} chunk(s), on {where}", file=sys.stderr)
     slow = batch.numba_missing()
     if slow and not args.quiet:
-        print(f"{PROG}: warning: {slow}", file=sys.stderr)
+        print(f"{PROG}: warning: {slow}; the scalar loop runs instead, scenario by scenario (slower, the same "
+              f"numbers)", file=sys.stderr)
     writer = results.ResultsWriter(args.out / "results.csv", [a.key for a in spec.axes], extra=_has_stages(spec))
     progress = _Progress(total, steps_per_run, args.quiet)
     try:

@@ -70,7 +70,7 @@ def numba_missing() -> Optional[str]:
     :func:`simulate_batch` runs the scalar loop scenario by scenario (:func:`_simulate_each`), slower, the same
     numbers."""
     from mwip_ros.optional import missing
-    return missing("numba", "the batch simulator's compiled loop (without it, the scalar loop: slower)")
+    return missing("numba")
 
 
 
