@@ -20,11 +20,11 @@ are PyPI packages that rosdistro does not name, defined for rosdep in ``rosdep/m
 """
 from __future__ import annotations
 
+import contextlib
 import importlib
-from types import ModuleType
-from typing import Dict, NamedTuple, Optional
+from typing import Dict, Iterator, NamedTuple, Optional
 
-__all__ = ["OptionalPackage", "OPTIONAL", "MissingPackage", "missing", "require"]
+__all__ = ["OptionalPackage", "OPTIONAL", "MissingPackage", "missing", "required"]
 
 
 class OptionalPackage(NamedTuple):
@@ -53,19 +53,27 @@ def _text(module: str, reason: str, feature: Optional[str]) -> str:
             f"pip install '{pkg.pip}' (rosdep key {pkg.rosdep})")
 
 
-def require(module: str, feature: Optional[str] = None) -> ModuleType:
-    """``module`` imported (``'dask.distributed'``: a submodule of an optional package), or :class:`MissingPackage`
-    whose text names the package, the feature (``feature``, else the table's) and how to install it."""
+@contextlib.contextmanager
+def required(module: str, feature: Optional[str] = None) -> Iterator[None]:
+    """Around the import statements of an optional package: an ImportError inside becomes :class:`MissingPackage`,
+    whose text names the package (``module``'s top level), the feature (``feature``, else the table's) and how to
+    install it.  The imports stay plain statements, where a reader (and package.xml's check) sees them::
+
+        with required("daqp", "the law mpc"):
+            import daqp
+    """
     try:
-        return importlib.import_module(module)
+        yield
     except ImportError as exc:
         raise MissingPackage(_text(module, str(exc) or type(exc).__name__, feature)) from None
 
 
 def missing(module: str, feature: Optional[str] = None) -> Optional[str]:
-    """None when ``module`` can be imported (it is imported then), else the one line :func:`require` raises."""
+    """None when ``module`` can be imported (it is imported then), else the one line :func:`required` raises: for a
+    check before any work (the law chosen, ``--dask``)."""
     try:
-        require(module, feature)
+        with required(module, feature):
+            importlib.import_module(module)
     except MissingPackage as exc:
         return str(exc)
     return None

@@ -11,7 +11,7 @@ import yaml
 
 from without import env_without
 
-from mwip_ros.optional import OPTIONAL, MissingPackage, require
+from mwip_ros.optional import OPTIONAL, MissingPackage, required
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -98,13 +98,16 @@ def test_mwip_sweep_refuses_a_missing_package_before_any_work(tmp_path, hidden, 
 
 
 @pytest.mark.unit
-def test_require_names_the_package_the_feature_and_the_rosdep_key(monkeypatch):
+def test_required_names_the_package_the_feature_and_the_rosdep_key(monkeypatch):
     monkeypatch.setitem(sys.modules, "foxglove", None)
     with pytest.raises(MissingPackage) as err:
-        require("foxglove", "the live view")
+        with required("foxglove", "the live view"):
+            import foxglove.websocket  # noqa: F401
     one_line_naming(str(err.value), "foxglove-sdk", "python3-foxglove-sdk-pip")
     assert str(err.value).startswith("the live view needs the Python package foxglove-sdk")
-    assert require("math").sqrt(4.0) == 2.0
+    with required("math"):
+        import math
+    assert math.sqrt(4.0) == 2.0
 
 
 @pytest.mark.unit

@@ -7,9 +7,12 @@ for good.  So the node raises its soft descriptor limit to the hard one (at most
 refuses a ``max_clients`` that would not leave room for its own descriptors (exit 2), and a thread
 looks at the process's own sockets five times a second (``/proc/self/fd``, ``getsockname``, the
 kernel's ``TCP_INFO``): a connection over the cap or idle is shut down (``shutdown(2)`` on the
-SDK's socket: the SDK sees the connection end and drops it); and when the listening socket is
-gone (a burst of connections faster than that thread), the server is started again on the same
-port (the old one serves its remaining clients until they leave).  Each refusal, closure and
+SDK's socket: the SDK sees the connection end and drops it, and the relay in front of it,
+:mod:`.foxglove_relay`, closes the client's); and when the SDK's listening socket is gone (a burst of
+connections faster than that thread), the server is started again on a port of its own (the relay
+passes new clients to it; the old one serves its remaining clients until they leave).  The SDK's
+ends are judged (on the SDK's port); the log names the client's own address (the relay's
+``origin``).  Each refusal, closure and
 restart is logged as a warning (at most one line per reason and second, with the counts) and
 counted in ``/diagnostics``.  Which connection belongs to a subscribed client is read from the
 SDK's own debug record ("Client ADDR subscribed to channel ...", logged just before the
@@ -345,7 +348,7 @@ class ConnectionWatch:
             if self._shut(c):
                 with self.lock:
                     self.refused += 1
-                self._note("refused", c.peer)
+                self._note("refused", self.node.relay.origin.get(c.peer, c.peer))
         for c in live[:self.max_clients]:
             if c.peer in peers:
                 continue
@@ -354,7 +357,7 @@ class ConnectionWatch:
             if quiet >= self.idle_timeout_s and self._shut(c):
                 with self.lock:
                     self.closed_idle += 1
-                self._note("idle", c.peer)
+                self._note("idle", self.node.relay.origin.get(c.peer, c.peer))
 
     def _shut(self, c: _Conn) -> bool:
         """End connection ``c`` under the SDK: ``shutdown(2)`` its socket (the SDK reads the end, closes it)."""

@@ -78,10 +78,10 @@ class _Side:
 
 
 class _Pair:
-    __slots__ = ("client", "sdk", "classic")
+    __slots__ = ("client", "sdk", "classic", "own")
 
     def __init__(self, client: socket.socket, sdk: socket.socket):
-        self.client, self.sdk, self.classic = _Side(client), _Side(sdk), False
+        self.client, self.sdk, self.classic, self.own = _Side(client), _Side(sdk), False, ""
         self.client.head = bytearray()   # the client's request is read whole before it goes on
 
 
@@ -109,6 +109,7 @@ class Relay:
         self.sides: Dict[int, Tuple[_Pair, _Side, _Side]] = {}   # fd -> (pair, this side, the other side)
         self.lock = threading.Lock()
         self.classic = 0                                           # handshakes offering only the classic one
+        self.origin: Dict[str, str] = {}   # "ip:port" of the relay's end to the SDK -> the client's "ip:port"
         self.stop_event = threading.Event()
         self.paused_until = 0.0                                    # out of descriptors: accept again later
         self.thread = threading.Thread(target=self._run, name="foxglove-relay", daemon=True)
@@ -156,7 +157,7 @@ class Relay:
     def _accept(self, now: float) -> None:
         for _ in range(64):
             try:
-                client, _ = self.listener.accept()
+                client, addr = self.listener.accept()
             except BlockingIOError:
                 return
             except OSError as exc:
@@ -174,6 +175,8 @@ class Relay:
                 s.setblocking(False)
                 s.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
             pair = _Pair(client, sdk)
+            pair.own = "%s:%d" % sdk.getsockname()[:2]
+            self.origin[pair.own] = "%s:%d" % addr[:2]
             self.sides[client.fileno()] = (pair, pair.client, pair.sdk)
             self.sides[sdk.fileno()] = (pair, pair.sdk, pair.client)
             self.selector.register(client, selectors.EVENT_READ, None)
@@ -279,6 +282,7 @@ class Relay:
             self.selector.modify(sock, events, None)
 
     def _close(self, pair: _Pair) -> None:
+        self.origin.pop(pair.own, None)
         for side in (pair.client, pair.sdk):
             fd = side.sock.fileno()
             if fd == -1:

@@ -82,7 +82,7 @@ from mwip_ros.nodes.foxglove_relay import CLASSIC_SUBPROTOCOL, DESCRIPTORS_PER_C
 from mwip_ros.nodes.params import declare
 from mwip_ros.nodes.runtime import EXIT_ERROR, GracefulNodeMixin, for_every_thread, run_node
 from mwip_ros.nodes.tap import TopicTap, resolve_topics
-from mwip_ros.optional import require
+from mwip_ros.optional import required
 from mwip_ros.params import ParamError
 
 NAME = "foxglove_server"
@@ -110,9 +110,11 @@ def _sdk():
     """The foxglove SDK and :mod:`.foxglove_connections` (which subclasses the SDK's listener), imported when the
     node starts: the SDK is optional (:mod:`mwip_ros.optional`), so ``--help`` answers without it and the node
     stops in one line naming it (exit 2)."""
-    sdk = require("foxglove", "foxglove_server (the live view)")
-    from mwip_ros.nodes import foxglove_connections
-    return sdk, foxglove_connections
+    with required("foxglove", "foxglove_server (the live view)"):
+        import foxglove
+
+        from mwip_ros.nodes import foxglove_connections
+    return foxglove, foxglove_connections
 
 
 class FoxgloveServer(Node, GracefulNodeMixin):

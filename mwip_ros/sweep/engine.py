@@ -213,7 +213,9 @@ class Runner:
             raise
 
     def _dask(self, chunks):
-        from dask.distributed import Client, LocalCluster, as_completed
+        from mwip_ros.optional import required
+        with required("dask", "--dask"):   # checked in __init__ already: this is the import itself
+            from dask.distributed import Client, LocalCluster, as_completed
 
         chunks = list(chunks)
         if self._client is None:
