@@ -122,7 +122,8 @@ def _main(argv=None) -> int:
             names = [args.controller or laws.variant(values["law"], values["use_observer"]).name]
         except ValueError as exc:
             return _fail(str(exc))
-    reason = _memory_refusal(values, args.duration, len(names))
+    reason = next(filter(None, map(laws.unavailable, map(laws.get, names))), None)   # mpc without daqp
+    reason = reason or _memory_refusal(values, args.duration, len(names))
     if reason:
         return _fail(reason)
     csv_paths = {}

@@ -17,6 +17,7 @@ from mwip_ros.cli import interrupts, outputs
 from mwip_ros.sweep import engine, results
 from mwip_ros.sweep import progress as sweep_progress
 from mwip_ros.sweep.scenarios import expand, parameter_file
+from mwip_ros.core import batch
 from mwip_ros.core import laws as registry
 from mwip_ros.sweep.spec import SpecError, load_spec
 
@@ -187,6 +188,10 @@ def _main(argv=None) -> int:
     if not args.quiet:
         print(f"{PROG}: {len(scenarios):,} scenarios x {len(spec.controllers)} law(s) = {total:,} runs of "
               f"{spec.duration_s:g} s in {len(chunks)} chunk(s), on {where}", file=sys.stderr)
+    slow = batch.numba_missing()
+    if slow and not args.quiet:
+        print(f"{PROG}: warning: {slow}; the scalar loop runs instead, scenario by scenario (slower, the same "
+              f"numbers)", file=sys.stderr)
     writer = results.ResultsWriter(args.out / "results.csv", [a.key for a in spec.axes], extra=_has_stages(spec))
     progress = _Progress(chunks, args.quiet, workers=lambda: runner.started or 1)
     try:

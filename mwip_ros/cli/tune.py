@@ -84,6 +84,9 @@ def _main(argv=None) -> int:
     if reason:
         return _fail(reason)
     law = args.controller
+    reason = laws.unavailable(laws.get(law))   # an optional package the law needs (mpc: daqp)
+    if reason:
+        return _fail(reason)
     try:
         spec = load_spec(args.spec)
         knobs = knobs_for(args.tune, law)

@@ -32,6 +32,7 @@ law's observer variant runs, with tau_hat = 0 for the scenarios without it).
 """
 from __future__ import annotations
 
+import functools
 import math
 import os
 from dataclasses import dataclass, fields, is_dataclass
@@ -61,6 +62,15 @@ BLOCKS = 1   # noise blocks (core.sensing.NOISE_BLOCK periods) drawn and run per
 def compiled_default() -> bool:
     """Whether :func:`simulate_batch` runs the compiled loop by default (``$MWIP_BATCH_COMPILED``, default on)."""
     return os.environ.get(COMPILED_ENV, "1").strip() not in ("0", "false", "no", "off", "")
+
+
+@functools.lru_cache(maxsize=None)
+def numba_missing() -> Optional[str]:
+    """None when numba (optional, :mod:`mwip_ros.optional`) is installed, else the line naming it: without it
+    :func:`simulate_batch` runs the scalar loop scenario by scenario (:func:`_simulate_each`), slower, the same
+    numbers."""
+    from mwip_ros.optional import missing
+    return missing("numba")
 
 
 
@@ -206,13 +216,14 @@ def simulate_batch(loops: Sequence[ClosedLoop], window: Sequence[float], record:
 
     ``compiled`` (default :func:`compiled_default`): without ``record``, a law with a pure form
     (``Law.pure_step``) runs as one compiled loop (:func:`_simulate_compiled`); else, and for every other law,
-    the loop runs over numpy arrays with the plant's RK4 compiled.  The raw sensors and their estimator, the motor
+    the loop runs over numpy arrays with the plant's RK4 compiled.  Without numba (:func:`numba_missing`), the
+    scalar loop scenario by scenario.  The raw sensors and their estimator, the motor
     and the excitation (:func:`_beyond_arrays`) run compiled too when the scenarios share whether they have raw
     sensors and the estimator's method (:func:`_raw_stage`); else, with ``record`` or a law without a pure form,
     the scalar loop scenario by scenario (:func:`_simulate_each`).  The array and compiled forms have no driver
     state machine (docs/theory.md 6.8): they always run enabled, so scenarios with ``require_enable: true`` (a
     driver nobody enables: its bridge open, no torque) run the scalar loop, which has it."""
-    if any(lp.plant.require_enable for lp in loops):
+    if numba_missing() or any(lp.plant.require_enable for lp in loops):   # both array forms need numba
         return _simulate_each(loops, window, record)
     beyond = any(_beyond_arrays(lp) for lp in loops)
     if compiled is None:

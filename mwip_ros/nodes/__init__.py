@@ -10,6 +10,8 @@
 :mod:`.lockstep`           the one lockstep driver (plant_sim and resim)
 :mod:`.params`             declares a node's parameters from the schema, validates updates
 :mod:`.runtime`            process plumbing, exit codes, ``finish``, rejected-message counts
+:mod:`.guards`             stamps, rejected-message counts, a second publisher (plain Python)
+:mod:`.state_input`        ``joint_states`` as the observer and the controller take it
 :mod:`.rclpy_compat`       everything that reaches into rclpy's internals, for the rclpy it was written for
 :mod:`.entry`              the console scripts' entry points: the malloc arena limit, then the node's ``main``
 ========================  ==============================================================

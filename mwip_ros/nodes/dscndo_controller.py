@@ -35,7 +35,8 @@ from mwip_ros.msgs import BadMessage
 from mwip_ros.msgs import layouts as L
 from mwip_ros.msgs.qos import qos_for
 from mwip_ros.nodes.diagnostics import OK
-from mwip_ros.nodes.guards import REPEAT, RESTART, STAMP_WINDOW_PERIODS, PublisherWatch, Rejects, StateInput
+from mwip_ros.nodes.guards import REPEAT, RESTART, STAMP_WINDOW_PERIODS, PublisherWatch, Rejects
+from mwip_ros.nodes.state_input import StateInput
 from mwip_ros.nodes.params import declare
 from mwip_ros.nodes.runtime import GracefulNodeMixin, run_node
 
@@ -43,14 +44,23 @@ NAME = "dscndo_controller"
 _MAX_PENDING = 64
 
 
+def _installed(values) -> None:
+    """ParamError naming ``law`` when the law chosen needs an optional package that is not installed (mpc: daqp):
+    at start-up one line and exit 2, at run time the change is refused; the other laws run without it."""
+    law = laws.lookup(values["law"], values["use_observer"])
+    text = laws.unavailable(law) if law is not None else None
+    if text:
+        raise P.ParamError("law", text)
+
+
 class DscndoController(Node, GracefulNodeMixin):
     def __init__(self, context=None, argv=()):
         super().__init__(NAME, context=context)
-        self.v = declare(self, NAME, argv, on_change=self._on_change)
+        self.v = declare(self, NAME, argv, on_change=self._on_change, check=_installed)
         self.nominal, self.h = P.physical(self.v, "nominal"), P.period(self.v)
-        # one instance of each family's law (core.laws); use_observer wraps it with the observer term
-        self.laws = {family: laws.variant(family, False).from_params(self.v, self.nominal, self.h)
-                     for family in laws.families() if laws.lookup(family, False)}
+        # one instance of each family's law (core.laws) whose packages are installed; use_observer wraps it with
+        # the observer term
+        self.laws = laws.instances(self.v, self.nominal, self.h)
         self._composed = {}
         for law in self.laws.values():
             self._warn(law)

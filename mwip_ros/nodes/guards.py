@@ -7,8 +7,8 @@
   pause longer than the window) shows as ``RESYNC`` consecutive stamps that agree with
   each other (each the same as the one before, a lockstep resend, or at most a window
   after it): then the guard follows it and tells the caller to re-initialise.
-* :class:`StateInput` is ``joint_states`` as the observer and the controller take it: parsed
-  by the message layer, judged by a stamp guard, a rejection counted, a restart logged.
+* ``joint_states`` as the observer and the controller take it (a stamp guard in front of the message
+  layer, the node's clock following the stream) is :class:`.state_input.StateInput`.
 * the same check stands in front of rclpy's ``/clock`` subscription (its time source raises
   on a negative time, which kills the node): :func:`.rclpy_compat.guard_clock`.
 * :class:`Rejects` counts rejected messages per topic and logs them, rate-limited per kind
@@ -22,10 +22,7 @@ import re
 import time
 from typing import Dict, Optional, Sequence
 
-from mwip_ros.msgs import BadMessage
-from mwip_ros.msgs.layouts import parse_joint_state
-
-__all__ = ["Rejects", "StampGuard", "StateInput", "NEW", "REPEAT", "RESTART", "STAMP_WINDOW_PERIODS", "RESYNC",
+__all__ = ["Rejects", "StampGuard", "NEW", "REPEAT", "RESTART", "STAMP_WINDOW_PERIODS", "RESYNC",
            "PublisherWatch"]
 
 STAMP_WINDOW_PERIODS = 20   # a stamp may lead the last accepted one by at most this many control periods
@@ -64,51 +61,6 @@ class StampGuard:
             return f"{self.what} {stamp * 1e-9:.6f} s is older than the stream's {last * 1e-9:.6f} s"
         return (f"{self.what} {stamp * 1e-9:.6f} s jumps ahead of the stream's {last * 1e-9:.6f} s by more than "
                 f"{self.window_ns * 1e-9:g} s")
-
-
-class StateInput:
-    """``take(data)``: None for a state that is rejected (counted), else ``(verdict, stamp, x, u_prev, last)``
-    with verdict :data:`NEW`, :data:`REPEAT` or :data:`RESTART` (logged; the caller re-initialises) and
-    ``last`` the stream's stamp before this one.
-
-    Without ``use_sim_time`` the node's clock follows the stream: it reads the stamp of the last state
-    answered (:meth:`answered`).  So a parameter change (``ros2 param set``) is stamped, in its
-    ``/parameter_events`` message, with the state after which it took effect: it applies from the next
-    state on, which is how ``bag_replay`` resim applies a recorded change at the same state."""
-
-    def __init__(self, node, rejects, window_ns: int, who: str):
-        self.guard = StampGuard(window_ns, "joint_states stamp")
-        self.node, self.rejects, self.who = node, rejects, who
-        self._clock = None
-        if not node.get_parameter("use_sim_time").value:
-            from rclpy.time import Time
-
-            from mwip_ros.nodes.rclpy_compat import use_ros_time_override
-            self._time = Time
-            self._clock = node.get_clock()
-            use_ros_time_override(self._clock)
-            self._clock.set_ros_time_override(Time(nanoseconds=0))
-
-    def take(self, data):
-        try:
-            stamp, x, u_prev = parse_joint_state(data)
-        except BadMessage as exc:
-            self.rejects("joint_states", str(exc))
-            return None
-        last = self.guard.last
-        verdict = self.guard.check(stamp)
-        if verdict == RESTART:
-            self.node.get_logger().warning(f"joint_states restarted at t = {stamp * 1e-9:.3f} s (the last state was "
-                                           f"t = {last * 1e-9:.3f} s): re-initialising the {self.who}")
-        elif verdict not in (NEW, REPEAT):
-            self.rejects("joint_states", verdict)
-            return None
-        return verdict, stamp, x, u_prev, last
-
-    def answered(self, stamp: int) -> None:
-        """The node published its answer to the state of ``stamp``: its clock reads that stamp now."""
-        if self._clock is not None:
-            self._clock.set_ros_time_override(self._time(nanoseconds=stamp))
 
 
 class PublisherWatch:

@@ -229,11 +229,14 @@ def _descriptor(spec: P.ParamSpec) -> ParameterDescriptor:
 
 
 def declare(node, node_name: str, argv: Sequence[str],
-            on_change: Callable[[Dict[str, Any]], None] | None = None) -> Dict[str, Any]:
+            on_change: Callable[[Dict[str, Any]], None] | None = None,
+            check: Callable[[Dict[str, Any]], None] | None = None) -> Dict[str, Any]:
     """Declare every parameter of ``node_name`` on ``node``; return {name: value}.
 
     Raises ``ParamError`` (naming the key) for a bad file, type, value or unknown override.
-    ``on_change(changed)`` is called after an accepted run-time update.
+    ``on_change(changed)`` is called after an accepted run-time update.  ``check(values)``, the node's own check
+    of the values together (e.g. that the law chosen can run here), raises ParamError: at start-up as the other
+    checks do, at run time the update is refused with its text.
     """
     specs = P.specs_for(node_name)
     # rcl skips a plain-name section under a namespace: apply the values as start_values reads them (ROS 2's
@@ -262,6 +265,8 @@ def declare(node, node_name: str, argv: Sequence[str],
             raise P.ParamError(name, f"invalid value ({exc})") from None
         values[name] = spec.validate(_py(p.value, spec), name, "start-up value")
     P.check_derived(values, "start-up value")
+    if check is not None:
+        check(values)
     for name in overrides:
         if name.startswith(P.schema.QOS_OVERRIDES):
             raise P.ParamError(name, P.schema.QOS_OVERRIDES_REFUSED, "command line")
@@ -287,6 +292,8 @@ def declare(node, node_name: str, argv: Sequence[str],
                 return SetParametersResult(successful=False, reason=str(exc))
         try:
             P.check_derived(new)
+            if check is not None:
+                check(new)
         except P.ParamError as exc:
             return SetParametersResult(successful=False, reason=str(exc))
         return SetParametersResult(successful=True)

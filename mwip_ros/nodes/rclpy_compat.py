@@ -43,6 +43,8 @@ from __future__ import annotations
 import sys
 from typing import Callable, Dict, List, Optional, Tuple
 
+from mwip_ros.nodes.guards import NEW, REPEAT, RESTART, Rejects, StampGuard
+
 __all__ = ["WRITTEN_FOR", "MAX_NAME_CHARS", "MAX_ARRAY_LEN", "MAX_PARAMETERS", "CLOCK_WINDOW_NS", "RclpyChanged",
            "rclpy_version", "check_version", "install", "installed", "parameter_from_msg", "shown_name", "guard_clock",
            "clock_guarded", "parameter_overrides", "name_undeclared_parameters", "use_ros_time_override"]
@@ -175,8 +177,6 @@ def guard_clock() -> None:
     time; a resend is dropped; the rest goes to rclpy's callback.  Idempotent."""
     from rclpy.time_source import TimeSource
 
-    from mwip_ros.nodes.guards import NEW, REPEAT, RESTART, StampGuard
-
     original = getattr(TimeSource, "clock_callback", None)
     if not callable(original) or not callable(getattr(TimeSource, "_get_node", None)):
         raise RclpyChanged("TimeSource.clock_callback or TimeSource._get_node is missing")
@@ -263,7 +263,6 @@ def _report(service, node, what: str, reason: str) -> None:
     if rejects is None:
         rejects = service.__dict__.get("_mwip_rejects")
         if rejects is None:
-            from mwip_ros.nodes.guards import Rejects
             rejects = service.__dict__["_mwip_rejects"] = Rejects(node.get_logger())
     try:
         where = f"{node.get_fully_qualified_name().rstrip('/')}/{what}"

@@ -12,7 +12,7 @@ message layer (:mod:`mwip_ros.msgs.layouts`).
 
 A gain changed during the recorded run (``ros2 param set``) is in the bag's
 ``/parameter_events``, stamped with the last state its node had answered (the observer's
-and the controller's clock follows their stream, :class:`~mwip_ros.nodes.guards.StateInput`).
+and the controller's clock follows their stream, :class:`~mwip_ros.nodes.state_input.StateInput`).
 With ``parameter_events`` (default true) the same change is made on the running node, through
 its ``set_parameters`` service, before the first state stamped after it: a run with a gain
 change mid-way re-simulates exactly.  Changes of the nodes named ``disturbance_observer`` and

@@ -24,6 +24,7 @@ import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.signals import SignalHandlerOptions
 
+from mwip_ros.optional import MissingPackage
 from mwip_ros.params import ParamError
 
 __all__ = ["EXIT_OK", "EXIT_ERROR", "EXIT_BAD_PARAMS", "EXIT_FALLEN", "GracefulNodeMixin", "StopRequested",
@@ -115,7 +116,8 @@ def _realtime_priority(node) -> None:
 
 _TOPIC_CALLS = {"create_publisher": "publishes", "create_subscription": "subscribes", "create_service": "services"}
 _GENERIC_EXIT_CODES = ("exit codes: 0 done (or stopped by SIGINT/SIGTERM), 1 a runtime error, 2 bad parameters or "
-                       "arguments (one line naming the key; nothing started)")
+                       "arguments, or an optional package the node needs is missing (one line naming the key or the "
+                       "package; nothing started)")
 
 
 def _topics(source_file: Optional[str]) -> Dict[str, List[str]]:
@@ -209,7 +211,7 @@ def run_node(factory: Callable[..., object], argv: Optional[Sequence[str]] = Non
     try:
         try:
             node = factory(context=context, argv=argv)
-        except ParamError as exc:
+        except (ParamError, MissingPackage) as exc:   # a bad parameter; an optional package the node needs
             return refuse(str(exc))
         # Start-up made tens of thousands of long-lived objects (rclpy, numpy, parameters); a full
         # garbage collection over them takes ~9 ms, more than a realtime period.  Freeze them: later

@@ -185,6 +185,11 @@ class Runner:
                                  f"machine's {os.cpu_count() or 1} CPUs: more run no faster, and each takes about "
                                  f"{budget.fmt_bytes(budget.WORKER_PROCESS)} plus up to "
                                  f"{budget.fmt_bytes(budget.batch_budget())} of batch arrays)")
+        if dask:   # optional (mwip_ros.optional): without it --dask is refused in one line, before any work
+            from mwip_ros.optional import missing
+            text = missing("dask.distributed", "--dask")
+            if text:
+                raise ValueError(text)
         self.started = 0   # the worker processes actually started (at most one per chunk)
         self._pool = self._client = self._cluster = None
 
@@ -231,7 +236,9 @@ class Runner:
             raise
 
     def _dask(self, chunks):
-        from dask.distributed import Client, LocalCluster, as_completed
+        from mwip_ros.optional import required
+        with required("dask", "--dask"):   # checked in __init__ already: this is the import itself
+            from dask.distributed import Client, LocalCluster, as_completed
 
         chunks = list(chunks)
         if self._client is None:

@@ -190,6 +190,10 @@ def parse_spec(doc: Any, source: str = "<spec>", here: Path = Path("."),
                                            f"{', '.join(known)}", source)
     if len(set(ctrls)) != len(ctrls):
         raise SpecError("controllers", f"a law is listed twice: {ctrls}", source)
+    for c in ctrls:   # a law whose optional package is missing (mpc: daqp), before any chunk runs
+        missing = laws.unavailable(laws.get(c))
+        if missing:
+            raise SpecError("controllers", missing, source)
 
     duration = _number(doc.get("duration_s", base_values["duration_s"]), "duration_s", source, "seconds > 0")
     if not 0 < duration <= 1e5:

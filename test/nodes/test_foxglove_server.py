@@ -36,6 +36,7 @@ from mwip_ros.msgs.topics import GRAPH_TOPICS, SYSTEM_TOPICS, topic_type
 pytestmark = pytest.mark.graph
 
 SUBPROTOCOL = "foxglove.sdk.v1"
+CLASSIC = "foxglove.websocket.v1"   # the subprotocol before the SDK's: the same frames
 MESSAGE_DATA = 0x01   # binary opcode of a message frame
 RUN_S, PERIOD_NS = 4.0, 5_000_000           # the lockstep run: 4 s of simulated time at 200 Hz
 STATES = int(RUN_S * 1e9) // PERIOD_NS + 1  # k = 0 .. 800
@@ -160,15 +161,18 @@ def test_the_client_gets_every_message_as_published_with_the_recorders_schemas(t
         tids = [int(t) for t in os.listdir(f"/proc/{fox.pid}/task")]
         assert len(tids) > 3 and all(os.getpriority(os.PRIO_PROCESS, t) == 10 for t in tids), fox.output()
 
-        # Only the SDK's subprotocol is spoken: a client that offers nothing but the old one is refused,
-        # one that offers both (as the Foxglove app does) gets the new one.
+        # Both subprotocols are spoken: a client that offers only the classic one (Lichtblick, @foxglove/ws-protocol)
+        # gets it, one that offers both (as the Foxglove app does) gets the SDK's; one that offers neither is refused.
         with pytest.raises(websockets.InvalidStatus):
-            with connect(url, subprotocols=["foxglove.websocket.v1"], open_timeout=30):
+            with connect(url, subprotocols=["foxglove.other.v1"], open_timeout=30):
                 pass
-        with connect(url, subprotocols=["foxglove.websocket.v1", SUBPROTOCOL], open_timeout=30) as both:
+        with connect(url, subprotocols=[CLASSIC, SUBPROTOCOL], open_timeout=30) as both:
             assert both.subprotocol == SUBPROTOCOL
 
-        with connect(url, subprotocols=[SUBPROTOCOL], open_timeout=30) as ws:
+        with connect(url, subprotocols=[SUBPROTOCOL], open_timeout=30) as ws, \
+                connect(url, subprotocols=[CLASSIC], open_timeout=30) as old:
+            assert old.subprotocol == CLASSIC and ws.subprotocol == SUBPROTOCOL
+            classic = FoxgloveClient(old, topics=("/joint_states",))
             client = FoxgloveClient(ws, topics=("/joint_states", "/robot_markers", "/external_wrench"))
             assert inj.wait(lambda: client.server_info is not None, 30), fox.output()
             assert "/joint_states" not in client.topics()      # nothing publishes it yet
@@ -203,8 +207,11 @@ def test_the_client_gets_every_message_as_published_with_the_recorders_schemas(t
             assert inj.wait(lambda: js and markers and client.got("/joint_states")[-1:] == js[-1:]
                             and client.got("/robot_markers")[-1:] == markers[-1:], 60), fox.output()
             assert inj.wait(lambda: EXPECTED <= client.topics(), 60), (sorted(client.topics()), fox.output())
+            assert inj.wait(lambda: classic.got("/joint_states")[-1:] == js[-1:], 60), fox.output()
             client.close()
+            classic.close()
         assert not client.errors, client.errors
+        assert not classic.errors, classic.errors
         assert fox.stop() == 0, fox.output()
     t_end = time.time_ns()
 
@@ -252,6 +259,14 @@ def test_the_client_gets_every_message_as_published_with_the_recorders_schemas(t
             (type_name, len(stamps), len(ours))
         assert all(len(set(theirs[t])) == 1 for t in stamps), type_name                       # a resend: same bytes
         assert set(theirs) <= set(ours) and all(theirs[t][0] == ours[t][0] for t in stamps), type_name
+    # the classic client: the same channels advertised, and the states as published, decodable, to the last
+    assert EXPECTED <= classic.topics() and classic.channels.keys() <= client.channels.keys(), sorted(classic.topics())
+    theirs = by_stamp(classic.got("/joint_states"), "sensor_msgs/msg/JointState", header_stamp)
+    ours = by_stamp(js, "sensor_msgs/msg/JointState", header_stamp)
+    stamps = sorted(theirs)
+    assert len(stamps) >= STATES // 4 and stamps[-1] == (STATES - 1) * PERIOD_NS, len(stamps)
+    assert all(b - a == PERIOD_NS for a, b in zip(stamps, stamps[1:]))                       # no gap
+    assert all(theirs[t][0] == ours[t][0] for t in stamps)                                   # as published
     assert all(t_start <= t <= t_end for t in client.log_times["/joint_states"])   # receive time, wall clock
     wrenches = [ts.deserialize_cdr(b, "geometry_msgs/msg/Wrench") for b in client.got("/external_wrench")]
     assert all(w.torque.y == 0.0 and w.torque.x >= 0.0 for w in wrenches)

@@ -27,7 +27,7 @@ import os
 from typing import Any, Dict, List, Mapping, NamedTuple, Optional, Tuple
 
 __all__ = ["Law", "LawParam", "register", "get", "names", "families", "variant", "lookup", "PLUGINS_ENV",
-           "load_plugins"]
+           "load_plugins", "unavailable", "instances"]
 
 PLUGINS_ENV = "MWIP_ROS_LAWS"
 
@@ -81,6 +81,9 @@ class Law:
     limit_key : str or None
         The parameter of the law's own torque limit, when it has one (``mpc.u_max``): its command, the observer
         term included, holds |u| <= that value at every step (:meth:`step_observed`); None: no limit.
+    requires : tuple of str
+        Optional packages the law needs (:mod:`mwip_ros.optional`: ``("daqp",)`` for mpc); without one the law is
+        refused in one line (:func:`unavailable`), and the other laws run.
     pure_lanes : int
         3 when ``pure_step`` is plain arithmetic and ``m``'s functions on its numbers, with ``P`` three numbers:
         the compiled loop then runs it for several scenarios at once (``core.simd``); 0 (the default): one
@@ -99,6 +102,7 @@ class Law:
     pure_step = None
     pure_lanes = 0
     limit_key: Optional[str] = None
+    requires: Tuple[str, ...] = ()
 
     @staticmethod
     def pure_params(params) -> tuple:
@@ -239,6 +243,25 @@ def variant(family: str, use_observer: bool) -> type:
         raise ValueError(f"the law {family!r} has no variant {'with' if use_observer else 'without'} the "
                          f"observer term (use_observer: {str(bool(use_observer)).lower()})")
     return law
+
+
+def unavailable(law: type) -> Optional[str]:
+    """None when the optional packages ``law`` needs (:attr:`Law.requires`, its base's for an observer variant) can
+    be imported, else the one line naming the first missing one and how to install it."""
+    from mwip_ros.optional import missing
+    for module in getattr(law, "base", law).requires:
+        text = missing(module, f"the law {law.name}")
+        if text:
+            return text
+    return None
+
+
+def instances(values: Mapping[str, Any], nominal, h: float) -> Dict[str, "Law"]:
+    """{family: its law without the observer term, designed from ``values``} for every family that has one and
+    whose optional packages are installed (:func:`unavailable`): what the controller node builds at start-up."""
+    plain = (lookup(family, False) for family in families())
+    return {law.family: law.from_params(values, nominal, h) for law in plain
+            if law is not None and unavailable(law) is None}
 
 
 def load_plugins(spec: Optional[str] = None) -> List[str]:

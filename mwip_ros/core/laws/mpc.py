@@ -144,7 +144,9 @@ class _Qp:
     def __init__(self, qp: QpMatrices, u_max: float, free_first: bool = True):
         """``free_first``: try the unconstrained optimum before DAQP (the law always does; False makes every
         period a DAQP solve, as ``scripts/bench_mpc.py`` times the solvers)."""
-        import daqp
+        from mwip_ros.optional import required
+        with required("daqp", "the law mpc"):
+            import daqp
         self.qp, self.u_max, self.N = qp, float(u_max), qp.H.shape[0]
         self.model = daqp.Model()
         # DAQP may keep pointers to the arrays it is given: they are this object's, kept alive with the workspace
@@ -240,6 +242,7 @@ class MpcLaw(Law):
     Params = MpcParams
     announce = False
     limit_key = "mpc.u_max"
+    requires = ("daqp",)   # optional (mwip_ros.optional): without it this law is refused, the others run
 
     def __init__(self, params, nominal, h: float, m=math):
         self.nominal, self.h, self.m = nominal, h, m
