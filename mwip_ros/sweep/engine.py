@@ -65,10 +65,15 @@ class ChunkResult:
 
 def chunk_size_for(controller: str, chunk_size: int = DEFAULT_CHUNK) -> int:
     """Scenarios per chunk of ``controller``: ``chunk_size``, at most :data:`SLOW_CHUNK` for a law without a pure
-    form (:func:`~mwip_ros.core.compiled.pure_form`: the batch cannot compile it)."""
+    form (:func:`~mwip_ros.core.compiled.pure_form`: the batch cannot compile it), and for every law without numba
+    (the scalar loop runs each scenario: :func:`~mwip_ros.core.batch.numba_missing`)."""
     from mwip_ros.core import laws
+    from mwip_ros.core.batch import numba_missing
+    slow = max(1, min(chunk_size, SLOW_CHUNK))
+    if numba_missing():
+        return slow
     from mwip_ros.core.compiled import pure_form
-    return chunk_size if pure_form(laws.get(controller)) is not None else max(1, min(chunk_size, SLOW_CHUNK))
+    return chunk_size if pure_form(laws.get(controller)) is not None else slow
 
 
 def make_chunks(spec, scenarios, chunk_size: int = DEFAULT_CHUNK) -> List[Chunk]:
