@@ -20,7 +20,7 @@ from .raw_sensors import RawSensorConfig
 from .sensing import NOISE_BLOCK, SensingConfig
 
 __all__ = ["Plant", "PLANTS", "make_plant", "PlantConfig", "PlantSim", "RK4Plant", "stage_torques", "rk4_period",
-           "rk4_driven", "NO_MOTOR", "saturate", "D_w_of"]
+           "rk4_driven", "NO_MOTOR", "saturate", "D_w_of", "finite_state"]
 
 
 @dataclass(frozen=True)
@@ -50,6 +50,11 @@ class PlantConfig:
         """(K_t, R, V_max, I_max) for :func:`rk4_driven`, or :data:`NO_MOTOR` when the motor is off."""
         mc = self.motor
         return (mc.torque_constant, mc.resistance, mc.voltage_limit, mc.current_limit) if mc.enabled else NO_MOTOR
+
+
+def finite_state(x) -> bool:
+    """Every component of the state ``x`` is a finite number (a run whose state is not has diverged)."""
+    return all(math.isfinite(v) for v in x)
 
 
 def D_w_of(mean: float, sd: float, z: float) -> float:
@@ -121,7 +126,8 @@ class PlantSim:
 
     @property
     def fallen(self) -> bool:
-        return abs(self.x[1]) > self.cfg.fall_angle
+        """|theta_b| beyond the fall angle, or the state not a number (diverged: NaN or infinite; never upright)."""
+        return not (abs(self.x[1]) <= self.cfg.fall_angle and finite_state(self.x))
 
     def _draw_D_w(self) -> float:
         c = self.cfg

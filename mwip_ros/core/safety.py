@@ -43,12 +43,16 @@ from dataclasses import dataclass
 from typing import Deque, Optional, Tuple
 
 __all__ = ["DISABLED", "ENABLED", "FAULT", "STATES", "FAULT_REASONS", "EVENTS", "Transition", "Answer",
-           "DriverStateMachine", "Watchdog", "HISTORY"]
+           "DriverStateMachine", "Watchdog", "HISTORY", "PLAUSIBLE_TORQUE"]
 
 DISABLED, ENABLED, FAULT = "disabled", "enabled", "fault"
 STATES = (DISABLED, ENABLED, FAULT)
 FAULT_REASONS = ("watchdog", "bad_command", "fall", "emergency_stop", "estimator_unhealthy")
 EVENTS = ("enable", "disable", "reset") + FAULT_REASONS   # the ``reason`` a Transition can carry
+# A command beyond this [N m] is implausible (a ``bad_command``): far beyond any drive of this robot (the paper's
+# run stays below 150 N m) and far inside what the model's arithmetic survives (1e300 overflows eq. 1 in a period).
+# The plant node's driver refuses such a message, the offline loop's driver the law's command (core.loop).
+PLAUSIBLE_TORQUE = 1e6
 HISTORY = 1000     # transitions kept by a machine (older ones drop: a node that runs for days stays bounded)
 
 # /diagnostics levels (diagnostic_msgs/DiagnosticStatus): OK, WARN, ERROR
