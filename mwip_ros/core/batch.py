@@ -17,6 +17,9 @@ Two forms of the one loop:
 * over numpy arrays (a law without a pure form, a plug-in; ``record=True``): the observer, the law and
   the true tau_d are called with the math namespace ``numpy`` and parameters whose fields are arrays;
   the plant's RK4 period runs as the same ``plant.rk4_period`` compiled by numba (:mod:`.compiled`).
+  A law whose step raises over arrays (its own error, or numpy's for a law written for one scenario,
+  ``if x[1] > a``) runs scenario by scenario instead (:func:`_simulate_each`): the same numbers, or the
+  law's own error as a :class:`~.laws.LawError` naming the scenario.
 
 * Each scenario has its own parameters and its own seeded D_w stream (the scalar plant's
   generator, drawn in the same order).
@@ -48,6 +51,7 @@ from .metrics import compute as metrics_compute
 from .metrics import window_metrics
 from .model import PhysicalParams, Sinusoid, State, accel, lumped_disturbance
 from .observer import DiscreteObserver
+from .trajectory import BAD_COMMAND, DIVERGED, FAILURES, FALL
 from .plant import stage_torques
 from .safety import PLAUSIBLE_TORQUE
 from .sensing import NOISE_BLOCK, Actuator, Sensors, sensor_rng
@@ -59,10 +63,6 @@ __all__ = ["BatchResult", "simulate_batch", "COMPILED_ENV", "compiled_default", 
 
 COMPILED_ENV = "MWIP_BATCH_COMPILED"   # "0": the numpy loop even for a law with a compiled form
 
-
-# why a scenario failed (BatchResult.failure): its code is the index here; 0: it did not
-FAILURES = ("", "fall", "bad_command", "diverged")
-FALL, BAD_COMMAND, DIVERGED = 1, 2, 3
 
 BLOCKS = 1   # noise blocks (core.sensing.NOISE_BLOCK periods) drawn and run per call of the compiled loop
 
@@ -268,7 +268,12 @@ def _simulate_each(loops: Sequence[ClosedLoop], window: Sequence[float], record:
     """The scalar loop (:func:`.sim.simulate`) scenario by scenario, its metrics as the batch gives them: the
     form for the stages the array forms do not run (:func:`_beyond_arrays`), the same numbers by construction."""
     from .sim import simulate
-    runs = [simulate(lp) for lp in loops]
+    runs = []
+    for i, lp in enumerate(loops):
+        try:
+            runs.append(simulate(lp))
+        except laws.LawError as exc:   # the law's own error, with the scenario (its index in ``loops``)
+            raise exc.in_scenario(i) from exc
     named = [metrics_compute(r.columns, window, lp.plant.fall_angle, r.record.get("t_fall"))
              for r, lp in zip(runs, loops)]
     fallen = np.array([r.fallen for r in runs], dtype=bool)
@@ -280,13 +285,9 @@ def _simulate_each(loops: Sequence[ClosedLoop], window: Sequence[float], record:
     out = {k: np.array([getattr(m, k) for m in named], dtype=float) for k in keys}
     out = {k: v for k, v in out.items() if k in keys[:6] or np.isfinite(v).any()}
     steps = sum(len(r) - 1 for r in runs)
-    failure = np.array([_cause(r.record.get("fall_text", "")) if r.fallen else 0 for r in runs], dtype=np.int64)
+    failure = np.array([FAILURES.index(r.record.get("failure", "fall")) if r.fallen else 0 for r in runs],
+                       dtype=np.int64)
     return BatchResult(fallen, t_fall, upright, out, steps, runs if record else None, failure)
-
-
-def _cause(text: str) -> int:
-    """The :data:`FAILURES` code of a scalar run's ``fall_text`` (:class:`.loop.Period`)."""
-    return BAD_COMMAND if "command is refused" in text else DIVERGED if "diverged" in text else FALL
 
 
 def _simulate_numpy(loops: Sequence[ClosedLoop], window: Sequence[float], record: bool = False) -> BatchResult:
@@ -343,7 +344,11 @@ def _simulate_numpy(loops: Sequence[ClosedLoop], window: Sequence[float], record
             # stage: observer
             tau_hat = obs.update(x_m, u_m)
             # stage: law
-            u_law, internals = ctrl.step(x_m, (np.where(use_obs, tau_hat[0], 0.0), np.where(use_obs, tau_hat[1], 0.0)))
+            try:
+                u_law, internals = ctrl.step(x_m, (np.where(use_obs, tau_hat[0], 0.0),
+                                                   np.where(use_obs, tau_hat[1], 0.0)))
+            except Exception:   # noqa: BLE001 - over arrays a law's error can read as numpy's: run it as it runs
+                return _simulate_each(loops, window, record)   # alone, which gives the same numbers or its own
             # stage: drive
             bad = ~(np.abs(u_law) <= PLAUSIBLE_TORQUE)   # the driver's bad_command (core.loop.PlantSide.act)
             u = np.where(limit > 0.0, np.clip(u_law, -limit, limit), u_law)

@@ -339,7 +339,7 @@ def _loop(k0, k1, n_steps, h, substeps, first_w, n_window, counts, delay, act_de
     and the excitation (``EXT[exi[i], k]`` added to the law's command, ``exi[i]`` < 0: none).  ``acc`` columns 8 to
     13: the sums of squares and counts of the estimate's theta_b and theta_b' errors and of the torque that acted
     (window), 14: the periods with the drive saturated (whole run).  ``failure``: why a scenario failed, its
-    ``core.batch.FAILURES`` code (1 fall, 2 a refused command, 3 diverged), with ``t_fall`` when."""
+    ``core.trajectory.FAILURES`` code (1 fall, 2 a refused command, 3 diverged), with ``t_fall`` when."""
     n = x.shape[0]
     dt = h / substeps
     if shared and n > 0:
@@ -411,7 +411,7 @@ def _loop(k0, k1, n_steps, h, substeps, first_w, n_window, counts, delay, act_de
                 if not (math.isfinite(xs[0, lane]) and math.isfinite(xs[1, lane]) and math.isfinite(xs[2, lane])
                         and math.isfinite(xs[3, lane])):   # diverged at t_k (core.loop.Period.advance): no row
                     t_fall[i] = t
-                    failure[i] = 3
+                    failure[i] = 3   # core.trajectory.DIVERGED
                     active[i] = False
                     live[lane] = False
                     continue
@@ -564,7 +564,7 @@ def _loop(k0, k1, n_steps, h, substeps, first_w, n_window, counts, delay, act_de
                                 acc[i, 2 * j + 9] += 1.0
                 if not abs(xt[1]) <= fall[i] or bad:   # a fall (theta_b not a number too), or a refused command
                     t_fall[i] = t
-                    failure[i] = 1 if not abs(xt[1]) <= fall[i] else 2   # core.batch.FAILURES
+                    failure[i] = 1 if not abs(xt[1]) <= fall[i] else 2   # core.trajectory.FALL, BAD_COMMAND
                     active[i] = False
                     live[lane] = False
                     continue

@@ -34,9 +34,11 @@ from collections import deque
 from dataclasses import dataclass
 from typing import Optional, Tuple
 
+from .laws import LawError
 from .plant import Plant, PlantConfig, finite_state, make_plant, saturate
 from .raw_sensors import RawSensors
 from .safety import PLAUSIBLE_TORQUE, DriverStateMachine
+from .trajectory import BAD_COMMAND, DIVERGED, FAILURES, FALL
 from .sensing import Actuator, Sensors
 
 __all__ = ["Stage", "STAGES", "STAGE_NAMES", "PLANT_NODE", "Answer", "answering", "loop_nodes", "PlantSide",
@@ -155,17 +157,20 @@ class Period:
     def __init__(self, side: PlantSide, observer, law, estimator=None, excitation=None):
         self.side, self.observer, self.law, self.estimator = side, observer, law, estimator
         self.excitation = excitation
-        self.failure = None   # (t, one line) once the run has failed: fallen, diverged or a refused command
+        self.failure = None   # (t, one line, cause: a FAILURES name) once the run has failed
         if (side.raw is None) != (estimator is None):
             raise ValueError("a raw plant needs a state estimator, and only a raw plant has one")
 
     def decide(self, measured, u_m, k: int = 0):
         """Stages ``estimator`` (the identity when the measurement is a state), ``observer`` and ``law`` (with the
         excitation of period ``k`` added, :func:`command`): (u_k, tau_hat_k, the law's internals, the state the
-        loop believes)."""
+        loop believes).  A law that raises is a :class:`~.laws.LawError` (the law, t_k, its error)."""
         x_m = measured if self.estimator is None else self.estimator.step(measured)
         tau_hat = self.observer.update(x_m, u_m)
-        u_law, internals = command(self.law, x_m, tau_hat, self.excitation, k)
+        try:
+            u_law, internals = command(self.law, x_m, tau_hat, self.excitation, k)
+        except Exception as exc:   # noqa: BLE001 - a law's own error (a plug-in's bug), named as the law's
+            raise LawError.of(self.law.name, k * self.side.cfg.h, exc) from exc
         return u_law, tau_hat, internals, x_m
 
     def run(self, table) -> bool:
@@ -181,10 +186,12 @@ class Period:
         table.append(p.t, p.x, u, tau_hat, tau_d, internals, (*measured, *x_m) if self.estimator else ())
         self.u = u
         if p.fallen:
-            self.failure = (p.t, fall_text(p.t, p.x, p.cfg.fall_angle))
+            self.failure = (p.t, fall_text(p.t, p.x, p.cfg.fall_angle),
+                            FAILURES[FALL if finite_state(p.x) else DIVERGED])
         elif side.safety.faulted and side.safety.fault_reason == "bad_command":
             why = side.safety.fault_detail
-            self.failure = (p.t, f"FAILED at t = {p.t:.3f} s: the law's command is refused ({why})")
+            self.failure = (p.t, f"FAILED at t = {p.t:.3f} s: the law's command is refused ({why})",
+                            FAILURES[BAD_COMMAND])
         return self.failure is not None
 
     def advance(self, table=None) -> bool:
@@ -195,12 +202,13 @@ class Period:
             self.side.advance(self.u)
         except (ArithmeticError, ValueError) as exc:   # e.g. sin of an infinite angle in eq. (1): t_k+1 not reached
             t = p.t + p.cfg.h
-            self.failure = (t, f"FAILED at t = {t:.3f} s: the state diverged (the model's arithmetic failed: {exc})")
+            self.failure = (t, f"FAILED at t = {t:.3f} s: the state diverged (the model's arithmetic failed: {exc})",
+                            FAILURES[DIVERGED])
             return True
         if table is not None:
             table.set_drive(p.u_prev, p.saturation)
         if not finite_state(p.x):
-            self.failure = (p.t, fall_text(p.t, p.x, p.cfg.fall_angle))
+            self.failure = (p.t, fall_text(p.t, p.x, p.cfg.fall_angle), FAILURES[DIVERGED])
             return True
         return False
 

@@ -82,8 +82,8 @@ class ClosedLoop:
 def simulate(loop: ClosedLoop, label: str = "", progress: Optional[Callable[[float], None]] = None) -> Trajectory:
     """Run the closed loop; stops early (``fallen``) when it fails: |theta_b| passes the fall angle, the state is not
     a finite number (diverged), or the law's command is (a ``bad_command``: NaN, infinite, beyond
-    :data:`.safety.PLAUSIBLE_TORQUE`).  The trajectory's ``record`` then holds ``t_fall`` and ``fall_text`` (the
-    line saying when and why)."""
+    :data:`.safety.PLAUSIBLE_TORQUE`).  The trajectory's ``record`` then holds ``t_fall``, ``fall_text`` (the
+    line saying when and why) and ``failure`` (the cause, a :data:`.trajectory.FAILURES` name)."""
     pc = loop.plant
     h = pc.h
     n_steps = int(round(loop.duration_s / h))
@@ -102,5 +102,5 @@ def simulate(loop: ClosedLoop, label: str = "", progress: Optional[Callable[[flo
             progress(k / n_steps)
     run = table.trajectory(label or loop.name, period.failure is not None, h)
     if period.failure is not None:   # the run's own record of its end (as a bag's plant log): when and why
-        run.record.update(t_fall=period.failure[0], fall_text=period.failure[1])
+        run.record.update(t_fall=period.failure[0], fall_text=period.failure[1], failure=period.failure[2])
     return run

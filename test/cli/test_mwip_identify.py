@@ -127,3 +127,12 @@ def test_help_is_complete(capsys):
     for word in ("BAG_OR_CSV", "--params", "--out", "--force", "--window", "--run", "--cutoff", "u_applied",
                  "exit status"):
         assert word in text, word
+
+
+def test_the_g_b_check_gives_no_verdict_from_nan():
+    """'within' / 'OUTSIDE' its 95 % interval is a verdict: not from a NaN difference or interval (issue 30)."""
+    from mwip_ros.cli.identify import g_b_verdict
+    from mwip_ros.core.identify import Estimate
+    assert g_b_verdict(Estimate(0.1, 1.0)) == "within" and g_b_verdict(Estimate(5.0, 1.0)) == "OUTSIDE"
+    for chk in (Estimate(math.nan, 1.0), Estimate(0.1, math.nan), Estimate(0.1, math.inf)):
+        assert g_b_verdict(chk) == "with no verdict (not a number)", chk

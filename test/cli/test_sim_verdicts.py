@@ -61,3 +61,20 @@ def test_help_lists_the_exit_codes(capsys):
     for code, words in (("0", "every run stayed upright"), ("2", "a mistake"), ("3", "a run fell or failed"),
                         ("130", "interrupted")):
         assert f"  {code:<5}{words}" in text
+
+
+def test_a_failed_runs_csv_keeps_when_and_why_and_mwip_report_judges_it_failed(capsys, tmp_path):
+    """The CSV of a run the law broke (its state fine, its command refused) says so; mwip_report reads it back
+    and never calls the run upright."""
+    from mwip_ros.cli import report
+    from mwip_ros.runs import read_csv
+    csv = tmp_path / "nan.csv"
+    code, _, _ = _sim(capsys, "--controller", "nan_cmd", "--duration", "1", "--csv", str(csv))
+    assert code == 3
+    run = read_csv(csv)
+    assert run.fallen and run.record == {"t_fall": T_BAD, "failure": "bad_command",
+                                         "fall_text": f"FAILED at t = {T_BAD:.3f} s (bad_command)"}
+    assert "t_fall" not in run.columns and "failure" not in run.columns
+    assert report.main([str(csv), "--out", str(tmp_path / "rep"), "--no-animation", "--window", "0.2", "0.5"]) == 0
+    md = (tmp_path / "rep" / "metrics.md").read_text()
+    assert f"**FELL: nan at t = {T_BAD:.3f} s**" in md and "| nan | NO |" in md
