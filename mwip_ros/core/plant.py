@@ -63,9 +63,10 @@ def D_w_of(mean: float, sd: float, z: float) -> float:
 
 
 def saturate(u: float, limit: float) -> float:
-    """Apply ``torque_limit`` (0 = no limit)."""
+    """Apply ``torque_limit`` (0 = no limit).  NaN stays NaN (``max(-limit, min(limit, nan))`` gave +limit: a command
+    that is not a number read as full torque); the driver refuses it (core.loop.PlantSide.act)."""
     if limit > 0.0:
-        return max(-limit, min(limit, u))
+        return -limit if u < -limit else (limit if u > limit else u)
     return u
 
 

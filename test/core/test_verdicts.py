@@ -86,3 +86,10 @@ def test_a_state_that_is_not_a_number_has_fallen():
     assert metrics.fall_time(t, [0.0, 0.1, -0.2], 0.5) is None
     m = metrics.compute({"t": t, "theta_b": np.array([0.0, math.nan, math.nan]), "u": np.zeros(3)}, (0.0, 0.01), 0.5)
     assert not m.upright and m.t_fall == 0.005
+
+
+def test_the_torque_limit_never_turns_a_command_that_is_not_a_number_into_torque():
+    from mwip_ros.core.plant import saturate
+    assert math.isnan(saturate(math.nan, 120.0)) and math.isnan(saturate(math.nan, 0.0))   # was +120 N m
+    assert saturate(1e300, 120.0) == 120.0 and saturate(-math.inf, 120.0) == -120.0
+    assert saturate(50.0, 120.0) == 50.0 and saturate(-130.0, 120.0) == -120.0 and saturate(7.0, 0.0) == 7.0
