@@ -13,14 +13,16 @@
 """
 from __future__ import annotations
 
+import signal
+import sys
 import textwrap
-from typing import Dict
+from typing import Dict, Optional
 
-from .interrupts import EXIT_SIGINT, EXIT_SIGTERM
-
-__all__ = ["EXIT_OK", "EXIT_ERROR", "EXIT_USAGE", "EXIT_FELL", "EXIT_SIGINT", "EXIT_SIGTERM", "epilog"]
+__all__ = ["EXIT_OK", "EXIT_ERROR", "EXIT_USAGE", "EXIT_FELL", "EXIT_SIGINT", "EXIT_SIGTERM", "epilog",
+           "plugin_refusal"]
 
 EXIT_OK, EXIT_ERROR, EXIT_USAGE, EXIT_FELL = 0, 1, 2, 3
+EXIT_SIGINT, EXIT_SIGTERM = 128 + signal.SIGINT, 128 + signal.SIGTERM   # 130, 143
 
 _MEANING: Dict[int, str] = {
     EXIT_OK: "done",
@@ -42,3 +44,15 @@ def epilog(**said: str) -> str:
         if text:
             lines += textwrap.wrap(text, 100, initial_indent=f"  {code:<5}", subsequent_indent=" " * 7)
     return "\n".join(lines)
+
+
+def plugin_refusal(prog: str) -> Optional[int]:
+    """A law plug-in of ``$MWIP_ROS_LAWS`` that failed to import (:func:`mwip_ros.core.laws.check_plugins`): its one
+    line on stderr and :data:`EXIT_USAGE`; None when every plug-in loaded.  Every tool calls it before its work."""
+    from mwip_ros.core import laws
+    try:
+        laws.check_plugins()
+    except laws.PluginError as exc:
+        print(f"{prog}: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    return None

@@ -29,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
+from mwip_ros.cli.exits import plugin_refusal
 from mwip_ros import params as P
 from mwip_ros.cli.outputs import refuse_existing
 from mwip_ros.core import identify as ID
@@ -142,6 +143,9 @@ def _load(args):
 def main(argv=None) -> int:
     """mwip_identify; returns the exit status."""
     args = _parser().parse_args(argv)
+    refused = plugin_refusal(PROG)
+    if refused is not None:
+        return refused
     reason = _options_refusal(args) or refuse_existing(args.out, args.force, "--out")
     if reason:
         return _fail(reason)

@@ -20,9 +20,10 @@ import sys
 import threading
 from typing import Callable, Iterator, Optional
 
+from .exits import EXIT_SIGINT, EXIT_SIGTERM, plugin_refusal   # 130, 143
+
 __all__ = ["Interrupted", "handled", "received", "exit_code", "run_main", "EXIT_SIGINT", "EXIT_SIGTERM"]
 
-EXIT_SIGINT, EXIT_SIGTERM = 128 + signal.SIGINT, 128 + signal.SIGTERM   # 130, 143
 
 _received: Optional[int] = None
 
@@ -77,11 +78,9 @@ def run_main(main: Callable[..., int], argv=None, prog: str = "") -> int:
     plug-in that failed to import (:func:`mwip_ros.core.laws.check_plugins`, before ``main``) and a law's step that
     raised (:class:`~mwip_ros.core.laws.LawError`) end in one line, exit 2 (:mod:`.exits`)."""
     from mwip_ros.core import laws
-    try:
-        laws.check_plugins()   # a law plug-in ($MWIP_ROS_LAWS) that failed to import: one line, exit 2
-    except laws.PluginError as exc:
-        print(f"{prog}: error: {exc}", file=sys.stderr)
-        return 2
+    refused = plugin_refusal(prog)   # a law plug-in ($MWIP_ROS_LAWS) that failed to import: one line, exit 2
+    if refused is not None:
+        return refused
     with handled():
         try:
             code = main(argv)

@@ -1,6 +1,6 @@
 """A law plug-in's mistakes end in one line and exit 2, never a traceback (issue 30, item 8): a module that cannot be
-imported or raises while importing (mwip_sim, mwip_sweep, mwip_tune, mwip_report), a law that raises in mwip_sim
-or inside a sweep (named with its scenario and its own error, not numpy's)."""
+imported or raises while importing (mwip_sim, mwip_sweep, mwip_tune, mwip_report, mwip_theorem, mwip_identify),
+a law that raises in mwip_sim or inside a sweep (named with its scenario and its own error, not numpy's)."""
 import os
 import subprocess
 import sys
@@ -53,7 +53,10 @@ def test_a_plugin_that_fails_to_import_stops_every_tool_in_one_line(tmp_path, pl
                        ("mwip_sweep", ("mwip_ros.cli.sweep", spec, "--out", tmp_path / "out")),
                        ("mwip_tune", ("mwip_ros.cli.tune", spec, "--controller", "dscndo", "--tune", "k1", "--out",
                                       tmp_path / "t.yaml")),
-                       ("mwip_report", ("mwip_ros.cli.report", tmp_path / "none.csv", "--out", tmp_path / "rep"))):
+                       ("mwip_report", ("mwip_ros.cli.report", tmp_path / "none.csv", "--out", tmp_path / "rep")),
+                       ("mwip_theorem", ("mwip_ros.cli.theorem",)),
+                       ("mwip_identify", ("mwip_ros.cli.identify", tmp_path / "none.csv", "--out",
+                                          tmp_path / "id.yaml"))):
         line = _one_line(_run(plugins, *args))
         assert line.startswith(f"{prog}: error: "), line
         for w in words:
