@@ -330,13 +330,13 @@ def _simulate_numpy(loops: Sequence[ClosedLoop], window: Sequence[float], record
     with np.errstate(all="ignore"):  # a diverging scenario may overflow: it is frozen, the others go on
         for k in range(n_steps + 1):
             t = k * h
-            if k:   # a state that is not a number: diverged at t_k (core.loop.Period.advance), no row
-                gone = active & ~(np.isfinite(x[0]) & np.isfinite(x[1]) & np.isfinite(x[2]) & np.isfinite(x[3]))
-                if gone.any():
-                    t_fall[gone], failure[gone] = t, DIVERGED
-                    active &= ~gone
-                    if not active.any():
-                        break
+            # a state that is not a number: diverged at t_k, no row (core.loop.Period.run)
+            gone = active & ~(np.isfinite(x[0]) & np.isfinite(x[1]) & np.isfinite(x[2]) & np.isfinite(x[3]))
+            if gone.any():
+                t_fall[gone], failure[gone] = t, DIVERGED
+                active &= ~gone
+                if not active.any():
+                    break
             # the stages of core.loop.STAGES, in its order
             # stage: sensors
             x_m, u_m = sensors.sample(x, u_prev) if sensors else (x, u_prev)   # what the loop sees

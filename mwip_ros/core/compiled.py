@@ -409,7 +409,7 @@ def _loop(k0, k1, n_steps, h, substeps, first_w, n_window, counts, delay, act_de
                     continue
                 i = i0 + lane
                 if not (math.isfinite(xs[0, lane]) and math.isfinite(xs[1, lane]) and math.isfinite(xs[2, lane])
-                        and math.isfinite(xs[3, lane])):   # diverged at t_k (core.loop.Period.advance): no row
+                        and math.isfinite(xs[3, lane])):   # diverged at t_k (core.loop.Period.run): no row
                     t_fall[i] = t
                     failure[i] = 3   # core.trajectory.DIVERGED
                     active[i] = False

@@ -175,19 +175,21 @@ class Period:
 
     def run(self, table) -> bool:
         """Period k up to the integration: sense, decide, act, and row k into ``table`` (true state, the torque
-        that acts, tau_hat, the true tau_d, internals; raw: the sample and the estimate).  True when the robot
-        has fallen or the law's command was refused (:attr:`failure` says which; the period ends there); else
-        :meth:`advance` integrates it."""
+        that acts, tau_hat, the true tau_d, internals; raw: the sample and the estimate).  True when the run fails
+        (:attr:`failure` says when and why; the period ends there): the state is not a number (diverged: no row),
+        the robot has fallen, or the law's command was refused; else :meth:`advance` integrates it."""
         side = self.side
-        measured, u_m = side.sense()
         p = side.plant
+        if not finite_state(p.x):   # diverged: the state is not a number (no row: nothing to sense or record)
+            self.failure = (p.t, fall_text(p.t, p.x, p.cfg.fall_angle), FAILURES[DIVERGED])
+            return True
+        measured, u_m = side.sense()
         u_law, tau_hat, internals, x_m = self.decide(measured, u_m, p.k)
         u, tau_d = side.act(u_law)
         table.append(p.t, p.x, u, tau_hat, tau_d, internals, (*measured, *x_m) if self.estimator else ())
         self.u = u
         if p.fallen:
-            self.failure = (p.t, fall_text(p.t, p.x, p.cfg.fall_angle),
-                            FAILURES[FALL if finite_state(p.x) else DIVERGED])
+            self.failure = (p.t, fall_text(p.t, p.x, p.cfg.fall_angle), FAILURES[FALL])
         elif side.safety.faulted and side.safety.fault_reason == "bad_command":
             why = side.safety.fault_detail
             self.failure = (p.t, f"FAILED at t = {p.t:.3f} s: the law's command is refused ({why})",
@@ -196,7 +198,8 @@ class Period:
 
     def advance(self, table=None) -> bool:
         """Stage ``plant``: integrate period k; ``table`` gets the torque that acted over it (motor model on).  True
-        when the state it reaches is not a number (diverged, :attr:`failure`; no row is recorded for it)."""
+        when the model's arithmetic fails on the way (diverged at t_k+1, :attr:`failure`); a state that comes out
+        not a number is the next :meth:`run`'s failure."""
         p = self.side.plant
         try:
             self.side.advance(self.u)
@@ -207,9 +210,6 @@ class Period:
             return True
         if table is not None:
             table.set_drive(p.u_prev, p.saturation)
-        if not finite_state(p.x):
-            self.failure = (p.t, fall_text(p.t, p.x, p.cfg.fall_angle), FAILURES[DIVERGED])
-            return True
         return False
 
 

@@ -93,3 +93,18 @@ def test_the_torque_limit_never_turns_a_command_that_is_not_a_number_into_torque
     assert math.isnan(saturate(math.nan, 120.0)) and math.isnan(saturate(math.nan, 0.0))   # was +120 N m
     assert saturate(1e300, 120.0) == 120.0 and saturate(-math.inf, 120.0) == -120.0
     assert saturate(50.0, 120.0) == 50.0 and saturate(-130.0, 120.0) == -120.0 and saturate(7.0, 0.0) == 7.0
+
+
+@pytest.mark.parametrize("bad", [(0.0, math.nan, 0.0, 0.0), (0.0, 0.05, math.inf, 0.0)])
+def test_a_state_that_is_not_a_number_ends_the_run_diverged_alike_offline_and_in_both_batches(bad):
+    """The state is checked before anything reads it: no row, diverged at that t (not a fall of a NaN angle, not the
+    law's NaN command the state would make)."""
+    from dataclasses import replace
+    good = _loop("dscndo")
+    lp = replace(good, plant=replace(good.plant, initial=type(good.plant.initial)(*bad)))
+    run = simulate(lp)
+    assert len(run) == 0 and run.fallen and run.record["failure"] == "diverged" and run.record["t_fall"] == 0.0
+    for compiled in (False, True):
+        res = simulate_batch([lp, good], WINDOW, compiled=compiled)
+        assert [B.FAILURES[c] for c in res.failure] == ["diverged", ""], compiled
+        assert res.t_fall[0] == 0.0 and list(res.upright) == [False, True], compiled
