@@ -168,7 +168,7 @@ def _run_laws(args, values, names, csv_paths, runs, written) -> None:
         run = simulate(P.closed_loop(values, duration=args.duration, controller=label), label, progress)
         if not args.quiet:
             print(f"\r  {label}: done, {len(run)} samples, h = {run.h * 1e3:.3f} ms"
-                  + ("  FALLEN" if run.fallen else ""), file=sys.stderr)
+                  + (f"  FAILED ({run.record.get('failure', 'fall')})" if run.fallen else ""), file=sys.stderr)
         runs.append(run)
         if args.csv:
             out = csv_paths[label]
