@@ -21,7 +21,8 @@ from typing import Dict, List, Optional
 
 import numpy as np
 
-from mwip_ros.core.trajectory import ALL_COLUMNS, TRAJECTORY_COLUMNS, Trajectory, TrajectoryTable, join_estimates
+from mwip_ros.core.trajectory import (ALL_COLUMNS, FAILURE_COLUMNS, FAILURES, TRAJECTORY_COLUMNS, Trajectory,
+                                     TrajectoryTable, join_estimates)
 from mwip_ros.msgs import BadMessage
 from mwip_ros.msgs import layouts as L
 from mwip_ros.msgs.topics import leaf
@@ -52,10 +53,16 @@ def write_csv(run: Trajectory, path) -> None:
     """The columns ``run`` has, in the trajectory table's order (then ``stamp``, a realtime plant's message
     stamps in seconds when they are not ``t``), floats written exactly (repr)."""
     names = [c for c in (*ALL_COLUMNS, "stamp") if c in run.columns]
+    cols = [run.columns[c] for c in names]
+    rec = run.record or {}
+    if run.fallen and rec.get("failure") in FAILURES[1:] and rec.get("t_fall") is not None:
+        # a failed run (core.sim.simulate): when and why, in every row (read_csv gives them back as its record)
+        names += list(FAILURE_COLUMNS)
+        cols += [np.full(len(run), float(rec["t_fall"])), np.full(len(run), float(FAILURES.index(rec["failure"])))]
     with open(path, "w", newline="") as f:
         w = csv.writer(f, lineterminator="\n")
         w.writerow(names)
-        for row in zip(*(run.columns[c] for c in names)):
+        for row in zip(*cols):
             w.writerow([repr(float(x)) for x in row])
 
 
@@ -136,7 +143,23 @@ def read_csv(path, label: Optional[str] = None, max_rows: Optional[int] = None, 
     cols = {name: data[:, i] for i, name in enumerate(header)}   # views: no copy of the table
     check_times(cols["t"], path, ordered)
     h = float(cols["t"][1] - cols["t"][0]) if len(data) > 1 else NAN
-    return Trajectory(label or str(path), cols, False, h)  # a CSV does not say; metrics.compute judges |theta_b|
+    record = _failure_record(cols, path)
+    # a CSV says nothing of a fall (metrics.compute judges |theta_b|), but a failed mwip_sim run's does
+    return Trajectory(label or str(path), cols, bool(record), h, record)
+
+
+def _failure_record(cols: dict, path) -> dict:
+    """``t_fall``, ``fall_text`` and ``failure`` of a failed mwip_sim run's CSV (its :data:`FAILURE_COLUMNS`, taken out
+    of ``cols``), or {}."""
+    if not all(c in cols for c in FAILURE_COLUMNS):
+        return {}
+    t_fall, code = cols.pop(FAILURE_COLUMNS[0]), cols.pop(FAILURE_COLUMNS[1])
+    if not len(t_fall) or not math.isfinite(t_fall[0]) or code[0] not in range(1, len(FAILURES)):
+        raise ValueError(f"{path}: not an mwip_ros CSV (the columns {', '.join(FAILURE_COLUMNS)} do not say when and "
+                         f"why the run failed)")
+    why = FAILURES[int(code[0])]
+    return {"t_fall": float(t_fall[0]), "failure": why,
+            "fall_text": f"{'FELL' if why == 'fall' else 'FAILED'} at t = {t_fall[0]:.3f} s ({why})"}
 
 
 def check_times(t: np.ndarray, source, ordered: bool = True) -> None:

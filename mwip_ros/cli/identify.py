@@ -29,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
+from mwip_ros.cli.exits import plugin_refusal
 from mwip_ros import params as P
 from mwip_ros.cli.outputs import refuse_existing
 from mwip_ros.core import identify as ID
@@ -142,6 +143,9 @@ def _load(args):
 def main(argv=None) -> int:
     """mwip_identify; returns the exit status."""
     args = _parser().parse_args(argv)
+    refused = plugin_refusal(PROG)
+    if refused is not None:
+        return refused
     reason = _options_refusal(args) or refuse_existing(args.out, args.force, "--out")
     if reason:
         return _fail(reason)
@@ -170,6 +174,14 @@ def main(argv=None) -> int:
     return 0
 
 
+def g_b_verdict(chk: ID.Estimate) -> str:
+    """Whether 0 lies in the G_b check's 95 % interval: 'within', 'OUTSIDE', or, when the difference or its interval
+    is not a number, 'with no verdict (not a number)' (never a verdict from NaN)."""
+    if not (math.isfinite(chk.value) and math.isfinite(chk.half_width)):
+        return "with no verdict (not a number)"
+    return "within" if chk.low <= 0.0 <= chk.high else "OUTSIDE"
+
+
 def _print(args, res: ID.IdentificationResult, torque: str, known) -> None:
     once = f" ({res.duplicates} repeated row(s) counted once)" if res.duplicates else ""
     print(f"{args.log}: {res.samples} periods{once}, torque from column {torque!r}; known m_w = {known.m_w:g} kg, "
@@ -180,7 +192,7 @@ def _print(args, res: ID.IdentificationResult, torque: str, known) -> None:
     for name, e, unit in rows:
         print(f"  {name:<4} = {e.text(unit)}")
     chk = res.G_b_check
-    within = "within" if chk.low <= 0.0 <= chk.high else "OUTSIDE"
+    within = g_b_verdict(chk)
     print(f"  G_b check: fitted {res.G_b.value:.6g} N m vs m_b g l = {res.G_b_model.value:.6g} N m, difference "
           f"{chk.value:+.4g} N m ({100 * chk.value / res.G_b_model.value:+.3g} %), {within} its 95 % interval "
           f"+-{chk.half_width:.3g}")

@@ -20,9 +20,10 @@ import sys
 import threading
 from typing import Callable, Iterator, Optional
 
+from .exits import EXIT_SIGINT, EXIT_SIGTERM, plugin_refusal   # 130, 143
+
 __all__ = ["Interrupted", "handled", "received", "exit_code", "run_main", "EXIT_SIGINT", "EXIT_SIGTERM"]
 
-EXIT_SIGINT, EXIT_SIGTERM = 128 + signal.SIGINT, 128 + signal.SIGTERM   # 130, 143
 
 _received: Optional[int] = None
 
@@ -73,10 +74,19 @@ def handled() -> Iterator[None]:
 
 def run_main(main: Callable[..., int], argv=None, prog: str = "") -> int:
     """``main(argv)`` with SIGTERM handled like SIGINT; an interrupt it does not handle itself ends in one
-    line and 128 + the signal; a handled one that returns 130 (SIGINT's code) returns 143 after SIGTERM."""
+    line and 128 + the signal; a handled one that returns 130 (SIGINT's code) returns 143 after SIGTERM.  A law
+    plug-in that failed to import (:func:`mwip_ros.core.laws.check_plugins`, before ``main``) and a law's step that
+    raised (:class:`~mwip_ros.core.laws.LawError`) end in one line, exit 2 (:mod:`.exits`)."""
+    from mwip_ros.core import laws
+    refused = plugin_refusal(prog)   # a law plug-in ($MWIP_ROS_LAWS) that failed to import: one line, exit 2
+    if refused is not None:
+        return refused
     with handled():
         try:
             code = main(argv)
+        except laws.LawError as exc:   # a law's step raised (a plug-in's bug): the law, when, where, its error
+            print(f"{prog}: error: {exc}", file=sys.stderr)
+            return 2
         except KeyboardInterrupt:
             sig = signal.Signals(_received).name if _received else "SIGINT"
             print(f"{prog}: interrupted ({sig})", file=sys.stderr)

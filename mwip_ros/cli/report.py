@@ -47,6 +47,7 @@ from typing import List, Optional, Sequence
 from mwip_ros.bag import REPAIRED_KEY, BagError, read_metadata
 from mwip_ros.bag.ledger import GAPS_KEY
 from mwip_ros.cli import animation, interrupts, outputs, plotting
+from mwip_ros.cli.exits import epilog
 from mwip_ros.core import metrics
 from mwip_ros.core.trajectory import Trajectory
 from mwip_ros.params import defaults_for
@@ -224,11 +225,13 @@ def main(argv=None) -> int:
 def _main(argv=None) -> int:
     ap = argparse.ArgumentParser(
         prog="mwip_report",
-        description="Read recorded bags (rosbag2 MCAP directories) or mwip_sim / plant_sim CSVs and write "
+        description="Read recorded bags (rosbag2 MCAP directories) or mwip_sim / plant_sim CSVs and write\n"
                     "fig3.png, observer.png, metrics.md, metrics.json and animation.gif into --out.",
-        epilog="Exit codes: 0 written (also when a run fell: a 'FELL: <label> at t = <t> s' line per fallen run), "
-               "2 an input cannot be read (a damaged bag names the file and the chunk), --out already holds a "
-               "report (without --force), or --window lies outside the runs.")
+        epilog=epilog(e0="written (also when a run fell: a 'FELL: <label> at t = <t> s' line per fallen run)",
+                      e1="", e2="an input cannot be read (a damaged bag names the file and the chunk), --out "
+                      "already holds a report (without --force), --window lies outside the runs, or a law plug-in "
+                      "failed to import", e3=""),
+        formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("runs", nargs="+", help="bag directories, .mcap files or .csv files (one run each)")
     ap.add_argument("--out", type=Path, required=True,
                     help="directory for the report (created; must not hold a report unless --force)")

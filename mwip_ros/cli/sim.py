@@ -1,4 +1,9 @@
-"""``mwip_sim``: the offline DSC / DSCNDO simulator (no ROS needed)."""
+"""``mwip_sim``: the offline DSC / DSCNDO simulator (no ROS needed).
+
+The verdict of each run is never computed from NaN: a run fails (exit 3) when the robot falls, the law's command is
+not a finite number or is implausible, or the state diverges (:func:`mwip_ros.core.sim.simulate`), and says when and
+why; a run that ends before the metrics window does is said so, its verdict qualified.  Exit codes:
+:mod:`.exits`."""
 from __future__ import annotations
 
 import argparse
@@ -10,6 +15,7 @@ from pathlib import Path
 
 from mwip_ros import params as P
 from mwip_ros.cli import interrupts, plotting
+from mwip_ros.cli.exits import EXIT_FELL, EXIT_OK, EXIT_USAGE, epilog
 from mwip_ros.cli.outputs import refuse_existing
 from mwip_ros.cli.theorem import theorem_report
 from mwip_ros.core import budget, metrics
@@ -27,7 +33,11 @@ def _parser() -> argparse.ArgumentParser:
                     "a plot in the layout of the paper's Fig. 3.",
         epilog="examples:\n  mwip_sim --controller dscndo --plot dscndo.png\n"
                "  mwip_sim --compare --plot compare.png --csv runs.csv   (writes runs_dsc.csv, runs_dscndo.csv)\n"
-               "  mwip_sim --compare dsc dscndo lqr lqr_ndo              (the paper's laws and the LQR baseline)",
+               "  mwip_sim --compare dsc dscndo lqr lqr_ndo              (the paper's laws and the LQR baseline)\n\n"
+               + epilog(e0="every run stayed upright", e1="", e3="a run fell or failed (a line says when and why: "
+                        "|theta_b| beyond fall_angle, the law's command not a finite number or beyond 1e6 N m, the "
+                        "state diverged)", e130="interrupted (Ctrl-C: finished runs keep their CSVs)",
+                        e143="terminated (SIGTERM)"),
         formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--params", type=Path, nargs="+", default=None, metavar="FILE",
                     help="ROS 2 parameter file(s), merged in order as ROS merges repeated --params-file (e.g. "
@@ -56,7 +66,7 @@ def _suffixed(path: Path, label: str) -> Path:
 
 def _fail(text: str) -> int:
     print(f"mwip_sim: error: {text}", file=sys.stderr)
-    return 2
+    return EXIT_USAGE
 
 
 DURATION_MAX_S = P.specs_for("plant_sim")["duration_s"].hi   # the parameter file's own limit
@@ -168,7 +178,7 @@ def _run_laws(args, values, names, csv_paths, runs, written) -> None:
         run = simulate(P.closed_loop(values, duration=args.duration, controller=label), label, progress)
         if not args.quiet:
             print(f"\r  {label}: done, {len(run)} samples, h = {run.h * 1e3:.3f} ms"
-                  + ("  FALLEN" if run.fallen else ""), file=sys.stderr)
+                  + (f"  FAILED ({run.record.get('failure', 'fall')})" if run.fallen else ""), file=sys.stderr)
         runs.append(run)
         if args.csv:
             out = csv_paths[label]
@@ -178,21 +188,55 @@ def _run_laws(args, values, names, csv_paths, runs, written) -> None:
 
 
 def _finish(args, values, runs) -> int:
-    named = [(r.label, metrics.compute(r.columns, args.window, values["fall_angle"])) for r in runs]
-    print(f"metrics over t in [{args.window[0]:g}, {args.window[1]:g}] s:")
+    named = [(r.label, metrics.compute(r.columns, args.window, values["fall_angle"], r.record.get("t_fall")))
+             for r in runs]
+    w0, w1 = args.window
+    print(f"metrics over t in [{w0:g}, {w1:g}] s:")
     print(metrics.text_table(named))
+    short = [m for _, m in named if m.upright and not m.covers_window]
+    if short:   # the window was not reached: say so, the metrics are over what there is (or none)
+        t_end = max(m.t_end for m in short)
+        print(f"note: the run{'s end' if len(short) > 1 else ' ends'} at t = {t_end:.3f} s, before the metrics window "
+              f"[{w0:g}, {w1:g}] s ends: the metrics need t >= {w1:g} s ({'none' if t_end < w0 else 'part'} of the "
+              f"window was simulated; --duration {w1:g} or a --window inside the run)")
     by = dict(named)
     if "dsc" in by and "dscndo" in by:
-        a, b = by["dsc"].theta_b_p2p, by["dscndo"].theta_b_p2p
-        print(f"DSCNDO / DSC theta_b peak-to-peak: {b / a:.3f} (DSCNDO is {a / b:.1f}x smaller)")
-    for run in runs:
-        print(f"{run.label}: {'FELL' if run.fallen else 'stayed upright'} "
-              f"(max |theta_b| = {abs(run['theta_b']).max():.4f} rad)")
+        print(ratio_line(by["dsc"], by["dscndo"]))
+    for run, (_, m) in zip(runs, named):
+        print(verdict_line(run, m, w1))
     if args.plot:   # shaded like mwip_report's: the window the metrics above are over, each fall marked
         falls = {name: m.t_fall for name, m in named if m.t_fall is not None}
         plotting.fig3(runs, args.plot, window=args.window, falls=falls)
         print(f"wrote {args.plot}")
-    return 1 if any(r.fallen for r in runs) else 0
+    return EXIT_FELL if any(not m.upright for _, m in named) else EXIT_OK
+
+
+def ratio_line(dsc: metrics.Metrics, dscndo: metrics.Metrics) -> str:
+    """DSCNDO's theta_b peak-to-peak over DSC's, or why there is no ratio (a run fell, no sample in the window): never
+    a ratio of NaN or of a run that fell."""
+    head = "DSCNDO / DSC theta_b peak-to-peak:"
+    fell = [name for name, m in (("DSC", dsc), ("DSCNDO", dscndo)) if not m.upright]
+    if fell:
+        return f"{head} no ratio, {'both fell' if len(fell) == 2 else fell[0] + ' fell'}"
+    a, b = dsc.theta_b_p2p, dscndo.theta_b_p2p
+    if not (math.isfinite(a) and math.isfinite(b)):
+        return f"{head} no ratio, no sample in the window"
+    if not (a > 0 and b > 0):
+        return f"{head} no ratio, a peak-to-peak of 0 (DSC {a:g}, DSCNDO {b:g} rad)"
+    return f"{head} {b / a:.3f} (DSCNDO is {a / b:.1f}x smaller)"
+
+
+def verdict_line(run, m: metrics.Metrics, window_end: float) -> str:
+    """'<label>: stayed upright (max |theta_b| = ... rad)', qualified when the run ended before ``window_end``, or the
+    line of its failure (:func:`mwip_ros.core.sim.simulate`'s ``fall_text``): when and why."""
+    if not m.upright:
+        text = run.record.get("fall_text") or f"FELL at t = {m.t_fall:.3f} s"
+        return f"{run.label}: {text}"
+    peak = f"max |theta_b| = {float(abs(run['theta_b']).max()):.4f} rad"
+    if not m.covers_window:
+        return (f"{run.label}: stayed upright to the run's end at t = {m.t_end:.3f} s ({peak}); the metrics window "
+                f"needs t >= {window_end:g} s")
+    return f"{run.label}: stayed upright ({peak})"
 
 
 if __name__ == "__main__":

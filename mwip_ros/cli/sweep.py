@@ -14,6 +14,7 @@ from pathlib import Path
 
 from mwip_ros import params as P
 from mwip_ros.cli import interrupts, outputs
+from mwip_ros.cli.exits import epilog
 from mwip_ros.sweep import engine, results
 from mwip_ros.sweep import progress as sweep_progress
 from mwip_ros.sweep.scenarios import expand, parameter_file
@@ -40,9 +41,11 @@ def _parser() -> argparse.ArgumentParser:
                "  mwip_sweep config/sweeps/roa.yaml --out sweeps/roa --dask tcp://scheduler:8786\n"
                "  mwip_sweep --results sweeps/mass --scenario 17 --controller dscndo --write-params s17.yaml\n"
                "  scripts/run_experiment.sh --params s17.yaml     # the same scenario through the ROS graph\n\n"
-               "exit codes: 0 done, 1 a worker failed, 2 a bad spec or option (nothing ran), 130 interrupted "
-               "(Ctrl-C), 143 terminated (SIGTERM: timeout, kill, a batch scheduler); finished rows are in "
-               "results.csv and no worker is left running",
+               + epilog(e0="done (runs that fell or failed are rows with upright 0 and their failure, not an "
+                        "error)", e1="a worker failed", e2="a bad spec, option or law plug-in (nothing ran), or a law "
+                        "that raised (named with its scenario and its own error)", e3="",
+                        e130="interrupted (Ctrl-C)", e143="terminated (SIGTERM: timeout, kill, a batch scheduler)")
+               + "\nfinished rows are in results.csv and no worker is left running",
         formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("spec", nargs="?", type=Path, help="the sweep spec (YAML); see config/sweeps/")
     ap.add_argument("--out", type=Path, metavar="DIR", help="output directory (created; must not hold results)")
@@ -206,6 +209,13 @@ def _main(argv=None) -> int:
         print(f"\n{PROG}: interrupted ({sig}): {writer.rows:,} of {total:,} rows are in {args.out / 'results.csv'}",
               file=sys.stderr)
         return EXIT_INTERRUPTED
+    except registry.LawError as exc:   # a law's step raised: the law, the scenario, when, its own error
+        runner.close(stop=True)
+        progress.close()
+        writer.close()
+        print(f"{PROG}: error: {exc}; {writer.rows:,} finished rows are in {args.out / 'results.csv'}",
+              file=sys.stderr)
+        return EXIT_BAD_INPUT
     except Exception as exc:   # a worker's failure (or a lost Dask connection): keep what finished
         progress.close()
         writer.close()

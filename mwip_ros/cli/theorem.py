@@ -5,6 +5,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from mwip_ros.cli.exits import plugin_refusal
 from mwip_ros import params as P
 from mwip_ros.core.theorem import theorem2
 from mwip_ros.params.paths import default_params_file
@@ -35,6 +36,9 @@ def main(argv=None) -> int:
     ap.add_argument("--params", type=Path, nargs="+", default=None, metavar="FILE",
                     help="parameter file(s), merged in order (default: config/paper.yaml)")
     args = ap.parse_args(argv)
+    refused = plugin_refusal("mwip_theorem")
+    if refused is not None:
+        return refused
     try:
         values = P.merged_values(P.load_param_files(args.params or [default_params_file()], option="--params"))
     except P.ParamError as exc:

@@ -14,6 +14,7 @@ import numpy as np
 from mwip_ros import params as P
 from mwip_ros.core import laws
 from mwip_ros.cli import interrupts
+from mwip_ros.cli.exits import epilog
 from mwip_ros.cli.outputs import refuse_existing
 from mwip_ros.cli.sweep import add_runner_arguments, runner_from
 from mwip_ros.sweep.scenarios import parameter_overlay
@@ -37,9 +38,9 @@ def _parser() -> argparse.ArgumentParser:
                "  mwip_tune SPEC.yaml --controller lqr_ndo --tune lqr.Q lqr.R --bounds lqr.R=0.001:0.1 --out lqr.yaml\n"
                "  mwip_sim --params config/paper.yaml tuned.yaml      # the overlay goes after the base file\n\n"
                f"tunable: {', '.join(KNOBS)} (X: its diagonal c1, c4; lqr.Q: its diagonal)\n"
-               "exit codes: 0 done, 2 a bad spec or option (nothing ran), 130 interrupted (Ctrl-C: the best so far "
-               "is written, judged on the held-out set), 143 terminated (SIGTERM: the best so far is written, not "
-               "judged)",
+               + epilog(e1="", e2="a bad spec, option or law plug-in (nothing ran), or a law that raised (named "
+                        "with its scenario)", e3="", e130="interrupted (Ctrl-C: the best so far is written, judged on "
+                        "the held-out set)", e143="terminated (SIGTERM: the best so far is written, not judged)"),
         formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("spec", type=Path, help="a sweep spec (its base file, duration, window, scenarios)")
     ap.add_argument("--controller", required=True, choices=laws.names(), help="the law to tune")
@@ -193,6 +194,11 @@ def _write_overlay(args, spec, holdout, knobs, x, j, before, after, generations,
     parameter_overlay(overlay(knobs, x, spec.base_values), args.out, "\n".join(lines) + "\n")
 
 
+def _median(v: float, fmt: str) -> str:
+    """A median over the upright runs; '- (none upright)' when there is none (NaN): never 'nan'."""
+    return fmt.format(v) if math.isfinite(v) else "- (none upright)"
+
+
 def _print_table(args, names, base_x, best_x, before, after, n, seed) -> None:
     print(f"{args.controller}: base file vs tuned" + (f", judged on a held-out set of {n:,} scenarios "
                                                       f"(spec seed {seed})" if after else ""))
@@ -200,9 +206,10 @@ def _print_table(args, names, base_x, best_x, before, after, n, seed) -> None:
     if after is not None:
         rows += [("J (held out)", f"{before['J']:.6g}", f"{after['J']:.6g}"),
                  ("upright", f"{100 * before['upright_share']:.1f} %", f"{100 * after['upright_share']:.1f} %"),
-                 ("theta_b RMS, median [rad]", f"{before['theta_b_rms_median']:.5g}",
-                  f"{after['theta_b_rms_median']:.5g}"),
-                 ("u RMS, median [N m]", f"{before['u_rms_median']:.4g}", f"{after['u_rms_median']:.4g}"),
+                 ("theta_b RMS, median [rad]", _median(before['theta_b_rms_median'], "{:.5g}"),
+                  _median(after['theta_b_rms_median'], "{:.5g}")),
+                 ("u RMS, median [N m]", _median(before['u_rms_median'], "{:.4g}"),
+                  _median(after['u_rms_median'], "{:.4g}")),
                  ("Theorem 2 holds", str(before["theorem2_holds"]), str(after["theorem2_holds"]))]
     w = [max(len(r[i]) for r in rows) for i in range(3)]
     for r in rows:

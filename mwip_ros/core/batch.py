@@ -17,12 +17,18 @@ Two forms of the one loop:
 * over numpy arrays (a law without a pure form, a plug-in; ``record=True``): the observer, the law and
   the true tau_d are called with the math namespace ``numpy`` and parameters whose fields are arrays;
   the plant's RK4 period runs as the same ``plant.rk4_period`` compiled by numba (:mod:`.compiled`).
+  A law whose step raises over arrays (its own error, or numpy's for a law written for one scenario,
+  ``if x[1] > a``) runs scenario by scenario instead (:func:`_simulate_each`): the same numbers, or the
+  law's own error as a :class:`~.laws.LawError` naming the scenario.
 
 * Each scenario has its own parameters and its own seeded D_w stream (the scalar plant's
   generator, drawn in the same order).
-* A scenario that falls (|theta_b| > its fall angle) is marked with the time it fell; its
-  row at that instant is the last it records, and from then on its state is frozen, so a
-  fallen or diverging scenario never poisons the others.
+* A scenario that fails is marked with the time it failed and why (:data:`FAILURES`, as the scalar loop,
+  :class:`.loop.Period`): it falls (|theta_b| > its fall angle, or theta_b not a number), the law's command is
+  refused (not a finite number, or beyond :data:`.safety.PLAUSIBLE_TORQUE`: the driver's ``bad_command``, zero
+  torque acts in that row), or its state diverges (a component not a finite number after a period: no row).
+  Its row at that instant is the last it records, and from then on its state is frozen, so a
+  fallen or diverging scenario never poisons the others, and is never upright.
 * The metrics over the window come from :func:`.metrics.window_metrics`, the function the
   single-run metrics use.
 
@@ -46,12 +52,15 @@ from .metrics import compute as metrics_compute
 from .metrics import window_metrics
 from .model import PhysicalParams, Sinusoid, State, accel, lumped_disturbance
 from .observer import DiscreteObserver
+from .trajectory import BAD_COMMAND, DIVERGED, FAILURES, FALL
 from .plant import stage_torques
+from .safety import PLAUSIBLE_TORQUE
 from .sensing import NOISE_BLOCK, Actuator, Sensors, sensor_rng
 from .sim import ClosedLoop
 from .trajectory import COLUMNS, INTERNAL_COLUMNS, Trajectory
 
-__all__ = ["BatchResult", "simulate_batch", "COMPILED_ENV", "compiled_default"]
+__all__ = ["BatchResult", "simulate_batch", "COMPILED_ENV", "compiled_default", "FAILURES", "FALL", "BAD_COMMAND",
+           "DIVERGED"]
 
 COMPILED_ENV = "MWIP_BATCH_COMPILED"   # "0": the numpy loop even for a law with a compiled form
 
@@ -84,6 +93,11 @@ class BatchResult:
     metrics: Dict[str, np.ndarray]
     steps: int                  # scenario-steps integrated (fallen scenarios stop counting)
     trajectories: Optional[List[Trajectory]] = None
+    failure: Optional[np.ndarray] = None   # int: why each failed, an index of FAILURES (0: it did not)
+
+    def __post_init__(self):
+        if self.failure is None:
+            self.failure = np.where(self.fallen, FALL, 0).astype(np.int64)
 
 
 def _column(values):
@@ -269,8 +283,14 @@ def _simulate_each(loops: Sequence[ClosedLoop], window: Sequence[float], record:
     """The scalar loop (:func:`.sim.simulate`) scenario by scenario, its metrics as the batch gives them: the
     form for the stages the array forms do not run (:func:`_beyond_arrays`), the same numbers by construction."""
     from .sim import simulate
-    runs = [simulate(lp) for lp in loops]
-    named = [metrics_compute(r.columns, window, lp.plant.fall_angle) for r, lp in zip(runs, loops)]
+    runs = []
+    for i, lp in enumerate(loops):
+        try:
+            runs.append(simulate(lp))
+        except laws.LawError as exc:   # the law's own error, with the scenario (its index in ``loops``)
+            raise exc.in_scenario(i) from exc
+    named = [metrics_compute(r.columns, window, lp.plant.fall_angle, r.record.get("t_fall"))
+             for r, lp in zip(runs, loops)]
     fallen = np.array([r.fallen for r in runs], dtype=bool)
     t_fall = np.array([m.t_fall if m.t_fall is not None else np.nan for m in named])
     n_steps = [int(round(lp.duration_s / lp.plant.h)) for lp in loops]
@@ -280,7 +300,9 @@ def _simulate_each(loops: Sequence[ClosedLoop], window: Sequence[float], record:
     out = {k: np.array([getattr(m, k) for m in named], dtype=float) for k in keys}
     out = {k: v for k, v in out.items() if k in keys[:6] or np.isfinite(v).any()}
     steps = sum(len(r) - 1 for r in runs)
-    return BatchResult(fallen, t_fall, upright, out, steps, runs if record else None)
+    failure = np.array([FAILURES.index(r.record.get("failure", "fall")) if r.fallen else 0 for r in runs],
+                       dtype=np.int64)
+    return BatchResult(fallen, t_fall, upright, out, steps, runs if record else None, failure)
 
 
 def _simulate_numpy(loops: Sequence[ClosedLoop], window: Sequence[float], record: bool = False) -> BatchResult:
@@ -314,6 +336,7 @@ def _simulate_numpy(loops: Sequence[ClosedLoop], window: Sequence[float], record
     D_w = noise.draw()
     active = np.ones(n, dtype=bool)
     t_fall = np.full(n, np.nan)
+    failure = np.zeros(n, dtype=np.int64)
     first_w, n_window = window_samples(n_steps, h, window)   # the steps k with k h in the window (+-1e-9)
     # a row per sample, a column per scenario: each step writes one contiguous row
     win = {c: np.full((n_window, n), np.nan) for c in ("theta_b", "u", "e1", "e2")}
@@ -322,6 +345,13 @@ def _simulate_numpy(loops: Sequence[ClosedLoop], window: Sequence[float], record
     with np.errstate(all="ignore"):  # a diverging scenario may overflow: it is frozen, the others go on
         for k in range(n_steps + 1):
             t = k * h
+            # a state that is not a number: diverged at t_k, no row (core.loop.Period.run)
+            gone = active & ~(np.isfinite(x[0]) & np.isfinite(x[1]) & np.isfinite(x[2]) & np.isfinite(x[3]))
+            if gone.any():
+                t_fall[gone], failure[gone] = t, DIVERGED
+                active &= ~gone
+                if not active.any():
+                    break
             # the stages of core.loop.STAGES, in its order
             # stage: sensors
             x_m, u_m = sensors.sample(x, u_prev) if sensors else (x, u_prev)   # what the loop sees
@@ -329,11 +359,19 @@ def _simulate_numpy(loops: Sequence[ClosedLoop], window: Sequence[float], record
             # stage: observer
             tau_hat = obs.update(x_m, u_m)
             # stage: law
-            u_law, internals = ctrl.step(x_m, (np.where(use_obs, tau_hat[0], 0.0), np.where(use_obs, tau_hat[1], 0.0)))
+            try:
+                u_law, internals = ctrl.step(x_m, (np.where(use_obs, tau_hat[0], 0.0),
+                                                   np.where(use_obs, tau_hat[1], 0.0)))
+            except Exception:   # noqa: BLE001 - over arrays a law's error can read as numpy's: run it as it runs
+                return _simulate_each(loops, window, record)   # alone, which gives the same numbers or its own
             # stage: drive
+            bad = ~(np.abs(u_law) <= PLAUSIBLE_TORQUE)   # the driver's bad_command (core.loop.PlantSide.act)
             u = np.where(limit > 0.0, np.clip(u_law, -limit, limit), u_law)
             if actuator:
                 u = actuator.apply(u)   # the torque that acts over [t_k, t_k+1)
+            if bad.any():
+                bad &= active
+                u = np.where(bad, 0.0, u)   # in fault: zero torque acts
             # stage: plant (row k, its true tau_d and the fall check, then RK4)
             in_window = first_w <= k < first_w + n_window
             if record or in_window:   # the true tau_d is only compared inside the window
@@ -351,8 +389,11 @@ def _simulate_numpy(loops: Sequence[ClosedLoop], window: Sequence[float], record
                 for c, v in (("theta_b", x[1]), ("u", u), ("e1", tau_hat[0] - tau_d[0]),
                              ("e2", tau_hat[1] - tau_d[1])):
                     win[c][j] = v if everyone else np.where(active, v, np.nan)
-            fell = active & (np.abs(x[1]) > fall)
-            if fell.any():
+            fell = active & ~(np.abs(x[1]) <= fall)
+            if fell.any() or bad.any():
+                failure[bad & active] = BAD_COMMAND
+                failure[fell] = FALL   # the state had fallen before the law spoke (core.loop.Period.run)
+                fell |= bad & active
                 t_fall[fell] = t
                 active &= ~fell
                 everyone = False
@@ -366,7 +407,8 @@ def _simulate_numpy(loops: Sequence[ClosedLoop], window: Sequence[float], record
     fallen = ~np.isnan(t_fall)
     m = window_metrics(win["theta_b"].T, win["u"].T, win["e1"].T, win["e2"].T)
     upright = ~fallen & (n_steps * h >= window[1] - 1e-9)
-    return BatchResult(fallen, t_fall, upright, m, steps, _trajectories(rows, loops, h) if record else None)
+    return BatchResult(fallen, t_fall, upright, m, steps, _trajectories(rows, loops, h, t_fall, failure) if record
+                       else None, failure)
 
 
 def _simulate_compiled(loops: Sequence[ClosedLoop], window: Sequence[float], law: type, kernel, raw: bool = False,
@@ -432,6 +474,7 @@ def _simulate_compiled(loops: Sequence[ClosedLoop], window: Sequence[float], law
     qa = np.zeros((n, act_delay + 1))
     active = np.ones(n, dtype=bool)
     t_fall = np.full(n, np.nan)
+    failure = np.zeros(n, dtype=np.int64)
     steps = np.zeros(n, dtype=np.int64)
     acc = np.zeros((n, 15))   # sum of squares and count of theta_b, u, e1, e2, the estimate's errors, u applied
     # (finite samples); the periods saturated
@@ -478,7 +521,7 @@ def _simulate_compiled(loops: Sequence[ClosedLoop], window: Sequence[float], law
             args = (k0, k1, n_steps, h, substeps, first_w, n_window, counts, delay, act_delay, bool(law.observer),
                     act, nom, D_b, sins, shared, limit, fall, X, P, use_obs, noisy, std, mean, sd, rnd, Nw, Z,
                     x, u_prev, z, prev, s, qx, qa, active, t_fall, steps, acc, ext, T, tau1, tau2,
-                    raw, RW, RS, raw_noisy, PE, ES, bool(motor.any()), MC, EXT, exi)
+                    raw, RW, RS, raw_noisy, PE, ES, bool(motor.any()), MC, EXT, exi, failure)
             if k0 == 0:
                 load_cached(kernel, args)
             kernel(*args)
@@ -489,7 +532,7 @@ def _simulate_compiled(loops: Sequence[ClosedLoop], window: Sequence[float], law
             m.update(_stage_metrics(acc, steps, h, motor, raw=False, motor_on=True))
     fallen = ~np.isnan(t_fall)
     upright = ~fallen & (n_steps * h >= window[1] - 1e-9)
-    return BatchResult(fallen, t_fall, upright, m, int(steps.sum()))
+    return BatchResult(fallen, t_fall, upright, m, int(steps.sum()), None, failure)
 
 
 def window_sums_metrics(acc: np.ndarray, ext: np.ndarray) -> dict:
@@ -521,12 +564,15 @@ def _stage_metrics(acc: np.ndarray, steps: np.ndarray, h: float, motor: np.ndarr
     return out
 
 
-def _trajectories(rows, loops, h) -> List[Trajectory]:
-    """Each scenario's rows up to the one where it fell (or the end), as the scalar loop returns them."""
+def _trajectories(rows, loops, h, t_fall, failure) -> List[Trajectory]:
+    """Each scenario's rows up to the one where it failed (or the end), as the scalar loop returns them (a failed
+    one's ``record`` has ``t_fall`` and ``failure``, the :data:`FAILURES` name)."""
     out = []
     for i, lp in enumerate(loops):
         mine = np.array([r[i] for active, r in rows if active[i]])
         cols = {c: mine[:, j] for j, c in enumerate(COLUMNS)}
-        fell = bool(abs(mine[-1, 2]) > lp.plant.fall_angle)
-        out.append(Trajectory(lp.name, cols, fell, h))
+        run = Trajectory(lp.name, cols, bool(failure[i]), h)
+        if failure[i]:
+            run.record.update(t_fall=float(t_fall[i]), failure=FAILURES[failure[i]])
+        out.append(run)
     return out

@@ -60,13 +60,14 @@ import numpy as np
 from numba.core.caching import (CompileResultCacheImpl, FunctionCache, InTreeCacheLocator, UserProvidedCacheLocator,
                                 UserWideCacheLocator)
 
-from . import controller, drive, model, observer, plant, raw_sensors, sensing, simd
+from . import controller, drive, model, observer, plant, raw_sensors, safety, sensing, simd
 from .controller import u_taud_of
 from .drive import motor_torque
 from .model import lumped_disturbance
 from .observer import tau_hat_of, z_next, z_start
 from .plant import D_w_of, saturate
 from .raw_sensors import raw_sample
+from .safety import PLAUSIBLE_TORQUE
 from .sensing import quantize
 
 __all__ = ["Inertia", "RK4Periods", "SOURCES", "Sin", "kernel_for", "load_cached"]
@@ -75,7 +76,7 @@ SOURCES = (Path(model.__file__), Path(plant.__file__), Path(drive.__file__), Pat
 _STAMP = hashlib.sha256(b"".join(p.read_bytes() for p in SOURCES)).hexdigest()
 # what the compiled batch loop is made of besides a law's own module
 LOOP_SOURCES = SOURCES + (Path(observer.__file__), Path(controller.__file__), Path(sensing.__file__),
-                         Path(simd.__file__), Path(raw_sensors.__file__))
+                         Path(simd.__file__), Path(raw_sensors.__file__), Path(safety.__file__))
 
 
 def _stamp_of(paths) -> str:
@@ -320,7 +321,7 @@ def _stage(tau1, tau2, f1, f2, t, dt, substeps):   # pragma: no cover
 def _loop(k0, k1, n_steps, h, substeps, first_w, n_window, counts, delay, act_delay, observer_law,
           act, nom, D_b, sins, shared, limit, fall, X, P, use_obs, noisy, std, D_w_mean, D_w_sd, D_w_random,
           Nw, Z, x, u_prev, z, prev, s, qx, qa, active, t_fall, steps, acc, ext, T, tau1, tau2,
-          raw, RW, RS, raw_noisy, PE, ES, motor_any, MC, EXT, exi):   # pragma: no cover
+          raw, RW, RS, raw_noisy, PE, ES, motor_any, MC, EXT, exi, failure):   # pragma: no cover
     """Periods k0 .. k1 - 1 of every active scenario: the scalar loop of :func:`.sim.simulate` (sensors, observer,
     law, saturation, actuator, true tau_d in the window, fall, RK4), calling its own functions compiled; the
     per-scenario state lives in the arrays between calls.  The scenarios go ``LANES`` at a time, period by period:
@@ -337,7 +338,8 @@ def _loop(k0, k1, n_steps, h, substeps, first_w, n_window, counts, delay, act_de
     K_t = 0: none; ``motor_any``: some scenario has it, and the RK4 runs per scenario, :func:`.plant.rk4_driven`)
     and the excitation (``EXT[exi[i], k]`` added to the law's command, ``exi[i]`` < 0: none).  ``acc`` columns 8 to
     13: the sums of squares and counts of the estimate's theta_b and theta_b' errors and of the torque that acted
-    (window), 14: the periods with the drive saturated (whole run)."""
+    (window), 14: the periods with the drive saturated (whole run).  ``failure``: why a scenario failed, its
+    ``core.trajectory.FAILURES`` code (1 fall, 2 a refused command, 3 diverged), with ``t_fall`` when."""
     n = x.shape[0]
     dt = h / substeps
     if shared and n > 0:
@@ -406,6 +408,13 @@ def _loop(k0, k1, n_steps, h, substeps, first_w, n_window, counts, delay, act_de
                 if not live[lane]:
                     continue
                 i = i0 + lane
+                if not (math.isfinite(xs[0, lane]) and math.isfinite(xs[1, lane]) and math.isfinite(xs[2, lane])
+                        and math.isfinite(xs[3, lane])):   # diverged at t_k (core.loop.Period.run): no row
+                    t_fall[i] = t
+                    failure[i] = 3   # core.trajectory.DIVERGED
+                    active[i] = False
+                    live[lane] = False
+                    continue
                 if raw:   # core.loop.PlantSide.sense with raw sensors (core.plant.PlantSim.sample_accel)
                     xt = (xs[0, lane], xs[1, lane], xs[2, lane], xs[3, lane])
                     if k == 0:   # D_w of period 0
@@ -520,10 +529,13 @@ def _loop(k0, k1, n_steps, h, substeps, first_w, n_window, counts, delay, act_de
                 if exi[i] >= 0:   # the excitation (core.loop.command)
                     u = u + EXT[exi[i], k]
                 # stage: drive
+                bad = not abs(u) <= PLAUSIBLE_TORQUE   # the driver's bad_command (core.loop.PlantSide.act)
                 u = saturate(u, limit[i])
                 if act_delay > 0:   # core.sensing.Actuator.apply
                     qa[i, k % (act_delay + 1)] = u
                     u = qa[i, (k - act_delay) % (act_delay + 1)] if k >= act_delay else 0.0
+                if bad:
+                    u = 0.0   # in fault: zero torque acts
                 # stage: plant (row k's true tau_d in the window, the fall check, then RK4)
                 # D_w of this period from its own draw z, as core.plant.PlantSim._draw_D_w
                 D_w = D_w_of(D_w_mean[i], D_w_sd[i], Nw[i, k - k0]) if D_w_random[i] else D_w_mean[i]
@@ -550,8 +562,9 @@ def _loop(k0, k1, n_steps, h, substeps, first_w, n_window, counts, delay, act_de
                             if math.isfinite(v):
                                 acc[i, 2 * j + 8] += v * v
                                 acc[i, 2 * j + 9] += 1.0
-                if abs(xt[1]) > fall[i]:
+                if not abs(xt[1]) <= fall[i] or bad:   # a fall (theta_b not a number too), or a refused command
                     t_fall[i] = t
+                    failure[i] = 1 if not abs(xt[1]) <= fall[i] else 2   # core.trajectory.FALL, BAD_COMMAND
                     active[i] = False
                     live[lane] = False
                     continue

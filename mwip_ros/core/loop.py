@@ -35,13 +35,15 @@ from collections import deque
 from dataclasses import dataclass
 from typing import Optional, Tuple
 
-from .plant import Plant, PlantConfig, make_plant, saturate
+from .laws import LawError
+from .plant import Plant, PlantConfig, finite_state, make_plant, saturate
 from .raw_sensors import RawSensors
-from .safety import DriverStateMachine
+from .safety import PLAUSIBLE_TORQUE, DriverStateMachine
+from .trajectory import BAD_COMMAND, DIVERGED, FAILURES, FALL
 from .sensing import Actuator, Sensors
 
 __all__ = ["Stage", "STAGES", "STAGE_NAMES", "PLANT_NODE", "Answer", "answering", "loop_nodes", "PlantSide",
-           "Period", "command"]
+           "Period", "command", "fall_text"]
 
 PLANT_NODE = "plant_sim"
 
@@ -120,8 +122,9 @@ class PlantSide:
             self.raw_queue = deque(maxlen=sc.delay_periods + 1)
         self.sensors = Sensors.for_plant(sc, cfg.seed) if sc.measuring and self.raw is None else None
         self.actuator = Actuator(sc.actuator_delay_periods) if sc.actuator_delay_periods else None
-        # the driver's state machine (docs/theory.md 6.8): disabled or faulted, the torque that acts is zero
-        self.safety = DriverStateMachine(require_enable=cfg.require_enable)
+        # the driver's state machine (docs/theory.md 6.8): disabled or faulted, the torque that acts is zero; a
+        # command that is not a number or beyond PLAUSIBLE_TORQUE is a ``bad_command`` fault (the node's own limit)
+        self.safety = DriverStateMachine(require_enable=cfg.require_enable, max_command=PLAUSIBLE_TORQUE)
         self.enabled = self.safety.enabled   # the bridge over the period :meth:`act` decided (closed: enabled)
 
     def sense(self):
@@ -135,7 +138,9 @@ class PlantSide:
 
     def act(self, u_cmd: float, extra=(0.0, 0.0)):
         """Stage ``drive``: the torque acting over [t_k, t_k+1) for the command ``u_cmd``, and the true tau_d
-        at t_k with it (what row k records)."""
+        at t_k with it (what row k records).  A command that is not a finite number, or is implausible, faults the
+        driver (``bad_command``, before the torque limit, which would clip NaN to a limit): zero torque acts."""
+        self.safety.check_command(self.plant.t, u_cmd)
         u = saturate(u_cmd, self.cfg.torque_limit)
         if self.actuator is not None:
             u = self.actuator.apply(u)
@@ -155,37 +160,68 @@ class Period:
     def __init__(self, side: PlantSide, observer, law, estimator=None, excitation=None):
         self.side, self.observer, self.law, self.estimator = side, observer, law, estimator
         self.excitation = excitation
+        self.failure = None   # (t, one line, cause: a FAILURES name) once the run has failed
         if (side.raw is None) != (estimator is None):
             raise ValueError("a raw plant needs a state estimator, and only a raw plant has one")
 
     def decide(self, measured, u_m, k: int = 0):
         """Stages ``estimator`` (the identity when the measurement is a state), ``observer`` and ``law`` (with the
         excitation of period ``k`` added, :func:`command`): (u_k, tau_hat_k, the law's internals, the state the
-        loop believes)."""
+        loop believes).  A law that raises is a :class:`~.laws.LawError` (the law, t_k, its error)."""
         x_m = measured if self.estimator is None else self.estimator.step(measured)
         tau_hat = self.observer.update(x_m, u_m)
-        u_law, internals = command(self.law, x_m, tau_hat, self.excitation, k)
+        try:
+            u_law, internals = command(self.law, x_m, tau_hat, self.excitation, k)
+        except Exception as exc:   # noqa: BLE001 - a law's own error (a plug-in's bug), named as the law's
+            raise LawError.of(self.law.name, k * self.side.cfg.h, exc) from exc
         return u_law, tau_hat, internals, x_m
 
     def run(self, table) -> bool:
         """Period k up to the integration: sense, decide, act, and row k into ``table`` (true state, the torque
-        that acts, tau_hat, the true tau_d, internals; raw: the sample and the estimate).  True when the robot
-        has fallen (the period ends there); else :meth:`advance` integrates it."""
+        that acts, tau_hat, the true tau_d, internals; raw: the sample and the estimate).  True when the run fails
+        (:attr:`failure` says when and why; the period ends there): the state is not a number (diverged: no row),
+        the robot has fallen, or the law's command was refused; else :meth:`advance` integrates it."""
         side = self.side
-        measured, u_m = side.sense()
         p = side.plant
+        if not finite_state(p.x):   # diverged: the state is not a number (no row: nothing to sense or record)
+            self.failure = (p.t, fall_text(p.t, p.x, p.cfg.fall_angle), FAILURES[DIVERGED])
+            return True
+        measured, u_m = side.sense()
         u_law, tau_hat, internals, x_m = self.decide(measured, u_m, p.k)
         u, tau_d = side.act(u_law)
         table.append(p.t, p.x, u, tau_hat, tau_d, internals, (*measured, *x_m) if self.estimator else ())
         self.u = u
-        return p.fallen
+        if p.fallen:
+            self.failure = (p.t, fall_text(p.t, p.x, p.cfg.fall_angle), FAILURES[FALL])
+        elif side.safety.faulted and side.safety.fault_reason == "bad_command":
+            why = side.safety.fault_detail
+            self.failure = (p.t, f"FAILED at t = {p.t:.3f} s: the law's command is refused ({why})",
+                            FAILURES[BAD_COMMAND])
+        return self.failure is not None
 
-    def advance(self, table=None) -> None:
-        """Stage ``plant``: integrate period k; ``table`` gets the torque that acted over it (motor model on)."""
-        self.side.advance(self.u)
+    def advance(self, table=None) -> bool:
+        """Stage ``plant``: integrate period k; ``table`` gets the torque that acted over it (motor model on).  True
+        when the model's arithmetic fails on the way (diverged at t_k+1, :attr:`failure`); a state that comes out
+        not a number is the next :meth:`run`'s failure."""
+        p = self.side.plant
+        try:
+            self.side.advance(self.u)
+        except (ArithmeticError, ValueError) as exc:   # e.g. sin of an infinite angle in eq. (1): t_k+1 not reached
+            t = p.t + p.cfg.h
+            self.failure = (t, f"FAILED at t = {t:.3f} s: the state diverged (the model's arithmetic failed: {exc})",
+                            FAILURES[DIVERGED])
+            return True
         if table is not None:
-            p = self.side.plant
             table.set_drive(p.u_prev, p.saturation)
+        return False
+
+
+def fall_text(t: float, x, fall_angle: float) -> str:
+    """The line of a failed state ``x`` at ``t``: a fall, 'FELL at t = ...: |theta_b| = ... > fall_angle ...', or a
+    state that diverged (a component not a finite number)."""
+    if not finite_state(x):
+        return f"FAILED at t = {t:.3f} s: the state diverged (not a finite number: {tuple(float(v) for v in x)})"
+    return f"FELL at t = {t:.3f} s: |theta_b| = {abs(x[1]):.4f} > fall_angle {fall_angle:g}"
 
 
 def command(law, x, tau_hat, excitation, k: int):

@@ -1,7 +1,8 @@
 """The metrics of a run (docs/theory.md, what a correct implementation shows), from its columns.
 
 ``WINDOW`` is the reporting window the paper's comparison uses, t in [5, 10] s.  ``upright`` means the
-run never fell (|theta_b| <= fall_angle over the whole run, :func:`fall_time`); whether the run lasted
+run never fell (|theta_b| <= fall_angle over the whole run, :func:`fall_time`, a theta_b that is not a finite
+number being a fall, and no failure in the run's own record, ``t_fall``); whether the run lasted
 to the window's end is ``covers_window``, a separate question (:func:`fit_window` picks a window that fits
 runs shorter than the requested one).
 """
@@ -62,9 +63,10 @@ def json_safe(obj):
 
 
 def fall_time(t, theta_b, fall_angle: float) -> Optional[float]:
-    """The first t with |theta_b| > ``fall_angle`` (NaN rows are no fall); None when there is none."""
+    """The first t with |theta_b| > ``fall_angle`` or theta_b not a finite number (a diverged state is never
+    upright); None when there is none."""
     with np.errstate(invalid="ignore"):
-        over = np.flatnonzero(np.abs(np.asarray(theta_b, dtype=float)) > fall_angle)
+        over = np.flatnonzero(~(np.abs(np.asarray(theta_b, dtype=float)) <= fall_angle))
     return float(np.asarray(t, dtype=float)[over[0]]) if len(over) else None
 
 

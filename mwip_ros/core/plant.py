@@ -22,7 +22,7 @@ from .raw_sensors import RawSensorConfig
 from .sensing import NOISE_BLOCK, SensingConfig
 
 __all__ = ["Plant", "PLANTS", "make_plant", "PlantConfig", "PlantSim", "RK4Plant", "stage_torques", "rk4_period",
-           "rk4_driven", "NO_MOTOR", "saturate", "D_w_of", "gated_drive"]
+           "rk4_driven", "NO_MOTOR", "saturate", "D_w_of", "gated_drive", "finite_state"]
 
 
 @dataclass(frozen=True)
@@ -54,15 +54,21 @@ class PlantConfig:
         return (mc.torque_constant, mc.resistance, mc.voltage_limit, mc.current_limit) if mc.enabled else NO_MOTOR
 
 
+def finite_state(x) -> bool:
+    """Every component of the state ``x`` is a finite number (a run whose state is not has diverged)."""
+    return all(math.isfinite(v) for v in x)
+
+
 def D_w_of(mean: float, sd: float, z: float) -> float:
     """The wheel friction of one period from its standard normal draw ``z``: Gaussian, clipped at 0 (table II)."""
     return max(0.0, mean + sd * z)
 
 
 def saturate(u: float, limit: float) -> float:
-    """Apply ``torque_limit`` (0 = no limit)."""
+    """Apply ``torque_limit`` (0 = no limit).  NaN stays NaN (``max(-limit, min(limit, nan))`` gave +limit: a command
+    that is not a number read as full torque); the driver refuses it (core.loop.PlantSide.act)."""
     if limit > 0.0:
-        return max(-limit, min(limit, u))
+        return -limit if u < -limit else (limit if u > limit else u)
     return u
 
 
@@ -124,7 +130,8 @@ class PlantSim:
 
     @property
     def fallen(self) -> bool:
-        return abs(self.x[1]) > self.cfg.fall_angle
+        """|theta_b| beyond the fall angle, or the state not a number (diverged: NaN or infinite; never upright)."""
+        return not (abs(self.x[1]) <= self.cfg.fall_angle and finite_state(self.x))
 
     def _draw_D_w(self) -> float:
         c = self.cfg

@@ -64,7 +64,7 @@ from dataclasses import dataclass
 from typing import Deque, Dict, Optional, Tuple
 
 __all__ = ["DISABLED", "ENABLED", "FAULT", "STATES", "FAULT_REASONS", "LEVEL_INPUTS", "EVENTS", "Transition",
-           "Answer", "DriverStateMachine", "Watchdog", "HISTORY"]
+           "Answer", "DriverStateMachine", "Watchdog", "HISTORY", "PLAUSIBLE_TORQUE"]
 
 DISABLED, ENABLED, FAULT = "disabled", "enabled", "fault"
 STATES = (DISABLED, ENABLED, FAULT)
@@ -76,6 +76,10 @@ _HELD_TEXT = {"emergency_stop": ("the emergency stop is still asserted",
               "estimator_unhealthy": ("the state estimator still reports ERROR",
                                       "wait for its status to return to OK or WARN")}
 EVENTS = ("enable", "disable", "reset") + FAULT_REASONS   # the ``reason`` a Transition can carry
+# A command beyond this [N m] is implausible (a ``bad_command``): far beyond any drive of this robot (the paper's
+# run stays below 150 N m) and far inside what the model's arithmetic survives (1e300 overflows eq. 1 in a period).
+# The plant node's driver refuses such a message, the offline loop's driver the law's command (core.loop).
+PLAUSIBLE_TORQUE = 1e6
 HISTORY = 1000     # transitions kept by a machine (older ones drop: a node that runs for days stays bounded)
 
 # /diagnostics levels (diagnostic_msgs/DiagnosticStatus): OK, WARN, ERROR

@@ -80,7 +80,10 @@ class ClosedLoop:
 
 
 def simulate(loop: ClosedLoop, label: str = "", progress: Optional[Callable[[float], None]] = None) -> Trajectory:
-    """Run the closed loop; stops early (``fallen``) when |theta_b| passes the fall angle."""
+    """Run the closed loop; stops early (``fallen``) when it fails: |theta_b| passes the fall angle, the state is not
+    a finite number (diverged), or the law's command is (a ``bad_command``: NaN, infinite, beyond
+    :data:`.safety.PLAUSIBLE_TORQUE`).  The trajectory's ``record`` then holds ``t_fall``, ``fall_text`` (the
+    line saying when and why) and ``failure`` (the cause, a :data:`.trajectory.FAILURES` name)."""
     pc = loop.plant
     h = pc.h
     n_steps = int(round(loop.duration_s / h))
@@ -91,15 +94,13 @@ def simulate(loop: ClosedLoop, label: str = "", progress: Optional[Callable[[flo
     # the true state: the metrics judge it
     table = TrajectoryTable(internals=True, raw=pc.raw is not None, drive=pc.motor.enabled or pc.raw is not None,
                             excitation=excitation is not None)
-    fallen = False
     every = max(1, n_steps // 10)
     for k in range(n_steps + 1):
-        if period.run(table):
-            fallen = True
+        if period.run(table) or k == n_steps or period.advance(table):
             break
-        if k == n_steps:
-            break
-        period.advance(table)
         if progress is not None and k % every == 0:
             progress(k / n_steps)
-    return table.trajectory(label or loop.name, fallen, h)
+    run = table.trajectory(label or loop.name, period.failure is not None, h)
+    if period.failure is not None:   # the run's own record of its end (as a bag's plant log): when and why
+        run.record.update(t_fall=period.failure[0], fall_text=period.failure[1], failure=period.failure[2])
+    return run

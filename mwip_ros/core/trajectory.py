@@ -18,7 +18,7 @@ from typing import Any, Dict, Iterable, Sequence, Tuple
 import numpy as np
 
 __all__ = ["TRAJECTORY_COLUMNS", "INTERNAL_COLUMNS", "COLUMNS", "RAW_COLUMNS", "ESTIMATE_COLUMNS", "DRIVE_COLUMNS",
-           "EXCITATION_COLUMNS", "ALL_COLUMNS",
+           "EXCITATION_COLUMNS", "ALL_COLUMNS", "FAILURES", "FALL", "BAD_COMMAND", "DIVERGED", "FAILURE_COLUMNS",
            "Trajectory", "TrajectoryTable",
            "join_estimates", "stamp_key"]
 
@@ -37,6 +37,13 @@ EXCITATION_COLUMNS = ["excitation"]   # the controller's excitation, included in
 ALL_COLUMNS = COLUMNS + RAW_COLUMNS + ESTIMATE_COLUMNS + DRIVE_COLUMNS + EXCITATION_COLUMNS
 _NAN2 = (math.nan, math.nan)
 
+# why a run failed (a Trajectory's ``record['failure']``; a batch's ``failure`` codes are the index here, 0: it did
+# not): the robot fell (|theta_b| beyond the fall angle), the law's command was refused (not a finite number, or
+# implausible: the driver's ``bad_command``), or the state diverged (not a finite number after a period)
+FAILURES = ("", "fall", "bad_command", "diverged")
+FALL, BAD_COMMAND, DIVERGED = 1, 2, 3
+FAILURE_COLUMNS = ("t_fall", "failure")   # a failed run's CSV (mwip_sim --csv): when, and why (a FAILURES index)
+
 
 def stamp_key(t: float) -> int:
     """The integer nanosecond stamp of a time in seconds: the key estimates join on."""
@@ -48,8 +55,8 @@ class Trajectory:
     """A finished run: ``columns`` maps a column name to its array (one entry per period).
 
     ``record`` holds what the run's source says of it beside the table (a bag's plant log: the fall,
-    the configured duration, the torque limit; see :func:`mwip_ros.runs.read_bag_run`), empty when
-    it says nothing."""
+    the configured duration, the torque limit; see :func:`mwip_ros.runs.read_bag_run`; a failed offline run:
+    ``t_fall``, ``fall_text`` and ``failure``, a :data:`FAILURES` name), empty when it says nothing."""
 
     label: str
     columns: Dict[str, np.ndarray]

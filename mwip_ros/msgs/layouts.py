@@ -32,6 +32,7 @@ import math
 from typing import Dict, Sequence, Tuple
 
 from mwip_ros.core.model import State
+from mwip_ros.core.safety import PLAUSIBLE_TORQUE
 
 from . import cdr
 from .errors import BadMessage, CdrError
@@ -53,7 +54,7 @@ LIMITS = {
     "theta_b": math.pi,        # body pitch [rad]: beyond it the body is upside down
     "theta_w": 1e9,            # wheel angle [rad]: 250,000 km of travel
     "rate": 1e3,               # theta_w', theta_b' [rad/s]
-    "torque": 1e6,             # u, tau_hat, tau_d, tau_ext [N m]
+    "torque": PLAUSIBLE_TORQUE,   # u, tau_hat, tau_d, tau_ext [N m] (core.safety: the driver's own limit)
 }
 
 # The raw sensors' plausible readings (theory.md 6.4), far beyond a balancing robot (the paper's run: |gyro| < 5 rad/s,

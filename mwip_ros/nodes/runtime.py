@@ -196,6 +196,11 @@ def run_node(factory: Callable[..., object], argv: Optional[Sequence[str]] = Non
         check_command_line(argv, name)  # before rcl parses them: its parser would end the process with a traceback
     except ParamError as exc:
         return refuse(str(exc))
+    from mwip_ros.core import laws
+    try:
+        laws.check_plugins()   # a law plug-in ($MWIP_ROS_LAWS) that failed to import: its one line
+    except laws.PluginError as exc:
+        return refuse(str(exc))
     from mwip_ros.nodes import rclpy_compat
     # rclpy's classes, patched before any node binds their callbacks: a parameter request rclpy cannot read is
     # refused, naming it, and a /clock it cannot use is rejected, neither raised in the executor

@@ -27,7 +27,7 @@ from typing import Any, Dict, Iterator, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from mwip_ros.core import budget
+from mwip_ros.core import budget, laws
 from mwip_ros.core.budget import window_samples
 from mwip_ros.sweep.workers import signals_held, stop_resource_tracker, worker_init
 
@@ -61,6 +61,7 @@ class ChunkResult:
     metrics: Dict[str, np.ndarray]
     steps: int
     seconds: float = 0.0   # wall time the chunk took where it ran (a worker): the law's cost, for the time left
+    failure: Optional[np.ndarray] = None   # why each failed: a core.trajectory.FAILURES code (0: it did not)
 
 
 def chunk_size_for(controller: str, chunk_size: int = DEFAULT_CHUNK) -> int:
@@ -151,7 +152,7 @@ def _run_chunk(chunk: Chunk, batch_bytes: Optional[int]) -> ChunkResult:
                v["sensors.delay_periods"], v["actuator.delay_periods"],   # PlantConfig's h, substeps, sensing
                v.get("sensors.model"), v.get("motor.enabled"), v.get("excitation.type"), v.get("method"))   # stages
         groups.setdefault(key, []).append(i)
-    upright, t_fall = np.zeros(n, dtype=bool), np.full(n, np.nan)
+    upright, t_fall, failure = np.zeros(n, dtype=bool), np.full(n, np.nan), np.zeros(n, dtype=np.int64)
     metrics: Dict[str, np.ndarray] = {}
     steps = 0
     for group in groups.values():
@@ -161,13 +162,17 @@ def _run_chunk(chunk: Chunk, batch_bytes: Optional[int]) -> ChunkResult:
             idx = group[start:start + size]
             loops = [P.closed_loop(values(chunk.overrides[i]), duration=chunk.duration_s, controller=chunk.controller)
                      for i in idx]
-            r = simulate_batch(loops, chunk.window)
+            try:
+                r = simulate_batch(loops, chunk.window)
+            except laws.LawError as exc:   # its scenario, as the sweep numbers them
+                raise exc.in_scenario(chunk.first + idx[exc.scenario] if exc.scenario is not None else None) \
+                    from None
             del loops
-            upright[idx], t_fall[idx] = r.upright, r.t_fall
+            upright[idx], t_fall[idx], failure[idx] = r.upright, r.t_fall, r.failure
             for k, v in r.metrics.items():
                 metrics.setdefault(k, np.full(n, np.nan))[idx] = v
             steps += r.steps
-    return ChunkResult(upright, t_fall, metrics, steps)
+    return ChunkResult(upright, t_fall, metrics, steps, failure)
 
 
 class Runner:

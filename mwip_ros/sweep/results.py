@@ -1,8 +1,9 @@
 """A sweep's outputs: ``results.csv`` (streamed), ``summary.json`` and ``summary.md``.
 
 ``results.csv`` has one row per scenario and law: ``scenario, seed, controller``, each varied
-parameter by its spec key holding the value used, then ``upright, t_fall`` and the metrics over
-the window (:data:`METRICS`; NaN where a run has no sample in the window).  Values are written
+parameter by its spec key holding the value used, then ``upright, t_fall, failure`` (why a run failed: ``fall``,
+``bad_command`` (the law's command not a finite number or beyond 1e6 N m), ``diverged``; empty when upright) and the
+metrics over the window (:data:`METRICS`; NaN where a run has no sample in the window).  Values are written
 with ``repr`` so a row reads back to the very floats that ran.  Rows are written and flushed as
 chunks finish, so an interrupted sweep leaves every finished row readable.
 
@@ -63,7 +64,7 @@ class ResultsWriter:
         self.path = path
         self.varied = list(varied)
         self.metrics = ALL_METRICS if extra else METRICS
-        self.header = ["scenario", "seed", "controller", *self.varied, "upright", "t_fall", *self.metrics]
+        self.header = ["scenario", "seed", "controller", *self.varied, "upright", "t_fall", "failure", *self.metrics]
         self._f = open(path, "w", newline="")
         self._w = csv.writer(self._f)
         self._w.writerow(self.header)
@@ -78,7 +79,7 @@ class ResultsWriter:
         for j in range(len(chunk)):
             i = chunk.first + j
             row = [i, scenarios.seeds[i], chunk.controller, *(scenarios.values[k][i] for k in self.varied),
-                   bool(result.upright[j]), float(result.t_fall[j]),
+                   bool(result.upright[j]), float(result.t_fall[j]), _failure(result, j),
                    *(float(result.metrics[m][j]) if m in result.metrics else math.nan
                      for m in self.metrics.values())]
             w.writerow([_fmt(v) for v in row])
@@ -88,6 +89,14 @@ class ResultsWriter:
 
     def close(self) -> None:
         self._f.close()
+
+
+def _failure(result, j: int) -> str:
+    """Why run ``j`` failed ('fall', 'bad_command', 'diverged': core.trajectory.FAILURES), '' when it did not."""
+    from mwip_ros.core.trajectory import FAILURES
+    f = getattr(result, "failure", None)
+    return FAILURES[int(f[j])] if f is not None else ("" if result.upright[j] or math.isnan(result.t_fall[j])
+                                                      else "fall")
 
 
 def laws(cols: Dict[str, list]) -> List[str]:
@@ -164,7 +173,7 @@ def _brief(exc) -> str:
 
 
 def _value(h: str, v: str):
-    if h == "controller":
+    if h in ("controller", "failure"):
         return v
     if h in ("scenario", "seed"):
         return int(v)
@@ -235,6 +244,7 @@ def summarize(cols: Dict[str, list], spec_info: dict) -> dict:
         sel = ctrl == c
         entry = {"runs": int(sel.sum()), "upright": int(upright[sel].sum()),
                  "upright_share": float(upright[sel].mean()) if sel.any() else math.nan,
+                 "failures": _failures(cols, sel),
                  "metrics_over": "upright runs",
                  "metrics": {m: _stats(np.array(cols[m], dtype=float)[sel & upright]) for m in _present(cols)}}
         if THETA0_KEY in cols:
@@ -243,6 +253,18 @@ def summarize(cols: Dict[str, list], spec_info: dict) -> dict:
         out["controllers"][c] = entry
     out["units"] = {m: UNITS[m] for m in _present(cols)}
     out["ratios"] = median_ratios(out["controllers"])
+    return out
+
+
+def _failures(cols: Dict[str, list], sel: np.ndarray) -> Dict[str, int]:
+    """How many runs of ``sel`` failed, by cause ('fall', 'bad_command', 'diverged'; a results.csv without the
+    ``failure`` column: the runs that fell, as 'fall')."""
+    if "failure" not in cols:
+        return {"fall": int(np.sum(sel & ~np.isnan(np.array(cols["t_fall"], dtype=float))))} if sel.any() else {}
+    out: Dict[str, int] = {}
+    for f in np.array(cols["failure"], dtype=object)[sel]:
+        if f:
+            out[f] = out.get(f, 0) + 1
     return out
 
 
@@ -283,7 +305,8 @@ def summary_markdown(doc: dict) -> str:
     head = ["law", "upright", *(f"{m} [{UNITS[m]}]" for m in shown)]
     lines += ["| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in head) + "|"]
     for c, e in doc["controllers"].items():
-        cells = [c, f"{e['upright']}/{e['runs']} ({100 * e['upright_share']:.1f} %)"]
+        other = ", ".join(f"{n} {why}" for why, n in e.get("failures", {}).items() if why != "fall")
+        cells = [c, f"{e['upright']}/{e['runs']} ({100 * e['upright_share']:.1f} %{'; ' + other if other else ''})"]
         for m in shown:
             s = e["metrics"][m]
             cells.append(" / ".join(_num(s[k]) for k in ("median", "p90", "max")))

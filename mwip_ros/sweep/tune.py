@@ -198,7 +198,7 @@ class Objective:
 
     def admissibility(self, x) -> float:
         """< 0 when a candidate breaks the law's stability condition (by that much: for DSC and DSCNDO
-        Theorem 2, core.laws.Law.stability_margin), else 0."""
+        Theorem 2, core.laws.Law.stability_margin), else 0; -INADMISSIBLE when the margin is NaN."""
         cls = laws.get(self.law_name)
         v = dict(self.spec.base_values, **apply(self.knobs, x, self.spec.base_values))
         nominal, h = P.physical(v, "nominal"), P.period(v)
@@ -206,7 +206,10 @@ class Objective:
             params = cls.design(v, nominal, h)
         except ValueError:
             return 0.0   # no law for these values: the simulation says so, as for any candidate
-        return min(0.0, cls.stability_margin(nominal, params, P.observer_gain(v), observer=cls.observer))
+        margin = cls.stability_margin(nominal, params, P.observer_gain(v), observer=cls.observer)
+        if math.isnan(margin):   # no verdict from NaN: a condition that cannot be evaluated is not satisfied
+            return -INADMISSIBLE
+        return min(0.0, margin)
 
     def _simulate(self, xs) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(upright, theta_b RMS, u RMS), each (candidates, scenarios), of every candidate on every scenario."""

@@ -143,3 +143,12 @@ def test_a_log_with_every_row_twice_gives_the_logs_own_result(chirp_csv, tmp_pat
     assert f"({n} repeated row(s) counted once)" in text
     m_b = [ln for ln in once.splitlines() if ln.strip().startswith("m_b")]
     assert len(m_b) == 1 and m_b[0] in text.splitlines()
+
+
+def test_the_g_b_check_gives_no_verdict_from_nan():
+    """'within' / 'OUTSIDE' its 95 % interval is a verdict: not from a NaN difference or interval (issue 30)."""
+    from mwip_ros.cli.identify import g_b_verdict
+    from mwip_ros.core.identify import Estimate
+    assert g_b_verdict(Estimate(0.1, 1.0)) == "within" and g_b_verdict(Estimate(5.0, 1.0)) == "OUTSIDE"
+    for chk in (Estimate(math.nan, 1.0), Estimate(0.1, math.nan), Estimate(0.1, math.inf)):
+        assert g_b_verdict(chk) == "with no verdict (not a number)", chk

@@ -43,7 +43,7 @@ def test_a_sweep_writes_rows_summary_and_figures(tmp_path):
         head = next(csv.reader(f))
     assert head == ["scenario", "seed", "controller", "plant_sim.actual.m_b", "plant_sim.initial.theta_b",
                     "plant_sim.torque_limit", "upright",
-                    "t_fall", "theta_b_p2p", "theta_b_rms", "max_abs_theta_b", "u_rms", "tau_hat1_err_rms",
+                    "t_fall", "failure", "theta_b_p2p", "theta_b_rms", "max_abs_theta_b", "u_rms", "tau_hat1_err_rms",
                     "tau_hat2_err_rms"]
     cols = read_results(out / "results.csv")
     assert len(cols["scenario"]) == 5 * 6 * 2

@@ -1,9 +1,11 @@
 """Every start-up mistake ends with exit 2 and one line naming the key or the file, never a traceback; every
 node answers --help from the parameter schema without starting."""
 import importlib
+import os
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import pytest
 
@@ -72,6 +74,25 @@ def test_start_up_mistakes_exit_2_with_one_line(tmp_path, case):
     assert "Traceback" not in out and len(out.strip().splitlines()) == 1, out
     for w in words:
         assert w in out, (w, out)
+
+
+@pytest.mark.graph
+@pytest.mark.parametrize("plugins, words", [
+    ("no_such_law_module", ("cannot import the law module 'no_such_law_module'", "No module named")),
+    ("broken_plugin", ("the law module 'broken_plugin' raised while importing", "broken_plugin's own import error"))])
+def test_a_law_plugin_that_fails_to_import_stops_each_node_in_one_line(tmp_path, plugins, words):
+    """MWIP_ROS_LAWS naming a module that cannot be imported, or raises while importing: exit 2 at start-up."""
+    test_dir = str(Path(__file__).resolve().parents[1])
+    with Graph(tmp_path) as g:
+        g.env.update(MWIP_ROS_LAWS=plugins, PYTHONPATH=os.pathsep.join(
+            p for p in (test_dir, g.env.get("PYTHONPATH", "")) if p))
+        procs = [g.start(node) for node in ("dscndo_controller", "plant_sim")]
+        codes = [p.wait(60) for p in procs]
+    for p, code in zip(procs, codes):
+        out = p.output()
+        assert code == 2, out
+        assert "Traceback" not in out and len(out.strip().splitlines()) == 1, out
+        assert f"MWIP_ROS_LAWS='{plugins}'" in out and all(w in out for w in words), out
 
 
 @pytest.mark.graph

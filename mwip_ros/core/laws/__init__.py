@@ -13,7 +13,11 @@ the observer term).
   values of the node's ``law`` parameter, :func:`variant` maps (family, use_observer) to a law.
 * Plug-ins: the environment variable ``MWIP_ROS_LAWS`` (``module[:module...]``, importable
   module names) is read when this package is first imported; each module registers its laws
-  with :func:`register`.  So a process started with it (a node, ``mwip_sim``) knows them.
+  with :func:`register`.  So a process started with it (a node, ``mwip_sim``) knows them.  A module
+  that cannot be imported, or raises while importing, is kept as a :class:`PluginError` that
+  :func:`check_plugins` raises: the tools and the nodes stop at start-up with its one line, exit 2.
+* A law's step that raises is a :class:`LawError` in the loops that run it (:mod:`..loop`, :mod:`..batch`):
+  the law, when, the error, and in a batch the scenario.
 
 Today's laws: ``dsc`` and ``dscndo`` (:mod:`.dsc`, eq. 16-28 and 19-21), ``lqr`` and
 ``lqr_ndo`` (:mod:`.lqr`, the baseline), ``smc`` and ``smc_ndo`` (:mod:`.smc`, sliding-mode control),
@@ -27,7 +31,7 @@ import os
 from typing import Any, Dict, List, Mapping, NamedTuple, Optional, Tuple
 
 __all__ = ["Law", "LawParam", "register", "get", "names", "families", "variant", "lookup", "PLUGINS_ENV",
-           "load_plugins", "unavailable", "instances"]
+           "load_plugins", "unavailable", "instances", "check_plugins", "LawError", "PluginError"]
 
 PLUGINS_ENV = "MWIP_ROS_LAWS"
 
@@ -178,6 +182,32 @@ class Law:
         return []
 
 
+class LawError(RuntimeError):
+    """A law's step raised: names the law, when (``t``, None: unknown), the error (its type and text) and, in a
+    batch or a sweep, the scenario (None: unknown).  Plain arguments, so it crosses processes (a sweep's workers)."""
+
+    def __init__(self, law: str, t: Optional[float], error: str, scenario: Optional[int] = None):
+        super().__init__(law, t, error, scenario)
+        self.law, self.t, self.error, self.scenario = law, t, error, scenario
+
+    @classmethod
+    def of(cls, law: str, t: Optional[float], exc: BaseException) -> "LawError":
+        return cls(law, t, f"{type(exc).__name__}: {exc}")
+
+    def in_scenario(self, scenario: int) -> "LawError":
+        return LawError(self.law, self.t, self.error, scenario)
+
+    def __str__(self) -> str:
+        where = [f"at t = {self.t:.3f} s" if self.t is not None else "",
+                 f"in scenario {self.scenario}" if self.scenario is not None else ""]
+        return f"the law {self.law!r} raised {' '.join(w for w in where if w)}: {self.error}".replace("  ", " ")
+
+
+class PluginError(ImportError):
+    """A law plug-in module (``$MWIP_ROS_LAWS``) that cannot be imported or raised while importing: one line naming
+    the module and the error."""
+
+
 _LAWS: Dict[str, type] = {}
 
 
@@ -213,7 +243,8 @@ def get(name: str) -> type:
     try:
         return _LAWS[name]
     except KeyError:
-        raise KeyError(f"unknown law {name!r}; known: {', '.join(names())}") from None
+        why = f" ({_PLUGIN_FAILURE})" if _PLUGIN_FAILURE is not None else ""
+        raise KeyError(f"unknown law {name!r}; known: {', '.join(names())}{why}") from None
 
 
 def names() -> Tuple[str, ...]:
@@ -273,8 +304,11 @@ def load_plugins(spec: Optional[str] = None) -> List[str]:
         try:
             importlib.import_module(mod)
         except ImportError as exc:
-            raise ImportError(f"{PLUGINS_ENV}={spec!r}: cannot import the law module {mod!r} ({exc}); name "
+            raise PluginError(f"{PLUGINS_ENV}={spec!r}: cannot import the law module {mod!r} ({exc}); name "
                               f"importable modules (on PYTHONPATH), separated by ':'") from exc
+        except Exception as exc:   # noqa: BLE001 - whatever a plug-in raises while importing, said in one line
+            raise PluginError(f"{PLUGINS_ENV}={spec!r}: the law module {mod!r} raised while importing: "
+                              f"{type(exc).__name__}: {exc}") from exc
     return mods
 
 
@@ -286,5 +320,18 @@ def _builtins() -> None:
     register(mpc.MpcLaw, with_observer="mpc_ndo", title="MPC+NDO")  # model predictive control (docs/theory.md 6.6)
 
 
+def check_plugins() -> None:
+    """Raise the :class:`PluginError` of the plug-ins of ``$MWIP_ROS_LAWS`` imported with this package, if any: the
+    tools (``mwip_sim``, ``mwip_sweep``, ...: ``cli.interrupts.run_main``) and the nodes (``run_node``) call it at
+    start-up and stop with its one line, exit 2.  Importing this package does not raise it (a tool's module
+    imports the package before its ``main`` could say anything in one line)."""
+    if _PLUGIN_FAILURE is not None:
+        raise _PLUGIN_FAILURE
+
+
 _builtins()
-load_plugins()
+_PLUGIN_FAILURE: Optional[PluginError] = None
+try:
+    load_plugins()
+except PluginError as _exc:
+    _PLUGIN_FAILURE = _exc
