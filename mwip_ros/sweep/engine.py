@@ -172,7 +172,7 @@ def _run_chunk(chunk: Chunk, batch_bytes: Optional[int]) -> ChunkResult:
             for k, v in r.metrics.items():
                 metrics.setdefault(k, np.full(n, np.nan))[idx] = v
             steps += r.steps
-    return ChunkResult(upright, t_fall, metrics, steps, failure)
+    return ChunkResult(upright, t_fall, metrics, steps, failure=failure)
 
 
 class Runner:
