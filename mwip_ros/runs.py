@@ -31,7 +31,7 @@ __all__ = ["write_csv", "read_csv", "read_bag_run", "read_bag_runs", "load_run",
            "PLANT_NODE", "MAX_ROWS", "MAX_CSV_BYTES", "MAX_BAG_BYTES", "check_size", "check_times", "RUN_COLUMNS"]
 
 PLANT_NODE = "plant_sim"
-# what plant_sim logs (mwip_ros.nodes.plant_sim): its start (the configured duration), a fall, an interruption
+# what plant_sim logs (mwip_ros.nodes.loop.plant_sim): its start (the configured duration), a fall, an interruption
 _FALLEN = re.compile(r"FALLEN at t = ([-+0-9.eE]+) s(?:: \|theta_b\| = [-+0-9.eE]+ > fall_angle ([-+0-9.eE]+))?")
 _START = re.compile(r"(?:lockstep|realtime) plant: h = .*?, (?:([-+0-9.eE]+) s|until stopped), seed")
 _INTERRUPTED = re.compile(r"interrupted at t = ([-+0-9.eE]+) s of ([-+0-9.eE]+) s")

@@ -24,7 +24,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from std_msgs.msg import Float64
 
 from mwip_ros.msgs import cdr
-from mwip_ros.nodes.runtime import EXIT_ERROR, GracefulNodeMixin, run_node
+from mwip_ros.nodes.runtime.process import EXIT_ERROR, GracefulNodeMixin, run_node
 
 QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
                  durability=DurabilityPolicy.VOLATILE)

@@ -17,7 +17,6 @@ import time
 from pathlib import Path
 from typing import Dict, List, Optional
 
-from mwip_ros.nodes.entry import NODES as NODE_ENTRIES
 
 REPO = Path(__file__).resolve().parent.parent
 PARAMS = REPO / "config" / "paper.yaml"
@@ -218,12 +217,12 @@ class Graph:
 
     def start(self, node: str, *ros_args: str, params=PARAMS, label: Optional[str] = None,
               module: Optional[str] = None, cmd: Optional[List[str]] = None, as_given: bool = False) -> Proc:
-        """Start ``python -m mwip_ros.nodes <node>`` (as its console script starts it: mwip_ros.nodes.entry; or
+        """Start ``python -m mwip_ros.nodes <node>`` (as its console script starts it: mwip_ros.nodes.runtime.entry; or
         ``python -m module``, or the command ``cmd``) --ros-args ... (each ``-p`` rule for that node, see
         :func:`node_rules`, unless ``as_given``).  ``params``: a parameter file, several (a base file and
         overlays, one ``--params-file`` each, in order) or None."""
         label = label or node
-        default = ["mwip_ros.nodes", node] if node in NODE_ENTRIES else [f"mwip_ros.nodes.{node}"]
+        default = ["mwip_ros.nodes", node]
         cmd = list(cmd or [sys.executable, "-m", *([module] if module else default)]) + ["--ros-args"]
         for f in param_files(params):
             cmd += ["--params-file", str(f)]

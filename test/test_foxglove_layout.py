@@ -157,7 +157,7 @@ def test_the_layout_shows_what_the_docs_say(doc):
     """The robot in frame world; theta_b, theta_w', u, each tau_hat beside the true tau_d and the estimated
     pitch beside the true one (layouts.py:
     joint_states holds [wheel, body_pitch]; torque.x / torque.y are components 1 / 2)."""
-    from mwip_ros.nodes.robot_markers import FRAME
+    from mwip_ros.nodes.tools.robot_markers import FRAME
     three_d = [cfg for panel, cfg in doc["configById"].items() if panel.startswith("3D!")]
     assert len(three_d) == 1 and three_d[0]["followTf"] == FRAME and three_d[0]["topics"]["/robot_markers"]["visible"]
     plotted = {tuple(s["value"] for s in cfg["paths"]) for panel, cfg in doc["configById"].items()

@@ -186,7 +186,7 @@ def test_bag_metadata_is_bounded(tmp_path):
 
 @pytest.mark.unit
 def test_a_p_rule_with_an_alias_is_refused():
-    from mwip_ros.nodes.params import parse_rule
+    from mwip_ros.nodes.runtime.params import parse_rule
     with pytest.raises(P.ParamError, match="aliases"):
         parse_rule("seed:=[&a [1], *a]")
 
@@ -216,5 +216,5 @@ def test_mwip_sweep_refuses_a_spec_bomb_and_a_base_bomb(tmp_path):
 def test_plant_sim_refuses_a_bomb_before_rcl_parses_it(tmp_path):
     bomb = param_bomb(tmp_path / "bomb.yaml")
     assert bomb.stat().st_size < 900
-    assert_refused(measured("mwip_ros.nodes.plant_sim", ["--ros-args", "--params-file", bomb], node=True),
+    assert_refused(measured("mwip_ros.nodes.loop.plant_sim", ["--ros-args", "--params-file", bomb], node=True),
                    "plant_sim", "bomb.yaml", "YAML aliases")

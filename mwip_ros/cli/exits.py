@@ -1,5 +1,5 @@
 """The exit codes of the command-line tools, one list for all of them (the nodes' are
-:mod:`mwip_ros.nodes.runtime`'s, the same numbers; ``scripts/run_experiment.sh`` follows them too).
+:mod:`mwip_ros.nodes.runtime.process`'s, the same numbers; ``scripts/run_experiment.sh`` follows them too).
 
 ====  =========================================================================================
 0     done (a simulation: every run stayed upright)

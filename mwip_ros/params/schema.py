@@ -35,7 +35,7 @@ NOISE_SIGMAS = 8.0
 
 # --- ranges and choices, as data: ParamSpec(**_positive()) ----------------------------------------
 # Each helper gives ParamSpec fields; the start-up and run-time check (ParamSpec.check), the ROS parameter
-# descriptor (nodes.params) and the --help text (nodes.params.range_text) are all derived from them.
+# descriptor (nodes.runtime.params) and the --help text (nodes.runtime.params.range_text) are all derived from them.
 
 def _bounds(lo: float, hi: float, lo_open: bool = False) -> Dict[str, Any]:
     """lo < v <= hi (``lo_open``) or lo <= v <= hi."""

@@ -8,7 +8,9 @@ import pytest
 
 from mwip_ros.core import batch, compiled, loop
 from mwip_ros.core.plant import PLANTS, Plant, PlantSim, make_plant
-from mwip_ros.nodes import lockstep, plant_runners, plant_sim, resim
+from mwip_ros.nodes.loop import plant_runners, plant_sim
+from mwip_ros.nodes.runtime import lockstep
+from mwip_ros.nodes.tools import resim
 from mwip_ros.params import file as param_file
 
 from mathfixtures import exact_model_plant

@@ -10,7 +10,7 @@ from graphproc import Graph, wait_until
 
 pytestmark = pytest.mark.graph
 
-MODULE = "mwip_ros.nodes.bag_replay"
+MODULE = "mwip_ros.nodes.tools.bag_replay"
 STATES = 401  # duration_s 2.0 at 200 Hz: states k = 0 .. 400
 
 

@@ -42,7 +42,8 @@ MAX_CLIENTS = 32     # the default
 
 def start_limited(g: Graph, port: int, *params: str):
     fox = g.start("foxglove_server", "-p", f"port:={port}", *params,
-                  cmd=["prlimit", f"--nofile={LIMIT}:{LIMIT}", sys.executable, "-m", "mwip_ros.nodes.foxglove_server"])
+                  cmd=["prlimit", f"--nofile={LIMIT}:{LIMIT}", sys.executable, "-m",
+                       "mwip_ros.nodes.tools.foxglove_server"])
     assert fox.wait_for_output(f"on ws://127.0.0.1:{port}", 60), fox.output()
     with open(f"/proc/{fox.pid}/limits") as f:
         line = next(l for l in f if l.startswith("Max open files"))
@@ -293,6 +294,6 @@ def test_a_bad_limit_stops_the_node_at_start_naming_it(tmp_path, rule, text):
     with Graph(tmp_path) as g:
         fox = g.start("foxglove_server", "-p", f"port:={free_port()}", "-p", rule,
                       cmd=["prlimit", f"--nofile={LIMIT}:{LIMIT}", sys.executable, "-m",
-                           "mwip_ros.nodes.foxglove_server"])
+                           "mwip_ros.nodes.tools.foxglove_server"])
         assert fox.wait(60) == 2, fox.output()
     assert text in fox.output(), fox.output()

@@ -1,9 +1,9 @@
-"""The live view's port takes both Foxglove subprotocols (mwip_ros/nodes/foxglove_relay.py): the handshake as the
+"""The live view's port takes both Foxglove subprotocols (mwip_ros/nodes/tools/foxglove_relay.py): the handshake as the
 SDK is handed it and as the client gets the answer.  The whole path, a client offering only the classic one
 decoding the graph's messages, is test_foxglove_server.py's."""
 import pytest
 
-from mwip_ros.nodes.foxglove_relay import CLASSIC_SUBPROTOCOL, SDK_SUBPROTOCOL, answer_for_client, offer_for_sdk
+from mwip_ros.nodes.tools.foxglove_relay import CLASSIC_SUBPROTOCOL, SDK_SUBPROTOCOL, answer_for_client, offer_for_sdk
 
 pytestmark = pytest.mark.unit
 

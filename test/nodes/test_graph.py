@@ -546,7 +546,7 @@ def test_realtime_priority_puts_every_thread_under_sched_fifo(tmp_path):
 HANGING_NODE = '''
 import sys, time
 from rclpy.node import Node
-from mwip_ros.nodes import runtime as _runtime
+from mwip_ros.nodes.runtime import process as _runtime
 
 class Hangs(Node, _runtime.GracefulNodeMixin):
     def __init__(self, context=None, argv=()):

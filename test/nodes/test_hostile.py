@@ -188,15 +188,16 @@ def test_a_flood_of_hostile_messages_leaves_memory_bounded(tmp_path):
 ARENAS = """
 import contextlib, ctypes, importlib, io, sys, threading
 if sys.argv[1] == "entry":      # as the console script runs a node: entry first, then the node (rclpy) imported
-    from mwip_ros.nodes import entry
+    from mwip_ros.nodes.runtime import entry
     with contextlib.redirect_stdout(io.StringIO()):
         assert entry.main(["python", "disturbance_observer", "--help"]) == 0
 elif sys.argv[1] == "run_node":  # python -m mwip_ros.nodes.NODE: the node module (rclpy) imported, then run_node
-    node = importlib.import_module("mwip_ros.nodes.disturbance_observer")
+    node = importlib.import_module("mwip_ros.nodes.loop.disturbance_observer")
     with contextlib.redirect_stdout(io.StringIO()):
         assert node.main(["disturbance_observer", "--help"]) == 0
 elif sys.argv[1] == "import":    # importing changes nothing
-    for name in ("entry", "rclpy_compat", "runtime", "plant_sim", "disturbance_observer", "dscndo_controller"):
+    for name in ("runtime.entry", "runtime.rclpy_compat", "runtime.process", "loop.plant_sim",
+                 "loop.disturbance_observer", "loop.dscndo_controller"):
         importlib.import_module("mwip_ros.nodes." + name)
 def work():
     keep = [bytearray(1000 + i % 500) for i in range(20000)]   # malloc, not Python's small-object pool
@@ -229,7 +230,7 @@ def test_a_node_process_allocates_from_one_malloc_arena():
     env = {k: v for k, v in os.environ.items() if k != "MALLOC_ARENA_MAX"}
     assert _malloc_heaps("plain", env=env) > 1    # glibc's default: an arena per allocating thread
     assert _malloc_heaps("import", env=env) > 1   # importing the nodes sets no limit (no import side effect)
-    assert _malloc_heaps("entry", env=env) == 1   # mwip_ros.nodes.entry limits it before rclpy's threads start
+    assert _malloc_heaps("entry", env=env) == 1   # mwip_ros.nodes.runtime.entry limits it before rclpy's threads start
     # run_node's own call comes after rclpy's import started threads with arenas of their own: too late
     assert _malloc_heaps("run_node", env=env) > 1
     assert _malloc_heaps("entry", env=dict(env, MALLOC_ARENA_MAX="3")) > 1   # the user's setting wins

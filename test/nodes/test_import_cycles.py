@@ -1,5 +1,5 @@
 """The node modules import one another one way: no cycle among mwip_ros/nodes (read from the sources, lazy
-imports inside functions included), e.g. guards <- rclpy_compat <- state_input, never back."""
+imports inside functions included), e.g. runtime.guards <- runtime.rclpy_compat <- runtime.state_input, never back."""
 import ast
 from pathlib import Path
 
@@ -11,23 +11,27 @@ NODES = Path(__file__).resolve().parents[2] / "mwip_ros" / "nodes"
 
 
 def _imports() -> dict:
-    """{module: the mwip_ros.nodes modules it imports}, by file stem."""
-    names = {f.stem for f in NODES.glob("*.py")}
+    """{module: the mwip_ros.nodes modules it imports}, by dotted name under mwip_ros.nodes (``runtime.guards``)."""
+    files = {".".join(f.relative_to(NODES).with_suffix("").parts): f for f in NODES.rglob("*.py")}
+    names = set(files)
     graph = {}
-    for f in NODES.glob("*.py"):
+    for name, f in files.items():
+        package = name.rsplit(".", 1)[0] if "." in name else ""
         deps = set()
         for n in ast.walk(ast.parse(f.read_text())):
             if isinstance(n, ast.ImportFrom):
                 mod = n.module or ""
-                if n.level == 1:
-                    mod = f"mwip_ros.nodes.{mod}" if mod else "mwip_ros.nodes"
-                if mod == "mwip_ros.nodes":
-                    deps |= {a.name for a in n.names if a.name in names}
-                elif mod.startswith("mwip_ros.nodes."):
-                    deps.add(mod.split(".")[2])
+                if n.level:   # relative: from the module's own package upwards
+                    base = package.split(".")[: max(0, len(package.split(".")) - (n.level - 1))] if package else []
+                    mod = ".".join(["mwip_ros", "nodes", *base, *([mod] if mod else [])])
+                if mod.startswith("mwip_ros.nodes"):
+                    sub = mod[len("mwip_ros.nodes"):].lstrip(".")
+                    deps |= {f"{sub}.{a.name}".lstrip(".") for a in n.names} & names
+                    deps |= {sub} & names
             elif isinstance(n, ast.Import):
-                deps |= {a.name.split(".")[2] for a in n.names if a.name.startswith("mwip_ros.nodes.")}
-        graph[f.stem] = deps & names - {f.stem}
+                deps |= {a.name[len("mwip_ros.nodes."):] for a in n.names
+                         if a.name.startswith("mwip_ros.nodes.")} & names
+        graph[name] = deps - {name}
     return graph
 
 
@@ -56,7 +60,7 @@ def _cycle(graph: dict):
 
 def test_the_node_modules_import_each_other_one_way():
     graph = _imports()
-    assert "guards" in graph["rclpy_compat"]   # the imports are read
+    assert "runtime.guards" in graph["runtime.rclpy_compat"]   # the imports are read
     cycle = _cycle(graph)
     assert cycle is None, " -> ".join(cycle)
 

@@ -15,7 +15,7 @@ from mwip_ros.bag import type_hash
 pytestmark = pytest.mark.graph
 
 TS = get_typestore(Stores.ROS2_JAZZY)
-MODULE = "mwip_ros.nodes.mcap_recorder"
+MODULE = "mwip_ros.nodes.tools.mcap_recorder"
 N = 60
 
 

@@ -8,7 +8,7 @@ from injector import Injector
 
 pytestmark = pytest.mark.graph
 
-MODULE = "mwip_ros.nodes.bag_replay"
+MODULE = "mwip_ros.nodes.tools.bag_replay"
 NEW_K1 = 8.0
 CHANGE_AFTER_NS = 300_000_000     # set k1 once the run passed t = 0.3 s (of 10 s: about 2 s of wall time left)
 

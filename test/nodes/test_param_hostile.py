@@ -1,4 +1,4 @@
-"""Hostile parameter requests, events and values never crash or stop a node (mwip_ros.nodes.rclpy_compat).
+"""Hostile parameter requests, events and values never crash or stop a node (mwip_ros.nodes.runtime.rclpy_compat).
 
 rclpy's ParameterService reads each request parameter with ``Parameter.from_parameter_msg`` outside
 any try: one SetParameters request with a ParameterValue of type code 99 used to end a node with a
@@ -17,9 +17,9 @@ import pytest
 
 from graphproc import PARAMS, Graph
 from injector import Injector
-from mwip_ros.nodes import rclpy_compat as C
+from mwip_ros.nodes.runtime import rclpy_compat as C
 
-MODULE = "mwip_ros.nodes.bag_replay"
+MODULE = "mwip_ros.nodes.tools.bag_replay"
 TIMEOUT = 60.0
 
 
@@ -187,7 +187,7 @@ def test_another_rclpy_version_is_warned_of_once(monkeypatch):
 
 @pytest.mark.unit
 def test_importing_installs_nothing_and_install_is_idempotent():
-    code = ("import mwip_ros.nodes.rclpy_compat as C\n"
+    code = ("import mwip_ros.nodes.runtime.rclpy_compat as C\n"
             "from rclpy.parameter_service import ParameterService as S\n"
             "before = S._set_parameters_callback\n"
             "assert not C.installed() and not hasattr(before, '_mwip_guarded')\n"
@@ -207,7 +207,7 @@ def test_a_real_node_refuses_each_hostile_update_by_name_and_keeps_its_values():
     from rclpy.parameter_service import ParameterService
 
     from graphproc import fresh_domain_id, release_domain_id
-    from mwip_ros.nodes.params import declare
+    from mwip_ros.nodes.runtime.params import declare
 
     C.install()
     domain = fresh_domain_id()
@@ -250,7 +250,7 @@ def test_a_real_node_refuses_each_hostile_update_by_name_and_keeps_its_values():
 def test_the_recorders_and_live_views_loop_goes_on_after_a_callback_raised(monkeypatch):
     """TopicTap.spin (mcap_recorder, foxglove_server): an exception from a callback is logged, the loop goes on;
     only an executor that raises on every turn for BROKEN_AFTER_S ends the run."""
-    from mwip_ros.nodes import tap
+    from mwip_ros.nodes.tools import tap
 
     class Log:
         def __init__(self):

@@ -19,7 +19,7 @@ from graphproc import PARAMS, Graph, fresh_domain_id, release_domain_id
 from injector import Injector
 from mwip_ros.msgs import layouts as L
 from mwip_ros.msgs.qos import SERVICE_QOS
-from mwip_ros.nodes.guards import NEW, REPEAT, RESTART, StampGuard
+from mwip_ros.nodes.runtime.guards import NEW, REPEAT, RESTART, StampGuard
 
 pytestmark = pytest.mark.graph
 
@@ -54,7 +54,7 @@ def _calls(inj, client, n: int, timeout: float = 60.0):
 def lockstep_plant():
     import rclpy
 
-    from mwip_ros.nodes.plant_sim import PlantSimNode
+    from mwip_ros.nodes.loop.plant_sim import PlantSimNode
     domain = fresh_domain_id()
     ctx = rclpy.Context()
     argv = ["plant_sim", "--ros-args", "--params-file", str(PARAMS), "-p", "plant_sim:duration_s:=0.0"]

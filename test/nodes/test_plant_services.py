@@ -8,7 +8,7 @@ from sensor_msgs.msg import JointState
 from graphproc import Graph
 from injector import Injector
 from mwip_ros.msgs import layouts as L
-from mwip_ros.nodes.guards import NEW, REPEAT, RESTART, RESYNC, StampGuard
+from mwip_ros.nodes.runtime.guards import NEW, REPEAT, RESTART, RESYNC, StampGuard
 
 INITIAL_THETA_B = -0.1745   # config/paper.yaml
 

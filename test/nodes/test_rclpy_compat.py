@@ -1,4 +1,4 @@
-"""Each use of an rclpy internal (mwip_ros.nodes.rclpy_compat) against the rclpy installed: the private
+"""Each use of an rclpy internal (mwip_ros.nodes.runtime.rclpy_compat) against the rclpy installed: the private
 attribute exists with the shape it was written for, rclpy still behaves as the patch assumes, and the
 patched behaviour is what the nodes rely on.  A test here that fails after an rclpy upgrade names the
 function to revisit.  (The parameter-service callbacks: test_param_hostile.py.)"""
@@ -10,7 +10,7 @@ import sys
 
 import pytest
 
-from mwip_ros.nodes import rclpy_compat as C
+from mwip_ros.nodes.runtime import rclpy_compat as C
 
 
 @pytest.fixture
@@ -150,10 +150,11 @@ def test_importing_patches_nothing_and_install_patches_the_clock_too():
             "from rclpy.node import Node\n"
             "from rclpy.time_source import TimeSource\n"
             "check, callback = Node._check_undeclared_parameters, TimeSource.clock_callback\n"
-            "for m in ('rclpy_compat', 'entry', 'runtime', 'params', 'guards', 'plant_sim', 'disturbance_observer',\n"
-            "          'dscndo_controller', 'mcap_recorder', 'bag_replay', 'robot_markers', 'foxglove_server'):\n"
+            "for m in ('runtime.rclpy_compat', 'runtime.entry', 'runtime.process', 'runtime.params',\n"
+            "          'runtime.guards', 'loop.plant_sim', 'loop.disturbance_observer', 'loop.dscndo_controller',\n"
+            "          'tools.mcap_recorder', 'tools.bag_replay', 'tools.robot_markers', 'tools.foxglove_server'):\n"
             "    importlib.import_module('mwip_ros.nodes.' + m)\n"
-            "import mwip_ros.nodes.rclpy_compat as C\n"
+            "import mwip_ros.nodes.runtime.rclpy_compat as C\n"
             "assert not C.installed() and not C.clock_guarded()\n"
             "assert Node._check_undeclared_parameters is check and TimeSource.clock_callback is callback\n"
             "C.install()\n"

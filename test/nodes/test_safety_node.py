@@ -94,7 +94,7 @@ def _states(data):
 def make_plant():
     import rclpy
 
-    from mwip_ros.nodes.plant_sim import PlantSimNode
+    from mwip_ros.nodes.loop.plant_sim import PlantSimNode
     made = []
 
     def make(*rules):

@@ -11,6 +11,7 @@ import pytest
 
 from graphproc import PARAMS, Graph
 from mwip_ros import params as P
+from mwip_ros.nodes.runtime.entry import NODES as NODE_MODULES
 
 NODES = ("plant_sim", "disturbance_observer", "dscndo_controller", "mcap_recorder", "bag_replay", "robot_markers",
          "foxglove_server", "state_estimator")
@@ -176,7 +177,7 @@ def test_every_node_answers_help_from_the_schema_without_starting(tmp_path, node
     a started one would wait for its peers, serve or record until stopped, or fail without its parameters)."""
     env = Graph(tmp_path).env
     t0 = time.monotonic()
-    r = subprocess.run([sys.executable, "-m", f"mwip_ros.nodes.{node}", "--help"], env=env, capture_output=True,
+    r = subprocess.run([sys.executable, "-m", NODE_MODULES[node], "--help"], env=env, capture_output=True,
                        text=True, timeout=30)
     took = time.monotonic() - t0
     assert r.returncode == 0 and r.stderr == "", r.stdout + r.stderr
@@ -184,18 +185,18 @@ def test_every_node_answers_help_from_the_schema_without_starting(tmp_path, node
     assert took < 10, took   # an import and a print (a started node runs until its peers come or it is stopped)
     out = r.stdout
     assert out.startswith(f"usage: {node} [--ros-args --params-file FILE -p {node}:NAME:=VALUE ...]"), out
-    doc = importlib.import_module(f"mwip_ros.nodes.{node}").__doc__
+    doc = importlib.import_module(NODE_MODULES[node]).__doc__
     assert _words(doc.split("\n\n")[0].replace("``", "")) in _words(out)
     for name, spec in P.specs_for(node).items():
         assert f"\n  {name}  ({spec.type}, default " in out, name
         assert _words(spec.description) in _words(out), name
-    assert "exit code" in out.lower() and f"python -m pydoc mwip_ros.nodes.{node}" in out
+    assert "exit code" in out.lower() and f"python -m pydoc {NODE_MODULES[node]}" in out
 
 
 @pytest.mark.graph
 def test_help_shows_defaults_ranges_topics_and_exit_codes(tmp_path):
     env = Graph(tmp_path).env
-    ctl, fox, plant = (subprocess.run([sys.executable, "-m", f"mwip_ros.nodes.{n}", flag], env=env, capture_output=True,
+    ctl, fox, plant = (subprocess.run([sys.executable, "-m", NODE_MODULES[n], flag], env=env, capture_output=True,
                                       text=True, timeout=30).stdout
                        for n, flag in (("dscndo_controller", "-h"), ("foxglove_server", "--help"), ("plant_sim", "-h")))
     assert "  tau4  (double, default 0.1, [1e-06, 1e+06], changeable at run time)" in ctl
@@ -219,7 +220,7 @@ def test_help_in_process_creates_no_ros_context(monkeypatch, capsys):
     monkeypatch.setattr(rclpy, "init", boom)
     monkeypatch.setattr(rclpy, "Context", boom)
     for node in NODES:
-        main = importlib.import_module(f"mwip_ros.nodes.{node}").main
+        main = importlib.import_module(NODE_MODULES[node]).main
         # help wins over a file that would be refused, and over what follows --ros-args
         assert main([node, "-h", "--ros-args", "--params-file", "/no/such.yaml"]) == 0, node
         assert capsys.readouterr().out.startswith(f"usage: {node} "), node
@@ -233,7 +234,7 @@ def test_help_in_process_creates_no_ros_context(monkeypatch, capsys):
 ])
 def test_an_argument_outside_ros_args_exits_2_naming_it(tmp_path, before, after, word):
     with Graph(tmp_path) as g:
-        p = g.start("plant_sim", *after, cmd=[sys.executable, "-m", "mwip_ros.nodes.plant_sim", *before],
+        p = g.start("plant_sim", *after, cmd=[sys.executable, "-m", "mwip_ros.nodes.loop.plant_sim", *before],
                     as_given=True)
         code = p.wait(60)
     out = p.output()
@@ -279,7 +280,7 @@ class _Fake:
 
 
 def _driver(monkeypatch):
-    from mwip_ros.nodes import lockstep
+    from mwip_ros.nodes.runtime import lockstep
     now = [100.0]
     monkeypatch.setattr(lockstep.time, "monotonic", lambda: now[0])
     fake = _Fake()

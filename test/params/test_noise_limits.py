@@ -65,9 +65,9 @@ def test_the_largest_accepted_noise_publishes_plausible_pitches():
 
 @pytest.mark.graph
 def test_plant_sim_refuses_implausible_noise_at_start_up():
-    assert_refused(measured("mwip_ros.nodes.plant_sim",
+    assert_refused(measured("mwip_ros.nodes.loop.plant_sim",
                             ["--ros-args", "-p", "plant_sim:sensors.noise_std.theta_b:=3.14159"], node=True),
                    "plant_sim", "sensors.noise_std.theta_b")
-    assert_refused(measured("mwip_ros.nodes.plant_sim",
+    assert_refused(measured("mwip_ros.nodes.loop.plant_sim",
                             ["--ros-args", "-p", "plant_sim:sensors.noise_std.theta_b:=0.3"], node=True),
                    "parameter 'sensors.noise_std.theta_b': 0.3 rad would publish implausible pitches")

@@ -77,7 +77,7 @@ def test_the_wording_users_see():
 def test_descriptors_are_derived_from_the_data():
     from rcl_interfaces.msg import ParameterType
 
-    from mwip_ros.nodes.params import _descriptor
+    from mwip_ros.nodes.runtime.params import _descriptor
 
     for (node, name), spec in SPECS.items():
         d = _descriptor(spec)
@@ -100,7 +100,7 @@ def test_descriptors_are_derived_from_the_data():
 
 
 def test_help_ranges_are_derived_from_the_data():
-    from mwip_ros.nodes.params import range_text
+    from mwip_ros.nodes.runtime.params import range_text
 
     plant, ctl = P.specs_for("plant_sim"), P.specs_for("dscndo_controller")
     assert range_text(plant["duration_s"]) == "[0, 1e+07]"

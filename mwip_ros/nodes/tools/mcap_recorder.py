@@ -1,6 +1,6 @@
 """``mcap_recorder``: record the graph's topics into a rosbag2-compatible MCAP bag.
 
-    python -m mwip_ros.nodes.mcap_recorder --ros-args -p output:=bags/run1 [-p compression:=zstd]
+    python -m mwip_ros.nodes.tools.mcap_recorder --ros-args -p output:=bags/run1 [-p compression:=zstd]
 
 Parameters: ``output`` (the bag directory to create; required, must not exist),
 ``topics`` (names from :data:`mwip_ros.msgs.topics.GRAPH_TOPICS` and ``SYSTEM_TOPICS``; empty = all),
@@ -10,7 +10,7 @@ Every message is stored as the exact CDR bytes received (raw subscriptions), wit
 node clock's receive time as log time (sim time under ``use_sim_time``, as rosbag2 does)
 and as publish time (rclpy's EventsExecutor gives raw subscriptions no MessageInfo).
 
-The topics are subscribed as :mod:`mwip_ros.nodes.tap` says: the loop's own topics at
+The topics are subscribed as :mod:`mwip_ros.nodes.tools.tap` says: the loop's own topics at
 start with the graph's QoS (so a plant waiting for the recorder starts only once it listens,
 and a writer that matched late still hands over its last 1000 messages), ``external_wrench``
 and the system topics (``/rosout``, ``/parameter_events``, ``/diagnostics``) with a QoS
@@ -38,11 +38,11 @@ from rclpy.node import Node
 
 from mwip_ros.bag import BagError, BagWriter, qos_profiles_yaml
 from mwip_ros.bag.ledger import GAPS_KEY, MAX_STAMPS, Ledger
-from mwip_ros.nodes.diagnostics import OK
-from mwip_ros.nodes.guards import Rejects
-from mwip_ros.nodes.params import declare
-from mwip_ros.nodes.runtime import EXIT_ERROR, GracefulNodeMixin, run_node
-from mwip_ros.nodes.tap import TopicTap, resolve_topics
+from mwip_ros.nodes.runtime.diagnostics import OK
+from mwip_ros.nodes.runtime.guards import Rejects
+from mwip_ros.nodes.runtime.params import declare
+from mwip_ros.nodes.runtime.process import EXIT_ERROR, GracefulNodeMixin, run_node
+from mwip_ros.nodes.tools.tap import TopicTap, resolve_topics
 from mwip_ros.params import ParamError
 
 NAME = "mcap_recorder"

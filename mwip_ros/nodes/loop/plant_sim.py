@@ -92,12 +92,12 @@ from mwip_ros.core.trajectory import TrajectoryTable
 from mwip_ros.msgs import BadMessage, cdr
 from mwip_ros.msgs import layouts as L
 from mwip_ros.msgs.qos import BEST_EFFORT_INPUT_QOS, DRIVER_STATE_QOS, INPUT_QOS, SERVICE_QOS, qos_for
-from mwip_ros.nodes.diagnostics import ERROR, OK, WARN, StepRate
-from mwip_ros.nodes.guards import PublisherWatch, Rejects
-from mwip_ros.nodes.lockstep import LockstepDriver, subscriber_floor
-from mwip_ros.nodes.params import declare
-from mwip_ros.nodes.plant_runners import RUNNERS
-from mwip_ros.nodes.runtime import EXIT_ERROR, EXIT_FALLEN, GracefulNodeMixin, run_node
+from mwip_ros.nodes.runtime.diagnostics import ERROR, OK, WARN, StepRate
+from mwip_ros.nodes.runtime.guards import PublisherWatch, Rejects
+from mwip_ros.nodes.runtime.lockstep import LockstepDriver, subscriber_floor
+from mwip_ros.nodes.runtime.params import declare
+from mwip_ros.nodes.loop.plant_runners import RUNNERS
+from mwip_ros.nodes.runtime.process import EXIT_ERROR, EXIT_FALLEN, GracefulNodeMixin, run_node
 from mwip_ros.params import plant_config
 from mwip_ros.params.typed import limit_warnings
 from mwip_ros.runs import write_csv
@@ -498,7 +498,7 @@ class PlantSimNode(Node, GracefulNodeMixin):
         self.get_logger().info(f"t = {self.plant.t:.2f}{total} s simulated, "
                                f"{rate or 0.0:.0f} steps/s, theta_b = {self.plant.x[1]:+.4f} rad")
 
-    # --- health (nodes.diagnostics) -------------------------------------------------------------
+    # --- health (nodes.runtime.diagnostics) -------------------------------------------------------------
     def diagnostic_count(self) -> int:
         return self.steps   # grows across resets (plant.k goes back to 0)
 

@@ -36,14 +36,14 @@ executor and ends the process.  :func:`install` replaces the two set callbacks:
 The four read-only services (get, get_types, describe, list) already answer odd names and depths
 (an undeclared name gives rclpy's empty answer); an exception from one of them is answered with an
 empty response instead of ending the process.  Requests refused unread are counted in the node's
-``rejects`` (:class:`~mwip_ros.nodes.guards.Rejects`, on ``/diagnostics``) and logged rate-limited.
+``rejects`` (:class:`~mwip_ros.nodes.runtime.guards.Rejects`, on ``/diagnostics``) and logged rate-limited.
 """
 from __future__ import annotations
 
 import sys
 from typing import Callable, Dict, List, Optional, Tuple
 
-from mwip_ros.nodes.guards import NEW, REPEAT, RESTART, Rejects, StampGuard
+from mwip_ros.nodes.runtime.guards import NEW, REPEAT, RESTART, Rejects, StampGuard
 
 __all__ = ["WRITTEN_FOR", "MAX_NAME_CHARS", "MAX_ARRAY_LEN", "MAX_PARAMETERS", "CLOCK_WINDOW_NS", "RclpyChanged",
            "rclpy_version", "check_version", "install", "installed", "parameter_from_msg", "shown_name", "guard_clock",
@@ -96,7 +96,7 @@ def check_version(version: Optional[str] = None, warn: Optional[Callable[[str], 
     version = rclpy_version() if version is None else version
     if version in WRITTEN_FOR:
         return None
-    text = (f"mwip_ros.nodes.rclpy_compat was written for rclpy {', '.join(WRITTEN_FOR)} (ROS 2 Jazzy); this is "
+    text = (f"nodes.runtime.rclpy_compat was written for rclpy {', '.join(WRITTEN_FOR)} (ROS 2 Jazzy); this is "
             f"rclpy {version or 'of an unknown version'}: its patches are installed as written, check them "
             f"(test/nodes/test_rclpy_compat.py, test/nodes/test_param_hostile.py)")
     if not _state["warned"]:
@@ -109,7 +109,7 @@ class RclpyChanged(RuntimeError):
     """An rclpy internal this module uses is missing or has another shape (an rclpy other than WRITTEN_FOR)."""
 
     def __init__(self, what: str):
-        super().__init__(f"rclpy {rclpy_version() or '(unknown version)'}: {what}; mwip_ros.nodes.rclpy_compat was "
+        super().__init__(f"rclpy {rclpy_version() or '(unknown version)'}: {what}; nodes.runtime.rclpy_compat was "
                          f"written for rclpy {', '.join(WRITTEN_FOR)}")
 
 
@@ -171,7 +171,7 @@ def guard_clock() -> None:
 
     rclpy's ``TimeSource.clock_callback`` (bound when a node with ``use_sim_time`` subscribes to /clock,
     so this runs before any node is made) raises on a negative time, which ends the node.  The replacement
-    judges each stamp with a :class:`~mwip_ros.nodes.guards.StampGuard` of :data:`CLOCK_WINDOW_NS`: a
+    judges each stamp with a :class:`~mwip_ros.nodes.runtime.guards.StampGuard` of :data:`CLOCK_WINDOW_NS`: a
     negative time, one that goes backwards or one that jumps ahead by more than a second is rejected,
     counted in the node's ``rejects`` (if it has one) and logged; the node's clock keeps its last good
     time; a resend is dropped; the rest goes to rclpy's callback.  Idempotent."""

@@ -23,9 +23,9 @@ from mwip_ros.msgs import BadMessage
 from mwip_ros.msgs import layouts as L
 from mwip_ros.msgs.qos import GRAPH_QOS, INPUT_QOS
 from mwip_ros.msgs.stamps import to_time
-from mwip_ros.nodes.guards import Rejects
-from mwip_ros.nodes.params import declare
-from mwip_ros.nodes.runtime import GracefulNodeMixin, run_node
+from mwip_ros.nodes.runtime.guards import Rejects
+from mwip_ros.nodes.runtime.params import declare
+from mwip_ros.nodes.runtime.process import GracefulNodeMixin, run_node
 
 NAME = "robot_markers"
 FRAME = "world"

@@ -1,11 +1,11 @@
 """The nodes' entry points: what a node process does first, then the node's ``main``.
 
-The console scripts (setup.py: ``plant_sim = mwip_ros.nodes.entry:plant_sim``, ...) and
+The console scripts (setup.py: ``plant_sim = mwip_ros.nodes.runtime.entry:plant_sim``, ...) and
 ``python -m mwip_ros.nodes NODE [--ros-args ...]`` come here.  :func:`run` limits glibc's malloc
 arenas (:func:`bound_malloc_arenas`) and only then imports the node's module: importing rclpy
 starts threads that allocate (2, with an arena each, when its C extension loads), so the limit
 must come before that import, which is why it is not in ``run_node`` (it runs there too, for a
-node started as ``python -m mwip_ros.nodes.NODE``, where it bounds only the arenas made later).
+node started as ``python -m mwip_ros.nodes.loop.NODE``, where it bounds only the arenas made later).
 This module imports neither rclpy nor numpy; importing it changes nothing.
 """
 from __future__ import annotations
@@ -20,8 +20,10 @@ __all__ = ["NODES", "M_ARENA_MAX", "bound_malloc_arenas", "run", "main", *(
     "plant_sim", "disturbance_observer", "dscndo_controller", "mcap_recorder", "bag_replay", "robot_markers",
     "foxglove_server", "state_estimator")]
 
-NODES = ("plant_sim", "disturbance_observer", "dscndo_controller", "mcap_recorder", "bag_replay", "robot_markers",
-         "foxglove_server", "state_estimator")
+# every node by name, and its module: the loop's nodes in nodes/loop, the tool nodes in nodes/tools
+NODES = {name: f"mwip_ros.nodes.{room}.{name}" for room, names in (
+    ("loop", ("plant_sim", "disturbance_observer", "dscndo_controller", "state_estimator")),
+    ("tools", ("mcap_recorder", "bag_replay", "robot_markers", "foxglove_server"))) for name in names}
 M_ARENA_MAX = -8   # glibc's mallopt() parameter number for the arena limit
 
 
@@ -45,9 +47,9 @@ def bound_malloc_arenas(arenas: int = 1) -> bool:
 
 
 def run(node: str, argv: Optional[Sequence[str]] = None) -> int:
-    """The malloc arena limit, then ``mwip_ros.nodes.<node>.main(argv)`` (argv None: ``sys.argv``)."""
+    """The malloc arena limit, then the node's ``main(argv)`` (its module: :data:`NODES`; argv None: ``sys.argv``)."""
     bound_malloc_arenas()
-    return importlib.import_module(f"mwip_ros.nodes.{node}").main(None if argv is None else list(argv))
+    return importlib.import_module(NODES[node]).main(None if argv is None else list(argv))
 
 
 def plant_sim(argv=None) -> int:

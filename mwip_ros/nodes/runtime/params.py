@@ -29,7 +29,7 @@ from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValu
 from rclpy.parameter import Parameter
 
 from mwip_ros import params as P
-from mwip_ros.nodes import rclpy_compat
+from mwip_ros.nodes.runtime import rclpy_compat
 
 _TYPES = {"double": ParameterType.PARAMETER_DOUBLE, "integer": ParameterType.PARAMETER_INTEGER,
           "bool": ParameterType.PARAMETER_BOOL, "string": ParameterType.PARAMETER_STRING,

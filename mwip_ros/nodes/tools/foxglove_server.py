@@ -1,6 +1,6 @@
 """``foxglove_server``: the graph's topics, live, to Foxglove over a WebSocket.
 
-    python -m mwip_ros.nodes.foxglove_server [--ros-args -p port:=8765 -p host:=127.0.0.1]
+    python -m mwip_ros.nodes.tools.foxglove_server [--ros-args -p port:=8765 -p host:=127.0.0.1]
 
 Then, in Foxglove: *Open connection* > *Foxglove WebSocket* > ``ws://127.0.0.1:8765``, and
 import ``config/foxglove_layout.json`` (README: Live view).
@@ -35,7 +35,7 @@ the successor of ``foxglove.websocket.v1`` with the same frames), behind the nod
 (:mod:`.foxglove_relay`), which accepts both subprotocols: a client that offers only the classic
 ``foxglove.websocket.v1`` (Lichtblick, older Foxglove apps, tools on @foxglove/ws-protocol) gets it.
 Every message is forwarded as the exact CDR bytes received (raw subscriptions through
-:class:`mwip_ros.nodes.tap.TopicTap`, the recorder's: the loop's topics at once with the
+:class:`mwip_ros.nodes.tools.tap.TopicTap`, the recorder's: the loop's topics at once with the
 graph's QoS, ``external_wrench`` and the system topics with a QoS adapted to their
 publishers once they appear), nothing is decoded or re-encoded.  A topic's channel is
 advertised at its first message, with the ``ros2msg`` schema the recorder writes into a
@@ -77,11 +77,11 @@ import time
 from rclpy.node import Node
 
 from mwip_ros.bag import message_definition
-from mwip_ros.nodes.diagnostics import OK, WARN
-from mwip_ros.nodes.foxglove_relay import CLASSIC_SUBPROTOCOL, DESCRIPTORS_PER_CLIENT, SDK_SUBPROTOCOL, Relay
-from mwip_ros.nodes.params import declare
-from mwip_ros.nodes.runtime import EXIT_ERROR, GracefulNodeMixin, for_every_thread, run_node
-from mwip_ros.nodes.tap import TopicTap, resolve_topics
+from mwip_ros.nodes.runtime.diagnostics import OK, WARN
+from mwip_ros.nodes.tools.foxglove_relay import CLASSIC_SUBPROTOCOL, DESCRIPTORS_PER_CLIENT, SDK_SUBPROTOCOL, Relay
+from mwip_ros.nodes.runtime.params import declare
+from mwip_ros.nodes.runtime.process import EXIT_ERROR, GracefulNodeMixin, for_every_thread, run_node
+from mwip_ros.nodes.tools.tap import TopicTap, resolve_topics
 from mwip_ros.optional import required
 from mwip_ros.params import ParamError
 
@@ -113,7 +113,7 @@ def _sdk():
     with required("foxglove", "foxglove_server (the live view)"):
         import foxglove
 
-        from mwip_ros.nodes import foxglove_connections
+        from mwip_ros.nodes.tools import foxglove_connections
     return foxglove, foxglove_connections
 
 

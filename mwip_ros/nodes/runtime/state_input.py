@@ -10,8 +10,8 @@ from __future__ import annotations
 
 from mwip_ros.msgs import BadMessage
 from mwip_ros.msgs.layouts import parse_joint_state
-from mwip_ros.nodes.guards import NEW, REPEAT, RESTART, StampGuard
-from mwip_ros.nodes.rclpy_compat import use_ros_time_override
+from mwip_ros.nodes.runtime.guards import NEW, REPEAT, RESTART, StampGuard
+from mwip_ros.nodes.runtime.rclpy_compat import use_ros_time_override
 
 __all__ = ["StateInput"]
 

@@ -24,7 +24,7 @@ from mwip_ros.msgs.cdr import peek_stamp
 from mwip_ros.msgs.layouts import encode_clock
 from mwip_ros.msgs.qos import GRAPH_QOS, recorded_qos
 from mwip_ros.msgs.topics import SYSTEM_TOPICS, leaf, msg_class
-from mwip_ros.nodes.runtime import EXIT_ERROR, EXIT_OK
+from mwip_ros.nodes.runtime.process import EXIT_ERROR, EXIT_OK
 from mwip_ros.params import ParamError
 
 __all__ = ["Replay"]

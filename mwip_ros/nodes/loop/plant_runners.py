@@ -30,7 +30,7 @@ from typing import Dict, Optional
 
 import numpy as np
 
-from mwip_ros.nodes.runtime import EXIT_ERROR
+from mwip_ros.nodes.runtime.process import EXIT_ERROR
 
 __all__ = ["LockstepRunner", "RealtimeRunner", "RUNNERS"]
 

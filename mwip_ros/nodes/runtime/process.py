@@ -146,7 +146,7 @@ def _paragraphs(doc: str) -> List[str]:
 def node_help(name: str, module=None) -> str:
     """``NODE --help``: what the node does (its module docstring's first paragraph), its usage, its topics (read
     from its source), its parameters from the schema and its exit codes.  Creates no ROS context."""
-    from mwip_ros.nodes.params import parameter_help, usage_line
+    from mwip_ros.nodes.runtime.params import parameter_help, usage_line
     paragraphs = _paragraphs(getattr(module, "__doc__", None) or "")
     lines = [f"usage: {usage_line(name)}", ""]
     if paragraphs:   # what it does; a usage paragraph of its own (bag_replay's two modes) after it
@@ -173,7 +173,7 @@ def run_node(factory: Callable[..., object], argv: Optional[Sequence[str]] = Non
 
     ``-h`` / ``--help`` before ``--ros-args`` prints :func:`node_help` and returns 0 without a ROS context; any
     other argument outside ``--ros-args`` (rcl would ignore it) is refused with one line, exit 2."""
-    from mwip_ros.nodes.entry import bound_malloc_arenas
+    from mwip_ros.nodes.runtime.entry import bound_malloc_arenas
     bound_malloc_arenas()   # first, for a node started as python -m mwip_ros.nodes.NODE (entry.run did it earlier)
     argv = list(sys.argv if argv is None else argv)
     stop = {"signal": None}
@@ -188,7 +188,7 @@ def run_node(factory: Callable[..., object], argv: Optional[Sequence[str]] = Non
         print(f"[ERROR] {name}: {text}", file=sys.stderr, flush=True)
         return EXIT_BAD_PARAMS
 
-    from mwip_ros.nodes.params import check_command_line, wants_help
+    from mwip_ros.nodes.runtime.params import check_command_line, wants_help
     if wants_help(argv):
         print(node_help(name, module), flush=True)
         return EXIT_OK
@@ -201,7 +201,7 @@ def run_node(factory: Callable[..., object], argv: Optional[Sequence[str]] = Non
         laws.check_plugins()   # a law plug-in ($MWIP_ROS_LAWS) that failed to import: its one line
     except laws.PluginError as exc:
         return refuse(str(exc))
-    from mwip_ros.nodes import rclpy_compat
+    from mwip_ros.nodes.runtime import rclpy_compat
     # rclpy's classes, patched before any node binds their callbacks: a parameter request rclpy cannot read is
     # refused, naming it, and a /clock it cannot use is rejected, neither raised in the executor
     rclpy_compat.install()
@@ -225,7 +225,7 @@ def run_node(factory: Callable[..., object], argv: Optional[Sequence[str]] = Non
         executor = _make_executor(context)
         executor.add_node(node)
         _realtime_priority(node)
-        from mwip_ros.nodes.diagnostics import Diagnostics
+        from mwip_ros.nodes.runtime.diagnostics import Diagnostics
         diagnostics = Diagnostics(node)
         try:
             while stop["signal"] is None and not node.done and context.ok():

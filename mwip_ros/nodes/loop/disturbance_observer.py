@@ -25,11 +25,11 @@ from mwip_ros.core.theorem import observer_conditions
 from mwip_ros.core.trajectory import Trajectory
 from mwip_ros.msgs import layouts as L
 from mwip_ros.msgs.qos import qos_for
-from mwip_ros.nodes.diagnostics import OK
-from mwip_ros.nodes.guards import REPEAT, RESTART, STAMP_WINDOW_PERIODS, PublisherWatch, Rejects
-from mwip_ros.nodes.state_input import StateInput
-from mwip_ros.nodes.params import declare
-from mwip_ros.nodes.runtime import GracefulNodeMixin, run_node
+from mwip_ros.nodes.runtime.diagnostics import OK
+from mwip_ros.nodes.runtime.guards import REPEAT, RESTART, STAMP_WINDOW_PERIODS, PublisherWatch, Rejects
+from mwip_ros.nodes.runtime.state_input import StateInput
+from mwip_ros.nodes.runtime.params import declare
+from mwip_ros.nodes.runtime.process import GracefulNodeMixin, run_node
 from mwip_ros.runs import write_csv
 
 NAME = "disturbance_observer"

@@ -33,10 +33,11 @@ from mwip_ros.core.trajectory import ESTIMATE_COLUMNS, RAW_COLUMNS, Trajectory
 from mwip_ros.msgs import BadMessage
 from mwip_ros.msgs import layouts as L
 from mwip_ros.msgs.qos import qos_for
-from mwip_ros.nodes.diagnostics import ERROR, OK
-from mwip_ros.nodes.guards import NEW, REPEAT, RESTART, STAMP_WINDOW_PERIODS, PublisherWatch, Rejects, StampGuard
-from mwip_ros.nodes.params import declare
-from mwip_ros.nodes.runtime import GracefulNodeMixin, run_node
+from mwip_ros.nodes.runtime.diagnostics import ERROR, OK
+from mwip_ros.nodes.runtime.guards import (NEW, REPEAT, RESTART, STAMP_WINDOW_PERIODS, PublisherWatch, Rejects,
+                                           StampGuard)
+from mwip_ros.nodes.runtime.params import declare
+from mwip_ros.nodes.runtime.process import GracefulNodeMixin, run_node
 from mwip_ros.runs import write_csv
 
 NAME = "state_estimator"
@@ -189,7 +190,7 @@ class StateEstimatorNode(Node, GracefulNodeMixin):
         super().spin_step(executor)
         self._expire()
 
-    # --- health (nodes.diagnostics) -------------------------------------------------------------------
+    # --- health (nodes.runtime.diagnostics) -------------------------------------------------------------------
     def diagnostic_count(self) -> int:
         return self.count
 

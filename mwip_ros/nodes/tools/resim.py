@@ -12,7 +12,7 @@ message layer (:mod:`mwip_ros.msgs.layouts`).
 
 A gain changed during the recorded run (``ros2 param set``) is in the bag's
 ``/parameter_events``, stamped with the last state its node had answered (the observer's
-and the controller's clock follows their stream, :class:`~mwip_ros.nodes.state_input.StateInput`).
+and the controller's clock follows their stream, :class:`~mwip_ros.nodes.runtime.state_input.StateInput`).
 With ``parameter_events`` (default true) the same change is made on the running node, through
 its ``set_parameters`` service, before the first state stamped after it: a run with a gain
 change mid-way re-simulates exactly.  Changes of the nodes named ``disturbance_observer`` and
@@ -37,10 +37,10 @@ from mwip_ros.msgs import BadMessage
 from mwip_ros.msgs import layouts as L
 from mwip_ros.msgs.qos import GRAPH_QOS, INPUT_QOS
 from mwip_ros.msgs.topics import leaf
-from mwip_ros.nodes.comparison import Stat, compare_stamped, diff
-from mwip_ros.nodes.guards import Rejects
-from mwip_ros.nodes.lockstep import CHAIN, LockstepDriver
-from mwip_ros.nodes.runtime import EXIT_ERROR, EXIT_OK
+from mwip_ros.nodes.tools.comparison import Stat, compare_stamped, diff
+from mwip_ros.nodes.runtime.guards import Rejects
+from mwip_ros.nodes.runtime.lockstep import CHAIN, LockstepDriver
+from mwip_ros.nodes.runtime.process import EXIT_ERROR, EXIT_OK
 from mwip_ros.params import ParamError
 
 __all__ = ["Resim", "EXIT_DIFFERENT"]
@@ -187,7 +187,7 @@ class Resim:
         from rcl_interfaces.msg import ParameterEvent
         from rclpy.serialization import deserialize_message
 
-        from mwip_ros.nodes.rclpy_compat import parameter_from_msg
+        from mwip_ros.nodes.runtime.rclpy_compat import parameter_from_msg
 
         if "/parameter_events" not in self.node.types:
             return []

@@ -44,10 +44,10 @@ from pathlib import Path
 from rclpy.node import Node
 
 from mwip_ros.bag import BagError, check, topic_counts, topic_qos, topic_types
-from mwip_ros.nodes.params import declare
-from mwip_ros.nodes.replay import Replay
-from mwip_ros.nodes.resim import Resim
-from mwip_ros.nodes.runtime import GracefulNodeMixin, run_node
+from mwip_ros.nodes.runtime.params import declare
+from mwip_ros.nodes.tools.replay import Replay
+from mwip_ros.nodes.tools.resim import Resim
+from mwip_ros.nodes.runtime.process import GracefulNodeMixin, run_node
 from mwip_ros.params import ParamError
 
 NAME = "bag_replay"
