@@ -86,8 +86,9 @@ def soak(work: Path, duration: float, warmup: float, every: float, split: Dict[s
                 r = rss_kib(procs[name].pid)
                 if r is not None:
                     samples[name].append((t, r))
-            if procs["plant_sim"].poll() is not None:
-                ended = f"plant_sim exited at t = {t:.0f} s (code {procs['plant_sim'].poll()})"
+            gone = [name for name in NODES if procs[name].poll() is not None]
+            if gone:
+                ended = f"{', '.join(gone)} exited at t = {t:.0f} s (code {procs[gone[0]].poll()})"
                 break
             if t >= duration:
                 break
@@ -148,7 +149,7 @@ def main(argv=None) -> int:
     ap.add_argument("--rate", type=float, default=200.0, help="control rate [Hz] (default 200)")
     ap.add_argument("--max-bagfile-size", type=int, default=50_000_000,
                     help="the recorder's max_bagfile_size [bytes] (default 50 MB)")
-    ap.add_argument("--max-bagfile-duration", type=float, default=120.0,
+    ap.add_argument("--max-bagfile-duration", type=int, default=120,
                     help="the recorder's max_bagfile_duration [s] (default 120)")
     ap.add_argument("--no-split", action="store_true", help="record one file (a recorder without splitting)")
     ap.add_argument("--workdir", type=Path, help="keep the logs, csv and bag here (default: a temporary directory)")
@@ -158,7 +159,7 @@ def main(argv=None) -> int:
     if not (args.duration > args.warmup >= 0 and args.every > 0):
         ap.error("need --duration > --warmup >= 0 and --every > 0")
     split = {} if args.no_split else {"max_bagfile_size": str(args.max_bagfile_size),
-                                      "max_bagfile_duration": f"{args.max_bagfile_duration:g}"}
+                                      "max_bagfile_duration": str(args.max_bagfile_duration)}
     with tempfile.TemporaryDirectory() as tmp:
         work = args.workdir or Path(tmp)
         work.mkdir(parents=True, exist_ok=True)

@@ -397,9 +397,10 @@ NODE_SPECS: Dict[str, List[ParamSpec]] = {
         ParamSpec("max_bagfile_size", "integer", 0, "split the bag: start the next file <bag>_<n>.mcap once the "
                   "current one holds more than this many bytes (rosbag2's max_bagfile_size); 0 = no limit",
                   **_count_range(0, 1 << 50), unit="B"),
-        ParamSpec("max_bagfile_duration", "double", 0.0, "split the bag: start the next file once a message is "
+        ParamSpec("max_bagfile_duration", "integer", 0, "split the bag: start the next file once a message is "
                   "more than this many seconds of log time after the current file's first (rosbag2's "
-                  "max_bagfile_duration); 0 = no limit", **_non_negative(1e9), unit="s"),
+                  "max_bagfile_duration, whole seconds as there); 0 = no limit", **_count_range(0, 1 << 40),
+                  unit="s"),
     ],
     "foxglove_server": [
         ParamSpec("host", "string", "127.0.0.1", "address the WebSocket server listens on (0.0.0.0: every "

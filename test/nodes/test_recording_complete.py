@@ -42,7 +42,7 @@ def test_every_lockstep_run_is_recorded_whole_or_flagged(tmp_path, order):
     """``split``: the recorder splits its bag every simulated second (max_bagfile_duration, log time from /clock):
     the ledger judges the whole recording, and the files read as one run."""
     results = []
-    split = ("-p", "max_bagfile_duration:=1.0") if order.endswith("split") else ()
+    split = ("-p", "max_bagfile_duration:=1") if order.endswith("split") else ()
     for run in range(RUNS if not split else 1):
         bag = tmp_path / f"bag{run}"
         with Graph(tmp_path) as g:
@@ -70,6 +70,9 @@ def test_every_lockstep_run_is_recorded_whole_or_flagged(tmp_path, order):
         if split:
             assert meta["relative_file_paths"] == [f"{bag.name}_{i}.mcap" for i in range(len(meta["files"]))]
             assert len(meta["files"]) >= 4, meta["files"]   # 5 s simulated
+            from mwip_ros.runs import read_bag_run
+            run = read_bag_run(bag)   # bag -> trajectory (mwip_report, mwip_identify): every file, one run
+            assert len(run) == states and run.t[0] == 0.0 and run.t[-1] == pytest.approx((states - 1) * 0.005)
         flagged = GAPS_KEY in (meta.get("custom_data") or {})
         complete = all(n == states for n in unique.values())
         results.append((order, run, states, unique, counts, flagged, round(_start_cost_s(plant_log), 2)))
