@@ -251,7 +251,8 @@ def _loop(k0, k1, n_steps, h, substeps, first_w, n_window, counts, delay, act_de
           act, nom, D_b, sins, shared, limit, fall, X, P, use_obs, noisy, std, D_w_mean, D_w_sd, D_w_random,
           Nw, Z, x, u_prev, z, prev, s, qx, qa, active, t_fall, steps, acc, ext, T, tau1, tau2,
           raw, RW, RS, raw_noisy, PE, ES, motor_any, MC, EXT, exi):   # pragma: no cover
-    """Periods k0 .. k1 - 1 of every active scenario: the scalar loop of :func:`.sim.simulate` (sensors, observer,
+    """Periods k0 .. k1 - 1 of every active scenario (the arguments by name and meaning: :class:`.kernel_args.LoopArgs`,
+    as :mod:`.batch` builds them): the scalar loop of :func:`.sim.simulate` (sensors, observer,
     law, saturation, actuator, true tau_d in the window, fall, RK4), calling its own functions compiled; the
     per-scenario state lives in the arrays between calls.  The scenarios go ``LANES`` at a time, period by period:
     each one's sensors to fall check in turn, then, when they share tau_ext (``shared``: ``sins`` row 0, whose stage

@@ -399,3 +399,11 @@ def test_the_stamp_follows_the_callees_and_the_frozen_values():
         assert jitcache.stamp_of(kernel.py_func) != stamp
     finally:
         est["NIS_WINDOW_S"] = old
+
+
+def test_the_loops_arguments_by_name_are_its_parameters_in_order():
+    """core.batch builds the kernel's arguments by keyword (core.kernel_args.LoopArgs) and passes them positionally:
+    the bundle's fields must be the compiled loop's parameters, in its order."""
+    from mwip_ros.core.kernel_args import LoopArgs
+    code = compiled._loop.__code__
+    assert LoopArgs._fields == code.co_varnames[:code.co_argcount]
