@@ -108,7 +108,8 @@ def soak(work: Path, duration: float, warmup: float, every: float, split: Dict[s
             "rss_start_mib": s[0][1] / 1024 if s else None,
             "rss_warm_mib": after[0][1] / 1024 if after else None,
             "rss_end_mib": s[-1][1] / 1024 if s else None,
-            "slope_mb_per_h": slope_mb_per_h(after), "samples": len(after)}
+            "slope_mb_per_h": slope_mb_per_h(after), "samples": len(after),
+            "rss_kib": [[round(t, 1), r] for t, r in s]}
     if summary.exists():
         plant = json.loads(summary.read_text())
         out["periods"] = plant.get("periods")
