@@ -27,8 +27,9 @@ from mwip_ros.msgs import BadMessage
 from mwip_ros.msgs import layouts as L
 from mwip_ros.msgs.topics import leaf
 
-__all__ = ["write_csv", "read_csv", "read_bag_run", "read_bag_runs", "load_run", "load_runs", "plant_record",
-           "PLANT_NODE", "MAX_ROWS", "MAX_CSV_BYTES", "MAX_BAG_BYTES", "check_size", "check_times", "RUN_COLUMNS"]
+__all__ = ["CsvStream", "write_csv", "read_csv", "read_bag_run", "read_bag_runs", "load_run", "load_runs",
+           "plant_record", "PLANT_NODE", "MAX_ROWS", "MAX_CSV_BYTES", "MAX_BAG_BYTES", "check_size", "check_times",
+           "RUN_COLUMNS"]
 
 PLANT_NODE = "plant_sim"
 # what plant_sim logs (mwip_ros.nodes.loop.plant_sim): its start (the configured duration), a fall, an interruption
@@ -49,6 +50,36 @@ MAX_LOG_MESSAGES = 100_000     # /rosout, /parameter_events messages of a bag ke
 RUN_COLUMNS = ("t", "theta_w", "theta_b", "dtheta_w", "dtheta_b", "u")
 
 
+class CsvStream:
+    """A trajectory CSV written row by row as a run goes (a node's ``csv``): the header ``names`` (in the
+    trajectory table's order, then ``stamp``), then each row's floats written exactly (repr); the text of
+    :func:`write_csv` for the same rows, without holding them.  :meth:`restart` empties the file (a plant's
+    reset: the csv keeps the run from there)."""
+
+    def __init__(self, path, names):
+        self.names = list(names)
+        self._f = open(path, "w", newline="")
+        self._w = csv.writer(self._f, lineterminator="\n")
+        self._w.writerow(self.names)
+
+    def row(self, values) -> None:
+        self._w.writerow([repr(float(x)) for x in values])
+
+    def restart(self) -> None:
+        self._f.seek(0)
+        self._f.truncate()
+        self._w.writerow(self.names)
+
+    def close(self) -> None:
+        self._f.close()
+
+    def __enter__(self) -> "CsvStream":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
 def write_csv(run: Trajectory, path) -> None:
     """The columns ``run`` has, in the trajectory table's order (then ``stamp``, a realtime plant's message
     stamps in seconds when they are not ``t``), floats written exactly (repr)."""
@@ -59,11 +90,9 @@ def write_csv(run: Trajectory, path) -> None:
         # a failed run (core.sim.simulate): when and why, in every row (read_csv gives them back as its record)
         names += list(FAILURE_COLUMNS)
         cols += [np.full(len(run), float(rec["t_fall"])), np.full(len(run), float(FAILURES.index(rec["failure"])))]
-    with open(path, "w", newline="") as f:
-        w = csv.writer(f, lineterminator="\n")
-        w.writerow(names)
+    with CsvStream(path, names) as out:
         for row in zip(*cols):
-            w.writerow([repr(float(x)) for x in row])
+            out.row(row)
 
 
 def _mib(n: float) -> str:

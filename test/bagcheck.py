@@ -138,15 +138,16 @@ def _marker(T, header, i: int, k: int):
 
 
 def write_bag(path, topics: Dict[str, str], n: int, compression=None, chunk_size: int = 300,
-              t0: int = T0) -> List[tuple]:
-    """``n`` messages on each topic (topic -> type), interleaved, log times 1 ms apart from ``t0``.
+              t0: int = T0, **split) -> List[tuple]:
+    """``n`` messages on each topic (topic -> type), interleaved, log times 1 ms apart from ``t0``; ``split``:
+    the writer's ``max_bagfile_size``, ``max_bagfile_duration``.
 
     Returns ``[(topic, type_name, log_time_ns, msg, cdr_bytes)]`` in the order written."""
     from mwip_ros.bag import BagWriter, qos_profiles_yaml
 
     ts = typestore()
     written = []
-    with BagWriter(path, compression=compression, chunk_size=chunk_size) as bag:
+    with BagWriter(path, compression=compression, chunk_size=chunk_size, **split) as bag:
         for topic, type_name in topics.items():
             bag.add_topic(topic, type_name, qos_profiles_yaml([ENDPOINT_QOS]), "")
         t = t0
@@ -166,9 +167,9 @@ def graph_topics() -> Dict[str, str]:
     return {(name if name.startswith("/") else "/" + name): type_name for name, type_name in GRAPH_TOPICS.items()}
 
 
-def write_graph_bag(path, n=7, compression=None, chunk_size=300):
+def write_graph_bag(path, n=7, compression=None, chunk_size=300, **split):
     """Every graph topic, n messages each, interleaved; returns [(topic, type, t, msg, cdr)]."""
-    return write_bag(path, graph_topics(), n, compression, chunk_size)
+    return write_bag(path, graph_topics(), n, compression, chunk_size, **split)
 
 
 # --- what a damaged copy should give back ------------------------------------------------------

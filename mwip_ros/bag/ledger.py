@@ -9,18 +9,22 @@ grid up to the last one recorded, one message of that stamp on each stamped topi
 ``robot_markers`` a view of the states, ``driver_state`` the driver's transitions and ``/rosout``,
 ``/parameter_events``, ``/diagnostics`` ROS's own: those are not compared.  A recorder that joined
 late lacks the first stamps everywhere: the grid from 0 still shows it.  A state the plant resent
-before the graph had matched shows as a repeated stamp: it counts once.  :class:`Ledger` keeps the
-stamps (8 bytes each) and says which topics lack which stamps; no ROS here.
+before the graph had matched shows as a repeated stamp: it counts once.  :class:`Ledger` keeps each
+topic's stamps as runs of evenly spaced ones (:class:`Runs`: first, step, count; a topic's stamps in a complete
+lockstep recording are one run, and each gap or reset starts another), so its memory does not grow with the length
+of the recording, and says which topics lack which stamps; no ROS here.
 """
 from __future__ import annotations
 
 from array import array
-from typing import Dict, List, Optional, Tuple
+from typing import Dict, Iterator, List, Optional, Tuple
+
+import numpy as np
 
 from mwip_ros.msgs.cdr import peek_stamp
 from mwip_ros.msgs.topics import leaf
 
-__all__ = ["Ledger", "GAPS_KEY", "MAX_STAMPS"]
+__all__ = ["Ledger", "Runs", "GAPS_KEY", "MAX_STAMPS", "MAX_RUNS"]
 
 GAPS_KEY = "mwip_ros.lockstep_gaps"    # the bag's custom_data entry that says what a lockstep recording lacks
 STAMPED = {"sensor_msgs/msg/JointState", "geometry_msgs/msg/WrenchStamped", "rosgraph_msgs/msg/Clock"}
@@ -30,13 +34,58 @@ NOT_COMPARED = {"external_wrench", "emergency_stop",     # what a user sent;
 # published only with sensing options on (the truth) or raw sensors (the IMU, the encoder): judged when they have
 # messages
 OPTIONAL = {"true_joint_states", "data_raw", "wheel_encoder"}
-MAX_STAMPS = 10_000_000     # per topic (80 MB); past it a topic is only counted
+MAX_STAMPS = 10_000_000     # per topic; past it a topic is only counted (its judgement would hold them all at once)
+MAX_RUNS = 100_000          # per topic (2.4 MB); past it (stamps on no grid) a topic is only counted
+
+
+class Runs:
+    """A topic's stamps in the order they came, as runs of evenly spaced stamps: three int64 per run."""
+
+    def __init__(self):
+        self.first, self.step, self.count = array("q"), array("q"), array("q")
+        self.total = 0
+
+    def __len__(self) -> int:
+        return self.total
+
+    def runs(self) -> int:
+        return len(self.first)
+
+    @property
+    def last(self) -> Optional[int]:
+        return self.first[-1] + (self.count[-1] - 1) * self.step[-1] if self.first else None
+
+    def add(self, stamp: int) -> None:
+        if self.first:
+            n, first = self.count[-1], self.first[-1]
+            if n == 1 and stamp > first:
+                self.step[-1], self.count[-1] = stamp - first, 2
+                self.total += 1
+                return
+            if n > 1 and stamp == first + n * self.step[-1]:
+                self.count[-1] = n + 1
+                self.total += 1
+                return
+        self.first.append(stamp)
+        self.step.append(0)
+        self.count.append(1)
+        self.total += 1
+
+    def __iter__(self) -> Iterator[int]:
+        for first, step, n in zip(self.first, self.step, self.count):
+            yield from range(first, first + n * step, step) if step else (first,)
+
+    def array(self) -> np.ndarray:
+        """Every stamp (int64), in the order they came."""
+        parts = [np.arange(n, dtype=np.int64) * step + first for first, step, n in zip(self.first, self.step,
+                                                                                      self.count)]
+        return np.concatenate(parts) if parts else np.zeros(0, dtype=np.int64)
 
 
 class Ledger:
     def __init__(self):
         self.counts: Dict[str, int] = {}
-        self.stamps: Dict[str, array] = {}
+        self.stamps: Dict[str, Runs] = {}
         self.repeats: Dict[str, int] = {}
         self.overflow = False
 
@@ -47,28 +96,26 @@ class Ledger:
         stamp = peek_stamp(data)
         if stamp is None:
             return
-        seen = self.stamps.setdefault(topic, array("q"))
-        if seen and seen[-1] == stamp:
+        seen = self.stamps.setdefault(topic, Runs())
+        if seen.last == stamp:
             self.repeats[topic] = self.repeats.get(topic, 0) + 1   # a resend: recorded, counted once
-        elif len(seen) < MAX_STAMPS:
-            seen.append(stamp)
+        elif len(seen) < MAX_STAMPS and seen.runs() < MAX_RUNS:
+            seen.add(stamp)
         else:
             self.overflow = True
 
-    def expected(self) -> set:
-        """The stamps a complete lockstep recording has: the grid from 0 to the last stamp seen (or, when
+    def expected(self) -> np.ndarray:
+        """The stamps a complete lockstep recording has (sorted): the grid from 0 to the last stamp seen (or, when
         the stamps are not on such a grid or it would be mostly empty, every stamp seen on any topic)."""
-        seen = set()
-        for stamps in self.stamps.values():
-            seen.update(stamps)
+        seen = np.unique(np.concatenate([r.array() for r in self.stamps.values()] or [np.zeros(0, np.int64)]))
         if len(seen) < 2:
             return seen
-        ordered = sorted(seen)
-        step = min(b - a for a, b in zip(ordered, ordered[1:]))
-        points = ordered[-1] // step + 1
-        if ordered[0] % step or points > 2 * len(seen) + 1000:  # not one plant's grid from 0
+        step = int(np.diff(seen).min())
+        last = int(seen[-1])
+        points = last // step + 1
+        if int(seen[0]) % step or points > 2 * len(seen) + 1000:  # not one plant's grid from 0
             return seen
-        return set(range(0, ordered[-1] + 1, step))
+        return np.arange(0, last + 1, step, dtype=np.int64)
 
     def gaps(self) -> List[Tuple[str, int, int, Optional[int]]]:
         """[(topic, messages it has, messages it should have, first missing stamp or None)] for every topic of
@@ -83,9 +130,10 @@ class Ledger:
             if leaf(topic) in NOT_COMPARED or (leaf(topic) in OPTIONAL and not count):
                 continue
             if topic in self.stamps:
-                have = states.intersection(self.stamps[topic])
-                if len(have) < len(states):
-                    out.append((topic, len(have), len(states), min(states - have)))
+                have = np.isin(states, self.stamps[topic].array())
+                n = int(have.sum())
+                if n < len(states):
+                    out.append((topic, n, len(states), int(states[np.argmin(have)])))
             elif count < len(states):
                 out.append((topic, count, len(states), None))
         return out

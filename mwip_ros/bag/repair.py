@@ -36,7 +36,7 @@ from mwip_ros.yamlio import load_yaml
 from .errors import BagError
 from .metadata import (REPAIRED_KEY, ROS_DISTRO, TopicInfo, bag_metadata, dump_yaml, parse_qos_yaml,
                        write_metadata_yaml)
-from .reader import mcap_files, read_metadata
+from .reader import _file_index, mcap_files, read_metadata
 from .scan import Collected, walk
 from .writer import DEFAULT_CHUNK_SIZE, FileSink
 
@@ -205,7 +205,7 @@ def _bag_dir_for(target: Path) -> Tuple[Optional[Path], List[Path]]:
     try:
         files = mcap_files(target)
     except BagError:
-        files = sorted(target.glob("*.mcap"))
+        files = sorted(target.glob("*.mcap"), key=_file_index)
     return target, files
 
 

@@ -1,6 +1,7 @@
 """A rosbag2-compatible MCAP bag writer (what Jazzy's ``ros2 bag record -s mcap`` writes).
 
-A bag is a directory ``<bag_dir>/`` holding ``<basename>_0.mcap`` and ``metadata.yaml``:
+A bag is a directory ``<bag_dir>/`` holding ``<basename>_0.mcap`` (a split bag: ``<basename>_1.mcap``, ... too)
+and ``metadata.yaml``:
 
 * the MCAP file has profile ``ros2``; one Schema per message type (encoding ``ros2msg``,
   name e.g. ``sensor_msgs/msg/JointState``, data = the rosbag2 message definition, see
@@ -19,6 +20,16 @@ lives in memory, so a recording cut by ``kill -9`` loses it, at most the last
 a file whole again (and saves the complete records of a chunk cut short on disk, e.g. by a
 full disk or a power loss).
 
+Splitting, as rosbag2's ``max_bagfile_size`` and ``max_bagfile_duration`` (0: none): before a message is written,
+the file being written is finished and the next one started when it already holds more than ``max_bagfile_size``
+bytes on disk (the chunk being filled is not yet there) or the message's log time is more than
+``max_bagfile_duration`` seconds past the file's first message.  Each file is a whole MCAP file of its own (its
+schemas and a channel for every topic known so far, its own summary, its own ``rosbag2`` record), and
+``metadata.yaml`` lists them all (``relative_file_paths`` and ``files``: path, starting time, duration and messages
+of each), as rosbag2 writes a split bag; the readers (:mod:`.reader`) take every file of it as one run.  The
+writer's memory then stays bounded on a run of days: what an MCAP writer keeps for its summary (the index of every
+chunk) belongs to one file.
+
 As with rosbag2's MCAP plugin, zstd compresses each chunk inside the MCAP file, so
 ``metadata.yaml`` says ``compression_format: ""`` and ``compression_mode: ""``.
 """
@@ -26,7 +37,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Any, Dict, Mapping, Optional, Union
+from typing import Any, Dict, List, Mapping, Optional, Union
 
 from mcap.writer import CompressionType, Writer
 
@@ -107,7 +118,8 @@ class BagWriter:
     def __init__(self, bag_dir: Union[str, Path], compression: Optional[str] = None,
                  chunk_size: int = DEFAULT_CHUNK_SIZE, *, custom_data: Optional[Mapping[str, str]] = None,
                  ros_distro: str = ROS_DISTRO, library: Optional[str] = None,
-                 max_chunk_duration: Optional[float] = DEFAULT_MAX_CHUNK_DURATION):
+                 max_chunk_duration: Optional[float] = DEFAULT_MAX_CHUNK_DURATION, max_bagfile_size: int = 0,
+                 max_bagfile_duration: float = 0.0):
         self.path = Path(bag_dir)
         if str(bag_dir).strip() == "":
             raise BagError("bag directory must not be empty")
@@ -119,6 +131,14 @@ class BagWriter:
                                                    and max_chunk_duration > 0):
             raise BagError(f"max_chunk_duration must be a positive number of seconds or None, "
                            f"got {max_chunk_duration!r}")
+        if not (isinstance(max_bagfile_size, int) and not isinstance(max_bagfile_size, bool)
+                and max_bagfile_size >= 0):
+            raise BagError(f"max_bagfile_size must be a whole number of bytes >= 0 (0: no splitting), got "
+                           f"{max_bagfile_size!r}")
+        if not (isinstance(max_bagfile_duration, (int, float)) and not isinstance(max_bagfile_duration, bool)
+                and 0 <= max_bagfile_duration < float("inf")):
+            raise BagError(f"max_bagfile_duration must be a number of seconds >= 0 (0: no splitting), got "
+                           f"{max_bagfile_duration!r}")
         if self.path.exists() or self.path.is_symlink():
             raise BagError(f"bag directory {self.path} already exists; refusing to overwrite it "
                            f"(choose a new output path)")
@@ -138,17 +158,64 @@ class BagWriter:
         self._chunk_first_ns: Optional[int] = None  # log time of the first message in the chunk being filled
         self.custom_data = dict(custom_data or {})
         self.ros_distro = ros_distro
-        self.relative_path = f"{self.path.name}_0.mcap"
-        self.mcap_path = self.path / self.relative_path
-        self._file = FileInfo(self.relative_path)
+        self.max_bagfile_size = max_bagfile_size
+        self.max_bagfile_duration = max_bagfile_duration
+        self._max_file_ns = int(round(max_bagfile_duration * 1e9))
+        self._compression_type = compression_type
+        self._library = library or _library_string()
+        self._files: List[FileInfo] = []
         self._topics: Dict[str, TopicInfo] = {}
+        self._definitions: Dict[str, str] = {}   # type name -> its schema's text, for every file
+        self._channel_meta: Dict[str, dict] = {}  # topic -> its channel's metadata, for every file
+        self._closed = False
+        self._open_file()
+
+    def _open_file(self) -> None:
+        """Start the next MCAP file, ``<basename>_<n>.mcap``: its header, its ``rosbag2`` record, the schemas and
+        channels of every topic known so far."""
+        self.relative_path = f"{self.path.name}_{len(self._files)}.mcap"
+        self.mcap_path = self.path / self.relative_path
+        self._sink = FileSink(self.mcap_path)
+        self._file = FileInfo(self.relative_path)
+        self._files.append(self._file)
         self._channels: Dict[str, int] = {}
         self._schemas: Dict[str, int] = {}
-        self._closed = False
-        self._sink = FileSink(self.mcap_path)
-        self._writer = Writer(self._sink, chunk_size=chunk_size, compression=compression_type)
-        self._writer.start(profile="ros2", library=library or _library_string())
+        self._chunk_first_ns = None
+        self._writer = Writer(self._sink, chunk_size=self.chunk_size, compression=self._compression_type)
+        self._writer.start(profile="ros2", library=self._library)
         self._write_bag_metadata_record()
+        for name, t in self._topics.items():
+            self._register(name, t.type, t.serialization_format)
+
+    def _register(self, name: str, type_name: str, serialization_format: str) -> int:
+        if type_name not in self._schemas:
+            self._schemas[type_name] = self._writer.register_schema(
+                name=type_name, encoding="ros2msg", data=self._definitions[type_name].encode("utf-8"))
+        self._channels[name] = self._writer.register_channel(
+            topic=name, message_encoding=serialization_format, schema_id=self._schemas[type_name],
+            metadata=self._channel_meta[name])
+        return self._channels[name]
+
+    def _finish_file(self) -> None:
+        try:
+            self._write_bag_metadata_record()
+            self._writer.finish()
+        finally:
+            self._sink.close()
+
+    def _should_split(self, log_time_ns: int) -> bool:
+        """rosbag2's rule: the file has messages and is past ``max_bagfile_size`` on disk, or this message is past
+        ``max_bagfile_duration`` after its first."""
+        f = self._file
+        if f.start_ns is None:
+            return False
+        return ((self.max_bagfile_size > 0 and self._sink.tell() > self.max_bagfile_size)
+                or (self._max_file_ns > 0 and log_time_ns - f.start_ns > self._max_file_ns))
+
+    @property
+    def files(self) -> List[str]:
+        """The bag's files so far (relative to its directory), in recording order."""
+        return [f.path for f in self._files]
 
     # -- topics and messages --
 
@@ -171,15 +238,11 @@ class BagWriter:
             return self._channels[name]
         profiles = parse_qos_yaml(qos_yaml)
         type_hash = type_hash or installed_type_hash(type_name)
-        if type_name not in self._schemas:
-            text = definition if definition is not None else message_definition(type_name)
-            self._schemas[type_name] = self._writer.register_schema(
-                name=type_name, encoding="ros2msg", data=text.encode("utf-8"))
-        channel_id = self._writer.register_channel(
-            topic=name, message_encoding=serialization_format, schema_id=self._schemas[type_name],
-            metadata={"offered_qos_profiles": dump_yaml(profiles), "topic_type_hash": type_hash})
+        if type_name not in self._definitions:
+            self._definitions[type_name] = definition if definition is not None else message_definition(type_name)
+        self._channel_meta[name] = {"offered_qos_profiles": dump_yaml(profiles), "topic_type_hash": type_hash}
+        channel_id = self._register(name, type_name, serialization_format)
         self._topics[name] = TopicInfo(name, type_name, profiles, type_hash, 0, serialization_format)
-        self._channels[name] = channel_id
         return channel_id
 
     def has_topic(self, name: str) -> bool:
@@ -195,6 +258,10 @@ class BagWriter:
         log_time_ns = int(log_time_ns)
         if log_time_ns < 0:
             raise BagError(f"log time of a message on {topic!r} is negative: {log_time_ns}")
+        if self._should_split(log_time_ns):
+            self._finish_file()
+            self._open_file()
+            channel_id = self._channels[topic]
         written = self._sink.tell()
         self._writer.add_message(channel_id=channel_id, log_time=log_time_ns, data=bytes(data),
                                  publish_time=log_time_ns if publish_time_ns is None else int(publish_time_ns),
@@ -221,7 +288,7 @@ class BagWriter:
 
     @property
     def message_count(self) -> int:
-        return self._file.message_count
+        return sum(f.message_count for f in self._files)
 
     @property
     def topic_counts(self) -> Dict[str, int]:
@@ -229,15 +296,17 @@ class BagWriter:
 
     @property
     def start_time_ns(self) -> Optional[int]:
-        return self._file.start_ns
+        starts = [f.start_ns for f in self._files if f.start_ns is not None]
+        return min(starts) if starts else None
 
     @property
     def end_time_ns(self) -> Optional[int]:
-        return self._file.end_ns
+        ends = [f.end_ns for f in self._files if f.end_ns is not None]
+        return max(ends) if ends else None
 
     def metadata(self) -> Dict[str, Any]:
         """The bag's metadata (``rosbag2_bagfile_information``) as it stands now."""
-        return bag_metadata(list(self._topics.values()), [self._file], custom_data=self.custom_data,
+        return bag_metadata(list(self._topics.values()), self._files, custom_data=self.custom_data,
                             ros_distro=self.ros_distro)
 
     # -- closing --
@@ -247,11 +316,7 @@ class BagWriter:
         if self._closed:
             return self.path
         self._closed = True
-        try:
-            self._write_bag_metadata_record()
-            self._writer.finish()
-        finally:
-            self._sink.close()
+        self._finish_file()
         write_metadata_yaml(self.path, self.metadata())
         return self.path
 

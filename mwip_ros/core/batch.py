@@ -419,6 +419,7 @@ def _simulate_compiled(loops: Sequence[ClosedLoop], window: Sequence[float], law
     excitation are per scenario."""
     from .compiled import Inertia, load_cached
     from .excitation import Excitation
+    from .kernel_args import LoopArgs
     from .raw_sensors import raw_rng
     n = len(loops)
     pcs = [lp.plant for lp in loops]
@@ -518,12 +519,17 @@ def _simulate_compiled(loops: Sequence[ClosedLoop], window: Sequence[float], law
                 gen.standard_normal(out=Nw[random[row], :k1 - k0])
             for row, gen in enumerate(z_gens):    # core.sensing.Normals
                 gen.standard_normal(out=Z[z_idx[row], :k1 - k0])
-            args = (k0, k1, n_steps, h, substeps, first_w, n_window, counts, delay, act_delay, bool(law.observer),
-                    act, nom, D_b, sins, shared, limit, fall, X, P, use_obs, noisy, std, mean, sd, rnd, Nw, Z,
-                    x, u_prev, z, prev, s, qx, qa, active, t_fall, steps, acc, ext, T, tau1, tau2,
-                    raw, RW, RS, raw_noisy, PE, ES, bool(motor.any()), MC, EXT, exi, failure)
+            args = LoopArgs(   # the compiled loop's arguments by name (core.kernel_args), passed positionally
+                k0=k0, k1=k1, n_steps=n_steps, h=h, substeps=substeps, first_w=first_w, n_window=n_window,
+                counts=counts, delay=delay, act_delay=act_delay, observer_law=bool(law.observer),
+                act=act, nom=nom, D_b=D_b, sins=sins, shared=shared, limit=limit, fall=fall, X=X, P=P, use_obs=use_obs,
+                noisy=noisy, std=std, D_w_mean=mean, D_w_sd=sd, D_w_random=rnd, Nw=Nw, Z=Z,
+                x=x, u_prev=u_prev, z=z, prev=prev, s=s, qx=qx, qa=qa, active=active,
+                t_fall=t_fall, steps=steps, acc=acc, ext=ext, T=T, tau1=tau1, tau2=tau2,
+                raw=raw, RW=RW, RS=RS, raw_noisy=raw_noisy, PE=PE, ES=ES,
+                motor_any=bool(motor.any()), MC=MC, EXT=EXT, exi=exi, failure=failure)
             if k0 == 0:
-                load_cached(kernel, args)
+                load_cached(kernel, tuple(args))
             kernel(*args)
         m = window_sums_metrics(acc, ext)
         if raw:

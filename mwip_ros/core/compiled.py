@@ -42,27 +42,24 @@ excitation (a table of each distinct one's periods, added to the law's command b
 numba compiles on first use (about a second for the RK4, a few for a loop) and caches the machine code
 where numba would (``NUMBA_CACHE_DIR`` if set, else ``__pycache__`` next to the sources, else numba's
 user-wide cache directory), so later processes (sweep workers) only load it.  numba would renew a cached
-function only when its own file changes, but the compiled RK4 period contains ``accel`` from ``model.py``:
-here every cached function is stamped with the contents of the files it is made of (``model.py``,
-``plant.py``, this one for the RK4; :data:`LOOP_SOURCES` and the law's own module for the loop), so an
-edit to any equation is compiled afresh.
+function only when its own file changes, but the compiled RK4 period contains ``accel`` from ``model.py``, the
+loop a law's callees (``core/lqr.py``'s ``lqr_u``) and the constants numba freezes (``estimators``'
+``NIS_WINDOW_S``): here every cached function is stamped with what it is made of (:func:`made_of`, found by
+walking the globals of the compiled functions: the contents of every file a compiled function, class or module
+comes from, and the value of every constant), so an edit to any of them is compiled afresh.
 """
 from __future__ import annotations
 
-import hashlib
 import math
 import types
-from pathlib import Path
 from typing import NamedTuple
 
-import numba
 import numpy as np
-from numba.core.caching import (CompileResultCacheImpl, FunctionCache, InTreeCacheLocator, UserProvidedCacheLocator,
-                                UserWideCacheLocator)
 
-from . import controller, drive, model, observer, plant, raw_sensors, safety, sensing, simd
+from . import drive, model, observer, plant, simd
 from .controller import u_taud_of
 from .drive import motor_torque
+from .jitcache import jit as _jit
 from .model import lumped_disturbance
 from .observer import tau_hat_of, z_next, z_start
 from .plant import D_w_of, saturate
@@ -70,70 +67,7 @@ from .raw_sensors import raw_sample
 from .safety import PLAUSIBLE_TORQUE
 from .sensing import quantize
 
-__all__ = ["Inertia", "RK4Periods", "SOURCES", "Sin", "kernel_for", "load_cached"]
-
-SOURCES = (Path(model.__file__), Path(plant.__file__), Path(drive.__file__), Path(__file__))   # the compiled plant's
-_STAMP = hashlib.sha256(b"".join(p.read_bytes() for p in SOURCES)).hexdigest()
-# what the compiled batch loop is made of besides a law's own module
-LOOP_SOURCES = SOURCES + (Path(observer.__file__), Path(controller.__file__), Path(sensing.__file__),
-                         Path(simd.__file__), Path(raw_sensors.__file__), Path(safety.__file__))
-
-
-def _stamp_of(paths) -> str:
-    return hashlib.sha256(b"".join(Path(p).read_bytes() for p in paths)).hexdigest()
-
-
-class _Stamped:
-    stamp = _STAMP
-
-    def get_source_stamp(self):
-        return self.stamp   # numba's own stamp covers the function's file only
-
-
-class _UserProvided(_Stamped, UserProvidedCacheLocator):
-    pass
-
-
-class _InTree(_Stamped, InTreeCacheLocator):
-    pass
-
-
-class _UserWide(_Stamped, UserWideCacheLocator):
-    pass
-
-
-class _CacheImpl(CompileResultCacheImpl):
-    _locator_classes = [_UserProvided, _InTree, _UserWide]   # numba's order: NUMBA_CACHE_DIR first
-
-
-class _Cache(FunctionCache):
-    _impl_class = _CacheImpl
-
-
-def _stamped_cache(stamp: str, tag: str = "") -> type:
-    """A :class:`_Cache` whose locators stamp with ``stamp``, in files of their own for ``tag``.
-
-    numba keeps one index file per function and renews it whenever the stamp differs, so two builds of one
-    function (one per lane width) under one file name would each throw the other's machine code away: a
-    process without lanes after one with lanes (the tests run both) compiled everything again."""
-    locs = [type(c.__name__, (c,), {"stamp": stamp}) for c in _CacheImpl._locator_classes]
-
-    def get_filename_base(self, fullname, abiflags):
-        return CompileResultCacheImpl.get_filename_base(self, f"{fullname}__{tag}" if tag else fullname, abiflags)
-    impl = type("_Impl", (CompileResultCacheImpl,), {"_locator_classes": locs,
-                                                     "get_filename_base": get_filename_base})
-    return type("_StampedCache", (FunctionCache,), {"_impl_class": impl})
-
-
-def _jit(fn, cache: type = _Cache):
-    """numba's nopython compilation of ``fn``, cached under the stamp of :data:`SOURCES` (or ``cache``'s)."""
-    compiled = numba.njit(error_model="numpy")(fn)
-    try:
-        compiled._cache = cache(compiled.py_func)   # what ``cache=True`` sets, with the stamp above
-    except RuntimeError:   # no writable cache directory: compile in every process
-        pass
-    return compiled
-
+__all__ = ["Inertia", "RK4Periods", "Sin", "kernel_for", "load_cached"]
 
 class Inertia(NamedTuple):
     """The terms of eq. (2) that :func:`.model.accel` reads, for one scenario."""
@@ -242,7 +176,7 @@ def _lanes_of(fn, **calls):
             bound[name] = _deep(g)
     same = types.FunctionType(fn.__code__, {**fn.__globals__, **bound}, fn.__name__, fn.__defaults__[:-1] + (simd,))
     same.__qualname__ = fn.__qualname__ + "__lanes"
-    return _jit(same, _cache_for((fn.__code__.co_filename,)))
+    return _jit(same, _lanes_tag())
 
 
 def _no_lanes(p, D_w, D_b, tau1, tau2, x, u, h, n):   # pragma: no cover
@@ -277,21 +211,17 @@ def _params3(Pg):   # pragma: no cover
 
 law_lanes, params_lanes = _no_law_lanes, _params3
 
-_CACHES: dict = {}
 _DONE: dict = {}   # code object -> its compiled function
 
 
-def _cache_for(extra=()) -> type:
-    paths = LOOP_SOURCES + tuple(Path(p) for p in extra if Path(p) not in LOOP_SOURCES)
-    if paths not in _CACHES:
-        _CACHES[paths] = _stamped_cache(_stamp_of(paths), f"lanes{simd.WIDTH}")   # a kernel per lane width
-    return _CACHES[paths]
+def _lanes_tag() -> str:
+    return f"lanes{simd.WIDTH}"   # a kernel per lane width
 
 
-def _deep(fn, suffix: str = "", _sources=(), **calls):
+def _deep(fn, suffix: str = "", **calls):
     """``fn``'s own code compiled by numba (as :func:`_compiled`), every plain Python function it calls by a global
-    name compiled alike, recursively: the scalar loop's own functions, no copy.  Cached under the stamp of
-    :data:`LOOP_SOURCES`, ``fn``'s own file and ``_sources`` (the files of the functions bound in ``calls``)."""
+    name compiled alike, recursively: the scalar loop's own functions, no copy.  Cached under the stamp of what it
+    is made of (:func:`made_of`: the functions bound in ``calls`` included)."""
     key = (fn.__code__, suffix)
     if key in _DONE:
         return _DONE[key]
@@ -302,7 +232,7 @@ def _deep(fn, suffix: str = "", _sources=(), **calls):
             bound[name] = _deep(g)
     same = types.FunctionType(fn.__code__, {**fn.__globals__, **bound}, fn.__name__, fn.__defaults__)
     same.__qualname__ = fn.__qualname__ + suffix
-    _DONE[key] = out = _jit(same, _cache_for((fn.__code__.co_filename,) + tuple(_sources)))
+    _DONE[key] = out = _jit(same, _lanes_tag())
     return out
 
 
@@ -322,7 +252,8 @@ def _loop(k0, k1, n_steps, h, substeps, first_w, n_window, counts, delay, act_de
           act, nom, D_b, sins, shared, limit, fall, X, P, use_obs, noisy, std, D_w_mean, D_w_sd, D_w_random,
           Nw, Z, x, u_prev, z, prev, s, qx, qa, active, t_fall, steps, acc, ext, T, tau1, tau2,
           raw, RW, RS, raw_noisy, PE, ES, motor_any, MC, EXT, exi, failure):   # pragma: no cover
-    """Periods k0 .. k1 - 1 of every active scenario: the scalar loop of :func:`.sim.simulate` (sensors, observer,
+    """Periods k0 .. k1 - 1 of every active scenario (the arguments by name and meaning: :class:`.kernel_args.LoopArgs`,
+    as :mod:`.batch` builds them): the scalar loop of :func:`.sim.simulate` (sensors, observer,
     law, saturation, actuator, true tau_d in the window, fall, RK4), calling its own functions compiled; the
     per-scenario state lives in the arrays between calls.  The scenarios go ``LANES`` at a time, period by period:
     each one's sensors to fall check in turn, then, when they share tau_ext (``shared``: ``sins`` row 0, whose stage
@@ -661,21 +592,20 @@ def kernel_for(law: type, estimator: type = None):
         step = _deep(fn)
         at = _deep(model.Sinusoid.at)
         lanes = (_lanes_of(plant.rk4_period, rk4_driven=_lanes_of(plant.rk4_driven, accel=_lanes_of(model.accel),
-                                                                  motor_torque=_jit(_held, _cache_for())))
-                 if SIMD else _jit(_no_lanes, _cache_for()))
-        z_lanes = _lanes_of(observer.z_next) if SIMD else _jit(_no_z_lanes, _cache_for())
+                                                                  motor_torque=_jit(_held, _lanes_tag())))
+                 if SIMD else _jit(_no_lanes, _lanes_tag()))
+        z_lanes = _lanes_of(observer.z_next) if SIMD else _jit(_no_z_lanes, _lanes_tag())
         by_lanes = SIMD and getattr(core, "pure_lanes", 0) == 3   # a law whose pure_step runs on lanes
         suffix = f"__{fn.__module__}.{fn.__qualname__}".replace(".", "_")
         if est is not _no_est:
             suffix += f"__{est.__module__}.{est.__qualname__}".replace(".", "_")
-        sources = tuple(sorted({fn.__code__.co_filename, est.__code__.co_filename}))   # one order: one stamp
-        _KERNELS[fn, est] = _deep(_loop, suffix, _sources=sources, law_step=step,
-                             est_step=_deep(est) if est is not _no_est else _jit(_no_est, _cache_for()),
+        _KERNELS[fn, est] = _deep(_loop, suffix, law_step=step,
+                             est_step=_deep(est) if est is not _no_est else _jit(_no_est, _lanes_tag()),
                              raw_sample=_deep(raw_sample), motor_torque=_compiled(drive.motor_torque),
                              rk4_driven=_rk4_driven,
                              Inertia=Inertia, Sin=Sin, at=at, _stage=_deep(_stage, at=at), accel=_accel,
                              rk4_period=_rk4_period, rk4_lanes=lanes, load=load, store=store,
                              z_next_lanes=z_lanes, LAW_LANES=by_lanes,
-                             law_lanes=_lanes_of(fn) if by_lanes else _jit(_no_law_lanes, _cache_for()),
-                             params_lanes=_jit(_params3, _cache_for()))
+                             law_lanes=_lanes_of(fn) if by_lanes else _jit(_no_law_lanes, _lanes_tag()),
+                             params_lanes=_jit(_params3, _lanes_tag()))
     return _KERNELS[fn, est]

@@ -81,9 +81,15 @@ class TrajectoryTable:
     No Python object per row: a node that runs for hours keeps 80 bytes per period and
     gives the garbage collector nothing to scan (BENCHMARKS.md, "Measurements moved out of
     the core's docstrings").  ``internals=True`` adds :data:`INTERNAL_COLUMNS`.
+
+    Bounded for a run of days: the table keeps the rows up to ``t <= keep_until`` and the newest one; each row is
+    handed to ``sink(k, row)`` once final (when the next is appended, or at :meth:`flush`: :meth:`set_drive` may
+    still change the newest), so a writer streams the whole run to disk (:class:`mwip_ros.runs.CsvStream`).  The
+    periods with the drive saturated are counted over every row (:attr:`saturated`).
     """
 
-    def __init__(self, internals: bool = False, raw: bool = False, drive: bool = False, excitation: bool = False):
+    def __init__(self, internals: bool = False, raw: bool = False, drive: bool = False, excitation: bool = False,
+                 keep_until: float = math.inf, sink=None):
         self.internals = internals
         self.excitation = excitation
         self.names = ((COLUMNS if internals else TRAJECTORY_COLUMNS) + ((RAW_COLUMNS + ESTIMATE_COLUMNS) if raw
@@ -92,7 +98,31 @@ class TrajectoryTable:
         self.width = len(self.names)
         self.n_extra = len(RAW_COLUMNS + ESTIMATE_COLUMNS) if raw else 0
         self.drive = drive
-        self.rows = array("d")
+        self.rows = array("d")      # the kept rows, then the newest row
+        self.keep_until = keep_until
+        self.sink = sink
+        self.count = 0              # rows appended
+        self.saturated = 0          # final rows whose drive_saturation > 0
+        self._final = 0             # rows handed to the sink
+        self._newest_kept = True
+
+    def _finish_newest(self) -> None:
+        if self._final < self.count:
+            row = self.rows[len(self.rows) - self.width:]
+            if self.sink is not None:
+                self.sink(self.count - 1, row)
+            if self.drive and row[self.names.index("drive_saturation")] > 0:
+                self.saturated += 1
+            self._final = self.count
+
+    def flush(self) -> None:
+        """The newest row is final: hand it to the sink (the end of a run)."""
+        self._finish_newest()
+
+    @property
+    def dropped(self) -> int:
+        """Rows no longer in memory (past ``keep_until``, and not the newest)."""
+        return self.count - len(self.rows) // self.width
 
     def append(self, t: float, x, u: float, tau_hat: Sequence[float] = _NAN2, tau_d: Sequence[float] = _NAN2,
                out=None, extra: Sequence[float] = ()) -> None:
@@ -100,6 +130,11 @@ class TrajectoryTable:
         :meth:`mwip_ros.core.laws.Law.step`, or an object with them as attributes); one it lacks is NaN.
         ``extra``: with ``raw``, the raw sample and the estimate (:data:`RAW_COLUMNS`, :data:`ESTIMATE_COLUMNS`;
         empty: NaN)."""
+        self._finish_newest()
+        if not self._newest_kept:
+            del self.rows[len(self.rows) - self.width:]
+        self._newest_kept = t <= self.keep_until
+        self.count += 1
         self.rows.extend((t, x[0], x[1], x[2], x[3], u, tau_hat[0], tau_hat[1], tau_d[0], tau_d[1]))
         if self.internals:
             if isinstance(out, dict):
@@ -121,13 +156,15 @@ class TrajectoryTable:
             self.rows[at + 1] = float(saturation)
 
     def __len__(self) -> int:
-        return len(self.rows) // self.width
+        return self.count
 
     def last(self, name: str) -> float:
         return self.rows[len(self.rows) - self.width + self.names.index(name)]
 
     def trajectory(self, label: str, fallen: bool, h: float) -> Trajectory:
-        table = np.array(self.rows, dtype=float).reshape(len(self), self.width)
+        """The rows in memory (every row, unless some were past ``keep_until``: then those up to it and the
+        newest)."""
+        table = np.array(self.rows, dtype=float).reshape(len(self.rows) // self.width, self.width)
         return Trajectory(label, {c: table[:, i] for i, c in enumerate(self.names)}, fallen, h)
 
 

@@ -407,6 +407,13 @@ NODE_SPECS: Dict[str, List[ParamSpec]] = {
         ParamSpec("topics", "string_array", [], "topics to record; empty = every topic of the graph"),
         ParamSpec("compression", "string", "", "'' or 'zstd' (MCAP chunk compression)", **_one_of("", "zstd")),
         ParamSpec("chunk_size", "integer", 1 << 20, "MCAP chunk size [bytes]", **_at_least_one),
+        ParamSpec("max_bagfile_size", "integer", 0, "split the bag: start the next file <bag>_<n>.mcap once the "
+                  "current one holds more than this many bytes (rosbag2's max_bagfile_size); 0 = no limit",
+                  **_count_range(0, 1 << 50), unit="B"),
+        ParamSpec("max_bagfile_duration", "integer", 0, "split the bag: start the next file once a message is "
+                  "more than this many seconds of log time after the current file's first (rosbag2's "
+                  "max_bagfile_duration, whole seconds as there); 0 = no limit", **_count_range(0, 1 << 40),
+                  unit="s"),
     ],
     "foxglove_server": [
         ParamSpec("host", "string", "127.0.0.1", "address the WebSocket server listens on (0.0.0.0: every "

@@ -89,3 +89,14 @@ def test_an_expected_topic_with_nothing_recorded_is_a_gap_and_an_absent_optional
     for k in range(5):   # the plant measured with noise: its truth is judged like any loop topic
         led.add("/true_joint_states", JS, L.encode_state(k * H, State(0.0, 0.0, 0.0, 0.0), 0.0))
     assert [g[0] for g in led.gaps()] == ["/true_joint_states", "/wheel_torque_cmd"]
+
+
+def test_a_ledger_keeps_runs_of_stamps_not_every_stamp():
+    """The recorder's ledger must not grow with the recording: a topic's stamps on the grid are one run, each gap
+    starts another; the judgement is the same as with every stamp kept."""
+    led = Ledger()
+    _run(led, 20_000, skip={("est", 7), ("est", 12_345)})
+    assert led.stamps["/joint_states"].runs() == 1 and led.stamps["/clock"].runs() == 1
+    assert led.stamps["/disturbance_estimate"].runs() == 3 and len(led.stamps["/disturbance_estimate"]) == 19_998
+    assert led.gaps() == [("/disturbance_estimate", 19_998, 20_000, 7 * H)]
+    assert list(led.stamps["/disturbance_estimate"])[:8] == [k * H for k in (0, 1, 2, 3, 4, 5, 6, 8)]

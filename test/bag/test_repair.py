@@ -260,3 +260,28 @@ def test_damaged_fields_inside_records_skip_only_that_record(tmp_path):
     assert f.bytes_discarded == (chunks[m].end - chunks[m].start) + metadata_record
     with open(bag / "b_0.mcap", "rb") as fh:
         assert sum(1 for _ in make_reader(fh, validate_crcs=True).iter_messages()) == result.total_messages
+
+
+def test_a_split_bag_cut_in_its_last_file_is_repaired_whole_in_file_order(tmp_path):
+    """A recorder killed while writing the 12th file of a split bag: no metadata.yaml, the finished files whole, the
+    last one cut.  Repair keeps every finished file, saves what it can of the last, lists the files in recording
+    order (_10 after _9, not after _1) and rosbags reads the result as one run."""
+    bag = tmp_path / "run"
+    topics = {"/joint_states": "sensor_msgs/msg/JointState", "/wheel_torque_cmd": "std_msgs/msg/Float64"}
+    written = write_bag(bag, topics, 130, chunk_size=400, max_bagfile_duration=0.02)
+    (bag / "metadata.yaml").unlink()
+    files = sorted(bag.glob("*.mcap"), key=lambda p: int(p.stem.rsplit("_", 1)[1]))
+    assert len(files) >= 12
+    last = files[-1]
+    with open(last, "rb") as fh:
+        in_last = sum(1 for _ in make_reader(fh).iter_messages())
+    last.write_bytes(last.read_bytes()[:len(last.read_bytes()) // 2])
+    result = repair(bag)
+    assert result.metadata_written
+    meta = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    assert meta["relative_file_paths"] == [p.name for p in files]
+    kept = len(written) - in_last
+    assert kept <= meta["message_count"] < len(written)
+    with AnyReader([bag], default_typestore=TS) as reader:
+        got = [(c.topic, t, bytes(raw)) for c, t, raw in reader.messages()]
+    assert got == [(w[0], w[2], w[4]) for w in written[:len(got)]] and len(got) == meta["message_count"]

@@ -8,7 +8,8 @@ from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 from rosbags.highlevel import AnyReader
 
-from bagcheck import ENDPOINT_QOS_YAML, decoded_messages, graph_topics, make_msg, typestore, write_graph_bag
+from bagcheck import (ENDPOINT_QOS_YAML, decoded_messages, graph_topics, make_msg, typestore, write_bag,
+                      write_graph_bag)
 from mwip_ros.bag import BagError, BagWriter, message_definition, raw_messages, topic_counts, type_hash
 
 pytestmark = pytest.mark.unit
@@ -153,3 +154,57 @@ def test_empty_bag_reads(tmp_path):
     assert meta["message_count"] == 0 and meta["topics_with_message_count"][0]["message_count"] == 0
     assert meta["starting_time"]["nanoseconds_since_epoch"] == 2 ** 63 - 1
     assert topic_counts(tmp_path / "empty") == {"/joint_states": 0}
+
+
+@pytest.mark.parametrize("split", [{"max_bagfile_duration": 0.05}, {"max_bagfile_size": 6000}],
+                         ids=["duration", "size"])
+def test_a_split_bag_is_rosbag2s_layout_and_every_reader_takes_it_as_one_run(tmp_path, split):
+    """rosbag2's max_bagfile_size / max_bagfile_duration: files <bag>_0.mcap, <bag>_1.mcap, ..., each a whole MCAP
+    file with every topic's channel; metadata.yaml lists them all (relative_file_paths, files); rosbags (an
+    independent reader), our reader and each file's own summary agree with what was written."""
+    bag_dir = tmp_path / "run1"
+    topics = {"/joint_states": "sensor_msgs/msg/JointState", "/disturbance_estimate": "geometry_msgs/msg/WrenchStamped",
+              "/wheel_torque_cmd": "std_msgs/msg/Float64"}
+    n = 100
+    written = write_bag(bag_dir, topics, n, **split)
+    meta = yaml.safe_load((bag_dir / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    names = [f"run1_{i}.mcap" for i in range(len(meta["files"]))]
+    assert len(names) >= 3 and meta["relative_file_paths"] == names
+    assert sorted(os.listdir(bag_dir)) == sorted(names + ["metadata.yaml"])
+    assert [f["path"] for f in meta["files"]] == names
+    assert sum(f["message_count"] for f in meta["files"]) == meta["message_count"] == len(written)
+    times = [w[2] for w in written]
+    start = 0
+    for f, name in zip(meta["files"], names):   # each file: its own span of the messages, all its channels
+        with open(bag_dir / name, "rb") as fh:
+            reader = make_reader(fh, decoder_factories=[DecoderFactory()])
+            got = [(c.topic, m.log_time, m.data) for _s, c, m, _d in reader.iter_decoded_messages()]
+            channels = {c.topic for c in reader.get_summary().channels.values()}
+        assert got == [(w[0], w[2], w[4]) for w in written[start:start + len(got)]]
+        assert f["message_count"] == len(got) and f["starting_time"]["nanoseconds_since_epoch"] == got[0][1]
+        assert f["duration"]["nanoseconds"] == got[-1][1] - got[0][1]
+        if "max_bagfile_duration" in split:
+            assert got[-1][1] - got[0][1] <= split["max_bagfile_duration"] * 1e9
+        elif name != names[-1]:   # a file ends once what is on disk passes the size (the chunk being filled is
+            assert (bag_dir / name).stat().st_size > split["max_bagfile_size"]   # in memory till then)
+        assert channels == set(topics)
+        start += len(got)
+    assert start == len(written)
+    assert meta["duration"]["nanoseconds"] == times[-1] - times[0]
+
+    with AnyReader([bag_dir], default_typestore=TS) as reader:
+        got = [(c.topic, t, bytes(raw)) for c, t, raw in reader.messages()]
+        counts = {}
+        for c in reader.connections:
+            counts[c.topic] = counts.get(c.topic, 0) + c.msgcount
+    assert got == [(w[0], w[2], w[4]) for w in written]
+    assert counts == {topic: n for topic in topics}
+    assert topic_counts(bag_dir) == counts
+    assert list(raw_messages(bag_dir)) == [(w[2], w[0], w[4]) for w in written]
+
+
+def test_split_sizes_are_checked(tmp_path):
+    for bad in ({"max_bagfile_size": -1}, {"max_bagfile_size": 1.5}, {"max_bagfile_duration": -1.0},
+                {"max_bagfile_duration": float("inf")}):
+        with pytest.raises(BagError, match=next(iter(bad))):
+            BagWriter(tmp_path / "b", **bad)

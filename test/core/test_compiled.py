@@ -7,7 +7,7 @@ import pytest
 
 from mathfixtures import P_FILE
 from mwip_ros import params as P
-from mwip_ros.core import compiled, drive, metrics, model, plant
+from mwip_ros.core import compiled, drive, jitcache, metrics, model, plant
 from mwip_ros.core.batch import simulate_batch
 from mwip_ros.core.model import PhysicalParams, Sinusoid
 from mwip_ros.core.sim import simulate
@@ -105,12 +105,13 @@ def test_each_lane_width_caches_its_kernels_in_files_of_its_own(tmp_path, monkey
     names = {}
     for width in (0, 8):
         monkeypatch.setattr(compiled.simd, "WIDTH", width)
-        monkeypatch.setattr(compiled, "_CACHES", {})
-        impl = compiled._cache_for()(z_next_like)._impl
+        monkeypatch.setattr(jitcache, "_CACHES", {})
+        tag = compiled._lanes_tag()
+        impl = jitcache.cache_for(z_next_like, tag)(z_next_like)._impl
         names[width] = impl.filename_base
-        assert compiled._cache_for() is compiled._cache_for()   # one cache class per width and sources
+        assert jitcache.cache_for(z_next_like, tag) is jitcache.cache_for(z_next_like, tag)   # one per stamp, width
     assert names[0] != names[8] and "lanes0" in names[0] and "lanes8" in names[8], names
-    assert compiled._stamped_cache("s")(z_next_like)._impl.filename_base.startswith(
+    assert jitcache.stamped_cache("s")(z_next_like)._impl.filename_base.startswith(
         "test_compiled.test_each_lane_width_caches_its_kernels_in_files_of_its_own.<locals>.z_next_like-".replace(
             "<", "").replace(">", ""))   # no tag: numba's own name
 
@@ -314,3 +315,95 @@ def test_an_edit_to_the_observer_is_compiled_afresh_in_the_batch_loop(tmp_path):
     second = run()
     assert second[0] != pytest.approx(first[0], rel=1e-6)   # the edit changes the observer
     assert second[1] == pytest.approx(second[0], rel=1e-9)  # and the compiled loop follows it
+
+
+_LQR_CHECK = """
+from mwip_ros import params as P
+from mwip_ros.core import metrics
+from mwip_ros.core.batch import simulate_batch
+from mwip_ros.core.sim import simulate
+loop = P.closed_loop(dict(P.merged_values(P.load_param_file({p_file!r})), **{{"initial.theta_b": 0.1}}),
+                     duration=0.2, controller="lqr")
+r = simulate_batch([loop], (0.1, 0.2), compiled=True)
+m = metrics.compute(simulate(loop).columns, (0.1, 0.2), loop.plant.fall_angle)
+print(repr(m.u_rms), repr(float(r.metrics["u_rms"][0])))
+"""
+
+
+def test_an_edit_to_a_callee_or_a_frozen_constant_of_another_module_is_compiled_afresh(tmp_path):
+    """The loop links in the law's callees (core/lqr.py's lqr_u, not the law's own file) and freezes the values of
+    the globals it reads, wherever they were assigned: an edit to either reaches the next process's compiled loop,
+    and a run without an edit only loads the cache (no file of it is written again)."""
+    import os
+    import shutil
+    import subprocess
+    import sys
+
+    pkg = Path(compiled.__file__).resolve().parents[1]
+    shutil.copytree(pkg, tmp_path / "mwip_ros", ignore=shutil.ignore_patterns("__pycache__"))
+    core = tmp_path / "mwip_ros" / "core"
+    lqr_py = core / "lqr.py"
+    body = "return -(K[0] * theta_b + K[1] * dtheta_b + K[2] * dtheta_w)"
+    assert body in lqr_py.read_text()
+    # a constant lqr_u reads, assigned in a module no compiled function comes from
+    (core / "lqr_scale.py").write_text("SCALE = 1.0\n")
+    lqr_py.write_text(lqr_py.read_text().replace(body, "return -SCALE * (K[0] * theta_b + K[1] * dtheta_b + "
+                                                       "K[2] * dtheta_w)")
+                      .replace("\nimport ", "\nfrom .lqr_scale import SCALE\nimport ", 1))
+    cache = tmp_path / "numba_cache"
+    env = dict(os.environ, PYTHONPATH=str(tmp_path), NUMBA_CACHE_DIR=str(cache))
+    script = _LQR_CHECK.format(p_file=str(P_FILE))
+
+    def run():
+        out = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, timeout=300,
+                             cwd=tmp_path)
+        assert out.returncode == 0, out.stderr
+        scalar, batch = (float(v) for v in out.stdout.split())
+        assert batch == pytest.approx(scalar, rel=1e-9)   # the compiled loop runs the code as it is now
+        return batch
+
+    def cache_files():
+        return {p: p.stat().st_mtime_ns for p in cache.rglob("*") if p.is_file()}
+
+    first = run()
+    assert any(p.name.startswith("compiled._loop__") for p in cache_files())
+    before = cache_files()
+    assert run() == first
+    assert cache_files() == before   # warm: loaded, nothing compiled and written again
+    (core / "lqr_scale.py").write_text("SCALE = 1.25\n")   # only the constant's module
+    scaled = run()
+    assert scaled != pytest.approx(first, rel=1e-3)   # a stiffer law (in closed loop: not simply 1.25 x)
+    lqr_py.write_text(lqr_py.read_text().replace("return -SCALE * (", "return -1.25 * SCALE * ("))   # the callee
+    again = run()
+    assert again != pytest.approx(scaled, rel=1e-3)
+
+
+def test_the_stamp_follows_the_callees_and_the_frozen_values():
+    """What the loop is made of: the law's callee's file (core/lqr.py), the estimator's frozen NIS_WINDOW_S by its
+    value; a stamp that changes with the value."""
+    import mwip_ros.core.estimators.kalman as kalman
+    from mwip_ros.core import jitcache
+    from mwip_ros.core.estimators import get as estimator
+    from mwip_ros.core.laws import get as law
+
+    kernel = compiled.kernel_for(law("lqr"), estimator("kalman"))
+    files, consts = jitcache.made_of(kernel.py_func)
+    assert str(Path(compiled.__file__).with_name("lqr.py")) in files
+    assert any(c.endswith(f"NIS_WINDOW_S={kalman.NIS_WINDOW_S!r}") for c in consts), consts
+    stamp = jitcache.stamp_of(kernel.py_func)
+    assert jitcache.stamp_of(kernel.py_func) == stamp   # the same in every process (no address in it)
+    est = kernel.py_func.__globals__["est_step"].py_func.__globals__   # the compiled step's globals (a copy)
+    old = est["NIS_WINDOW_S"]
+    try:
+        est["NIS_WINDOW_S"] = old * 2
+        assert jitcache.stamp_of(kernel.py_func) != stamp
+    finally:
+        est["NIS_WINDOW_S"] = old
+
+
+def test_the_loops_arguments_by_name_are_its_parameters_in_order():
+    """core.batch builds the kernel's arguments by keyword (core.kernel_args.LoopArgs) and passes them positionally:
+    the bundle's fields must be the compiled loop's parameters, in its order."""
+    from mwip_ros.core.kernel_args import LoopArgs
+    code = compiled._loop.__code__
+    assert LoopArgs._fields == code.co_varnames[:code.co_argcount]

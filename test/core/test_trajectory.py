@@ -38,3 +38,37 @@ def test_a_source_without_estimates_writes_nan_and_the_join_fills_them_by_stamp(
     assert math.isnan(joined["tau_hat1"][2]) and 99.0 not in joined["tau_hat1"]
     assert np.isnan(run["tau_hat1"]).all()  # the original is unchanged
     np.testing.assert_array_equal(joined["u"], run["u"])
+
+
+def test_a_bounded_table_keeps_the_window_and_the_newest_row_and_streams_every_row_final():
+    """A node's table on a run of days: rows up to keep_until and the newest in memory, whatever the number of
+    periods; each row handed to the sink once, final (set_drive's values in it), in order; the saturated periods
+    counted over the whole run."""
+    got = []
+    table = TrajectoryTable(drive=True, keep_until=0.5, sink=lambda k, row: got.append((k, tuple(row))))
+    h, n = 0.005, 20_000
+    sizes = []
+    for k in range(n):
+        table.append(k * h, State(0.0, 1e-3 * k, 0.0, 0.0), float(k))
+        table.set_drive(float(k) / 2, 1 if k % 3 == 0 else 0)
+        if k in (1_000, n - 1):
+            sizes.append(len(table.rows))
+    kept = int(0.5 / h) + 1
+    assert sizes == [(kept + 1) * table.width] * 2   # bounded: the same size after 1,000 and 20,000 periods
+    assert len(table) == n and table.dropped == n - kept - 1 and table.last("t") == (n - 1) * h
+    assert len(got) == n - 1   # the newest is not final yet
+    table.flush()
+    table.flush()
+    assert [k for k, _ in got] == list(range(n))
+    ui, si = table.names.index("u_applied"), table.names.index("drive_saturation")
+    assert all(row[0] == k * h and row[ui] == k / 2 and row[si] == (1.0 if k % 3 == 0 else 0.0) for k, row in got)
+    assert table.saturated == len(range(0, n, 3))
+    run = table.trajectory("x", False, h)
+    assert len(run) == kept + 1 and run.t[kept - 1] == (kept - 1) * h and run.t[-1] == (n - 1) * h
+
+
+def test_an_unbounded_table_is_unchanged():
+    table = TrajectoryTable()
+    for k in range(100):
+        table.append(k * 0.01, State(0.0, 0.0, 0.0, 0.0), 1.0)
+    assert len(table) == 100 and table.dropped == 0 and len(table.trajectory("x", False, 0.01)) == 100

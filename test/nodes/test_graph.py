@@ -52,6 +52,27 @@ def test_lockstep_graph_equals_offline_simulator(tmp_path, controller):
     assert "steps/s" in logs["plant_sim"].output()
 
 
+def test_a_run_past_the_metrics_window_streams_its_csv_whole_and_reports_the_offline_metrics(tmp_path):
+    """The plant keeps in memory only the rows to the metrics window's end and the newest (a run of days stays
+    bounded): its csv, streamed row by row, still holds every period as mwip_sim, and its summary's metrics (the
+    window's, the run's end) are the offline ones."""
+    from mwip_ros.core import metrics
+    summary = tmp_path / "summary.json"
+    code, csv_path, logs = run_lockstep(tmp_path, True, "-p", "duration_s:=12.0", "-p", f"summary_json:={summary}",
+                                        law="dsc")
+    assert code == 0, logs["plant_sim"].output()
+    graph = read_csv(csv_path)
+    loop = P.closed_loop(P.merged_values(P.load_param_file(PARAMS)), use_observer=True, law="dsc", duration=12.0)
+    offline = simulate(loop)
+    assert len(graph) == len(offline) == 2401
+    for c in COLUMNS[:6] + ["tau_d1", "tau_d2"]:
+        np.testing.assert_allclose(graph[c], offline[c], rtol=0, atol=1e-9, err_msg=c)
+    want = metrics.compute(offline.columns, metrics.WINDOW, loop.plant.fall_angle).as_dict()
+    got = json.loads(summary.read_text())["metrics"]
+    for key in ("theta_b_p2p", "theta_b_rms", "theta_b_max_abs", "u_rms", "upright", "t_end", "samples"):
+        assert got[key] == pytest.approx(want[key], abs=1e-12), key
+
+
 @pytest.mark.parametrize("controller", ["trivial", "trivial_ndo"])
 def test_lockstep_graph_runs_a_law_registered_by_a_test_equal_to_offline(tmp_path, monkeypatch, controller):
     """test/trivial_law.py reaches the controller process through the plug-in hook ($MWIP_ROS_LAWS, core.laws):

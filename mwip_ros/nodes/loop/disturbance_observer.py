@@ -6,14 +6,13 @@ plant resending at start-up) gets the same estimate again and is not integrated 
 A state it cannot use (malformed, non-finite, implausible, a stamp outside the stream's
 window; :mod:`.guards`) is rejected, counted and logged, and changes nothing; a stream
 that restarted (a new plant, a reset) re-initialises the observer.  With ``csv`` set it
-writes its estimates (``t, tau_hat1, tau_hat2``) at the end, which
+writes its estimates (``t, tau_hat1, tau_hat2``) as it goes, which
 ``mwip_report --estimates`` joins to the plant's CSV by stamp.
 """
 from __future__ import annotations
 
 import math
 import sys
-from array import array
 
 from geometry_msgs.msg import WrenchStamped
 from rclpy.node import Node
@@ -22,7 +21,6 @@ from sensor_msgs.msg import JointState
 from mwip_ros import params as P
 from mwip_ros.core.observer import DiscreteObserver
 from mwip_ros.core.theorem import observer_conditions
-from mwip_ros.core.trajectory import Trajectory
 from mwip_ros.msgs import layouts as L
 from mwip_ros.msgs.qos import qos_for
 from mwip_ros.nodes.runtime.diagnostics import OK
@@ -30,7 +28,7 @@ from mwip_ros.nodes.runtime.guards import REPEAT, RESTART, STAMP_WINDOW_PERIODS,
 from mwip_ros.nodes.runtime.state_input import StateInput
 from mwip_ros.nodes.runtime.params import declare
 from mwip_ros.nodes.runtime.process import GracefulNodeMixin, run_node
-from mwip_ros.runs import write_csv
+from mwip_ros.runs import CsvStream
 
 NAME = "disturbance_observer"
 
@@ -45,7 +43,8 @@ class DisturbanceObserver(Node, GracefulNodeMixin):
         self._warn_theorem()
         self.last_msg = None
         self.count = 0
-        self.written = array("d") if self.v["csv"] else None  # t, tau_hat1, tau_hat2 per estimate
+        self.written = (CsvStream(self.v["csv"], ("t", "tau_hat1", "tau_hat2"))   # streamed, one row per estimate
+                        if self.v["csv"] else None)
         self.rejects = Rejects(self.get_logger())
         self.input = StateInput(self, self.rejects, STAMP_WINDOW_PERIODS * self.period_ns, "observer")
         pub_qos, in_qos = qos_for(self.v["mode"])   # msgs.qos: lockstep loses nothing, realtime keeps the newest
@@ -98,7 +97,7 @@ class DisturbanceObserver(Node, GracefulNodeMixin):
         self.input.answered(stamp)
         self.count += 1
         if self.written is not None:
-            self.written.extend((stamp * 1e-9, tau_hat[0], tau_hat[1]))
+            self.written.row((stamp * 1e-9, tau_hat[0], tau_hat[1]))
 
     def diagnostic_count(self) -> int:
         return self.count
@@ -109,8 +108,7 @@ class DisturbanceObserver(Node, GracefulNodeMixin):
     def on_shutdown(self) -> None:
         self.get_logger().info(f"estimated {self.count} states; rejected: {self.rejects.summary()}")
         if self.written is not None:
-            cols = {name: self.written[i::3] for i, name in enumerate(("t", "tau_hat1", "tau_hat2"))}
-            write_csv(Trajectory(NAME, cols, False, self.h), self.v["csv"])
+            self.written.close()
             self.get_logger().info(f"wrote {self.v['csv']}")
 
 

@@ -24,8 +24,8 @@ torque (the driver is in fault), so the run goes on; in realtime it is dropped, 
 """
 from __future__ import annotations
 
+import random
 import time
-from array import array
 from typing import Dict, Optional
 
 import numpy as np
@@ -118,6 +118,65 @@ class LockstepRunner(_Runner):
         return None
 
 
+class TickLog:
+    """The realtime loop's tick times in bounded memory, whatever the run's length.
+
+    Keeps the newest :attr:`RECENT` tick times (a ring: the watchdog looks back over them, the diagnostics over the
+    last 400 periods), the count of ticks, the longest period and when it ended, the first :attr:`MISSED` periods
+    longer than ``late_after`` and, for the percentiles, every period up to :attr:`RESERVOIR` of them, then a uniform
+    sample of that many of all (reservoir sampling, Vitter's algorithm R, a fixed seed): a run of up to
+    ``RESERVOIR`` periods (41 s at 200 Hz) gets its percentiles exactly, a longer one from that sample.
+    ``log[-1]``, ``log[-n:]`` (n at most ``RECENT``), ``len(log)`` and ``bool(log)`` read as on the list of every
+    tick time it replaces."""
+
+    RECENT = 4096
+    RESERVOIR = 8192
+    MISSED = 50
+
+    def __init__(self, late_after: float):
+        self.late_after = late_after
+        self.recent = np.zeros(self.RECENT)
+        self.ticks = 0
+        self.sample = np.zeros(self.RESERVOIR)
+        self.periods = 0
+        self.max_period, self.max_index = 0.0, 0
+        self.late = []          # indices (from 0) of the first MISSED late periods
+        self._rng = random.Random(0)
+
+    def append(self, t: float) -> None:
+        if self.ticks:
+            p, i = t - self.recent[(self.ticks - 1) % self.RECENT], self.periods
+            self.periods += 1
+            j = i if i < self.RESERVOIR else self._rng.randrange(i + 1)
+            if j < self.RESERVOIR:
+                self.sample[j] = p
+            if p > self.max_period:
+                self.max_period, self.max_index = p, i
+            if p > self.late_after and len(self.late) < self.MISSED:
+                self.late.append(i)
+        self.recent[self.ticks % self.RECENT] = t
+        self.ticks += 1
+
+    def __len__(self) -> int:
+        return self.ticks
+
+    def __getitem__(self, key):
+        """``[-k]``: the k-th newest tick time; ``[-n:]``: the newest n (at most RECENT) in order, a list."""
+        kept = min(self.ticks, self.RECENT)
+        if isinstance(key, slice):
+            if key.stop is not None or key.step is not None or key.start is None or key.start >= 0:
+                raise IndexError("a TickLog gives its newest ticks only: log[-n:]")
+            n = min(-key.start, kept)
+            return [float(self.recent[k % self.RECENT]) for k in range(self.ticks - n, self.ticks)]
+        if not -kept <= key < 0:
+            raise IndexError(f"a TickLog keeps its newest {kept} ticks: log[-1] .. log[-{kept}]")
+        return float(self.recent[(self.ticks + key) % self.RECENT])
+
+    def periods_ms(self) -> np.ndarray:
+        """Every period [ms] (the sample of them past RESERVOIR)."""
+        return self.sample[:min(self.periods, self.RESERVOIR)] * 1e3
+
+
 class RealtimeRunner(_Runner):
     mode = "realtime"
     reset_when = "at the next tick"
@@ -126,7 +185,7 @@ class RealtimeRunner(_Runner):
         super().__init__(node)
         self.cmd: Optional[float] = None
         self.cmd_at = 0.0
-        self.tick_times = array("d")
+        self.tick_times = TickLog(1.5 * node.h)   # bounded: a run of days keeps the same few arrays
         self.stale = 0
         self.missed = 0
 
@@ -177,7 +236,7 @@ class RealtimeRunner(_Runner):
     def diagnostic_values(self) -> dict:
         if len(self.tick_times) <= 2:
             return {}
-        per = np.diff(self.tick_times[-400:]) * 1e3
+        per = np.diff(self.tick_times[-400:]) * 1e3   # the last 400 periods
         return {"loop_period_p99_ms": f"{np.percentile(per, 99):.3f}", "missed_deadlines": self.missed,
                 "stale_commands": self.stale}
 
@@ -185,13 +244,13 @@ class RealtimeRunner(_Runner):
         if len(self.tick_times) <= 2:
             return {}
         h = self.node.h
-        per = np.diff(self.tick_times) * 1e3
+        log = self.tick_times
+        per = log.periods_ms()   # every period, or a uniform sample of them on a long run (TickLog)
         rt = {"period_ms_p50": float(np.percentile(per, 50)), "period_ms_p99": float(np.percentile(per, 99)),
-              "period_ms_max": float(per.max()), "ticks": len(self.tick_times),
-              "period_max_at_s": float(np.argmax(per) + 1) * h,  # sim time of the tick that ended it
+              "period_ms_max": log.max_period * 1e3, "ticks": len(log),
+              "period_max_at_s": float(log.max_index + 1) * h,  # sim time of the tick that ended it
               "missed_deadlines": self.missed, "stale_command_substitutions": self.stale,
-              "missed_at_s": [round(float(i + 1) * h, 6)  # sim time of the ticks that came late (first 50)
-                              for i in np.flatnonzero(per > 1.5 * h * 1e3)[:50]]}
+              "missed_at_s": [round(float(i + 1) * h, 6) for i in log.late]}  # the ticks that came late (first 50)
         self.node.get_logger().info(
             f"realtime: loop period p50 = {rt['period_ms_p50']:.3f} ms, p99 = {rt['period_ms_p99']:.3f} ms, "
             f"max = {rt['period_ms_max']:.3f} ms (nominal {h * 1e3:g} ms); missed deadlines = "

@@ -74,9 +74,9 @@ import math
 import sys
 import time
 from collections import deque
+from dataclasses import replace
 from typing import Optional
 
-import numpy as np
 from geometry_msgs.msg import Wrench, WrenchStamped
 from rclpy.duration import Duration
 from rclpy.node import Node
@@ -100,7 +100,7 @@ from mwip_ros.nodes.loop.plant_runners import RUNNERS
 from mwip_ros.nodes.runtime.process import EXIT_ERROR, EXIT_FALLEN, GracefulNodeMixin, run_node
 from mwip_ros.params import plant_config
 from mwip_ros.params.typed import limit_warnings
-from mwip_ros.runs import write_csv
+from mwip_ros.runs import CsvStream
 
 NAME = "plant_sim"
 SETTLE_S = 0.3  # the discovered graph must be unchanged this long before the first state
@@ -135,7 +135,8 @@ class PlantSimNode(Node, GracefulNodeMixin):
         self.resets = 0
         self.reset_calls = 0
         self._reset_pending = False   # reset at the next period boundary (lockstep: the state in flight answered)
-        self.table = TrajectoryTable(drive=self.cfg.motor.enabled or self.cfg.raw is not None)   # u_applied
+        self.csv = None               # the csv, streamed as the run goes (opened at its first row)
+        self.table = self._new_table()
         self.rejects = Rejects(self.get_logger())
         self.fallen = False
         self.started = False
@@ -320,10 +321,24 @@ class PlantSimNode(Node, GracefulNodeMixin):
         self.side = PlantSide(self.cfg)
         self.side.safety = self.safety   # the one machine: a reset restores the plant, ~/reset the driver
 
+    def _new_table(self) -> TrajectoryTable:
+        """The run's table, bounded: rows kept to the metrics window's end (and the newest), every row streamed to
+        the csv."""
+        return TrajectoryTable(drive=self.cfg.motor.enabled or self.cfg.raw is not None,   # u_applied
+                               keep_until=metrics.WINDOW[1] + self.h, sink=self._csv_row if self.v["csv"] else None)
+
+    def _csv_row(self, k: int, row) -> None:
+        """Row k of the run to the csv (with its message stamp in seconds, realtime)."""
+        if self.csv is None:
+            self.csv = CsvStream(self.v["csv"], self.table.names + (["stamp"] if self.stamp0 else []))
+        self.csv.row((*row, self._stamp(k) * 1e-9) if self.stamp0 else row)
+
     def _reset(self) -> str:
         dropped, t = len(self.table), self.plant.t
         self._initial_state()
-        self.table = TrajectoryTable(drive=self.cfg.motor.enabled or self.cfg.raw is not None)   # u_applied
+        self.table = self._new_table()
+        if self.csv is not None:
+            self.csv.restart()
         self.resets += 1
         self._reset_pending = False
         self.fallen, self.fell_at = False, None
@@ -548,19 +563,21 @@ class PlantSimNode(Node, GracefulNodeMixin):
                      f"wall ({steps / max(wall, 1e-9):.0f} steps/s); {'FALLEN' if self.fallen else 'upright'}")
         summary.update(self.runner.summary())
         log.info(f"rejected messages: {self.rejects.summary()}")
+        self.table.flush()
+        if self.csv is not None:
+            self.csv.close()
         if n:
-            run = self.table.trajectory(NAME, self.fallen, self.h)
-            if self.stamp0:   # the stamps the estimates carry (seconds, as the observer's csv writes them)
-                run.columns["stamp"] = np.array([self._stamp(k) * 1e-9 for k in range(n)])
+            run = self.table.trajectory(NAME, self.fallen, self.h)   # to the window's end, and the last row
             t_end = run.t[-1]
             win = metrics.WINDOW if t_end >= metrics.WINDOW[1] - 1e-9 else (t_end / 2, t_end)
-            m = metrics.compute(run.columns, win, self.cfg.fall_angle)
+            m = metrics.compute(run.columns, win, self.cfg.fall_angle, t_fall=self.fell_at)
+            if self.table.dropped and self.table.drive:   # saturated_s is of the whole run
+                m = replace(m, saturated_s=self.table.saturated * self.h)
             summary["metrics"] = {"window_s": list(win), **m.as_dict()}
             log.info(f"metrics t in [{win[0]:g}, {win[1]:g}] s: theta_b p2p = {m.theta_b_p2p:.5f} rad, RMS = "
                      f"{m.theta_b_rms:.5f} rad, max|theta_b| = {m.theta_b_max_abs:.5f} rad, u RMS = {m.u_rms:.3f} "
                      f"N m")
-            if self.v["csv"]:
-                write_csv(run, self.v["csv"])
+            if self.csv is not None:
                 log.info(f"wrote {self.v['csv']}")
         if self.v["summary_json"]:
             with open(self.v["summary_json"], "w") as f:

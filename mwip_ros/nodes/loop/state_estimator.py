@@ -16,20 +16,19 @@ Its health (innovation, normalized innovation squared and its running mean, dive
 ``/diagnostics``: ERROR while the estimator says it diverged.  With ``csv`` set (when the schema has the
 parameter) it writes the samples and the estimates (``t``, ``gyro``, ``accel_x``, ``accel_z``, ``encoder``,
 ``encoder_rate``, ``theta_w_hat``, ``theta_b_hat``, ``dtheta_w_hat``, ``dtheta_b_hat``: mwip_sim's raw
-columns) at the end.
+columns) as it goes.
 """
 from __future__ import annotations
 
 import sys
 import time
-from array import array
 
 from rclpy.node import Node
 from sensor_msgs.msg import Imu, JointState
 
 from mwip_ros import params as P
 from mwip_ros.core.raw_sensors import RawSample
-from mwip_ros.core.trajectory import ESTIMATE_COLUMNS, RAW_COLUMNS, Trajectory
+from mwip_ros.core.trajectory import ESTIMATE_COLUMNS, RAW_COLUMNS
 from mwip_ros.msgs import BadMessage
 from mwip_ros.msgs import layouts as L
 from mwip_ros.msgs.qos import qos_for
@@ -38,7 +37,7 @@ from mwip_ros.nodes.runtime.guards import (NEW, REPEAT, RESTART, STAMP_WINDOW_PE
                                            StampGuard)
 from mwip_ros.nodes.runtime.params import declare
 from mwip_ros.nodes.runtime.process import GracefulNodeMixin, run_node
-from mwip_ros.runs import write_csv
+from mwip_ros.runs import CsvStream
 
 NAME = "state_estimator"
 IMU_TOPIC, ENCODER_TOPIC = "imu/data_raw", "wheel_encoder"
@@ -71,7 +70,7 @@ class StateEstimatorNode(Node, GracefulNodeMixin):
         self.rejects = Rejects(self.get_logger())
         csv_path = self.v.get("csv") or ""
         self.csv_path = csv_path
-        self.written = array("d") if csv_path else None
+        self.written = CsvStream(csv_path, _CSV_COLUMNS) if csv_path else None   # streamed, a row per sample
         pub_qos, in_qos = qos_for(self.v["mode"])   # msgs.qos: lockstep loses nothing, realtime keeps the newest
         self.pub = self.create_publisher(JointState, "joint_states", pub_qos)
         self.create_subscription(Imu, "imu/data_raw", self._on_imu, in_qos, raw=True)
@@ -175,7 +174,7 @@ class StateEstimatorNode(Node, GracefulNodeMixin):
         self.answered = stamp
         self.count += 1
         if self.written is not None:
-            self.written.extend((stamp * 1e-9, *sample, *x))
+            self.written.row((stamp * 1e-9, *sample, *x))
         diverged = self.est.health.diverged
         if diverged != self.was_diverged:
             self.was_diverged = diverged
@@ -209,9 +208,7 @@ class StateEstimatorNode(Node, GracefulNodeMixin):
                                f"{self.unpaired} (+{waiting} still waiting at the end); rejected: "
                                f"{self.rejects.summary()}")
         if self.written is not None:
-            n = len(_CSV_COLUMNS)
-            cols = {name: self.written[i::n] for i, name in enumerate(_CSV_COLUMNS)}
-            write_csv(Trajectory(NAME, cols, False, self.h), self.csv_path)
+            self.written.close()
             self.get_logger().info(f"wrote {self.csv_path}")
 
 

@@ -4,7 +4,10 @@
 
 Parameters: ``output`` (the bag directory to create; required, must not exist),
 ``topics`` (names from :data:`mwip_ros.msgs.topics.GRAPH_TOPICS` and ``SYSTEM_TOPICS``; empty = all),
-``compression`` ('' or 'zstd', per MCAP chunk), ``chunk_size`` (bytes).
+``compression`` ('' or 'zstd', per MCAP chunk), ``chunk_size`` (bytes), ``max_bagfile_size`` (bytes) and
+``max_bagfile_duration`` (seconds of log time): split the bag into ``<bag>_0.mcap``, ``<bag>_1.mcap``, ... as rosbag2
+does (0: no limit; :mod:`mwip_ros.bag.writer`), so a recording of days keeps its memory bounded; every tool reads
+a split bag as one run.
 
 Every message is stored as the exact CDR bytes received (raw subscriptions), with the
 node clock's receive time as log time (sim time under ``use_sim_time``, as rosbag2 does)
@@ -65,7 +68,8 @@ class McapRecorder(Node, GracefulNodeMixin):
 
         try:
             self.writer = BagWriter(self.output, compression=self.v["compression"] or None,
-                                    chunk_size=self.v["chunk_size"])
+                                    chunk_size=self.v["chunk_size"], max_bagfile_size=self.v["max_bagfile_size"],
+                                    max_bagfile_duration=float(self.v["max_bagfile_duration"]))
         except BagError as exc:
             raise ParamError("output", str(exc)) from None
         self.rejects = Rejects(self.get_logger())   # what the node's own clock refuses (/clock, see guards)
@@ -80,7 +84,10 @@ class McapRecorder(Node, GracefulNodeMixin):
         self.get_logger().info(
             f"recording {len(self.types)} topic(s) to {self.output} ({self.writer.relative_path}; compression "
             f"{self.writer.compression or 'none'}, chunks of {self.writer.chunk_size} B or "
-            f"{self.writer.max_chunk_duration} s at most): "
+            f"{self.writer.max_chunk_duration} s at most"
+            + (f"; split at {self.writer.max_bagfile_size} B" if self.writer.max_bagfile_size else "")
+            + (f"; split after {self.writer.max_bagfile_duration:g} s" if self.writer.max_bagfile_duration else "")
+            + "): "
             + ", ".join(sorted(self.types)))
 
     # --- recording -------------------------------------------------------------------------------
@@ -164,7 +171,10 @@ class McapRecorder(Node, GracefulNodeMixin):
         except (BagError, OSError) as exc:
             self.finish(EXIT_ERROR, f"cannot finish the bag {self.output}: {exc}; run mwip_bag_repair {self.output}")
             return
-        log.info(f"bag {self.output}: {self.writer.message_count} messages: {self._per_topic()}"
+        files = self.writer.files
+        log.info(f"bag {self.output}: {self.writer.message_count} messages"
+                 + (f" in {len(files)} files ({files[0]} .. {files[-1]})" if len(files) > 1 else "")
+                 + f": {self._per_topic()}"
                  + (f"; the clock rejected: {self.rejects.summary()}" if self.rejects.counts else ""))
 
 
