@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from mwip_ros.nodes.plant_runners import TickLog
+from mwip_ros.nodes.loop.plant_runners import TickLog
 
 pytestmark = pytest.mark.unit
 
