@@ -49,7 +49,7 @@ class StampGuard:
     restart if ``may_restart()`` (asked then; None: always); refused, the run asks again after ``RETRY_S``.
     Before the stream's first stamp, with ``may_restart`` saying no (more than one publisher), the stream starts
     with a run of :data:`RESYNC` strictly increasing stamps (a stray repeated does not start it).
-    ``may_restart(back_to_start)`` is told whether the stamps go back to the stream's first one."""
+    ``may_restart(back_to_start)`` is told whether the run began at the stream's first stamp."""
 
     MAX_RUNS = 8
     RETRY_S = 0.1
@@ -60,7 +60,7 @@ class StampGuard:
         self.may_restart = may_restart   # None: any RESYNC agreeing stamps restart the stream
         self.last: Optional[int] = None
         self.start: Optional[int] = None   # the stream's first stamp (since its last restart): a reset goes back to it
-        self._runs: list = []            # [last stamp, length, strictly increasing, refused until (monotonic s)]
+        self._runs: list = []   # [last stamp, length, strictly increasing, refused until (monotonic s), first stamp]
 
     def check(self, stamp: int, commit: bool = True) -> str:
         """The verdict on ``stamp``; a :data:`NEW` one becomes the stream's time unless ``commit`` is False."""
@@ -97,7 +97,7 @@ class StampGuard:
         if run is None:
             if len(runs) >= self.MAX_RUNS:
                 del runs[0]
-            run = [stamp, 0, True, 0.0]
+            run = [stamp, 0, True, 0.0, stamp]
             runs.append(run)
         run[1], run[2], run[0] = run[1] + 1, run[2] and (run[1] == 0 or stamp > run[0]), stamp
         if run[1] < RESYNC or (run[3] and time.monotonic() < run[3]):
@@ -107,7 +107,7 @@ class StampGuard:
                 return None
             self.commit(stamp)
             return NEW
-        if self.may_restart is not None and not self.may_restart(stamp == self.start):
+        if self.may_restart is not None and not self.may_restart(run[4] == self.start):   # a reset: back to the start
             run[3] = time.monotonic() + self.RETRY_S
             return (f"{self.what} {stamp * 1e-9:.6f} s: {run[1]} stamps agree away from the stream's "
                     f"{last * 1e-9:.6f} s, but the topic has more than one publisher: no restart")
