@@ -44,12 +44,14 @@ NEW, REPEAT, RESTART = "new", "repeat", "restart"
 class StampGuard:
     """Judge each stamp of a stream: :data:`NEW`, :data:`REPEAT`, :data:`RESTART`, or a rejection text.
 
-    Rejected stamps form runs (at most ``MAX_RUNS``, each stamp at most a window after the run's last one: a
-    stream that restarted while strays come in between still agrees with itself).  A run of :data:`RESYNC` is a
-    restart if ``may_restart()`` (asked then; None: always); refused, the run asks again after ``RETRY_S``.
+    Rejected stamps form runs (at most ``MAX_RUNS``: each later than the run's last by at most a window, or the
+    same stamp resent; a stream that restarted while strays come in between still agrees with itself).  A run of
+    :data:`RESYNC` is a restart if ``may_restart`` allows it (asked then; None: always); refused, the run asks
+    again after ``RETRY_S``.
     Before the stream's first stamp, with ``may_restart`` saying no (more than one publisher), the stream starts
     with a run of :data:`RESYNC` strictly increasing stamps (a stray repeated does not start it).
-    ``may_restart(back_to_start)`` is told whether the run began at the stream's first stamp."""
+    ``may_restart(own)`` is told whether the run is what the stream's own publisher may do: go back to the
+    stream's first stamp (a reset), or jump ahead after the stream stood still for a window's time (a pause)."""
 
     MAX_RUNS = 8
     RETRY_S = 0.1
@@ -60,6 +62,7 @@ class StampGuard:
         self.may_restart = may_restart   # None: any RESYNC agreeing stamps restart the stream
         self.last: Optional[int] = None
         self.start: Optional[int] = None   # the stream's first stamp (since its last restart): a reset goes back to it
+        self._moved_at = 0.0               # when (monotonic s) the stream's time last moved
         self._runs: list = []   # [last stamp, length, strictly increasing, refused until (monotonic s), first stamp]
 
     def check(self, stamp: int, commit: bool = True) -> str:
@@ -93,7 +96,9 @@ class StampGuard:
         """Count ``stamp`` in the run it agrees with (a resend agrees too); :data:`RESTART`, :data:`NEW` (the first
         start), a refusal, or None (not yet)."""
         runs = self._runs
-        run = next((r for r in reversed(runs) if 0 <= stamp - r[0] <= self.window_ns), None)
+        # a later stamp extends a run that has moved at each stamp; the same stamp again (a resend) extends its run
+        run = next((r for r in reversed(runs) if (r[2] and 0 < stamp - r[0] <= self.window_ns) or stamp == r[0]),
+                   None)
         if run is None:
             if len(runs) >= self.MAX_RUNS:
                 del runs[0]
@@ -107,11 +112,15 @@ class StampGuard:
                 return None
             self.commit(stamp)
             return NEW
-        if self.may_restart is not None and not self.may_restart(run[4] == self.start):   # a reset: back to the start
+        # what the stream's own publisher may do: a reset (back to the start), or go on after a pause (ahead of a
+        # stream that has not moved for a window's time)
+        own = run[4] == self.start or (stamp > last and time.monotonic() - self._moved_at > self.window_ns * 1e-9)
+        if self.may_restart is not None and not self.may_restart(own):
             run[3] = time.monotonic() + self.RETRY_S
             return (f"{self.what} {stamp * 1e-9:.6f} s: {run[1]} stamps agree away from the stream's "
                     f"{last * 1e-9:.6f} s, but the topic has more than one publisher: no restart")
         self.last = self.start = stamp
+        self._moved_at = time.monotonic()
         runs.clear()
         return RESTART
 
@@ -121,28 +130,30 @@ class StampGuard:
             if self.last is None:
                 self.start = stamp
             self.last = stamp
+            self._moved_at = time.monotonic()
             self._runs.clear()
 
 
 class SolePublisher:
     """A ``may_restart`` for :class:`StampGuard`: whether the stamps can only be the stream's own publisher's.
 
-    ``may_restart(back_to_start)``, asked (the graph, then) when a stream starts or restarts: yes when ``topic``
-    has exactly one publisher that never shared the topic with the stream, and it is another than the one the
-    stream started from (a new plant) or the stamps go back to the stream's first one (``back_to_start``: a
-    plant's ``~/reset`` restarts its stamps at the run's start); no while there are more, and each publisher
+    ``may_restart(own)``, asked (the graph, then) when a stream starts or restarts: yes when ``topic`` has
+    exactly one publisher that never shared the topic with the stream, and it is another than the one the
+    stream started from (a new plant) or the run is one the stream's own publisher makes (``own``: back to the
+    stream's first stamp, as a plant's ``~/reset`` restarts its stamps at the run's start, or ahead after the
+    stream stood still, a pause); no while there are more, and each publisher
     then seen beside the stream's own is remembered as an intruder, which a restart never follows, also when it
     is left alone on the topic.  (The graph can lag the data: a publisher whose messages come before the graph
-    lists it looks like the stream's own, which then restarts only back to its start.)"""
+    lists it looks like the stream's own, which then restarts only back to its start, or after a pause.)"""
 
     def __init__(self, node, topic: str):
         self.node, self.name = node, node.resolve_topic_name(topic)
         self.own: Optional[tuple] = None   # the endpoint gid of the publisher the stream (re)started from
         self.intruders: set = set()
 
-    def __call__(self, back_to_start: bool) -> bool:
+    def __call__(self, own: bool) -> bool:
         gids = [tuple(i.endpoint_gid) for i in self.node.get_publishers_info_by_topic(self.name)]
-        if len(gids) == 1 and gids[0] not in self.intruders and (gids[0] != self.own or back_to_start):
+        if len(gids) == 1 and gids[0] not in self.intruders and (gids[0] != self.own or own):
             self.own = gids[0]
             return True
         self.intruders.update(g for g in gids if g != self.own)
