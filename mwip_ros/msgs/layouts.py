@@ -17,7 +17,9 @@
                                                     angular_velocity (0, gyro, 0), linear_acceleration
                                                     (accel_x, 0, accel_z); covariances diagonal
                                                     (gyro_noise_std^2, accel_noise_std^2); stamp t_k
-    wheel_encoder         sensor_msgs/JointState    name [wheel], position [phi = theta_w - theta_b],
+    wheel_encoder         sensor_msgs/JointState    frame_id "" (a joint's state: no frame, as
+                                                    joint_state_publisher sends it); name [wheel],
+                                                    position [phi = theta_w - theta_b],
                                                     velocity [phi rate], effort [torque that acted
                                                     over the previous period]; stamp t_k
 
@@ -37,8 +39,8 @@ from mwip_ros.core.safety import PLAUSIBLE_TORQUE
 from . import cdr
 from .errors import BadMessage, CdrError
 
-__all__ = ["JOINT_NAMES", "INTERNAL_NAMES", "LIMITS", "RAW_LIMITS", "IMU_FRAME", "ENCODER_JOINT", "encode_state",
-           "encode_wrench", "encode_internals",
+__all__ = ["JOINT_NAMES", "INTERNAL_NAMES", "LIMITS", "RAW_LIMITS", "IMU_FRAME", "ENCODER_FRAME", "ENCODER_JOINT",
+           "encode_state", "encode_wrench", "encode_internals",
            "encode_command", "encode_clock", "encode_external_wrench", "parse_joint_state", "parse_wrench",
            "parse_command", "parse_clock", "parse_internals", "parse_external_wrench", "encode_imu", "parse_imu",
            "encode_encoder", "parse_encoder", "check_state"]
@@ -70,10 +72,11 @@ RAW_LIMITS = {
 }
 IMU_FRAME = "imu_link"         # REP-145: the IMU's own frame (the body frame at the IMU, core.raw_sensors)
 ENCODER_JOINT = "wheel"        # the encoder's joint: the wheel relative to the body
+ENCODER_FRAME = ""             # the encoder's JointState frame_id: none (a joint angle is no pose in a frame)
 
 _STATE = cdr.JointStateEncoder(JOINT_NAMES)
 _IMU = cdr.ImuEncoder(IMU_FRAME)
-_ENCODER = cdr.JointStateEncoder((ENCODER_JOINT,))
+_ENCODER = cdr.JointStateEncoder((ENCODER_JOINT,), ENCODER_FRAME)
 _NO_ORIENTATION = (0.0, 0.0, 0.0, 0.0)
 _NO_ORIENTATION_COV = (-1.0,) + (0.0,) * 8
 _INTERNALS = cdr.JointStateEncoder(INTERNAL_NAMES)
@@ -198,9 +201,11 @@ def _raw_within(values: Sequence[float], limit: str, what: str) -> None:
 
 def parse_imu(data) -> Tuple[int, float, float, float]:
     """(stamp_ns, gyro = angular_velocity.y, accel_x, accel_z) of an imu/data_raw message, or BadMessage (every
-    axis of angular_velocity and linear_acceleration must be finite and plausible; the orientation and the
-    covariances are not read)."""
-    stamp, _frame, _q, _qc, w, _wc, a, _ac = _decoded(cdr.decode_imu, data, "sensor_msgs/Imu")
+    axis of angular_velocity and linear_acceleration must be finite and plausible, the frame :data:`IMU_FRAME`;
+    the orientation and the covariances are not read)."""
+    stamp, frame, _q, _qc, w, _wc, a, _ac = _decoded(cdr.decode_imu, data, "sensor_msgs/Imu")
+    if frame != IMU_FRAME:
+        raise BadMessage(f"frame_id {frame[:64]!r}, expected {IMU_FRAME!r} (the IMU's own frame, REP-145)")
     _finite((*w, *a), "IMU reading")
     _raw_within(w, "gyro", "angular_velocity")
     _raw_within(a, "accel", "linear_acceleration")
@@ -209,9 +214,11 @@ def parse_imu(data) -> Tuple[int, float, float, float]:
 
 def parse_encoder(data) -> Tuple[int, float, float, float]:
     """(stamp_ns, phi, phi rate, torque) of a wheel_encoder message, or BadMessage (name [wheel], one value in
-    each of position, velocity and effort, finite and plausible)."""
-    stamp, _frame, names, position, velocity, effort = _decoded(cdr.decode_joint_state, data,
-                                                                "sensor_msgs/JointState")
+    each of position, velocity and effort, finite and plausible; the frame :data:`ENCODER_FRAME`)."""
+    stamp, frame, names, position, velocity, effort = _decoded(cdr.decode_joint_state, data,
+                                                               "sensor_msgs/JointState")
+    if frame != ENCODER_FRAME:
+        raise BadMessage(f"frame_id {frame[:64]!r}, expected {ENCODER_FRAME!r} (the encoder's JointState has none)")
     if list(names) != [ENCODER_JOINT]:
         raise BadMessage(f"joint names {list(names)}, expected [{ENCODER_JOINT!r}]")
     if len(position) != 1 or len(velocity) != 1 or len(effort) != 1:

@@ -7,11 +7,21 @@
 * The loop's own subscriptions (:data:`INPUT_QOS`, observer, controller, plant): reliable,
   keep last 1000, **volatile**: a node that joins late must not integrate a backlog of old
   states; the lockstep driver resends the one state that is waiting.
-* Realtime (``mode: realtime`` of the plant, the observer and the controller): the newest
-  state matters, not a backlog.  Publishers (:data:`REALTIME_QOS`) are reliable, transient
-  local and keep the last 10 (a recorder that joins gets 50 ms at 200 Hz, not seconds);
-  the loop's subscriptions (:data:`REALTIME_INPUT_QOS`) keep the last one only, so a node
-  that fell behind answers the newest state and never works through old ones.
+* Realtime (``mode: realtime`` of the plant, the state estimator, the observer and the
+  controller): publishers (:data:`REALTIME_QOS`) are reliable, transient local and keep the
+  last 10 (a recorder that joins gets 50 ms at 200 Hz, not seconds).  The loop's
+  subscriptions (:data:`REALTIME_INPUT_QOS`: the estimator's ``imu/data_raw`` and
+  ``wheel_encoder``, the observer's ``joint_states``, the controller's ``joint_states`` and
+  ``disturbance_estimate``, the plant's ``wheel_torque_cmd``) keep the last
+  :data:`REALTIME_INPUT_DEPTH`, volatile, and the node takes every message (the executor
+  calls back once per message; a rejection costs microseconds).  A reader's history is one
+  queue for all of a topic's publishers: with a depth of one, a flood of messages that are
+  all rejected pushed the genuine samples out before the node saw them (issue 30: 45,000 a
+  second on the raw topics, the filter diverged, the robot fell).  Now a flood displaces a
+  genuine message only when it outruns what the node rejects a second, or fills the queue
+  while the node is not scheduled.  A node that fell behind works through what waited (the
+  stamp guards and the pairing judge each message; the plant holds the newest command;
+  the estimator integrates over the stamps' time, so a lost sample costs a longer step).
 * The recorder (:data:`RECORD_QOS`): reliable, keep last 1000, transient local, so it gets
   that backlog.  A volatile publisher (``ros2 topic pub`` by default) does not match a
   transient-local reader: the recorder takes ``external_wrench``, which users publish by
@@ -30,15 +40,16 @@
   (the same, keep last 100 on its side: a burst is not overwritten before its callback runs).
 * ``emergency_stop``, which users publish with any QoS: the plant subscribes twice, with
   :data:`INPUT_QOS` (reliable: nothing a reliable publisher sends is lost) and with
-  :data:`BEST_EFFORT_INPUT_QOS` (which also matches a best-effort publisher); a message that
-  comes twice latches the same fault.
+  :data:`BEST_EFFORT_INPUT_QOS` (which also matches a best-effort publisher; it keeps
+  :data:`DEPTH` too, so a flood cannot push a best-effort stop out of the queue); a message
+  that comes twice latches the same fault.
 """
 from __future__ import annotations
 
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-__all__ = ["GRAPH_QOS", "INPUT_QOS", "RECORD_QOS", "REALTIME_QOS", "REALTIME_INPUT_QOS", "SERVICE_QOS",
-           "DRIVER_STATE_QOS", "DRIVER_STATE_READER_QOS", "BEST_EFFORT_INPUT_QOS", "DEPTH", "qos_for",
+__all__ = ["GRAPH_QOS", "INPUT_QOS", "RECORD_QOS", "REALTIME_QOS", "REALTIME_INPUT_QOS", "REALTIME_INPUT_DEPTH",
+           "SERVICE_QOS", "DRIVER_STATE_QOS", "DRIVER_STATE_READER_QOS", "BEST_EFFORT_INPUT_QOS", "DEPTH", "qos_for",
            "recorded_qos"]
 
 DEPTH = 1000
@@ -51,8 +62,9 @@ RECORD_QOS = GRAPH_QOS
 REALTIME_DEPTH = 10
 REALTIME_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=REALTIME_DEPTH,
                           reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
-REALTIME_INPUT_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                                durability=DurabilityPolicy.VOLATILE)
+REALTIME_INPUT_DEPTH = DEPTH   # a flood's backlog while the node is not scheduled (0.2 s of 5,000 a second)
+REALTIME_INPUT_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=REALTIME_INPUT_DEPTH,
+                                reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
 
 SERVICE_QOS = QoSProfile(history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPolicy.RELIABLE,
                          durability=DurabilityPolicy.VOLATILE)
@@ -61,8 +73,8 @@ DRIVER_STATE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliabil
 DRIVER_STATE_READER_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
                                      reliability=ReliabilityPolicy.RELIABLE,
                                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
-BEST_EFFORT_INPUT_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.BEST_EFFORT,
-                                   durability=DurabilityPolicy.VOLATILE)
+BEST_EFFORT_INPUT_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=DEPTH,
+                                   reliability=ReliabilityPolicy.BEST_EFFORT, durability=DurabilityPolicy.VOLATILE)
 
 
 def qos_for(mode: str):

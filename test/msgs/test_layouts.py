@@ -82,7 +82,8 @@ def test_imu_round_trip_says_it_has_no_orientation():
 
 def test_encoder_round_trip():
     data = L.encode_encoder(7, 0.25, -3.5, 42.0)
-    assert cdr.decode_joint_state(data)[2:] == (["wheel"], (0.25,), (-3.5,), (42.0,))
+    assert cdr.decode_joint_state(data)[1:] == (L.ENCODER_FRAME, ["wheel"], (0.25,), (-3.5,), (42.0,))
+    assert L.ENCODER_FRAME == ""   # as plant_sim publishes it (a joint's state is in no frame)
     assert L.parse_encoder(data) == (7, 0.25, -3.5, 42.0)
 
 
@@ -105,6 +106,10 @@ def test_an_imu_that_gives_an_orientation_is_not_an_error():
     (_imu(a=(1.5e3, 0.0, 9.81)), "implausible linear_acceleration 1500"),
     (_imu()[:-30], "not a sensor_msgs/Imu: message ends"),
     (b"\x00\x01\x00\x00" + bytes(8), "not a sensor_msgs/Imu"),
+    (cdr.ImuEncoder("base_link")(1, (0.0,) * 4, (-1.0,) + (0.0,) * 8, (0.0,) * 3, (0.0,) * 9, (0.0, 0.0, 9.81),
+                                 (0.0,) * 9), "frame_id 'base_link', expected 'imu_link'"),   # issue 30: accepted
+    (cdr.ImuEncoder("")(1, (0.0,) * 4, (-1.0,) + (0.0,) * 8, (0.0,) * 3, (0.0,) * 9, (0.0, 0.0, 9.81), (0.0,) * 9),
+     "frame_id '', expected 'imu_link'"),
 ])
 def test_bad_imu_samples_are_refused_with_the_reason(data, words):
     with pytest.raises(BadMessage, match=words):
@@ -128,7 +133,9 @@ def test_the_raw_limits_are_the_documented_bounds():
     (L.encode_encoder(1, 0.0, -1e4, 0.0), "implausible encoder rate"),
     (L.encode_encoder(1, 0.0, 0.0, 1e7), "implausible effort"),
     (L.encode_encoder(1, 0.0, 0.0, 0.0)[:-4], "not a sensor_msgs/JointState"),
-    (L.encode_imu(1, 0.0, 0.0, 9.81), "not a sensor_msgs/JointState|joint names"),   # another type's bytes
+    (L.encode_imu(1, 0.0, 0.0, 9.81), "not a sensor_msgs/JointState|joint names|frame_id"),   # another type's bytes
+    (cdr.JointStateEncoder(("wheel",), "imu_link")(1, (0.0,), (0.0,), (0.0,)), "frame_id 'imu_link', expected ''"),
+    (cdr.JointStateEncoder(("wheel",), "base_link")(1, (0.0,), (0.0,), (0.0,)), "frame_id 'base_link'"),
 ])
 def test_bad_encoder_samples_are_refused_with_the_reason(data, words):
     with pytest.raises(BadMessage, match=words):

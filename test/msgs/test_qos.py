@@ -28,12 +28,14 @@ def test_nothing_recorded_replays_with_the_graphs_qos():
 
 
 def test_the_qos_fits_the_mode():
-    """Lockstep loses nothing (deep; transient-local writers); realtime keeps the newest state (shallow; the
-    loop's readers keep one).  The graph does not show history depths, so this is checked here."""
+    """Lockstep loses nothing (deep; transient-local writers); realtime publishers keep a shallow backlog for a
+    recorder, and the loop's readers are deep: a flood of rejected messages must not push a genuine one out of a
+    queue of one (issue 30).  The graph does not show history depths, so this is checked here."""
     from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
-    from mwip_ros.msgs.qos import DEPTH, qos_for
+    from mwip_ros.msgs.qos import BEST_EFFORT_INPUT_QOS, DEPTH, qos_for
     (pub, sub), (rt_pub, rt_sub) = qos_for("lockstep"), qos_for("realtime")
-    assert (pub.depth, sub.depth, rt_pub.depth, rt_sub.depth) == (DEPTH, DEPTH, 10, 1)
+    assert (pub.depth, sub.depth, rt_pub.depth, rt_sub.depth) == (DEPTH, DEPTH, 10, DEPTH)
+    assert BEST_EFFORT_INPUT_QOS.depth == DEPTH   # the plant's best-effort emergency_stop reader
     assert pub.durability == rt_pub.durability == DurabilityPolicy.TRANSIENT_LOCAL   # a recorder gets a backlog
     assert sub.durability == rt_sub.durability == DurabilityPolicy.VOLATILE          # a loop node never does
     assert {q.reliability for q in (pub, sub, rt_pub, rt_sub)} == {ReliabilityPolicy.RELIABLE}

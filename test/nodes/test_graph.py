@@ -217,7 +217,7 @@ def test_realtime_graph_with_raw_sensors_balances(tmp_path):
     assert run.t[-1] == pytest.approx(2.0)
     assert np.abs(run["theta_b"]).max() < 0.5 and abs(run["theta_b"][-1]) < 0.1   # recovering from -10 deg
     e_out = est.output()
-    assert "estimated " in e_out and "diverged" not in e_out, e_out
+    assert "estimated " in e_out and "estimator diverged" not in e_out and "withheld diverged: 0" in e_out, e_out
     assert int(e_out.split("estimated ")[1].split()[0]) > 300   # most of the 400 periods
 
 

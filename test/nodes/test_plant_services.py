@@ -26,6 +26,35 @@ def test_a_stream_that_goes_back_is_followed_after_resync_agreeing_stamps_resend
     assert stray.check(20) == NEW          # two stamps that do not agree restart nothing
 
 
+@pytest.mark.unit
+def test_a_restart_is_asked_of_may_restart_and_a_crowded_start_needs_a_moving_stream():
+    """Issue 30 item 5: stamps that agree restart the stream only when ``may_restart`` says they can be the stream's
+    own publisher's (told whether the run is a reset back to the stream's start); a lone stamp judged without
+    commit does not move the stream's time; before any stream, a crowded topic starts only on stamps that move."""
+    asked, answer = [], [False]
+
+    def may_restart(own):
+        asked.append(own)
+        return answer[0]
+
+    w = 10 ** 9   # the window: 1 s (a stream that stands still that long in wall time has paused)
+    g = StampGuard(window_ns=w, may_restart=may_restart)
+    answer[0] = True
+    assert [g.check(s * w // 10) for s in (0, 1, 2)] == [NEW, NEW, NEW] and asked == [True]   # the start: asked
+    answer[0], asked[:] = False, []
+    ahead = [g.check(1000 * w + s) for s in (0, 10, 20)]          # a second publisher's stamps, far ahead
+    assert all(v not in (NEW, REPEAT, RESTART) for v in ahead) and "no restart" in ahead[-1] and asked == [False]
+    assert g.check(3 * w // 10) == NEW and g.last == 3 * w // 10   # the stream goes on
+    asked[:] = []
+    answer[0] = True
+    assert [g.check(s) for s in (0, 0, 0)][-1] == RESTART and asked == [True]   # back to the start: a reset
+    assert g.check(4, commit=False) == NEW and g.last == 0       # judged, not committed: a lone sample ahead
+    assert g.check(1) == NEW and g.last == 1
+    crowded = StampGuard(window_ns=100, may_restart=lambda own: False)
+    assert all(crowded.check(5) not in (NEW, RESTART) for _ in range(5))   # a stray repeated starts nothing
+    assert [crowded.check(s) for s in (7, 8, 9)][-1] == NEW and crowded.last == 9   # three that move do
+
+
 @pytest.mark.graph
 def test_reset_in_lockstep_goes_back_to_the_initial_state_and_the_loop_goes_on(tmp_path):
     from std_srvs.srv import Trigger

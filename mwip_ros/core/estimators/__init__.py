@@ -70,8 +70,9 @@ class Estimator:
     parameters : tuple of EstimatorParam
         Its ``state_estimator`` parameters, named ``<name>.<key>``.
     pure_step : function
-        The period as a pure function, ``pure_step(P, h, sample, s, first, m=math)`` -> ``(estimate, s_next,
-        health)``: ``P`` the numbers :meth:`pure_params` makes, ``sample`` the 5 floats of a
+        The period as a pure function, ``pure_step(P, dt, sample, s, first, m=math)`` -> ``(estimate, s_next,
+        health)``: ``P`` the numbers :meth:`pure_params` makes, ``dt`` the time since the last sample [s] (the
+        period h, or a multiple of it when samples were lost), ``sample`` the 5 floats of a
         :class:`~..raw_sensors.RawSample`, ``s`` the flat tuple of floats of the state (ignored when ``first``,
         the first sample), ``estimate`` (theta_w, theta_b, theta_w', theta_b'), ``health`` the fields of
         :class:`Health`.  numba compiles it as is (``numba.njit(error_model="numpy")``).
@@ -130,9 +131,11 @@ class Estimator:
         self.first = True
         self.health = Health(0.0, 0.0, 0.0, False)
 
-    def step(self, sample) -> State:
-        """The estimated state at the sample's instant; :attr:`health` tells how the step went."""
-        est, self.s, health = type(self).pure_step(self.P, self.h, tuple(sample), self.s, self.first)
+    def step(self, sample, dt: Optional[float] = None) -> State:
+        """The estimated state at the sample's instant, ``dt`` [s] after the last sample (the period ``h`` when
+        None: no sample lost between them); :attr:`health` tells how the step went."""
+        est, self.s, health = type(self).pure_step(self.P, self.h if dt is None else dt, tuple(sample), self.s,
+                                                   self.first)
         self.first = False
         self.health = Health(*health)
         return State(*est)

@@ -1,9 +1,10 @@
 """The estimator ``complementary``: the gyro integrated, blended with the accelerometer's pitch (docs/theory.md 6.4).
 
-Per sample k (gyro w_k, specific force (f_x, f_z), encoder phi_k and its rate)::
+Per sample k (gyro w_k, specific force (f_x, f_z), encoder phi_k and its rate; dt the time since the last sample,
+h when none was lost)::
 
     theta_acc = atan2(-f_x, f_z)                                 exact when the IMU does not accelerate
-    theta_k   = a (theta_{k-1} + h (w_k - b)) + (1 - a) theta_acc,  a = tau / (tau + h)
+    theta_k   = a (theta_{k-1} + dt (w_k - b)) + (1 - a) theta_acc,  a = tau / (tau + dt)
     theta_k'  = w_k - b
     theta_w   = phi_k + theta_k,   theta_w' = phi_k' + theta_k'
 
@@ -11,7 +12,7 @@ a first-order filter of time constant ``tau``: the accelerometer below 1/tau, th
 bias b is a parameter (``complementary.gyro_bias``): the filter does not estimate it, and an error
 in it becomes a pitch error of (bias error) x tau.  At k = 0 theta_0 = theta_acc.
 
-Health: the innovation theta_acc - (theta_{k-1} + h (w_k - b)), its NIS against
+Health: the innovation theta_acc - (theta_{k-1} + dt (w_k - b)), its NIS against
 ``complementary.innovation_std``, their running mean over NIS_WINDOW_S; ``diverged`` when the estimate
 is not finite or the mean NIS exceeds ``complementary.nis_limit``.
 """
@@ -24,12 +25,12 @@ from . import NIS_WINDOW_S, Estimator, EstimatorParam
 __all__ = ["ComplementaryFilter", "complementary_step"]
 
 
-def complementary_step(P, h, sample, s, first, m=math):
+def complementary_step(P, dt, sample, s, first, m=math):
     """One period of the complementary filter as a pure function (:attr:`~.Estimator.pure_step`).
 
-    ``P`` = (tau, gyro_bias, innovation_std, nis_limit); ``sample`` = (gyro, accel_x, accel_z, encoder,
-    encoder_rate); ``s`` = (theta_b, nis_mean).  Returns ((theta_w, theta_b, theta_w', theta_b'),
-    (theta_b, nis_mean), (innovation, nis, nis_mean, diverged))."""
+    ``P`` = (tau, gyro_bias, innovation_std, nis_limit); ``dt`` the time since the last sample [s]; ``sample`` =
+    (gyro, accel_x, accel_z, encoder, encoder_rate); ``s`` = (theta_b, nis_mean).  Returns ((theta_w, theta_b,
+    theta_w', theta_b'), (theta_b, nis_mean), (innovation, nis, nis_mean, diverged))."""
     tau, bias, innovation_std, nis_limit = P[0], P[1], P[2], P[3]
     gyro, f_x, f_z, phi, phi_rate = sample[0], sample[1], sample[2], sample[3], sample[4]
     theta_acc = m.atan2(-f_x, f_z)                 # the accelerometer's pitch
@@ -37,13 +38,13 @@ def complementary_step(P, h, sample, s, first, m=math):
     if first:
         theta, innovation, nis_mean = theta_acc, 0.0, 0.0
     else:
-        pred = s[0] + h * rate                      # the gyro integrated
-        a = tau / (tau + h)
+        pred = s[0] + dt * rate                     # the gyro integrated
+        a = tau / (tau + dt)
         theta = a * pred + (1.0 - a) * theta_acc    # first-order blend, time constant tau
         innovation = theta_acc - pred
         nis_mean = s[1]
     nis = (innovation / innovation_std) ** 2
-    nis_mean = nis_mean + (h / (NIS_WINDOW_S + h)) * (nis - nis_mean)
+    nis_mean = nis_mean + (dt / (NIS_WINDOW_S + dt)) * (nis - nis_mean)
     est = (phi + theta, theta, phi_rate + rate, rate)
     finite = m.isfinite(est[0]) and m.isfinite(theta) and m.isfinite(est[2]) and m.isfinite(rate)
     diverged = (not finite) or nis_mean > nis_limit

@@ -7,17 +7,22 @@ the IMU is; a pitch error theta_e leaks g theta_e into that acceleration and sho
 second as a position error, and the gyro bias as a growing pitch error.  So the robot's acceleration, which
 corrupts the accelerometer's pitch by milliradians to centiradians, is part of the model instead of an error.
 
-State (theta, b, p, v): pitch, gyro bias, the IMU point's horizontal position x_imu = r theta_w + d sin theta
-and velocity.  Inputs per sample k: gyro w_k, specific force (f_x, f_z) at t_k^- (the acceleration over
-the period that ends at t_k).  Prediction::
+State (theta, b, p, v, n): pitch, gyro bias, the IMU point's horizontal position x_imu = r theta_w + d sin theta
+and velocity, and n, the white noise of the last gyro sample.  Inputs per sample k: gyro w_k, specific force
+(f_x, f_z) at t_k^- (the acceleration over the period that ends at t_k), and the period dt_k = t_k - t_{k-1}
+the stamps give (h when none is lost).  Prediction::
 
-    theta_k = theta_{k-1} + h ((w_{k-1} + w_k) / 2 - b)             trapezoid (theta' is continuous)
+    theta_k = theta_{k-1} + dt ((w_{k-1} + w_k) / 2 - b) - dt n_{k-1} / 2      trapezoid (theta' is continuous)
+    n_k     = 0 (a new sample's noise, variance gyro_noise_std^2; it enters theta_k as -dt n_k / 2)
     a_k     = f_x cos theta_k + f_z sin theta_k                      world horizontal acceleration of the IMU
-    v_k     = v_{k-1} + h a_k,   p_k = p_{k-1} + h v_{k-1} + h^2 a_k / 2,   b_k = b_{k-1}
+    v_k     = v_{k-1} + dt a_k,   p_k = p_{k-1} + dt v_{k-1} + dt^2 a_k / 2,   b_k = b_{k-1}
 
+The trapezoid uses each gyro sample in two periods, so its noise is not white from period to period: n carries
+the last sample's noise into the next period, which makes the pitch's variance grow by dt^2 sigma_g^2 a period,
+as the integral of the samples does (docs/theory.md 6.4).
 Measurement: the encoder, phi_k = (p - d sin theta) / r - theta (since theta_w = phi + theta), noise
 ``encoder_noise_std``.  The Jacobian of a_k in theta is c = -f_x sin theta + f_z cos theta (about g).
-Estimate: theta_b = theta, theta_b' = w_k - b, theta_w = phi_k + theta_b and theta_w' = phi' + theta_b' with
+Estimate: theta_b = theta, theta_b' = w_k - b - n, theta_w = phi_k + theta_b and theta_w' = phi' + theta_b' with
 phi' the filter's, (v - d cos theta theta_b') / r - theta_b' (``kalman.wheel_rate: 1``, the default; the cosine at
 the predicted theta, which the update moves by microradians), or the driver's differenced encoder rate
 (``kalman.wheel_rate: 0``).  Nothing of the true state or the true bias enters: r, d, g are the nominal
@@ -30,89 +35,120 @@ exceeds ``kalman.nis_limit``.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 from . import NIS_WINDOW_S, Estimator, EstimatorParam
 
-__all__ = ["KalmanFilter", "kalman_step", "STATE_NAMES"]
-
-# the flat state tuple: the estimate, the covariance's upper triangle (row-major), the last gyro, the mean NIS
-STATE_NAMES = ("theta", "bias", "p", "v", "P00", "P01", "P02", "P03", "P11", "P12", "P13", "P22", "P23", "P33",
-               "gyro_prev", "nis_mean")
+__all__ = ["KalmanFilter", "KalmanParams", "kalman_step", "STATE_NAMES"]
 
 
-def kalman_step(P, h, sample, s, first, m=math):
+class KalmanParams(NamedTuple):
+    """The numbers :func:`kalman_step` reads, in this order (the compiled batch passes them as an array row)."""
+
+    gyro_noise_std: float      # s_g [rad/s]
+    bias_walk: float           # s_w [rad/s/sqrt(s)]
+    accel_noise_std: float     # s_a [m/s^2]
+    encoder_noise_std: float   # s_e [rad]
+    initial_pitch_std: float   # [rad]
+    initial_bias_std: float    # [rad/s]
+    initial_speed_std: float   # [m/s]
+    gyro_bias: float           # the bias at the start [rad/s]
+    nis_limit: float
+    wheel_rate: float          # 1: phi' from the filter, 0: the driver's
+    r: float                   # nominal wheel radius [m]
+    d: float                   # IMU offset [m]
+    g: float                   # gravity [m/s^2]
+
+
+# the flat state tuple: the estimate, the covariance's upper triangle (row-major, indices 0..4 = theta, b, p, v, n),
+# the last gyro, the mean NIS
+STATE_NAMES = ("theta", "bias", "p", "v", "n", "P00", "P01", "P02", "P03", "P04", "P11", "P12", "P13", "P14", "P22",
+               "P23", "P24", "P33", "P34", "P44", "gyro_prev", "nis_mean")
+
+
+def kalman_step(prm, dt, sample, s, first, m=math):
     """One period of the EKF as a pure function (:attr:`~.Estimator.pure_step`).
 
-    ``P`` = (gyro_noise_std, bias_walk, accel_noise_std, encoder_noise_std, initial_pitch_std, initial_bias_std,
-    initial_speed_std, gyro_bias, nis_limit, wheel_rate, r, d, g); ``sample`` = (gyro, accel_x, accel_z,
-    encoder, encoder_rate); ``s`` the 16 floats of :data:`STATE_NAMES`.  Returns ((theta_w, theta_b, theta_w',
-    theta_b'), s_next, (innovation, nis, nis_mean, diverged))."""
-    sg, sw, sa, se = P[0], P[1], P[2], P[3]
-    r, d = P[10], P[11]
-    gyro, f_x, f_z, phi, phi_rate = sample[0], sample[1], sample[2], sample[3], sample[4]
+    ``prm`` the 13 numbers of :class:`KalmanParams`; ``dt`` the period [s] since the last sample; ``sample`` =
+    (gyro, accel_x, accel_z, encoder, encoder_rate); ``s`` the 22 floats of :data:`STATE_NAMES`.  Returns
+    ((theta_w, theta_b, theta_w', theta_b'), s_next, (innovation, nis, nis_mean, diverged))."""
+    sg, sw, sa, se, pitch_std0, bias_std0, speed_std0, bias0, nis_limit, wheel_rate, r, d, _g = prm
+    gyro, f_x, f_z, phi, phi_rate = sample
+    vg = sg * sg                                # the variance of one gyro sample's noise
     if first:   # pitch from the accelerometer; p, v and their covariance follow from it and the encoder
         th = m.atan2(-f_x, f_z)
-        b = P[7]
+        b, n = bias0, 0.0
         cs = m.cos(th)
         lever = r + d * cs                      # d x_imu / d theta at a fixed phi
         p = r * (phi + th) + d * m.sin(th)
-        v = lever * (gyro - b) + r * phi_rate
-        vth, vb = P[4] * P[4], P[5] * P[5]
-        P00, P01, P02, P03 = vth, 0.0, lever * vth, 0.0
-        P11, P12, P13 = vb, 0.0, -lever * vb
-        P22, P23 = lever * lever * vth + r * r * se * se, 0.0
-        P33 = lever * lever * vb + P[6] * P[6]
+        v = lever * (gyro - b) + r * phi_rate   # its errors: -lever (bias error + the gyro's noise)
+        vth, vb = pitch_std0 * pitch_std0, bias_std0 * bias_std0
+        P00, P01, P02, P03, P04 = vth, 0.0, lever * vth, 0.0, 0.0
+        P11, P12, P13, P14 = vb, 0.0, -lever * vb, 0.0
+        P22, P23, P24 = lever * lever * vth + r * r * se * se, 0.0, 0.0
+        P33, P34 = lever * lever * (vb + vg) + speed_std0 * speed_std0, -lever * vg
+        P44 = vg
         nis_mean, innovation, nis, S = 0.0, 0.0, 0.0, 1.0
     else:
-        th, b, p, v = s[0], s[1], s[2], s[3]
-        P00, P01, P02, P03, P11, P12, P13, P22, P23, P33 = s[4], s[5], s[6], s[7], s[8], s[9], s[10], s[11], \
-            s[12], s[13]
-        nis_mean = s[15]
+        (th, b, p, v, n, P00, P01, P02, P03, P04, P11, P12, P13, P14, P22, P23, P24, P33, P34, P44, gyro_prev,
+         nis_mean) = s
         # --- prediction over [t_{k-1}, t_k] ---
-        th = th + h * (0.5 * (s[14] + gyro) - b)
+        q = 0.5 * dt                            # the weight of each gyro sample in the trapezoid
+        th = th + dt * (0.5 * (gyro_prev + gyro) - b) - q * n
         sn, cs = m.sin(th), m.cos(th)
         a = f_x * cs + f_z * sn                 # the IMU point's horizontal acceleration (world)
         c = f_z * cs - f_x * sn                 # d a / d theta
-        p = p + h * v + 0.5 * h * h * a
-        v = v + h * a
-        # covariance: shear 1 (theta -= h b, p += h v), then shear 2 (p += e theta, v += f theta)
+        p = p + dt * v + 0.5 * dt * dt * a
+        v = v + dt * a
+        # covariance: shear 1 (theta -= dt b + q n, p += dt v; the old n is used up) ...
         P00, P01, P02, P03, P11, P12, P13, P22, P23, P33 = (
-            P00 - 2.0 * h * P01 + h * h * P11, P01 - h * P11, P02 + h * P03 - h * (P12 + h * P13), P03 - h * P13,
-            P11, P12 + h * P13, P13, P22 + 2.0 * h * P23 + h * h * P33, P23 + h * P33, P33)
-        e, f = 0.5 * h * h * c, h * c
+            P00 - 2.0 * dt * P01 - 2.0 * q * P04 + dt * dt * P11 + 2.0 * dt * q * P14 + q * q * P44,
+            P01 - dt * P11 - q * P14,
+            P02 + dt * P03 - dt * (P12 + dt * P13) - q * (P24 + dt * P34),
+            P03 - dt * P13 - q * P34,
+            P11, P12 + dt * P13, P13, P22 + 2.0 * dt * P23 + dt * dt * P33, P23 + dt * P33, P33)
+        # ... the new sample's noise (theta += q n_k; n = n_k, independent of the past) ...
+        P00, P04, P14, P24, P34, P44 = P00 + q * q * vg, -q * vg, 0.0, 0.0, 0.0, vg
+        n = 0.0
+        # ... shear 2 (p += e theta, v += f theta: the acceleration at the predicted pitch)
+        e, f = 0.5 * dt * dt * c, dt * c
         P22, P23, P33 = P22 + 2.0 * e * P02 + e * e * P00, P23 + e * P03 + f * P02 + e * f * P00, \
             P33 + 2.0 * f * P03 + f * f * P00
-        P02, P03, P12, P13 = P02 + e * P00, P03 + f * P00, P12 + e * P01, P13 + f * P01
-        # process noise: the gyro's white noise (trapezoid of two samples), the bias walk, the accelerometer's
-        qa = sa * sa * h * h
-        P00 = P00 + 0.5 * h * h * sg * sg
-        P11 = P11 + sw * sw * h
-        P22, P23, P33 = P22 + 0.25 * h * h * qa, P23 + 0.5 * h * qa, P33 + qa
+        P02, P03, P12, P13, P24, P34 = P02 + e * P00, P03 + f * P00, P12 + e * P01, P13 + f * P01, P24 + e * P04, \
+            P34 + f * P04
+        # process noise: the bias walk, the accelerometer's
+        qa = sa * sa * dt * dt
+        P11 = P11 + sw * sw * dt
+        P22, P23, P33 = P22 + 0.25 * dt * dt * qa, P23 + 0.5 * dt * qa, P33 + qa
         # --- update with the encoder: phi = (p - d sin theta) / r - theta (sn, cs: at the predicted theta) ---
         H0, H2 = -(1.0 + d * cs / r), 1.0 / r
         innovation = phi - ((p - d * sn) / r - th)
-        g0, g1, g2, g3 = P00 * H0 + P02 * H2, P01 * H0 + P12 * H2, P02 * H0 + P22 * H2, P03 * H0 + P23 * H2
+        g0, g1, g2 = P00 * H0 + P02 * H2, P01 * H0 + P12 * H2, P02 * H0 + P22 * H2
+        g3, g4 = P03 * H0 + P23 * H2, P04 * H0 + P24 * H2
         S = H0 * g0 + H2 * g2 + se * se
         iS = 1.0 / S
-        k0, k1, k2, k3 = g0 * iS, g1 * iS, g2 * iS, g3 * iS
-        th, b, p, v = th + k0 * innovation, b + k1 * innovation, p + k2 * innovation, v + k3 * innovation
-        P00, P01, P02, P03 = P00 - k0 * g0, P01 - k0 * g1, P02 - k0 * g2, P03 - k0 * g3
-        P11, P12, P13 = P11 - k1 * g1, P12 - k1 * g2, P13 - k1 * g3
-        P22, P23, P33 = P22 - k2 * g2, P23 - k2 * g3, P33 - k3 * g3
+        k0, k1, k2, k3, k4 = g0 * iS, g1 * iS, g2 * iS, g3 * iS, g4 * iS
+        th, b, p, v, n = th + k0 * innovation, b + k1 * innovation, p + k2 * innovation, v + k3 * innovation, \
+            n + k4 * innovation
+        P00, P01, P02, P03, P04 = P00 - k0 * g0, P01 - k0 * g1, P02 - k0 * g2, P03 - k0 * g3, P04 - k0 * g4
+        P11, P12, P13, P14 = P11 - k1 * g1, P12 - k1 * g2, P13 - k1 * g3, P14 - k1 * g4
+        P22, P23, P24 = P22 - k2 * g2, P23 - k2 * g3, P24 - k2 * g4
+        P33, P34, P44 = P33 - k3 * g3, P34 - k3 * g4, P44 - k4 * g4
         nis = innovation * innovation * iS
-        nis_mean = nis_mean + (h / (NIS_WINDOW_S + h)) * (nis - nis_mean)
-    rate = gyro - b
-    if P[9] > 0.5:   # phi' from the filter's IMU velocity: v = r theta_w' + d cos(theta) theta' (cs: the prediction's)
+        nis_mean = nis_mean + (dt / (NIS_WINDOW_S + dt)) * (nis - nis_mean)
+    rate = gyro - b - n
+    if wheel_rate > 0.5:   # phi' from the filter's IMU velocity: v = r theta_w' + d cos(theta) theta' (cs: predicted)
         w_rate = (v - d * cs * rate) / r
-    else:            # the driver's differenced encoder rate
+    else:                  # the driver's differenced encoder rate
         w_rate = phi_rate + rate
     est = (phi + th, th, w_rate, rate)
-    finite = m.isfinite(th) and m.isfinite(b) and m.isfinite(p) and m.isfinite(v) and m.isfinite(w_rate) \
-        and m.isfinite(P00 + P11 + P22 + P33 + P01 + P02 + P03 + P12 + P13 + P23)
-    diverged = (not finite) or P00 <= 0.0 or P11 <= 0.0 or P22 <= 0.0 or P33 <= 0.0 or S <= 0.0 \
-        or nis_mean > P[8]
-    return est, (th, b, p, v, P00, P01, P02, P03, P11, P12, P13, P22, P23, P33, gyro, nis_mean), \
-        (innovation, nis, nis_mean, diverged)
+    finite = m.isfinite(th) and m.isfinite(b) and m.isfinite(p) and m.isfinite(v) and m.isfinite(n) \
+        and m.isfinite(w_rate) and m.isfinite(P00 + P01 + P02 + P03 + P04 + P11 + P12 + P13 + P14 + P22 + P23 + P24
+                                               + P33 + P34 + P44)
+    diverged = (not finite) or P00 <= 0.0 or P11 <= 0.0 or P22 <= 0.0 or P33 <= 0.0 or P44 <= 0.0 or S <= 0.0 \
+        or nis_mean > nis_limit
+    return est, (th, b, p, v, n, P00, P01, P02, P03, P04, P11, P12, P13, P14, P22, P23, P24, P33, P34, P44, gyro,
+                 nis_mean), (innovation, nis, nis_mean, diverged)
 
 
 class KalmanFilter(Estimator):
@@ -147,9 +183,8 @@ class KalmanFilter(Estimator):
     )
 
     @staticmethod
-    def pure_params(values, r, d, g) -> tuple:
-        keys = ("gyro_noise_std", "bias_walk", "accel_noise_std", "encoder_noise_std", "initial_pitch_std",
-                "initial_bias_std", "initial_speed_std", "gyro_bias", "nis_limit", "wheel_rate")
-        return tuple(float(values[f"kalman.{k}"]) for k in keys) + (float(r), float(d), float(g))
+    def pure_params(values, r, d, g) -> KalmanParams:
+        own = {k: float(values[f"kalman.{k}"]) for k in KalmanParams._fields[:-3]}
+        return KalmanParams(**own, r=float(r), d=float(d), g=float(g))
 
     pure_step = staticmethod(kalman_step)

@@ -7,16 +7,20 @@ and velocities, effort = the torque the encoder's driver reported) with the samp
 
 In lockstep each stamp is answered once; a repeated stamp (the plant resending a sample nobody answered) is
 answered again with the same message and integrated nothing.  A sample it cannot use (malformed, non-finite,
-implausible: ``mwip_ros.msgs.layouts.RAW_LIMITS``, a wrong joint name; a stamp outside the stream's window or
-older than the last: :mod:`.guards`) is rejected, counted and logged, and never integrated; a sample whose
-partner of the other stream has not come when a later pair is complete, or within ``PAIR_WAIT_S`` of wall
-time, is dropped and counted.  A stream that restarted (a new plant, a reset) re-initialises the estimator.
-A realtime gap (lost samples) is one step of the estimator's period: it does not integrate over the gap.
+implausible: ``mwip_ros.msgs.layouts.RAW_LIMITS``, a wrong joint name or frame_id; a stamp outside the stream's
+window or older than the last: :mod:`.guards`) is rejected, counted and logged, and never integrated; a sample
+whose partner of the other stream has not come when a later pair is complete, or within ``PAIR_WAIT_S`` of wall
+time, is dropped and counted.  A sample moves its stream's time only when its pair is estimated, so a lone
+sample ahead of the stream costs nothing.  A stream that restarted (a plant's ``~/reset``, a new plant: stamps
+that agree away from the stream, :mod:`.guards`) re-initialises the estimator, but only while the topic has one
+publisher: stamps from a second publisher never restart it.  The estimator integrates over the time the stamps
+give (two periods after a lost pair; at most ``MAX_GAP_S``, a longer gap re-initialises it).
 Its health (innovation, normalized innovation squared and its running mean, diverged) is on
-``/diagnostics``: ERROR while the estimator says it diverged.  With ``csv`` set (when the schema has the
-parameter) it writes the samples and the estimates (``t``, ``gyro``, ``accel_x``, ``accel_z``, ``encoder``,
-``encoder_rate``, ``theta_w_hat``, ``theta_b_hat``, ``dtheta_w_hat``, ``dtheta_b_hat``: mwip_sim's raw
-columns) as it goes.
+``/diagnostics``: ERROR while the estimator says it diverged, published at once when it changes (and once a
+second); a diverged estimate is never published on ``joint_states`` (withheld and counted).  With ``csv`` set
+(when the schema has the parameter) it writes the samples and the estimates (``t``, ``gyro``, ``accel_x``,
+``accel_z``, ``encoder``, ``encoder_rate``, ``theta_w_hat``, ``theta_b_hat``, ``dtheta_w_hat``, ``dtheta_b_hat``:
+mwip_sim's raw columns) as it goes.
 """
 from __future__ import annotations
 
@@ -34,7 +38,8 @@ from mwip_ros.msgs import layouts as L
 from mwip_ros.msgs.qos import qos_for
 from mwip_ros.nodes.runtime.diagnostics import ERROR, OK
 from mwip_ros.nodes.runtime.guards import (NEW, REPEAT, RESTART, STAMP_WINDOW_PERIODS, PublisherWatch, Rejects,
-                                           StampGuard)
+                                           StampGuard,
+                                           sole_publisher)
 from mwip_ros.nodes.runtime.params import declare
 from mwip_ros.nodes.runtime.process import GracefulNodeMixin, run_node
 from mwip_ros.runs import CsvStream
@@ -44,6 +49,7 @@ IMU_TOPIC, ENCODER_TOPIC = "imu/data_raw", "wheel_encoder"
 PARTNER = {IMU_TOPIC: ENCODER_TOPIC, ENCODER_TOPIC: IMU_TOPIC}
 PAIR_WAIT_S = 1.0       # wall time a sample waits for its partner of the other stream before it is dropped
 _MAX_PENDING = 64       # samples of one stream waiting for their partner, at most
+MAX_GAP_S = 1.0         # the longest time between two estimated pairs integrated over; longer re-initialises
 _CSV_COLUMNS = ("t", *RAW_COLUMNS, *ESTIMATE_COLUMNS)
 
 
@@ -60,13 +66,15 @@ class StateEstimatorNode(Node, GracefulNodeMixin):
         except (KeyError, ValueError) as exc:   # the schema checked them; a plug-in estimator's own check
             raise P.ParamError("method", str(exc).strip("'\"")) from None
         window = STAMP_WINDOW_PERIODS * self.period_ns
-        self.stamp_guards = {t: StampGuard(window, f"{t} stamp") for t in (IMU_TOPIC, ENCODER_TOPIC)}
+        self.stamp_guards = {t: StampGuard(window, f"{t} stamp", sole_publisher(self, t))
+                             for t in (IMU_TOPIC, ENCODER_TOPIC)}
         self.pending = {IMU_TOPIC: {}, ENCODER_TOPIC: {}}   # topic -> {stamp: (parsed, arrival, restarted)}
         self.answered = None      # the stamp of the last sample pair answered
         self.last_msg = None      # its joint_states message (answered again for a resent sample)
         self.count = 0
         self.unpaired = 0
         self.was_diverged = False
+        self.withheld = 0         # diverged estimates not published
         self.rejects = Rejects(self.get_logger())
         csv_path = self.v.get("csv") or ""
         self.csv_path = csv_path
@@ -96,7 +104,7 @@ class StateEstimatorNode(Node, GracefulNodeMixin):
         stamp = parsed[0]
         guard = self.stamp_guards[topic]
         last = guard.last
-        verdict = guard.check(stamp)
+        verdict = guard.check(stamp, commit=False)   # committed when its pair is estimated
         if verdict == REPEAT:
             # a resent sample: its pair answered, answer it again (once per resend: on the IMU's copy)
             if topic == IMU_TOPIC and stamp == self.answered and self.last_msg is not None:
@@ -152,12 +160,19 @@ class StateEstimatorNode(Node, GracefulNodeMixin):
         _s, phi, phi_rate, torque = enc
         sample = RawSample(gyro, accel_x, accel_z, phi, phi_rate)
         snap = self.est.snapshot()
+        gap = None if self.answered is None else stamp - self.answered
+        if gap is not None and not restart and gap > MAX_GAP_S * 1e9:
+            self.get_logger().warning(f"no sample pair for {gap * 1e-9:.3f} s (more than {MAX_GAP_S:g} s) before "
+                                      f"t = {stamp * 1e-9:.3f} s")
+            restart = True
+        # the time since the last pair: h when none was lost (bit for bit the offline loop's), else the stamps'
+        dt = None if restart or gap is None or gap == self.period_ns else gap * 1e-9
         if restart:
             self.get_logger().warning(f"the raw samples restarted at t = {stamp * 1e-9:.3f} s: re-initialising the "
                                       f"{self.est.title} estimator")
             self.est.reset()
         try:
-            x = self.est.step(sample)
+            x = self.est.step(sample, dt)
             L.check_state(x, torque)   # what the observer and the controller would refuse, never published
             problem = None
         except BadMessage as exc:
@@ -169,21 +184,30 @@ class StateEstimatorNode(Node, GracefulNodeMixin):
             self.rejects(IMU_TOPIC, f"the estimate for t = {stamp * 1e-9:.3f} s is not usable: {problem}; the "
                                     "sample is not integrated, nothing published")
             return
-        self.last_msg = L.encode_state(stamp, x, torque)
-        self.pub.publish(self.last_msg)
+        for guard in self.stamp_guards.values():
+            guard.commit(stamp)
         self.answered = stamp
         self.count += 1
         if self.written is not None:
             self.written.row((stamp * 1e-9, *sample, *x))
         diverged = self.est.health.diverged
+        if diverged:   # integrated (it may recover), never published as a state
+            self.withheld += 1
+            self.last_msg = None
         if diverged != self.was_diverged:
             self.was_diverged = diverged
+            self.report_health_now()   # the plant faults on the ERROR (estimator_unhealthy) within a period
             health = self.est.health
             if diverged:
                 self.get_logger().error(f"the {self.est.title} estimator diverged at t = {stamp * 1e-9:.3f} s "
-                                        f"(innovation {health.innovation:.3g}, NIS mean {health.nis_mean:.3g})")
+                                        f"(innovation {health.innovation:.3g}, NIS mean {health.nis_mean:.3g}); its "
+                                        "estimates are withheld from joint_states while it is")
             else:
                 self.get_logger().warning(f"the {self.est.title} estimator recovered at t = {stamp * 1e-9:.3f} s")
+        if diverged:
+            return
+        self.last_msg = L.encode_state(stamp, x, torque)
+        self.pub.publish(self.last_msg)
 
     def spin_step(self, executor) -> None:
         super().spin_step(executor)
@@ -196,6 +220,7 @@ class StateEstimatorNode(Node, GracefulNodeMixin):
     def diagnostic_status(self):
         hl = self.est.health
         values = {"method": self.est.name, "estimates": self.count, "unpaired_dropped": self.unpaired,
+                  "withheld_diverged": self.withheld,
                   "innovation": f"{hl.innovation:.6g}", "nis": f"{hl.nis:.4g}", "nis_mean": f"{hl.nis_mean:.4g}",
                   "diverged": str(hl.diverged).lower()}
         if hl.diverged:
@@ -205,7 +230,8 @@ class StateEstimatorNode(Node, GracefulNodeMixin):
     def on_shutdown(self) -> None:
         waiting = sum(len(w) for w in self.pending.values())
         self.get_logger().info(f"estimated {self.count} samples ({self.est.title}); unpaired dropped: "
-                               f"{self.unpaired} (+{waiting} still waiting at the end); rejected: "
+                               f"{self.unpaired} (+{waiting} still waiting at the end); withheld diverged: "
+                               f"{self.withheld}; rejected: "
                                f"{self.rejects.summary()}")
         if self.written is not None:
             self.written.close()

@@ -1,4 +1,6 @@
-"""Every node's health on ``/diagnostics`` (``diagnostic_msgs/DiagnosticArray``), once a second of wall time.
+"""Every node's health on ``/diagnostics`` (``diagnostic_msgs/DiagnosticArray``), once a second of wall time, and
+at once when the node says its health changed (``GracefulNodeMixin.report_health_now``: the state estimator's
+divergence, which the plant's driver faults on).
 
 ``run_node`` calls :meth:`Diagnostics.tick` between callbacks (no timer: the lockstep loop
 is not disturbed, and with ``use_sim_time`` the report still comes every wall second) and
@@ -40,12 +42,14 @@ class Diagnostics:
         rejects = getattr(self.node, "rejects", None)
         return sum(rejects.counts.values()) if rejects is not None else 0
 
-    def tick(self, force: bool = False) -> None:
-        now = time.monotonic()
-        if not force and now < self._next:
+    def tick(self, force: bool = False, now: bool = False) -> None:
+        """The report, once a second; ``now``: at once (the node's health changed); ``force``: at once, and wait
+        for the readers to have it (the last report, at shutdown)."""
+        at = time.monotonic()
+        if not (force or now) and at < self._next:
             return
-        self._next = now + PERIOD_S
-        self.pub.publish(self.report(now))
+        self._next = at + PERIOD_S
+        self.pub.publish(self.report(at))
         self.published += 1
         if force:   # the last report, just before the process ends: let a listener have it
             from rclpy.duration import Duration

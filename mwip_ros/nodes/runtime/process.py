@@ -54,6 +54,13 @@ class GracefulNodeMixin:
     exit_code: int = EXIT_OK
     stop_signal: Optional[int] = None  # set by run_node before on_shutdown when SIGINT/SIGTERM ended the loop
     failure: Optional[str] = None      # the reason a run ended in error (reported on /diagnostics as ERROR)
+    diagnostics = None                 # the node's /diagnostics publisher (nodes.diagnostics), set by run_node
+
+    def report_health_now(self) -> None:
+        """The node's health changed (its ``diagnostic_status`` level): its /diagnostics report goes out now, from
+        the callback that calls this, besides the report once a second."""
+        if self.diagnostics is not None:
+            self.diagnostics.tick(now=True)
 
     def finish(self, code: int = EXIT_OK, reason: Optional[str] = None) -> None:
         """End the run with exit ``code``; ``reason`` (a failure) is logged as an error first."""
@@ -226,7 +233,7 @@ def run_node(factory: Callable[..., object], argv: Optional[Sequence[str]] = Non
         executor.add_node(node)
         _realtime_priority(node)
         from mwip_ros.nodes.runtime.diagnostics import Diagnostics
-        diagnostics = Diagnostics(node)
+        diagnostics = node.diagnostics = Diagnostics(node)
         try:
             while stop["signal"] is None and not node.done and context.ok():
                 node.spin_step(executor)

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from mwip_ros.msgs import BadMessage
 from mwip_ros.msgs.layouts import parse_joint_state
-from mwip_ros.nodes.runtime.guards import NEW, REPEAT, RESTART, StampGuard
+from mwip_ros.nodes.runtime.guards import NEW, REPEAT, RESTART, StampGuard, sole_publisher
 from mwip_ros.nodes.runtime.rclpy_compat import use_ros_time_override
 
 __all__ = ["StateInput"]
@@ -27,7 +27,7 @@ class StateInput:
     state on, which is how ``bag_replay`` resim applies a recorded change at the same state."""
 
     def __init__(self, node, rejects, window_ns: int, who: str):
-        self.guard = StampGuard(window_ns, "joint_states stamp")
+        self.guard = StampGuard(window_ns, "joint_states stamp", sole_publisher(node, "joint_states"))
         self.node, self.rejects, self.who = node, rejects, who
         self._clock = None
         if not node.get_parameter("use_sim_time").value:
