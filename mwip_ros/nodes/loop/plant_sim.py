@@ -175,9 +175,8 @@ class PlantSimNode(Node, GracefulNodeMixin):
         self.estimator_status = None
         if self.raw:   # the estimator reports its health on /diagnostics (ERROR: diverged)
             from diagnostic_msgs.msg import DiagnosticArray
-            from rclpy.qos import QoSProfile
             self.estimator_status = f"{self.get_namespace().rstrip('/')}/{ESTIMATOR}"
-            self.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, QoSProfile(depth=10),
+            self.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, INPUT_QOS,
                                      raw=True)
         # one graph, one controller: a second publisher of commands or states means mixed streams
         self.watch = PublisherWatch(self, ["wheel_torque_cmd", "joint_states",
