@@ -39,7 +39,13 @@ def mujoco_module():
         import mujoco
     except ImportError:
         raise ImportError(MISSING) from None
+    if mujoco.get_mju_user_warning() is None:   # no MUJOCO_LOG.TXT in the user's directory: the plant reports
+        mujoco.set_mju_user_warning(_unlogged)   # MuJoCo's warnings itself (PlantDiverged)
     return mujoco
+
+
+def _unlogged(text: str) -> None:
+    """MuJoCo's warning handler: nothing (the plant turns the warning counts into :class:`PlantDiverged`)."""
 
 
 @dataclass(frozen=True)
@@ -68,6 +74,9 @@ class Pose(NamedTuple):
     wheel_right: float
 
 
+_D0, _DMAX = 0.99, 0.999   # the contact's impedance (solimp) at rest and deep in
+
+
 def mjcf(cfg) -> str:
     """The MJCF model of the :class:`~.plant.PlantConfig` ``cfg`` at its initial state (module docstring)."""
     p, mc = cfg.actual, cfg.mujoco or MujocoConfig()
@@ -76,7 +85,11 @@ def mjcf(cfg) -> str:
     half = mc.track_width / 2.0
     # a stiff contact (time constant 4 physics steps, impedance 0.99..0.999): the wheel sinks ~1e-5 r into the
     # ground, so it rolls on its radius r as eq. (1) has it (MuJoCo's default 0.02 s sinks it by ~1e-3 r)
-    contact = f'friction="{mc.friction!r} 0 0" solref="{4.0 * cfg.h / n!r} 1" solimp="0.99 0.999 0.001"'
+    tc = 4.0 * cfg.h / n
+    contact = f'friction="{mc.friction!r} 0 0" solref="{tc!r} 1" solimp="{_D0} {_DMAX} 0.001"'
+    # the wheels start where the contact holds them at rest: MuJoCo's soft contact at rest sinks by
+    # (1 - d0) g / (d0 k), k = 1 / (dmax tc)^2 (its reference acceleration, damping ratio 1): no transient at t = 0
+    z0 = p.r - (1.0 - _D0) * p.g * (_DMAX * tc) ** 2 / _D0
     wheels = "".join(
         f'<body name="wheel_{side}" pos="0 {y!r} 0">'
         f'<joint name="wheel_{side}" type="hinge" axis="0 1 0" damping="{cfg.D_b / 2.0!r}" ref="0"/>'
@@ -88,7 +101,7 @@ def mjcf(cfg) -> str:
         f'<option timestep="{cfg.h / n!r}" integrator="RK4" gravity="0 0 {-p.g!r}"/>'
         '<worldbody>'
         f'<geom name="ground" type="plane" size="0 0 1" {contact}/>'
-        f'<body name="body" pos="{p.r * th_w!r} 0 {p.r!r}" quat="{math.cos(th_b / 2)!r} 0 {math.sin(th_b / 2)!r} 0">'
+        f'<body name="body" pos="{p.r * th_w!r} 0 {z0!r}" quat="{math.cos(th_b / 2)!r} 0 {math.sin(th_b / 2)!r} 0">'
         '<freejoint name="base"/>'
         f'<inertial pos="0 0 {p.l!r}" mass="{p.m_b!r}" diaginertia="{mc.I_b_roll!r} {p.I_b!r} {mc.I_b_yaw!r}"/>'
         f'{wheels}</body></worldbody>'
@@ -212,7 +225,9 @@ class MujocoPlant(PlantSim):
             raise PlantDiverged(f"{where}: a state that is not finite")
 
 
-_WHY = {"mjWARN_BADQACC": "the accelerations are not finite or huge", "mjWARN_BADQPOS": "a position is not finite",
-        "mjWARN_BADQVEL": "a velocity is not finite", "mjWARN_BADCTRL": "a control input is not finite",
+_WHY = {"mjWARN_BADQACC": "accelerations not finite or beyond 1e10",
+        "mjWARN_BADQPOS": "a position not finite or beyond 1e10",
+        "mjWARN_BADQVEL": "a velocity not finite or beyond 1e10",
+        "mjWARN_BADCTRL": "a torque that is not finite or beyond 1e10",
         "mjWARN_CONTACTFULL": "too many contacts", "mjWARN_CNSTRFULL": "too many constraints",
         "mjWARN_INERTIA": "an inertia matrix is not positive definite"}
