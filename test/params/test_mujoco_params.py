@@ -92,3 +92,10 @@ def test_a_sweep_of_the_mujoco_backend_is_refused_in_one_line(tmp_path):
     with pytest.raises(SpecError) as ei:
         load_spec(spec)
     assert "backend: mujoco" in str(ei.value) and "mwip_sim" in str(ei.value) and "\n" not in str(ei.value)
+
+
+def test_the_batch_simulator_refuses_the_mujoco_backend():
+    from mwip_ros.core.batch import simulate_batch
+    loop = P.closed_loop(dict(BASE, backend="mujoco"), duration=0.1)
+    with pytest.raises(ValueError, match="rk4 plant backend only"):
+        simulate_batch([loop], (0.0, 0.1))
