@@ -83,8 +83,8 @@ def mjcf(cfg) -> str:
     n = max(1, math.ceil(cfg.h / mc.timestep - 1e-9))
     th_w, th_b = cfg.initial[0], cfg.initial[1]
     half = mc.track_width / 2.0
-    # a stiff contact (time constant 4 physics steps, impedance 0.99..0.999): the wheel sinks ~1e-5 r into the
-    # ground, so it rolls on its radius r as eq. (1) has it (MuJoCo's default 0.02 s sinks it by ~1e-3 r)
+    # a stiff contact (time constant 4 physics steps, impedance 0.99..0.999): the wheel sinks 1.6e-6 m at 1 ms, so it
+    # rolls on its radius r as eq. (1) has it (MuJoCo's defaults sink it 0.4 mm); the elliptic cone is Coulomb's
     tc = 4.0 * cfg.h / n
     contact = f'friction="{mc.friction!r} 0 0" solref="{tc!r} 1" solimp="{_D0} {_DMAX} 0.001"'
     # the wheels start where the contact holds them at rest: MuJoCo's soft contact at rest sinks by
@@ -98,7 +98,7 @@ def mjcf(cfg) -> str:
         f'</body>' for side, y in (("left", half), ("right", -half)))
     return (
         '<mujoco model="mwip"><compiler angle="radian" autolimits="true"/>'
-        f'<option timestep="{cfg.h / n!r}" integrator="RK4" gravity="0 0 {-p.g!r}"/>'
+        f'<option timestep="{cfg.h / n!r}" integrator="RK4" cone="elliptic" gravity="0 0 {-p.g!r}"/>'
         '<worldbody>'
         f'<geom name="ground" type="plane" size="0 0 1" {contact}/>'
         f'<body name="body" pos="{p.r * th_w!r} 0 {z0!r}" quat="{math.cos(th_b / 2)!r} 0 {math.sin(th_b / 2)!r} 0">'

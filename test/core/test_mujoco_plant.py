@@ -112,16 +112,17 @@ def test_the_motor_acts_per_wheel_as_the_one_motor_of_eq1():
 
 def test_the_accelerations_a_raw_sample_reads_are_mujocos_and_agree_with_eq1():
     """sample_accel and the true tau_d are MuJoCo's accelerations and agree with eq. (1)'s: the wheels start sunk
-    where the contact holds them at rest (no fall onto the ground at t = 0: started on the surface, the first
-    sample reads 9x eq. 1's wheel acceleration); the soft contact takes a few ms to carry the torque's step (the
-    first tau_d is 13 % off), then follows to 2 %, and to 0.1 % from the sixth period."""
+    where the contact holds them at rest (started on the surface they fall onto the ground in the first ms, and
+    the first sample reads 9x eq. 1's wheel acceleration); the soft contact takes a few ms to carry the torque's
+    step (the first tau_d is 1.2 % off), then follows to 0.5 %, and to 0.1 % from the sixth period."""
     pc = P.plant_config(_values())
     rk, mj = make_plant(dataclasses.replace(pc, backend="rk4")), make_plant(pc)
-    np.testing.assert_allclose(mj.sample_accel(), rk.sample_accel(), rtol=3e-2)
+    np.testing.assert_allclose(mj.sample_accel(), rk.sample_accel(), rtol=1e-2)
+    np.testing.assert_allclose(mj.lumped_disturbance(20.0), rk.lumped_disturbance(20.0), rtol=2e-2)
     for k in range(40):
         rk.step(20.0)
         mj.step(20.0)
-        rtol = 2e-2 if k < 5 else 1e-3
+        rtol = 5e-3 if k < 5 else 1e-3
         np.testing.assert_allclose(mj.sample_accel(), rk.sample_accel(), rtol=rtol)
         np.testing.assert_allclose(mj.lumped_disturbance(20.0), rk.lumped_disturbance(20.0), rtol=rtol)
 
