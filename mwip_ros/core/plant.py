@@ -77,8 +77,8 @@ class PlantDiverged(RuntimeError):
 class Plant(Protocol):
     """What a runner needs of a plant (the offline loop, the ``plant_sim`` node's lockstep and realtime runners):
     the true state at t_k = k h, the torque that acted over the previous period, one period's integration, and the
-    true lumped disturbance.  :class:`PlantSim` (RK4 of eq. 1) implements it; another backend (a physics engine)
-    is one more class in :data:`PLANTS`."""
+    true lumped disturbance.  :class:`PlantSim` (RK4 of eq. 1) implements it, and so does
+    :class:`~.mujoco_plant.MujocoPlant` (MuJoCo, docs/theory.md 6.10); a backend is one more entry in :data:`PLANTS`."""
 
     cfg: PlantConfig
     k: int
