@@ -160,3 +160,18 @@ def test_a_non_finite_state_is_fallen():
     p = make_plant(P.plant_config(_values()))
     p.x = p.x._replace(theta_b=math.nan)
     assert p.fallen
+
+
+@pytest.mark.parametrize("yaw", [0.0, 0.7, -2.5, 3.0])
+@pytest.mark.parametrize("pitch", [0.0, -0.1745, 1.2, 2.8, -3.0])
+def test_the_pose_of_a_yawed_and_pitched_body(yaw, pitch):
+    """theta_b is the pitch about the axle over the whole circle, whatever the heading (R = Rz(yaw) Ry(pitch))."""
+    import mujoco
+
+    from mwip_ros.core.mujoco_plant import _pose_of
+    q = np.zeros(4)
+    mujoco.mju_mulQuat(q, np.array([math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)]),
+                       np.array([math.cos(pitch / 2), 0.0, math.sin(pitch / 2), 0.0]))
+    got = _pose_of((0.0, 0.0, 0.0, *q))
+    assert got[0] == pytest.approx(pitch, abs=1e-12) and got[1] == pytest.approx(yaw, abs=1e-12)
+    assert got[2] == pytest.approx(0.0, abs=1e-12)
