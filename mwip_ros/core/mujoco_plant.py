@@ -136,7 +136,7 @@ class MujocoPlant(PlantSim):
         self.model = mj.MjModel.from_xml_string(mjcf(c))
         self.data = mj.MjData(self.model)
         self.n = max(1, math.ceil(c.h / (c.mujoco or MujocoConfig()).timestep - 1e-9))   # physics steps per period
-        d = self.data
+        d = self.data   # dofs: free joint 0-2 (world velocity), 3-5 (body-frame rates, 4 the pitch); wheels 6, 7
         self._qpos, self._qvel, self._ctrl, self._qfrc = d.qpos, d.qvel, d.ctrl, d.qfrc_applied   # live views
         self._warnings = d.warning.number                                    # MuJoCo's warning counts, live
         x0 = self.x
@@ -174,7 +174,7 @@ class MujocoPlant(PlantSim):
         """(theta_w'', theta_b'') at the current state with the torque ``u`` (u / 2 per wheel), MuJoCo's."""
         self._apply(self.t, (0.5 * u, 0.5 * u), D_w, extra)
         self._mj.mj_forward(self.model, self.data)
-        a = self.data.qacc
+        a = self.data.qacc.tolist()
         return a[4] + 0.5 * (a[6] + a[7]), a[4]
 
     def lumped_disturbance(self, u: float, extra=(0.0, 0.0)) -> Tuple[float, float]:
