@@ -13,6 +13,8 @@ numba       numba                python3-numba                the batch simulato
                                                               each scenario, slower, the same numbers
 dask        dask[distributed]    python3-dask-pip             mwip_sweep --dask (exit 2)
 lz4         lz4                  python3-lz4-pip              reading a bag whose chunks are lz4-compressed
+mujoco      mujoco               python3-mujoco-pip           the plant backend mujoco (exit 2 for a tool
+                                                              asked for it; the rk4 backend runs)
 ==========  ===================  ===========================  ===============================================
 
 Every one is declared in package.xml (a ROS user's ``rosdep install`` installs them); the keys ending in ``-pip``
@@ -39,6 +41,7 @@ OPTIONAL: Dict[str, OptionalPackage] = {
     "numba": OptionalPackage("numba", "python3-numba", "the batch simulator's compiled loop"),
     "dask": OptionalPackage("dask[distributed]", "python3-dask-pip", "mwip_sweep --dask"),
     "lz4": OptionalPackage("lz4", "python3-lz4-pip", "reading lz4-compressed bag chunks"),
+    "mujoco": OptionalPackage("mujoco", "python3-mujoco-pip", "the plant backend mujoco"),
 }
 
 

@@ -324,16 +324,29 @@ def os_floor(plan: Plan) -> List[dict]:
 # --- 4. offline ----------------------------------------------------------------------------------
 
 def offline(plan: Plan) -> dict:
+    """mwip_sim's loop (DSCNDO, 10 s); and with ``plant_sim.backend: mujoco`` (docs/theory.md 6.10) when MuJoCo is
+    installed, the two backends' runs taking turns, so both see the same load."""
+    import importlib.util
     from mwip_ros import params as P
     from mwip_ros.core.sim import simulate
-    loop = P.closed_loop(P.merged_values(P.load_param_file(PARAMS)), use_observer=True, duration=10.0)
-    runs = []
+    values = P.merged_values(P.load_param_file(PARAMS))
+    loop = P.closed_loop(values, use_observer=True, duration=10.0)
+    mj = None
+    if importlib.util.find_spec("mujoco") is not None:
+        mj = P.closed_loop(dict(values, backend="mujoco"), use_observer=True, duration=10.0)
+    runs, mj_runs = [], []
     for _ in range(max(plan.repeat, 3)):
         t0 = time.perf_counter()
         r = simulate(loop)
         runs.append(len(r) / (time.perf_counter() - t0))
-    progress(f"offline: {statistics.median(runs):.0f} steps/s")
-    return {"per_s": statistics.median(runs), "runs": runs, "steps": len(r), "batch": batch(plan)}
+        if mj is not None:
+            t0 = time.perf_counter()
+            m = simulate(mj)
+            mj_runs.append(len(m) / (time.perf_counter() - t0))
+    progress(f"offline: {statistics.median(runs):.0f} steps/s"
+             + (f"; backend mujoco {statistics.median(mj_runs):.0f} steps/s" if mj_runs else ""))
+    return {"per_s": statistics.median(runs), "runs": runs, "steps": len(r), "batch": batch(plan),
+            "mujoco_per_s": statistics.median(mj_runs) if mj_runs else None, "mujoco_runs": mj_runs}
 
 
 def batch(plan: Plan) -> list:
@@ -491,6 +504,10 @@ def table(plan: Plan, quick: bool, m: Dict[str, str], floor: dict, typed: dict, 
             f"{f['worst_ms']:.3f} ms / {f['late']} of {f['periods']}")
     row("4. offline simulator (mwip_sim loop, DSCNDO, 10 s)", f"{off['per_s']:,.0f} steps/s", ">= 20,000 steps/s",
         off["per_s"] >= 20000)
+    if off.get("mujoco_per_s"):
+        ratio = off["mujoco_per_s"] / off["per_s"]
+        row("4. the same with plant_sim.backend mujoco (mujoco.timestep 1 ms), runs taking turns with the rk4 one's",
+            f"{off['mujoco_per_s']:,.0f} steps/s ({ratio:.2f} x the rk4 backend's)", ">= 0.5 x rk4", ratio >= 0.5)
     for b in off["batch"]:
         if b["what"] == "startup":
             row("4. mwip_sweep worker start-up: a spawned worker to its first chunk's result (one scenario, 0.1 s; "

@@ -20,6 +20,7 @@ from mwip_ros.cli.outputs import refuse_existing
 from mwip_ros.cli.theorem import theorem_report
 from mwip_ros.core import budget, metrics
 from mwip_ros.core import laws
+from mwip_ros.core.plant import PlantDiverged
 from mwip_ros.core.sim import simulate
 from mwip_ros.params.paths import default_params_file
 from mwip_ros.runs import write_csv
@@ -166,6 +167,10 @@ def _main(argv=None) -> int:
         kept = f"; kept {', '.join(map(str, written))}" if written else "; no file written"
         print(f"mwip_sim: interrupted ({sig}) after {len(runs)} of {len(names)} run(s){kept}", file=sys.stderr)
         return interrupts.exit_code()
+    except PlantDiverged as exc:   # a fault of the physics (backend mujoco), not a trajectory to score
+        print(f"mwip_sim: {names[len(runs)]}: {exc}; kept {', '.join(map(str, written)) or 'no file'}",
+              file=sys.stderr)
+        return 1
     return _finish(args, values, runs)
 
 

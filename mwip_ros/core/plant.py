@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Dict, Optional, Protocol, Tuple, runtime_checkable
+from typing import Callable, Dict, Optional, Protocol, Tuple, runtime_checkable
 
 import numpy as np
 
@@ -22,7 +22,7 @@ from .raw_sensors import RawSensorConfig
 from .sensing import NOISE_BLOCK, SensingConfig
 
 __all__ = ["Plant", "PLANTS", "make_plant", "PlantConfig", "PlantSim", "RK4Plant", "stage_torques", "rk4_period",
-           "rk4_driven", "NO_MOTOR", "saturate", "D_w_of", "gated_drive", "finite_state"]
+           "rk4_driven", "NO_MOTOR", "saturate", "D_w_of", "gated_drive", "finite_state", "PlantDiverged"]
 
 
 @dataclass(frozen=True)
@@ -46,6 +46,8 @@ class PlantConfig:
     raw: Optional[RawSensorConfig] = None      # sensors.model raw: the IMU and the relative encoder (theory.md 6.4)
     motor: MotorConfig = MotorConfig()         # the DC motor and its driver (docs/theory.md 6.7); off
     require_enable: bool = False               # the driver starts disabled (docs/theory.md 6.8)
+    backend: str = "rk4"                       # a key of PLANTS: rk4 (eq. 1, this module) or mujoco (theory.md 6.10)
+    mujoco: Optional[object] = None            # the MuJoCo model's own values (core.mujoco_plant.MujocoConfig)
 
     @property
     def motor_constants(self) -> Tuple[float, float, float, float]:
@@ -72,12 +74,17 @@ def saturate(u: float, limit: float) -> float:
     return u
 
 
+class PlantDiverged(RuntimeError):
+    """A plant's simulation diverged (a physics engine's warning, a state that is not finite); the message names
+    the time and the cause.  The run ends there: no row of it is scored."""
+
+
 @runtime_checkable
 class Plant(Protocol):
     """What a runner needs of a plant (the offline loop, the ``plant_sim`` node's lockstep and realtime runners):
     the true state at t_k = k h, the torque that acted over the previous period, one period's integration, and the
-    true lumped disturbance.  :class:`PlantSim` (RK4 of eq. 1) implements it; another backend (a physics engine)
-    is one more class in :data:`PLANTS`."""
+    true lumped disturbance.  :class:`PlantSim` (RK4 of eq. 1) implements it, and so does
+    :class:`~.mujoco_plant.MujocoPlant` (MuJoCo, docs/theory.md 6.10); a backend is one more entry in :data:`PLANTS`."""
 
     cfg: PlantConfig
     k: int
@@ -262,11 +269,19 @@ def rk4_driven(p: PhysicalParams, D_w, D_b, tau1, tau2, x, u, h: float, n: int, 
     return w, b, dw, db, (acted / (6.0 * n) if driven else u), sat
 
 RK4Plant = PlantSim
-PLANTS: Dict[str, type] = {"rk4": PlantSim}   # backend name -> class implementing :class:`Plant`
 
 
-def make_plant(cfg: PlantConfig, backend: str = "rk4") -> Plant:
-    """A fresh plant at the initial state of ``cfg`` (``backend``: a key of :data:`PLANTS`)."""
+def _mujoco(cfg: PlantConfig) -> Plant:
+    from .mujoco_plant import MujocoPlant   # imports mujoco: only when this backend is chosen
+    return MujocoPlant(cfg)
+
+
+PLANTS: Dict[str, Callable[[PlantConfig], Plant]] = {"rk4": PlantSim, "mujoco": _mujoco}   # backend -> Plant maker
+
+
+def make_plant(cfg: PlantConfig, backend: Optional[str] = None) -> Plant:
+    """A fresh plant at the initial state of ``cfg`` (``backend``: a key of :data:`PLANTS`; None: ``cfg.backend``)."""
+    backend = cfg.backend if backend is None else backend
     try:
         cls = PLANTS[backend]
     except KeyError:

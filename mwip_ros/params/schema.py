@@ -270,6 +270,18 @@ NODE_SPECS: Dict[str, List[ParamSpec]] = {
         ParamSpec("duration_s", "double", 10.0, "simulated time to run [s]; 0 = until stopped",
                   **_non_negative(1e7)),
         ParamSpec("substeps", "integer", 5, "RK4 sub-steps per control period", **_at_least_one),
+        ParamSpec("backend", "string", "rk4", "the physics: rk4 (eq. 1, RK4) or mujoco (a 3D model with two wheels "
+                  "in MuJoCo, docs/theory.md 6.10; mwip_sim only for now)", **_one_of("rk4", "mujoco")),
+        ParamSpec("mujoco.timestep", "double", 0.001, "mujoco: the largest physics step [s]; a control period is "
+                  "ceil(h / timestep) equal steps", **_positive_from(1e-5, 1.0, "a step below 10 us"), unit="s"),
+        ParamSpec("actual.track_width", "double", 0.5, "mujoco: distance between the two wheels [m]",
+                  **_positive_from(1e-3, 100.0, "wheels closer than a millimetre"), unit="m"),
+        *[ParamSpec(f"actual.I_b_{ax}", "double", v, f"mujoco: true body moment of inertia about its {ax} axis "
+                    "through the centre of gravity [kg m^2] (actual.I_b is the pitch axis)",
+                    **_positive_from(1e-6, 1e6, "a body inertia below 1e-6 kg m^2"), unit="kg m^2")
+          for ax, v in (("roll", 65.0), ("yaw", 20.0))],
+        ParamSpec("ground.friction", "double", 2.0, "mujoco: the ground's sliding friction coefficient (wheel on "
+                  "ground)", **_positive_from(1e-3, 100.0, "ground with no grip")),
         ParamSpec("seed", "integer", 0, "seed of the D_w friction noise", **_at_least_zero),
         *_body("actual", PAPER_ACTUAL, "true"),
         ParamSpec("actual.D_b", "double", 0.1, "true drive viscous friction D_b [N m s/rad]", **_non_negative()),
@@ -501,6 +513,26 @@ def _check_designs(values: Mapping[str, Any], nominal, source: Optional[str]) ->
             raise ParamError(key, reason, source) from None
 
 
+def _check_mujoco(values: Mapping[str, Any], source: Optional[str]) -> None:
+    """The 3D model of ``backend: mujoco`` (docs/theory.md 6.10): a body inertia a rigid body can have (each
+    principal moment at most the sum of the other two), wheels that do not overlap, and the package."""
+    moments = {"actual.I_b_roll": values["actual.I_b_roll"], "actual.I_b": values["actual.I_b"],
+               "actual.I_b_yaw": values["actual.I_b_yaw"]}
+    for key, v in moments.items():
+        rest = sum(moments.values()) - v
+        if v > rest:
+            raise ParamError(key, f"{v:g} kg m^2 is more than the other two principal moments of the body together "
+                                  f"({rest:g}); no rigid body has it", source)
+    width = values["actual.r"] / 5.0   # each wheel's cylinder is r / 5 wide (core.mujoco_plant.mjcf)
+    if values["actual.track_width"] <= width:
+        raise ParamError("actual.track_width", f"{values['actual.track_width']:g} m: the wheels (each "
+                                               f"actual.r / 5 = {width:g} m wide) would overlap", source)
+    from mwip_ros.optional import missing
+    why = missing("mujoco")
+    if why is not None:
+        raise ParamError("backend", why, source)
+
+
 def check_derived(values: Mapping[str, Any], source: Optional[str] = None) -> None:
     """Raise ParamError when values that pass their own checks give a model no arithmetic can run:
     inertia terms that are not finite or an A_bar that is not positive (eq. 2, 38); or a law's parameters
@@ -518,6 +550,8 @@ def check_derived(values: Mapping[str, Any], source: Optional[str] = None) -> No
             raise ParamError(f"{prefix}.m_b", f"the {prefix} model's inertia terms are not usable (m11 = {m11:g}, "
                                               f"m12 = {m12:g}, m22 = {m22:g}, A_bar = {a_bar:g}); check "
                                               f"{prefix}.{{m_b, m_w, I_b, I_w, l, r, g}}", source)
+    if values.get("backend") == "mujoco":
+        _check_mujoco(values, source)
     if values.get("excitation.f0", 0.0) > values.get("excitation.f1", math.inf):
         raise ParamError("excitation.f0", f"must be <= excitation.f1 ({values['excitation.f1']:g} Hz), got "
                                           f"{values['excitation.f0']:g}", source)

@@ -53,7 +53,17 @@ def plant_config(v: Mapping[str, Any]) -> PlantConfig:
         h=period(v), substeps=v["substeps"], seed=v["seed"],
         initial=State(v["initial.theta_w"], v["initial.theta_b"], v["initial.dtheta_w"], v["initial.dtheta_b"]),
         torque_limit=v["torque_limit"], fall_angle=v["fall_angle"], sensing=sensing(v), raw=raw_sensors(v),
-        motor=motor(v), require_enable=v.get("require_enable", False))
+        motor=motor(v), require_enable=v.get("require_enable", False), backend=v.get("backend", "rk4"),
+        mujoco=mujoco(v))
+
+
+def mujoco(v: Mapping[str, Any]):
+    """The MuJoCo model's own values (``backend: mujoco``, docs/theory.md 6.10); None with the rk4 backend."""
+    if v.get("backend", "rk4") != "mujoco":
+        return None
+    from mwip_ros.core.mujoco_plant import MujocoConfig
+    return MujocoConfig(track_width=v["actual.track_width"], I_b_roll=v["actual.I_b_roll"],
+                        I_b_yaw=v["actual.I_b_yaw"], friction=v["ground.friction"], timestep=v["mujoco.timestep"])
 
 
 def excitation(v: Mapping[str, Any]) -> Optional[ExcitationConfig]:

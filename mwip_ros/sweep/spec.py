@@ -177,6 +177,9 @@ def parse_spec(doc: Any, source: str = "<spec>", here: Path = Path("."),
         base_path = [default_params_file()]
     pf = P.load_param_files(base_path, option="base")   # ParamError names the file and the key
     base_values = P.merged_values(pf)
+    if base_values.get("backend", "rk4") != "rk4":
+        raise SpecError("base", f"plant_sim.backend: {base_values['backend']}: the batch simulator (mwip_sweep, "
+                                "mwip_tune) runs the rk4 backend only for now; mwip_sim runs the others", source)
 
     ctrls = doc.get("controllers", ["dsc", "dscndo"])   # the paper's comparison unless the spec says more
     known = laws.names()   # the registry (core.laws)

@@ -88,8 +88,8 @@ def test_the_plant_interface():
     cfg = exact_model_plant()
     p = make_plant(cfg)
     assert isinstance(p, PlantSim) and isinstance(p, Plant) and PLANTS["rk4"] is PlantSim
-    with pytest.raises(ValueError, match="unknown plant backend 'mujoco'; known: rk4"):
-        make_plant(cfg, "mujoco")
+    with pytest.raises(ValueError, match="unknown plant backend 'bullet'; known: mujoco, rk4"):
+        make_plant(cfg, "bullet")
 
 
 def test_each_mode_is_a_runner():

@@ -27,7 +27,7 @@ def _ends(spec):
 
 
 def test_every_physical_parameter_is_bounded_on_both_sides():
-    assert len(PHYSICAL) == 7 + 7 + 3 + 4                 # nominal, actual, actual.D_*, motor
+    assert len(PHYSICAL) == 7 + 7 + 3 + 4 + 3             # nominal, actual, actual.D_*, motor, the 3D body (mujoco)
     for name in PHYSICAL:
         s = SPECS[name]
         assert s.hi is not None and s.lo is not None and (s.floor is not None or not s.lo_open), name

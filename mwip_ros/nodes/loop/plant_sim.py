@@ -98,7 +98,7 @@ from mwip_ros.nodes.runtime.lockstep import LockstepDriver, subscriber_floor
 from mwip_ros.nodes.runtime.params import declare
 from mwip_ros.nodes.loop.plant_runners import RUNNERS
 from mwip_ros.nodes.runtime.process import EXIT_ERROR, EXIT_FALLEN, GracefulNodeMixin, run_node
-from mwip_ros.params import plant_config
+from mwip_ros.params import ParamError, plant_config
 from mwip_ros.params.typed import limit_warnings
 from mwip_ros.runs import CsvStream
 
@@ -115,6 +115,8 @@ class PlantSimNode(Node, GracefulNodeMixin):
         super().__init__(NAME, context=context)
         self.v = declare(self, NAME, argv)
         self.cfg = plant_config(self.v)
+        if self.cfg.backend != "rk4":   # the graph with MuJoCo is to come (docs/theory.md 6.10): mwip_sim runs it
+            raise ParamError("backend", f"{self.cfg.backend!r}: plant_sim runs the rk4 backend only, for now")
         sc = self.cfg.sensing
         # the driver's state machine (theory 6.8): one for the node's life, handed to every PlantSide (_initial_state)
         self.safety = DriverStateMachine(require_enable=self.cfg.require_enable, max_command=L.LIMITS["torque"])
@@ -176,8 +178,7 @@ class PlantSimNode(Node, GracefulNodeMixin):
         if self.raw:   # the estimator reports its health on /diagnostics (ERROR: diverged)
             from diagnostic_msgs.msg import DiagnosticArray
             self.estimator_status = f"{self.get_namespace().rstrip('/')}/{ESTIMATOR}"
-            self.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, INPUT_QOS,
-                                     raw=True)
+            self.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, INPUT_QOS, raw=True)
         # one graph, one controller: a second publisher of commands or states means mixed streams
         self.watch = PublisherWatch(self, ["wheel_torque_cmd", "joint_states",
                                            *(("imu/data_raw", "wheel_encoder") if self.raw else ())])

@@ -1,0 +1,230 @@
+"""The true plant in MuJoCo: a second, independent physics (``plant_sim: backend: mujoco``; docs/theory.md 6.10).
+
+The robot is a 3D model generated from the :class:`~.plant.PlantConfig` (``actual.*`` and :class:`MujocoConfig`;
+:func:`mjcf`): a body on a free joint with its mass ``m_b`` at (0, 0, l) and the inertia (I_b_roll, I_b, I_b_yaw),
+two wheels hinged to it about its y axis at y = +-track_width / 2, each with half of ``m_w``, ``I_w`` and ``D_b``
+(the hinge's damping) and a cylinder of radius ``r`` that rolls on a ground plane.  Each wheel's motor is an
+actuator on its hinge: u_i on the wheel, -u_i on the body, u_L = u_R = u / 2 (no yaw command).  The rest of
+eq. (1) acts as generalized forces (theory 6.10):
+
+    Q_phi_i = -D_w / 2 theta_w_i' + tau_ext1 / 2           on wheel i's hinge
+    Q_pitch = Q_phi_L + Q_phi_R + tau_ext2 - tau_ext1       on the body's pitch axis (body y)
+
+A free joint's angular velocity and generalized force are in the body's own frame, so the pitch axis is body y.
+The laws see the planar :class:`~.model.State`: theta_b the body's pitch, theta_w the mean of the two wheels'
+absolute angles; :attr:`MujocoPlant.pose` is the 3D pose.  ``D_w`` is drawn per period from the same seeded
+generator as :class:`~.plant.PlantSim`'s, so both backends see the same friction sequence.  A simulation that
+diverges (a MuJoCo warning, a state that is not finite) raises :class:`PlantDiverged` naming the time and the
+cause: it never hands a NaN state or MuJoCo's silent reset to the loop.  ``mujoco`` is imported when the backend
+is built, not before (:func:`mujoco_module`).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import NamedTuple, Optional, Tuple
+
+from .drive import motor_torque
+from .model import State, lumped_disturbance
+from .plant import PlantDiverged, PlantSim, gated_drive
+from mwip_ros.optional import required
+
+__all__ = ["MujocoConfig", "MujocoPlant", "PlantDiverged", "Pose", "mjcf", "mujoco_module"]
+
+
+def mujoco_module():
+    """``import mujoco``, or one line naming the package (:class:`mwip_ros.optional.MissingPackage`)."""
+    with required("mujoco"):
+        import mujoco
+    if mujoco.get_mju_user_warning() is None:   # no MUJOCO_LOG.TXT in the user's directory: the plant reports
+        mujoco.set_mju_user_warning(_unlogged)   # MuJoCo's warnings itself (PlantDiverged)
+    return mujoco
+
+
+def _unlogged(text: str) -> None:
+    """MuJoCo's warning handler: nothing (the plant turns the warning counts into :class:`PlantDiverged`)."""
+
+
+@dataclass(frozen=True)
+class MujocoConfig:
+    """What the 3D model has that eq. (1) has not (``actual.track_width``, ``actual.I_b_roll``, ``actual.I_b_yaw``,
+    ``ground.friction``, ``mujoco.timestep``; defaults as the schema's)."""
+
+    track_width: float = 0.5     # wheel to wheel [m]
+    I_b_roll: float = 65.0       # the body's inertia about its x axis (through the centre of gravity) [kg m^2]
+    I_b_yaw: float = 20.0        # ... about its z axis [kg m^2]
+    friction: float = 2.0        # ground sliding friction coefficient
+    timestep: float = 1e-3       # largest physics step [s]; a control period is an integer number of steps
+
+
+class Pose(NamedTuple):
+    """The 3D pose: the axle's centre (x, y, z) [m], yaw, pitch (theta_b) and roll [rad] of the body
+    (REP-103), each wheel's absolute angle [rad]."""
+
+    x: float
+    y: float
+    z: float
+    yaw: float
+    pitch: float
+    roll: float
+    wheel_left: float
+    wheel_right: float
+
+
+_D0, _DMAX = 0.99, 0.999   # the contact's impedance (solimp) at rest and deep in
+
+
+def mjcf(cfg) -> str:
+    """The MJCF model of the :class:`~.plant.PlantConfig` ``cfg`` at its initial state (module docstring)."""
+    p, mc = cfg.actual, cfg.mujoco or MujocoConfig()
+    n = max(1, math.ceil(cfg.h / mc.timestep - 1e-9))
+    th_w, th_b = cfg.initial[0], cfg.initial[1]
+    half = mc.track_width / 2.0
+    # a stiff contact (time constant 4 physics steps, impedance 0.99..0.999): the wheel sinks 1.6e-6 m at 1 ms, so it
+    # rolls on its radius r as eq. (1) has it (MuJoCo's defaults sink it 0.4 mm); the elliptic cone is Coulomb's
+    tc = 4.0 * cfg.h / n
+    contact = f'friction="{mc.friction!r} 0 0" solref="{tc!r} 1" solimp="{_D0} {_DMAX} 0.001"'
+    # the wheels start where the contact holds them at rest: MuJoCo's soft contact at rest sinks by
+    # (1 - d0) g / (d0 k), k = 1 / (dmax tc)^2 (its reference acceleration, damping ratio 1): no transient at t = 0
+    z0 = p.r - (1.0 - _D0) * p.g * (_DMAX * tc) ** 2 / _D0
+    wheels = "".join(
+        f'<body name="wheel_{side}" pos="0 {y!r} 0">'
+        f'<joint name="wheel_{side}" type="hinge" axis="0 1 0" damping="{cfg.D_b / 2.0!r}" ref="0"/>'
+        f'<inertial pos="0 0 0" mass="{p.m_w / 2.0!r}" diaginertia="{p.I_w / 4.0!r} {p.I_w / 2.0!r} {p.I_w / 4.0!r}"/>'
+        f'<geom type="cylinder" size="{p.r!r} {p.r / 10.0!r}" zaxis="0 1 0" {contact}/>'
+        f'</body>' for side, y in (("left", half), ("right", -half)))
+    return (
+        '<mujoco model="mwip"><compiler angle="radian" autolimits="true"/>'
+        f'<option timestep="{cfg.h / n!r}" integrator="RK4" cone="elliptic" gravity="0 0 {-p.g!r}"/>'
+        '<worldbody>'
+        f'<geom name="ground" type="plane" size="0 0 1" {contact}/>'
+        f'<body name="body" pos="{p.r * th_w!r} 0 {z0!r}" quat="{math.cos(th_b / 2)!r} 0 {math.sin(th_b / 2)!r} 0">'
+        '<freejoint name="base"/>'
+        f'<inertial pos="0 0 {p.l!r}" mass="{p.m_b!r}" diaginertia="{mc.I_b_roll!r} {p.I_b!r} {mc.I_b_yaw!r}"/>'
+        f'{wheels}</body></worldbody>'
+        '<actuator><motor name="wheel_left" joint="wheel_left"/><motor name="wheel_right" joint="wheel_right"/>'
+        '</actuator></mujoco>')
+
+
+def _pose_of(qpos) -> Tuple[float, float, float]:
+    """(pitch, yaw, roll) of the free joint's quaternion: the pitch is the body z axis's angle from the vertical
+    in the plane normal to the axle (body y), over the whole circle; yaw the heading of that plane; roll the
+    axle's rise."""
+    w, a, b, c = qpos[3], qpos[4], qpos[5], qpos[6]
+    yx, yy, yz = 2 * (a * b - w * c), 1 - 2 * (a * a + c * c), 2 * (b * c + w * a)    # body y in the world
+    zx, zy, zz = 2 * (a * c + w * b), 2 * (b * c - w * a), 1 - 2 * (a * a + b * b)    # body z in the world
+    hn = math.hypot(yx, yy) or 1.0
+    pitch = math.atan2((zx * yy - zy * yx) / hn, zz)      # z_b . h with h = (y_b x z_world) / |.| = (yy, -yx, 0)
+    return pitch, math.atan2(-yx, yy), math.asin(max(-1.0, min(1.0, yz)))
+
+
+@dataclass
+class MujocoPlant(PlantSim):
+    """The :class:`~.plant.Plant` of a MuJoCo model (module docstring); the D_w generator, the clock and the
+    bookkeeping of the previous period are :class:`~.plant.PlantSim`'s."""
+
+    pose: Optional[Pose] = None
+    _mj: object = field(default=None, repr=False)
+
+    def __post_init__(self):
+        super().__post_init__()
+        mj = self._mj = mujoco_module()
+        c = self.cfg
+        self.model = mj.MjModel.from_xml_string(mjcf(c))
+        self.data = mj.MjData(self.model)
+        self.n = max(1, math.ceil(c.h / (c.mujoco or MujocoConfig()).timestep - 1e-9))   # physics steps per period
+        d = self.data   # dofs: free joint 0-2 (world velocity), 3-5 (body-frame rates, 4 the pitch); wheels 6, 7
+        self._qpos, self._qvel, self._ctrl, self._qfrc = d.qpos, d.qvel, d.ctrl, d.qfrc_applied   # live views
+        self._warnings = d.warning.number                                    # MuJoCo's warning counts, live
+        x0 = self.x
+        d.qpos[7] = d.qpos[8] = x0[0] - x0[1]                                 # phi_i = theta_w - theta_b
+        d.qvel[0] = c.actual.r * x0[2]                                       # rolling, no slip
+        d.qvel[4] = x0[3]                                                    # the pitch rate, body y
+        d.qvel[6] = d.qvel[7] = x0[2] - x0[3]
+        mj.mj_forward(self.model, d)
+        self._read()
+
+    def _read(self) -> None:
+        """:attr:`x` and :attr:`pose` from MuJoCo's state."""
+        q, v = self._qpos.tolist(), self._qvel.tolist()
+        pitch, yaw, roll = _pose_of(q)
+        wl, wr = pitch + q[7], pitch + q[8]
+        self.x = State(0.5 * (wl + wr), pitch, v[4] + 0.5 * (v[6] + v[7]), v[4])
+        self.pose = Pose(q[0], q[1], q[2], yaw, pitch, roll, wl, wr)
+
+    @property
+    def fallen(self) -> bool:
+        return not all(math.isfinite(v) for v in self.x) or abs(self.x[1]) > self.cfg.fall_angle
+
+    def _apply(self, t: float, u_pair, D_w: float, extra) -> None:
+        """The inputs at time ``t``: the wheels' torques ``u_pair`` (left, right), D_w's and tau_ext's generalized
+        forces from the current velocities (module docstring)."""
+        c, v, f = self.cfg, self._qvel, self._qfrc
+        e1, e2 = c.tau_ext1(t) + extra[0], c.tau_ext2(t) + extra[1]
+        pitch_rate = v[4]
+        ql = -0.5 * D_w * (pitch_rate + v[6]) + 0.5 * e1
+        qr = -0.5 * D_w * (pitch_rate + v[7]) + 0.5 * e1
+        self._ctrl[:] = u_pair
+        f[4], f[6], f[7] = ql + qr + e2 - e1, ql, qr
+
+    def _accel(self, u: float, D_w: float, extra) -> Tuple[float, float]:
+        """(theta_w'', theta_b'') at the current state with the torque ``u`` (u / 2 per wheel), MuJoCo's."""
+        self._apply(self.t, (0.5 * u, 0.5 * u), D_w, extra)
+        self._mj.mj_forward(self.model, self.data)
+        a = self.data.qacc.tolist()
+        return a[4] + 0.5 * (a[6] + a[7]), a[4]
+
+    def lumped_disturbance(self, u: float, extra=(0.0, 0.0)) -> Tuple[float, float]:
+        return lumped_disturbance(self.cfg.nominal, self.x, self._accel(u, self.D_w, extra), u)
+
+    def sample_accel(self) -> Tuple[float, float]:
+        c = self.cfg
+        u = self.u_prev
+        if c.motor.enabled and self.k > 0 and self.enabled_prev:
+            u = motor_torque(self.u_cmd_prev, self.x[2] - self.x[3], *c.motor_constants)[0]
+        return self._accel(u, self.D_w_prev, self.extra_prev)
+
+    def step(self, u: float, extra=(0.0, 0.0), enabled: bool = True) -> None:
+        """Integrate t_k -> t_{k+1}: :attr:`n` MuJoCo steps, each wheel's torque and the generalized forces held over
+        each (tau_ext at its midpoint, D_w's term from its start); with the motor model, each wheel's drive is
+        half the motor (K_t, 2 R, V_max, I_max / 2: the two sum to the one of eq. 1) with half the command."""
+        c, mj, d = self.cfg, self._mj, self.data
+        u, motor = gated_drive(u, c.motor_constants, enabled)
+        driven = motor[0] > 0.0
+        half = (motor[0], 2.0 * motor[1], motor[2], 0.5 * motor[3])
+        dt = c.h / self.n
+        acted, sat = 0.0, 0
+        for i in range(self.n):
+            ul = ur = 0.5 * u
+            if driven:
+                ul, sl = motor_torque(0.5 * u, self._qvel[6], *half)
+                ur, sr = motor_torque(0.5 * u, self._qvel[7], *half)
+                sat = max(sat, sl, sr)
+            acted += ul + ur
+            self._apply(self.t + (i + 0.5) * dt, (ul, ur), self.D_w, extra)
+            mj.mj_step(self.model, d)
+        self._read()
+        self._check()
+        self.k += 1
+        self.saturation = sat
+        self.u_prev, self.u_cmd_prev, self.enabled_prev = (acted / self.n if driven else u), u, bool(enabled)
+        self.D_w_prev, self.extra_prev = self.D_w, (float(extra[0]), float(extra[1]))
+        self.D_w = self._draw_D_w()
+
+    def _check(self) -> None:
+        """After the period [t_k, t_k+1]: raise :class:`PlantDiverged` on a MuJoCo warning (on a diverged state
+        MuJoCo warns and resets it to the model's initial one, silently) or a state that is not finite."""
+        where = f"the MuJoCo simulation diverged in [{self.t:.6g}, {self.t + self.cfg.h:.6g}] s"
+        if self._warnings.any():
+            names = [self._mj.mjtWarning(i).name for i, n in enumerate(self._warnings.tolist()) if n]
+            raise PlantDiverged(f"{where}: {', '.join(f'{n} ({_WHY.get(n, n)})' for n in names)}")
+        if not all(math.isfinite(v) for v in (*self.x, *self.pose)):
+            raise PlantDiverged(f"{where}: a state that is not finite")
+
+
+_WHY = {"mjWARN_BADQACC": "accelerations not finite or beyond 1e10",
+        "mjWARN_BADQPOS": "a position not finite or beyond 1e10",
+        "mjWARN_BADQVEL": "a velocity not finite or beyond 1e10",
+        "mjWARN_BADCTRL": "a torque that is not finite or beyond 1e10",
+        "mjWARN_CONTACTFULL": "too many contacts", "mjWARN_CNSTRFULL": "too many constraints",
+        "mjWARN_INERTIA": "an inertia matrix is not positive definite"}
