@@ -24,32 +24,16 @@ never repeats it (a repeat would be taken for a resend).  The service keeps ever
 the robot, publish ``external_wrench`` (``geometry_msgs/Wrench``: ``torque.x`` adds to
 tau_ext1, ``torque.y`` to tau_ext2, until the next one; a zero wrench clears it).
 
-The driver's state machine (docs/theory.md 6.8, :mod:`mwip_ros.core.safety`, one machine for the node's life: a
-``~/reset`` does not re-create it): ``disabled`` (the start state with ``require_enable: true``), ``enabled`` (the
-start state by default: the paper's run starts at once) and ``fault`` (latched with its reason until ``~/reset``);
-disabled or in fault the driver's bridge is open: no current, no torque (with the motor model too, whatever the
-wheel's speed), and what the plant reports as ``effort`` and records in its ``u`` and ``u_applied`` columns is exactly
-zero. Faults: ``watchdog`` (realtime: no good ``wheel_torque_cmd`` for ``watchdog_s``, counted from the first state
-published (and again from a reset), so a controller that never answers is a fault too, its detail naming the first
-stage of the chain that did not answer; lockstep: the lockstep timeout, which still ends the run with exit 1),
-``bad_command`` (a Float64 that is non-finite or beyond 1e6 N m: still rejected and counted, and in lockstep it
-answers the state, with zero torque; bytes that are no Float64 are rejected only), ``fall`` (|theta_b| >
-``fall_angle``: with ``exit_on_fall: true`` the run ends, exit 3; with false the robot lies where it fell, at rest,
-its time going on, zero torque, until ``~/reset``), ``emergency_stop`` and, with raw sensors, ``estimator_unhealthy``,
-two levels (core.safety): the e-stop (std_msgs/Bool, any QoS) asserted by true, released by false (the latest message
-on each of the node's two subscriptions; asserted while either holds true), the estimator unhealthy while its latest
-``/diagnostics`` status is ERROR (OK or WARN: healthy again; one that stops is caught by the watchdog). While a level
-is asserted, ``~/reset`` answers ``success: false`` naming it (the driver stays in fault; the robot's own reset, which
-applies no torque, is still done: an estimator re-initialises on it) and ``~/enable`` is refused. A fault while in
-fault keeps the first reason; a level asserted meanwhile is held all the same. ``~/enable`` and ``~/disable``
-(std_srvs/Trigger) answer every call in every state with core.safety's answer; ``~/reset`` clears a fault at once and
-returns the driver to its start state (``require_enable: true``: ``disabled``). Each transition is logged (one line
-with its reason), counted on ``/diagnostics`` (``driver_state``, ``fault_reason``, ``held``; ERROR in fault, WARN
-disabled) and published on ``driver_state`` (std_msgs/String, JSON ``{"state", "from", "reason", "detail", "t",
-"stamp_ns", "text"}`` plus ``silence_s`` for a watchdog fault (and ``max_tick_gap_s``, the plant's own longest tick
-interval meanwhile, and ``silent_stage``, the stage named); latched, transient local with depth 1,
-:data:`~mwip_ros.msgs.qos.DRIVER_STATE_QOS`: a reader that joins late gets the current state only; the start state is
-the first message, reason ``start``); the summary JSON lists them (``transitions``).
+The driver's state machine (docs/theory.md 6.8; the pure machine, its states, faults, levels and answers:
+:mod:`mwip_ros.core.safety`; one machine for the node's life) stands between the command and the plant: not
+enabled, the bridge is open (no current, no torque: ``effort``, ``u`` and ``u_applied`` are exactly zero).  The
+node feeds it its faults (the realtime watchdog, counted from the first state published and naming the first
+stage that did not answer; the lockstep timeout; a bad command; a fall, which with ``exit_on_fall: true`` ends the
+run, exit 3), its two levels (``emergency_stop``, std_msgs/Bool on a reliable and a best-effort subscription; with
+raw sensors the estimator's latest ``/diagnostics`` level) and the services ``~/enable``, ``~/disable`` and
+``~/reset`` (std_srvs/Trigger, every call answered).  Each transition is logged, counted on ``/diagnostics`` and
+published on ``driver_state`` (std_msgs/String, JSON; latched at depth 1,
+:data:`~mwip_ros.msgs.qos.DRIVER_STATE_QOS`: a late reader gets the current state only).
 
 With ``sensors.model: raw`` (docs/theory.md 6.4) the plant publishes what its sensors measure instead of a state:
 per state k ``imu/data_raw`` (sensor_msgs/Imu, frame ``imu_link``, no orientation, the pitch rate and the
