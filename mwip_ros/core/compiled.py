@@ -1,21 +1,11 @@
 """The batch simulator's compiled code: the plant's RK4 period (:class:`RK4Periods`) and the whole closed loop
 (:func:`kernel_for`), built by numba from the scalar loop's own functions.
 
-The batch simulator spends most of its time integrating the plant (eq. 1 is evaluated 4 x
-``substeps`` times per period).  Over numpy arrays every one of the ~700 operations of a period is
-a separate pass over the scenarios, so this one part runs instead as compiled code, one scenario
-after another, with the scalar plant's own functions:
-
-* :func:`.model.accel` and :func:`.plant.rk4_period` are handed to numba as they are: the same
-  code objects, with the math namespace ``m`` left at its default ``math``.  The only change is
-  that, inside the compiled ``rk4_period``, the name ``accel`` refers to the compiled ``accel``.
-  There is no second copy of the equations, and a test checks the result against the scalar plant
-  bit for bit.
-* The physical parameters reach ``accel`` as an :class:`Inertia` tuple: the four terms of eq. (2)
-  it reads (``m11``, ``m12``, ``m22``, ``G_b``), under the names of
-  :class:`~.model.PhysicalParams`' properties.
-* ``error_model="numpy"``: a diverging scenario gives inf or NaN as numpy would, instead of an
-  exception (the batch freezes it at its fall).
+The plant's RK4 (eq. 1 evaluated 4 x ``substeps`` times a period) is :func:`.model.accel` and
+:func:`.plant.rk4_period` handed to numba as they are, the same code objects (inside the compiled ``rk4_period``,
+``accel`` is the compiled ``accel``), the parameters as an :class:`Inertia` tuple (the four terms of eq. 2 it
+reads); no second copy of the equations, and a test checks it against the scalar plant bit for bit.
+``error_model="numpy"``: a diverging scenario gives inf or NaN, not an exception (the batch freezes it).
 
 The whole loop (:func:`_loop`, one kernel per law, :func:`kernel_for`) runs every period of :func:`.sim.simulate`
 the same way: the sensors (noise from draws handed in, the encoder :func:`.sensing.quantize`, the delay queues), the
@@ -39,14 +29,8 @@ ones, the same delay queue) and the estimator (its ``pure_step``: one kernel per
 torque that acted reported to the observer, the saturated periods counted; the lanes' RK4 is motorless) and the
 excitation (a table of each distinct one's periods, added to the law's command before the torque limit).
 
-numba compiles on first use (about a second for the RK4, a few for a loop) and caches the machine code
-where numba would (``NUMBA_CACHE_DIR`` if set, else ``__pycache__`` next to the sources, else numba's
-user-wide cache directory), so later processes (sweep workers) only load it.  numba would renew a cached
-function only when its own file changes, but the compiled RK4 period contains ``accel`` from ``model.py``, the
-loop a law's callees (``core/lqr.py``'s ``lqr_u``) and the constants numba freezes (``estimators``'
-``NIS_WINDOW_S``): here every cached function is stamped with what it is made of (:func:`made_of`, found by
-walking the globals of the compiled functions: the contents of every file a compiled function, class or module
-comes from, and the value of every constant), so an edit to any of them is compiled afresh.
+numba compiles on first use and caches the machine code (:mod:`.jitcache`: every cached function stamped with
+everything it is made of, callees and frozen constants included, so an edit to any of them is compiled afresh).
 """
 from __future__ import annotations
 
