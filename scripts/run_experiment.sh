@@ -150,7 +150,7 @@ trap 'echo; echo "run_experiment: interrupted, stopping every node" >&2; exit 13
 # controller never read a clock (each output carries the stamp of the state it answers), so
 # they run without use_sim_time: that spares each a /clock message per step (BENCHMARKS.md).
 # Every -p names its node (-p NODE:name:=value): in ROS 2 a node's own section of a parameter file
-# wins over a -p rule without a node name (README: The parameter file).
+# wins over a -p rule without a node name (docs/parameters.md).
 SIMTIME=()
 [ "$MODE" = lockstep ] && SIMTIME=(-p mcap_recorder:use_sim_time:=true)
 PLANT_EXTRA=(-p "plant_sim:mode:=$MODE")
@@ -162,7 +162,7 @@ ESTIMATES=()   # the observer's estimates (CSV), for a report from the plant's C
 for i in "${!LAW_LIST[@]}"; do
     CTRL="${LAW_LIST[$i]}"; LAW="${FAMILY_OF[$i]}"; USE_OBS="${OBSERVER_OF[$i]}"
     echo "=== $CTRL: $MODE run, ROS_DOMAIN_ID=$ROS_DOMAIN_ID, logs in ${LOGS#$ROOT/}/ ==="
-    SUBS=2   # expected_subscribers as without an estimator; with one, the plant counts it instead (README)
+    SUBS=2   # expected_subscribers as without an estimator; with one, the plant counts it instead (docs/real-robot.md)
     if [ "$RECORD" = 1 ]; then
         BAG="$OUT/${STAMP}_${CTRL}"
         mcap_recorder --ros-args "${PF[@]}" -p "mcap_recorder:output:=$BAG" "${SIMTIME[@]}" \

@@ -1,4 +1,4 @@
-"""``mwip_ctl``: the README's live actions without a ``ros2`` CLI: set a parameter, reset the plant, push it,
+"""``mwip_ctl``: the live actions of docs/graph.md without a ``ros2`` CLI: set a parameter, reset the plant, push it,
 drive its driver's state machine (docs/theory.md 6.8).
 
     mwip_ctl param set NODE NAME VALUE     # /NODE/set_parameters; VALUE is YAML, as in -p NAME:=VALUE

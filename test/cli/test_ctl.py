@@ -1,4 +1,4 @@
-"""mwip_ctl, the README's live actions without a ros2 CLI, against a realtime graph as a user runs them."""
+"""mwip_ctl, the live actions of docs/graph.md without a ros2 CLI, against a realtime graph as a user runs them."""
 import signal
 import subprocess
 import sys

@@ -3,7 +3,7 @@
     python -m mwip_ros.nodes.tools.foxglove_server [--ros-args -p port:=8765 -p host:=127.0.0.1]
 
 Then, in Foxglove: *Open connection* > *Foxglove WebSocket* > ``ws://127.0.0.1:8765``, and
-import ``config/foxglove_layout.json`` (README: Live view).
+import ``config/foxglove_layout.json`` (docs/graph.md: Live view).
 
 Parameters
 ----------
