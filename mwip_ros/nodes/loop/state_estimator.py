@@ -36,6 +36,7 @@ from mwip_ros.core.trajectory import ESTIMATE_COLUMNS, RAW_COLUMNS
 from mwip_ros.msgs import BadMessage
 from mwip_ros.msgs import layouts as L
 from mwip_ros.msgs.qos import qos_for
+from mwip_ros.nodes.runtime.content_filter import set_content_filter
 from mwip_ros.nodes.runtime.diagnostics import ERROR, OK
 from mwip_ros.nodes.runtime.guards import (NEW, REPEAT, RESTART, STAMP_WINDOW_PERIODS, PublisherWatch, Rejects,
                                            StampGuard,
@@ -81,12 +82,27 @@ class StateEstimatorNode(Node, GracefulNodeMixin):
         self.written = CsvStream(csv_path, _CSV_COLUMNS) if csv_path else None   # streamed, a row per sample
         pub_qos, in_qos = qos_for(self.v["mode"])   # msgs.qos: lockstep loses nothing, realtime keeps the newest
         self.pub = self.create_publisher(JointState, "joint_states", pub_qos)
-        self.create_subscription(Imu, "imu/data_raw", self._on_imu, in_qos, raw=True)
-        self.create_subscription(JointState, "wheel_encoder", self._on_encoder, in_qos, raw=True)
+        subs = {IMU_TOPIC: self.create_subscription(Imu, IMU_TOPIC, self._on_imu, in_qos, raw=True),
+                ENCODER_TOPIC: self.create_subscription(JointState, ENCODER_TOPIC, self._on_encoder, in_qos, raw=True)}
+        self.filtered = self.v["mode"] == "realtime" and self._filter(subs)
         self.watch = PublisherWatch(self, [IMU_TOPIC, ENCODER_TOPIC, "joint_states"])
         own = ", ".join(f"{k} = {v!r}" for k, v in self.est.values.items())
         self.get_logger().info(f"{self.est.title} state estimator ready: imu_offset = {self.config.imu_offset:g} m, "
                                f"h = {self.h * 1e3:.3f} ms{'; ' + own if own else ''}")
+
+    def _filter(self, subs) -> bool:
+        """Realtime: a DDS content filter on each raw subscription (layouts.RAW_FILTERS), so that a flood of
+        samples with a wrong frame, joint or value is dropped by the middleware, in C++, and cannot displace a
+        genuine sample in the reader's queue (issue 30).  What it drops is not counted; the parsers still judge
+        (and count) what passes.  Lockstep keeps every message for the parsers to count."""
+        why = [f"{t}: {w}" for t, w in ((t, set_content_filter(s, L.RAW_FILTERS[t])) for t, s in subs.items()) if w]
+        if why:
+            self.get_logger().warning(f"no content filter ({'; '.join(why)}): every raw message reaches the parser")
+            return False
+        self.get_logger().info("content filter on imu/data_raw and wheel_encoder: messages with a wrong frame_id or "
+                               "joint, or values outside RAW_LIMITS (NaN too), or that cannot be deserialized, are "
+                               "dropped by DDS and not counted")
+        return True
 
     # --- inputs ---------------------------------------------------------------------------------------
     def _on_imu(self, data: bytes) -> None:
@@ -220,6 +236,8 @@ class StateEstimatorNode(Node, GracefulNodeMixin):
     def diagnostic_status(self):
         hl = self.est.health
         values = {"method": self.est.name, "estimates": self.count, "unpaired_dropped": self.unpaired,
+                  "content_filter": "on: messages outside the limits are dropped by DDS, not counted"
+                  if self.filtered else "off",
                   "withheld_diverged": self.withheld,
                   "innovation": f"{hl.innovation:.6g}", "nis": f"{hl.nis:.4g}", "nis_mean": f"{hl.nis_mean:.4g}",
                   "diverged": str(hl.diverged).lower()}
