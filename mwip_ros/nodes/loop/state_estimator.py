@@ -10,8 +10,12 @@ answered again with the same message and integrated nothing.  A sample it cannot
 implausible: ``mwip_ros.msgs.layouts.RAW_LIMITS``, a wrong joint name or frame_id; a stamp outside the stream's
 window or older than the last: :mod:`.guards`) is rejected, counted and logged, and never integrated; a sample
 whose partner of the other stream has not come when a later pair is complete, or within ``PAIR_WAIT_S`` of wall
-time, is dropped and counted.  A sample moves its stream's time only when its pair is estimated, so a lone
-sample ahead of the stream costs nothing.  A stream that restarted (a plant's ``~/reset``, a new plant: stamps
+time, is dropped and counted.  In realtime the two raw subscriptions carry a DDS content filter
+(``layouts.RAW_FILTERS``, :mod:`mwip_ros.nodes.runtime.content_filter`): a sample with a wrong frame or joint, a
+value outside ``RAW_LIMITS`` or bytes that cannot be deserialized is dropped by the middleware before the reader's
+queue (a flood of them cannot displace genuine samples, issue 30) and is not counted; the log and
+``/diagnostics`` (``content_filter``) say so.  A sample moves its stream's time only when its pair is estimated,
+so a lone sample ahead of the stream costs nothing.  A stream that restarted (a plant's ``~/reset``, a new plant: stamps
 that agree away from the stream, :mod:`.guards`) re-initialises the estimator, but only while the topic has one
 publisher: stamps from a second publisher never restart it.  The estimator integrates over the time the stamps
 give (two periods after a lost pair; at most ``MAX_GAP_S``, a longer gap re-initialises it).
