@@ -43,7 +43,7 @@ __all__ = ["JOINT_NAMES", "INTERNAL_NAMES", "LIMITS", "RAW_LIMITS", "IMU_FRAME",
            "encode_state", "encode_wrench", "encode_internals",
            "encode_command", "encode_clock", "encode_external_wrench", "parse_joint_state", "parse_wrench",
            "parse_command", "parse_clock", "parse_internals", "parse_external_wrench", "encode_imu", "parse_imu",
-           "encode_encoder", "parse_encoder", "check_state"]
+           "encode_encoder", "parse_encoder", "check_state", "RAW_FILTERS"]
 
 JOINT_NAMES = ("wheel", "body_pitch")
 INTERNAL_NAMES = ("S1", "S2", "x4d", "x4_bar", "u_dsc", "u_taud", "u", "x1")
@@ -73,6 +73,29 @@ RAW_LIMITS = {
 IMU_FRAME = "imu_link"         # REP-145: the IMU's own frame (the body frame at the IMU, core.raw_sensors)
 ENCODER_JOINT = "wheel"        # the encoder's joint: the wheel relative to the body
 ENCODER_FRAME = ""             # the encoder's JointState frame_id: none (a joint angle is no pose in a frame)
+
+
+
+def _inside(field: str, limit: float) -> str:
+    """A DDS-SQL condition that holds iff -limit <= field <= limit: strict comparisons with the next double (Fast
+    DDS evaluates ``a >= b`` as ``not a < b``, which a NaN passes; a NaN fails every strict comparison)."""
+    bound = repr(math.nextafter(limit, math.inf))
+    return f"{field} > -{bound} AND {field} < {bound}"
+
+
+# The raw topics' DDS content filters (the state estimator's realtime subscriptions, nodes.runtime.content_filter):
+# what parse_imu / parse_encoder would reject for its frame, names or values, written from the same constants, so
+# that the middleware drops it before it enters the reader's queue.  A sample that cannot be deserialized fails
+# the filter too.  The parsers stay the judge of what passes (stamps, the array lengths beyond the first value).
+RAW_FILTERS = {
+    "imu/data_raw": " AND ".join([f"header.frame_id = '{IMU_FRAME}'"]
+                                 + [_inside(f"{v}.{a}", RAW_LIMITS[k])
+                                    for v, k in (("angular_velocity", "gyro"), ("linear_acceleration", "accel"))
+                                    for a in "xyz"]),
+    "wheel_encoder": " AND ".join([f"header.frame_id = '{ENCODER_FRAME}'", f"name[0] = '{ENCODER_JOINT}'"]
+                                  + [_inside(f"{f}[0]", RAW_LIMITS[k])
+                                     for f, k in (("position", "phi"), ("velocity", "rate"), ("effort", "torque"))]),
+}
 
 _STATE = cdr.JointStateEncoder(JOINT_NAMES)
 _IMU = cdr.ImuEncoder(IMU_FRAME)

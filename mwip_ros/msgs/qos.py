@@ -19,7 +19,10 @@
   all rejected pushed the genuine samples out before the node saw them (issue 30: 45,000 a
   second on the raw topics, the filter diverged, the robot fell).  Now a flood displaces a
   genuine message only when it outruns what the node rejects a second, or fills the queue
-  while the node is not scheduled.  A node that fell behind works through what waited (the
+  while the node is not scheduled.  The state estimator's two raw subscriptions also carry a DDS content filter
+  in realtime (:data:`mwip_ros.msgs.layouts.RAW_FILTERS`, :mod:`mwip_ros.nodes.runtime.content_filter`): what
+  has a wrong frame or joint, a value outside the limits or bytes that cannot be deserialized is dropped by the
+  middleware before the queue, and not counted.  A node that fell behind works through what waited (the
   stamp guards and the pairing judge each message; the plant holds the newest command;
   the estimator integrates over the stamps' time, so a lost sample costs a longer step).
 * The recorder (:data:`RECORD_QOS`): reliable, keep last 1000, transient local, so it gets

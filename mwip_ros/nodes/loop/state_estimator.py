@@ -10,8 +10,12 @@ answered again with the same message and integrated nothing.  A sample it cannot
 implausible: ``mwip_ros.msgs.layouts.RAW_LIMITS``, a wrong joint name or frame_id; a stamp outside the stream's
 window or older than the last: :mod:`.guards`) is rejected, counted and logged, and never integrated; a sample
 whose partner of the other stream has not come when a later pair is complete, or within ``PAIR_WAIT_S`` of wall
-time, is dropped and counted.  A sample moves its stream's time only when its pair is estimated, so a lone
-sample ahead of the stream costs nothing.  A stream that restarted (a plant's ``~/reset``, a new plant: stamps
+time, is dropped and counted.  In realtime the two raw subscriptions carry a DDS content filter
+(``layouts.RAW_FILTERS``, :mod:`mwip_ros.nodes.runtime.content_filter`): a sample with a wrong frame or joint, a
+value outside ``RAW_LIMITS`` or bytes that cannot be deserialized is dropped by the middleware before the reader's
+queue (a flood of them cannot displace genuine samples, issue 30) and is not counted; the log and
+``/diagnostics`` (``content_filter``) say so.  A sample moves its stream's time only when its pair is estimated,
+so a lone sample ahead of the stream costs nothing.  A stream that restarted (a plant's ``~/reset``, a new plant: stamps
 that agree away from the stream, :mod:`.guards`) re-initialises the estimator, but only while the topic has one
 publisher: stamps from a second publisher never restart it.  The estimator integrates over the time the stamps
 give (two periods after a lost pair; at most ``MAX_GAP_S``, a longer gap re-initialises it).
@@ -36,6 +40,7 @@ from mwip_ros.core.trajectory import ESTIMATE_COLUMNS, RAW_COLUMNS
 from mwip_ros.msgs import BadMessage
 from mwip_ros.msgs import layouts as L
 from mwip_ros.msgs.qos import qos_for
+from mwip_ros.nodes.runtime.content_filter import set_content_filter
 from mwip_ros.nodes.runtime.diagnostics import ERROR, OK
 from mwip_ros.nodes.runtime.guards import (NEW, REPEAT, RESTART, STAMP_WINDOW_PERIODS, PublisherWatch, Rejects,
                                            StampGuard,
@@ -81,12 +86,27 @@ class StateEstimatorNode(Node, GracefulNodeMixin):
         self.written = CsvStream(csv_path, _CSV_COLUMNS) if csv_path else None   # streamed, a row per sample
         pub_qos, in_qos = qos_for(self.v["mode"])   # msgs.qos: lockstep loses nothing, realtime keeps the newest
         self.pub = self.create_publisher(JointState, "joint_states", pub_qos)
-        self.create_subscription(Imu, "imu/data_raw", self._on_imu, in_qos, raw=True)
-        self.create_subscription(JointState, "wheel_encoder", self._on_encoder, in_qos, raw=True)
+        subs = {IMU_TOPIC: self.create_subscription(Imu, IMU_TOPIC, self._on_imu, in_qos, raw=True),
+                ENCODER_TOPIC: self.create_subscription(JointState, ENCODER_TOPIC, self._on_encoder, in_qos, raw=True)}
+        self.filtered = self.v["mode"] == "realtime" and self._filter(subs)
         self.watch = PublisherWatch(self, [IMU_TOPIC, ENCODER_TOPIC, "joint_states"])
         own = ", ".join(f"{k} = {v!r}" for k, v in self.est.values.items())
         self.get_logger().info(f"{self.est.title} state estimator ready: imu_offset = {self.config.imu_offset:g} m, "
                                f"h = {self.h * 1e3:.3f} ms{'; ' + own if own else ''}")
+
+    def _filter(self, subs) -> bool:
+        """Realtime: a DDS content filter on each raw subscription (layouts.RAW_FILTERS), so that a flood of
+        samples with a wrong frame, joint or value is dropped by the middleware, in C++, and cannot displace a
+        genuine sample in the reader's queue (issue 30).  What it drops is not counted; the parsers still judge
+        (and count) what passes.  Lockstep keeps every message for the parsers to count."""
+        why = [f"{t}: {w}" for t, w in ((t, set_content_filter(s, L.RAW_FILTERS[t])) for t, s in subs.items()) if w]
+        if why:
+            self.get_logger().warning(f"no content filter ({'; '.join(why)}): every raw message reaches the parser")
+            return False
+        self.get_logger().info("content filter on imu/data_raw and wheel_encoder: messages with a wrong frame_id or "
+                               "joint, or values outside RAW_LIMITS (NaN too), or that cannot be deserialized, are "
+                               "dropped by DDS and not counted")
+        return True
 
     # --- inputs ---------------------------------------------------------------------------------------
     def _on_imu(self, data: bytes) -> None:
@@ -220,6 +240,8 @@ class StateEstimatorNode(Node, GracefulNodeMixin):
     def diagnostic_status(self):
         hl = self.est.health
         values = {"method": self.est.name, "estimates": self.count, "unpaired_dropped": self.unpaired,
+                  "content_filter": "on: messages outside the limits are dropped by DDS, not counted"
+                  if self.filtered else "off",
                   "withheld_diverged": self.withheld,
                   "innovation": f"{hl.innovation:.6g}", "nis": f"{hl.nis:.4g}", "nis_mean": f"{hl.nis_mean:.4g}",
                   "diverged": str(hl.diverged).lower()}
