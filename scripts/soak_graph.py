@@ -36,16 +36,18 @@ sys.path.insert(0, str(REPO / "test"))
 sys.path.insert(0, str(REPO / "scripts"))
 from graphproc import Graph  # noqa: E402
 
+from mwip_ros.nodes.runtime.memtrace import status_kib  # noqa: E402
+
 NODES = ("plant_sim", "disturbance_observer", "dscndo_controller", "mcap_recorder", "foxglove_server")
 GOAL_MB_PER_H = 1.0
 
 
+PARTS = ("RssAnon", "RssFile", "RssShmem")   # VmRSS = their sum: the heaps, mapped files, shared memory (Fast DDS)
+
+
 def rss_kib(pid: int) -> Optional[int]:
-    try:
-        with open(f"/proc/{pid}/status") as f:
-            return next((int(line.split()[1]) for line in f if line.startswith("VmRSS:")), None)
-    except OSError:
-        return None
+    r = status_kib("VmRSS", pid=pid)["VmRSS"]
+    return None if r < 0 else r
 
 
 def slope_mb_per_h(samples: List[tuple]) -> float:
@@ -67,18 +69,21 @@ def memtrace_slopes(path: Path, warmup: float) -> Optional[dict]:
     Python heap (tracemalloc) and glibc's heap in use and free; its closing lines (what grew, malloc_trim)."""
     if not path.exists():
         return None
-    rows, notes = [], []
+    rows, notes, base = [], [], None
     for line in path.read_text().splitlines():
-        if line.startswith("#"):
+        if line.startswith("# baseline snapshot"):
+            base = len(rows)   # the snapshot is a step in RSS: the slopes start after it (the node's own clock)
+        elif line.startswith("#"):
             notes.append(line[2:])
         elif line.strip():
             rows.append([float(v) for v in line.split()])
-    after = [r for r in rows if r[0] >= warmup]
+    after = rows[base:] if base is not None else []
     kib = 1024.0
     out = {name: slope_mb_per_h([(r[0], r[i] / kib if i > 1 else r[i]) for r in after])
            for i, name in ((1, "rss"), (2, "python_heap"), (3, "glibc_in_use"), (4, "glibc_free"))}
     out["python_heap_mib"] = [rows[0][2] / 2**20, rows[-1][2] / 2**20] if rows else None
     out["notes"] = notes[1:]
+    out["rss_shmem"] = slope_mb_per_h([(r[0], r[8]) for r in after]) if rows and len(rows[0]) > 8 else float("nan")
     return out
 
 
@@ -113,6 +118,7 @@ def soak(work: Path, duration: float, warmup: float, every: float, split: Dict[s
             raise SystemExit(f"soak: plant_sim did not start; logs in {work}:\n{procs['plant_sim'].output()}")
         t0 = time.monotonic()
         samples: Dict[str, List[tuple]] = {n: [] for n in NODES}
+        parts: Dict[str, List[tuple]] = {n: [] for n in NODES}   # (t, RssAnon, RssFile, RssShmem)
         ended = None
         while True:
             t = time.monotonic() - t0
@@ -120,6 +126,8 @@ def soak(work: Path, duration: float, warmup: float, every: float, split: Dict[s
                 r = rss_kib(procs[name].pid)
                 if r is not None:
                     samples[name].append((t, r))
+                    p = status_kib(*PARTS, pid=procs[name].pid)
+                    parts[name].append((t, *(p[k] for k in PARTS)))
             gone = [name for name in NODES if procs[name].poll() is not None]
             if gone:
                 ended = f"{', '.join(gone)} exited at t = {t:.0f} s (code {procs[gone[0]].poll()})"
@@ -145,7 +153,11 @@ def soak(work: Path, duration: float, warmup: float, every: float, split: Dict[s
             "slope_mb_per_h": slope_mb_per_h(after), "samples": len(after),
             # the second half of the samples after the warm-up alone: a slope that is the warm-up's tail falls here
             "slope_last_half_mb_per_h": slope_mb_per_h([p for p in after if p[0] >= (warmup + duration) / 2]),
-            "rss_kib": [[round(t, 1), r] for t, r in s]}
+            "rss_kib": [[round(t, 1), r] for t, r in s],
+            # VmRSS's parts after the warm-up: which of them the slope is in
+            **{f"slope_{k}_mb_per_h": slope_mb_per_h([(q[0], q[1 + i]) for q in parts[name] if q[0] >= warmup])
+               for i, k in enumerate(PARTS)},
+            "rss_parts_kib": [[round(q[0], 1), *q[1:]] for q in parts[name]]}
         if name in memtrace:
             out["nodes"][name]["memtrace"] = memtrace_slopes(work / f"{name}.mem", warmup)
     if summary.exists():
@@ -166,20 +178,22 @@ def table(r: dict) -> str:
              f"{r['every_s']:g} s; slope: least squares after a {r['warmup_s']:g} s warm-up; goal < "
              f"{GOAL_MB_PER_H:g} MB/h)", "",
              "| node | RSS at start [MiB] | after warm-up [MiB] | at the end [MiB] | slope after warm-up [MB/h] "
-             "| slope over its second half [MB/h] |",
-             "|---|---|---|---|---|---|"]
+             "| slope over its second half [MB/h] | slope of RssAnon / RssFile / RssShmem [MB/h] |",
+             "|---|---|---|---|---|---|---|"]
     def cell(v):
         return "-" if v is None else f"{v:.1f}"
 
     for name, n in r["nodes"].items():
         lines.append(f"| {name} | {cell(n['rss_start_mib'])} | {cell(n['rss_warm_mib'])} | {cell(n['rss_end_mib'])} "
-                     f"| {n['slope_mb_per_h']:+.2f} | {n['slope_last_half_mb_per_h']:+.2f} |")
+                     f"| {n['slope_mb_per_h']:+.2f} | {n['slope_last_half_mb_per_h']:+.2f} | "
+                     + " / ".join(f"{n.get(f'slope_{k}_mb_per_h', float('nan')):+.2f}" for k in PARTS) + " |")
     traced = {name: n["memtrace"] for name, n in r["nodes"].items() if n.get("memtrace")}
     if traced:
         lines += ["", "Under MWIP_MEMTRACE (tracemalloc and glibc's mallinfo2), slopes after the warm-up [MB/h]:", "",
-                  "| node | RSS | Python heap | glibc heap in use | glibc heap free, kept |", "|---|---|---|---|---|"]
-        lines += [f"| {name} | {m['rss']:+.2f} | {m['python_heap']:+.2f} | {m['glibc_in_use']:+.2f} | "
-                  f"{m['glibc_free']:+.2f} |" for name, m in traced.items()]
+                  "| node | RSS | RssShmem | Python heap | glibc heap in use | glibc heap free, kept |",
+                  "|---|---|---|---|---|---|"]
+        lines += [f"| {name} | {m['rss']:+.2f} | {m['rss_shmem']:+.2f} | {m['python_heap']:+.2f} | "
+                  f"{m['glibc_in_use']:+.2f} | {m['glibc_free']:+.2f} |" for name, m in traced.items()]
     b = r["bag"]
     lines += ["", f"plant periods: {r.get('periods')}; bag: {b['files']} file(s), {b['bytes'] / 2**20:.1f} MiB, "
                   f"{b['messages']:,} messages ({b['read_as_one_run']:,} joint_states read as one run)"

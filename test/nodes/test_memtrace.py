@@ -27,7 +27,8 @@ def test_off_unless_the_variable_names_a_file(monkeypatch, tmp_path):
 
 def test_samples_and_names_the_line_whose_objects_grew(tmp_path, monkeypatch):
     """A list that keeps 20,000 objects after the warm-up: the Python heap column grows by about their size, and
-    the closing lines name this file's line that made them; every sample has the six columns."""
+    the closing lines name this file's line that made them; every sample has its nine columns, and the baseline
+    snapshot (a step in RSS, after which the slopes are taken) is marked where it was taken."""
     clock = [1000.0]
     monkeypatch.setattr(memtrace.time, "monotonic", lambda: clock[0])
     path = tmp_path / "node.mem"
@@ -45,9 +46,26 @@ def test_samples_and_names_the_line_whose_objects_grew(tmp_path, monkeypatch):
     lines = path.read_text().splitlines()
     rows = [[float(v) for v in line.split()] for line in lines if not line.startswith("#")]
     assert [r[0] for r in rows] == [0.0, 10.0, 20.0, 30.0, 45.0]
-    assert all(len(r) == 6 and r[1] > 0 for r in rows)
+    assert all(len(r) == 9 and r[1] > 0 and r[1] >= r[6] > 0 for r in rows)   # VmRSS >= its RssAnon
+    assert lines.index("# baseline snapshot at t = 20.0 s") == 4   # after the header and the samples at 0, 10, 20
     assert rows[-1][2] - rows[-2][2] > 1e6   # the Python heap column saw the kept objects
     grew = [line for line in lines if line.startswith("# grew since t = 20 s")]
     assert grew and "test_memtrace.py" in grew[0], grew[:3]
     assert any(line.startswith("# malloc_trim(0): RSS") for line in lines)
     assert not tracemalloc.is_tracing()
+
+
+def test_a_sample_keeps_no_memory_of_its_own():
+    """Each sample reads glibc's heap through ctypes: made once, not a CDLL per sample (which kept ~220 B each: the
+    tracer's own growth, 63 KiB in an 11-minute soak, was the first thing it found)."""
+    memtrace.mallinfo()
+    tracemalloc.start(1)
+    try:
+        before, _ = tracemalloc.get_traced_memory()
+        for _ in range(2000):
+            used, free, mapped = memtrace.mallinfo()
+        grown = tracemalloc.get_traced_memory()[0] - before
+    finally:
+        tracemalloc.stop()
+    assert used > 0 and free >= 0 and mapped >= 0
+    assert grown < 20_000, grown

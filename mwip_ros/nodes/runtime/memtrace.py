@@ -5,8 +5,10 @@
 With it set, ``run_node`` starts :mod:`tracemalloc` before the node is made and, every ``MWIP_MEMTRACE_EVERY``
 seconds (default 10) of its loop, appends one line to the file: the seconds since the start, the resident memory
 (VmRSS, KiB), the Python heap that tracemalloc traces (bytes), and glibc's own account of its heap
-(``mallinfo2``: bytes in use, bytes free but kept, bytes in mmap'd blocks), which covers the C and C++ libraries
-(rcl, Fast DDS, the foxglove SDK) that tracemalloc does not see.  So a growing RSS can be told apart:
+(``mallinfo2``: bytes in use, bytes free but kept, bytes in mmap'd blocks), which covers the C, C++ and Rust
+libraries (rcl, Fast DDS, the foxglove SDK) that tracemalloc does not see, and VmRSS's parts (RssAnon, RssFile,
+RssShmem: Fast DDS's shared-memory transport maps segments that count as RssShmem once touched).  So a growing RSS
+can be told apart:
 
 * the Python heap grows: our code (or rclpy's Python side) keeps something; the file ends with the 25 source lines
   whose allocations grew most since the first sample after ``MWIP_MEMTRACE_WARMUP`` seconds (default 60);
@@ -35,13 +37,18 @@ class _MallInfo2(ctypes.Structure):
         "arena", "ordblks", "smblks", "hblks", "hblkhd", "usmblks", "fsmblks", "uordblks", "fordblks", "keepcost")]
 
 
+_LIBC = []   # the C library, loaded once: a CDLL made per sample is Python heap that grows (seen: 63 KiB in 11 min)
+
+
 def _libc():
-    try:
-        libc = ctypes.CDLL(None)
-        libc.mallinfo2.restype = _MallInfo2
-        return libc
-    except (OSError, AttributeError):   # pragma: no cover - not glibc >= 2.33
-        return None
+    if not _LIBC:
+        try:
+            libc = ctypes.CDLL(None)
+            libc.mallinfo2.restype = _MallInfo2
+            _LIBC.append((libc, libc.mallinfo2, libc.malloc_trim))
+        except (OSError, AttributeError):   # pragma: no cover - not glibc >= 2.33
+            _LIBC.append(None)
+    return _LIBC[0]
 
 
 def mallinfo() -> Tuple[int, int, int]:
@@ -49,13 +56,27 @@ def mallinfo() -> Tuple[int, int, int]:
     libc = _libc()
     if libc is None:
         return -1, -1, -1
-    m = libc.mallinfo2()
+    m = libc[1]()
     return int(m.uordblks), int(m.fordblks), int(m.hblkhd)
 
 
-def rss_kib() -> int:
-    with open("/proc/self/status") as f:
-        return next((int(line.split()[1]) for line in f if line.startswith("VmRSS:")), -1)
+def rss_kib(key: str = "VmRSS") -> int:
+    return status_kib(key)[key]
+
+
+def status_kib(*keys: str, pid="self") -> dict:
+    """Fields of /proc/PID/status in KiB (-1 when absent): VmRSS = RssAnon (the heaps) + RssFile (mapped files)
+    + RssShmem (shared memory: Fast DDS's shared-memory transport maps its segments)."""
+    out = dict.fromkeys(keys, -1)
+    try:
+        with open(f"/proc/{pid}/status") as f:
+            for line in f:
+                name = line.split(":", 1)[0]
+                if name in out:
+                    out[name] = int(line.split()[1])
+    except OSError:
+        pass
+    return out
 
 
 class MemTrace:
@@ -68,7 +89,8 @@ class MemTrace:
         self.next = self.t0
         self.base: Optional[tracemalloc.Snapshot] = None
         with open(self.path, "w") as f:
-            f.write("# t_s rss_kib python_heap_bytes glibc_in_use_bytes glibc_free_bytes glibc_mmap_bytes\n")
+            f.write("# t_s rss_kib python_heap_bytes glibc_in_use_bytes glibc_free_bytes glibc_mmap_bytes rss_anon_kib "
+                    "rss_file_kib rss_shmem_kib\n")
 
     def tick(self) -> None:
         now = time.monotonic()
@@ -78,10 +100,14 @@ class MemTrace:
         t = now - self.t0
         traced, _ = tracemalloc.get_traced_memory()
         used, free, mapped = mallinfo()
+        rss = status_kib("VmRSS", "RssAnon", "RssFile", "RssShmem")
         with open(self.path, "a") as f:
-            f.write(f"{t:.1f} {rss_kib()} {traced} {used} {free} {mapped}\n")
-        if self.base is None and t >= self.warmup:
-            self.base = tracemalloc.take_snapshot()
+            f.write(f"{t:.1f} {rss['VmRSS']} {traced} {used} {free} {mapped} {rss['RssAnon']} {rss['RssFile']} "
+                    f"{rss['RssShmem']}\n")
+            if self.base is None and t >= self.warmup:
+                # the snapshot is itself memory (MiB, a step in RSS): the slopes are taken after this line
+                self.base = tracemalloc.take_snapshot()
+                f.write(f"# baseline snapshot at t = {t:.1f} s\n")
 
     def close(self) -> None:
         """The last sample, what grew most since the warm-up, and what ``malloc_trim`` gives back."""
@@ -95,7 +121,7 @@ class MemTrace:
         libc = _libc()
         if libc is not None:
             before = rss_kib()
-            libc.malloc_trim(0)
+            libc[2](0)
             lines.append(f"# malloc_trim(0): RSS {before} -> {rss_kib()} KiB")
         with open(self.path, "a") as f:
             f.write("\n".join(lines) + "\n")
