@@ -9,5 +9,6 @@
 :mod:`.lockstep`            the one lockstep driver (plant_sim and resim)
 :mod:`.diagnostics`         ``/diagnostics`` for every node
 :mod:`.rclpy_compat`        everything that reaches into rclpy's internals, for the rclpy it was written for
+:mod:`.memtrace`            a debugging aid (``MWIP_MEMTRACE``): RSS, Python heap and glibc heap over a long run
 ==========================  ==================================================================
 """

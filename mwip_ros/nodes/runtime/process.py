@@ -220,6 +220,8 @@ def run_node(factory: Callable[..., object], argv: Optional[Sequence[str]] = Non
     old = {s: signal.signal(s, _on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
     node = executor = None
     code = EXIT_OK
+    from mwip_ros.nodes.runtime.memtrace import from_environment
+    memtrace = from_environment()   # off unless MWIP_MEMTRACE names a file (a debugging aid)
     try:
         try:
             node = factory(context=context, argv=argv)
@@ -238,12 +240,16 @@ def run_node(factory: Callable[..., object], argv: Optional[Sequence[str]] = Non
             while stop["signal"] is None and not node.done and context.ok():
                 node.spin_step(executor)
                 diagnostics.tick()
+                if memtrace is not None:
+                    memtrace.tick()
         except StopRequested:
             pass
         if stop["signal"] is not None:
             node.stop_signal = stop["signal"]
             node.get_logger().info(f"received {signal.Signals(stop['signal']).name}, shutting down")
         node.on_shutdown()
+        if memtrace is not None:
+            memtrace.close()
         if context.ok():
             diagnostics.tick(force=True)   # the run's last word: ERROR with the reason if it failed
         code = node.exit_code
