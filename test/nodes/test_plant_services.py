@@ -55,6 +55,30 @@ def test_a_restart_is_asked_of_may_restart_and_a_crowded_start_needs_a_moving_st
     assert [crowded.check(s) for s in (7, 8, 9)][-1] == NEW and crowded.last == 9   # three that move do
 
 
+@pytest.mark.unit
+def test_a_realtime_stream_reset_again_and_again_is_followed_each_time_and_only_back_to_its_start():
+    """A realtime plant's resets restart its stamps at the run's start and move on at once (no resend of state 0,
+    which may even be lost): the stream must come back to its start each time, not only the first (it once took
+    the run's third stamp for the start, so a second reset was refused as an intruder's stamps)."""
+    asked = []
+
+    def may_restart(own):
+        asked.append(own)
+        return own
+
+    h = 5_000_000   # 5 ms [ns]: the window (20 periods, 0.1 s) is wall time too (a pause), longer than this test
+    g = StampGuard(window_ns=20 * h, may_restart=may_restart)
+    assert [g.check(k * h) for k in range(40)] == [NEW] * 40
+    for reset in range(4):
+        first = h if reset == 2 else 0   # the third reset's first state lost
+        verdicts = [g.check(k * h) for k in range(first // h, 30)]
+        assert RESTART in verdicts and verdicts[-1] == NEW and g.last == 29 * h, (reset, verdicts)
+        assert asked[-1] is True and g.start == first, (reset, asked, g.start)
+    asked.clear()
+    late = [g.check(k * h) for k in range(60, 63)]   # a run that neither goes back to the start nor follows a pause
+    assert RESTART not in late and asked == [False] and "no restart" in late[-1]
+
+
 @pytest.mark.graph
 def test_reset_in_lockstep_goes_back_to_the_initial_state_and_the_loop_goes_on(tmp_path):
     from std_srvs.srv import Trigger

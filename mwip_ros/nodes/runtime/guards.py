@@ -108,15 +108,19 @@ class StampGuard:
             if not run[2]:
                 return None
             self.commit(stamp)
+            self.start = run[4]   # the stream starts at the run's first stamp: where a reset comes back to
             return NEW
-        # what the stream's own publisher may do: a reset (back to the start), or go on after a pause (ahead of a
-        # stream that has not moved for a window's time)
-        own = run[4] == self.start or (stamp > last and time.monotonic() - self._moved_at > self.window_ns * 1e-9)
+        # what the stream's own publisher may do: a reset (back to the start: a realtime run's first state may be
+        # lost, so to within a window of it), or go on after a pause (ahead of a stream that has not moved for a
+        # window's time)
+        own = (self.start is not None and abs(run[4] - self.start) <= self.window_ns) or \
+            (stamp > last and time.monotonic() - self._moved_at > self.window_ns * 1e-9)
         if self.may_restart is not None and not self.may_restart(own):
             run[3] = time.monotonic() + self.RETRY_S
+            why = getattr(self.may_restart, "why", "") or "the topic has more than one publisher"
             return (f"{self.what} {stamp * 1e-9:.6f} s: {run[1]} stamps agree away from the stream's "
-                    f"{last * 1e-9:.6f} s, but the topic has more than one publisher: no restart")
-        self.last = self.start = stamp
+                    f"{last * 1e-9:.6f} s, but {why}: no restart")
+        self.last, self.start = stamp, run[4]   # the restarted stream's start: its run's first stamp
         self._moved_at = time.monotonic()
         runs.clear()
         return RESTART
@@ -147,12 +151,17 @@ class SolePublisher:
         self.node, self.name = node, node.resolve_topic_name(topic)
         self.own: Optional[tuple] = None   # the endpoint gid of the publisher the stream (re)started from
         self.intruders: set = set()
+        self.why = ""   # why the last answer was no (StampGuard's rejection names it)
 
     def __call__(self, own: bool) -> bool:
         gids = [tuple(i.endpoint_gid) for i in self.node.get_publishers_info_by_topic(self.name)]
         if len(gids) == 1 and gids[0] not in self.intruders and (gids[0] != self.own or own):
-            self.own = gids[0]
+            self.own, self.why = gids[0], ""
             return True
+        self.why = ("the topic has more than one publisher" if len(gids) > 1 else "the topic has no publisher"
+                    if not gids else
+                    "its one publisher was seen beside the stream's own" if gids[0] in self.intruders else
+                    "the stream's own publisher neither went back to its start nor paused")
         self.intruders.update(g for g in gids if g != self.own)
         return False
 
