@@ -213,6 +213,11 @@ class BagWriter:
                 or (self._max_file_ns > 0 and log_time_ns - f.start_ns > self._max_file_ns))
 
     @property
+    def file_count(self) -> int:
+        """How many files the bag has so far (one more after each split)."""
+        return len(self._files)
+
+    @property
     def files(self) -> List[str]:
         """The bag's files so far (relative to its directory), in recording order."""
         return [f.path for f in self._files]

@@ -70,6 +70,8 @@ def test_every_lockstep_run_is_recorded_whole_or_flagged(tmp_path, order):
         if split:
             assert meta["relative_file_paths"] == [f"{bag.name}_{i}.mcap" for i in range(len(meta["files"]))]
             assert len(meta["files"]) >= 4, meta["files"]   # 5 s simulated
+            splits = re.findall(r"split: now writing (\S+) \(file (\d+);", rec_log)   # each split said (and trimmed)
+            assert splits == [(f"{bag.name}_{i}.mcap", str(i + 1)) for i in range(1, len(meta["files"]))], rec_log
             from mwip_ros.runs import read_bag_run
             run = read_bag_run(bag)   # bag -> trajectory (mwip_report, mwip_identify): every file, one run
             assert len(run) == states and run.t[0] == 0.0 and run.t[-1] == pytest.approx((states - 1) * 0.005)

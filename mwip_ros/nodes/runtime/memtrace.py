@@ -27,7 +27,7 @@ import time
 import tracemalloc
 from typing import Optional, Tuple
 
-__all__ = ["MemTrace", "from_environment", "rss_kib", "mallinfo"]
+__all__ = ["MemTrace", "from_environment", "rss_kib", "mallinfo", "trim"]
 
 TOP = 25
 
@@ -49,6 +49,15 @@ def _libc():
         except (OSError, AttributeError):   # pragma: no cover - not glibc >= 2.33
             _LIBC.append(None)
     return _LIBC[0]
+
+
+def trim() -> bool:
+    """Give the heap's free pages back to the system (glibc's ``malloc_trim(0)``); False without glibc."""
+    libc = _libc()
+    if libc is None:
+        return False
+    libc[2](0)
+    return True
 
 
 def mallinfo() -> Tuple[int, int, int]:
