@@ -219,6 +219,10 @@ def _finish(args, values, runs) -> int:
         falls = {name: m.t_fall for name, m in named if m.t_fall is not None}
         plotting.fig3(runs, args.plot, window=args.window, falls=falls)
         print(f"wrote {args.plot}")
+        if moving:   # v and v* per law, beside it
+            speed = args.plot.with_name(f"{args.plot.stem}_speed{args.plot.suffix}")
+            plotting.speed_plot([r for r in runs if "v_ref" in r.columns], speed, values["nominal.r"])
+            print(f"wrote {speed}")
     return EXIT_FELL if any(not m.upright for _, m in named) else EXIT_OK
 
 
