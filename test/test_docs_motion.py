@@ -14,12 +14,17 @@ pytestmark = pytest.mark.unit
 
 PAGE = REPO / "docs" / "laws.md"
 FILES = [REPO / "config" / "paper.yaml", REPO / "config" / "motion.yaml"]
+REAL = [FILES[0], *(REPO / "config" / f for f in ("sensors_raw_realistic.yaml", "motor_realistic.yaml")), FILES[1]]
 
 
-def test_the_motion_table_is_what_the_code_computes():
-    head, rows = table_after(PAGE.read_text(), "Motion tracking, config/motion.yaml (ideal sensing):")
+@pytest.mark.parametrize("caption, files", [
+    ("Motion tracking, config/motion.yaml (ideal sensing):", FILES),
+    ("Motion tracking, config/motion.yaml with config/sensors_raw_realistic.yaml and config/motor_realistic.yaml:",
+     REAL)])
+def test_the_motion_tables_are_what_the_code_computes(caption, files):
+    head, rows = table_after(PAGE.read_text(), caption)
     assert [r[0] for r in rows] == ["dsc", "dscndo", "lqr", "lqr_ndo", "smc", "smc_ndo", "mpc", "mpc_ndo"]
-    v = P.merged_values(P.load_param_files(FILES))
+    v = P.merged_values(P.load_param_files(files))
     for row in rows:
         run = simulate(P.closed_loop(v, controller=row[0]))
         m = metrics.motion_metrics(run.columns, v["nominal.r"], v["fall_angle"], run.record.get("t_fall"))
