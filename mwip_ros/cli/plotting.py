@@ -129,6 +129,24 @@ def fig3(runs: Sequence, path, title: Optional[str] = None, window=None, falls: 
     plt.close(fig)
 
 
+def speed_plot(runs: Sequence, path, r: float) -> None:
+    """v = r theta_w' and the reference v* (column ``v_ref``, SPEC 15) against time, one panel per run."""
+    plt = _plt()
+    fig, axes = plt.subplots(len(runs), 1, sharex=True, sharey=True, figsize=(8.5, 1.6 + 1.35 * len(runs)),
+                             squeeze=False)
+    for ax, run in zip(axes[:, 0], runs):
+        ax.plot(*decimate(run["t"], r * np.asarray(run["dtheta_w"])), lw=1.0, label="v = r theta_w'")
+        ax.plot(*decimate(run["t"], run["v_ref"]), lw=1.2, ls="--", color="k", label="v*")
+        ax.set_ylabel(f"{run.label}\n[m/s]")
+        ax.grid(True, alpha=0.3)
+    axes[0, 0].legend(loc="upper right", fontsize=8)
+    axes[-1, 0].set_xlabel("t [s]")
+    fig.suptitle("speed and its reference (config/motion.yaml)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
 def _finite(x) -> bool:
     return bool(np.isfinite(np.asarray(x, dtype=float)).any())
 

@@ -44,7 +44,7 @@ def _parser() -> argparse.ArgumentParser:
                     help="ROS 2 parameter file(s), merged in order as ROS merges repeated --params-file (e.g. "
                          "config/paper.yaml config/sensing_realistic.yaml); default: the package's config/paper.yaml")
     mode = ap.add_mutually_exclusive_group()
-    mode.add_argument("--controller", choices=laws.names(), default=None,
+    mode.add_argument("--controller", "--law", choices=laws.names(), default=None,
                       help="dsc, dscndo (DSC with the observer term), lqr (the LQR baseline), lqr_ndo (LQR with the "
                            "observer term); default: the file's law and use_observer")
     mode.add_argument("--compare", nargs="*", choices=laws.names(), metavar="LAW",
@@ -204,6 +204,12 @@ def _finish(args, values, runs) -> int:
         print(f"note: the run{'s end' if len(short) > 1 else ' ends'} at t = {t_end:.3f} s, before the metrics window "
               f"[{w0:g}, {w1:g}] s ends: the metrics need t >= {w1:g} s ({'none' if t_end < w0 else 'part'} of the "
               f"window was simulated; --duration {w1:g} or a --window inside the run)")
+    moving = [(r.label, metrics.motion_metrics(r.columns, values["nominal.r"], values["fall_angle"],
+                                               r.record.get("t_fall"))) for r in runs if "v_ref" in r.columns]
+    if moving:   # motion.enabled: how each law tracked v* and held its position (SPEC 15)
+        print("motion (v* of motion.profile or cmd_vel; the hold: v* = 0 at the end, from "
+              f"{metrics.HOLD_SETTLE_S:g} s after the stop):")
+        print(metrics.motion_table(moving))
     by = dict(named)
     if "dsc" in by and "dscndo" in by:
         print(ratio_line(by["dsc"], by["dscndo"]))
@@ -213,6 +219,10 @@ def _finish(args, values, runs) -> int:
         falls = {name: m.t_fall for name, m in named if m.t_fall is not None}
         plotting.fig3(runs, args.plot, window=args.window, falls=falls)
         print(f"wrote {args.plot}")
+        if moving:   # v and v* per law, beside it
+            speed = args.plot.with_name(f"{args.plot.stem}_speed{args.plot.suffix}")
+            plotting.speed_plot([r for r in runs if "v_ref" in r.columns], speed, values["nominal.r"])
+            print(f"wrote {speed}")
     return EXIT_FELL if any(not m.upright for _, m in named) else EXIT_OK
 
 

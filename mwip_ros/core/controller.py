@@ -15,8 +15,8 @@ from typing import Optional
 
 from .model import PhysicalParams
 
-__all__ = ["DscGains", "ControlOutput", "u_taud_of", "x4_bar_of", "dsc_law", "dsc_terms", "filter_step",
-           "DscController"]
+__all__ = ["DscGains", "ControlOutput", "u_taud_of", "x4_bar_of", "dsc_law", "dsc_terms", "dsc_terms_tracking",
+           "filter_step", "DscController"]
 
 
 @dataclass(frozen=True)
@@ -47,9 +47,11 @@ def u_taud_of(nominal: PhysicalParams, mc, tau_hat):
     return tau_hat[0] - mc / (nominal.m22 + mc) * tau_hat[1]  # eq. (20)-(21), fix: uses tau_hat1
 
 
-def x4_bar_of(nominal: PhysicalParams, k1: float, theta_b: float, x1: float, mc: float) -> float:
-    """Virtual control x4_bar (eq. 24) with S1 = x2 = theta_b (eq. 22) and M_C12 = ``mc`` (m12 cos theta_b)."""
-    return (nominal.m22 + mc) / (nominal.m11 + mc) * (x1 / (nominal.m22 + mc) + k1 * theta_b)
+def x4_bar_of(nominal: PhysicalParams, k1: float, S1: float, x1: float, mc: float, dxd: float) -> float:
+    """Virtual control x4_bar (eq. 24) for the surface S1 = x2 - x_d (eq. 22; x_d = 0 in the paper) and M_C12 = ``mc``
+    (m12 cos theta_b); ``dxd`` is x_d' (0 in the paper; - 0.0 changes no bit): S1' = -k1 S1 when x4 = x4_bar
+    (docs/theory.md 6.11)."""
+    return (nominal.m22 + mc) / (nominal.m11 + mc) * (x1 / (nominal.m22 + mc) + k1 * S1 - dxd)
 
 
 def dsc_law(nominal: PhysicalParams, gains: DscGains, x, x4d: Optional[float], tau_hat=None,
@@ -69,7 +71,14 @@ def dsc_law(nominal: PhysicalParams, gains: DscGains, x, x4d: Optional[float], t
 
 def dsc_terms(nominal, k1, k2, tau4, x, x4d, first, m=math):
     """(u_DSC, S1, S2, x1, x4_bar, x4d) of eq. (16)-(28) for the state ``x``; ``first``: x4d(0) = x4_bar(0)
-    (``x4d`` is then ignored).  A pure function of numbers (``core.compiled`` compiles it for the batch)."""
+    (``x4d`` is then ignored).  A pure function of numbers (``core.compiled`` compiles it for the batch): the
+    paper's surfaces, :func:`dsc_terms_tracking` with x_d = x_d' = 0 (the same bits: x2 - 0.0 is x2)."""
+    return dsc_terms_tracking(nominal, k1, k2, tau4, x, x4d, first, 0.0, 0.0, m)
+
+
+def dsc_terms_tracking(nominal, k1, k2, tau4, x, x4d, first, xd, dxd, m=math):
+    """:func:`dsc_terms` with the first surface tracking the lean reference ``xd`` (x_d' = ``dxd``): S1 = x2 - x_d
+    (eq. 22 with a reference, docs/theory.md 6.11) and x4_bar with -x_d' (eq. 24); the rest is eq. (25)-(28)."""
     p = nominal
     _, x2, x4, x3 = x                            # x2 = theta_b, x3 = theta_b', x4 = theta_w' (eq. 16)
     mc = p.m12 * m.cos(x2)                       # M_C12
@@ -77,8 +86,8 @@ def dsc_terms(nominal, k1, k2, tau4, x, x4d, first, m=math):
     gs = p.G_b * sb                              # G_S2
     A = p.m11 * p.m22 - mc ** 2
     x1 = (p.m11 + mc) * x4 + (p.m22 + mc) * x3   # eq. (16)
-    S1 = x2                                      # eq. (22)
-    x4_bar = x4_bar_of(p, k1, x2, x1, mc)        # eq. (24)
+    S1 = x2 - xd                                 # eq. (22); x_d = 0 in the paper
+    x4_bar = x4_bar_of(p, k1, S1, x1, mc, dxd)   # eq. (24)
     if first:
         x4d = x4_bar                             # eq. (25) initial condition
     S2 = x4 - x4d                                # eq. (26)

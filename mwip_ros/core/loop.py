@@ -157,9 +157,10 @@ class Period:
     """A whole period in one process (the offline loop): the plant's stages around the estimator (when the
     plant measures raw: :mod:`.estimators`), the observer and the law."""
 
-    def __init__(self, side: PlantSide, observer, law, estimator=None, excitation=None):
+    def __init__(self, side: PlantSide, observer, law, estimator=None, excitation=None, motion=None):
         self.side, self.observer, self.law, self.estimator = side, observer, law, estimator
         self.excitation = excitation
+        self.motion = motion   # the references' shaper (core.motion.Shaper, SPEC 15), None: none (the paper)
         self.failure = None   # (t, one line, cause: a FAILURES name) once the run has failed
         if (side.raw is None) != (estimator is None):
             raise ValueError("a raw plant needs a state estimator, and only a raw plant has one")
@@ -171,7 +172,7 @@ class Period:
         x_m = measured if self.estimator is None else self.estimator.step(measured)
         tau_hat = self.observer.update(x_m, u_m)
         try:
-            u_law, internals = command(self.law, x_m, tau_hat, self.excitation, k)
+            u_law, internals = command(self.law, x_m, tau_hat, self.excitation, k, self.motion)
         except Exception as exc:   # noqa: BLE001 - a law's own error (a plug-in's bug), named as the law's
             raise LawError.of(self.law.name, k * self.side.cfg.h, exc) from exc
         return u_law, tau_hat, internals, x_m
@@ -224,11 +225,18 @@ def fall_text(t: float, x, fall_angle: float) -> str:
     return f"FELL at t = {t:.3f} s: |theta_b| = {abs(x[1]):.4f} > fall_angle {fall_angle:g}"
 
 
-def command(law, x, tau_hat, excitation, k: int):
-    """Stage ``law``: the law's command for the state ``x`` and ``tau_hat``, plus the excitation of period ``k``
-    (:mod:`.excitation`; None: none) — the command sent, what the trajectory's ``u`` records; the excitation is
-    in the internals (``excitation``).  The controller node calls this too."""
+def command(law, x, tau_hat, excitation, k: int, motion=None):
+    """Stage ``law``: the references of period ``k`` handed to the law (``motion``, a :class:`.motion.Shaper`;
+    None: none, the law regulates as in the paper), the law's command for the state ``x`` and ``tau_hat``, plus the
+    excitation of period ``k`` (:mod:`.excitation`; None: none) — the command sent, what the trajectory's ``u``
+    records; the excitation and the references (v_ref, theta_w_ref) are in the internals.  The controller node
+    calls this too, so the offline loop and the graph take the references in the same place of the period."""
+    if motion is not None:
+        ref = motion.reference(k, x[0])   # SPEC 15: theta_w*(0) is the first state's wheel angle
+        law.track(ref)
     u, internals = law.step(x, tau_hat)
+    if motion is not None and isinstance(internals, dict):
+        internals = {**internals, "v_ref": ref.v, "theta_w_ref": ref.theta_w}
     if excitation is not None:
         e = excitation.at(k)
         u = u + e

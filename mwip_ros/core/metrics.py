@@ -15,7 +15,8 @@ from typing import Mapping, Optional, Sequence, Tuple
 import numpy as np
 
 __all__ = ["WINDOW", "Metrics", "compute", "window_metrics", "fall_time", "fit_window", "WindowError",
-           "markdown_table", "text_table", "json_safe"]
+           "markdown_table", "text_table", "json_safe", "motion_metrics", "motion_rows", "motion_table",
+           "HOLD_SETTLE_S"]
 
 WINDOW = (5.0, 10.0)
 
@@ -199,6 +200,60 @@ def text_table(named: Sequence[tuple]) -> str:
     """A fixed-width table for terminals."""
     head = [h for h, _ in _headers(named)]
     rows = table_rows(named)
+    widths = [max(len(head[i]), *(len(r[i]) for r in rows)) for i in range(len(head))]
+    fmt = "  ".join("{:<%d}" % w for w in widths)
+    return "\n".join([fmt.format(*head)] + [fmt.format(*r) for r in rows])
+
+
+HOLD_SETTLE_S = 2.0   # the hold's first seconds after v* reached 0 are the stop, not the hold
+
+
+def motion_metrics(cols: Mapping[str, np.ndarray], r: float, fall_angle: float, t_fall: Optional[float] = None,
+                   settle: float = HOLD_SETTLE_S) -> dict:
+    """The tracking metrics of a run with motion references (SPEC 15; columns ``v_ref``, ``theta_w_ref``):
+
+    * ``speed_rms``: RMS of v - v* over the run, v = r theta_w' [m/s];
+    * ``hold_drift``: r (theta_w(end) - theta_w(hold start)) [m] over the hold: the final stretch with v* = 0, from
+      ``settle`` s after v* reached 0 (NaN without such a stretch); ``hold_rate`` that over its length [m/s];
+    * ``max_lean``: the largest |theta_b| [rad]; ``upright``: it stayed up (no fall recorded or seen).
+    Non-finite samples are left out (a verdict is never taken from NaN)."""
+    t = np.asarray(cols["t"], dtype=float)
+    v = r * np.asarray(cols["dtheta_w"], dtype=float)
+    v_ref = np.asarray(cols["v_ref"], dtype=float)
+    th = np.asarray(cols["theta_b"], dtype=float)
+    moving = np.flatnonzero(~(v_ref == 0.0))
+    start = t[moving[-1] + 1] if len(moving) and moving[-1] + 1 < len(t) else (t[0] if not len(moving) else math.nan)
+    hold = t >= start + settle - 1e-9 if math.isfinite(start) else np.zeros(len(t), bool)
+    tw = np.asarray(cols["theta_w"], dtype=float)[hold]
+    drift = float(r * (tw[-1] - tw[0])) if len(tw) > 1 else math.nan
+    span = float(t[hold][-1] - t[hold][0]) if len(tw) > 1 else math.nan
+    fell = fall_time(t, th, fall_angle)
+    fell = t_fall if fell is None else fell
+    finite_th = th[np.isfinite(th)]
+    return {"speed_rms": float(_rms(v - v_ref)), "hold_drift": drift,
+            "hold_rate": drift / span if len(tw) > 1 and span > 0 else math.nan,
+            "max_lean": float(np.max(np.abs(finite_th))) if len(finite_th) else math.nan,
+            "upright": fell is None}
+
+
+MOTION_HEADERS = [("run", "{}"), ("upright", "{}"), ("speed err RMS [m/s]", "{:.4f}"),
+                  ("hold drift [m]", "{:.4f}"), ("hold drift rate [m/s]", "{:.4f}"),
+                  ("max abs theta_b [rad]", "{:.4f}")]
+
+
+def motion_rows(named: Sequence[tuple]) -> list:
+    """The cells of a motion table, one row per (name, :func:`motion_metrics` dict)."""
+    return [[_cell(fmt, v) for (_, fmt), v in zip(MOTION_HEADERS, (name, "yes" if m["upright"] else "NO",
+                                                                    m["speed_rms"], m["hold_drift"], m["hold_rate"],
+                                                                    m["max_lean"]))] for name, m in named]
+
+
+def motion_table(named: Sequence[tuple], markdown: bool = False) -> str:
+    """The motion metrics as a fixed-width (or Markdown) table."""
+    head, rows = [h for h, _ in MOTION_HEADERS], motion_rows(named)
+    if markdown:
+        return "\n".join(["| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in head) + "|",
+                          *("| " + " | ".join(r) + " |" for r in rows)])
     widths = [max(len(head[i]), *(len(r[i]) for r in rows)) for i in range(len(head))]
     fmt = "  ".join("{:<%d}" % w for w in widths)
     return "\n".join([fmt.format(*head)] + [fmt.format(*r) for r in rows])

@@ -18,6 +18,7 @@ from . import laws
 from .estimators import EstimatorConfig
 from .excitation import Excitation, ExcitationConfig
 from .loop import Period, PlantSide
+from .motion import MotionConfig, Shaper
 from .observer import DiscreteObserver, gain_matrix
 from .plant import PlantConfig
 from .trajectory import Trajectory, TrajectoryTable
@@ -59,6 +60,7 @@ class ClosedLoop:
     duration_s: float
     estimator: Optional[EstimatorConfig] = None   # the state_estimator of a raw plant (plant.raw), else None
     excitation: Optional[ExcitationConfig] = None   # the controller's excitation (identification), else None
+    motion: Optional[MotionConfig] = None   # the references every law tracks (SPEC 15), else None (the paper)
 
     @property
     def name(self) -> str:
@@ -89,11 +91,12 @@ def simulate(loop: ClosedLoop, label: str = "", progress: Optional[Callable[[flo
     n_steps = int(round(loop.duration_s / h))
     estimator = loop.estimator.make(h, pc.nominal.r, pc.nominal.g) if pc.raw is not None else None
     excitation = Excitation(loop.excitation, h) if loop.excitation is not None else None
+    motion = Shaper(loop.motion, h) if loop.motion is not None else None
     period = Period(PlantSide(pc), DiscreteObserver(pc.nominal, gain_matrix(loop.X), h),
-                    loop.law_class(loop.params, pc.nominal, h), estimator, excitation)   # core.loop's stages
+                    loop.law_class(loop.params, pc.nominal, h), estimator, excitation, motion)   # core.loop's stages
     # the true state: the metrics judge it
     table = TrajectoryTable(internals=True, raw=pc.raw is not None, drive=pc.motor.enabled or pc.raw is not None,
-                            excitation=excitation is not None)
+                            excitation=excitation is not None, motion=motion is not None)
     every = max(1, n_steps // 10)
     for k in range(n_steps + 1):
         if period.run(table) or k == n_steps or period.advance(table):

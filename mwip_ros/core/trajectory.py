@@ -18,8 +18,8 @@ from typing import Any, Dict, Iterable, Sequence, Tuple
 import numpy as np
 
 __all__ = ["TRAJECTORY_COLUMNS", "INTERNAL_COLUMNS", "COLUMNS", "RAW_COLUMNS", "ESTIMATE_COLUMNS", "DRIVE_COLUMNS",
-           "EXCITATION_COLUMNS", "ALL_COLUMNS", "FAILURES", "FALL", "BAD_COMMAND", "DIVERGED", "FAILURE_COLUMNS",
-           "Trajectory", "TrajectoryTable",
+           "EXCITATION_COLUMNS", "MOTION_COLUMNS", "ALL_COLUMNS", "FAILURES", "FALL", "BAD_COMMAND", "DIVERGED",
+           "FAILURE_COLUMNS", "Trajectory", "TrajectoryTable",
            "join_estimates", "stamp_key"]
 
 # The trajectory every source has (simulator, plant_sim's CSV, a bag), then the controller's internals.
@@ -34,7 +34,8 @@ ESTIMATE_COLUMNS = ["theta_w_hat", "theta_b_hat", "dtheta_w_hat", "dtheta_b_hat"
 # worst saturation code of the period (core.drive: 0 none, 1 current, 2 voltage); NaN in a row no period followed
 DRIVE_COLUMNS = ["u_applied", "drive_saturation"]
 EXCITATION_COLUMNS = ["excitation"]   # the controller's excitation, included in u (identification)
-ALL_COLUMNS = COLUMNS + RAW_COLUMNS + ESTIMATE_COLUMNS + DRIVE_COLUMNS + EXCITATION_COLUMNS
+MOTION_COLUMNS = ["v_ref", "theta_w_ref"]   # the motion references of the period (SPEC 15: v* [m/s], theta_w* [rad])
+ALL_COLUMNS = COLUMNS + RAW_COLUMNS + ESTIMATE_COLUMNS + DRIVE_COLUMNS + EXCITATION_COLUMNS + MOTION_COLUMNS
 _NAN2 = (math.nan, math.nan)
 
 # why a run failed (a Trajectory's ``record['failure']``; a batch's ``failure`` codes are the index here, 0: it did
@@ -89,12 +90,13 @@ class TrajectoryTable:
     """
 
     def __init__(self, internals: bool = False, raw: bool = False, drive: bool = False, excitation: bool = False,
-                 keep_until: float = math.inf, sink=None):
+                 keep_until: float = math.inf, sink=None, motion: bool = False):
         self.internals = internals
         self.excitation = excitation
+        self.motion = motion
         self.names = ((COLUMNS if internals else TRAJECTORY_COLUMNS) + ((RAW_COLUMNS + ESTIMATE_COLUMNS) if raw
                                                                          else []) + (DRIVE_COLUMNS if drive else [])
-                      + (EXCITATION_COLUMNS if excitation else []))
+                      + (EXCITATION_COLUMNS if excitation else []) + (MOTION_COLUMNS if motion else []))
         self.width = len(self.names)
         self.n_extra = len(RAW_COLUMNS + ESTIMATE_COLUMNS) if raw else 0
         self.drive = drive
@@ -147,6 +149,8 @@ class TrajectoryTable:
             self.rows.extend(_NAN2)   # u_applied, drive_saturation: known once the period is integrated
         if self.excitation:
             self.rows.append(out.get("excitation", math.nan) if isinstance(out, dict) else math.nan)
+        if self.motion:
+            self.rows.extend([out.get(c, math.nan) if isinstance(out, dict) else math.nan for c in MOTION_COLUMNS])
 
     def set_drive(self, u_applied: float, saturation: int) -> None:
         """The last row's :data:`DRIVE_COLUMNS`, once its period has been integrated."""

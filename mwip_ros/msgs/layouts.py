@@ -43,7 +43,7 @@ __all__ = ["JOINT_NAMES", "INTERNAL_NAMES", "LIMITS", "RAW_LIMITS", "IMU_FRAME",
            "encode_state", "encode_wrench", "encode_internals",
            "encode_command", "encode_clock", "encode_external_wrench", "parse_joint_state", "parse_wrench",
            "parse_command", "parse_clock", "parse_internals", "parse_external_wrench", "encode_imu", "parse_imu",
-           "encode_encoder", "parse_encoder", "check_state", "RAW_FILTERS"]
+           "encode_encoder", "parse_encoder", "check_state", "RAW_FILTERS", "encode_twist", "parse_twist"]
 
 JOINT_NAMES = ("wheel", "body_pitch")
 INTERNAL_NAMES = ("S1", "S2", "x4d", "x4_bar", "u_dsc", "u_taud", "u", "x1")
@@ -281,6 +281,18 @@ def parse_external_wrench(data) -> Tuple[float, float]:
     _force, torque = _decoded(cdr.decode_wrench, data, "geometry_msgs/Wrench")
     _torques(torque[:2], "torque")
     return torque[0], torque[1]
+
+
+def encode_twist(vx: float, wz: float) -> bytes:
+    """cmd_vel (geometry_msgs/Twist, REP-103 base frame): linear.x = ``vx`` [m/s], angular.z = ``wz`` [rad/s]."""
+    return cdr.encode_wrench((float(vx), 0.0, 0.0), (0.0, 0.0, float(wz)))   # the same layout: two Vector3
+
+
+def parse_twist(data) -> Tuple[float, float]:
+    """(linear.x, angular.z) of a cmd_vel Twist, or BadMessage when it is not one; the numbers are judged by
+    :meth:`mwip_ros.core.motion.Shaper.command` (not finite or absurd: rejected and counted)."""
+    linear, angular = _decoded(cdr.decode_wrench, data, "geometry_msgs/Twist")   # Twist's layout is Wrench's
+    return linear[0], angular[2]
 
 
 def parse_clock(data) -> int:

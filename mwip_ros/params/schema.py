@@ -251,6 +251,11 @@ def _law_parameters() -> List[ParamSpec]:
     return out
 
 
+def _motion_parameters() -> List[ParamSpec]:
+    from .motion import specs
+    return specs()
+
+
 def _estimator_parameters() -> List[ParamSpec]:
     """The state_estimator parameters the registered estimators declare (core.estimators)."""
     from mwip_ros.core import estimators
@@ -388,6 +393,7 @@ NODE_SPECS: Dict[str, List[ParamSpec]] = {
                   **_lqr_q, dynamic=True),
         ParamSpec("lqr.R", "double", 0.01, "LQR input weight (> 0)", **_positive(), dynamic=True),
         *_law_parameters(),   # what a plug-in law declares itself (core.laws.Law.parameters)
+        *_motion_parameters(),   # motion.*: the references the laws track (params.motion, SPEC 15)
         ParamSpec("excitation.type", "string", "none", "a known torque added to the law's command, recorded, for "
                   "identification (mwip_identify): none, chirp (a linear sweep f0 -> f1) or prbs (+-amplitude, "
                   "random bits)", **_one_of("none", "chirp", "prbs")),

@@ -14,6 +14,8 @@ from mwip_ros.core.raw_sensors import RawSensorConfig
 from mwip_ros.core.sensing import SensingConfig
 from mwip_ros.core.sim import ClosedLoop
 
+from .motion import motion as motion_config
+
 from .schema import PAPER_NOMINAL
 
 __all__ = ["physical", "sinusoid", "gains", "period", "observer_gain", "plant_config", "sensing", "raw_sensors",
@@ -158,4 +160,5 @@ def closed_loop(v: Mapping[str, Any], use_observer: Optional[bool] = None,
     return ClosedLoop(plant=plant, X=tuple(float(c) for c in v["X"]), controller=controller,
                       params=cls.design(v, plant.nominal, plant.h),
                       duration_s=v["duration_s"] if duration is None else duration,
-                      estimator=estimator(v) if plant.raw is not None else None, excitation=excitation(v))
+                      estimator=estimator(v) if plant.raw is not None else None, excitation=excitation(v),
+                      motion=motion_config(v))

@@ -104,6 +104,16 @@ def test_resim_with_a_changed_gain_reports_the_difference(tmp_path, bag):
     assert "RESULT: DIFFERENT" in out and "wheel_torque_cmd" in out.split("RESULT:")[1]
 
 
+def test_resim_refuses_a_controller_that_tracks_cmd_vel_in_one_line(tmp_path, bag):
+    """SPEC 15: cmd_vel is not in the bag, so a controller with motion.enabled (and no profile) cannot be
+    re-simulated: one line naming motion.enabled, exit 2, before any state is fed."""
+    code, out = resim(tmp_path, bag, "-p", "motion.enabled:=true")
+    assert code == 2, out
+    errors = [ln for ln in out.splitlines() if "[ERROR]" in ln]
+    assert len(errors) == 1 and "motion.enabled" in errors[0], out
+    assert "starting the lockstep re-simulation" not in out
+
+
 def test_replay_at_rate_4_republishes_every_message_in_a_quarter_of_the_time(tmp_path, bag):
     import rclpy
     from rclpy.executors import SingleThreadedExecutor

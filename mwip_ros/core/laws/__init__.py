@@ -107,6 +107,7 @@ class Law:
     pure_lanes = 0
     limit_key: Optional[str] = None
     requires: Tuple[str, ...] = ()
+    ref = None   # the motion reference (core.motion.Reference) of this period; None: regulation, as in the paper
 
     @staticmethod
     def pure_params(params) -> tuple:
@@ -137,6 +138,21 @@ class Law:
         return math.inf
 
     # --- state --------------------------------------------------------------------------------------
+
+    def track(self, ref) -> None:
+        """The references of the coming step (:class:`~mwip_ros.core.motion.Reference`, SPEC 15; None: none, the law
+        regulates to the upright at rest as in the paper).  The loop calls it once per period before :meth:`step`
+        (:meth:`mwip_ros.core.loop.Period.decide`, the controller node); a law tracks it in error coordinates
+        (:meth:`tracked`), DSC through its outer loop (docs/theory.md 6.11)."""
+        self.ref = ref
+
+    def tracked(self, x):
+        """``x`` in the error coordinates of the reference (theta_w - theta_w*, theta_b, theta_w' - theta_w'* +
+        lambda (theta_w - theta_w*), theta_b'): :func:`mwip_ros.core.motion.error_state`; ``x`` itself without one."""
+        if self.ref is None:
+            return x
+        from ..motion import error_state
+        return error_state(x, self.ref)
 
     def reset(self) -> None:
         """Forget the state: the next step is a first step."""

@@ -10,10 +10,10 @@ from __future__ import annotations
 import math
 from typing import List
 
-from ..controller import DscGains, dsc_terms, filter_step
+from ..controller import DscGains, dsc_terms, dsc_terms_tracking, filter_step
 from . import Law
 
-__all__ = ["DscLaw", "INTERNALS", "dsc_step"]
+__all__ = ["DscLaw", "INTERNALS", "dsc_step", "lean_reference"]
 
 # controller_internals of DSC and DSCNDO (docs/graph.md: plot them): msgs.layouts.INTERNAL_NAMES
 INTERNALS = ("S1", "S2", "x4d", "x4_bar", "u_dsc", "u_taud", "u", "x1")
@@ -25,6 +25,13 @@ def dsc_step(P, p, h, x, s, first, m=math):
     x1)): u_DSC (eq. 28) with the current x4d, then x4d advanced over one period (eq. 25)."""
     u_dsc, S1, S2, x1, x4_bar, x4d = dsc_terms(p, P[0], P[1], P[2], x, s, first, m)
     return u_dsc, filter_step(x4d, x4_bar, h, P[2], m), (S1, S2, x4d, x4_bar, u_dsc, x1)
+
+
+def lean_reference(ref, x, m=math):
+    """The outer loop's lean reference before its filter, x_d_bar = -k_x e with the wheel error
+    e = (theta_w' - theta_w'*) + lambda (theta_w - theta_w*) (docs/theory.md 6.11)."""
+    from ..motion import rate_reference
+    return -ref.lean_gain * (x[2] - rate_reference(ref, x[0]))
 
 
 class DscLaw(Law):
@@ -39,6 +46,7 @@ class DscLaw(Law):
     def __init__(self, params: DscGains, nominal, h: float, m=math):
         super().__init__(params, nominal, h, m)
         self.x4d = None   # None: the next step is the first, x4d(0) = x4_bar(0) (eq. 25)
+        self.xd = None    # the outer loop's filtered lean reference x_d (motion only; None: x_d(0) = x_d_bar(0))
 
     @classmethod
     def design(cls, values, nominal, h) -> DscGains:
@@ -54,14 +62,33 @@ class DscLaw(Law):
 
     def reset(self) -> None:
         self.x4d = None
+        self.xd = None
 
     def step(self, x, tau_hat=None):
-        """u_DSC (eq. 28) for ``x`` with the current x4d, then x4d advanced over one period (eq. 25)."""
+        """u_DSC (eq. 28) for ``x`` with the current x4d, then x4d advanced over one period (eq. 25); with a motion
+        reference (:meth:`track`) the surfaces track the outer loop's lean x_d (:meth:`_step_tracking`)."""
         first = self.x4d is None
+        if self.ref is not None:
+            return self._step_tracking(x, first)
         u, self.x4d, (S1, S2, x4d, x4_bar, u_dsc, x1) = dsc_step(self.pure_params(self.params), self.nominal, self.h,
                                                                  x, 0.0 if first else self.x4d, first, self.m)
         return u, {"S1": S1, "S2": S2, "x4d": x4d, "x4_bar": x4_bar, "u_dsc": u_dsc,
                    "u_taud": 0.0, "u": u, "x1": x1}   # u_taud: 0, the term is off
+
+    def _step_tracking(self, x, first):
+        """The surfaces track x_d (docs/theory.md 6.11): x_d_bar = -k_x e (:func:`lean_reference`) through the filter
+        of eq. (25), tau4 x_d' + x_d = x_d_bar, so x_d' = (x_d_bar - x_d) / tau4 exactly; then eq. (22)-(28) with
+        S1 = x2 - x_d and x4_bar's -x_d', and both filters advanced over the period."""
+        k1, k2, tau4 = self.pure_params(self.params)
+        m = self.m
+        xd_bar = lean_reference(self.ref, x, m)
+        xd = xd_bar if self.xd is None else self.xd
+        dxd = (xd_bar - xd) / tau4
+        u, S1, S2, x1, x4_bar, x4d = dsc_terms_tracking(self.nominal, k1, k2, tau4, x, 0.0 if first else self.x4d,
+                                                        first, xd, dxd, m)
+        self.x4d = filter_step(x4d, x4_bar, self.h, tau4, m)
+        self.xd = filter_step(xd, xd_bar, self.h, tau4, m)
+        return u, {"S1": S1, "S2": S2, "x4d": x4d, "x4_bar": x4_bar, "u_dsc": u, "u_taud": 0.0, "u": u, "x1": x1}
 
     pure_step = staticmethod(dsc_step)
     pure_lanes = 3   # P = (k1, k2, tau4)
@@ -71,7 +98,7 @@ class DscLaw(Law):
         return params.k1, params.k2, params.tau4
 
     def finite(self) -> bool:
-        return self.x4d is None or bool(math.isfinite(self.x4d))
+        return all(s is None or bool(math.isfinite(s)) for s in (self.x4d, self.xd))
 
     def summary(self) -> str:
         g = self.params

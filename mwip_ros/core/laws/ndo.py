@@ -61,6 +61,9 @@ class WithObserver(Law):
         internals["u_taud"], internals["u"] = u_taud, u
         return u, internals
 
+    def track(self, ref) -> None:
+        self.inner.track(ref)
+
     def reset(self) -> None:
         self.inner.reset()
 

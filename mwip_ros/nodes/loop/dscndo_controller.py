@@ -16,13 +16,20 @@ stream's window; :mod:`.guards`) is rejected, counted and logged and changes not
 so is a state for which the law gives a non-finite command (nothing is published).
 A stream that restarted re-initialises the filter.  At most ``_MAX_PENDING`` states
 and estimates wait for their partner.
+
+With ``motion.enabled`` (SPEC 15, docs/theory.md 6.11) the law tracks references: from ``motion.profile`` (offline and
+lockstep scenarios: the graph then equals ``mwip_sim``) or, without one, from ``cmd_vel`` (geometry_msgs/Twist,
+REP-103: linear.x, angular.z).  A Twist only sets the target (:class:`mwip_ros.core.motion.Shaper`); the references
+of period k are made inside the period, in ``core.loop.command``, as offline.  A Twist that is not one, not finite or
+absurd is rejected and counted; one over the limits is clipped and counted; no cmd_vel for
+``motion.cmd_vel_timeout_s`` ramps the references to zero (logged once per silence, counted on /diagnostics).
 """
 from __future__ import annotations
 
 import math
 import sys
 
-from geometry_msgs.msg import WrenchStamped
+from geometry_msgs.msg import Twist, WrenchStamped
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
@@ -31,9 +38,11 @@ from mwip_ros import params as P
 from mwip_ros.core import laws
 from mwip_ros.core.excitation import Excitation
 from mwip_ros.core.loop import command
+from mwip_ros.core.motion import Shaper
 from mwip_ros.msgs import BadMessage
 from mwip_ros.msgs import layouts as L
 from mwip_ros.msgs.qos import qos_for
+from mwip_ros.params.motion import motion as motion_config
 from mwip_ros.nodes.runtime.diagnostics import OK
 from mwip_ros.nodes.runtime.guards import REPEAT, RESTART, STAMP_WINDOW_PERIODS, PublisherWatch, Rejects
 from mwip_ros.nodes.runtime.state_input import StateInput
@@ -80,6 +89,12 @@ class DscndoController(Node, GracefulNodeMixin):
         self.input = StateInput(self, self.rejects, STAMP_WINDOW_PERIODS * round(P.period(self.v) * 1e9),
                                 "controller")
         self.watch = PublisherWatch(self, ["joint_states", "disturbance_estimate"])
+        mc = motion_config(self.v)   # SPEC 15: None while motion.enabled is false (nothing changes)
+        self.motion = Shaper(mc, self.h) if mc is not None else None
+        if mc is not None and not mc.profile:   # cmd_vel sets the target; the newest one counts
+            from rclpy.qos import QoSProfile, ReliabilityPolicy
+            self.create_subscription(Twist, "cmd_vel", self._on_cmd_vel,
+                                     QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT), raw=True)
         self.get_logger().info(self._ready_text())
 
     @property
@@ -108,7 +123,12 @@ class DscndoController(Node, GracefulNodeMixin):
         own = ", ".join(t for t in (ctrl.summary(), ctrl.design_text(self.v)) if t)
         others = "".join(f"; ({law.design_text(self.v)}, not in use)" for family, law in self.laws.items()
                          if family != self.v["law"] and law.announce and law.design_text(self.v))
-        return f"{self._name()} ready: {own}{others}"
+        mc = self.motion.cfg if self.motion is not None else None
+        moving = "" if mc is None else (
+            f"; tracking motion.profile ({len(mc.profile)} points; cmd_vel is not read)" if mc.profile else
+            f"; tracking cmd_vel (|v| <= {mc.max_speed:g} m/s, {mc.max_accel:g} m/s^2, |psi'| <= {mc.max_yaw_rate:g} "
+            f"rad/s, stop after {mc.timeout_s:g} s without one)")
+        return f"{self._name()} ready: {own}{others}{moving}"
 
     def _warn(self, law) -> None:
         for text in law.warnings():
@@ -146,6 +166,8 @@ class DscndoController(Node, GracefulNodeMixin):
             self.estimates = {s: e for s, e in self.estimates.items() if s >= stamp}
             self.last_answered = None
             self.stamp0 = None
+            if self.motion is not None:
+                self.motion.reset()   # the references start again from the new stream's first state
         if self.stamp0 is None:
             self.stamp0 = stamp
         self.states[stamp] = x
@@ -181,7 +203,7 @@ class DscndoController(Node, GracefulNodeMixin):
         before = ctrl.snapshot()
         k = round((stamp - self.stamp0) / (self.h * 1e9)) if self.stamp0 is not None else 0
         try:
-            u, internals = command(ctrl, x, tau_hat, self.excitation, k)   # the law (+ the excitation), core.loop
+            u, internals = command(ctrl, x, tau_hat, self.excitation, k, self.motion)   # core.loop: the law stage
             ok = math.isfinite(u) and ctrl.finite()
         except (ArithmeticError, ValueError):
             ok = False
@@ -190,6 +212,9 @@ class DscndoController(Node, GracefulNodeMixin):
             self.rejects("joint_states", f"the law gives no finite command for t = {stamp * 1e-9:.3f} s "
                                          f"({self._describe()}); nothing published")
             return
+        if self.motion is not None and self.motion.stopped_now:
+            self.get_logger().warning(f"cmd_vel: none for {self.motion.cfg.timeout_s:g} s: the references ramp to zero "
+                                      f"and the robot holds its position (stop #{self.motion.timeouts})")
         self.cmd_pub.publish(L.encode_command(u))
         names = ctrl.internal_names + (("excitation",) if self.excitation is not None else ())
         self.int_pub.publish(L.encode_internals(stamp, internals, names))
@@ -201,6 +226,18 @@ class DscndoController(Node, GracefulNodeMixin):
                 for s in [s for s in d if s < stamp]:
                     del d[s]
 
+    def _on_cmd_vel(self, data: bytes) -> None:
+        """A Twist sets the target of the coming periods (core.motion.Shaper.command), or is rejected and counted."""
+        try:
+            vx, wz = L.parse_twist(data)
+        except BadMessage as exc:
+            self.rejects("cmd_vel", str(exc))
+            self.motion.rejected += 1
+            return
+        why = self.motion.command(vx, wz)
+        if why is not None:
+            self.rejects("cmd_vel", why)
+
     def _trim(self):
         for d in (self.states, self.estimates):
             while len(d) > _MAX_PENDING:
@@ -210,8 +247,12 @@ class DscndoController(Node, GracefulNodeMixin):
         return self.count
 
     def diagnostic_status(self):
-        return OK, f"{self._describe()} answering", {"commands": self.count, "law": self._name(),
-                                                     "waiting_states": len(self.states)}
+        values = {"commands": self.count, "law": self._name(), "waiting_states": len(self.states)}
+        if self.motion is not None:   # SPEC 15: the stops and the refused or clipped cmd_vel
+            m = self.motion
+            values.update(cmd_vel_timeouts=m.timeouts, cmd_vel_rejected=m.rejected, cmd_vel_clipped=m.clipped,
+                          v_ref=m.ref.v if m.ref is not None else 0.0)
+        return OK, f"{self._describe()} answering", values
 
     def on_shutdown(self) -> None:
         self.get_logger().info(f"answered {self.count} states; rejected: {self.rejects.summary()}")

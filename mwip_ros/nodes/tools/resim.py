@@ -40,7 +40,7 @@ from mwip_ros.msgs.topics import leaf
 from mwip_ros.nodes.tools.comparison import Stat, compare_stamped, diff
 from mwip_ros.nodes.runtime.guards import Rejects
 from mwip_ros.nodes.runtime.lockstep import CHAIN, LockstepDriver
-from mwip_ros.nodes.runtime.process import EXIT_ERROR, EXIT_OK
+from mwip_ros.nodes.runtime.process import EXIT_BAD_PARAMS, EXIT_ERROR, EXIT_OK
 from mwip_ros.params import ParamError
 
 __all__ = ["Resim", "EXIT_DIFFERENT"]
@@ -85,6 +85,8 @@ class Resim:
         self.failed = False
         self._param_clients: Dict[str, object] = {}
         self._param_wait: Optional[Tuple[float, list]] = None   # (since, futures) of changes being applied
+        self._motion_asked = None   # the future of the controller's motion.* (SPEC 15), then True once judged
+        self.refused = False
         self.applied_changes = 0
 
         clock_pub = node.create_publisher(Clock, "/clock", GRAPH_QOS)
@@ -323,10 +325,43 @@ class Resim:
         self.failed = True
         self.node.finish(EXIT_ERROR, text)
 
+    def _motion_refused(self) -> Optional[bool]:
+        """Ask the running controller for motion.enabled and motion.profile once the graph is there: with cmd_vel
+        (enabled, no profile) its references came from commands the bag does not hold, so resim refuses in one line
+        (exit 2); a profile is made inside each period from the state's stamp and re-simulates.  None while the
+        answer is awaited, else whether it refused."""
+        from rcl_interfaces.srv import GetParameters
+        if self._motion_asked is True:
+            return False
+        if self._motion_asked is None:
+            client = self.node.create_client(GetParameters, "dscndo_controller/get_parameters")
+            if not client.wait_for_service(timeout_sec=self.v["timeout_s"]):
+                self._motion_asked = True   # no such service to ask: the lockstep's own checks name what is missing
+                return False
+            # one name a request: rclpy answers nothing for a request whose parameter is an empty array
+            self._motion_asked = [client.call_async(GetParameters.Request(names=[n]))
+                                  for n in ("motion.enabled", "motion.profile")]
+            return None
+        if not all(f.done() for f in self._motion_asked):
+            return None
+        enabled, profile = (list(f.result().values) for f in self._motion_asked)
+        self._motion_asked = True
+        if enabled and enabled[0].bool_value and not (profile and len(profile[0].double_array_value)):
+            self.refused = True   # nothing fed, nothing to compare: the one line, exit 2 (no table)
+            self.node.finish(EXIT_BAD_PARAMS, "motion.enabled: the running dscndo_controller tracks cmd_vel, which "
+                                              "resim cannot replay yet; re-simulate with motion.enabled: false or "
+                                              "a motion.profile")
+            return True
+        return False
+
     def step(self, executor) -> None:
         if not self.started:
             ready = self.lockstep.wait_for_graph()
             if ready:
+                refused = self._motion_refused()
+                if refused is not False:   # asking (spin for the answer), or refused (finished)
+                    executor.spin_once(timeout_sec=0.02)
+                    return
                 self.started = True
                 self.t_wall0 = time.monotonic()
                 self.log.info("graph matched; starting the lockstep re-simulation")
@@ -377,6 +412,8 @@ class Resim:
         return topics, fields
 
     def report(self) -> None:
+        if self.refused:
+            return
         tol = self.v["tolerance"]
         topics, fields = self.compare()
         wall = (time.monotonic() - self.t_wall0) if self.t_wall0 else 0.0

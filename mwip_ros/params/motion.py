@@ -1,0 +1,76 @@
+"""The ``motion.*`` parameters of ``dscndo_controller`` (SPEC 15, docs/theory.md 6.11): the references a law tracks.
+
+:func:`specs` gives their :class:`~.schema.ParamSpec` (``params.schema`` lists them with the controller's own);
+:func:`motion` makes the :class:`mwip_ros.core.motion.MotionConfig` of merged values, None while
+``motion.enabled`` is false (the default, and config/paper.yaml's: every law regulates, as in the paper).
+"""
+from __future__ import annotations
+
+from typing import Any, List, Mapping, Optional
+
+__all__ = ["specs", "motion", "profile_rule", "refuse_motion", "PROFILE_MAX_POINTS", "ABSURD_SPEED"]
+
+PROFILE_MAX_POINTS = 10000
+ABSURD_SPEED = 1e3   # m/s: a profile's (and a cmd_vel's, core.motion) speed beyond this is no robot's
+
+
+def profile_rule(v) -> Optional[str]:
+    """None when ``v`` is a speed profile [t0, v0, t1, v1, ...]: pairs, times from 0 increasing, finite speeds."""
+    if len(v) % 2:
+        return f"give pairs [t0, v0, t1, v1, ...] (time [s], speed [m/s]), got {len(v)} entries"
+    if len(v) > 2 * PROFILE_MAX_POINTS:
+        return f"at most {PROFILE_MAX_POINTS} points, got {len(v) // 2}"
+    times, speeds = v[0::2], v[1::2]
+    if any(t < 0 for t in times) or any(b <= a for a, b in zip(times, times[1:])):
+        return f"the times must be >= 0 and increase, got {list(times)!r}"
+    if any(abs(s) > ABSURD_SPEED for s in speeds):
+        return f"speeds must be within +/-{ABSURD_SPEED:g} m/s, got {list(speeds)!r}"
+    return None
+
+
+def specs() -> List[Any]:
+    """The ``motion.*`` ParamSpecs (called by ``params.schema`` once ``ParamSpec`` exists)."""
+    from .schema import ParamSpec
+    pos = dict(lo=0.0, lo_open=True)
+    return [
+        ParamSpec("motion.enabled", "bool", False, "track references from cmd_vel (or motion.profile): every law "
+                  "tracks the wheel's reference angle and rate (SPEC 15, docs/theory.md 6.11); false = balance only, "
+                  "as in the paper"),
+        ParamSpec("motion.max_speed", "double", 1.5, "motion: |v*| at most this [m/s]; a faster cmd_vel is clipped",
+                  hi=100.0, **pos, unit="m/s"),
+        ParamSpec("motion.max_accel", "double", 0.5, "motion: the reference speed changes at most this fast [m/s^2]",
+                  hi=100.0, **pos, unit="m/s^2"),
+        ParamSpec("motion.max_yaw_rate", "double", 1.0, "motion: |psi'*| at most this [rad/s]; it changes at most "
+                  "max_yaw_rate per second", hi=100.0, **pos, unit="rad/s"),
+        ParamSpec("motion.cmd_vel_timeout_s", "double", 0.5, "motion: with no cmd_vel for this long the references "
+                  "ramp to zero (max_accel) and the robot holds its position", hi=3600.0, **pos, unit="s"),
+        ParamSpec("motion.position_gain", "double", 0.2, "motion: lambda of the wheel error e = (theta_w' - "
+                  "theta_w'*) + lambda (theta_w - theta_w*) every law drives to zero [1/s]; 0 = speed only, no "
+                  "position hold", lo=0.0, hi=100.0, unit="1/s"),
+        ParamSpec("motion.lean_gain", "double", 0.03, "motion, DSC/DSCNDO: k_x of the outer loop's lean reference "
+                  "x_d = -k_x e, tracked by the surfaces (eq. 22) [rad per rad/s]", lo=0.0, hi=10.0,
+                  unit="rad s/rad"),
+        ParamSpec("motion.profile", "double_array", [], "motion: a speed profile for offline and lockstep runs, "
+                  "[t0, v0, t1, v1, ...] (time [s], v* [m/s] from then on); empty = follow cmd_vel",
+                  rule=profile_rule, words="pairs [t0, v0, t1, v1, ...], times from 0 increasing"),
+    ]
+
+
+def motion(v: Mapping[str, Any]):
+    """The :class:`~mwip_ros.core.motion.MotionConfig` of merged values, or None while ``motion.enabled`` is false."""
+    if not v.get("motion.enabled", False):
+        return None
+    from mwip_ros.core.motion import MotionConfig
+    prof = [float(x) for x in v["motion.profile"]]
+    return MotionConfig(max_speed=v["motion.max_speed"], max_accel=v["motion.max_accel"],
+                        max_yaw_rate=v["motion.max_yaw_rate"], timeout_s=v["motion.cmd_vel_timeout_s"],
+                        position_gain=v["motion.position_gain"], lean_gain=v["motion.lean_gain"],
+                        profile=tuple(zip(prof[0::2], prof[1::2])), r=v["nominal.r"])
+
+
+def refuse_motion(v: Mapping[str, Any], what: str) -> None:
+    """ParamError naming ``motion.enabled`` when it is true where ``what`` cannot track references yet."""
+    if v.get("motion.enabled", False):
+        from .errors import ParamError
+        raise ParamError("motion.enabled", f"{what} does not track references yet; set it to false")
+
