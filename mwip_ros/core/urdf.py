@@ -17,13 +17,16 @@ node publishes it latched on ``robot_description``; the live view shows it in it
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
-from typing import Any, Mapping
+from typing import Any, List, Mapping, NamedTuple, Tuple
 from xml.sax.saxutils import quoteattr
 
-__all__ = ["ROBOT_NAME", "BASE_LINK", "IMU_LINK", "WHEEL_LINKS", "WHEEL_JOINTS", "RobotModel", "robot_model", "urdf"]
+__all__ = ["ROBOT_NAME", "ODOM_FRAME", "Transform", "frame_transforms",
+           "BASE_LINK", "IMU_LINK", "WHEEL_LINKS", "WHEEL_JOINTS", "RobotModel", "robot_model", "urdf"]
 
 ROBOT_NAME = "mwip"
+ODOM_FRAME = "odom"
 BASE_LINK = "base_link"
 IMU_LINK = "imu_link"
 WHEEL_LINKS = ("wheel_left_link", "wheel_right_link")
@@ -31,6 +34,15 @@ WHEEL_JOINTS = ("wheel_left_joint", "wheel_right_joint")
 # the parameters the model is made of (each a plant_sim parameter of the schema)
 KEYS = ("actual.m_b", "actual.m_w", "actual.I_b", "actual.I_w", "actual.l", "actual.r", "actual.I_b_roll",
         "actual.I_b_yaw", "actual.track_width", "sensors.imu.offset")
+
+
+class Transform(NamedTuple):
+    """One frame's pose in its parent: translation (x, y, z) [m], rotation (x, y, z, w)."""
+
+    parent: str
+    child: str
+    translation: Tuple[float, float, float]
+    rotation: Tuple[float, float, float, float]
 
 
 @dataclass(frozen=True)
@@ -109,3 +121,21 @@ def urdf(m: RobotModel, name: str = ROBOT_NAME) -> str:
         '</robot>',
     ]
     return "\n".join(parts) + "\n"
+
+
+def _yaw_pitch(yaw: float, pitch: float):
+    """(x, y, z, w) of a yaw about z then a pitch about the new y: q_z(yaw) q_y(pitch)."""
+    sz, cz, sy, cy = math.sin(yaw / 2), math.cos(yaw / 2), math.sin(pitch / 2), math.cos(pitch / 2)
+    return (-sz * sy, cz * sy, cy * sz, cz * cy)
+
+
+def frame_transforms(m: RobotModel, x: float, y: float, yaw: float, theta_b: float, phi_left: float,
+                     phi_right: float) -> List[Transform]:
+    """The frame tree odom -> base_link -> wheels / imu_link of the pose (x, y, yaw) in ``odom``, the body's pitch
+    ``theta_b`` and the wheels' joint angles phi (relative to the body): base_link on the axle's centre, r above
+    the ground, turned by yaw then pitched; each wheel at y = +-track_width / 2 turned by its phi about y."""
+    half = m.track_width / 2.0
+    return [Transform(ODOM_FRAME, BASE_LINK, (x, y, m.r), _yaw_pitch(yaw, theta_b)),
+            Transform(BASE_LINK, WHEEL_LINKS[0], (0.0, half, 0.0), _yaw_pitch(0.0, phi_left)),
+            Transform(BASE_LINK, WHEEL_LINKS[1], (0.0, -half, 0.0), _yaw_pitch(0.0, phi_right)),
+            Transform(BASE_LINK, IMU_LINK, (0.0, 0.0, m.imu_offset), (0.0, 0.0, 0.0, 1.0))]
