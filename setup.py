@@ -46,6 +46,7 @@ setup(
             'mwip_tune = mwip_ros.cli.tune:main',
             'mwip_identify = mwip_ros.cli.identify:main',
             'robot_markers = mwip_ros.nodes.runtime.entry:robot_markers',
+            'robot_state = mwip_ros.nodes.runtime.entry:robot_state',
             'foxglove_server = mwip_ros.nodes.runtime.entry:foxglove_server',
             'mwip_ctl = mwip_ros.cli.ctl:main',
             'state_estimator = mwip_ros.nodes.runtime.entry:state_estimator',

@@ -30,6 +30,7 @@ GAPS_KEY = "mwip_ros.lockstep_gaps"    # the bag's custom_data entry that says w
 STAMPED = {"sensor_msgs/msg/JointState", "geometry_msgs/msg/WrenchStamped", "rosgraph_msgs/msg/Clock"}
 NOT_COMPARED = {"external_wrench", "emergency_stop",     # what a user sent;
                 "robot_markers", "driver_state",          # a view, not the loop; the driver's transitions;
+                "odom", "robot_description", "wheel_joint_states",   # robot_state's view of the states;
                 "rosout", "parameter_events", "diagnostics"}   # ROS's own topics
 # published only with sensing options on (the truth) or raw sensors (the IMU, the encoder): judged when they have
 # messages

@@ -9,6 +9,8 @@ drive its driver's state machine (docs/theory.md 6.8).
     mwip_ctl disable [--node plant_sim]    # std_srvs/Trigger /plant_sim/disable
     mwip_ctl estop [--release]             # std_msgs/Bool true (false: --release) on emergency_stop
     mwip_ctl push [--wheel NM] [--body NM] [--duration S] [--rate HZ]   # external_wrench, then a zero one
+    mwip_ctl cmd --vx V --wz W --duration S [--rate HZ]   # cmd_vel (geometry_msgs/Twist), then a zero one
+    mwip_ctl drive [--params FILE ...] [--rate HZ]        # keyboard teleop on cmd_vel (cli.teleop)
 
 The e-stop is a level that the plant holds (core.safety): ``estop`` publishes true once, waits until the plant
 has acknowledged it and exits; the plant keeps it asserted (its driver in fault, ``~/reset`` and ``~/enable``
@@ -242,6 +244,16 @@ def _push(ros: Ros, args) -> int:
     return 0
 
 
+def _cmd(ros: Ros, args) -> int:
+    from mwip_ros.cli import teleop
+    return teleop.cmd(ros, args, Failure)
+
+
+def _drive(ros: Ros, args) -> int:
+    from mwip_ros.cli import teleop
+    return teleop.drive(ros, args, Failure)
+
+
 def _number(text: str) -> float:
     try:
         v = float(text)
@@ -265,6 +277,10 @@ def _checked(ap: argparse.ArgumentParser, args) -> argparse.Namespace:
             ap.error(f"VALUE {args.text!r} is not YAML ({_first_line(exc)})")
         if args.value is None or isinstance(args.value, dict):
             ap.error(f"VALUE {args.text!r}: give a number, true/false, a string or a [list]")
+    if args.command == "cmd" and not args.duration > 0:
+        ap.error("--duration must be > 0")
+    if args.command == "drive" and not args.rate > 0:
+        ap.error("--rate must be > 0")
     if args.command == "push":
         if not args.duration > 0:   # the plant holds a wrench until the next one: 0 s would be no push at all
             ap.error("--duration must be > 0")
@@ -285,7 +301,8 @@ def parser() -> argparse.ArgumentParser:
                  "mwip_ros graph, without a ros2 CLI, on the environment's ROS_DOMAIN_ID. Exit codes: 0 done, 1 "
                  "nothing answered within --timeout or the node refused (one line on stderr), 2 a usage error, "
                  "130 Ctrl-C.")
-    sub = ap.add_subparsers(dest="command", required=True, metavar="{param,reset,enable,disable,estop,push}")
+    sub = ap.add_subparsers(dest="command", required=True,
+                            metavar="{param,reset,enable,disable,estop,push,cmd,drive}")
     psub = sub.add_parser("param", help="set, get or list a node's parameters").add_subparsers(
         dest="action", required=True, metavar="{set,get,list}")
     s = psub.add_parser("set", parents=[common], help="set a parameter (the node checks it; a refusal exits 1)",
@@ -332,6 +349,24 @@ def parser() -> argparse.ArgumentParser:
                    "it lasts; 0 = once (default 10)")
     for q in (r, en, dis, es, p):
         q.add_argument("--node", default="plant_sim", help="the plant node (default plant_sim)")
+    c = sub.add_parser("cmd", parents=[common], help="drive: cmd_vel (geometry_msgs/Twist) for a while, then zero",
+                       description="Publish cmd_vel (linear.x = VX m/s, angular.z = WZ rad/s, REP-103) at --rate for "
+                       "--duration, then a zero Twist (also on Ctrl-C).")
+    c.add_argument("--vx", type=_number, default=0.0, metavar="V", help="forward speed [m/s]")
+    c.add_argument("--wz", type=_number, default=0.0, metavar="W", help="yaw rate [rad/s], + turns left")
+    c.add_argument("--duration", type=_number, default=1.0, metavar="S", help="how long [s] (default 1)")
+    c.add_argument("--rate", type=_number, default=10.0, metavar="HZ", help="resend at this rate; 0 = once "
+                   "(default 10)")
+    d = sub.add_parser("drive", parents=[common], help="keyboard teleop on cmd_vel (arrows, space stops, q quits)",
+                       description="Arrows up/down change vx, left/right wz by a step; space stops; q quits. The "
+                       "command stays within motion.max_speed and motion.max_yaw_rate (from --params, else the "
+                       "defaults), is published at --rate, and a zero Twist is sent on exit (also Ctrl-C). Needs a "
+                       "terminal on stdin.")
+    d.add_argument("--params", nargs="+", default=[], metavar="FILE", help="parameter files with motion.* limits")
+    d.add_argument("--rate", type=_number, default=20.0, metavar="HZ", help="publish rate (default 20)")
+    d.add_argument("--step-v", type=_number, default=0.0, metavar="V", help="vx step [m/s] (default max_speed/10)")
+    d.add_argument("--step-w", type=_number, default=0.0, metavar="W", help="wz step [rad/s] (default "
+                   "max_yaw_rate/10)")
     return ap
 
 
@@ -339,10 +374,12 @@ def main(argv=None) -> int:
     try:
         ap = parser()
         args = _checked(ap, ap.parse_args(argv))
+        if args.command == "drive" and not sys.stdin.isatty():
+            raise Failure("drive needs a terminal on stdin (use 'mwip_ctl cmd' in scripts)", 2)
         ros = Ros(args.namespace, args.timeout)
         try:
             return {"param": _param, "reset": _trigger, "enable": _trigger, "disable": _trigger, "estop": _estop,
-                    "push": _push}[args.command](ros, args)
+                    "push": _push, "cmd": _cmd, "drive": _drive}[args.command](ros, args)
         finally:
             ros.close()
     except Failure as exc:

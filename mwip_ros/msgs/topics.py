@@ -26,6 +26,9 @@ GRAPH_TOPICS: Dict[str, str] = {
     "controller_internals": "sensor_msgs/msg/JointState",
     "/clock": "rosgraph_msgs/msg/Clock",
     "robot_markers": "visualization_msgs/msg/MarkerArray",  # robot_markers: the robot to look at
+    "odom": "nav_msgs/msg/Odometry",                     # robot_state: wheel odometry (frame odom, child base_link)
+    "robot_description": "std_msgs/msg/String",          # robot_state: the URDF, latched
+    "wheel_joint_states": "sensor_msgs/msg/JointState",  # robot_state: the URDF's wheel joints (robot_state_publisher)
 }
 # published by users (any QoS), not by the graph's nodes with GRAPH_QOS
 USER_TOPICS = {"external_wrench", "emergency_stop"}

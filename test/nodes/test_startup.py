@@ -14,7 +14,7 @@ from mwip_ros import params as P
 from mwip_ros.nodes.runtime.entry import NODES as NODE_MODULES
 
 NODES = ("plant_sim", "disturbance_observer", "dscndo_controller", "mcap_recorder", "bag_replay", "robot_markers",
-         "foxglove_server", "state_estimator")
+         "foxglove_server", "state_estimator", "robot_state")
 
 PAPER = PARAMS.read_text()
 

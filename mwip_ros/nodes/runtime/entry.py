@@ -18,12 +18,12 @@ from typing import Optional, Sequence
 
 __all__ = ["NODES", "M_ARENA_MAX", "bound_malloc_arenas", "run", "main", *(
     "plant_sim", "disturbance_observer", "dscndo_controller", "mcap_recorder", "bag_replay", "robot_markers",
-    "foxglove_server", "state_estimator")]
+    "foxglove_server", "state_estimator", "robot_state")]
 
 # every node by name, and its module: the loop's nodes in nodes/loop, the tool nodes in nodes/tools
 NODES = {name: f"mwip_ros.nodes.{room}.{name}" for room, names in (
     ("loop", ("plant_sim", "disturbance_observer", "dscndo_controller", "state_estimator")),
-    ("tools", ("mcap_recorder", "bag_replay", "robot_markers", "foxglove_server"))) for name in names}
+    ("tools", ("mcap_recorder", "bag_replay", "robot_markers", "foxglove_server", "robot_state"))) for name in names}
 M_ARENA_MAX = -8   # glibc's mallopt() parameter number for the arena limit
 
 
@@ -82,6 +82,10 @@ def foxglove_server(argv=None) -> int:
 
 def state_estimator(argv=None) -> int:
     return run("state_estimator", argv)
+
+
+def robot_state(argv=None) -> int:
+    return run("robot_state", argv)
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:

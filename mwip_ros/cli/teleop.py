@@ -1,0 +1,182 @@
+"""``mwip_ctl cmd`` and ``mwip_ctl drive``: velocity commands on ``cmd_vel`` (geometry_msgs/Twist), without a ROS CLI.
+
+``cmd --vx V --wz W --duration S [--rate HZ]`` publishes the Twist (linear.x = V m/s, angular.z = W rad/s) at HZ
+for S seconds, then a zero Twist (also on Ctrl-C).  ``drive`` is a keyboard teleop: the arrows change vx (up,
+down) and wz (left turns left: +wz, REP-103) by a step, space stops, q quits; it shows the command and the limits
+``motion.max_speed`` and ``motion.max_yaw_rate`` (from ``--params`` files, else the defaults) and keeps the
+command within them, publishes at a fixed rate, and a zero Twist on exit; the terminal is restored even on
+Ctrl-C.  Without a terminal on stdin it refuses in one line (exit 2).
+"""
+from __future__ import annotations
+
+import math
+import os
+import select
+import sys
+import time
+from dataclasses import dataclass
+from typing import Optional, Sequence, Tuple
+
+__all__ = ["DEFAULT_MAX_SPEED", "DEFAULT_MAX_YAW_RATE", "Limits", "limits", "apply_key", "read_keys", "cmd", "drive"]
+
+DEFAULT_MAX_SPEED = 1.0      # [m/s] when neither the schema nor a file gives motion.max_speed
+DEFAULT_MAX_YAW_RATE = 1.0   # [rad/s] ... motion.max_yaw_rate
+UP, DOWN, RIGHT, LEFT = "\x1b[A", "\x1b[B", "\x1b[C", "\x1b[D"
+
+
+@dataclass(frozen=True)
+class Limits:
+    max_speed: float
+    max_yaw_rate: float
+
+
+def _schema_default(name: str, fallback: float) -> float:
+    from mwip_ros.params.schema import NODE_SPECS
+    for specs in NODE_SPECS.values():
+        for s in specs:
+            if s.name == name:
+                return float(s.default)
+    return fallback
+
+
+def _lookup(tree, dotted: str):
+    for part in dotted.split("."):
+        if not isinstance(tree, dict) or part not in tree:
+            return None
+        tree = tree[part]
+    return tree
+
+
+def limits(files: Sequence[str] = ()) -> Limits:
+    """``motion.max_speed`` and ``motion.max_yaw_rate``: the last of the ``files`` (any section) that gives them,
+    else the schema's defaults (:data:`DEFAULT_MAX_SPEED`, :data:`DEFAULT_MAX_YAW_RATE` without one).  Raises
+    ValueError naming the key for a value that is not a positive number."""
+    from pathlib import Path
+
+    from mwip_ros.yamlio import load_yaml
+    out = {"motion.max_speed": _schema_default("motion.max_speed", DEFAULT_MAX_SPEED),
+           "motion.max_yaw_rate": _schema_default("motion.max_yaw_rate", DEFAULT_MAX_YAW_RATE)}
+    for f in files:
+        doc = load_yaml(Path(f)) or {}
+        for section in doc.values() if isinstance(doc, dict) else ():
+            params = section.get("ros__parameters", {}) if isinstance(section, dict) else {}
+            for key in out:
+                v = params.get(key, _lookup(params, key))
+                if v is None:
+                    continue
+                if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
+                    raise ValueError(f"{key}: {v!r} in {f} is not a positive number")
+                out[key] = float(v)
+    return Limits(out["motion.max_speed"], out["motion.max_yaw_rate"])
+
+
+def _clip(v: float, lim: float) -> float:
+    return max(-lim, min(lim, v))
+
+
+def apply_key(key: str, vx: float, wz: float, lim: Limits, step_v: float,
+              step_w: float) -> Optional[Tuple[float, float]]:
+    """The command after ``key`` (an arrow's escape sequence, space or q): None to quit; other keys change nothing."""
+    if key in ("q", "Q"):
+        return None
+    if key == " ":
+        return 0.0, 0.0
+    dv, dw = {UP: (step_v, 0.0), DOWN: (-step_v, 0.0), LEFT: (0.0, step_w), RIGHT: (0.0, -step_w)}.get(key, (0, 0))
+    return _clip(round(vx + dv, 9), lim.max_speed), _clip(round(wz + dw, 9), lim.max_yaw_rate)
+
+
+def read_keys(text: str):
+    """The keys in ``text``: each arrow (ESC [ A..D) one key, any other character one key."""
+    i = 0
+    while i < len(text):
+        if text.startswith("\x1b[", i) and i + 2 < len(text):
+            yield text[i:i + 3]
+            i += 3
+        else:
+            yield text[i]
+            i += 1
+
+
+def _twist(vx: float, wz: float):
+    from geometry_msgs.msg import Twist
+    t = Twist()
+    t.linear.x, t.angular.z = float(vx), float(wz)
+    return t
+
+
+def _publisher(ros):
+    from geometry_msgs.msg import Twist
+
+    from mwip_ros.msgs.qos import REALTIME_INPUT_QOS
+    return ros.node.create_publisher(Twist, "cmd_vel", REALTIME_INPUT_QOS)
+
+
+def cmd(ros, args, failure) -> int:
+    """``mwip_ctl cmd``: the Twist at ``--rate`` for ``--duration``, then a zero Twist."""
+    from rclpy.duration import Duration
+    pub = _publisher(ros)
+    if not ros.until(lambda: pub.get_subscription_count() > 0, args.timeout):
+        raise failure(f"nobody subscribes {pub.topic_name} after {args.timeout:g} s: is the controller running?")
+    sent, start, msg = 0, time.monotonic(), _twist(args.vx, args.wz)
+    try:
+        while True:
+            pub.publish(msg)
+            sent += 1
+            left = args.duration - (time.monotonic() - start)
+            if left <= 0:
+                break
+            ros.until(lambda: False, min(left, 1.0 / args.rate) if args.rate > 0 else left)
+    finally:   # also on Ctrl-C: the robot stops
+        pub.publish(_twist(0.0, 0.0))
+        lasted = time.monotonic() - start
+        pub.wait_for_all_acked(Duration(seconds=args.timeout))
+    print(f"cmd_vel: vx {args.vx:g} m/s, wz {args.wz:g} rad/s for {lasted:.2f} s ({sent} message(s)), then zero")
+    return 0
+
+
+def drive(ros, args, failure, stdin=None, stdout=None) -> int:
+    """``mwip_ctl drive``: the keyboard teleop (module docstring)."""
+    import termios
+    import tty
+    stdin, stdout = stdin or sys.stdin, stdout or sys.stdout
+    try:
+        lim = limits(args.params or ())
+    except (ValueError, OSError) as exc:
+        raise failure(str(exc), 2) from None
+    step_v = args.step_v if args.step_v > 0 else lim.max_speed / 10.0
+    step_w = args.step_w if args.step_w > 0 else lim.max_yaw_rate / 10.0
+    pub, fd = _publisher(ros), stdin.fileno()
+    saved = termios.tcgetattr(fd)
+    vx = wz = 0.0
+    try:
+        tty.setcbreak(fd)   # keys one at a time, no echo; Ctrl-C still interrupts
+        stdout.write(f"drive: arrows up/down vx (max {lim.max_speed:g} m/s), left/right wz (max "
+                     f"{lim.max_yaw_rate:g} rad/s), space stop, q quit\r\n")
+        period, nxt = 1.0 / args.rate, time.monotonic()
+        while True:
+            stdout.write(f"\rvx {vx:+.3f} m/s  wz {wz:+.3f} rad/s   ")
+            stdout.flush()
+            pub.publish(_twist(vx, wz))
+            nxt += period
+            ready, _, _ = select.select([fd], [], [], max(0.0, nxt - time.monotonic()))
+            if ready:
+                data = os.read(fd, 64).decode("utf-8", "replace")
+                if not data:   # the terminal closed
+                    break
+                quit_ = False
+                for key in read_keys(data):
+                    out = apply_key(key, vx, wz, lim, step_v, step_w)
+                    if out is None:
+                        quit_ = True
+                        break
+                    vx, wz = out
+                if quit_:
+                    break
+            ros.until(lambda: False, 0.0)
+    finally:   # also on Ctrl-C: the terminal as it was, the robot stopped
+        termios.tcsetattr(fd, termios.TCSADRAIN, saved)
+        pub.publish(_twist(0.0, 0.0))
+        ros.until(lambda: False, 0.05)
+        stdout.write("\r\ndrive: stopped (zero cmd_vel sent)\n")
+        stdout.flush()
+    return 0
