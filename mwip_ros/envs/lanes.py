@@ -37,7 +37,7 @@ from mwip_ros.core.sensing import NOISE_BLOCK, measure, sensor_rng
 from mwip_ros.core.trajectory import BAD_COMMAND, DIVERGED, FALL
 
 from .common import EnvSetup
-from .kernels import advance, tau_table
+from .kernels import TauTable, advance
 
 __all__ = ["Lanes", "refusal"]
 
@@ -109,7 +109,7 @@ class Lanes:
         self.noisy = sc.noisy
         self.rows = np.arange(n)
         self.inertia = tuple(float(getattr(pc.actual, f)) for f in ("m11", "m12", "m22", "G_b"))
-        self.T1, self.T2 = tau_table(pc, s.n_steps)
+        self.tau = TauTable(pc)
         self.sd_w = float(np.sqrt(pc.D_w_variance))
         self.dw = _Streams(n, 1, np.random.default_rng) if pc.D_w_variance != 0.0 else None
         self.zs = _Streams(n, 4, sensor_rng) if self.noisy else None
@@ -204,8 +204,9 @@ class Lanes:
             D_w = np.full(self.n, float(pc.D_w_mean))
         x = tuple(v.copy() for v in self.x)
         with np.errstate(all="ignore"):
-            advance(*self.inertia, float(pc.D_b), D_w, self.T1, self.T2, k, *x, np.ascontiguousarray(u, dtype=float),
-                    self.h, self.substeps, run)
+            self.tau.cover(int(k.max()))
+            advance(*self.inertia, float(pc.D_b), D_w, self.tau.T1, self.tau.T2, k, *x,
+                    np.ascontiguousarray(u, dtype=float), self.h, self.substeps, run)
             self.x = x
             finite = np.isfinite(x[0]) & np.isfinite(x[1]) & np.isfinite(x[2]) & np.isfinite(x[3])
             fell = run & ~(np.abs(x[1]) <= pc.fall_angle)
