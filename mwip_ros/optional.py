@@ -15,6 +15,8 @@ dask        dask[distributed]    python3-dask-pip             mwip_sweep --dask 
 lz4         lz4                  python3-lz4-pip              reading a bag whose chunks are lz4-compressed
 mujoco      mujoco               python3-mujoco-pip           the plant backend mujoco (exit 2 for a tool
                                                               asked for it; the rk4 backend runs)
+gymnasium   gymnasium            python3-gymnasium-pip        mwip_ros.envs, the Gymnasium environments (an
+                                                              import of mwip_ros.envs raises the one line)
 ==========  ===================  ===========================  ===============================================
 
 Every one is declared in package.xml (a ROS user's ``rosdep install`` installs them); the keys ending in ``-pip``
@@ -42,6 +44,7 @@ OPTIONAL: Dict[str, OptionalPackage] = {
     "dask": OptionalPackage("dask[distributed]", "python3-dask-pip", "mwip_sweep --dask"),
     "lz4": OptionalPackage("lz4", "python3-lz4-pip", "reading lz4-compressed bag chunks"),
     "mujoco": OptionalPackage("mujoco", "python3-mujoco-pip", "the plant backend mujoco"),
+    "gymnasium": OptionalPackage("gymnasium", "python3-gymnasium-pip", "mwip_ros.envs (the Gymnasium environments)"),
 }
 
 

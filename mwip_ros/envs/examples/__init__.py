@@ -1,0 +1,1 @@
+"""Examples of learning with mwip_ros.envs (numpy only)."""

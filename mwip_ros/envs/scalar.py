@@ -1,0 +1,146 @@
+"""``MwipEnv``: one robot as a Gymnasium environment, a period of the offline loop per step.
+
+An adapter over :class:`mwip_ros.core.loop.Period` (the stages of :data:`mwip_ros.core.loop.STAGES`, as
+:func:`mwip_ros.core.sim.simulate` runs them): ``reset`` builds the plant with its sensors and drive
+(:class:`~mwip_ros.core.loop.PlantSide`), the observer, the estimator (raw sensors) and the base law, and runs the
+stages ``sensors`` to ``observer`` of period 0 (the observation is what the law sees); ``step(a)`` is the stage
+``law`` (the action, plus the base law's command when there is one), ``drive`` and ``plant`` of period k, then the
+stages up to the observer of period k + 1.  Actions equal to the law's own command give ``mwip_sim``'s trajectory
+of that law bit for bit (``test/envs``).
+"""
+from __future__ import annotations
+
+import dataclasses
+from typing import Any, Callable, Optional
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from mwip_ros.core.loop import Period, PlantSide
+from mwip_ros.core.excitation import Excitation
+from mwip_ros.core.observer import DiscreteObserver, gain_matrix
+from mwip_ros.core.plant import finite_state
+from mwip_ros.core.trajectory import BAD_COMMAND, DIVERGED, FAILURES, FALL
+
+from .common import ParamsArg, setup
+
+__all__ = ["MwipEnv", "NoLaw"]
+
+SEED_RANGE = 2 ** 31   # an episode's plant seed, when reset is given none, is drawn from [0, 2^31)
+
+
+class NoLaw:
+    """The law stage without a law (the action is the whole command): u = 0, to which the action is added."""
+
+    name = "none"
+
+    def step(self, x, tau_hat=None):
+        return 0.0, {}
+
+
+class MwipEnv(gym.Env):
+    """The MWIP of the parameter files as a Gymnasium environment.
+
+    Parameters
+    ----------
+    params : path, list of paths, dict or None
+        The parameter files, merged in order as ``mwip_sim --params`` (None: the package's ``config/paper.yaml``),
+        or merged values (``mwip_ros.params.merged_values``).
+    duration : float, optional
+        The episode's length [s] (default: ``plant_sim.duration_s``); the episode is truncated there.
+    base_law : str, optional
+        A registered law (``dscndo``, ``lqr``, ...): the action is a residual added to its command.  None: the
+        action is the whole command.
+    observation : {'state', 'raw'}
+        ``state``: the state the law sees (the measurement, noisy, quantized, delayed as the files say; with raw
+        sensors the estimator's state), (theta_w, theta_b, theta_w', theta_b').  ``raw``: the raw sample (gyro,
+        accel_x, accel_z, encoder, encoder_rate; ``sensors.model: raw`` only).
+    reward : callable, optional
+        ``reward(x, u, x_next, fell) -> float`` (true states at t_k and t_k+1, the torque that acted); default
+        :class:`~mwip_ros.envs.common.Reward`.
+    torque_scale : float, optional
+        S [N m]: the action a in [-1, 1] is the torque a S.  Default: the drive's ``torque_limit``, else the motor's
+        peak torque, else :data:`~mwip_ros.envs.common.DEFAULT_TORQUE_SCALE` (256 N m).
+    normalize_action : bool
+        False: the action is the torque in N m, in [-S, S].
+
+    The episode is terminated when the robot falls (|theta_b| > ``fall_angle``), its state diverges or the drive
+    refuses the command; truncated after ``duration`` / h periods.  ``reset(seed=s)`` seeds the episode's plant with
+    s (its D_w noise and sensor noise, as ``plant_sim.seed: s``); without a seed, a seed drawn from the env's
+    generator.  ``reset(options={"initial": (theta_w, theta_b, theta_w', theta_b')})`` sets the initial state.
+    ``info``: ``t`` (t_k), ``state`` (the true state at t_k), ``u`` (the torque that acted over period k),
+    ``tau_hat`` and ``tau_d`` (the observer's estimate and the true lumped disturbance at t_k), ``failure``.
+    """
+
+    metadata = {"render_modes": []}
+
+    def __init__(self, params: ParamsArg = None, duration: Optional[float] = None, base_law: Optional[str] = None,
+                 observation: str = "state", reward: Optional[Callable] = None, torque_scale: Optional[float] = None,
+                 normalize_action: bool = True):
+        self.setup = s = setup(params, duration, base_law, observation, reward, torque_scale, normalize_action)
+        self.action_space = spaces.Box(-s.bound, s.bound, (1,), np.float64)
+        self.observation_space = spaces.Box(-np.inf, np.inf, (5 if observation == "raw" else 4,), np.float64)
+        self._period: Optional[Period] = None
+
+    # --- the loop's stages ----------------------------------------------------------------------------------------
+
+    def _build(self, seed: int, initial=None) -> Period:
+        loop = self.setup.loop
+        pc = dataclasses.replace(loop.plant, seed=int(seed))
+        if initial is not None:
+            pc = dataclasses.replace(pc, initial=type(pc.initial)(*(float(v) for v in initial)))
+        h = pc.h
+        estimator = loop.estimator.make(h, pc.nominal.r, pc.nominal.g) if pc.raw is not None else None
+        excitation = Excitation(loop.excitation, h) if loop.excitation is not None else None
+        law = loop.law_class(loop.params, pc.nominal, h) if self.setup.base_law else NoLaw()
+        return Period(PlantSide(pc), DiscreteObserver(pc.nominal, gain_matrix(loop.X), h), law, estimator,
+                      excitation)
+
+    def _observe(self) -> np.ndarray:
+        """Stages ``sensors``, ``estimator``, ``observer`` and ``law`` (the base law's command) of period k."""
+        period = self._period
+        p = period.side.plant
+        if not finite_state(p.x):   # diverged: nothing to sense
+            self._u_base, self._tau_hat = 0.0, (0.0, 0.0)
+            return np.nan_to_num(np.array(p.x, dtype=float)[: self.observation_space.shape[0]])
+        measured, u_m = period.side.sense()
+        self._u_base, self._tau_hat, _, x_m = period.decide(measured, u_m, p.k)
+        return np.array(measured if self.setup.observation == "raw" else x_m, dtype=np.float64)
+
+    # --- gymnasium ------------------------------------------------------------------------------------------------
+
+    def reset(self, *, seed: Optional[int] = None, options: Optional[dict] = None):
+        super().reset(seed=seed)
+        plant_seed = seed if seed is not None else int(self.np_random.integers(SEED_RANGE))
+        self._period = self._build(plant_seed, (options or {}).get("initial"))
+        p = self._period.side.plant
+        obs = self._observe()
+        return obs, {"t": p.t, "state": np.array(p.x, dtype=float), "seed": plant_seed}
+
+    def step(self, action) -> tuple:
+        if self._period is None:
+            raise RuntimeError("MwipEnv.step before reset")
+        period, s = self._period, self.setup
+        side = period.side
+        p = side.plant
+        t, x = p.t, p.x
+        a = float(np.asarray(action, dtype=float).reshape(-1)[0])
+        u_cmd = self._u_base + float(s.torque(a))           # stage law: the base law's command plus the action
+        u, tau_d = side.act(u_cmd)                           # stage drive
+        failure = None
+        if side.safety.faulted and side.safety.fault_reason == "bad_command":
+            failure = FAILURES[BAD_COMMAND]
+        else:
+            period.u = u
+            if period.advance():                             # stage plant (RK4); True: the arithmetic failed
+                failure = FAILURES[DIVERGED]
+            elif p.fallen:
+                failure = FAILURES[FALL] if finite_state(p.x) else FAILURES[DIVERGED]
+        terminated = failure is not None
+        truncated = not terminated and p.k >= s.n_steps
+        reward = float(s.reward(x, u, p.x, terminated))
+        info: dict[str, Any] = {"t": t, "state": np.array(x, dtype=float), "u": u, "tau_hat": self._tau_hat,
+                                "tau_d": tau_d, "failure": failure}
+        obs = self._observe()
+        return obs, reward, terminated, truncated, info

@@ -1,0 +1,89 @@
+"""``MwipVectorEnv``: N robots of the parameter files as one ``gymnasium.vector.VectorEnv``, one call of the array
+stepper (:class:`~mwip_ros.envs.lanes.Lanes`) per step for all of them.
+
+The spaces, the action's scale, the reward and the ends of an episode are :class:`~mwip_ros.envs.scalar.MwipEnv`'s.
+Autoreset is Gymnasium's ``NEXT_STEP`` mode: the step after a robot's episode ended restarts it (its action is
+ignored, its reward 0, its observation the first of the new episode); the restart sets that robot's entries of the
+arrays, nothing is built again, and the robot's noise streams go on.  ``reset(seed=s)`` seeds robot i's plant with
+s + i (its D_w and sensor noise, as ``plant_sim.seed``), so its first episode is ``mwip_sim``'s with that seed.
+"""
+from __future__ import annotations
+
+from typing import Callable, Optional
+
+import numpy as np
+from gymnasium import spaces
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
+
+from .common import ParamsArg, setup
+from .lanes import Lanes
+
+__all__ = ["MwipVectorEnv"]
+
+SEED_RANGE = 2 ** 31
+
+
+class MwipVectorEnv(VectorEnv):
+    """``num_envs`` robots of the parameter files (the arguments as :class:`~mwip_ros.envs.scalar.MwipEnv`'s, but
+    ``observation``: the state only).  The files may set the state sensors (noise, encoder, delay), the torque limit,
+    the actuator delay, D_w, tau_ext and the model error; raw sensors, the motor, the excitation and the driver's
+    enable are refused, naming the key (``MwipEnv`` runs them).  ``infos``: ``u`` (the torque that acted),
+    ``failure`` (0, or the :data:`mwip_ros.core.trajectory.FAILURES` index of why the episode ended)."""
+
+    metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
+
+    def __init__(self, num_envs: int = 1, params: ParamsArg = None, duration: Optional[float] = None,
+                 base_law: Optional[str] = None, observation: str = "state", reward: Optional[Callable] = None,
+                 torque_scale: Optional[float] = None, normalize_action: bool = True):
+        if int(num_envs) < 1:
+            raise ValueError(f"num_envs: must be >= 1, got {num_envs!r}")
+        if observation != "state":
+            raise ValueError(f"observation: the vector env observes the state only, got {observation!r}")
+        self.setup = s = setup(params, duration, base_law, observation, reward, torque_scale, normalize_action)
+        self.num_envs = n = int(num_envs)
+        self.lanes = Lanes(s, n)
+        self.single_action_space = spaces.Box(-s.bound, s.bound, (1,), np.float64)
+        self.single_observation_space = spaces.Box(-np.inf, np.inf, (4,), np.float64)
+        self.action_space = batch_space(self.single_action_space, n)
+        self.observation_space = batch_space(self.single_observation_space, n)
+        self._restart = np.zeros(n, dtype=bool)
+        self._obs = np.zeros((n, 4))
+
+    def _observation(self) -> np.ndarray:
+        xm = self.lanes.observe()
+        for j in range(4):
+            self._obs[:, j] = xm[j]
+        return self._obs.copy()
+
+    def reset(self, *, seed=None, options: Optional[dict] = None):
+        """Every robot at t = 0; ``seed``: an int s (robot i: s + i), a list of one per robot, or None (drawn)."""
+        super().reset(seed=seed if isinstance(seed, (int, np.integer)) else None)
+        n = self.num_envs
+        if seed is None:
+            seeds = self.np_random.integers(SEED_RANGE, size=n)
+        elif isinstance(seed, (int, np.integer)):
+            seeds = int(seed) + np.arange(n)
+        else:
+            seeds = np.asarray(seed, dtype=np.int64)
+            if seeds.shape != (n,):
+                raise ValueError(f"seed: a list of {n} seeds (one per robot), got {len(seeds)}")
+        self.lanes.restart(np.ones(n, dtype=bool), seeds)
+        self._restart[:] = False
+        return self._observation(), {"seed": np.asarray(seeds)}
+
+    def step(self, actions):
+        s, lanes = self.setup, self.lanes
+        a = np.asarray(actions, dtype=float).reshape(self.num_envs)
+        go = ~self._restart
+        x_k = lanes.x
+        u, code = lanes.advance(lanes.u_base + s.torque(a), go)
+        terminated = code > 0
+        truncated = go & ~terminated & (lanes.k >= s.n_steps)
+        reward = np.asarray(s.reward(x_k, u, lanes.x, terminated), dtype=float)
+        if self._restart.any():   # NEXT_STEP autoreset: these robots start again instead of stepping
+            reward = np.where(go, reward, 0.0)
+            lanes.restart(self._restart)
+        obs = self._observation()
+        self._restart = terminated | truncated
+        return obs, reward, terminated, truncated, {"u": u, "failure": code}

@@ -1,0 +1,152 @@
+"""MwipVectorEnv (mwip_ros.envs.vector over envs.lanes): a law's own command as the actions equals the batch
+simulator (core.batch.simulate_batch: its trajectories and the compiled loop's metrics, computed here from the same
+files, not through the env) to 1e-9; autoreset restarts a robot in place; the refusals."""
+import dataclasses
+
+import numpy as np
+import pytest
+
+gym = pytest.importorskip("gymnasium")
+
+from mwip_ros import params as P  # noqa: E402
+from mwip_ros.core import laws  # noqa: E402
+from mwip_ros.core.batch import simulate_batch  # noqa: E402
+from mwip_ros.core.budget import window_samples  # noqa: E402
+from mwip_ros.core.observer import DiscreteObserver  # noqa: E402
+from mwip_ros.envs import ENV_ID, MwipVectorEnv, load_values  # noqa: E402
+from mwip_ros.params.paths import default_params_file  # noqa: E402
+
+pytestmark = pytest.mark.unit
+
+CONFIG = default_params_file().parent
+PAPER = [CONFIG / "paper.yaml"]
+SENSING = PAPER + [CONFIG / "sensing_realistic.yaml"]
+N, SEED, DURATION, WINDOW = 6, 40, 2.0, (1.0, 2.0)
+
+
+def batch(files, law):
+    """simulate_batch of robots SEED + i: (its trajectories, the compiled loop's metrics)."""
+    loop = P.closed_loop(load_values(files), duration=DURATION, controller=law)
+    loops = [dataclasses.replace(loop, plant=dataclasses.replace(loop.plant, seed=SEED + i)) for i in range(N)]
+    recorded = simulate_batch(loops, WINDOW, record=True)
+    compiled = simulate_batch(loops, WINDOW, compiled=True)
+    return recorded.trajectories, compiled.metrics
+
+
+def run(env, policy):
+    """One episode of every robot: true states (steps + 1, N, 4), torques (steps, N); every robot truncated."""
+    obs, _ = env.reset(seed=SEED)
+    xs, us = [np.stack(env.lanes.x, 1)], []
+    while True:
+        obs, r, terminated, truncated, info = env.step(policy(obs, us[-1] if us else np.zeros(N)))
+        us.append(info["u"])
+        xs.append(np.stack(env.lanes.x, 1))
+        assert not terminated.any()
+        if truncated.any():
+            assert truncated.all()
+            return np.array(xs), np.array(us)
+
+
+def check_against_batch(xs, us, trajectories, metrics, h):
+    n_steps = us.shape[0]
+    for i, tr in enumerate(trajectories):
+        c = tr.columns
+        assert len(c["u"]) == n_steps + 1
+        for j, name in enumerate(("theta_w", "theta_b", "dtheta_w", "dtheta_b")):
+            assert np.allclose(xs[:, i, j], c[name], rtol=0, atol=1e-9), (i, name)
+        assert np.allclose(us[:, i], c["u"][:-1], rtol=0, atol=1e-9), i
+    first, count = window_samples(n_steps, h, WINDOW)
+    rows = slice(first, first + count)
+    theta_rms = np.sqrt(np.mean(xs[rows, :, 1] ** 2, axis=0))
+    assert np.allclose(theta_rms, metrics["theta_b_rms"], rtol=1e-9, atol=0)
+    if first + count <= n_steps:   # u of the window's rows (the last row's command is not integrated)
+        assert np.allclose(np.sqrt(np.mean(us[rows] ** 2, axis=0)), metrics["u_rms"], rtol=1e-9, atol=0)
+
+
+@pytest.mark.parametrize("files, law", [(PAPER, "dscndo"), (SENSING, "dscndo"), (SENSING, "lqr_ndo"), (PAPER, "dsc")])
+def test_a_zero_residual_on_a_base_law_equals_the_batch_simulator(files, law):
+    env = MwipVectorEnv(N, files, duration=DURATION, base_law=law)
+    xs, us = run(env, lambda obs, u: np.zeros((N, 1)))
+    trajectories, metrics = batch(files, law)
+    check_against_batch(xs, us, trajectories, metrics, env.setup.loop.plant.h)
+
+
+def test_the_laws_command_computed_over_the_observations_equals_the_batch_simulator():
+    """The policy is DSCNDO over arrays (the core's observer and law with numpy, as the batch builds them), its command
+    divided by the action's scale (256 N m)."""
+    env = MwipVectorEnv(N, PAPER, duration=DURATION)
+    loop = env.setup.loop
+    pc = loop.plant
+    law = laws.get("dscndo")(loop.params if loop.controller == "dscndo" else
+                             laws.get("dscndo").design(load_values(PAPER), pc.nominal, pc.h), pc.nominal, pc.h, np)
+    obs_ = DiscreteObserver(pc.nominal, tuple(loop.X), pc.h, m=np)
+
+    def dscndo(obs, u_prev):
+        x = tuple(obs[:, j] for j in range(4))
+        u = law.step(x, obs_.update(x, u_prev))[0]
+        return (u / 256.0)[:, None]
+
+    xs, us = run(env, dscndo)
+    check_against_batch(xs, us, *batch(PAPER, "dscndo"), pc.h)
+
+
+def deterministic():
+    """The paper's robot with deterministic friction, delays and an encoder: a restarted episode repeats the first."""
+    return {**load_values(PAPER), "actual.D_w_variance": 0.0, "sensors.delay_periods": 2,
+            "actuator.delay_periods": 1, "sensors.encoder_counts_per_rev": 1024}
+
+
+def test_autoreset_restarts_a_robot_in_place_and_its_next_episode_repeats_the_first():
+    env = MwipVectorEnv(3, deterministic(), duration=0.5, base_law="dscndo", torque_scale=4096.0)
+    obs0, _ = env.reset(seed=1)
+    lanes, x_arr, gens = env.lanes, env.lanes.x[0], list(env.lanes.zs.gens if env.lanes.zs else [])
+    push = np.array([[0.0], [1.0], [0.0]])   # robot 1 is pushed over
+    first, second, ends = [], [], []
+    for step in range(400):
+        obs, r, term, trunc, info = env.step(push if step < 200 else np.zeros((3, 1)))
+        ends.append((term.copy(), trunc.copy(), r.copy()))
+        (first if step < 100 else second).append(obs[0].copy())
+        if step == 99:
+            assert trunc[0] and trunc[2] and not term[0]
+        if step == 100:   # the step after the end: robots 0 and 2 start again, their reward 0
+            assert np.array_equal(obs[0], obs0[0]) and np.array_equal(obs[2], obs0[2]) and r[0] == 0.0
+    fell = [s for s, (t, _, _) in enumerate(ends) if t[1]]
+    assert fell and all(ends[s][2][1] == -100.0 for s in fell)
+    assert np.array_equal(np.array(first), np.array(second[1:101]))   # the second episode repeats the first
+    assert env.lanes is lanes and env.lanes.x[0] is not x_arr   # the same stepper, no rebuild
+    assert list(env.lanes.zs.gens if env.lanes.zs else []) == gens
+
+
+def test_a_restarted_robot_keeps_its_noise_streams():
+    env = MwipVectorEnv(2, SENSING, duration=0.1, base_law="dscndo")
+    env.reset(seed=3)
+    gens = list(env.lanes.dw.gens)
+    for _ in range(25):
+        env.step(np.zeros((2, 1)))
+    assert env.lanes.k.tolist() == [4, 4] and all(a is b for a, b in zip(env.lanes.dw.gens, gens))
+
+
+def test_make_vec_of_the_registered_id_runs_the_vector_env():
+    envs = gym.make_vec(ENV_ID, num_envs=4, vectorization_mode="vector_entry_point", duration=0.2)
+    assert isinstance(envs.unwrapped, MwipVectorEnv) and envs.num_envs == 4
+    obs, _ = envs.reset(seed=0)
+    assert obs.shape == (4, 4) and envs.action_space.shape == (4, 1)
+    obs, r, term, trunc, info = envs.step(envs.action_space.sample())
+    assert r.shape == (4,) and obs.shape == (4, 4)
+
+
+@pytest.mark.parametrize("files, key", [
+    (PAPER + [CONFIG / "sensors_raw_realistic.yaml"], "sensors.model"),
+    (PAPER + [CONFIG / "motor_realistic.yaml"], "motor.enabled"),
+])
+def test_what_the_vector_env_does_not_run_is_refused_naming_the_key(files, key):
+    with pytest.raises(ValueError) as err:
+        MwipVectorEnv(2, files)
+    assert str(err.value).startswith(f"{key}:"), err.value
+
+
+def test_a_law_without_a_pure_step_is_refused_naming_base_law():
+    pytest.importorskip("daqp")
+    with pytest.raises(ValueError) as err:
+        MwipVectorEnv(2, PAPER, base_law="mpc")
+    assert str(err.value).startswith("base_law:"), err.value
