@@ -80,6 +80,12 @@ def mjcf(cfg) -> str:
         f'<inertial pos="0 0 0" mass="{p.m_w / 2.0!r}" diaginertia="{p.I_w / 4.0!r} {p.I_w / 2.0!r} {p.I_w / 4.0!r}"/>'
         f'<geom type="cylinder" size="{p.r!r} {p.r / 10.0!r}" zaxis="0 1 0" {contact}/>'
         f'</body>' for side, y in (("left", half), ("right", -half)))
+    # raw sensors (theory 6.4): MuJoCo's own gyro and accelerometer at the IMU, (0, 0, offset) on the body, to
+    # cross-check core.raw_sensors' model (read after Plant.sample_accel, which computes the instant t_k^-)
+    imu_site = imu_sensors = ""
+    if cfg.raw is not None:
+        imu_site = f'<site name="imu" pos="0 0 {cfg.raw.offset!r}"/>'
+        imu_sensors = '<sensor><gyro name="gyro" site="imu"/><accelerometer name="accel" site="imu"/></sensor>'
     return (
         '<mujoco model="mwip"><compiler angle="radian" autolimits="true"/>'
         f'<option timestep="{cfg.h / n!r}" integrator="RK4" cone="elliptic" gravity="0 0 {-p.g!r}"/>'
@@ -88,9 +94,9 @@ def mjcf(cfg) -> str:
         f'<body name="body" pos="{p.r * th_w!r} 0 {z0!r}" quat="{math.cos(th_b / 2)!r} 0 {math.sin(th_b / 2)!r} 0">'
         '<freejoint name="base"/>'
         f'<inertial pos="0 0 {p.l!r}" mass="{p.m_b!r}" diaginertia="{mc.I_b_roll!r} {p.I_b!r} {mc.I_b_yaw!r}"/>'
-        f'{wheels}</body></worldbody>'
+        f'{wheels}{imu_site}</body></worldbody>'
         '<actuator><motor name="wheel_left" joint="wheel_left"/><motor name="wheel_right" joint="wheel_right"/>'
-        '</actuator></mujoco>')
+        f'</actuator>{imu_sensors}</mujoco>')
 
 
 @dataclass
@@ -131,6 +137,13 @@ class MujocoPlant(PlantSim):
         wl, wr = pitch + q[7], pitch + q[8]
         self.x = State(0.5 * (wl + wr), pitch, v[4] + 0.5 * (v[6] + v[7]), v[4])
         self.pose = Pose(q[0], q[1], q[2], yaw, pitch, roll, wl, wr)
+
+    def imu_reading(self) -> Tuple[Tuple[float, ...], Tuple[float, ...]]:
+        """MuJoCo's own gyro and accelerometer at the IMU site (the model has them with raw sensors, theory 6.4): the
+        angular velocity and the specific force in the body frame, ((x, y, z), (x, y, z)), as of the last
+        ``mj_forward``: after :meth:`sample_accel`, at t_k^- as the raw sample (SPEC 10)."""
+        v = self.data.sensordata.tolist()
+        return tuple(v[:3]), tuple(v[3:6])
 
     @property
     def fallen(self) -> bool:
