@@ -21,6 +21,7 @@ from typing import Dict, List, Optional
 
 import numpy as np
 
+from mwip_ros.core.plant import Pose
 from mwip_ros.core.trajectory import (ALL_COLUMNS, FAILURE_COLUMNS, FAILURES, TRAJECTORY_COLUMNS, Trajectory,
                                      TrajectoryTable, join_estimates)
 from mwip_ros.msgs import BadMessage
@@ -42,7 +43,7 @@ NAN = math.nan
 MAX_ROWS = 2_000_000           # rows (samples): 2.8 h at 200 Hz; ~16 columns of float64 = 256 MB
 MAX_CSV_BYTES = 1 << 30        # a CSV of MAX_ROWS full rows (16 repr floats, ~330 B a row) is ~660 MB
 MAX_BAG_BYTES = 2 << 30        # a bag of MAX_ROWS periods (state, command, estimate, truth: ~600 B) is ~1.2 GB
-MAX_CSV_COLUMNS = 64           # a trajectory has 27 at most (ALL_COLUMNS and stamp)
+MAX_CSV_COLUMNS = 64           # a trajectory has 34 at most (ALL_COLUMNS and stamp)
 MAX_T = 1e10   # [s] |t| beyond this is no run; a realtime observer's CSV holds wall-clock stamps (1.8e9 s in 2026)
 _HEADER_MAX = 1 << 16          # characters of a header line
 MAX_LOG_MESSAGES = 100_000     # /rosout, /parameter_events messages of a bag kept for plant_record
@@ -218,7 +219,9 @@ def read_bag_run(bag, label: Optional[str] = None, segment: Optional[int] = None
     can have clipped it), else NaN (unknown).  A state resent with the same stamp counts once.
     When the plant measured with noise or delay, the bag has ``true_joint_states`` too: the
     trajectory (and so every metric) is the true one, and the last row's torque is NaN (with an
-    actuator delay no message holds it).  The run's ``record`` is :func:`plant_record`'s.
+    actuator delay no message holds it).  The run's ``record`` is :func:`plant_record`'s.  A spatial plant's bag
+    (backend mujoco) has ``true_pose`` too: the trajectory then has the pose columns (x, y, yaw, roll; the wheels'
+    own angles are in no message: NaN); a bag without it reads as before.
 
     A bag of several runs (a reset or a new plant: the stamps go back, :mod:`mwip_ros.bag.segments`) is
     never merged: without ``segment`` it raises :class:`~mwip_ros.bag.segments.SpliceError` (a
@@ -243,6 +246,7 @@ def read_bag_run(bag, label: Optional[str] = None, segment: Optional[int] = None
     states, true_states = _Stamped(5, "joint_states"), _Stamped(5, "true_joint_states")   # x (4), u_prev
     imu, enc = _Stamped(3, "imu/data_raw"), _Stamped(2, "wheel_encoder")   # raw sensors: gyro, f_x, f_z; phi, rate
     est, truth = _Stamped(2, "disturbance_estimate"), _Stamped(2, "lumped_disturbance")
+    poses = _Stamped(6, "true_pose")   # a spatial plant's (backend mujoco): x, y, z, yaw, pitch, roll
     cmds: List[float] = []
     logs: List[bytes] = []
     param_events: List[bytes] = []
@@ -274,6 +278,9 @@ def read_bag_run(bag, label: Optional[str] = None, segment: Optional[int] = None
             elif name == "wheel_encoder":
                 stamp, phi, rate, _torque = L.parse_encoder(data)
                 enc.put(bag, stamp, (phi, rate))
+            elif name == "true_pose":
+                stamp, pose = L.parse_pose(data)
+                poses.put(bag, stamp, pose)
         except BadMessage:
             continue  # not the graph's message (a foreign publisher): not part of the run
     estimates = None
@@ -292,12 +299,13 @@ def read_bag_run(bag, label: Optional[str] = None, segment: Optional[int] = None
     del applied
     # raw sensors or the motor: the torque that acted (joint_states' effort, the encoder's) is u_applied too
     drive = estimates is not None or bool(record.get("motor.enabled"))
-    table = TrajectoryTable(raw=estimates is not None, drive=drive)
-    nan2, nan3, nan5 = (NAN, NAN), (NAN,) * 3, (NAN,) * 5
+    table = TrajectoryTable(raw=estimates is not None, drive=drive, pose=bool(len(poses)))
+    nan2, nan3, nan5, nan6 = (NAN, NAN), (NAN,) * 3, (NAN,) * 5, (NAN,) * 6
     for i, s in enumerate(stamps):
         u = states.value(stamps[i + 1], 4) if i + 1 < len(stamps) else last_u
         extra = () if estimates is None else (*imu.get(s, nan3), *enc.get(s, nan2), *estimates.get(s, nan5)[:4])
-        table.append((s - t0) * 1e-9, states.get(s), u, est.get(s, nan2), truth.get(s, nan2), extra=extra)
+        pose = Pose(*poses.get(s, nan6), NAN, NAN) if len(poses) else None   # no message holds the wheels' angles
+        table.append((s - t0) * 1e-9, states.get(s), u, est.get(s, nan2), truth.get(s, nan2), extra=extra, pose=pose)
         if drive:
             table.set_drive(u, math.nan)   # the drive's saturation is in no message
     run = table.trajectory(label or Path(bag).name, "t_fall" in record, NAN)

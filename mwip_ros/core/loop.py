@@ -190,7 +190,7 @@ class Period:
         measured, u_m = side.sense()
         u_law, tau_hat, internals, x_m = self.decide(measured, u_m, p.k)
         u, tau_d = side.act(u_law)
-        table.append(p.t, p.x, u, tau_hat, tau_d, internals, (*measured, *x_m) if self.estimator else ())
+        table.append(p.t, p.x, u, tau_hat, tau_d, internals, (*measured, *x_m) if self.estimator else (), p.pose)
         self.u = u
         if p.fallen:
             self.failure = (p.t, fall_text(p.t, p.x, p.cfg.fall_angle), FAILURES[FALL])

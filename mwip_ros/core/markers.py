@@ -14,7 +14,7 @@ from typing import Tuple
 
 from .model import PhysicalParams
 
-__all__ = ["RobotPose", "robot_pose", "pitch_quaternion"]
+__all__ = ["RobotPose", "robot_pose", "pitch_quaternion", "pose_quaternion", "pose_angles"]
 
 
 @dataclass(frozen=True)
@@ -45,3 +45,25 @@ def robot_pose(nominal: PhysicalParams, x) -> RobotPose:
 def pitch_quaternion(angle: float) -> Tuple[float, float, float, float]:
     """(x, y, z, w) of a rotation by ``angle`` about +y: it turns +z towards +x."""
     return (0.0, math.sin(angle / 2), 0.0, math.cos(angle / 2))
+
+
+def pose_quaternion(yaw: float, pitch: float, roll: float) -> Tuple[float, float, float, float]:
+    """(x, y, z, w) of the body's orientation from its yaw, pitch and roll as :func:`pose_angles` reads them:
+    R = Rz(yaw) Rx(roll) Ry(pitch) (REP-103 axes; pitch about the axle, body y, turns +z towards +x)."""
+    cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
+    cr, sr = math.cos(roll / 2), math.sin(roll / 2)
+    cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
+    w, x, y, z = cy * cr, cy * sr, sy * sr, sy * cr            # qz(yaw) qx(roll)
+    return (x * cp - z * sp, w * sp + y * cp, z * cp + x * sp, w * cp - y * sp)   # (.) qy(pitch), as x, y, z, w
+
+
+def pose_angles(w: float, a: float, b: float, c: float) -> Tuple[float, float, float]:
+    """(pitch, yaw, roll) of the body's orientation quaternion w + a i + b j + c k: the pitch is the body z axis's
+    angle from the vertical in the plane normal to the axle (body y), over the whole circle; the yaw the heading of
+    that plane; the roll the axle's rise (the inverse of :func:`pose_quaternion`)."""
+    yx, yy, yz = 2 * (a * b - w * c), 1 - 2 * (a * a + c * c), 2 * (b * c + w * a)    # body y in the world
+    zx, zy, zz = 2 * (a * c + w * b), 2 * (b * c - w * a), 1 - 2 * (a * a + b * b)    # body z in the world
+    hn = math.hypot(yx, yy) or 1.0
+    # z_b . h and z_b . m: h = (y_b x z_world) / |.| = (yy, -yx, 0) / hn, m = h x y_b (the plane's upward axis)
+    pitch = math.atan2((zx * yy - zy * yx) / hn, zz * hn - (zx * yx + zy * yy) * yz / hn)
+    return pitch, math.atan2(-yx, yy), math.asin(max(-1.0, min(1.0, yz)))

@@ -22,11 +22,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import NamedTuple, Optional, Tuple
+from typing import ClassVar, Optional, Tuple
 
 from .drive import motor_torque
+from .markers import pose_angles
 from .model import State, lumped_disturbance
-from .plant import PlantDiverged, PlantSim, gated_drive
+from .plant import PlantDiverged, PlantSim, Pose, gated_drive
 from mwip_ros.optional import required
 
 __all__ = ["MujocoConfig", "MujocoPlant", "PlantDiverged", "Pose", "mjcf", "mujoco_module"]
@@ -57,20 +58,6 @@ class MujocoConfig:
     timestep: float = 1e-3       # largest physics step [s]; a control period is an integer number of steps
 
 
-class Pose(NamedTuple):
-    """The 3D pose: the axle's centre (x, y, z) [m], yaw, pitch (theta_b) and roll [rad] of the body
-    (REP-103), each wheel's absolute angle [rad]."""
-
-    x: float
-    y: float
-    z: float
-    yaw: float
-    pitch: float
-    roll: float
-    wheel_left: float
-    wheel_right: float
-
-
 _D0, _DMAX = 0.99, 0.999   # the contact's impedance (solimp) at rest and deep in
 
 
@@ -93,6 +80,12 @@ def mjcf(cfg) -> str:
         f'<inertial pos="0 0 0" mass="{p.m_w / 2.0!r}" diaginertia="{p.I_w / 4.0!r} {p.I_w / 2.0!r} {p.I_w / 4.0!r}"/>'
         f'<geom type="cylinder" size="{p.r!r} {p.r / 10.0!r}" zaxis="0 1 0" {contact}/>'
         f'</body>' for side, y in (("left", half), ("right", -half)))
+    # raw sensors (theory 6.4): MuJoCo's own gyro and accelerometer at the IMU, (0, 0, offset) on the body, to
+    # cross-check core.raw_sensors' model (read after Plant.sample_accel, which computes the instant t_k^-)
+    imu_site = imu_sensors = ""
+    if cfg.raw is not None:
+        imu_site = f'<site name="imu" pos="0 0 {cfg.raw.offset!r}"/>'
+        imu_sensors = '<sensor><gyro name="gyro" site="imu"/><accelerometer name="accel" site="imu"/></sensor>'
     return (
         '<mujoco model="mwip"><compiler angle="radian" autolimits="true"/>'
         f'<option timestep="{cfg.h / n!r}" integrator="RK4" cone="elliptic" gravity="0 0 {-p.g!r}"/>'
@@ -101,21 +94,9 @@ def mjcf(cfg) -> str:
         f'<body name="body" pos="{p.r * th_w!r} 0 {z0!r}" quat="{math.cos(th_b / 2)!r} 0 {math.sin(th_b / 2)!r} 0">'
         '<freejoint name="base"/>'
         f'<inertial pos="0 0 {p.l!r}" mass="{p.m_b!r}" diaginertia="{mc.I_b_roll!r} {p.I_b!r} {mc.I_b_yaw!r}"/>'
-        f'{wheels}</body></worldbody>'
+        f'{wheels}{imu_site}</body></worldbody>'
         '<actuator><motor name="wheel_left" joint="wheel_left"/><motor name="wheel_right" joint="wheel_right"/>'
-        '</actuator></mujoco>')
-
-
-def _pose_of(qpos) -> Tuple[float, float, float]:
-    """(pitch, yaw, roll) of the free joint's quaternion: the pitch is the body z axis's angle from the vertical
-    in the plane normal to the axle (body y), over the whole circle; yaw the heading of that plane; roll the
-    axle's rise."""
-    w, a, b, c = qpos[3], qpos[4], qpos[5], qpos[6]
-    yx, yy, yz = 2 * (a * b - w * c), 1 - 2 * (a * a + c * c), 2 * (b * c + w * a)    # body y in the world
-    zx, zy, zz = 2 * (a * c + w * b), 2 * (b * c - w * a), 1 - 2 * (a * a + b * b)    # body z in the world
-    hn = math.hypot(yx, yy) or 1.0
-    pitch = math.atan2((zx * yy - zy * yx) / hn, zz)      # z_b . h with h = (y_b x z_world) / |.| = (yy, -yx, 0)
-    return pitch, math.atan2(-yx, yy), math.asin(max(-1.0, min(1.0, yz)))
+        f'</actuator>{imu_sensors}</mujoco>')
 
 
 @dataclass
@@ -125,6 +106,7 @@ class MujocoPlant(PlantSim):
 
     pose: Optional[Pose] = None
     _mj: object = field(default=None, repr=False)
+    spatial: ClassVar[bool] = True   # a 3D pose (Pose, core.plant)
 
     def __post_init__(self):
         super().__post_init__()
@@ -144,13 +126,24 @@ class MujocoPlant(PlantSim):
         mj.mj_forward(self.model, d)
         self._read()
 
+    @property
+    def integration(self) -> str:
+        return f"MuJoCo {self._mj.__version__}, {self.n} RK4 steps of {self.cfg.h / self.n * 1e3:g} ms"
+
     def _read(self) -> None:
         """:attr:`x` and :attr:`pose` from MuJoCo's state."""
         q, v = self._qpos.tolist(), self._qvel.tolist()
-        pitch, yaw, roll = _pose_of(q)
+        pitch, yaw, roll = pose_angles(q[3], q[4], q[5], q[6])
         wl, wr = pitch + q[7], pitch + q[8]
         self.x = State(0.5 * (wl + wr), pitch, v[4] + 0.5 * (v[6] + v[7]), v[4])
         self.pose = Pose(q[0], q[1], q[2], yaw, pitch, roll, wl, wr)
+
+    def imu_reading(self) -> Tuple[Tuple[float, ...], Tuple[float, ...]]:
+        """MuJoCo's own gyro and accelerometer at the IMU site (the model has them with raw sensors, theory 6.4): the
+        angular velocity and the specific force in the body frame, ((x, y, z), (x, y, z)), as of the last
+        ``mj_forward``: after :meth:`sample_accel`, at t_k^- as the raw sample (SPEC 10)."""
+        v = self.data.sensordata.tolist()
+        return tuple(v[:3]), tuple(v[3:6])
 
     @property
     def fallen(self) -> bool:
@@ -203,8 +196,13 @@ class MujocoPlant(PlantSim):
             acted += ul + ur
             self._apply(self.t + (i + 0.5) * dt, (ul, ur), self.D_w, extra)
             mj.mj_step(self.model, d)
+        x, pose = self.x, self.pose
         self._read()
-        self._check()
+        try:
+            self._check()
+        except PlantDiverged:   # x and pose stay those of t_k: no state that is not finite leaves the plant
+            self.x, self.pose = x, pose
+            raise
         self.k += 1
         self.saturation = sat
         self.u_prev, self.u_cmd_prev, self.enabled_prev = (acted / self.n if driven else u), u, bool(enabled)

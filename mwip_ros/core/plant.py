@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Callable, Dict, Optional, Protocol, Tuple, runtime_checkable
+from typing import Callable, ClassVar, Dict, NamedTuple, Optional, Protocol, Tuple, runtime_checkable
 
 import numpy as np
 
@@ -22,7 +22,8 @@ from .raw_sensors import RawSensorConfig
 from .sensing import NOISE_BLOCK, SensingConfig
 
 __all__ = ["Plant", "PLANTS", "make_plant", "PlantConfig", "PlantSim", "RK4Plant", "stage_torques", "rk4_period",
-           "rk4_driven", "NO_MOTOR", "saturate", "D_w_of", "gated_drive", "finite_state", "PlantDiverged"]
+           "rk4_driven", "NO_MOTOR", "saturate", "D_w_of", "gated_drive", "finite_state", "PlantDiverged",
+           "Pose", "POSE_COLUMNS"]
 
 
 @dataclass(frozen=True)
@@ -74,6 +75,23 @@ def saturate(u: float, limit: float) -> float:
     return u
 
 
+class Pose(NamedTuple):
+    """A spatial plant's 3D pose at t_k (:attr:`Plant.pose`): the axle's centre (x, y, z) [m], the body's yaw, pitch
+    (theta_b) and roll [rad] (REP-103: x forward, z up), each wheel's absolute angle [rad]."""
+
+    x: float
+    y: float
+    z: float
+    yaw: float
+    pitch: float
+    roll: float
+    wheel_left: float
+    wheel_right: float
+
+
+POSE_COLUMNS = ("x", "y", "yaw", "roll", "wheel_left", "wheel_right")   # a spatial plant's csv, after the others
+
+
 class PlantDiverged(RuntimeError):
     """A plant's simulation diverged (a physics engine's warning, a state that is not finite); the message names
     the time and the cause.  The run ends there: no row of it is scored."""
@@ -84,12 +102,22 @@ class Plant(Protocol):
     """What a runner needs of a plant (the offline loop, the ``plant_sim`` node's lockstep and realtime runners):
     the true state at t_k = k h, the torque that acted over the previous period, one period's integration, and the
     true lumped disturbance.  :class:`PlantSim` (RK4 of eq. 1) implements it, and so does
-    :class:`~.mujoco_plant.MujocoPlant` (MuJoCo, docs/theory.md 6.10); a backend is one more entry in :data:`PLANTS`."""
+    :class:`~.mujoco_plant.MujocoPlant` (MuJoCo, docs/theory.md 6.10); a backend is one more entry in :data:`PLANTS`.
+
+    ``spatial`` says whether the plant has a 3D pose: then :attr:`pose` is the :class:`Pose` at t_k (the runners
+    record :data:`POSE_COLUMNS` and publish it), else None.  ``integration`` says in words how a period is
+    integrated (the node's start line).  :meth:`step` raises :class:`PlantDiverged` when the simulation
+    diverges."""
 
     cfg: PlantConfig
     k: int
     x: State
     u_prev: float
+    spatial: ClassVar[bool]
+    pose: Optional[Pose]
+
+    @property
+    def integration(self) -> str: ...
 
     @property
     def t(self) -> float: ...
@@ -125,6 +153,8 @@ class PlantSim:
     enabled_prev: bool = True        # the driver was enabled over the previous period (its bridge closed)
     _rng: np.random.Generator = field(default=None, repr=False)
     _noise: list = field(default_factory=list, repr=False)
+    spatial: ClassVar[bool] = False  # planar: no 3D pose
+    pose: ClassVar[Optional[Pose]] = None
 
     def __post_init__(self):
         self.x = State(*(float(v) for v in (self.cfg.initial if self.x is None else self.x)))
@@ -134,6 +164,10 @@ class PlantSim:
     @property
     def t(self) -> float:
         return self.k * self.cfg.h
+
+    @property
+    def integration(self) -> str:
+        return f"{self.cfg.substeps} RK4 sub-steps of eq. (1)"
 
     @property
     def fallen(self) -> bool:

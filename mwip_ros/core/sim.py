@@ -96,7 +96,8 @@ def simulate(loop: ClosedLoop, label: str = "", progress: Optional[Callable[[flo
                     loop.law_class(loop.params, pc.nominal, h), estimator, excitation, motion)   # core.loop's stages
     # the true state: the metrics judge it
     table = TrajectoryTable(internals=True, raw=pc.raw is not None, drive=pc.motor.enabled or pc.raw is not None,
-                            excitation=excitation is not None, motion=motion is not None)
+                            excitation=excitation is not None, motion=motion is not None,
+                            pose=period.side.plant.spatial)
     every = max(1, n_steps // 10)
     for k in range(n_steps + 1):
         if period.run(table) or k == n_steps or period.advance(table):

@@ -18,8 +18,8 @@ from typing import Any, Dict, Iterable, Sequence, Tuple
 import numpy as np
 
 __all__ = ["TRAJECTORY_COLUMNS", "INTERNAL_COLUMNS", "COLUMNS", "RAW_COLUMNS", "ESTIMATE_COLUMNS", "DRIVE_COLUMNS",
-           "EXCITATION_COLUMNS", "MOTION_COLUMNS", "ALL_COLUMNS", "FAILURES", "FALL", "BAD_COMMAND", "DIVERGED",
-           "FAILURE_COLUMNS", "Trajectory", "TrajectoryTable",
+           "EXCITATION_COLUMNS", "MOTION_COLUMNS", "POSE_COLUMNS", "ALL_COLUMNS", "FAILURES", "FALL", "BAD_COMMAND",
+           "DIVERGED", "FAILURE_COLUMNS", "Trajectory", "TrajectoryTable",
            "join_estimates", "stamp_key"]
 
 # The trajectory every source has (simulator, plant_sim's CSV, a bag), then the controller's internals.
@@ -35,7 +35,11 @@ ESTIMATE_COLUMNS = ["theta_w_hat", "theta_b_hat", "dtheta_w_hat", "dtheta_b_hat"
 DRIVE_COLUMNS = ["u_applied", "drive_saturation"]
 EXCITATION_COLUMNS = ["excitation"]   # the controller's excitation, included in u (identification)
 MOTION_COLUMNS = ["v_ref", "theta_w_ref"]   # the motion references of the period (SPEC 15: v* [m/s], theta_w* [rad])
-ALL_COLUMNS = COLUMNS + RAW_COLUMNS + ESTIMATE_COLUMNS + DRIVE_COLUMNS + EXCITATION_COLUMNS + MOTION_COLUMNS
+# a spatial plant's 3D pose at t_k (core.plant.Pose, backend mujoco: docs/theory.md 6.10), after every other column
+POSE_COLUMNS = ["x", "y", "yaw", "roll", "wheel_left", "wheel_right"]
+ALL_COLUMNS = (COLUMNS + RAW_COLUMNS + ESTIMATE_COLUMNS + DRIVE_COLUMNS + EXCITATION_COLUMNS + MOTION_COLUMNS
+               + POSE_COLUMNS)
+_NAN_POSE = (math.nan,) * len(POSE_COLUMNS)
 _NAN2 = (math.nan, math.nan)
 
 # why a run failed (a Trajectory's ``record['failure']``; a batch's ``failure`` codes are the index here, 0: it did
@@ -90,13 +94,15 @@ class TrajectoryTable:
     """
 
     def __init__(self, internals: bool = False, raw: bool = False, drive: bool = False, excitation: bool = False,
-                 keep_until: float = math.inf, sink=None, motion: bool = False):
+                 keep_until: float = math.inf, sink=None, motion: bool = False, pose: bool = False):
         self.internals = internals
         self.excitation = excitation
         self.motion = motion
+        self.pose = pose
         self.names = ((COLUMNS if internals else TRAJECTORY_COLUMNS) + ((RAW_COLUMNS + ESTIMATE_COLUMNS) if raw
                                                                          else []) + (DRIVE_COLUMNS if drive else [])
-                      + (EXCITATION_COLUMNS if excitation else []) + (MOTION_COLUMNS if motion else []))
+                      + (EXCITATION_COLUMNS if excitation else []) + (MOTION_COLUMNS if motion else [])
+                      + (POSE_COLUMNS if pose else []))
         self.width = len(self.names)
         self.n_extra = len(RAW_COLUMNS + ESTIMATE_COLUMNS) if raw else 0
         self.drive = drive
@@ -127,11 +133,11 @@ class TrajectoryTable:
         return self.count - len(self.rows) // self.width
 
     def append(self, t: float, x, u: float, tau_hat: Sequence[float] = _NAN2, tau_d: Sequence[float] = _NAN2,
-               out=None, extra: Sequence[float] = ()) -> None:
+               out=None, extra: Sequence[float] = (), pose=None) -> None:
         """Row of state ``x`` at ``t`` with command ``u``; ``out`` is the law's internals (a dict of its signals,
         :meth:`mwip_ros.core.laws.Law.step`, or an object with them as attributes); one it lacks is NaN.
         ``extra``: with ``raw``, the raw sample and the estimate (:data:`RAW_COLUMNS`, :data:`ESTIMATE_COLUMNS`;
-        empty: NaN)."""
+        empty: NaN).  ``pose``: with ``pose``, the plant's :class:`~.plant.Pose` at t_k (None: NaN)."""
         self._finish_newest()
         if not self._newest_kept:
             del self.rows[len(self.rows) - self.width:]
@@ -151,6 +157,9 @@ class TrajectoryTable:
             self.rows.append(out.get("excitation", math.nan) if isinstance(out, dict) else math.nan)
         if self.motion:
             self.rows.extend([out.get(c, math.nan) if isinstance(out, dict) else math.nan for c in MOTION_COLUMNS])
+        if self.pose:
+            self.rows.extend(_NAN_POSE if pose is None else (pose.x, pose.y, pose.yaw, pose.roll, pose.wheel_left,
+                                                              pose.wheel_right))
 
     def set_drive(self, u_applied: float, saturation: int) -> None:
         """The last row's :data:`DRIVE_COLUMNS`, once its period has been integrated."""

@@ -242,6 +242,14 @@ def decode_clock(data) -> int:
     t = r.time_ns()
     return t
 
+def decode_pose_stamped(data) -> Tuple[int, str, Tuple[float, float, float], Tuple[float, float, float, float]]:
+    """geometry_msgs/PoseStamped -> (stamp_ns, frame_id, position xyz, orientation xyzw)."""
+    r = _Reader(data, "PoseStamped")
+    stamp = r.time_ns()
+    frame = r.string()
+    v = r.doubles(7)
+    return stamp, frame, v[:3], v[3:]
+
 
 # --- encoding (little endian) ----------------------------------------------------------------------
 
@@ -311,6 +319,18 @@ class WrenchStampedEncoder:
 
     def __call__(self, stamp_ns: int, force: Sequence[float], torque: Sequence[float]) -> bytes:
         return CDR_LE + self._stamp.pack(*split_ns(stamp_ns)) + self._tail + self._body.pack(*force, *torque)
+
+
+class PoseStampedEncoder:
+    """Encode geometry_msgs/PoseStamped messages with a fixed ``frame_id``: position xyz, orientation xyzw."""
+
+    def __init__(self, frame_id: str = ""):
+        self._tail, pos = _header_tail(frame_id)
+        self._body = struct.Struct(f"<{-pos % 8}x7d")
+        self._stamp = _st("<iI")
+
+    def __call__(self, stamp_ns: int, position: Sequence[float], orientation: Sequence[float]) -> bytes:
+        return CDR_LE + self._stamp.pack(*split_ns(stamp_ns)) + self._tail + self._body.pack(*position, *orientation)
 
 
 class ImuEncoder:

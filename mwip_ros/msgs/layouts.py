@@ -10,6 +10,9 @@
     /clock                rosgraph_msgs/Clock       simulation time
 
     external_wrench       geometry_msgs/Wrench      torque.x, torque.y added to tau_ext1, tau_ext2
+    true_pose             geometry_msgs/PoseStamped a spatial plant's (backend mujoco) true 3D pose: frame_id
+                                                    odom (REP-105), position the axle's centre, orientation
+                                                    from yaw, pitch, roll (core.markers.pose_quaternion); stamp t_k
 
     raw sensors (plant_sim with sensors.model: raw, docs/theory.md 6.4; the state_estimator reads them):
     imu/data_raw          sensor_msgs/Imu           frame_id imu_link; no orientation (all 0,
@@ -33,6 +36,7 @@ from __future__ import annotations
 import math
 from typing import Dict, Sequence, Tuple
 
+from mwip_ros.core.markers import pose_angles, pose_quaternion
 from mwip_ros.core.model import State
 from mwip_ros.core.safety import PLAUSIBLE_TORQUE
 
@@ -43,7 +47,8 @@ __all__ = ["JOINT_NAMES", "INTERNAL_NAMES", "LIMITS", "RAW_LIMITS", "IMU_FRAME",
            "encode_state", "encode_wrench", "encode_internals",
            "encode_command", "encode_clock", "encode_external_wrench", "parse_joint_state", "parse_wrench",
            "parse_command", "parse_clock", "parse_internals", "parse_external_wrench", "encode_imu", "parse_imu",
-           "encode_encoder", "parse_encoder", "check_state", "RAW_FILTERS", "encode_twist", "parse_twist"]
+           "encode_encoder", "parse_encoder", "check_state", "RAW_FILTERS", "encode_twist", "parse_twist",
+           "POSE_FRAME", "encode_pose", "parse_pose", "parse_bool"]
 
 JOINT_NAMES = ("wheel", "body_pitch")
 INTERNAL_NAMES = ("S1", "S2", "x4d", "x4_bar", "u_dsc", "u_taud", "u", "x1")
@@ -73,6 +78,7 @@ RAW_LIMITS = {
 IMU_FRAME = "imu_link"         # REP-145: the IMU's own frame (the body frame at the IMU, core.raw_sensors)
 ENCODER_JOINT = "wheel"        # the encoder's joint: the wheel relative to the body
 ENCODER_FRAME = ""             # the encoder's JointState frame_id: none (a joint angle is no pose in a frame)
+POSE_FRAME = "odom"            # true_pose's frame: the world fixed where the run starts (REP-105)
 
 
 
@@ -104,6 +110,7 @@ _NO_ORIENTATION = (0.0, 0.0, 0.0, 0.0)
 _NO_ORIENTATION_COV = (-1.0,) + (0.0,) * 8
 _INTERNALS = cdr.JointStateEncoder(INTERNAL_NAMES)
 _WRENCH = cdr.WrenchStampedEncoder()
+_POSE = cdr.PoseStampedEncoder(POSE_FRAME)
 _ZERO3 = (0.0, 0.0, 0.0)
 encode_command = cdr.encode_float64   # std_msgs/Float64 wheel_torque_cmd
 encode_clock = cdr.encode_clock       # rosgraph_msgs/Clock
@@ -142,6 +149,12 @@ def encode_state(stamp: int, x, u_prev: float) -> bytes:
 def encode_wrench(stamp: int, t1: float, t2: float) -> bytes:
     """disturbance_estimate / lumped_disturbance: torque.x = component 1, torque.y = component 2."""
     return _WRENCH(stamp, _ZERO3, (float(t1), float(t2), 0.0))
+
+
+def encode_pose(stamp: int, pose) -> bytes:
+    """true_pose: a :class:`~mwip_ros.core.plant.Pose` as a PoseStamped in :data:`POSE_FRAME`."""
+    return _POSE(stamp, (float(pose.x), float(pose.y), float(pose.z)),
+                 pose_quaternion(pose.yaw, pose.pitch, pose.roll))
 
 
 def _diagonal(variance: float) -> Tuple[float, ...]:
@@ -260,6 +273,30 @@ def parse_wrench(data) -> Tuple[int, float, float]:
     stamp, _frame, _force, torque = _decoded(cdr.decode_wrench_stamped, data, "geometry_msgs/WrenchStamped")
     _torques(torque[:2], "torque")
     return stamp, torque[0], torque[1]
+
+
+def parse_pose(data) -> Tuple[int, Tuple[float, ...]]:
+    """(stamp_ns, (x, y, z, yaw, pitch, roll)) of a true_pose message, or BadMessage (frame :data:`POSE_FRAME`,
+    every value finite, the quaternion of unit norm to 1e-6)."""
+    stamp, frame, p, q = _decoded(cdr.decode_pose_stamped, data, "geometry_msgs/PoseStamped")
+    if frame != POSE_FRAME:
+        raise BadMessage(f"frame_id {frame[:64]!r}, expected {POSE_FRAME!r}")
+    _finite((*p, *q), "pose")
+    if abs(sum(v * v for v in q) - 1.0) > 1e-6:
+        raise BadMessage(f"orientation {list(q)} is not a unit quaternion")
+    pitch, yaw, roll = pose_angles(q[3], q[0], q[1], q[2])
+    return stamp, (p[0], p[1], p[2], yaw, pitch, roll)
+
+
+def parse_bool(data) -> bool:
+    """emergency_stop's value: std_msgs/Bool from its CDR bytes (encapsulation CDR_LE or CDR_BE, then one byte 0 or
+    1), or BadMessage."""
+    b = bytes(data[:5])
+    if len(b) < 5 or b[0] != 0 or b[1] not in (0, 1):
+        raise BadMessage(f"not a std_msgs/Bool: {len(data)} bytes, encapsulation {b[:2].hex() or 'missing'}")
+    if b[4] > 1:
+        raise BadMessage(f"not a std_msgs/Bool: data byte {b[4]} is neither 0 nor 1")
+    return b[4] == 1
 
 
 def parse_command(data) -> float:

@@ -162,16 +162,21 @@ def test_a_non_finite_state_is_fallen():
     assert p.fallen
 
 
+@pytest.mark.parametrize("roll", [0.0, 0.3, -1.2])
 @pytest.mark.parametrize("yaw", [0.0, 0.7, -2.5, 3.0])
 @pytest.mark.parametrize("pitch", [0.0, -0.1745, 1.2, 2.8, -3.0])
-def test_the_pose_of_a_yawed_and_pitched_body(yaw, pitch):
-    """theta_b is the pitch about the axle over the whole circle, whatever the heading (R = Rz(yaw) Ry(pitch))."""
+def test_the_pose_of_a_yawed_rolled_and_pitched_body(yaw, pitch, roll):
+    """theta_b is the pitch about the axle over the whole circle, whatever the heading and the roll
+    (R = Rz(yaw) Rx(roll) Ry(pitch), composed by MuJoCo), and true_pose's quaternion is that rotation."""
     import mujoco
 
-    from mwip_ros.core.mujoco_plant import _pose_of
-    q = np.zeros(4)
-    mujoco.mju_mulQuat(q, np.array([math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)]),
-                       np.array([math.cos(pitch / 2), 0.0, math.sin(pitch / 2), 0.0]))
-    got = _pose_of((0.0, 0.0, 0.0, *q))
+    from mwip_ros.core.markers import pose_angles, pose_quaternion
+    q, qz_qx = np.zeros(4), np.zeros(4)
+    mujoco.mju_mulQuat(qz_qx, np.array([math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)]),
+                       np.array([math.cos(roll / 2), math.sin(roll / 2), 0.0, 0.0]))
+    mujoco.mju_mulQuat(q, qz_qx, np.array([math.cos(pitch / 2), 0.0, math.sin(pitch / 2), 0.0]))
+    got = pose_angles(*q)
     assert got[0] == pytest.approx(pitch, abs=1e-12) and got[1] == pytest.approx(yaw, abs=1e-12)
-    assert got[2] == pytest.approx(0.0, abs=1e-12)
+    assert got[2] == pytest.approx(roll, abs=1e-12)
+    x, y, z, w = pose_quaternion(yaw, pitch, roll)   # ROS order (x, y, z, w); MuJoCo's is (w, x, y, z)
+    np.testing.assert_allclose(np.array([w, x, y, z]) * np.sign(w * q[0] or 1.0), q, rtol=0, atol=1e-12)

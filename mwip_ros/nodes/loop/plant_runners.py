@@ -188,6 +188,7 @@ class RealtimeRunner(_Runner):
         self.tick_times = TickLog(1.5 * node.h)   # bounded: a run of days keeps the same few arrays
         self.stale = 0
         self.missed = 0
+        self.watchdog_deferred = False   # a late tick deferred the watchdog's verdict to the next (_check_watchdog)
 
     def start(self) -> None:
         from mwip_ros.msgs.qos import REALTIME_INPUT_QOS
@@ -221,7 +222,7 @@ class RealtimeRunner(_Runner):
         if n._reset_pending:   # a period boundary: the new run's state 0 instead of the next state
             n._reset()
         elif len(self.tick_times) > 1:  # finish the period of the state published at the last tick
-            n.check_watchdog(now, late, self.tick_times)
+            self._check_watchdog(now, late)
             u = self.cmd
             if u is None or now - self.cmd_at > n.v["stale_command_periods"] * n.h:
                 self.stale += 1
@@ -232,6 +233,28 @@ class RealtimeRunner(_Runner):
                 return
         for pub, data in n._sample_messages():
             pub.publish(data)
+
+    def _check_watchdog(self, now: float, late: bool = False) -> None:
+        """At every tick: no good command for ``watchdog_s`` (counted from the first state) is a fault.
+        A tick that came late (``late``: a missed deadline, the plant itself stalled) defers the verdict to the
+        next tick, once: the controller cannot answer states the plant did not publish, so it first gets the one
+        this tick publishes (a dead controller is then caught one period later).  The detail names the first
+        stage of the chain that answered no state since then (the lockstep driver's :meth:`silent_stage`)."""
+        n = self.node
+        wd, ticks = n.watchdog, self.tick_times
+        if n.safety.faulted or not wd.expired(now):
+            self.watchdog_deferred = False
+        elif late and not self.watchdog_deferred:
+            self.watchdog_deferred = True
+        else:
+            silence = wd.silence(now)
+            since = [t for t in ticks[-(int(silence / n.h) + 3):] if t >= wd.last] + [now]   # the plant's ticks
+            gap = max((b - a for a, b in zip(since, since[1:])), default=0.0)   # meanwhile: its longest stall
+            stage, why = n.lockstep.silent_stage(n._watch_stamp, n.stamp0)
+            what = ("since the last" if wd.answered else "since the first state: none ever came")
+            n._fault("watchdog", f"no wheel_torque_cmd for {silence * 1e3:.1f} ms > watchdog_s = "
+                                 f"{wd.timeout * 1e3:g} ms ({what}); the stage that did not answer: {why}",
+                     silence_s=round(silence, 6), max_tick_gap_s=round(gap, 6), silent_stage=stage)
 
     def diagnostic_values(self) -> dict:
         if len(self.tick_times) <= 2:

@@ -48,8 +48,8 @@ trajectory by stamp where a report needs them (the bag, or the observer's own ``
 
 Exit code 0 when the run completed (or, with ``duration_s: 0``, was stopped), 3 when
 the robot fell (with ``exit_on_fall: false``: when the run reached ``duration_s`` with the robot down), 1 on
-a lockstep timeout, 2 on bad parameters, 128 + the signal (130,
-143) when SIGINT/SIGTERM stopped it before ``duration_s``.
+a lockstep timeout or a diverged simulation (``backend: mujoco``: a ``diverged`` fault), 2 on bad parameters,
+128 + the signal (130, 143) when SIGINT/SIGTERM stopped it before ``duration_s``.
 """
 from __future__ import annotations
 
@@ -61,7 +61,7 @@ from collections import deque
 from dataclasses import replace
 from typing import Optional
 
-from geometry_msgs.msg import Wrench, WrenchStamped
+from geometry_msgs.msg import PoseStamped, Wrench, WrenchStamped
 from rclpy.duration import Duration
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
@@ -71,6 +71,7 @@ from std_srvs.srv import Trigger
 
 from mwip_ros.core import metrics
 from mwip_ros.core.loop import PlantSide, answering
+from mwip_ros.core.plant import PlantDiverged
 from mwip_ros.core.safety import FAULT, HISTORY, DriverStateMachine, Transition, Watchdog
 from mwip_ros.core.trajectory import TrajectoryTable
 from mwip_ros.msgs import BadMessage, cdr
@@ -82,7 +83,7 @@ from mwip_ros.nodes.runtime.lockstep import LockstepDriver, subscriber_floor
 from mwip_ros.nodes.runtime.params import declare
 from mwip_ros.nodes.loop.plant_runners import RUNNERS
 from mwip_ros.nodes.runtime.process import EXIT_ERROR, EXIT_FALLEN, GracefulNodeMixin, run_node
-from mwip_ros.params import ParamError, plant_config
+from mwip_ros.params import plant_config
 from mwip_ros.params.typed import limit_warnings
 from mwip_ros.runs import CsvStream
 
@@ -99,18 +100,17 @@ class PlantSimNode(Node, GracefulNodeMixin):
         super().__init__(NAME, context=context)
         self.v = declare(self, NAME, argv)
         self.cfg = plant_config(self.v)
-        if self.cfg.backend != "rk4":   # the graph with MuJoCo is to come (docs/theory.md 6.10): mwip_sim runs it
-            raise ParamError("backend", f"{self.cfg.backend!r}: plant_sim runs the rk4 backend only, for now")
         sc = self.cfg.sensing
         # the driver's state machine (theory 6.8): one for the node's life, handed to every PlantSide (_initial_state)
         self.safety = DriverStateMachine(require_enable=self.cfg.require_enable, max_command=L.LIMITS["torque"])
         self.watchdog = Watchdog(self.v["watchdog_s"])   # realtime: armed at the first state, fed by every good
-        self._watchdog_deferred = False                   # command, checked per tick
+                                                          # command, checked per tick (the realtime runner)
         self._watch_stamp = 0                             # the stamp of the newest state when it was armed or fed
         self.steps = 0                                    # periods stepped since the start, across resets
         self.rate = StepRate()
         self.transitions: deque = deque(maxlen=HISTORY)   # what driver_state published (the summary's list)
         self.fell_at: Optional[float] = None
+        self.diverged_at: Optional[float] = None          # the physics diverged (backend mujoco): the run ended
         self._initial_state()
         self.mode = self.v["mode"]
         self.h = self.cfg.h
@@ -145,6 +145,8 @@ class PlantSimNode(Node, GracefulNodeMixin):
         self.true_pub = (self.create_publisher(JointState, "true_joint_states", pub_qos)
                          if sc.active or self.raw else None)
         self.truth_pub = self.create_publisher(WrenchStamped, "lumped_disturbance", pub_qos)
+        # a spatial plant (backend mujoco, docs/theory.md 6.10): its true 3D pose beside each state
+        self.pose_pub = self.create_publisher(PoseStamped, "true_pose", pub_qos) if self.plant.spatial else None
         self.clock_pub = self.create_publisher(Clock, "/clock", pub_qos) if runner.publishes_clock else None
         cmd_sub = self.create_subscription(Float64, "wheel_torque_cmd", self._on_cmd, in_qos, raw=True)
         self.create_subscription(Wrench, "external_wrench", self._on_wrench, INPUT_QOS, raw=True)
@@ -175,11 +177,12 @@ class PlantSimNode(Node, GracefulNodeMixin):
             need_subs=subscriber_floor(self.v["expected_subscribers"], answers),
             timeout_s=self.v["lockstep_timeout_s"], timeout_param="lockstep_timeout_s", settle_s=SETTLE_S,
             idle_hint="a wheel_torque_cmd (the controller is running but did not answer)",
-            also_published=tuple(p for p in (self.encoder_pub, self.truth_pub, self.true_pub) if p is not None),
+            also_published=tuple(p for p in (self.encoder_pub, self.truth_pub, self.true_pub, self.pose_pub)
+                                 if p is not None),
             answers=answers)
         self.runner = runner(self)
         dur = f"{self.v['duration_s']:g} s" if self.n_steps is not None else "until stopped"
-        self.get_logger().info(f"{self.mode} plant: h = {self.h * 1e3:.3f} ms, {self.cfg.substeps} RK4 sub-steps, "
+        self.get_logger().info(f"{self.mode} plant: h = {self.h * 1e3:.3f} ms, {self.plant.integration}, "
                                f"{dur}, seed {self.cfg.seed}")
         if self.raw:
             r = self.cfg.raw
@@ -223,7 +226,7 @@ class PlantSimNode(Node, GracefulNodeMixin):
     def _on_estop(self, data: bytes, via: str = "reliable") -> None:
         """``emergency_stop``, a level (module doc): true asserts it (a fault, held), false releases it."""
         try:
-            stop = _parse_bool(data)
+            stop = L.parse_bool(data)
         except BadMessage as exc:
             self.rejects("emergency_stop", str(exc))
             return
@@ -308,7 +311,7 @@ class PlantSimNode(Node, GracefulNodeMixin):
     def _new_table(self) -> TrajectoryTable:
         """The run's table, bounded: rows kept to the metrics window's end (and the newest), every row streamed to
         the csv."""
-        return TrajectoryTable(drive=self.cfg.motor.enabled or self.cfg.raw is not None,   # u_applied
+        return TrajectoryTable(drive=self.cfg.motor.enabled or self.cfg.raw is not None, pose=self.plant.spatial,
                                keep_until=metrics.WINDOW[1] + self.h, sink=self._csv_row if self.v["csv"] else None)
 
     def _csv_row(self, k: int, row) -> None:
@@ -359,27 +362,6 @@ class PlantSimNode(Node, GracefulNodeMixin):
         self.watchdog.arm(time.monotonic())
         self._watch_stamp = self._stamp()
 
-    def check_watchdog(self, now: float, late: bool = False, ticks=()) -> None:
-        """Realtime, at every tick: no good command for ``watchdog_s`` (counted from the first state) is a fault.
-        A tick that came late (``late``: a missed deadline, the plant itself stalled) defers the verdict to the
-        next tick, once: the controller cannot answer states the plant did not publish, so it first gets the one
-        this tick publishes (a dead controller is then caught one period later).  The detail names the first
-        stage of the chain that answered no state since then (the lockstep driver's :meth:`silent_stage`)."""
-        wd = self.watchdog
-        if self.safety.faulted or not wd.expired(now):
-            self._watchdog_deferred = False
-        elif late and not self._watchdog_deferred:
-            self._watchdog_deferred = True
-        else:
-            silence = wd.silence(now)
-            since = [t for t in ticks[-(int(silence / self.h) + 3):] if t >= wd.last] + [now]   # the plant's ticks
-            gap = max((b - a for a, b in zip(since, since[1:])), default=0.0)   # meanwhile: its longest stall
-            stage, why = self.lockstep.silent_stage(self._watch_stamp, self.stamp0)
-            what = ("since the last" if wd.answered else "since the first state: none ever came")
-            self._fault("watchdog", f"no wheel_torque_cmd for {silence * 1e3:.1f} ms > watchdog_s = "
-                                    f"{wd.timeout * 1e3:g} ms ({what}); the stage that did not answer: {why}",
-                        silence_s=round(silence, 6), max_tick_gap_s=round(gap, 6), silent_stage=stage)
-
     def _publish_transition(self, tr: Optional[Transition], start: bool = False, **extra) -> None:
         """Log a transition (one line), publish it on ``driver_state`` and keep it for the summary."""
         if tr is None:
@@ -410,6 +392,8 @@ class PlantSimNode(Node, GracefulNodeMixin):
         stamp = self._stamp()
         if self.true_pub is not None:
             self.true_pub.publish(L.encode_state(stamp, p.x, p.u_prev))
+        if self.pose_pub is not None:
+            self.pose_pub.publish(L.encode_pose(stamp, p.pose))
         measured, u_prev = self.side.sense()
         if not self.raw:
             return [(self.state_pub, L.encode_state(stamp, measured, u_prev))]
@@ -425,7 +409,7 @@ class PlantSimNode(Node, GracefulNodeMixin):
         self.steps += 1
         u, tau_d = self.side.act(u_cmd, self.extra)
         self.truth_pub.publish(L.encode_wrench(self._stamp(), tau_d[0], tau_d[1]))
-        self.table.append(p.t, p.x, u, tau_d=tau_d)
+        self.table.append(p.t, p.x, u, tau_d=tau_d, pose=p.pose)
         if p.fallen and not self.fallen:
             self.fallen, self.fell_at = True, p.t
             self._publish_transition(self.safety.check_fall(p.t, p.x[1], self.cfg.fall_angle))
@@ -451,6 +435,12 @@ class PlantSimNode(Node, GracefulNodeMixin):
             finite = all(map(math.isfinite, p.x))
         except (ArithmeticError, ValueError):  # e.g. sin of an infinite angle
             finite = False
+        except PlantDiverged as exc:   # the physics diverged (backend mujoco, theory 6.10): a driver fault, exit 1
+            tr = self.safety.fault(p.t, "diverged", str(exc))   # its line names the time and the cause
+            self.diverged_at = p.t
+            self._publish_transition(tr)
+            self.finish(EXIT_ERROR, None if tr else f"{exc}; stopping")   # (in another fault already: said here)
+            return True
         if not finite:
             self.finish(EXIT_ERROR, f"state became non-finite at t = {p.t:.3f} s; stopping")
             return True
@@ -524,6 +514,10 @@ class PlantSimNode(Node, GracefulNodeMixin):
         return OK, f"{self.mode} run at t = {p.t:.2f} s", values
 
     # --- end of run: the one report of both runners -------------------------------------------------
+    def _verdict(self) -> str:
+        """The run's end in a word: a diverged simulation is never scored upright."""
+        return "DIVERGED" if self.diverged_at is not None else ("FALLEN" if self.fallen else "upright")
+
     def on_shutdown(self) -> None:
         log = self.get_logger()
         if self.stop_signal is not None and self.n_steps is not None and not self.done:
@@ -532,11 +526,12 @@ class PlantSimNode(Node, GracefulNodeMixin):
         wall = (time.monotonic() - self.t_wall0) if self.t_wall0 else 0.0
         n, steps = len(self.table), self.steps   # the table holds the run since the last reset; steps all of it
         for pub in (self.state_pub, self.imu_pub, self.encoder_pub, self.truth_pub, self.clock_pub, self.true_pub,
-                    self.driver_pub):
+                    self.pose_pub, self.driver_pub):
             if pub is not None:  # let a recorder receive the last states before this process exits
                 pub.wait_for_all_acked(Duration(seconds=2.0))
         summary = {"mode": self.mode, "control_rate_hz": 1.0 / self.h, "periods": n, "steps": steps, "wall_s": wall,
                    "steps_per_s": steps / wall if wall > 0 else None, "fallen": self.fallen,
+                   "diverged_at": self.diverged_at,
                    "exit_code": self.exit_code, "rejected": dict(self.rejects.counts),
                    "resets": self.resets, "reset_calls": self.reset_calls,
                    "driver_state": self.safety.state, "fault_reason": self.safety.fault_reason,
@@ -544,7 +539,7 @@ class PlantSimNode(Node, GracefulNodeMixin):
         if n:
             since = f" since the last of {self.resets} reset(s), {steps} in all" if self.resets else ""
             log.info(f"{self.mode} run: {n} periods{since}, {self.table.last('t'):.3f} s simulated in {wall:.2f} s "
-                     f"wall ({steps / max(wall, 1e-9):.0f} steps/s); {'FALLEN' if self.fallen else 'upright'}")
+                     f"wall ({steps / max(wall, 1e-9):.0f} steps/s); {self._verdict()}")
         summary.update(self.runner.summary())
         log.info(f"rejected messages: {self.rejects.summary()}")
         self.table.flush()
@@ -554,7 +549,8 @@ class PlantSimNode(Node, GracefulNodeMixin):
             run = self.table.trajectory(NAME, self.fallen, self.h)   # to the window's end, and the last row
             t_end = run.t[-1]
             win = metrics.WINDOW if t_end >= metrics.WINDOW[1] - 1e-9 else (t_end / 2, t_end)
-            m = metrics.compute(run.columns, win, self.cfg.fall_angle, t_fall=self.fell_at)
+            failed = self.fell_at if self.diverged_at is None else self.diverged_at   # never upright when diverged
+            m = metrics.compute(run.columns, win, self.cfg.fall_angle, t_fall=failed)
             if self.table.dropped and self.table.drive:   # saturated_s is of the whole run
                 m = replace(m, saturated_s=self.table.saturated * self.h)
             summary["metrics"] = {"window_s": list(win), **m.as_dict()}
@@ -565,31 +561,8 @@ class PlantSimNode(Node, GracefulNodeMixin):
                 log.info(f"wrote {self.v['csv']}")
         if self.v["summary_json"]:
             with open(self.v["summary_json"], "w") as f:
-                json.dump(_jsonable(summary), f, indent=1, allow_nan=False)
+                json.dump(metrics.json_safe(summary), f, indent=1, allow_nan=False)
             log.info(f"wrote {self.v['summary_json']}")
-
-
-def _parse_bool(data) -> bool:
-    """std_msgs/Bool's value from its CDR bytes (encapsulation CDR_LE or CDR_BE, then one byte 0 or 1), or
-    BadMessage."""
-    b = bytes(data[:5])
-    if len(b) < 5 or b[0] != 0 or b[1] not in (0, 1):
-        raise BadMessage(f"not a std_msgs/Bool: {len(data)} bytes, encapsulation {b[:2].hex() or 'missing'}")
-    if b[4] > 1:
-        raise BadMessage(f"not a std_msgs/Bool: data byte {b[4]} is neither 0 nor 1")
-    return b[4] == 1
-
-
-def _jsonable(x):
-    """Plain JSON values: numpy numbers -> float, NaN/inf -> None (JSON has neither)."""
-    if isinstance(x, dict):
-        return {k: _jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, (bool, int, str)) or x is None:
-        return x
-    x = float(x)
-    return x if math.isfinite(x) else None
 
 
 def main(argv=None) -> int:

@@ -1,0 +1,131 @@
+"""The graph with the MuJoCo plant (``plant_sim: backend: mujoco``, docs/theory.md 6.10): lockstep equal to
+``mwip_sim`` with it, pose columns and ``true_pose`` included; realtime balances; a diverging simulation is the
+driver's ``diverged`` fault (exit 1, nothing that is not finite recorded); ``~/reset`` restarts it."""
+import json
+import math
+
+import numpy as np
+import pytest
+
+pytest.importorskip("mujoco")
+
+from graphproc import PARAMS, Graph  # noqa: E402
+from mwip_ros import params as P  # noqa: E402
+from mwip_ros.core.sim import simulate  # noqa: E402
+from mwip_ros.core.trajectory import POSE_COLUMNS  # noqa: E402
+from mwip_ros.runs import read_bag_run, read_csv  # noqa: E402
+
+pytestmark = pytest.mark.graph
+
+MUJOCO = ("-p", "backend:=mujoco")
+STATE = ["theta_w", "theta_b", "dtheta_w", "dtheta_b", "u", "tau_d1", "tau_d2"]
+# MuJoCo's hinge damping far beyond what its explicit RK4 step holds: it warns (mjWARN_BADQ*) in the first period
+DIVERGING = ("-p", "actual.I_w:=0.000001", "-p", "actual.D_b:=1000000.0")
+
+
+def _paper(**over):
+    return dict(P.merged_values(P.load_param_file(PARAMS)), backend="mujoco", **over)
+
+
+def test_lockstep_mujoco_graph_equals_mwip_sim_with_the_pose_and_the_bag_holds_it(tmp_path):
+    """Deterministic: the graph's trajectory, its pose columns included, equals mwip_sim's with backend mujoco to
+    1e-9 over 1.5 s of DSCNDO, and the recorded true_pose is that pose (the rk4 csv has no pose columns)."""
+    csv_path, bag = tmp_path / "graph.csv", tmp_path / "bag"
+    with Graph(tmp_path) as g:
+        rec = g.start("mcap_recorder", "-p", f"output:={bag}", "-p", "use_sim_time:=true")
+        g.start("disturbance_observer", "-p", "use_sim_time:=true")
+        g.start("dscndo_controller", "-p", "use_sim_time:=true")
+        plant = g.start("plant_sim", "-p", f"csv:={csv_path}", "-p", "duration_s:=1.5", "-p", "expected_subscribers:=3",
+                        *MUJOCO)
+        assert plant.wait(180) == 0, plant.output()
+        assert rec.stop() == 0, rec.output()
+    assert "MuJoCo" in plant.output()
+    offline = simulate(P.closed_loop(_paper(), duration=1.5, controller="dscndo"))
+    graph = read_csv(csv_path)
+    assert len(graph) == len(offline) == 301
+    assert list(graph.columns)[-len(POSE_COLUMNS):] == POSE_COLUMNS
+    for c in STATE + POSE_COLUMNS:
+        assert np.isfinite(offline[c]).all(), c
+        np.testing.assert_allclose(graph[c], offline[c], rtol=0, atol=1e-9, err_msg=c)
+    assert offline["x"][-1] != offline["x"][0] and offline["wheel_left"][-1] != offline["wheel_left"][0]  # it moved
+    from_bag = read_bag_run(bag)
+    assert len(from_bag) == 301
+    for c in ("x", "y", "yaw", "roll"):   # from true_pose's position and quaternion
+        np.testing.assert_allclose(from_bag[c], offline[c], rtol=0, atol=1e-9, err_msg=c)
+    assert np.isnan(from_bag["wheel_left"]).all()   # no message carries the wheels' own angles
+    np.testing.assert_allclose(from_bag["theta_b"], offline["theta_b"], rtol=0, atol=1e-9)
+
+
+def test_realtime_mujoco_graph_balances(tmp_path):
+    with Graph(tmp_path) as g:
+        g.start("disturbance_observer", "-p", "mode:=realtime")
+        g.start("dscndo_controller", "-p", "mode:=realtime")
+        plant = g.start("plant_sim", "-p", "mode:=realtime", "-p", "duration_s:=3.0",
+                        "-p", f"csv:={tmp_path / 'rt.csv'}", *MUJOCO)
+        code = plant.wait(90)
+    assert code == 0, plant.output()
+    run = read_csv(tmp_path / "rt.csv")
+    assert run.t[-1] == pytest.approx(3.0) and len(run) == 601
+    assert np.isfinite(run["x"]).all() and np.abs(run["yaw"]).max() < 1e-9   # u / 2 per wheel: straight ahead
+    assert np.abs(run["theta_b"][-100:]).max() < 0.1, run["theta_b"][-100:]   # recovering from -10 deg, upright
+
+
+def test_a_diverging_mujoco_simulation_is_a_diverged_fault_exit_1_and_nothing_non_finite_recorded(tmp_path):
+    csv_path, bag, summary = tmp_path / "graph.csv", tmp_path / "bag", tmp_path / "summary.json"
+    with Graph(tmp_path) as g:
+        rec = g.start("mcap_recorder", "-p", f"output:={bag}", "-p", "use_sim_time:=true")
+        g.start("disturbance_observer", "-p", "use_sim_time:=true")
+        g.start("dscndo_controller", "-p", "use_sim_time:=true")
+        plant = g.start("plant_sim", "-p", f"csv:={csv_path}", "-p", "duration_s:=1.0", "-p", "expected_subscribers:=3",
+                        "-p", f"summary_json:={summary}", *MUJOCO, *DIVERGING)
+        code = plant.wait(120)
+        assert rec.stop() == 0, rec.output()
+    out = plant.output()
+    assert code == 1, out
+    lines = [ln for ln in out.splitlines() if "diverged" in ln and "ERROR" in ln]
+    assert len(lines) == 1 and "t = 0.000 s" in lines[0] and "mjWARN_BADQ" in lines[0], out
+    s = json.loads(summary.read_text())
+    assert s["driver_state"] == "fault" and s["fault_reason"] == "diverged" and s["exit_code"] == 1, s
+    assert s["diverged_at"] == 0.0 and s["metrics"]["upright"] is False, s   # never scored upright
+    assert "DIVERGED" in out and "upright" not in out.split("lockstep run:")[1].splitlines()[0], out
+    run = read_csv(csv_path)
+    assert len(run) == 1
+    for c in ("theta_w", "theta_b", "dtheta_w", "dtheta_b", *POSE_COLUMNS):
+        assert np.isfinite(run[c]).all(), c
+    from_bag = read_bag_run(bag)
+    assert len(from_bag) == 1 and all(math.isfinite(from_bag[c][0]) for c in ("theta_b", "x", "yaw"))
+
+
+def test_reset_restarts_the_mujoco_plant_and_the_run_after_it_equals_mwip_sim(tmp_path):
+    """``~/reset`` builds the MuJoCo model afresh at the initial state: the run after it (the csv keeps it) equals
+    mwip_sim's from the start, pose included, and the recording splits into two runs there."""
+    from sensor_msgs.msg import JointState
+
+    from injector import Injector
+    from test_plant_resets import _calls, _client
+    from mwip_ros.bag.segments import Segments
+    csv_path, bag = tmp_path / "graph.csv", tmp_path / "bag"
+    with Graph(tmp_path) as g:
+        rec = g.start("mcap_recorder", "-p", f"output:={bag}", "-p", "use_sim_time:=true")
+        g.start("disturbance_observer", "-p", "use_sim_time:=true")
+        g.start("dscndo_controller", "-p", "use_sim_time:=true")
+        plant = g.start("plant_sim", "-p", "duration_s:=1.0", "-p", "expected_subscribers:=4", "-p", f"csv:={csv_path}",
+                        *MUJOCO)
+        with Injector(g.domain_id) as inj:
+            client = _client(inj)
+            states = inj.record("joint_states", JointState)
+            assert inj.wait(lambda: len(states) > 60, 120), plant.output()[-2000:]
+            assert _calls(inj, client, 1)[0].message.startswith("reset #1")
+            assert inj.wait(lambda: plant.poll() is not None, 120), plant.output()[-3000:]
+        assert plant.wait(10) == 0, plant.output()[-3000:]
+        assert rec.stop() == 0, rec.output()[-2000:]
+    assert "reset #1 at t = " in plant.output()
+    offline = simulate(P.closed_loop(_paper(), duration=1.0, controller="dscndo"))
+    graph = read_csv(csv_path)
+    assert len(graph) == len(offline) == 201
+    for c in STATE + POSE_COLUMNS:
+        np.testing.assert_allclose(graph[c], offline[c], rtol=0, atol=1e-9, err_msg=c)
+    segs = Segments.from_bag(bag)
+    assert len(segs) == 2 and segs[1].states == 201, segs.describe()
+    second = read_bag_run(bag, segment=1)   # the pose of the run after the reset, from true_pose
+    np.testing.assert_allclose(second["x"], offline["x"], rtol=0, atol=1e-9)
