@@ -155,7 +155,8 @@ class PlantSide:
 
 class Period:
     """A whole period in one process (the offline loop): the plant's stages around the estimator (when the
-    plant measures raw: :mod:`.estimators`), the observer and the law."""
+    plant measures raw: :mod:`.estimators`), the observer and the law (with ``motion``, a :class:`.motion.Shaper`,
+    the law tracks its references: :func:`command`)."""
 
     def __init__(self, side: PlantSide, observer, law, estimator=None, excitation=None, motion=None):
         self.side, self.observer, self.law, self.estimator = side, observer, law, estimator

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from typing import Any, List, Mapping, Optional
 
-__all__ = ["specs", "motion", "profile_rule", "refuse_motion", "PROFILE_MAX_POINTS", "ABSURD_SPEED"]
+__all__ = ["specs", "motion", "profile_rule", "PROFILE_MAX_POINTS", "ABSURD_SPEED"]
 
 PROFILE_MAX_POINTS = 10000
 ABSURD_SPEED = 1e3   # m/s: a profile's (and a cmd_vel's, core.motion) speed beyond this is no robot's
@@ -66,11 +66,3 @@ def motion(v: Mapping[str, Any]):
                         max_yaw_rate=v["motion.max_yaw_rate"], timeout_s=v["motion.cmd_vel_timeout_s"],
                         position_gain=v["motion.position_gain"], lean_gain=v["motion.lean_gain"],
                         profile=tuple(zip(prof[0::2], prof[1::2])), r=v["nominal.r"])
-
-
-def refuse_motion(v: Mapping[str, Any], what: str) -> None:
-    """ParamError naming ``motion.enabled`` when it is true where ``what`` cannot track references yet."""
-    if v.get("motion.enabled", False):
-        from .errors import ParamError
-        raise ParamError("motion.enabled", f"{what} does not track references yet; set it to false")
-
