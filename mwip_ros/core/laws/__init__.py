@@ -30,6 +30,8 @@ import math
 import os
 from typing import Any, Dict, List, Mapping, NamedTuple, Optional, Tuple
 
+from ..motion import error_state
+
 __all__ = ["Law", "LawParam", "register", "get", "names", "families", "variant", "lookup", "PLUGINS_ENV",
            "load_plugins", "unavailable", "instances", "check_plugins", "LawError", "PluginError"]
 
@@ -149,10 +151,7 @@ class Law:
     def tracked(self, x):
         """``x`` in the error coordinates of the reference (theta_w - theta_w*, theta_b, theta_w' - theta_w'* +
         lambda (theta_w - theta_w*), theta_b'): :func:`mwip_ros.core.motion.error_state`; ``x`` itself without one."""
-        if self.ref is None:
-            return x
-        from ..motion import error_state
-        return error_state(x, self.ref)
+        return x if self.ref is None else error_state(x, self.ref)
 
     def reset(self) -> None:
         """Forget the state: the next step is a first step."""
