@@ -34,7 +34,7 @@ ESTIMATE_COLUMNS = ["theta_w_hat", "theta_b_hat", "dtheta_w_hat", "dtheta_b_hat"
 # worst saturation code of the period (core.drive: 0 none, 1 current, 2 voltage); NaN in a row no period followed
 DRIVE_COLUMNS = ["u_applied", "drive_saturation"]
 EXCITATION_COLUMNS = ["excitation"]   # the controller's excitation, included in u (identification)
-MOTION_COLUMNS = ["v_ref", "theta_w_ref"]   # the motion references of the period (SPEC 15: v* [m/s], theta_w* [rad])
+MOTION_COLUMNS = ["v_ref", "theta_w_ref"]   # the period's motion references (theory 6.11: v* [m/s], theta_w* [rad])
 ALL_COLUMNS = COLUMNS + RAW_COLUMNS + ESTIMATE_COLUMNS + DRIVE_COLUMNS + EXCITATION_COLUMNS + MOTION_COLUMNS
 _NAN2 = (math.nan, math.nan)
 

@@ -1,4 +1,4 @@
-"""The ``motion.*`` parameters of ``dscndo_controller`` (SPEC 15, docs/theory.md 6.11): the references a law tracks.
+"""The ``motion.*`` parameters of ``dscndo_controller`` (docs/theory.md 6.11): the references a law tracks.
 
 :func:`specs` gives their :class:`~.schema.ParamSpec` (``params.schema`` lists them with the controller's own);
 :func:`motion` makes the :class:`mwip_ros.core.motion.MotionConfig` of merged values, None while
@@ -34,7 +34,7 @@ def specs() -> List[Any]:
     pos = dict(lo=0.0, lo_open=True)
     return [
         ParamSpec("motion.enabled", "bool", False, "track references from cmd_vel (or motion.profile): every law "
-                  "tracks the wheel's reference angle and rate (SPEC 15, docs/theory.md 6.11); false = balance only, "
+                  "tracks the wheel's reference angle and rate (docs/theory.md 6.11); false = balance only, "
                   "as in the paper"),
         ParamSpec("motion.max_speed", "double", 1.5, "motion: |v*| at most this [m/s]; a faster cmd_vel is clipped",
                   hi=100.0, **pos, unit="m/s"),

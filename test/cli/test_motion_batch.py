@@ -1,4 +1,4 @@
-"""The batch tracks motion references too (SPEC 15): scenarios with motion.enabled run the scalar loop scenario by
+"""The batch tracks motion references too (theory 6.11): scenarios with motion.enabled run the scalar loop scenario by
 scenario inside the batch (core.batch._simulate_each), so a batch's numbers are mwip_sim's, and mwip_sweep and
 mwip_tune run a spec whose base turns motion on."""
 import subprocess

@@ -1,4 +1,4 @@
-"""Every law tracks the motion references (SPEC 15, docs/theory.md 6.11); with x_d = 0 (no reference) DSC is eq.
+"""Every law tracks the motion references (docs/theory.md 6.11); with x_d = 0 (no reference) DSC is eq.
 (22)-(28) to the bit, and a reference at rest with zero gains changes no law's command."""
 import math
 
@@ -18,7 +18,7 @@ NOMINAL = P.physical(V, "nominal")
 
 
 def _paper_eq_22_28(p, k1, k2, tau4, x, x4d, first):
-    """Eq. (16)-(28) transcribed from SPEC section 3 (S1 = x2), independently of the code under test."""
+    """Eq. (16)-(28) transcribed from docs/theory.md section 3 (S1 = x2), independently of the code under test."""
     _, x2, x4, x3 = x
     mc = p.m12 * math.cos(x2)
     A = p.m11 * p.m22 - mc ** 2

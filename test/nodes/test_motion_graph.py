@@ -1,6 +1,6 @@
-"""cmd_vel and the motion references in the graph (SPEC 15): lockstep with config/motion.yaml's profile equals mwip_sim;
-realtime, the robot follows a published cmd_vel, stops when it ends (the timeout, logged once, counted on
-/diagnostics), and hostile Twists are rejected and counted."""
+"""cmd_vel and the motion references in the graph (theory 6.11): lockstep with config/motion.yaml's profile equals
+mwip_sim for every law; realtime, the robot follows a published cmd_vel, stops when it ends (the timeout, logged
+once, counted on /diagnostics), and hostile Twists are rejected and counted."""
 import time
 from pathlib import Path
 

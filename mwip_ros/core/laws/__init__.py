@@ -142,7 +142,7 @@ class Law:
     # --- state --------------------------------------------------------------------------------------
 
     def track(self, ref) -> None:
-        """The references of the coming step (:class:`~mwip_ros.core.motion.Reference`, SPEC 15; None: none, the law
+        """The references of the coming step (:class:`~mwip_ros.core.motion.Reference`, theory 6.11; None: none, the law
         regulates to the upright at rest as in the paper).  The loop calls it once per period before :meth:`step`
         (:meth:`mwip_ros.core.loop.Period.decide`, the controller node); a law tracks it in error coordinates
         (:meth:`tracked`), DSC through its outer loop (docs/theory.md 6.11)."""
