@@ -47,3 +47,18 @@ def test_roll_away_against_position_hold():
     assert rows[0][1:] == _travel(paper)
     assert rows[1][1:] == _travel(hold)
     assert abs(float(rows[1][2])) < abs(float(rows[0][2])) / 5   # holding, not rolling away
+
+
+def test_the_lean_gain_table_of_theory_6_11():
+    text = (REPO / "docs" / "theory.md").read_text()
+    _, rows = table_after(text, "| k_x [rad s/rad] | speed err RMS [m/s] | upright |")
+    base = P.merged_values(P.load_param_files(FILES))
+    for row in rows:
+        kx = float(row[0].split()[0])
+        v = dict(base, **{"motion.lean_gain": kx})
+        run = simulate(P.closed_loop(v, controller="dscndo"))
+        m = metrics.motion_metrics(run.columns, v["nominal.r"], v["fall_angle"], run.record.get("t_fall"))
+        if m["upright"]:
+            assert row[1:] == [f"{m['speed_rms']:.4f}", "yes"], row
+        else:
+            assert row[1:] == ["-", f"NO (fell at {run.record['t_fall']:.3f} s)"], row

@@ -130,7 +130,7 @@ def fig3(runs: Sequence, path, title: Optional[str] = None, window=None, falls: 
 
 
 def speed_plot(runs: Sequence, path, r: float) -> None:
-    """v = r theta_w' and the reference v* (column ``v_ref``, SPEC 15) against time, one panel per run."""
+    """v = r theta_w' and the reference v* (column ``v_ref``, docs/theory.md 6.11) against time, one panel per run."""
     plt = _plt()
     fig, axes = plt.subplots(len(runs), 1, sharex=True, sharey=True, figsize=(8.5, 1.6 + 1.35 * len(runs)),
                              squeeze=False)

@@ -206,7 +206,7 @@ def _finish(args, values, runs) -> int:
               f"window was simulated; --duration {w1:g} or a --window inside the run)")
     moving = [(r.label, metrics.motion_metrics(r.columns, values["nominal.r"], values["fall_angle"],
                                                r.record.get("t_fall"))) for r in runs if "v_ref" in r.columns]
-    if moving:   # motion.enabled: how each law tracked v* and held its position (SPEC 15)
+    if moving:   # motion.enabled: how each law tracked v* and held its position (docs/theory.md 6.11)
         print("motion (v* of motion.profile or cmd_vel; the hold: v* = 0 at the end, from "
               f"{metrics.HOLD_SETTLE_S:g} s after the stop):")
         print(metrics.motion_table(moving))

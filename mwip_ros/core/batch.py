@@ -236,10 +236,11 @@ def simulate_batch(loops: Sequence[ClosedLoop], window: Sequence[float], record:
     sensors and the estimator's method (:func:`_raw_stage`); else, with ``record`` or a law without a pure form,
     the scalar loop scenario by scenario (:func:`_simulate_each`).  The array and compiled forms have no driver
     state machine (docs/theory.md 6.8): they always run enabled, so scenarios with ``require_enable: true`` (a
-    driver nobody enables: its bridge open, no torque) run the scalar loop, which has it."""
+    driver nobody enables: its bridge open, no torque) run the scalar loop, which has it; so do scenarios that track
+    motion references (``motion``, theory 6.11: the shaping and the laws' ``track`` are not in the array forms yet)."""
     if any(lp.plant.backend != "rk4" for lp in loops):
         raise ValueError("the batch simulator runs the rk4 plant backend only for now (plant_sim.backend)")
-    if numba_missing() or any(lp.plant.require_enable for lp in loops):   # both array forms need numba
+    if numba_missing() or any(lp.plant.require_enable or lp.motion is not None for lp in loops):   # see above
         return _simulate_each(loops, window, record)
     beyond = any(_beyond_arrays(lp) for lp in loops)
     if compiled is None:

@@ -155,12 +155,13 @@ class PlantSide:
 
 class Period:
     """A whole period in one process (the offline loop): the plant's stages around the estimator (when the
-    plant measures raw: :mod:`.estimators`), the observer and the law."""
+    plant measures raw: :mod:`.estimators`), the observer and the law (with ``motion``, a :class:`.motion.Shaper`,
+    the law tracks its references: :func:`command`)."""
 
     def __init__(self, side: PlantSide, observer, law, estimator=None, excitation=None, motion=None):
         self.side, self.observer, self.law, self.estimator = side, observer, law, estimator
         self.excitation = excitation
-        self.motion = motion   # the references' shaper (core.motion.Shaper, SPEC 15), None: none (the paper)
+        self.motion = motion   # the references' shaper (core.motion.Shaper, theory 6.11), None: none (the paper)
         self.failure = None   # (t, one line, cause: a FAILURES name) once the run has failed
         if (side.raw is None) != (estimator is None):
             raise ValueError("a raw plant needs a state estimator, and only a raw plant has one")
@@ -232,7 +233,7 @@ def command(law, x, tau_hat, excitation, k: int, motion=None):
     records; the excitation and the references (v_ref, theta_w_ref) are in the internals.  The controller node
     calls this too, so the offline loop and the graph take the references in the same place of the period."""
     if motion is not None:
-        ref = motion.reference(k, x[0])   # SPEC 15: theta_w*(0) is the first state's wheel angle
+        ref = motion.reference(k, x[0])   # docs/theory.md 6.11: theta_w*(0) is the first state's wheel angle
         law.track(ref)
     u, internals = law.step(x, tau_hat)
     if motion is not None and isinstance(internals, dict):

@@ -210,7 +210,7 @@ HOLD_SETTLE_S = 2.0   # the hold's first seconds after v* reached 0 are the stop
 
 def motion_metrics(cols: Mapping[str, np.ndarray], r: float, fall_angle: float, t_fall: Optional[float] = None,
                    settle: float = HOLD_SETTLE_S) -> dict:
-    """The tracking metrics of a run with motion references (SPEC 15; columns ``v_ref``, ``theta_w_ref``):
+    """The tracking metrics of a run with motion references (docs/theory.md 6.11; columns ``v_ref``, ``theta_w_ref``):
 
     * ``speed_rms``: RMS of v - v* over the run, v = r theta_w' [m/s];
     * ``hold_drift``: r (theta_w(end) - theta_w(hold start)) [m] over the hold: the final stretch with v* = 0, from

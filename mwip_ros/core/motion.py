@@ -1,4 +1,4 @@
-"""Motion references (SPEC 15, docs/theory.md 6.11): a speed command shaped into the wheel's reference angle and rate.
+"""Motion references (docs/theory.md 6.11): a speed command shaped into the wheel's reference angle and rate.
 
 A command (``cmd_vel``: linear.x = v [m/s], angular.z = psi' [rad/s]; or the profile of an offline run) becomes, once
 per control period k (t_k = k h), the references every law tracks (:meth:`mwip_ros.core.laws.Law.track`):

@@ -60,7 +60,7 @@ class ClosedLoop:
     duration_s: float
     estimator: Optional[EstimatorConfig] = None   # the state_estimator of a raw plant (plant.raw), else None
     excitation: Optional[ExcitationConfig] = None   # the controller's excitation (identification), else None
-    motion: Optional[MotionConfig] = None   # the references every law tracks (SPEC 15), else None (the paper)
+    motion: Optional[MotionConfig] = None   # the references every law tracks (theory 6.11), else None (the paper)
 
     @property
     def name(self) -> str:

@@ -1,4 +1,4 @@
-"""The ``motion.*`` parameters of ``dscndo_controller`` (SPEC 15, docs/theory.md 6.11): the references a law tracks.
+"""The ``motion.*`` parameters of ``dscndo_controller`` (docs/theory.md 6.11): the references a law tracks.
 
 :func:`specs` gives their :class:`~.schema.ParamSpec` (``params.schema`` lists them with the controller's own);
 :func:`motion` makes the :class:`mwip_ros.core.motion.MotionConfig` of merged values, None while
@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from typing import Any, List, Mapping, Optional
 
-__all__ = ["specs", "motion", "profile_rule", "refuse_motion", "PROFILE_MAX_POINTS", "ABSURD_SPEED"]
+__all__ = ["specs", "motion", "profile_rule", "PROFILE_MAX_POINTS", "ABSURD_SPEED"]
 
 PROFILE_MAX_POINTS = 10000
 ABSURD_SPEED = 1e3   # m/s: a profile's (and a cmd_vel's, core.motion) speed beyond this is no robot's
@@ -34,7 +34,7 @@ def specs() -> List[Any]:
     pos = dict(lo=0.0, lo_open=True)
     return [
         ParamSpec("motion.enabled", "bool", False, "track references from cmd_vel (or motion.profile): every law "
-                  "tracks the wheel's reference angle and rate (SPEC 15, docs/theory.md 6.11); false = balance only, "
+                  "tracks the wheel's reference angle and rate (docs/theory.md 6.11); false = balance only, "
                   "as in the paper"),
         ParamSpec("motion.max_speed", "double", 1.5, "motion: |v*| at most this [m/s]; a faster cmd_vel is clipped",
                   hi=100.0, **pos, unit="m/s"),
@@ -66,11 +66,3 @@ def motion(v: Mapping[str, Any]):
                         max_yaw_rate=v["motion.max_yaw_rate"], timeout_s=v["motion.cmd_vel_timeout_s"],
                         position_gain=v["motion.position_gain"], lean_gain=v["motion.lean_gain"],
                         profile=tuple(zip(prof[0::2], prof[1::2])), r=v["nominal.r"])
-
-
-def refuse_motion(v: Mapping[str, Any], what: str) -> None:
-    """ParamError naming ``motion.enabled`` when it is true where ``what`` cannot track references yet."""
-    if v.get("motion.enabled", False):
-        from .errors import ParamError
-        raise ParamError("motion.enabled", f"{what} does not track references yet; set it to false")
-

@@ -393,7 +393,7 @@ NODE_SPECS: Dict[str, List[ParamSpec]] = {
                   **_lqr_q, dynamic=True),
         ParamSpec("lqr.R", "double", 0.01, "LQR input weight (> 0)", **_positive(), dynamic=True),
         *_law_parameters(),   # what a plug-in law declares itself (core.laws.Law.parameters)
-        *_motion_parameters(),   # motion.*: the references the laws track (params.motion, SPEC 15)
+        *_motion_parameters(),   # motion.*: the references the laws track (params.motion, docs/theory.md 6.11)
         ParamSpec("excitation.type", "string", "none", "a known torque added to the law's command, recorded, for "
                   "identification (mwip_identify): none, chirp (a linear sweep f0 -> f1) or prbs (+-amplitude, "
                   "random bits)", **_one_of("none", "chirp", "prbs")),

@@ -150,7 +150,8 @@ def _run_chunk(chunk: Chunk, batch_bytes: Optional[int]) -> ChunkResult:
         v = values(ov)
         key = (1.0 / v["control_rate_hz"], int(v["substeps"]), v["sensors.encoder_counts_per_rev"],
                v["sensors.delay_periods"], v["actuator.delay_periods"],   # PlantConfig's h, substeps, sensing
-               v.get("sensors.model"), v.get("motor.enabled"), v.get("excitation.type"), v.get("method"))   # stages
+               v.get("sensors.model"), v.get("motor.enabled"), v.get("excitation.type"), v.get("method"),
+               v.get("motion.enabled"))   # stages
         groups.setdefault(key, []).append(i)
     upright, t_fall, failure = np.zeros(n, dtype=bool), np.full(n, np.nan), np.zeros(n, dtype=np.int64)
     metrics: Dict[str, np.ndarray] = {}

@@ -180,10 +180,6 @@ def parse_spec(doc: Any, source: str = "<spec>", here: Path = Path("."),
     if base_values.get("backend", "rk4") != "rk4":
         raise SpecError("base", f"plant_sim.backend: {base_values['backend']}: the batch simulator (mwip_sweep, "
                                 "mwip_tune) runs the rk4 backend only for now; mwip_sim runs the others", source)
-    if base_values.get("motion.enabled", False):
-        raise SpecError("base", "dscndo_controller.motion.enabled: true: the batch simulator (mwip_sweep, mwip_tune) "
-                                "does not track motion references yet; set motion.enabled: false, or run mwip_sim",
-                        source)
 
     ctrls = doc.get("controllers", ["dsc", "dscndo"])   # the paper's comparison unless the spec says more
     known = laws.names()   # the registry (core.laws)

@@ -1,4 +1,4 @@
-"""core.motion: the shaping of SPEC 15 against hand-computed references; bad commands never enter them."""
+"""core.motion: the shaping of docs/theory.md 6.11 against hand-computed references; bad commands never enter them."""
 import math
 
 import pytest

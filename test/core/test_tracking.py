@@ -1,4 +1,4 @@
-"""Every law tracks the motion references (SPEC 15, docs/theory.md 6.11); with x_d = 0 (no reference) DSC is eq.
+"""Every law tracks the motion references (docs/theory.md 6.11); with x_d = 0 (no reference) DSC is eq.
 (22)-(28) to the bit, and a reference at rest with zero gains changes no law's command."""
 import math
 
@@ -18,7 +18,7 @@ NOMINAL = P.physical(V, "nominal")
 
 
 def _paper_eq_22_28(p, k1, k2, tau4, x, x4d, first):
-    """Eq. (16)-(28) transcribed from SPEC section 3 (S1 = x2), independently of the code under test."""
+    """Eq. (16)-(28) transcribed from docs/theory.md section 3 (S1 = x2), independently of the code under test."""
     _, x2, x4, x3 = x
     mc = p.m12 * math.cos(x2)
     A = p.m11 * p.m22 - mc ** 2
@@ -89,3 +89,22 @@ def test_state_laws_see_the_error_coordinates(name):
     b.track(ref)
     # the rate the law drives theta_w' to: 4 - 0.5 (3 - 2) = 3.5, so theta_w' - 3.5 = 1.5 (hand-computed)
     assert b.step(x, None)[0] == a.step((1.0, 0.05, 1.5, -0.1), None)[0]
+
+
+def test_every_plant_tracks_the_profile():
+    """Both physics (rk4 and mujoco, docs/theory.md 6.10) drive config/motion.yaml's profile with the same law: the
+    references are the law stage's, not the plant's."""
+    pytest.importorskip("mujoco")
+    from mwip_ros.core import metrics
+    from mwip_ros.core.sim import simulate
+    from mwip_ros.params.paths import default_params_file
+    files = [default_params_file(), default_params_file().parent / "motion.yaml"]
+    v = P.merged_values(P.load_param_files(files))
+    out = {}
+    for backend in ("rk4", "mujoco"):
+        run = simulate(P.closed_loop(dict(v, backend=backend), controller="smc_ndo", duration=12.0))
+        out[backend] = metrics.motion_metrics(run.columns, v["nominal.r"], v["fall_angle"], run.record.get("t_fall"))
+        t, v_ref = run["t"], run["v_ref"]
+        assert v_ref[np.searchsorted(t, 8.0)] == 1.0   # the profile's 1 m/s, reached at 4 s
+        assert out[backend]["upright"]
+    assert abs(out["rk4"]["speed_rms"] - out["mujoco"]["speed_rms"]) < 0.01, out

@@ -105,7 +105,7 @@ def test_resim_with_a_changed_gain_reports_the_difference(tmp_path, bag):
 
 
 def test_resim_refuses_a_controller_that_tracks_cmd_vel_in_one_line(tmp_path, bag):
-    """SPEC 15: cmd_vel is not in the bag, so a controller with motion.enabled (and no profile) cannot be
+    """docs/theory.md 6.11: cmd_vel is not in the bag, so a controller with motion.enabled (and no profile) cannot be
     re-simulated: one line naming motion.enabled, exit 2, before any state is fed."""
     code, out = resim(tmp_path, bag, "-p", "motion.enabled:=true")
     assert code == 2, out

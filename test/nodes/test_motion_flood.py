@@ -1,4 +1,4 @@
-"""A cmd_vel flood cannot make the controller miss its period (SPEC 15, issue 33 item 6): the realtime DSCNDO graph
+"""A cmd_vel flood cannot make the controller miss its period (docs/theory.md 6.11): the realtime DSCNDO graph
 with motion on, flooded on cmd_vel by a process of its own (test/cmd_vel_flooder.py: valid and NaN Twists in turn),
 answers every period as the unflooded one does.  The test's rate and durations are short (3,000 a second for 2 s);
 ``MWIP_CMD_VEL_FLOOD="RATE SECONDS"`` runs the long case whose numbers are in BENCHMARKS.md (10,000 a second):

@@ -1,4 +1,4 @@
-"""The ``motion.*`` keys of dscndo_controller (SPEC 15): defaults off, out of range is one line naming the key, and
+"""The ``motion.*`` keys of dscndo_controller (theory 6.11): defaults off, out of range is one line naming the key, and
 the typed config."""
 import subprocess
 import sys

@@ -30,6 +30,8 @@ import math
 import os
 from typing import Any, Dict, List, Mapping, NamedTuple, Optional, Tuple
 
+from ..motion import error_state
+
 __all__ = ["Law", "LawParam", "register", "get", "names", "families", "variant", "lookup", "PLUGINS_ENV",
            "load_plugins", "unavailable", "instances", "check_plugins", "LawError", "PluginError"]
 
@@ -140,7 +142,7 @@ class Law:
     # --- state --------------------------------------------------------------------------------------
 
     def track(self, ref) -> None:
-        """The references of the coming step (:class:`~mwip_ros.core.motion.Reference`, SPEC 15; None: none, the law
+        """The references of the coming step (:class:`~mwip_ros.core.motion.Reference`, theory 6.11; None: none, the law
         regulates to the upright at rest as in the paper).  The loop calls it once per period before :meth:`step`
         (:meth:`mwip_ros.core.loop.Period.decide`, the controller node); a law tracks it in error coordinates
         (:meth:`tracked`), DSC through its outer loop (docs/theory.md 6.11)."""
@@ -149,10 +151,7 @@ class Law:
     def tracked(self, x):
         """``x`` in the error coordinates of the reference (theta_w - theta_w*, theta_b, theta_w' - theta_w'* +
         lambda (theta_w - theta_w*), theta_b'): :func:`mwip_ros.core.motion.error_state`; ``x`` itself without one."""
-        if self.ref is None:
-            return x
-        from ..motion import error_state
-        return error_state(x, self.ref)
+        return x if self.ref is None else error_state(x, self.ref)
 
     def reset(self) -> None:
         """Forget the state: the next step is a first step."""

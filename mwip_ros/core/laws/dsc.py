@@ -11,6 +11,7 @@ import math
 from typing import List
 
 from ..controller import DscGains, dsc_terms, dsc_terms_tracking, filter_step
+from ..motion import rate_reference
 from . import Law
 
 __all__ = ["DscLaw", "INTERNALS", "dsc_step", "lean_reference"]
@@ -30,7 +31,6 @@ def dsc_step(P, p, h, x, s, first, m=math):
 def lean_reference(ref, x, m=math):
     """The outer loop's lean reference before its filter, x_d_bar = -k_x e with the wheel error
     e = (theta_w' - theta_w'*) + lambda (theta_w - theta_w*) (docs/theory.md 6.11)."""
-    from ..motion import rate_reference
     return -ref.lean_gain * (x[2] - rate_reference(ref, x[0]))
 
 

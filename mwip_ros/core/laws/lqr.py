@@ -46,7 +46,7 @@ class LqrLaw(Law):
         return LqrGain(*lqr_gain(nominal, h, values["lqr.Q"], values["lqr.R"]))
 
     def step(self, x, tau_hat=None):
-        x = self.tracked(x)   # the reference state's error coordinates (SPEC 15); x itself without motion
+        x = self.tracked(x)   # the reference state's error coordinates (docs/theory.md 6.11); x itself without motion
         u, _, (u_lqr, S1) = lqr_step(self.params, self.nominal, self.h, x, 0.0, False, self.m)
         return u, {"u_dsc": u_lqr, "u_taud": 0.0, "S1": S1, "u": u}   # u_taud: 0, off
 

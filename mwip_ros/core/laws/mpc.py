@@ -338,7 +338,7 @@ class MpcLaw(Law):
 
     def _solve(self, x, offset):
         """u_0 of the QP (bounds ``offset`` -+ u_max) for the state ``x``: one scenario, or arrays of them."""
-        x = self.tracked(x)   # the reference state's error coordinates (SPEC 15); x itself without motion
+        x = self.tracked(x)   # the reference state's error coordinates (docs/theory.md 6.11); x itself without motion
         theta_b, dtheta_w, dtheta_b = x[1], x[2], x[3]
         if np.ndim(theta_b) == 0:            # one scenario
             if self._qps is None or len(self._qps) != 1:

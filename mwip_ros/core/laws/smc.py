@@ -151,7 +151,7 @@ class SmcLaw(Law):
         return [text] if text else []
 
     def step(self, x, tau_hat=None):
-        x = self.tracked(x)   # the reference state's error coordinates (SPEC 15); x itself without motion
+        x = self.tracked(x)   # the reference state's error coordinates (docs/theory.md 6.11); x itself without motion
         u, _, (sigma, u_eq, u_sw, u_smc) = smc_step(self.pure_params(self.params), self.nominal, self.h, x, 0.0,
                                                     False, self.m)
         return u, {"S1": sigma, "u_dsc": u_smc, "u_taud": 0.0, "u": u}   # u_taud: 0, the term is off

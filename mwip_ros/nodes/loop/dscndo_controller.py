@@ -17,7 +17,7 @@ so is a state for which the law gives a non-finite command (nothing is published
 A stream that restarted re-initialises the filter.  At most ``_MAX_PENDING`` states
 and estimates wait for their partner.
 
-With ``motion.enabled`` (SPEC 15, docs/theory.md 6.11) the law tracks references: from ``motion.profile`` (offline and
+With ``motion.enabled`` (docs/theory.md 6.11) the law tracks references: from ``motion.profile`` (offline and
 lockstep scenarios: the graph then equals ``mwip_sim``) or, without one, from ``cmd_vel`` (geometry_msgs/Twist,
 REP-103: linear.x, angular.z).  A Twist only sets the target (:class:`mwip_ros.core.motion.Shaper`); the references
 of period k are made inside the period, in ``core.loop.command``, as offline.  A Twist that is not one, not finite or
@@ -89,7 +89,7 @@ class DscndoController(Node, GracefulNodeMixin):
         self.input = StateInput(self, self.rejects, STAMP_WINDOW_PERIODS * round(P.period(self.v) * 1e9),
                                 "controller")
         self.watch = PublisherWatch(self, ["joint_states", "disturbance_estimate"])
-        mc = motion_config(self.v)   # SPEC 15: None while motion.enabled is false (nothing changes)
+        mc = motion_config(self.v)   # docs/theory.md 6.11: None while motion.enabled is false (nothing changes)
         self.motion = Shaper(mc, self.h) if mc is not None else None
         if mc is not None and not mc.profile:   # cmd_vel sets the target; the newest one counts
             from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -248,7 +248,7 @@ class DscndoController(Node, GracefulNodeMixin):
 
     def diagnostic_status(self):
         values = {"commands": self.count, "law": self._name(), "waiting_states": len(self.states)}
-        if self.motion is not None:   # SPEC 15: the stops and the refused or clipped cmd_vel
+        if self.motion is not None:   # docs/theory.md 6.11: the stops and the refused or clipped cmd_vel
             m = self.motion
             values.update(cmd_vel_timeouts=m.timeouts, cmd_vel_rejected=m.rejected, cmd_vel_clipped=m.clipped,
                           v_ref=m.ref.v if m.ref is not None else 0.0)

@@ -85,7 +85,7 @@ class Resim:
         self.failed = False
         self._param_clients: Dict[str, object] = {}
         self._param_wait: Optional[Tuple[float, list]] = None   # (since, futures) of changes being applied
-        self._motion_asked = None   # the future of the controller's motion.* (SPEC 15), then True once judged
+        self._motion_asked = None   # the future of the controller's motion.* (theory 6.11), then True once judged
         self.refused = False
         self.applied_changes = 0
 
