@@ -116,6 +116,13 @@ def make_msg(type_name: str, i: int):
                             linear_acceleration_covariance=np.eye(3).ravel() * 4e-4)
     if type_name == "visualization_msgs/msg/MarkerArray":
         return T[type_name](markers=[_marker(T, header(), i, k) for k in range(2)])
+    if type_name == "nav_msgs/msg/Odometry":   # robot_state's odom
+        pose = T["geometry_msgs/msg/Pose"](position=T["geometry_msgs/msg/Point"](x=0.1 * i, y=0.0, z=0.254),
+                                           orientation=T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0))
+        twist = T["geometry_msgs/msg/Twist"](linear=vec(0.5 * i, 0, 0), angular=vec(0, 0, 0))
+        return T[type_name](header=header(), child_frame_id="base_link",
+                            pose=T["geometry_msgs/msg/PoseWithCovariance"](pose=pose, covariance=np.eye(6).ravel() * i),
+                            twist=T["geometry_msgs/msg/TwistWithCovariance"](twist=twist, covariance=np.zeros(36)))
     raise AssertionError(type_name)
 
 
