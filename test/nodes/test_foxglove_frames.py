@@ -90,3 +90,4 @@ def test_the_foxglove_message_carries_the_frames():
         assert text in data
     for value in (0.25, -0.25, 0.3, math.sin(0.15), math.cos(0.15)):   # doubles, protobuf's fixed64 little-endian
         assert struct.pack("<d", value) in data
+

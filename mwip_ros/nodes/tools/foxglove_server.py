@@ -90,6 +90,8 @@ from mwip_ros.params import ParamError
 NAME = "foxglove_server"
 SCHEMA_ENCODING = "ros2msg"
 MESSAGE_ENCODING = "cdr"
+LATCHED_TOPICS = ("robot_description",)   # published once, transient local: resent to each new subscriber
+LATCHED_RESEND_S = 0.2                    # how often new subscriptions are looked at for those
 SDK_HOST = "127.0.0.1"        # the SDK's server listens here, on a port of its own, behind the relay
 
 
@@ -162,6 +164,8 @@ class FoxgloveServer(Node, GracefulNodeMixin):
         self.channels = {}   # topic -> its foxglove.Channel
         self.received = 0
         self.frames, self.tf_channel = FrameView(), None   # robot_state's frames as foxglove.FrameTransforms
+        self.latched = {}   # topic -> the last message of a latched topic, sent again to each new subscriber
+        self.create_timer(LATCHED_RESEND_S, self._resend_latched)
         self.tap = TopicTap(self, wanted, self._on_message, what="forwarded")
         self.watch = conns.ConnectionWatch(self, self.max_clients, self.idle_timeout_s)
         self.watch.start()   # after _renice: the thread inherits the main thread's nice value
@@ -186,8 +190,16 @@ class FoxgloveServer(Node, GracefulNodeMixin):
         if channel.has_sinks():   # a channel no client subscribed: nothing to send, no clock to read
             channel.log(data, log_time=self._now())
         name = leaf(topic)
+        if name in LATCHED_TOPICS:
+            self.latched[topic] = data
         if name in FRAME_TOPICS:
             self._frames(name, data)
+
+    def _resend_latched(self) -> None:
+        """A latched topic's last message to a client that subscribed after it came (a late joiner gets the URDF)."""
+        for topic in self.listener.take_subscribed():
+            if topic in self.latched and topic in self.channels:
+                self.channels[topic].log(self.latched[topic], log_time=self._now())
 
     def _now(self) -> int:
         # the node clock's time; without use_sim_time that is the system time, read 40 times faster directly
