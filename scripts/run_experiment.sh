@@ -3,7 +3,7 @@
 #
 #   scripts/run_experiment.sh [--params FILE [FILE ...]] [--mode lockstep|realtime] [--duration S]
 #                             [--no-record] [--out DIR] [--name NAME] [--laws LAW[,LAW...]]
-#                             [--sensors state|raw]
+#                             [--sensors state|raw] [--robot-state]
 #
 # --params takes a base file, then overlays (config/sensing_realistic.yaml, a tuned overlay), merged
 # in order as ROS merges repeated --params-file; every node's section is checked before anything starts.
@@ -20,6 +20,9 @@
 # and a motor encoder measure, and a state_estimator (started here, with the same files) turns them into
 # joint_states. Files that set sensors.model: state contradict it (refused). A parameter file that sets
 # sensors.model: raw itself starts the estimator too.
+#
+# --robot-state also starts robot_state (odom, the URDF on robot_description, wheel_joint_states; docs/graph.md):
+# the bags then hold odom, robot_description and wheel_joint_states too. Off by default: the bags stay as they were.
 #
 # Bags, logs and the report go to DIR (default: bags/) as NAME_<law>, NAME_logs and NAME_report, NAME
 # being the date and time (or --name NAME); a second experiment with the same NAME (started in the
@@ -42,6 +45,7 @@ OUT="$ROOT/bags"
 LAWS=""    # --laws; empty: the files' law without and with the observer term (mwip_ros.cli.experiment)
 NAME=""
 SENSORS=state
+ROBOT_STATE=0   # --robot-state: robot_state beside the loop
 
 usage() { awk 'NR > 1 && /^#/ { sub(/^# ?/, ""); print; next } NR > 1 { exit }' "$0"; }
 die() { echo "run_experiment: $*" >&2; exit 2; }
@@ -60,6 +64,7 @@ while [ $# -gt 0 ]; do
         --mode) MODE="$(value_of "$@")"; shift 2 ;;
         --duration) DURATION="$(value_of "$@")"; shift 2 ;;
         --no-record) RECORD=0; shift ;;
+        --robot-state) ROBOT_STATE=1; shift ;;
         --out) OUT="$(value_of "$@")"; shift 2
                [ ! -e "$OUT" ] || [ -d "$OUT" ] || die "--out: $OUT exists and is not a directory" ;;
         --laws) LAWS="$(value_of "$@")"; shift 2 ;;
@@ -180,6 +185,10 @@ for i in "${!LAW_LIST[@]}"; do
     if [ "$MODEL" = raw ]; then   # the first stage of the chain: imu/data_raw + wheel_encoder -> joint_states
         state_estimator --ros-args "${PF[@]}" -p "state_estimator:mode:=$MODE" \
             > "$LOGS/${CTRL}_state_estimator.log" 2>&1 &
+        PIDS+=($!)
+    fi
+    if [ "$ROBOT_STATE" = 1 ]; then   # a view of the states: odom, robot_description, wheel_joint_states
+        robot_state --ros-args "${PF[@]}" > "$LOGS/${CTRL}_robot_state.log" 2>&1 &
         PIDS+=($!)
     fi
     dscndo_controller --ros-args "${PF[@]}" -p "dscndo_controller:mode:=$MODE" -p "dscndo_controller:use_observer:=$USE_OBS" -p "dscndo_controller:law:=$LAW" \

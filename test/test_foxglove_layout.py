@@ -149,17 +149,22 @@ def test_every_topic_and_message_path_exists(doc):
     for panel, topic in topics:
         assert topic in TOPICS, (panel, topic)
         kinds[panel.split("!")[0]].append(TOPICS[topic])
-    assert kinds["3D"] == ["visualization_msgs/msg/MarkerArray"]
+    assert kinds["3D"] == ["visualization_msgs/msg/MarkerArray", "std_msgs/msg/String"]   # markers, the URDF
     assert kinds["DiagnosticSummary"] == kinds["DiagnosticStatusPanel"] == ["diagnostic_msgs/msg/DiagnosticArray"]
 
 
 def test_the_layout_shows_what_the_docs_say(doc):
-    """The robot in frame world; theta_b, theta_w', u, each tau_hat beside the true tau_d and the estimated
-    pitch beside the true one (layouts.py:
+    """The robot in frame world, its URDF on the odom frames; theta_b, theta_w', u, each tau_hat beside the true
+    tau_d and the estimated pitch beside the true one (layouts.py:
     joint_states holds [wheel, body_pitch]; torque.x / torque.y are components 1 / 2)."""
     from mwip_ros.nodes.tools.robot_markers import FRAME
     three_d = [cfg for panel, cfg in doc["configById"].items() if panel.startswith("3D!")]
-    assert len(three_d) == 1 and three_d[0]["followTf"] == FRAME and three_d[0]["topics"]["/robot_markers"]["visible"]
+    assert len(three_d) == 2 and three_d[0]["followTf"] == FRAME and three_d[0]["topics"]["/robot_markers"]["visible"]
+    # the URDF (robot_state's robot_description) on the frames the server sends (foxglove_frames), its grid on odom
+    from mwip_ros.core.urdf import BASE_LINK, ODOM_FRAME
+    urdf = three_d[1]
+    assert urdf["followTf"] == BASE_LINK and urdf["topics"] == {"/robot_description": {"visible": True}}
+    assert urdf["layers"]["mwip_grid"]["frameId"] == ODOM_FRAME
     plotted = {tuple(s["value"] for s in cfg["paths"]) for panel, cfg in doc["configById"].items()
                if panel.startswith("Plot!")}
     b, w = JOINT_NAMES.index("body_pitch"), JOINT_NAMES.index("wheel")

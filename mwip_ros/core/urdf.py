@@ -17,12 +17,13 @@ node publishes it latched on ``robot_description``; the live view shows it in it
 """
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 from typing import Any, List, Mapping, NamedTuple, Tuple
 from xml.sax.saxutils import quoteattr
 
-__all__ = ["ROBOT_NAME", "ODOM_FRAME", "Transform", "frame_transforms",
+__all__ = ["ROBOT_NAME", "ODOM_FRAME", "Transform", "frame_transforms", "Joint", "urdf_joints", "joint_transforms",
            "BASE_LINK", "IMU_LINK", "WHEEL_LINKS", "WHEEL_JOINTS", "RobotModel", "robot_model", "urdf"]
 
 ROBOT_NAME = "mwip"
@@ -134,8 +135,82 @@ def frame_transforms(m: RobotModel, x: float, y: float, yaw: float, theta_b: flo
     """The frame tree odom -> base_link -> wheels / imu_link of the pose (x, y, yaw) in ``odom``, the body's pitch
     ``theta_b`` and the wheels' joint angles phi (relative to the body): base_link on the axle's centre, r above
     the ground, turned by yaw then pitched; each wheel at y = +-track_width / 2 turned by its phi about y."""
-    half = m.track_width / 2.0
     return [Transform(ODOM_FRAME, BASE_LINK, (x, y, m.r), _yaw_pitch(yaw, theta_b)),
-            Transform(BASE_LINK, WHEEL_LINKS[0], (0.0, half, 0.0), _yaw_pitch(0.0, phi_left)),
-            Transform(BASE_LINK, WHEEL_LINKS[1], (0.0, -half, 0.0), _yaw_pitch(0.0, phi_right)),
-            Transform(BASE_LINK, IMU_LINK, (0.0, 0.0, m.imu_offset), (0.0, 0.0, 0.0, 1.0))]
+            *joint_transforms(model_joints(m), {WHEEL_JOINTS[0]: phi_left, WHEEL_JOINTS[1]: phi_right})]
+
+
+@functools.lru_cache(maxsize=8)
+def model_joints(m: RobotModel) -> Tuple["Joint", ...]:
+    """The joints of :func:`urdf` of ``m`` (parsed once per model)."""
+    return tuple(urdf_joints(urdf(m)))
+
+
+class Joint(NamedTuple):
+    """One joint of a URDF: its origin in the parent (xyz [m], rpy [rad]) and, when it moves, its axis."""
+
+    name: str
+    type: str
+    parent: str
+    child: str
+    xyz: Tuple[float, float, float]
+    rpy: Tuple[float, float, float]
+    axis: Tuple[float, float, float]
+
+
+def _floats(text, default):
+    return tuple(float(a) for a in text.split()) if text else default
+
+
+def urdf_joints(text: str) -> List[Joint]:
+    """The joints of the URDF ``text`` (any robot's, not only :func:`urdf`'s).  Raises ValueError for text that
+    is no URDF."""
+    import xml.etree.ElementTree as ET
+    try:
+        root = ET.fromstring(text)
+    except ET.ParseError as exc:
+        raise ValueError(f"not XML: {exc}") from None
+    if root.tag != "robot":
+        raise ValueError(f"not a URDF: the root element is <{root.tag}>, not <robot>")
+    out = []
+    for j in root.findall("joint"):
+        origin, axis = j.find("origin"), j.find("axis")
+        parent, child = j.find("parent"), j.find("child")
+        if parent is None or child is None:
+            raise ValueError(f"joint {j.get('name')!r} has no parent or child")
+        out.append(Joint(j.get("name", ""), j.get("type", "fixed"), parent.get("link", ""), child.get("link", ""),
+                         _floats(origin.get("xyz") if origin is not None else None, (0.0, 0.0, 0.0)),
+                         _floats(origin.get("rpy") if origin is not None else None, (0.0, 0.0, 0.0)),
+                         _floats(axis.get("xyz") if axis is not None else None, (1.0, 0.0, 0.0))))
+    return out
+
+
+def _qmul(a, b):
+    ax, ay, az, aw = a
+    bx, by, bz, bw = b
+    return (aw * bx + ax * bw + ay * bz - az * by, aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw, aw * bw - ax * bx - ay * by - az * bz)
+
+
+def _rpy(r: float, p: float, y: float):
+    """(x, y, z, w) of URDF's rpy: roll about x, then pitch about y, then yaw about z, all about fixed axes."""
+    def about(axis, a):
+        s = math.sin(a / 2.0)
+        return (axis[0] * s, axis[1] * s, axis[2] * s, math.cos(a / 2.0))
+    return _qmul(about((0, 0, 1), y), _qmul(about((0, 1, 0), p), about((1, 0, 0), r)))
+
+
+def joint_transforms(joints, positions: Mapping[str, float]) -> List[Transform]:
+    """Each joint's child frame in its parent, as robot_state_publisher computes it: the origin, then a turn by the
+    joint's position about its axis (continuous and revolute joints; ``positions`` by joint name, missing = 0).
+    Prismatic and other moving joints are left out; fixed joints are included."""
+    out = []
+    for j in joints:
+        q = _rpy(*j.rpy)
+        if j.type in ("continuous", "revolute"):
+            n = math.sqrt(sum(a * a for a in j.axis)) or 1.0
+            a, s = float(positions.get(j.name, 0.0)), math.sin(float(positions.get(j.name, 0.0)) / 2.0)
+            q = _qmul(q, (j.axis[0] / n * s, j.axis[1] / n * s, j.axis[2] / n * s, math.cos(a / 2.0)))
+        elif j.type != "fixed":
+            continue
+        out.append(Transform(j.parent, j.child, tuple(j.xyz), q))
+    return out

@@ -136,11 +136,14 @@ class Subscriptions(ServerListener):
         self.pairs: Set[Tuple[int, int]] = set()
         self.clients: Set[int] = set()
         self.address: Dict[int, str] = {}   # subscribed client id -> its peer address (_peer_key)
+        self.new_topics: List[str] = []      # the topics subscribed since take_subscribed (latched resends)
 
     def on_subscribe(self, client, channel) -> None:
         pending = self.sdk_log.take_subscribing()
         with self.lock:
             self.pairs.add((client.id, channel.id))
+            if len(self.new_topics) < 1000:
+                self.new_topics.append(channel.topic)
             new = client.id not in self.clients
             self.clients.add(client.id)
             if pending is not None and pending[1] == channel.id:
@@ -158,6 +161,12 @@ class Subscriptions(ServerListener):
     def counts(self) -> Tuple[int, int]:
         with self.lock:
             return len(self.clients), len(self.pairs)
+
+    def take_subscribed(self) -> List[str]:
+        """The topics subscribed since the last call (each once)."""
+        with self.lock:
+            out, self.new_topics = list(dict.fromkeys(self.new_topics)), []
+        return out
 
     def subscribed_peers(self) -> Tuple[Set[str], int]:
         """The addresses of the subscribed clients, and how many subscribed clients have no known address."""

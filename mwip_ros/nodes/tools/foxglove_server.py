@@ -78,6 +78,8 @@ from rclpy.node import Node
 
 from mwip_ros.bag import message_definition
 from mwip_ros.nodes.runtime.diagnostics import OK, WARN
+from mwip_ros.msgs.topics import leaf
+from mwip_ros.nodes.tools.foxglove_frames import FRAME_TOPICS, TF_TOPIC, FrameView, to_foxglove
 from mwip_ros.nodes.tools.foxglove_relay import CLASSIC_SUBPROTOCOL, DESCRIPTORS_PER_CLIENT, SDK_SUBPROTOCOL, Relay
 from mwip_ros.nodes.runtime.params import declare
 from mwip_ros.nodes.runtime.process import EXIT_ERROR, GracefulNodeMixin, for_every_thread, run_node
@@ -88,6 +90,8 @@ from mwip_ros.params import ParamError
 NAME = "foxglove_server"
 SCHEMA_ENCODING = "ros2msg"
 MESSAGE_ENCODING = "cdr"
+LATCHED_TOPICS = ("robot_description",)   # published once, transient local: resent to each new subscriber
+LATCHED_RESEND_S = 0.2                    # how often new subscriptions are looked at for those
 SDK_HOST = "127.0.0.1"        # the SDK's server listens here, on a port of its own, behind the relay
 
 
@@ -159,6 +163,9 @@ class FoxgloveServer(Node, GracefulNodeMixin):
                         for type_name in sorted({t for _, _, t in wanted})}
         self.channels = {}   # topic -> its foxglove.Channel
         self.received = 0
+        self.frames, self.tf_channel = FrameView(), None   # robot_state's frames as foxglove.FrameTransforms
+        self.latched = {}   # topic -> the last message of a latched topic, sent again to each new subscriber
+        self.create_timer(LATCHED_RESEND_S, self._resend_latched)
         self.tap = TopicTap(self, wanted, self._on_message, what="forwarded")
         self.watch = conns.ConnectionWatch(self, self.max_clients, self.idle_timeout_s)
         self.watch.start()   # after _renice: the thread inherits the main thread's nice value
@@ -181,9 +188,33 @@ class FoxgloveServer(Node, GracefulNodeMixin):
             channel = self._advertise(topic, type_name)
         self.received += 1
         if channel.has_sinks():   # a channel no client subscribed: nothing to send, no clock to read
-            # the node clock's time; without use_sim_time that is the system time, read 40 times faster directly
-            now = self.clock.now().nanoseconds if self.clock.ros_time_is_active else time.time_ns()
-            channel.log(data, log_time=now)
+            channel.log(data, log_time=self._now())
+        name = leaf(topic)
+        if name in LATCHED_TOPICS:
+            self.latched[topic] = data
+        if name in FRAME_TOPICS:
+            self._frames(name, data)
+
+    def _resend_latched(self) -> None:
+        """A latched topic's last message to a client that subscribed after it came (a late joiner gets the URDF)."""
+        for topic in self.listener.take_subscribed():
+            if topic in self.latched and topic in self.channels:
+                self.channels[topic].log(self.latched[topic], log_time=self._now())
+
+    def _now(self) -> int:
+        # the node clock's time; without use_sim_time that is the system time, read 40 times faster directly
+        return self.clock.now().nanoseconds if self.clock.ros_time_is_active else time.time_ns()
+
+    def _frames(self, name: str, data: bytes) -> None:
+        """robot_state's odom and wheel joints as foxglove.FrameTransforms on /tf (:mod:`.foxglove_frames`)."""
+        if self.tf_channel is None:
+            self.tf_channel = self.sdk.channels.FrameTransformsChannel(TF_TOPIC, context=self.fx)
+            self.get_logger().info(f"advertised {TF_TOPIC} [foxglove.FrameTransforms] from {', '.join(FRAME_TOPICS)}")
+        if name != "robot_description" and not self.tf_channel.has_sinks():
+            return   # nobody looks: nothing decoded
+        out = self.frames.feed(name, data)
+        if out is not None:
+            self.tf_channel.log(to_foxglove(self.sdk.messages, *out), log_time=self._now())
 
     def _advertise(self, topic: str, type_name: str):
         channel = self.sdk.Channel(topic, schema=self.schemas[type_name], message_encoding=MESSAGE_ENCODING,
@@ -239,7 +270,7 @@ class FoxgloveServer(Node, GracefulNodeMixin):
         self.relay.close()  # the clients' connections end, and so the SDK's ends of them
         self.watch.stop_servers([self.server] + [server for server, _ in self.watch.retired])
         self.sdk_log.uninstall()
-        for channel in self.channels.values():
+        for channel in (*self.channels.values(), *([self.tf_channel] if self.tf_channel is not None else [])):
             channel.close()
         self.get_logger().info(f"stopped ws://{self.host}:{self.port}: {self.received} messages received on "
                                f"{len(self.channels)} channel(s); {clients} client(s) were subscribed at the end")
