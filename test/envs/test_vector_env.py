@@ -150,3 +150,14 @@ def test_a_law_without_a_pure_step_is_refused_naming_base_law():
     with pytest.raises(ValueError) as err:
         MwipVectorEnv(2, PAPER, base_law="mpc")
     assert str(err.value).startswith("base_law:"), err.value
+
+
+def test_the_stepper_holds_every_stage_of_the_loop_in_its_order():
+    """envs/lanes.py marks each stage as the batch's forms do (core.loop.STAGES; test/core/test_loop.py)."""
+    import re
+    from pathlib import Path
+
+    import mwip_ros.envs.lanes as lanes_module
+    from mwip_ros.core.loop import STAGE_NAMES
+    marks = re.findall(r"# stage: (\w+)", Path(lanes_module.__file__).read_text())
+    assert tuple(marks) == STAGE_NAMES
