@@ -16,8 +16,12 @@ from gymnasium import spaces
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
+from mwip_ros.optional import required
+
 from .common import ParamsArg, setup
-from .lanes import Lanes
+
+with required("numba", "MwipVectorEnv (its compiled RK4)"):
+    from .lanes import Lanes
 
 __all__ = ["MwipVectorEnv"]
 
