@@ -16,10 +16,10 @@ over arrays (the functions the compiled loop compiles), in :data:`mwip_ros.core.
 * ``drive``: the driver's ``bad_command`` (:data:`~mwip_ros.core.safety.PLAUSIBLE_TORQUE`), the torque limit, the
   actuator delay (the queue of :class:`~mwip_ros.core.sensing.Actuator`);
 * ``plant``: D_w (:func:`~mwip_ros.core.plant.D_w_of`'s arithmetic, each robot's own stream), tau_ext at each robot's
-  own t_k (:func:`~mwip_ros.core.plant.stage_torques`, a table of the episode's periods), one RK4 period
-  (:func:`~mwip_ros.core.plant.rk4_period` compiled, on every core: :mod:`.kernels`), the fall check.
+  own t_k (:func:`~mwip_ros.core.plant.stage_torques`, a table of the episode's periods), one RK4 period with the
+  motor when the files have it (:func:`~mwip_ros.core.plant.rk4_driven` compiled: :mod:`.kernels`), the fall check.
 
-The raw sensors with their estimator, the motor, the excitation and the driver's enable are not here (the scalar
+The raw sensors with their estimator, the excitation and the driver's enable are not here (the scalar
 env, :class:`~mwip_ros.envs.scalar.MwipEnv`, has every stage): the vector env refuses such files, naming the key.
 A restarted robot keeps its noise streams (its next draws), so no generator is built again.
 """
@@ -50,8 +50,6 @@ def refusal(s: EnvSetup) -> Optional[str]:
         return f"plant_sim.backend: the vector env runs the rk4 plant only, got {pc.backend!r} (MwipEnv runs it)"
     if pc.raw is not None:
         return "sensors.model: the vector env measures the state only, not raw (MwipEnv runs raw sensors)"
-    if pc.motor.enabled:
-        return "motor.enabled: the vector env has no motor model (MwipEnv runs it)"
     if loop.excitation is not None:
         return "excitation.enabled: the vector env has no excitation (MwipEnv runs it)"
     if pc.require_enable:
@@ -203,14 +201,16 @@ class Lanes:
         else:
             D_w = np.full(self.n, float(pc.D_w_mean))
         x = tuple(v.copy() for v in self.x)
+        u = np.ascontiguousarray(u, dtype=float)
+        acted = u.copy()   # the motor's torque over the period (without a motor: the command)
         with np.errstate(all="ignore"):
             self.tau.cover(int(k.max()))
-            advance(*self.inertia, float(pc.D_b), D_w, self.tau.T1, self.tau.T2, k, *x,
-                    np.ascontiguousarray(u, dtype=float), self.h, self.substeps, run)
+            args = (*self.inertia, float(pc.D_b), D_w, self.tau.T1, self.tau.T2, k, *x, u, self.h, self.substeps, run)
+            advance(*args, *(float(c) for c in pc.motor_constants), acted)
             self.x = x
             finite = np.isfinite(x[0]) & np.isfinite(x[1]) & np.isfinite(x[2]) & np.isfinite(x[3])
             fell = run & ~(np.abs(x[1]) <= pc.fall_angle)
-        self.u_prev = np.where(go, u, self.u_prev)
+        self.u_prev = np.where(go, acted, self.u_prev)   # what the sensors report next (core.plant.PlantSim.u_prev)
         self.k = k + go
         code = np.where(bad, BAD_COMMAND, np.where(fell, np.where(finite, FALL, DIVERGED), 0))
         return u, code

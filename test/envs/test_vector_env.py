@@ -21,6 +21,7 @@ pytestmark = pytest.mark.unit
 CONFIG = default_params_file().parent
 PAPER = [CONFIG / "paper.yaml"]
 SENSING = PAPER + [CONFIG / "sensing_realistic.yaml"]
+MOTOR = SENSING + [CONFIG / "motor_realistic.yaml"]
 N, SEED, DURATION, WINDOW = 6, 40, 2.0, (1.0, 2.0)
 
 
@@ -63,7 +64,8 @@ def check_against_batch(xs, us, trajectories, metrics, h):
         assert np.allclose(np.sqrt(np.mean(us[rows] ** 2, axis=0)), metrics["u_rms"], rtol=1e-9, atol=0)
 
 
-@pytest.mark.parametrize("files, law", [(PAPER, "dscndo"), (SENSING, "dscndo"), (SENSING, "lqr_ndo"), (PAPER, "dsc")])
+@pytest.mark.parametrize("files, law", [(PAPER, "dscndo"), (SENSING, "dscndo"), (SENSING, "lqr_ndo"), (PAPER, "dsc"),
+                                        (MOTOR, "dscndo")])
 def test_a_zero_residual_on_a_base_law_equals_the_batch_simulator(files, law):
     env = MwipVectorEnv(N, files, duration=DURATION, base_law=law)
     xs, us = run(env, lambda obs, u: np.zeros((N, 1)))
@@ -137,7 +139,6 @@ def test_make_vec_of_the_registered_id_runs_the_vector_env():
 
 @pytest.mark.parametrize("files, key", [
     (PAPER + [CONFIG / "sensors_raw_realistic.yaml"], "sensors.model"),
-    (PAPER + [CONFIG / "motor_realistic.yaml"], "motor.enabled"),
 ])
 def test_what_the_vector_env_does_not_run_is_refused_naming_the_key(files, key):
     with pytest.raises(ValueError) as err:
