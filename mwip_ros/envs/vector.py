@@ -31,7 +31,7 @@ SEED_RANGE = 2 ** 31
 class MwipVectorEnv(VectorEnv):
     """``num_envs`` robots of the parameter files (the arguments as :class:`~mwip_ros.envs.scalar.MwipEnv`'s, but
     ``observation``: the state only).  The files may set the state sensors (noise, encoder, delay), the torque limit,
-    the actuator delay, the motor, D_w, tau_ext and the model error; raw sensors, the excitation and the driver's
+    the actuator delay, the motor, D_w, tau_ext, the model error and the excitation; raw sensors and the driver's
     enable are refused, naming the key (``MwipEnv`` runs them).  ``infos``: ``u`` (the torque that acted),
     ``failure`` (0, or the :data:`mwip_ros.core.trajectory.FAILURES` index of why the episode ended)."""
 

@@ -22,6 +22,7 @@ CONFIG = default_params_file().parent
 PAPER = [CONFIG / "paper.yaml"]
 SENSING = PAPER + [CONFIG / "sensing_realistic.yaml"]
 MOTOR = SENSING + [CONFIG / "motor_realistic.yaml"]
+CHIRP = PAPER + [CONFIG / "identify.yaml"]   # the identification's chirp added to the law's command
 N, SEED, DURATION, WINDOW = 6, 40, 2.0, (1.0, 2.0)
 
 
@@ -65,7 +66,7 @@ def check_against_batch(xs, us, trajectories, metrics, h):
 
 
 @pytest.mark.parametrize("files, law", [(PAPER, "dscndo"), (SENSING, "dscndo"), (SENSING, "lqr_ndo"), (PAPER, "dsc"),
-                                        (MOTOR, "dscndo")])
+                                        (MOTOR, "dscndo"), (CHIRP, "dscndo")])
 def test_a_zero_residual_on_a_base_law_equals_the_batch_simulator(files, law):
     env = MwipVectorEnv(N, files, duration=DURATION, base_law=law)
     xs, us = run(env, lambda obs, u: np.zeros((N, 1)))
