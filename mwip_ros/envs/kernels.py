@@ -50,14 +50,15 @@ class TauTable:
 def _advance(m11, m12, m22, G_b, D_b, D_w, T1, T2, k, w, b, dw, db, u, h, substeps, run, K_t, R, V_max, I_max,
              acted):   # pragma: no cover
     """One period of the robots of ``run`` (their state arrays ``w``, ``b``, ``dw``, ``db`` in place), the torque
-    that acted over it into ``acted``; (K_t, R, V_max, I_max) the motor, K_t = 0: none (core.plant.NO_MOTOR; as fast
-    as rk4_period here: 2.3 to 3.2 ms for 4,096 robots, both, on the loaded machine)."""
-    p = Inertia(m11, m12, m22, G_b)
+    that acted over it into ``acted``; each robot's true eq. (2) terms ``m11`` .. ``G_b`` and ``D_b``; (K_t, R,
+    V_max, I_max) the motor, K_t = 0: none (core.plant.NO_MOTOR; as fast as rk4_period here: 2.3 to 3.2 ms for 4,096
+    robots, both, on the loaded machine)."""
     motor = (K_t, R, V_max, I_max)
     for i in range(w.size):
         if run[i]:
             j = k[i] if T1.shape[0] > 1 else 0
-            w[i], b[i], dw[i], db[i], acted[i], _ = rk4_driven(p, D_w[i], D_b, T1[j], T2[j],
+            p = Inertia(m11[i], m12[i], m22[i], G_b[i])
+            w[i], b[i], dw[i], db[i], acted[i], _ = rk4_driven(p, D_w[i], D_b[i], T1[j], T2[j],
                                                                (w[i], b[i], dw[i], db[i]), u[i], h, substeps, motor)
 
 

@@ -39,6 +39,7 @@ from mwip_ros.core.trajectory import BAD_COMMAND, DIVERGED, FALL
 
 from .common import EnvSetup
 from .kernels import TauTable, advance
+from .robots import TERMS
 
 __all__ = ["Lanes", "refusal"]
 
@@ -105,7 +106,8 @@ class Lanes:
         self.delay, self.act_delay, self.counts = sc.delay_periods, sc.actuator_delay_periods, sc.encoder_counts_per_rev
         self.noisy = sc.noisy
         self.rows = np.arange(n)
-        self.inertia = tuple(float(getattr(pc.actual, f)) for f in ("m11", "m12", "m22", "G_b"))
+        # each robot's true eq. (2) terms and D_b, columns of (5, n) (envs.robots: set per robot from a sweep spec)
+        self.robot = np.array([[float(getattr(pc.actual, f))] * n for f in TERMS] + [[float(pc.D_b)] * n])
         self.tau = TauTable(pc)
         self.sd_w = float(np.sqrt(pc.D_w_variance))
         # the excitation of each period (core.loop.command adds it to the law's command), a table of the episode
@@ -211,7 +213,7 @@ class Lanes:
         acted = u.copy()   # the motor's torque over the period (without a motor: the command)
         with np.errstate(all="ignore"):
             self.tau.cover(int(k.max()))
-            args = (*self.inertia, float(pc.D_b), D_w, self.tau.T1, self.tau.T2, k, *x, u, self.h, self.substeps, run)
+            args = (*self.robot, D_w, self.tau.T1, self.tau.T2, k, *x, u, self.h, self.substeps, run)
             advance(*args, *(float(c) for c in pc.motor_constants), acted)
             self.x = x
             finite = np.isfinite(x[0]) & np.isfinite(x[1]) & np.isfinite(x[2]) & np.isfinite(x[3])

@@ -126,9 +126,9 @@ class MwipEnv(gym.Env):
         """Stages ``sensors``, ``estimator``, ``observer`` and ``law`` (the base law's command) of period k."""
         period = self._period
         p = period.side.plant
-        if not finite_state(p.x):   # diverged: nothing to sense
+        if not finite_state(p.x):   # diverged (the episode has ended): nothing to sense, zeros
             self._u_base, self._tau_hat = 0.0, (0.0, 0.0)
-            return np.nan_to_num(np.array(p.x, dtype=float)[: self.observation_space.shape[0]])
+            return np.zeros(self.observation_space.shape)
         measured, u_m = period.side.sense()
         self._u_base, self._tau_hat, _, x_m = period.decide(measured, u_m, p.k)
         return np.array(measured if self.setup.observation == "raw" else x_m, dtype=np.float64)
