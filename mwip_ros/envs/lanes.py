@@ -12,14 +12,14 @@ over arrays (the functions the compiled loop compiles), in :data:`mwip_ros.core.
 * ``observer``: :func:`~mwip_ros.core.observer.z_start`, :func:`~mwip_ros.core.observer.z_next`,
   :func:`~mwip_ros.core.observer.tau_hat_of`;
 * ``law``: the base law's ``pure_step`` (:mod:`mwip_ros.core.laws`) and the observer term
-  :func:`~mwip_ros.core.controller.u_taud_of`, plus the action;
+  :func:`~mwip_ros.core.controller.u_taud_of`, the excitation (:mod:`mwip_ros.core.excitation`), plus the action;
 * ``drive``: the driver's ``bad_command`` (:data:`~mwip_ros.core.safety.PLAUSIBLE_TORQUE`), the torque limit, the
   actuator delay (the queue of :class:`~mwip_ros.core.sensing.Actuator`);
 * ``plant``: D_w (:func:`~mwip_ros.core.plant.D_w_of`'s arithmetic, each robot's own stream), tau_ext at each robot's
-  own t_k (:func:`~mwip_ros.core.plant.stage_torques`, a table of the episode's periods), one RK4 period
-  (:func:`~mwip_ros.core.plant.rk4_period` compiled, on every core: :mod:`.kernels`), the fall check.
+  own t_k (:func:`~mwip_ros.core.plant.stage_torques`, a table of the episode's periods), one RK4 period with the
+  motor when the files have it (:func:`~mwip_ros.core.plant.rk4_driven` compiled: :mod:`.kernels`), the fall check.
 
-The raw sensors with their estimator, the motor, the excitation and the driver's enable are not here (the scalar
+The raw sensors with their estimator and the driver's enable are not here (the scalar
 env, :class:`~mwip_ros.envs.scalar.MwipEnv`, has every stage): the vector env refuses such files, naming the key.
 A restarted robot keeps its noise streams (its next draws), so no generator is built again.
 """
@@ -31,6 +31,7 @@ import numpy as np
 
 from mwip_ros.core.compiled import pure_form
 from mwip_ros.core.controller import u_taud_of
+from mwip_ros.core.excitation import Excitation
 from mwip_ros.core.observer import tau_hat_of, z_next, z_start
 from mwip_ros.core.safety import PLAUSIBLE_TORQUE
 from mwip_ros.core.sensing import NOISE_BLOCK, measure, sensor_rng
@@ -38,6 +39,7 @@ from mwip_ros.core.trajectory import BAD_COMMAND, DIVERGED, FALL
 
 from .common import EnvSetup
 from .kernels import TauTable, advance
+from .robots import TERMS
 
 __all__ = ["Lanes", "refusal"]
 
@@ -50,10 +52,6 @@ def refusal(s: EnvSetup) -> Optional[str]:
         return f"plant_sim.backend: the vector env runs the rk4 plant only, got {pc.backend!r} (MwipEnv runs it)"
     if pc.raw is not None:
         return "sensors.model: the vector env measures the state only, not raw (MwipEnv runs raw sensors)"
-    if pc.motor.enabled:
-        return "motor.enabled: the vector env has no motor model (MwipEnv runs it)"
-    if loop.excitation is not None:
-        return "excitation.enabled: the vector env has no excitation (MwipEnv runs it)"
     if pc.require_enable:
         return "require_enable: the vector env's driver is always enabled (MwipEnv runs the driver's state machine)"
     if s.base_law is not None and pure_form(loop.law_class) is None:
@@ -108,9 +106,12 @@ class Lanes:
         self.delay, self.act_delay, self.counts = sc.delay_periods, sc.actuator_delay_periods, sc.encoder_counts_per_rev
         self.noisy = sc.noisy
         self.rows = np.arange(n)
-        self.inertia = tuple(float(getattr(pc.actual, f)) for f in ("m11", "m12", "m22", "G_b"))
+        # each robot's true eq. (2) terms and D_b, columns of (5, n) (envs.robots: set per robot from a sweep spec)
+        self.robot = np.array([[float(getattr(pc.actual, f))] * n for f in TERMS] + [[float(pc.D_b)] * n])
         self.tau = TauTable(pc)
         self.sd_w = float(np.sqrt(pc.D_w_variance))
+        # the excitation of each period (core.loop.command adds it to the law's command), a table of the episode
+        self.ext = (Excitation(loop.excitation, pc.h).series(s.n_steps + 1) if loop.excitation is not None else None)
         self.dw = _Streams(n, 1, np.random.default_rng) if pc.D_w_variance != 0.0 else None
         self.zs = _Streams(n, 4, sensor_rng) if self.noisy else None
         self.x = tuple(np.full(n, float(v)) for v in pc.initial)
@@ -179,7 +180,12 @@ class Lanes:
                 u, s_next = np.where(first, u0, u), np.where(first, s0, s_next)
             if self.observer_term:   # core.laws.ndo.WithObserver.step
                 u = u - u_taud_of(p, p.m12 * np.cos(xm[1]), th)
-            self.u_base, self.s = u, s_next
+            self.s = s_next
+        else:
+            u = np.zeros(n)   # no base law: the action is the whole command
+        if self.ext is not None:   # core.loop.command: the law's command plus the excitation of period k
+            u = u + self.ext[np.minimum(k, len(self.ext) - 1)]
+        self.u_base = u
         self.first = np.zeros(n, dtype=bool)
         return xm
 
@@ -203,14 +209,16 @@ class Lanes:
         else:
             D_w = np.full(self.n, float(pc.D_w_mean))
         x = tuple(v.copy() for v in self.x)
+        u = np.ascontiguousarray(u, dtype=float)
+        acted = u.copy()   # the motor's torque over the period (without a motor: the command)
         with np.errstate(all="ignore"):
             self.tau.cover(int(k.max()))
-            advance(*self.inertia, float(pc.D_b), D_w, self.tau.T1, self.tau.T2, k, *x,
-                    np.ascontiguousarray(u, dtype=float), self.h, self.substeps, run)
+            args = (*self.robot, D_w, self.tau.T1, self.tau.T2, k, *x, u, self.h, self.substeps, run)
+            advance(*args, *(float(c) for c in pc.motor_constants), acted)
             self.x = x
             finite = np.isfinite(x[0]) & np.isfinite(x[1]) & np.isfinite(x[2]) & np.isfinite(x[3])
             fell = run & ~(np.abs(x[1]) <= pc.fall_angle)
-        self.u_prev = np.where(go, u, self.u_prev)
+        self.u_prev = np.where(go, acted, self.u_prev)   # what the sensors report next (core.plant.PlantSim.u_prev)
         self.k = k + go
         code = np.where(bad, BAD_COMMAND, np.where(fell, np.where(finite, FALL, DIVERGED), 0))
         return u, code

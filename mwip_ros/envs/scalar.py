@@ -64,6 +64,11 @@ class MwipEnv(gym.Env):
         peak torque, else :data:`~mwip_ros.envs.common.DEFAULT_TORQUE_SCALE` (256 N m).
     normalize_action : bool
         False: the action is the torque in N m, in [-S, S].
+    sweep : path, optional
+        A sweep spec (``mwip_sweep``'s, e.g. ``config/sweeps/mass_mismatch.yaml``) instead of ``params``: its base
+        file, its duration (unless ``duration``), and on every reset one robot drawn from its ``vary`` axes as the
+        sweep draws them (:func:`mwip_ros.sweep.scenarios.expand` with the episode's seed as the spec's seed; a grid
+        point drawn too), ``info["robot"]`` its values.  The action's scale is the base file's.
 
     The episode is terminated when the robot falls (|theta_b| > ``fall_angle``), its state diverges or the drive
     refuses the command; truncated after ``duration`` / h periods.  ``reset(seed=s)`` seeds the episode's plant with
@@ -77,7 +82,16 @@ class MwipEnv(gym.Env):
 
     def __init__(self, params: ParamsArg = None, duration: Optional[float] = None, base_law: Optional[str] = None,
                  observation: str = "state", reward: Optional[Callable] = None, torque_scale: Optional[float] = None,
-                 normalize_action: bool = True):
+                 normalize_action: bool = True, sweep=None):
+        self._spec = None
+        if sweep is not None:
+            if params is not None:
+                raise ValueError("sweep: a sweep spec names its own base file; give params or sweep, not both")
+            from mwip_ros.sweep.spec import load_spec
+            self._spec = load_spec(sweep)
+            params = self._spec.base_values
+            duration = self._spec.duration_s if duration is None else duration
+        self._duration = duration
         self.setup = s = setup(params, duration, base_law, observation, reward, torque_scale, normalize_action)
         self.action_space = spaces.Box(-s.bound, s.bound, (1,), np.float64)
         self.observation_space = spaces.Box(-np.inf, np.inf, (5 if observation == "raw" else 4,), np.float64)
@@ -85,8 +99,19 @@ class MwipEnv(gym.Env):
 
     # --- the loop's stages ----------------------------------------------------------------------------------------
 
-    def _build(self, seed: int, initial=None) -> Period:
-        loop = self.setup.loop
+    def _robot(self, seed: int):
+        """(the closed loop of the episode with ``seed``, the values a sweep spec drew for it or None)."""
+        if self._spec is None:
+            return self.setup.loop, None
+        from mwip_ros import params as P
+        from mwip_ros.sweep.scenarios import expand
+        sc = expand(dataclasses.replace(self._spec, seed=int(seed), samples=1))
+        i = int(np.random.default_rng(int(seed)).integers(len(sc)))   # a grid point, when the spec has a grid
+        drawn = {k: v for k, v in sc.overrides(i).items() if k != "seed"}   # the noise seed is the episode's
+        return P.closed_loop({**self._spec.base_values, **drawn}, duration=self._duration,
+                             controller=self.setup.base_law), drawn
+
+    def _build(self, loop, seed: int, initial=None) -> Period:
         pc = dataclasses.replace(loop.plant, seed=int(seed))
         if initial is not None:
             pc = dataclasses.replace(pc, initial=type(pc.initial)(*(float(v) for v in initial)))
@@ -101,9 +126,9 @@ class MwipEnv(gym.Env):
         """Stages ``sensors``, ``estimator``, ``observer`` and ``law`` (the base law's command) of period k."""
         period = self._period
         p = period.side.plant
-        if not finite_state(p.x):   # diverged: nothing to sense
+        if not finite_state(p.x):   # diverged (the episode has ended): nothing to sense, zeros
             self._u_base, self._tau_hat = 0.0, (0.0, 0.0)
-            return np.nan_to_num(np.array(p.x, dtype=float)[: self.observation_space.shape[0]])
+            return np.zeros(self.observation_space.shape)
         measured, u_m = period.side.sense()
         self._u_base, self._tau_hat, _, x_m = period.decide(measured, u_m, p.k)
         return np.array(measured if self.setup.observation == "raw" else x_m, dtype=np.float64)
@@ -113,10 +138,14 @@ class MwipEnv(gym.Env):
     def reset(self, *, seed: Optional[int] = None, options: Optional[dict] = None):
         super().reset(seed=seed)
         plant_seed = seed if seed is not None else int(self.np_random.integers(SEED_RANGE))
-        self._period = self._build(plant_seed, (options or {}).get("initial"))
+        loop, drawn = self._robot(plant_seed)
+        self._period = self._build(loop, plant_seed, (options or {}).get("initial"))
         p = self._period.side.plant
         obs = self._observe()
-        return obs, {"t": p.t, "state": np.array(p.x, dtype=float), "seed": plant_seed}
+        info = {"t": p.t, "state": np.array(p.x, dtype=float), "seed": plant_seed}
+        if drawn is not None:
+            info["robot"] = drawn
+        return obs, info
 
     def step(self, action) -> tuple:
         if self._period is None:

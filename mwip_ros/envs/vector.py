@@ -16,8 +16,12 @@ from gymnasium import spaces
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
+from mwip_ros.optional import required
+
 from .common import ParamsArg, setup
-from .lanes import Lanes
+
+with required("numba", "MwipVectorEnv (its compiled RK4)"):
+    from .lanes import Lanes
 
 __all__ = ["MwipVectorEnv"]
 
@@ -27,21 +31,35 @@ SEED_RANGE = 2 ** 31
 class MwipVectorEnv(VectorEnv):
     """``num_envs`` robots of the parameter files (the arguments as :class:`~mwip_ros.envs.scalar.MwipEnv`'s, but
     ``observation``: the state only).  The files may set the state sensors (noise, encoder, delay), the torque limit,
-    the actuator delay, D_w, tau_ext and the model error; raw sensors, the motor, the excitation and the driver's
-    enable are refused, naming the key (``MwipEnv`` runs them).  ``infos``: ``u`` (the torque that acted),
-    ``failure`` (0, or the :data:`mwip_ros.core.trajectory.FAILURES` index of why the episode ended)."""
+    the actuator delay, the motor, D_w, tau_ext, the model error and the excitation; raw sensors and the driver's
+    enable are refused, naming the key (``MwipEnv`` runs them).  ``sweep``: a sweep spec instead of ``params``
+    (:class:`~mwip_ros.envs.robots.SpecRobots`: it may vary the true robot only): ``reset(seed=s)`` gives robot i
+    scenario i of the spec with ``seed: s`` and ``samples: num_envs`` (its true robot and its noise seed); a restarted
+    robot takes the next scenario, then those of the spec with seed s + 1, s + 2, ...  ``infos``: ``u`` (the torque
+    after the drive's limit and delay, as ``MwipEnv``'s ``info["u"]``), ``failure`` (0, or the
+    :data:`mwip_ros.core.trajectory.FAILURES` index of why the episode ended)."""
 
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
 
     def __init__(self, num_envs: int = 1, params: ParamsArg = None, duration: Optional[float] = None,
                  base_law: Optional[str] = None, observation: str = "state", reward: Optional[Callable] = None,
-                 torque_scale: Optional[float] = None, normalize_action: bool = True):
+                 torque_scale: Optional[float] = None, normalize_action: bool = True, sweep=None):
         if int(num_envs) < 1:
             raise ValueError(f"num_envs: must be >= 1, got {num_envs!r}")
         if observation != "state":
             raise ValueError(f"observation: the vector env observes the state only, got {observation!r}")
-        self.setup = s = setup(params, duration, base_law, observation, reward, torque_scale, normalize_action)
         self.num_envs = n = int(num_envs)
+        self.robots = None
+        if sweep is not None:
+            if params is not None:
+                raise ValueError("sweep: a sweep spec names its own base file; give params or sweep, not both")
+            from mwip_ros.sweep.spec import load_spec
+            from .robots import SpecRobots
+            spec = load_spec(sweep)
+            self.robots = SpecRobots(spec, n)
+            params = spec.base_values
+            duration = spec.duration_s if duration is None else duration
+        self.setup = s = setup(params, duration, base_law, observation, reward, torque_scale, normalize_action)
         self.lanes = Lanes(s, n)
         self.single_action_space = spaces.Box(-s.bound, s.bound, (1,), np.float64)
         self.single_observation_space = spaces.Box(-np.inf, np.inf, (4,), np.float64)
@@ -57,10 +75,19 @@ class MwipVectorEnv(VectorEnv):
         return self._obs.copy()
 
     def reset(self, *, seed=None, options: Optional[dict] = None):
-        """Every robot at t = 0; ``seed``: an int s (robot i: s + i), a list of one per robot, or None (drawn)."""
+        """Every robot at t = 0; ``seed``: an int s (robot i: s + i), a list of one per robot, or None (drawn).
+        With a sweep spec, an int or None: the spec's seed (robot i: its scenario i, its noise seed too)."""
         super().reset(seed=seed if isinstance(seed, (int, np.integer)) else None)
         n = self.num_envs
-        if seed is None:
+        if self.robots is not None:
+            if not (seed is None or isinstance(seed, (int, np.integer))):
+                raise ValueError("seed: with a sweep spec, one seed (the spec's) or None")
+            self._pool_seed = int(seed) if seed is not None else int(self.np_random.integers(SEED_RANGE))
+            self._pool, seeds = self.robots.pool(self._pool_seed)
+            self._pool_next = n
+            self.lanes.robot[:] = self._pool[:n].T
+            seeds = seeds[:n]
+        elif seed is None:
             seeds = self.np_random.integers(SEED_RANGE, size=n)
         elif isinstance(seed, (int, np.integer)):
             seeds = int(seed) + np.arange(n)
@@ -83,7 +110,23 @@ class MwipVectorEnv(VectorEnv):
         reward = np.asarray(s.reward(x_k, u, lanes.x, terminated), dtype=float)
         if self._restart.any():   # NEXT_STEP autoreset: these robots start again instead of stepping
             reward = np.where(go, reward, 0.0)
+            if self.robots is not None:
+                self._next_robots(self._restart)
             lanes.restart(self._restart)
         obs = self._observation()
         self._restart = terminated | truncated
         return obs, reward, terminated, truncated, {"u": u, "failure": code}
+
+    def _next_robots(self, mask: np.ndarray) -> None:
+        """The robots of ``mask`` take the next robots of the pool (then of the spec with the next seed)."""
+        idx = np.flatnonzero(mask)
+        rows = []
+        while len(rows) < len(idx):
+            if self._pool_next == len(self._pool):
+                self._pool_seed += 1
+                self._pool, _ = self.robots.pool(self._pool_seed)
+                self._pool_next = 0
+            take = min(len(idx) - len(rows), len(self._pool) - self._pool_next)
+            rows.extend(self._pool[self._pool_next:self._pool_next + take])
+            self._pool_next += take
+        self.lanes.robot[:, idx] = np.array(rows).T

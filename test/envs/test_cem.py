@@ -61,4 +61,4 @@ def test_the_policy_file_holds_the_weights(learned, tmp_path):
     import json
     learned[0].save(tmp_path / "p.json")
     doc = json.loads((tmp_path / "p.json").read_text())
-    assert doc["policy"] == "linear" and tuple(doc["w"]) == learned[0].w
+    assert doc["policy"] == "linear" and tuple(doc["w"]) == learned[0].w and doc["scale"] == 256.0

@@ -184,3 +184,30 @@ def test_a_wrong_parameter_file_is_refused_naming_the_key(tmp_path):
     with pytest.raises(P.ParamError) as err:
         MwipEnv(PAPER + [bad])
     assert "fall_angle" in str(err.value)
+
+
+def test_a_sweep_spec_draws_a_robot_per_episode_and_the_episode_is_mwip_sims_of_that_robot():
+    """sweep=mass_mismatch.yaml: each reset draws m_b, I_b and l from [0.7, 1.3] x the paper's true values, seeded
+    by the episode's seed; the episode (a zero residual on DSCNDO) is mwip_sim's run of that robot bit for bit."""
+    from mwip_ros.sweep.spec import load_spec
+    path = CONFIG / "sweeps" / "mass_mismatch.yaml"
+    base = load_spec(path).base_values
+    env = MwipEnv(sweep=path, duration=1.0, base_law="dscndo")
+    drawn = {}
+    for seed in (5, 6, 5):
+        obs, info = env.reset(seed=seed)
+        robot = info["robot"]
+        assert set(robot) == {"actual.m_b", "actual.I_b", "actual.l"}
+        for key, value in robot.items():
+            assert 0.7 * base[key] <= value <= 1.3 * base[key] and value != base[key], key
+        drawn.setdefault(seed, robot)
+        assert drawn[seed] == robot   # the same seed, the same robot
+    assert drawn[5] != drawn[6]
+    xs, us, *_ = episode(env, lambda o, i: np.zeros(1), 6)
+    assert_same_rows(xs, us, reference({**base, **drawn[6]}, "dscndo", 1.0, 6))
+
+
+def test_sweep_and_params_together_are_refused():
+    with pytest.raises(ValueError) as err:
+        MwipEnv(PAPER, sweep=CONFIG / "sweeps" / "mass_mismatch.yaml")
+    assert str(err.value).startswith("sweep:")

@@ -21,6 +21,8 @@ pytestmark = pytest.mark.unit
 CONFIG = default_params_file().parent
 PAPER = [CONFIG / "paper.yaml"]
 SENSING = PAPER + [CONFIG / "sensing_realistic.yaml"]
+MOTOR = SENSING + [CONFIG / "motor_realistic.yaml"]
+CHIRP = PAPER + [CONFIG / "identify.yaml"]   # the identification's chirp added to the law's command
 N, SEED, DURATION, WINDOW = 6, 40, 2.0, (1.0, 2.0)
 
 
@@ -63,7 +65,8 @@ def check_against_batch(xs, us, trajectories, metrics, h):
         assert np.allclose(np.sqrt(np.mean(us[rows] ** 2, axis=0)), metrics["u_rms"], rtol=1e-9, atol=0)
 
 
-@pytest.mark.parametrize("files, law", [(PAPER, "dscndo"), (SENSING, "dscndo"), (SENSING, "lqr_ndo"), (PAPER, "dsc")])
+@pytest.mark.parametrize("files, law", [(PAPER, "dscndo"), (SENSING, "dscndo"), (SENSING, "lqr_ndo"), (PAPER, "dsc"),
+                                        (MOTOR, "dscndo"), (CHIRP, "dscndo")])
 def test_a_zero_residual_on_a_base_law_equals_the_batch_simulator(files, law):
     env = MwipVectorEnv(N, files, duration=DURATION, base_law=law)
     xs, us = run(env, lambda obs, u: np.zeros((N, 1)))
@@ -137,7 +140,6 @@ def test_make_vec_of_the_registered_id_runs_the_vector_env():
 
 @pytest.mark.parametrize("files, key", [
     (PAPER + [CONFIG / "sensors_raw_realistic.yaml"], "sensors.model"),
-    (PAPER + [CONFIG / "motor_realistic.yaml"], "motor.enabled"),
 ])
 def test_what_the_vector_env_does_not_run_is_refused_naming_the_key(files, key):
     with pytest.raises(ValueError) as err:
@@ -150,3 +152,53 @@ def test_a_law_without_a_pure_step_is_refused_naming_base_law():
     with pytest.raises(ValueError) as err:
         MwipVectorEnv(2, PAPER, base_law="mpc")
     assert str(err.value).startswith("base_law:"), err.value
+
+
+def test_the_stepper_holds_every_stage_of_the_loop_in_its_order():
+    """envs/lanes.py marks each stage as the batch's forms do (core.loop.STAGES; test/core/test_loop.py)."""
+    import re
+    from pathlib import Path
+
+    import mwip_ros.envs.lanes as lanes_module
+    from mwip_ros.core.loop import STAGE_NAMES
+    marks = re.findall(r"# stage: (\w+)", Path(lanes_module.__file__).read_text())
+    assert tuple(marks) == STAGE_NAMES
+
+
+def test_a_sweep_spec_gives_robot_i_the_specs_scenario_i_equal_to_the_batch_and_restarts_draw_the_next():
+    """sweep=mass_mismatch.yaml, reset(seed=7): robot i is scenario i of the spec with seed 7 and samples N (its true
+    m_b, I_b, l and its noise seed), its episode the batch simulator's run of that scenario (1e-9)."""
+    from mwip_ros.sweep.scenarios import expand
+    from mwip_ros.sweep.spec import load_spec
+    path = CONFIG / "sweeps" / "mass_mismatch.yaml"
+    spec = dataclasses.replace(load_spec(path), seed=7, samples=N)
+    sc = expand(spec)
+    loops = [P.closed_loop({**spec.base_values, **sc.overrides(i)}, duration=DURATION, controller="dscndo")
+             for i in range(N)]
+    env = MwipVectorEnv(N, sweep=path, duration=DURATION, base_law="dscndo")
+    obs, _ = env.reset(seed=7)
+    m11 = [lp.plant.actual.m11 for lp in loops]
+    assert np.array_equal(env.lanes.robot[0], m11) and len(set(m11)) == N
+    xs, us = [np.stack(env.lanes.x, 1)], []
+    for _ in range(int(round(DURATION / loops[0].plant.h))):
+        obs, r, term, trunc, info = env.step(np.zeros((N, 1)))
+        xs.append(np.stack(env.lanes.x, 1))
+        us.append(info["u"])
+    assert trunc.all()
+    recorded = simulate_batch(loops, WINDOW, record=True)
+    check_against_batch(np.array(xs), np.array(us), recorded.trajectories,
+                        simulate_batch(loops, WINDOW, compiled=True).metrics, loops[0].plant.h)
+    env.step(np.zeros((N, 1)))   # the restart: the next robots, the spec with seed 8's first N
+    nxt = expand(dataclasses.replace(spec, seed=8))
+    want = [P.closed_loop({**spec.base_values, **nxt.overrides(i)}, duration=DURATION).plant.actual.m11
+            for i in range(N)]
+    assert np.array_equal(env.lanes.robot[0], want)
+
+
+def test_a_sweep_spec_that_varies_more_than_the_true_robot_is_refused_naming_the_axis(tmp_path):
+    spec = tmp_path / "s.yaml"
+    spec.write_text(f"base: {CONFIG / 'paper.yaml'}\ncontrollers: [dscndo]\nduration_s: 1.0\n"
+                    "metrics_window_s: [0.5, 1.0]\nsamples: 2\nvary:\n  dscndo_controller.k1: {scale: [0.9, 1.1]}\n")
+    with pytest.raises(ValueError) as err:
+        MwipVectorEnv(2, sweep=spec)
+    assert str(err.value).startswith("sweep:") and "dscndo_controller.k1" in str(err.value), err.value

@@ -3,8 +3,11 @@
     python -m mwip_ros.envs.examples.cem [--iterations 12] [--out policy.json]
 
 The policy is ``a = clip(w1 theta_b + w2 theta_b' + w3 theta_w', -1, 1)`` of the measured state (the torque a S,
-S = 256 N m on the paper's robot, :class:`~mwip_ros.envs.MwipVectorEnv`'s normalised action): the LQR's form, its
-gains found by search, without the model.  The cross-entropy method keeps a Gaussian over (w1, w2, w3); each
+S = 256 N m on the paper's robot, :class:`~mwip_ros.envs.MwipVectorEnv`'s normalised action;
+:class:`mwip_ros.policy.LinearPolicy`): the LQR's form, its gains found by search, without the model.  Its file
+(``--out``) is what the law ``policy`` reads (``MWIP_ROS_LAWS=mwip_ros.policy_law``, ``policy.file``).
+
+The cross-entropy method keeps a Gaussian over (w1, w2, w3); each
 iteration draws :data:`POPULATION` candidates, runs each on the :data:`TRAIN` training robots (the first robots of
 ``config/sweeps/mass_mismatch.yaml``: body mass, inertia and centre-of-gravity height each scaled by 0.7 to 1.3, the
 paper's friction noise and tau_ext) for :data:`EPISODE_S` seconds, every candidate a robot of one vector env per
@@ -17,7 +20,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import json
 import sys
 from pathlib import Path
 from typing import Dict, List, Sequence
@@ -28,31 +30,18 @@ from mwip_ros import params as P
 from mwip_ros.core.batch import simulate_batch
 from mwip_ros.core.budget import window_samples
 from mwip_ros.params.paths import default_params_file
+from mwip_ros.policy import LinearPolicy
 from mwip_ros.sweep.scenarios import expand
 from mwip_ros.sweep.spec import load_spec
 
 from .. import MwipVectorEnv
 
-__all__ = ["SPEC", "LinearPolicy", "robots", "train", "judge", "main"]
+__all__ = ["SPEC", "robots", "train", "judge", "table", "main"]
 
 SPEC = default_params_file().parent / "sweeps" / "mass_mismatch.yaml"
 POPULATION, ELITE, TRAIN, HELD_OUT = 32, 6, 4, 16
 EPISODE_S = 3.0
 FEATURES = (1, 3, 2)   # theta_b, theta_b', theta_w' of the observation (theta_w, theta_b, theta_w', theta_b')
-
-
-@dataclasses.dataclass(frozen=True)
-class LinearPolicy:
-    """a = clip(w . (theta_b, theta_b', theta_w'), -1, 1), the action of :class:`~mwip_ros.envs.MwipVectorEnv`."""
-
-    w: tuple
-
-    def __call__(self, obs: np.ndarray) -> np.ndarray:
-        return np.clip(obs[:, FEATURES] @ np.asarray(self.w, dtype=float), -1.0, 1.0)[:, None]
-
-    def save(self, path) -> None:
-        Path(path).write_text(json.dumps({"policy": "linear", "features": ["theta_b", "dtheta_b", "dtheta_w"],
-                                          "w": list(self.w)}, indent=1) + "\n")
 
 
 def robots(seed_offset: int, count: int) -> List[Dict]:
@@ -91,7 +80,7 @@ def train(iterations: int = 12, seed: int = 0, log=None) -> LinearPolicy:
         if log:
             log(f"iteration {it + 1:2d}: best return {score.max():8.2f}, mean {score.mean():8.2f}, "
                 f"w = {np.array2string(mean, precision=3)}")
-    return LinearPolicy(tuple(float(v) for v in mean))
+    return LinearPolicy(tuple(float(v) for v in mean), envs[0].setup.scale)
 
 
 def _policy_rms(policy: LinearPolicy, values: Dict, window) -> float:
@@ -136,7 +125,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m mwip_ros.envs.examples.cem", description=__doc__.split("\n")[0])
     ap.add_argument("--iterations", type=int, default=12, help="cross-entropy iterations (default 12)")
     ap.add_argument("--seed", type=int, default=0, help="the search's seed")
-    ap.add_argument("--out", type=Path, default=None, metavar="FILE.json", help="write the policy's weights")
+    ap.add_argument("--out", type=Path, default=None, metavar="FILE.json",
+                    help="write the policy (its weights and scale: the law policy's policy.file)")
     args = ap.parse_args(argv)
     policy = train(args.iterations, args.seed, log=lambda s: print(s, file=sys.stderr))
     print(f"w = {policy.w}")
