@@ -141,7 +141,7 @@ class MujocoPlant(PlantSim):
     def imu_reading(self) -> Tuple[Tuple[float, ...], Tuple[float, ...]]:
         """MuJoCo's own gyro and accelerometer at the IMU site (the model has them with raw sensors, theory 6.4): the
         angular velocity and the specific force in the body frame, ((x, y, z), (x, y, z)), as of the last
-        ``mj_forward``: after :meth:`sample_accel`, at t_k^- as the raw sample (SPEC 10)."""
+        ``mj_forward``: after :meth:`sample_accel`, at t_k^- as the raw sample (docs/theory.md 6.4)."""
         v = self.data.sensordata.tolist()
         return tuple(v[:3]), tuple(v[3:6])
 

@@ -34,7 +34,7 @@ ESTIMATE_COLUMNS = ["theta_w_hat", "theta_b_hat", "dtheta_w_hat", "dtheta_b_hat"
 # worst saturation code of the period (core.drive: 0 none, 1 current, 2 voltage); NaN in a row no period followed
 DRIVE_COLUMNS = ["u_applied", "drive_saturation"]
 EXCITATION_COLUMNS = ["excitation"]   # the controller's excitation, included in u (identification)
-MOTION_COLUMNS = ["v_ref", "theta_w_ref"]   # the motion references of the period (theory 6.11: v* [m/s], theta_w* [rad])
+MOTION_COLUMNS = ["v_ref", "theta_w_ref"]   # the period's motion references (theory 6.11: v* [m/s], theta_w* [rad])
 # a spatial plant's 3D pose at t_k (core.plant.Pose, backend mujoco: docs/theory.md 6.10), after every other column
 POSE_COLUMNS = ["x", "y", "yaw", "roll", "wheel_left", "wheel_right"]
 ALL_COLUMNS = (COLUMNS + RAW_COLUMNS + ESTIMATE_COLUMNS + DRIVE_COLUMNS + EXCITATION_COLUMNS + MOTION_COLUMNS

@@ -1,6 +1,6 @@
 """The raw sensors cross-checked against MuJoCo's own (issue 32 item 3; docs/theory.md 6.4 and 6.10): MuJoCo's gyro
 and accelerometer at the IMU site (0, 0, sensors.imu.offset) on the body and the wheels' hinge angles, at the
-instant of each raw sample (t_k^-), against core.raw_sensors' IMU and encoder model (SPEC 10), over the paper's
+instant of each raw sample (t_k^-), against core.raw_sensors' IMU and encoder model, over the paper's
 scenario under DSCNDO with ideal raw sensors."""
 import math
 
