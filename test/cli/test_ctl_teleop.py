@@ -95,6 +95,12 @@ def _twist_is(reader, vx, wz, timeout=20):
                                                                                            9)) == (vx, wz), timeout)
 
 
+def _default(name):
+    """The schema's default of ``name`` (a dscndo_controller parameter)."""
+    from mwip_ros.params.schema import NODE_SPECS
+    return next(s.default for s in NODE_SPECS["dscndo_controller"] if s.name == name)
+
+
 @pytest.mark.graph
 def test_drive_through_a_pty(reader, tmp_path):
     f = tmp_path / "limits.yaml"
@@ -127,7 +133,7 @@ def test_drive_through_a_pty(reader, tmp_path):
                              stderr=subprocess.PIPE)
         assert reader.wait(lambda: reader.sub.get_publisher_count() >= 1, 60)
         os.write(master, UP.encode())
-        assert _twist_is(reader, 0.1, 0.0)                           # the default limit 1 m/s: step 0.1
+        assert _twist_is(reader, round(_default("motion.max_speed") / 10, 9), 0.0)   # the schema's limit: a tenth
         p.send_signal(signal.SIGINT)
         assert reader.wait(lambda: p.poll() is not None, 20)
         reader.spin(0.3)
