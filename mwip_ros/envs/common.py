@@ -51,7 +51,8 @@ class Reward:
         r_k = alive - pitch (theta_b / fall_angle)^2 - rate theta_b'^2 - torque (u_k / S)^2     (upright at t_k+1)
         r_k = -fall                                                                               (fallen: terminated)
 
-    with theta_b, theta_b' of the state at t_k+1, u_k the torque that acted over the period and S the action's
+    with theta_b, theta_b' of the state at t_k+1, u_k the drive's torque over the period (after its limit and delay;
+    with the motor model, the motor's command) and S the action's
     scale.  Called with floats (the scalar env) or arrays (the vector env, one entry per robot).  Any callable
     ``reward(x, u, x_next, fell) -> float`` replaces it (``MwipEnv(reward=...)``)."""
 

@@ -190,8 +190,9 @@ class Lanes:
         return xm
 
     def advance(self, u_cmd: np.ndarray, go: np.ndarray):
-        """Stages ``drive`` and ``plant`` of period k for the robots of ``go`` with the commands ``u_cmd``: (the torque
-        that acted, each robot's failure code: 0, or FALL, BAD_COMMAND, DIVERGED of :mod:`mwip_ros.core.trajectory`)."""
+        """Stages ``drive`` and ``plant`` of period k for the robots of ``go`` with the commands ``u_cmd``: (the
+        drive's torque (after the limit and the delay), each robot's failure code: 0, or FALL, BAD_COMMAND, DIVERGED
+        of :mod:`mwip_ros.core.trajectory`)."""
         pc, k = self.pc, self.k
         # stage: drive
         bad = go & ~(np.abs(u_cmd) <= PLAUSIBLE_TORQUE)   # the driver's bad_command (core.loop.PlantSide.act)

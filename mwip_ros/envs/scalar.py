@@ -57,7 +57,7 @@ class MwipEnv(gym.Env):
         sensors the estimator's state), (theta_w, theta_b, theta_w', theta_b').  ``raw``: the raw sample (gyro,
         accel_x, accel_z, encoder, encoder_rate; ``sensors.model: raw`` only).
     reward : callable, optional
-        ``reward(x, u, x_next, fell) -> float`` (true states at t_k and t_k+1, the torque that acted); default
+        ``reward(x, u, x_next, fell) -> float`` (true states at t_k and t_k+1, the drive's torque); default
         :class:`~mwip_ros.envs.common.Reward`.
     torque_scale : float, optional
         S [N m]: the action a in [-1, 1] is the torque a S.  Default: the drive's ``torque_limit``, else the motor's
@@ -74,8 +74,9 @@ class MwipEnv(gym.Env):
     refuses the command; truncated after ``duration`` / h periods.  ``reset(seed=s)`` seeds the episode's plant with
     s (its D_w noise and sensor noise, as ``plant_sim.seed: s``); without a seed, a seed drawn from the env's
     generator.  ``reset(options={"initial": (theta_w, theta_b, theta_w', theta_b')})`` sets the initial state.
-    ``info``: ``t`` (t_k), ``state`` (the true state at t_k), ``u`` (the torque that acted over period k),
-    ``tau_hat`` and ``tau_d`` (the observer's estimate and the true lumped disturbance at t_k), ``failure``.
+    ``info``: ``t`` (t_k), ``state`` (the true state at t_k), ``u`` (the drive's torque over period k, after its limit
+    and delay: the trajectory's ``u``), ``tau_hat`` and ``tau_d`` (the observer's estimate and the true lumped
+    disturbance at t_k), ``failure``.
     """
 
     metadata = {"render_modes": []}

@@ -134,8 +134,10 @@ def test_make_vec_of_the_registered_id_runs_the_vector_env():
     assert isinstance(envs.unwrapped, MwipVectorEnv) and envs.num_envs == 4
     obs, _ = envs.reset(seed=0)
     assert obs.shape == (4, 4) and envs.action_space.shape == (4, 1)
+    assert envs.observation_space.contains(obs)
     obs, r, term, trunc, info = envs.step(envs.action_space.sample())
-    assert r.shape == (4,) and obs.shape == (4, 4)
+    assert r.shape == (4,) and r.dtype == np.float64 and envs.observation_space.contains(obs)
+    assert term.dtype == trunc.dtype == np.bool_
 
 
 @pytest.mark.parametrize("files, key", [
