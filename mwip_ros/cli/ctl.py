@@ -90,6 +90,22 @@ class Ros:
             self.ex.spin_once(timeout_sec=min(0.05, max(0.0, end - time.monotonic())))
         return done()
 
+    def publish_for(self, pub, msg, duration: float, rate: float, final) -> tuple:
+        """Publish ``msg`` on ``pub`` at ``rate`` Hz (0: once) for ``duration`` s, then ``final``, also on Ctrl-C
+        (a push ends, the robot stops); (messages sent, seconds it lasted)."""
+        sent, start = 0, time.monotonic()
+        try:
+            while True:
+                pub.publish(msg)
+                sent += 1
+                left = duration - (time.monotonic() - start)
+                if left <= 0:
+                    break
+                self.until(lambda: False, min(left, 1.0 / rate) if rate > 0 else left)
+        finally:
+            pub.publish(final)
+        return sent, time.monotonic() - start
+
     def call(self, srv_type, node: str, service: str, request):
         """The response of NODE's ``service``, or Failure naming the node and the domain."""
         try:
@@ -224,18 +240,9 @@ def _push(ros: Ros, args) -> int:
     topic, plant = pub.topic_name, args.node.rstrip("/").rsplit("/", 1)[-1]
     if not ros.until(lambda: _plant_listens(ros, pub, args.node), args.timeout):
         raise Failure(f"no {plant} subscribes {topic} after {args.timeout:g} s: is it running ({_domain()})?")
-    sent, start = 0, time.monotonic()
     try:
-        while True:
-            pub.publish(push)
-            sent += 1
-            left = args.duration - (time.monotonic() - start)
-            if left <= 0:
-                break
-            ros.until(lambda: False, min(left, 1.0 / args.rate) if args.rate > 0 else left)
-    finally:   # also on Ctrl-C: the push ends
-        pub.publish(L.encode_external_wrench(0.0, 0.0))
-        lasted = time.monotonic() - start
+        sent, lasted = ros.publish_for(pub, push, args.duration, args.rate, L.encode_external_wrench(0.0, 0.0))
+    finally:   # also on Ctrl-C: the zero wrench sent is delivered
         acked = pub.wait_for_all_acked(Duration(seconds=args.timeout))
     if not acked:
         raise Failure(f"{plant} did not acknowledge the end of the push on {topic} within {args.timeout:g} s")

@@ -117,18 +117,9 @@ def cmd(ros, args, failure) -> int:
     pub = _publisher(ros)
     if not ros.until(lambda: pub.get_subscription_count() > 0, args.timeout):
         raise failure(f"nobody subscribes {pub.topic_name} after {args.timeout:g} s: is the controller running?")
-    sent, start, msg = 0, time.monotonic(), _twist(args.vx, args.wz)
-    try:
-        while True:
-            pub.publish(msg)
-            sent += 1
-            left = args.duration - (time.monotonic() - start)
-            if left <= 0:
-                break
-            ros.until(lambda: False, min(left, 1.0 / args.rate) if args.rate > 0 else left)
-    finally:   # also on Ctrl-C: the robot stops
-        pub.publish(_twist(0.0, 0.0))
-        lasted = time.monotonic() - start
+    try:   # a zero Twist at the end, also on Ctrl-C: the robot stops
+        sent, lasted = ros.publish_for(pub, _twist(args.vx, args.wz), args.duration, args.rate, _twist(0.0, 0.0))
+    finally:
         pub.wait_for_all_acked(Duration(seconds=args.timeout))
     print(f"cmd_vel: vx {args.vx:g} m/s, wz {args.wz:g} rad/s for {lasted:.2f} s ({sent} message(s)), then zero")
     return 0
