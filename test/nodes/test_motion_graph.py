@@ -88,6 +88,7 @@ def test_realtime_cmd_vel_is_followed_then_the_timeout_stops_it_and_hostile_twis
                 "not a geometry_msgs/Twist"):
         assert why in out, why
     assert int(out.rsplit("rejected: cmd_vel: ", 1)[1].split()[0]) >= 4
+    assert "cmd_vel: 1 timeout stop(s)" in out
 
 
 def _diag(diags, key) -> int:

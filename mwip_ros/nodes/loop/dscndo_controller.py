@@ -256,6 +256,9 @@ class DscndoController(Node, GracefulNodeMixin):
 
     def on_shutdown(self) -> None:
         self.get_logger().info(f"answered {self.count} states; rejected: {self.rejects.summary()}")
+        if self.motion is not None:
+            m = self.motion
+            self.get_logger().info(f"cmd_vel: {m.timeouts} timeout stop(s), {m.rejected} rejected, {m.clipped} clipped")
 
 
 def main(argv=None) -> int:
