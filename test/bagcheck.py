@@ -120,7 +120,7 @@ def make_msg(type_name: str, i: int):
         pose = T["geometry_msgs/msg/Pose"](position=T["geometry_msgs/msg/Point"](x=0.1 * i, y=0.0, z=0.254),
                                            orientation=T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0))
         twist = T["geometry_msgs/msg/Twist"](linear=vec(0.5 * i, 0, 0), angular=vec(0, 0, 0))
-        return T[type_name](header=header(), child_frame_id="base_link",
+        return T[type_name](header=T["std_msgs/msg/Header"](stamp=stamp(), frame_id="odom"), child_frame_id="base_link",
                             pose=T["geometry_msgs/msg/PoseWithCovariance"](pose=pose, covariance=np.eye(6).ravel() * i),
                             twist=T["geometry_msgs/msg/TwistWithCovariance"](twist=twist, covariance=np.zeros(36)))
     raise AssertionError(type_name)

@@ -1,6 +1,7 @@
 """robot_state with the lockstep graph and the realistic raw sensors: odom follows the true wheel within the
-drift measured offline (test/core/test_odometry.py: under 1 mm after 10 s), robot_description is latched for a
-late subscriber and parses, the wheel joint states carry phi, and a bad state is rejected, never integrated."""
+drift measured offline (test/core/test_odometry.py: at most 1.3 mm over the paper's 10 s, 0.67 mm at the end),
+robot_description is latched for a late subscriber and parses, the wheel joint states carry phi, and a bad state
+is rejected, never integrated."""
 from __future__ import annotations
 
 import math
@@ -49,7 +50,7 @@ def test_odom_matches_the_true_pose_and_the_description_is_latched(tmp_path):
     assert k == 600   # the last state of the 3 s run
     true_x = 0.254 * (run.columns["theta_w"][k] - run.columns["theta_w"][0])
     assert abs(true_x) > 0.3                                         # it rolled: the comparison means something
-    assert abs(last.pose.pose.position.x - true_x) < 1e-3            # the drift measured offline: < 1 mm
+    assert abs(last.pose.pose.position.x - true_x) < 1.3e-3          # the drift measured offline: at most 1.3 mm
     assert last.pose.pose.position.y == 0.0 and last.pose.pose.position.z == 0.254
     # the orientation: no yaw, pitched by theta_b (the estimate, within 0.02 rad of the truth)
     q = last.pose.pose.orientation
