@@ -39,7 +39,6 @@ from typing import Optional, Tuple
 import numpy as np
 
 __all__ = ["OdometryNoise", "odometry_noise", "encoder_rate_std", "absolute_wheel_rates", "body_twist", "arc_step",
-           "yaw_rate_from_gyro",
            "Odometry", "yaw_quaternion"]
 
 
@@ -90,13 +89,6 @@ def odometry_noise(r: float, track_width: float, h: float, counts_per_rev: int =
 def absolute_wheel_rates(phi_rate_left: float, phi_rate_right: float, pitch_rate: float) -> Tuple[float, float]:
     """(theta_L', theta_R'): each wheel's absolute rate, its encoder's rate relative to the body plus the pitch rate."""
     return phi_rate_left + pitch_rate, phi_rate_right + pitch_rate
-
-
-def yaw_rate_from_gyro(gyro_x: float, gyro_z: float, theta_b: float) -> float:
-    """psi': the yaw rate about the world's z of a gyro on the body pitched by ``theta_b`` (its x and z axes).
-    The body's rate is R_y(theta_b)^T (0, 0, psi') + (0, theta_b', 0), so gyro_z = psi' cos(theta_b) and
-    gyro_x = -psi' sin(theta_b): psi' = gyro_z cos(theta_b) - gyro_x sin(theta_b)."""
-    return gyro_z * math.cos(theta_b) - gyro_x * math.sin(theta_b)
 
 
 def body_twist(rate_left: float, rate_right: float, r: float, track_width: float,

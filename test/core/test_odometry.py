@@ -67,14 +67,6 @@ def test_absolute_rates_add_the_pitch_rate_and_the_twist():
     assert yaw_quaternion(math.pi) == pytest.approx((0.0, 0.0, 1.0, 0.0))
 
 
-def test_the_gyros_yaw_rate_on_a_pitched_body():
-    from mwip_ros.core.odometry import yaw_rate_from_gyro
-    assert yaw_rate_from_gyro(0.0, 1.0, 0.0) == 1.0
-    # pitched by 0.3: a yaw rate of 2 reads z = 2 cos 0.3, x = -2 sin 0.3 in the body
-    assert yaw_rate_from_gyro(-2 * math.sin(0.3), 2 * math.cos(0.3), 0.3) == pytest.approx(2.0, abs=1e-15)
-    assert yaw_rate_from_gyro(0.0, 0.0, 0.3) == 0.0   # the planar IMU: (0, pitch rate, 0)
-
-
 def test_bad_input_and_time_going_back_change_nothing():
     o = _run(Odometry(R, W), (4.0, 4.0), 0.1, 10)
     before = (o.x, o.t, o.updates)

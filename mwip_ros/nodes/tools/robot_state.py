@@ -1,9 +1,7 @@
 """``robot_state``: odometry, the URDF, wheel joint states and the frame tree, as a ROS mobile base has them.
 
 Subscribes ``joint_states`` (the plant's state, or the state estimator's with raw sensors: theta_w' = phi' +
-theta_b', the encoder's rate plus the bias-corrected pitch rate) and ``imu/data_raw`` where the plant has raw
-sensors (the gyro's yaw rate, its z and x axes turned by theta_b into the world's z; without an IMU the yaw rate
-is the wheels'), and publishes (docs/graph.md):
+theta_b', the encoder's rate plus the bias-corrected pitch rate) and publishes (docs/graph.md):
 
 - ``odom`` (nav_msgs/Odometry, frame ``odom``, child ``base_link``): the pose integrated by
   :class:`mwip_ros.core.odometry.Odometry` (both wheels at theta_w' on the planar robot, yaw 0), pitched by theta_b,
@@ -21,19 +19,18 @@ odometry at the origin, logged.  A state it cannot use is rejected and counted, 
 """
 from __future__ import annotations
 
-import math
 import sys
 
 from nav_msgs.msg import Odometry as OdometryMsg
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from sensor_msgs.msg import Imu, JointState
+from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
 from mwip_ros import params as P
-from mwip_ros.core.odometry import Odometry, odometry_noise, yaw_rate_from_gyro
+from mwip_ros.core.odometry import Odometry, odometry_noise
 from mwip_ros.core.urdf import BASE_LINK, KEYS, ODOM_FRAME, WHEEL_JOINTS, frame_transforms, robot_model, urdf
-from mwip_ros.msgs import BadMessage, cdr
+from mwip_ros.msgs import BadMessage
 from mwip_ros.msgs import layouts as L
 from mwip_ros.msgs.qos import INPUT_QOS, REALTIME_QOS
 from mwip_ros.msgs.stamps import to_time
@@ -91,23 +88,9 @@ class RobotState(Node, GracefulNodeMixin):
         self.pub_joints = self.create_publisher(JointState, "wheel_joint_states", REALTIME_QOS)
         self.tf_type = _tf_message_type(self.get_logger())
         self.pub_tf = self.create_publisher(self.tf_type, "/tf", REALTIME_QOS) if self.tf_type else None
-        self.gyro = None   # the last IMU sample's (x, z) rates [rad/s]: the yaw rate's source once one came
         self.create_subscription(JointState, "joint_states", self._on_state, INPUT_QOS, raw=True)
-        self.create_subscription(Imu, "imu/data_raw", self._on_imu, INPUT_QOS, raw=True)
         self.get_logger().info(f"robot state ready: r {self.model.r} m, track {self.model.track_width} m, odom "
                                f"speed noise {noise.speed_std:.3g} m/s; robot_description {len(self.description)} B")
-
-    def _on_imu(self, data: bytes) -> None:
-        try:
-            _stamp, frame, _q, _qc, w, _wc, _a, _ac = cdr.decode_imu(data)
-        except ValueError as exc:
-            self.rejects("imu/data_raw", str(exc))
-            return
-        if frame != L.IMU_FRAME or not all(math.isfinite(v) and abs(v) <= L.RAW_LIMITS["gyro"] for v in w):
-            self.rejects("imu/data_raw", f"frame {frame[:64]!r} (expected {L.IMU_FRAME!r}) or angular velocity "
-                                         f"{list(w)} not finite and plausible")
-            return
-        self.gyro = (w[0], w[2])
 
     def _on_state(self, data: bytes) -> None:
         try:
@@ -123,8 +106,7 @@ class RobotState(Node, GracefulNodeMixin):
             self.rejects("joint_states", f"stamp {stamp} ns repeats the last one")
             return
         self.last_stamp = stamp
-        yaw_rate = None if self.gyro is None else yaw_rate_from_gyro(self.gyro[0], self.gyro[1], float(x[1]))
-        self.odom.update(stamp * 1e-9, float(x[2]), yaw_rate=yaw_rate)   # the planar robot: both wheels alike
+        self.odom.update(stamp * 1e-9, float(x[2]), yaw_rate=0.0)   # the planar robot: both wheels, no yaw
         self._publish(stamp, float(x[0]), float(x[1]))
         self.count += 1
 
