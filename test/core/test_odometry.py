@@ -52,6 +52,18 @@ def test_a_circle_by_the_wheels_and_by_the_gyro():
     assert (o.x, o.y) == pytest.approx((1.0, 1.0), abs=1e-12)
 
 
+def test_the_trapezoid_takes_the_mean_of_the_ends_the_rectangle_the_sample():
+    # the wheel's rate ramps 0 -> 4 rad/s over 1 s in 10 samples (v 0 -> 1 m/s): the trapezoid covers the exact
+    # 0.5 m; the rectangle holds each sample over the period before it: 0.1 * (0.1 + 0.2 + ... + 1.0) = 0.55 m
+    trap, rect = Odometry(R, W, rule="trapezoid"), Odometry(R, W)
+    for k in range(11):
+        trap.update(0.1 * k, 0.4 * k)
+        rect.update(0.1 * k, 0.4 * k)
+    assert trap.x == pytest.approx(0.5, abs=1e-12) and rect.x == pytest.approx(0.55, abs=1e-12)
+    with pytest.raises(ValueError, match="rule"):
+        Odometry(R, W, rule="simpson")
+
+
 def test_the_planar_robot_one_rate_no_yaw():
     o = Odometry(R, W)
     for k in range(11):
@@ -128,6 +140,13 @@ def test_drift_against_the_true_wheel_in_the_paper_scenario_with_realistic_raw_s
             xs.append(o.x)
         return np.abs(np.asarray(xs) - truth)
 
+    ideal = simulate(P.closed_loop(P.merged_values(P.load_param_file(CONFIG / "paper.yaml")), controller="dscndo"))
+    ci = ideal.columns
+    o, xs = Odometry(pc.nominal.r, 0.5, rule="trapezoid"), []   # the ideal state: instantaneous rates
+    for t, w in zip(ci["t"], ci["dtheta_w"]):
+        o.update(float(t), float(w))
+        xs.append(o.x)
+    assert np.abs(np.asarray(xs) - pc.actual.r * (ci["theta_w"] - ci["theta_w"][0])).max() < 5e-6   # 4 um
     est = drift(c["dtheta_w_hat"])
     assert est.max() < 1.3e-3 and est[-1] < 7e-4   # docs/theory.md 6.11: 0.67 mm at 10 s, 1.29 mm at most
     raw = drift(c["encoder_rate"] + c["gyro"])

@@ -39,6 +39,7 @@ def test_odom_matches_the_true_pose_and_the_description_is_latched(tmp_path):
             assert inj.wait(lambda: len(odom) >= 10 and desc and wheels, 30), (len(odom), len(desc), len(wheels))
         assert node.stop() == 0
     out = node.output()
+    assert "rectangle rule" in out   # raw sensors (plant_sim's sensors.model in the same files): the period's rates
     assert "tf2_msgs is not installed" in out or "/tf" not in out   # one line when tf2_msgs is missing
     assert out.count("tf2_msgs is not installed") <= 1
     run = load_run(csv_path)
@@ -85,3 +86,4 @@ def test_a_bad_state_is_rejected_and_a_reset_restarts_the_odometry(tmp_path):
     assert got[2].pose.pose.position.x == 0.0
     out = node.output()
     assert "rejected message #1 on joint_states" in out and "restarts at the origin" in out
+    assert "trapezoid rule" in out   # the plant's state (the default): instantaneous rates

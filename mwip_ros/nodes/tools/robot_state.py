@@ -44,7 +44,7 @@ NAME = "robot_state"
 WHEEL_JOINT_STATES = "wheel_joint_states"
 LATCHED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
-MODEL_KEYS = KEYS + ("sensors.encoder_counts_per_rev", "sensors.imu.gyro_noise_std")
+MODEL_KEYS = KEYS + ("sensors.model", "sensors.encoder_counts_per_rev", "sensors.imu.gyro_noise_std")
 
 
 def plant_values(argv) -> dict:
@@ -78,7 +78,9 @@ class RobotState(Node, GracefulNodeMixin):
         h = P.period(self.v)
         noise = odometry_noise(self.model.r, self.model.track_width, h, int(values["sensors.encoder_counts_per_rev"]),
                                float(values["sensors.imu.gyro_noise_std"]), encoders=1, yaw_gyro=True)
-        self.odom = Odometry(self.model.r, self.model.track_width, noise)
+        # raw sensors: the estimator's rate is the period's (rectangle); the plant's state: instantaneous (trapezoid)
+        rule = "rectangle" if values["sensors.model"] == "raw" else "trapezoid"
+        self.odom = Odometry(self.model.r, self.model.track_width, noise, rule=rule)
         self.rejects = Rejects(self.get_logger())
         self.count, self.restarts, self.last_stamp = 0, 0, None
         self.description = urdf(self.model)
@@ -90,7 +92,8 @@ class RobotState(Node, GracefulNodeMixin):
         self.pub_tf = self.create_publisher(self.tf_type, "/tf", REALTIME_QOS) if self.tf_type else None
         self.create_subscription(JointState, "joint_states", self._on_state, INPUT_QOS, raw=True)
         self.get_logger().info(f"robot state ready: r {self.model.r} m, track {self.model.track_width} m, odom "
-                               f"speed noise {noise.speed_std:.3g} m/s; robot_description {len(self.description)} B")
+                               f"speed noise {noise.speed_std:.3g} m/s, {rule} rule; robot_description "
+                               f"{len(self.description)} B")
 
     def _on_state(self, data: bytes) -> None:
         try:
