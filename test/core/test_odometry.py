@@ -146,7 +146,9 @@ def test_drift_against_the_true_wheel_in_the_paper_scenario_with_realistic_raw_s
     for t, w in zip(ci["t"], ci["dtheta_w"]):
         o.update(float(t), float(w))
         xs.append(o.x)
-    assert np.abs(np.asarray(xs) - pc.actual.r * (ci["theta_w"] - ci["theta_w"][0])).max() < 5e-6   # 4 um
+    ideal_err = np.abs(np.asarray(xs) - pc.actual.r * (ci["theta_w"] - ci["theta_w"][0]))
+    assert ideal_err.max() < 5e-6   # 4 um
+    ideal_end = ideal_err[-1]
     est = drift(c["dtheta_w_hat"])
     assert est.max() < 1.3e-3 and est[-1] < 7e-4   # docs/theory.md 6.11: 0.67 mm at 10 s, 1.29 mm at most
     raw = drift(c["encoder_rate"] + c["gyro"])
@@ -154,3 +156,15 @@ def test_drift_against_the_true_wheel_in_the_paper_scenario_with_realistic_raw_s
     mixed = drift(c["encoder_rate"] + c["dtheta_b_hat"])   # the encoder plus the estimator's bias-free pitch rate
     assert mixed[-1] < 2e-3
     assert abs(truth[-1]) > 2.0   # the robot rolled 2.35 m: the drift is a fraction of a real distance
+    # docs/theory.md 6.11's table prints these, in mm, to its digits
+    table = (CONFIG.parent / "docs" / "theory.md").read_text().split("**Drift.**", 1)[1].split("**The URDF.**")[0]
+    for value, text in ((est[-1], "| 0.67 mm (1.29 mm at most"), (est.max(), "at most on the way) |"),
+                        (mixed[-1], "| 1.2 mm |"), (raw[-1], "| 26.7 mm ")):
+        assert text in table, text
+    assert f"{est[-1] * 1e3:.2f}" == "0.67" and f"{est.max() * 1e3:.2f}" == "1.29"
+    assert f"{mixed[-1] * 1e3:.1f}" == "1.2" and f"{raw[-1] * 1e3:.1f}" == "26.7"
+    o = Odometry(pc.nominal.r, 0.5)   # the ideal state with the rectangle rule
+    for t, w in zip(ci["t"], ci["dtheta_w"]):
+        o.update(float(t), float(w))
+    rect_end = abs(o.x - pc.actual.r * (ci["theta_w"][-1] - ci["theta_w"][0]))
+    assert f"| {ideal_end * 1e3:.4f} mm ({rect_end * 1e3:.2f} mm with the rectangle rule) |" in table
