@@ -19,6 +19,7 @@ odometry at the origin, logged.  A state it cannot use is rejected and counted, 
 """
 from __future__ import annotations
 
+import importlib
 import sys
 
 from nav_msgs.msg import Odometry as OdometryMsg
@@ -59,8 +60,10 @@ def plant_values(argv) -> dict:
 
 
 def _tf_message_type(logger):
+    """tf2_msgs/TFMessage, or None (logged once) without tf2_msgs: a full ROS install has it, no PyPI wheel does,
+    so it is looked up by name, an optional runtime dependency (package.xml) and not one of the venv's."""
     try:
-        from tf2_msgs.msg import TFMessage
+        TFMessage = importlib.import_module("tf2_msgs.msg").TFMessage
     except ImportError:
         logger.info("tf2_msgs is not installed (the PyPI wheels lack it): no /tf; odom, robot_description and "
                     f"{WHEEL_JOINT_STATES} are published, and the live view shows the frames")
