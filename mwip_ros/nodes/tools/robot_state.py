@@ -33,7 +33,7 @@ from mwip_ros.core.odometry import Odometry, odometry_noise
 from mwip_ros.core.urdf import BASE_LINK, KEYS, ODOM_FRAME, WHEEL_JOINTS, frame_transforms, robot_model, urdf
 from mwip_ros.msgs import BadMessage
 from mwip_ros.msgs import layouts as L
-from mwip_ros.msgs.qos import INPUT_QOS, REALTIME_QOS
+from mwip_ros.msgs.qos import GRAPH_QOS, INPUT_QOS
 from mwip_ros.msgs.stamps import to_time
 from mwip_ros.nodes.runtime.guards import Rejects
 from mwip_ros.nodes.runtime.params import declare, ros_arguments, start_values
@@ -89,10 +89,10 @@ class RobotState(Node, GracefulNodeMixin):
         self.description = urdf(self.model)
         self.pub_desc = self.create_publisher(String, "robot_description", LATCHED_QOS)
         self.pub_desc.publish(String(data=self.description))
-        self.pub_odom = self.create_publisher(OdometryMsg, "odom", REALTIME_QOS)
-        self.pub_joints = self.create_publisher(JointState, "wheel_joint_states", REALTIME_QOS)
+        self.pub_odom = self.create_publisher(OdometryMsg, "odom", GRAPH_QOS)
+        self.pub_joints = self.create_publisher(JointState, "wheel_joint_states", GRAPH_QOS)
         self.tf_type = _tf_message_type(self.get_logger())
-        self.pub_tf = self.create_publisher(self.tf_type, "/tf", REALTIME_QOS) if self.tf_type else None
+        self.pub_tf = self.create_publisher(self.tf_type, "/tf", GRAPH_QOS) if self.tf_type else None
         self.create_subscription(JointState, "joint_states", self._on_state, INPUT_QOS, raw=True)
         self.get_logger().info(f"robot state ready: r {self.model.r} m, track {self.model.track_width} m, odom "
                                f"speed noise {noise.speed_std:.3g} m/s, {rule} rule; robot_description "
