@@ -247,6 +247,7 @@ def read_bag_run(bag, label: Optional[str] = None, segment: Optional[int] = None
     imu, enc = _Stamped(3, "imu/data_raw"), _Stamped(2, "wheel_encoder")   # raw sensors: gyro, f_x, f_z; phi, rate
     est, truth = _Stamped(2, "disturbance_estimate"), _Stamped(2, "lumped_disturbance")
     poses = _Stamped(6, "true_pose")   # a spatial plant's (backend mujoco): x, y, z, yaw, pitch, roll
+    odom = _Stamped(3, "odom")   # robot_state's pose (x, y, z = r): its drift from the truth
     cmds: List[float] = []
     logs: List[bytes] = []
     param_events: List[bytes] = []
@@ -281,6 +282,9 @@ def read_bag_run(bag, label: Optional[str] = None, segment: Optional[int] = None
             elif name == "true_pose":
                 stamp, pose = L.parse_pose(data)
                 poses.put(bag, stamp, pose)
+            elif name == "odom":
+                stamp, x, y, z = L.parse_odometry(data)
+                odom.put(bag, stamp, (x, y, z))
         except BadMessage:
             continue  # not the graph's message (a foreign publisher): not part of the run
     estimates = None
@@ -312,7 +316,26 @@ def read_bag_run(bag, label: Optional[str] = None, segment: Optional[int] = None
     check_times(run.t, bag)
     run.h = float(np.median(np.diff(run.t))) if len(run) > 1 else NAN
     run.record = record
+    if len(odom):
+        drift = odometry_drift(odom, states)
+        if drift is not None:
+            run.record["odometry"] = drift
     return run
+
+
+def odometry_drift(odom: "_Stamped", states: "_Stamped") -> Optional[dict]:
+    """How far ``odom``'s last pose is from the truth (docs/theory.md 6.12): the robot moved r (theta_w - theta_w0)
+    along x from the first odom stamp to the last one that has a state (r = the odom's z, base_link's height), and
+    not at all along y.  None when no odom stamp has a state."""
+    both = sorted(s for s in odom.index if states.get(s) is not None)
+    if not both:
+        return None
+    first, last = both[0], both[-1]
+    x, y, r = (odom.value(last, k) for k in range(3))
+    x0, y0 = odom.value(first, 0), odom.value(first, 1)
+    true_dx = r * (states.value(last, 0) - states.value(first, 0))
+    return {"t_s": (last - first) * 1e-9, "odom_x_m": x - x0, "true_x_m": true_dx,
+            "drift_m": math.hypot(x - x0 - true_dx, y - y0)}
 
 
 class _Stamped:

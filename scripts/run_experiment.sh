@@ -190,6 +190,8 @@ for i in "${!LAW_LIST[@]}"; do
     if [ "$ROBOT_STATE" = 1 ]; then   # a view of the states: odom, robot_description, wheel_joint_states
         robot_state --ros-args "${PF[@]}" > "$LOGS/${CTRL}_robot_state.log" 2>&1 &
         PIDS+=($!)
+        # it reads joint_states: without raw sensors the plant's first topic, so the plant counts it
+        [ "$MODEL" = raw ] || SUBS=$((SUBS + 1))
     fi
     dscndo_controller --ros-args "${PF[@]}" -p "dscndo_controller:mode:=$MODE" -p "dscndo_controller:use_observer:=$USE_OBS" -p "dscndo_controller:law:=$LAW" \
         > "$LOGS/${CTRL}_dscndo_controller.log" 2>&1 &

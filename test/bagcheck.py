@@ -116,18 +116,17 @@ def make_msg(type_name: str, i: int):
                             linear_acceleration_covariance=np.eye(3).ravel() * 4e-4)
     if type_name == "visualization_msgs/msg/MarkerArray":
         return T[type_name](markers=[_marker(T, header(), i, k) for k in range(2)])
-    if type_name in ("geometry_msgs/msg/PoseStamped", "nav_msgs/msg/Odometry"):   # true_pose; odom
+    if type_name == "geometry_msgs/msg/PoseStamped":   # true_pose (backend mujoco)
         pose = T["geometry_msgs/msg/Pose"](position=T["geometry_msgs/msg/Point"](x=0.1 * i, y=-0.05 * i, z=0.5),
                                            orientation=T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0))
-        if type_name == "geometry_msgs/msg/PoseStamped":
-            return T[type_name](header=T["std_msgs/msg/Header"](stamp=stamp(), frame_id="odom"), pose=pose)
-        cov = np.eye(6).ravel() * 1e-4
-        return T[type_name](header=T["std_msgs/msg/Header"](stamp=stamp(), frame_id="odom"),
-                            child_frame_id="base_link",
-                            pose=T["geometry_msgs/msg/PoseWithCovariance"](pose=pose, covariance=cov),
-                            twist=T["geometry_msgs/msg/TwistWithCovariance"](
-                                twist=T["geometry_msgs/msg/Twist"](linear=vec(0.1 * i, 0, 0), angular=vec(0, 0, 0.01)),
-                                covariance=cov))
+        return T[type_name](header=T["std_msgs/msg/Header"](stamp=stamp(), frame_id="odom"), pose=pose)
+    if type_name == "nav_msgs/msg/Odometry":   # robot_state's odom
+        pose = T["geometry_msgs/msg/Pose"](position=T["geometry_msgs/msg/Point"](x=0.1 * i, y=0.0, z=0.254),
+                                           orientation=T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0))
+        twist = T["geometry_msgs/msg/Twist"](linear=vec(0.5 * i, 0, 0), angular=vec(0, 0, 0))
+        return T[type_name](header=T["std_msgs/msg/Header"](stamp=stamp(), frame_id="odom"), child_frame_id="base_link",
+                            pose=T["geometry_msgs/msg/PoseWithCovariance"](pose=pose, covariance=np.eye(6).ravel() * i),
+                            twist=T["geometry_msgs/msg/TwistWithCovariance"](twist=twist, covariance=np.zeros(36)))
     raise AssertionError(type_name)
 
 

@@ -40,6 +40,7 @@ CONSOLE_SCRIPTS = [
     'foxglove_server',
     'mwip_ctl',
     'state_estimator',
+    'robot_state',
 ]
 PACKAGE_FILES = ['package.xml', 'setup.py', 'setup.cfg']
 PACKAGE_DIRS = ['resource', PACKAGE, 'config']
@@ -151,6 +152,8 @@ KEY_TO_PIP = {
     'python3-mcap-ros2-support-pip': 'mcap-ros2-support', 'python3-zstandard-pip': 'zstandard',
     'python3-lz4-pip': 'lz4', 'python3-foxglove-sdk-pip': 'foxglove-sdk', 'python3-dask-pip': 'dask[distributed]',
     'python3-distributed-pip': 'distributed', 'python3-mujoco-pip': 'mujoco',
+    'nav_msgs': 'ros-jazzy-common-interfaces',
+    'tf2_msgs': None,   # no PyPI wheel: robot_state's /tf only where a full ROS install has it (optional)
 }
 # what the ROS user's colcon builds with (buildtool, not in package.xml): handed to the build only, on PYTHONPATH
 BUILD_TOOLS = ('colcon_core', 'setuptools')
@@ -173,7 +176,7 @@ def _declared_pip_requirements():
         if line:
             pins[_norm(re.split(r'[=<>!~ ]', line, 1)[0])] = line
     wanted = []
-    for name in dict.fromkeys(KEY_TO_PIP[k] for k in keys):
+    for name in dict.fromkeys(KEY_TO_PIP[k] for k in keys if KEY_TO_PIP[k]):
         if _norm(name) in pins:
             line = pins[_norm(name)]
             wanted.append(name + line[len(line.split('=')[0].rstrip('<>!~')):] if '[' in name and '[' not in line

@@ -370,3 +370,21 @@ def test_a_files_duration_0_until_stopped_is_refused_not_run_forever(tmp_path):
                         "--out", str(tmp_path / "out")], capture_output=True, text=True, timeout=120, env=script_env())
     assert r.returncode == 2 and "plant_sim.duration_s is 0" in r.stderr and "give --duration" in r.stderr, r.stderr
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.e2e
+def test_robot_state_records_odom_and_the_report_states_its_drift(tmp_path):
+    """--robot-state: robot_state beside the loop (counted by the plant); the bag holds odom and the wheel joint
+    states for every one of the 401 stamps, the URDF once, and the report states odom's drift from the truth
+    (the plant's ideal state, trapezoid rule: micrometres after 2 s; docs/theory.md 6.11)."""
+    r = subprocess.run([*RUN_EXPERIMENT, "--robot-state", "--laws", "dscndo", "--duration", "2",
+                        "--out", str(tmp_path), "--name", "rs"], capture_output=True, text=True, timeout=600,
+                       env=script_env())
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+    log = (tmp_path / "rs_logs" / "dscndo_robot_state.log").read_text()
+    assert "trapezoid rule" in log and "integrated 401 states" in log, log
+    topics = ("/odom", "/wheel_joint_states", "/joint_states")
+    assert distinct_stamps(tmp_path / "rs_dscndo", topics) == {t: 401 for t in topics}
+    note = json.loads((tmp_path / "rs_report" / "metrics.json").read_text())["notes"]["dscndo"][-1]
+    assert note.startswith("odom drifts ") and " over 2.000 s " in note, note
+    assert float(note.split()[2]) < 1e-5, note

@@ -1,5 +1,5 @@
 """``mwip_ctl``: the live actions of docs/graph.md without a ``ros2`` CLI: set a parameter, reset the plant, push it,
-drive its driver's state machine (docs/theory.md 6.8).
+drive its driver's state machine (docs/theory.md 6.8), drive the robot on cmd_vel (:mod:`.teleop`).
 
     mwip_ctl param set NODE NAME VALUE     # /NODE/set_parameters; VALUE is YAML, as in -p NAME:=VALUE
     mwip_ctl param get NODE NAME           # /NODE/get_parameters
@@ -304,9 +304,9 @@ def parser() -> argparse.ArgumentParser:
                         help="how long to wait for the service or the subscriber, and for an answer (default 5)")
     common.add_argument("--namespace", default="", metavar="NS",
                         help="where relative names resolve (the graph's -r __ns:=NS); default /")
-    ap = _Parser(prog=PROG, description="Set parameters, reset, enable, disable, emergency-stop and push a running "
-                 "mwip_ros graph, without a ros2 CLI, on the environment's ROS_DOMAIN_ID. Exit codes: 0 done, 1 "
-                 "nothing answered within --timeout or the node refused (one line on stderr), 2 a usage error, "
+    ap = _Parser(prog=PROG, description="Set parameters, reset, enable, disable, emergency-stop, push and drive a "
+                 "running mwip_ros graph, without a ros2 CLI, on the environment's ROS_DOMAIN_ID. Exit codes: 0 "
+                 "done, 1 nothing answered within --timeout or the node refused (one line on stderr), 2 a usage error, "
                  "130 Ctrl-C.")
     sub = ap.add_subparsers(dest="command", required=True,
                             metavar="{param,reset,enable,disable,estop,push,cmd,drive}")

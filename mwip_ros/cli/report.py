@@ -130,8 +130,15 @@ def ratio_table(named: Sequence[tuple], markdown: bool = True) -> List[str]:
 
 
 def run_notes(run: Trajectory, m: metrics.Metrics) -> List[str]:
-    """What a run's end was: its fall, its cut (the plant's configured duration, where the bag recorded it)."""
+    """What a run's end was: its fall, its cut (the plant's configured duration, where the bag recorded it); with
+    robot_state's odom in the bag, its drift from the true pose (docs/theory.md 6.12)."""
     rec = run.record or {}
+    odo = rec.get("odometry")
+    return _end_notes(run, m, rec) + ([f"odom drifts {odo['drift_m']:.4g} m from the true pose over {odo['t_s']:.3f} s "
+                                       f"(x {odo['odom_x_m']:.4g} m against {odo['true_x_m']:.4g} m)"] if odo else [])
+
+
+def _end_notes(run: Trajectory, m: metrics.Metrics, rec: dict) -> List[str]:
     end = f"run ends at t = {m.t_end:.3f} s"
     if m.t_fall is not None:
         said = f" (the plant logged: \"{rec['fall_text']}\")" if rec.get("fall_text") else ""

@@ -11,7 +11,11 @@ mean of the two (REP-103: x forward, y left, z up; ``theta > 0`` rolls forward):
 
 The pose is integrated exactly over a period for a constant ``v`` and ``psi'`` (an arc of radius v / psi', a
 straight line when psi' = 0), as ROS's diff_drive_controller does: a straight run, a turn in place and a circle
-come out exact, whatever the period.
+come out exact, whatever the period.  Which constant depends on what the rates are (``rule``): ``rectangle``
+holds each sample's rates over the period that ends at it (a driver's differenced encoder rate is that period's
+mean; so is, to within its own error, the state estimator's), ``trapezoid`` takes the mean of the two ends (an
+instantaneous rate, as the plant's ideal state has it: over the paper's 10 s the drift falls from 0.58 mm with
+the rectangle to 2 um).
 
 The planar robot (one encoder, no yaw) is the case L = R: :meth:`Odometry.update` takes one rate for both wheels,
 its yaw rate stays 0.
@@ -39,7 +43,9 @@ from typing import Optional, Tuple
 import numpy as np
 
 __all__ = ["OdometryNoise", "odometry_noise", "encoder_rate_std", "absolute_wheel_rates", "body_twist", "arc_step",
-           "Odometry", "yaw_quaternion"]
+           "Odometry", "RULES", "yaw_quaternion"]
+
+RULES = ("rectangle", "trapezoid")
 
 
 @dataclass(frozen=True)
@@ -133,6 +139,11 @@ class Odometry:
     t: Optional[float] = None
     P: np.ndarray = field(default_factory=lambda: np.zeros((3, 3)))
     updates: int = 0
+    rule: str = "rectangle"   # rectangle | trapezoid (module docstring)
+
+    def __post_init__(self):
+        if self.rule not in RULES:
+            raise ValueError(f"rule: {self.rule!r} (one of {', '.join(RULES)})")
 
     def reset(self) -> None:
         """Back to the origin, no time, zero covariance."""
@@ -152,11 +163,13 @@ class Odometry:
             return False
         if self.t is not None and t <= self.t:
             return False
-        v, w = body_twist(rate_left, rr, self.r, self.track_width, yaw_rate)
-        self.v, self.yaw_rate = v, w
+        v1, w1 = body_twist(rate_left, rr, self.r, self.track_width, yaw_rate)
+        v0, w0 = self.v, self.yaw_rate
+        self.v, self.yaw_rate = v1, w1
         if self.t is None:
             self.t = t
             return True
+        v, w = ((v0 + v1) / 2.0, (w0 + w1) / 2.0) if self.rule == "trapezoid" else (v1, w1)
         dt = t - self.t
         yaw0 = self.yaw
         self.x, self.y, self.yaw = arc_step(self.x, self.y, self.yaw, v, w, dt)

@@ -19,6 +19,8 @@ Layouts (alignment counts from the first byte after the 4-byte encapsulation hea
                                  Vector3 angular_velocity, float64[9] angular_velocity_covariance,
                                  Vector3 linear_acceleration, float64[9] linear_acceleration_covariance
     std_msgs/Float64             float64 data
+    nav_msgs/Odometry            Header, string child_frame_id, Pose (Point xyz, Quaternion xyzw), float64[36],
+                                 Twist (Vector3 linear, angular), float64[36]       (decoded only: the report)
     rosgraph_msgs/Clock          Time clock
 
 Decoding raises :class:`CdrError` (a ``ValueError``) on anything that is not such a
@@ -39,7 +41,7 @@ from .stamps import NS_PER_S as _NS, join_ns, split_ns
 
 __all__ = ["CDR_LE", "CdrError", "JointStateEncoder", "WrenchStampedEncoder", "ImuEncoder", "IMU_DOUBLES",
            "decode_clock", "decode_float64", "decode_joint_state", "decode_wrench", "decode_wrench_stamped",
-           "decode_imu", "peek_stamp", "encode_clock", "encode_float64", "encode_wrench", "split_ns"]
+           "decode_imu", "decode_odometry", "peek_stamp", "encode_clock", "encode_float64", "encode_wrench", "split_ns"]
 
 IMU_DOUBLES = 4 + 9 + 3 + 9 + 3 + 9   # sensor_msgs/Imu after its Header: every field a float64, no sequence
 
@@ -213,6 +215,15 @@ def decode_imu(data) -> Tuple[int, str, Tuple[float, ...], Tuple[float, ...], Tu
         v = r.doubles(IMU_DOUBLES)
         _learn("Imu", data, body_at, f"{r.e}{-(body_at - 4) % 8}x{IMU_DOUBLES}d", (), (frame,))
     return stamp, frame, v[0:4], v[4:13], v[13:16], v[16:25], v[25:28], v[28:37]
+
+
+def decode_odometry(data) -> Tuple[int, str, str, Tuple[float, ...]]:
+    """nav_msgs/Odometry -> (stamp_ns, frame_id, child_frame_id, pose: position xyz and orientation xyzw)."""
+    r = _Reader(data, "Odometry")
+    stamp = r.time_ns()
+    frame = r.string()
+    child = r.string()
+    return stamp, frame, child, r.doubles(7)
 
 
 def decode_wrench(data) -> Tuple[Tuple[float, float, float], Tuple[float, float, float]]:

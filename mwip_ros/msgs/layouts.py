@@ -47,8 +47,8 @@ __all__ = ["JOINT_NAMES", "INTERNAL_NAMES", "LIMITS", "RAW_LIMITS", "IMU_FRAME",
            "encode_state", "encode_wrench", "encode_internals",
            "encode_command", "encode_clock", "encode_external_wrench", "parse_joint_state", "parse_wrench",
            "parse_command", "parse_clock", "parse_internals", "parse_external_wrench", "encode_imu", "parse_imu",
-           "encode_encoder", "parse_encoder", "check_state", "RAW_FILTERS", "encode_twist", "parse_twist",
-           "POSE_FRAME", "encode_pose", "parse_pose", "parse_bool"]
+           "encode_encoder", "parse_encoder", "parse_odometry", "check_state", "RAW_FILTERS", "encode_twist",
+           "parse_twist", "POSE_FRAME", "encode_pose", "parse_pose", "parse_bool"]
 
 JOINT_NAMES = ("wheel", "body_pitch")
 INTERNAL_NAMES = ("S1", "S2", "x4d", "x4_bar", "u_dsc", "u_taud", "u", "x1")
@@ -266,6 +266,16 @@ def parse_encoder(data) -> Tuple[int, float, float, float]:
     _raw_within((rate,), "rate", "encoder rate")
     _raw_within((torque,), "torque", "effort")
     return stamp, phi, rate, torque
+
+
+def parse_odometry(data) -> Tuple[int, float, float, float]:
+    """(stamp_ns, x, y, z) of robot_state's odom (frame odom, child base_link), or BadMessage (finite, plausible)."""
+    stamp, frame, child, pose = _decoded(cdr.decode_odometry, data, "nav_msgs/Odometry")
+    if (frame, child) != ("odom", "base_link"):
+        raise BadMessage(f"frames {frame[:64]!r} -> {child[:64]!r}, expected 'odom' -> 'base_link'")
+    _finite(pose, "odometry pose")
+    _within(max(abs(v) for v in pose[:3]), "theta_w", "odometry position")
+    return stamp, pose[0], pose[1], pose[2]
 
 
 def parse_wrench(data) -> Tuple[int, float, float]:

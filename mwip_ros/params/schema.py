@@ -474,7 +474,8 @@ NODE_SPECS: Dict[str, List[ParamSpec]] = {
 NODE_SPECS["robot_state"] = [s for s in NODE_SPECS["plant_sim"] if s.name in (
     "actual.m_b", "actual.m_w", "actual.I_b", "actual.I_w", "actual.l", "actual.r", "actual.g", "actual.I_b_roll",
     "actual.I_b_yaw",
-    "actual.track_width", "sensors.imu.offset", "sensors.encoder_counts_per_rev", "sensors.imu.gyro_noise_std")]
+    "actual.track_width", "sensors.model", "sensors.imu.offset", "sensors.encoder_counts_per_rev",
+    "sensors.imu.gyro_noise_std")]
 
 # Parameters ROS itself declares on every node; allowed anywhere in the file.
 ROS_OWN = {"use_sim_time": ParamSpec("use_sim_time", "bool", False, "use /clock"),

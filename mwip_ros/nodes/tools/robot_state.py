@@ -19,6 +19,7 @@ odometry at the origin, logged.  A state it cannot use is rejected and counted, 
 """
 from __future__ import annotations
 
+import importlib
 import sys
 
 from nav_msgs.msg import Odometry as OdometryMsg
@@ -32,7 +33,7 @@ from mwip_ros.core.odometry import Odometry, odometry_noise
 from mwip_ros.core.urdf import BASE_LINK, KEYS, ODOM_FRAME, WHEEL_JOINTS, frame_transforms, robot_model, urdf
 from mwip_ros.msgs import BadMessage
 from mwip_ros.msgs import layouts as L
-from mwip_ros.msgs.qos import INPUT_QOS, REALTIME_QOS
+from mwip_ros.msgs.qos import GRAPH_QOS, INPUT_QOS
 from mwip_ros.msgs.stamps import to_time
 from mwip_ros.nodes.runtime.guards import Rejects
 from mwip_ros.nodes.runtime.params import declare, ros_arguments, start_values
@@ -44,7 +45,7 @@ NAME = "robot_state"
 WHEEL_JOINT_STATES = "wheel_joint_states"
 LATCHED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
-MODEL_KEYS = KEYS + ("sensors.encoder_counts_per_rev", "sensors.imu.gyro_noise_std")
+MODEL_KEYS = KEYS + ("sensors.model", "sensors.encoder_counts_per_rev", "sensors.imu.gyro_noise_std")
 
 
 def plant_values(argv) -> dict:
@@ -59,8 +60,10 @@ def plant_values(argv) -> dict:
 
 
 def _tf_message_type(logger):
+    """tf2_msgs/TFMessage, or None (logged once) without tf2_msgs: a full ROS install has it, no PyPI wheel does,
+    so it is looked up by name, an optional runtime dependency (package.xml) and not one of the venv's."""
     try:
-        from tf2_msgs.msg import TFMessage
+        TFMessage = importlib.import_module("tf2_msgs.msg").TFMessage
     except ImportError:
         logger.info("tf2_msgs is not installed (the PyPI wheels lack it): no /tf; odom, robot_description and "
                     f"{WHEEL_JOINT_STATES} are published, and the live view shows the frames")
@@ -78,19 +81,22 @@ class RobotState(Node, GracefulNodeMixin):
         h = P.period(self.v)
         noise = odometry_noise(self.model.r, self.model.track_width, h, int(values["sensors.encoder_counts_per_rev"]),
                                float(values["sensors.imu.gyro_noise_std"]), encoders=1, yaw_gyro=True)
-        self.odom = Odometry(self.model.r, self.model.track_width, noise)
+        # raw sensors: the estimator's rate is the period's (rectangle); the plant's state: instantaneous (trapezoid)
+        rule = "rectangle" if values["sensors.model"] == "raw" else "trapezoid"
+        self.odom = Odometry(self.model.r, self.model.track_width, noise, rule=rule)
         self.rejects = Rejects(self.get_logger())
         self.count, self.restarts, self.last_stamp = 0, 0, None
         self.description = urdf(self.model)
         self.pub_desc = self.create_publisher(String, "robot_description", LATCHED_QOS)
         self.pub_desc.publish(String(data=self.description))
-        self.pub_odom = self.create_publisher(OdometryMsg, "odom", REALTIME_QOS)
-        self.pub_joints = self.create_publisher(JointState, "wheel_joint_states", REALTIME_QOS)
+        self.pub_odom = self.create_publisher(OdometryMsg, "odom", GRAPH_QOS)
+        self.pub_joints = self.create_publisher(JointState, "wheel_joint_states", GRAPH_QOS)
         self.tf_type = _tf_message_type(self.get_logger())
-        self.pub_tf = self.create_publisher(self.tf_type, "/tf", REALTIME_QOS) if self.tf_type else None
+        self.pub_tf = self.create_publisher(self.tf_type, "/tf", GRAPH_QOS) if self.tf_type else None
         self.create_subscription(JointState, "joint_states", self._on_state, INPUT_QOS, raw=True)
         self.get_logger().info(f"robot state ready: r {self.model.r} m, track {self.model.track_width} m, odom "
-                               f"speed noise {noise.speed_std:.3g} m/s; robot_description {len(self.description)} B")
+                               f"speed noise {noise.speed_std:.3g} m/s, {rule} rule; robot_description "
+                               f"{len(self.description)} B")
 
     def _on_state(self, data: bytes) -> None:
         try:
