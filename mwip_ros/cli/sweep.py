@@ -164,7 +164,7 @@ def _main(argv=None) -> int:
     except ValueError as exc:
         return _fail(str(exc))
     try:
-        spec = load_spec(args.spec)
+        spec = load_spec(args.spec, backends=("rk4", "mujoco"))   # mujoco: the scalar loop (core.batch)
         scenarios = expand(spec)
     except (SpecError, P.ParamError) as exc:
         return _fail(str(exc))

@@ -236,11 +236,12 @@ def simulate_batch(loops: Sequence[ClosedLoop], window: Sequence[float], record:
     sensors and the estimator's method (:func:`_raw_stage`); else, with ``record`` or a law without a pure form,
     the scalar loop scenario by scenario (:func:`_simulate_each`).  The array and compiled forms have no driver
     state machine (docs/theory.md 6.8): they always run enabled, so scenarios with ``require_enable: true`` (a
-    driver nobody enables: its bridge open, no torque) run the scalar loop, which has it; so do scenarios that track
-    motion references (``motion``, theory 6.11: the shaping and the laws' ``track`` are not in the array forms yet)."""
-    if any(lp.plant.backend != "rk4" for lp in loops):
-        raise ValueError("the batch simulator runs the rk4 plant backend only for now (plant_sim.backend)")
-    if numba_missing() or any(lp.plant.require_enable or lp.motion is not None for lp in loops):   # see above
+    driver nobody enables: its bridge open, no torque) run the scalar loop, which has it; so do scenarios with
+    another plant backend (``mujoco``: a simulation that diverges is the scenario's ``diverged`` failure) and
+    scenarios that track motion references (``motion``, theory 6.11: the shaping and the laws' ``track`` are not in
+    the array forms yet)."""
+    if numba_missing() or any(lp.plant.require_enable or lp.plant.backend != "rk4" or lp.motion is not None
+                              for lp in loops):   # both array forms need numba, a driver and eq. (1)
         return _simulate_each(loops, window, record)
     beyond = any(_beyond_arrays(lp) for lp in loops)
     if compiled is None:
@@ -289,7 +290,7 @@ def _simulate_each(loops: Sequence[ClosedLoop], window: Sequence[float], record:
     runs = []
     for i, lp in enumerate(loops):
         try:
-            runs.append(simulate(lp))
+            runs.append(simulate(lp, diverged_fails=True))   # a diverged scenario is a failure, not an error
         except laws.LawError as exc:   # the law's own error, with the scenario (its index in ``loops``)
             raise exc.in_scenario(i) from exc
     named = [metrics_compute(r.columns, window, lp.plant.fall_angle, r.record.get("t_fall"))

@@ -20,8 +20,8 @@ from .excitation import Excitation, ExcitationConfig
 from .loop import Period, PlantSide
 from .motion import MotionConfig, Shaper
 from .observer import DiscreteObserver, gain_matrix
-from .plant import PlantConfig
-from .trajectory import Trajectory, TrajectoryTable
+from .plant import PlantConfig, PlantDiverged
+from .trajectory import DIVERGED, FAILURES, Trajectory, TrajectoryTable
 
 __all__ = ["ClosedLoop", "simulate", "LAWS", "law_name"]
 
@@ -81,11 +81,14 @@ class ClosedLoop:
         return self.law_class.observer
 
 
-def simulate(loop: ClosedLoop, label: str = "", progress: Optional[Callable[[float], None]] = None) -> Trajectory:
+def simulate(loop: ClosedLoop, label: str = "", progress: Optional[Callable[[float], None]] = None,
+             diverged_fails: bool = False) -> Trajectory:
     """Run the closed loop; stops early (``fallen``) when it fails: |theta_b| passes the fall angle, the state is not
     a finite number (diverged), or the law's command is (a ``bad_command``: NaN, infinite, beyond
     :data:`.safety.PLAUSIBLE_TORQUE`).  The trajectory's ``record`` then holds ``t_fall``, ``fall_text`` (the
-    line saying when and why) and ``failure`` (the cause, a :data:`.trajectory.FAILURES` name)."""
+    line saying when and why) and ``failure`` (the cause, a :data:`.trajectory.FAILURES` name).  A plant whose
+    simulation diverges (:class:`~.plant.PlantDiverged`, backend mujoco) raises it, or with ``diverged_fails``
+    (a sweep's scenario) ends the run as a ``diverged`` failure at the period it happened in."""
     pc = loop.plant
     h = pc.h
     n_steps = int(round(loop.duration_s / h))
@@ -99,11 +102,17 @@ def simulate(loop: ClosedLoop, label: str = "", progress: Optional[Callable[[flo
                             excitation=excitation is not None, motion=motion is not None,
                             pose=period.side.plant.spatial)
     every = max(1, n_steps // 10)
-    for k in range(n_steps + 1):
-        if period.run(table) or k == n_steps or period.advance(table):
-            break
-        if progress is not None and k % every == 0:
-            progress(k / n_steps)
+    try:
+        for k in range(n_steps + 1):
+            if period.run(table) or k == n_steps or period.advance(table):
+                break
+            if progress is not None and k % every == 0:
+                progress(k / n_steps)
+    except PlantDiverged as exc:
+        if not diverged_fails:
+            raise
+        period.failure = (period.side.plant.t, f"FAILED at t = {period.side.plant.t:.3f} s: {exc}",
+                          FAILURES[DIVERGED])
     run = table.trajectory(label or loop.name, period.failure is not None, h)
     if period.failure is not None:   # the run's own record of its end (as a bag's plant log): when and why
         run.record.update(t_fall=period.failure[0], fall_text=period.failure[1], failure=period.failure[2])

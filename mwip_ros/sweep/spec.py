@@ -124,8 +124,9 @@ class SweepSpec:
         return n * (self.samples if self.random_axes else 1)
 
 
-def load_spec(path, base_override: Optional[Path] = None) -> SweepSpec:
-    """Read and check a sweep spec file; raises :class:`SpecError` (or ``ParamError`` for the base file)."""
+def load_spec(path, base_override: Optional[Path] = None, backends=("rk4",)) -> SweepSpec:
+    """Read and check a sweep spec file; raises :class:`SpecError` (or ``ParamError`` for the base file).
+    ``backends``: the plant backends the caller runs (``mwip_sweep``: rk4 and mujoco; ``mwip_tune``: rk4)."""
     p = Path(path)
     if not p.is_file():
         raise SpecError("<spec>", f"no such file: {p}" if not p.is_dir() else f"{p} is a directory")
@@ -141,7 +142,7 @@ def load_spec(path, base_override: Optional[Path] = None) -> SweepSpec:
         mark = getattr(exc, "problem_mark", None)
         where = f" at line {mark.line + 1}" if mark is not None else ""
         raise SpecError("<spec>", f"not valid YAML{where}: {getattr(exc, 'problem', None) or exc}", str(p)) from None
-    return parse_spec(doc, str(p), p.parent, base_override)
+    return parse_spec(doc, str(p), p.parent, base_override, backends)
 
 
 def _did_you_mean(word: str, options) -> str:
@@ -156,8 +157,9 @@ def _number(v, key: str, source: str, what: str = "a number") -> float:
 
 
 def parse_spec(doc: Any, source: str = "<spec>", here: Path = Path("."),
-               base_override: Optional[Path] = None) -> SweepSpec:
-    """Check a loaded spec document; ``here`` is the directory ``base`` is relative to."""
+               base_override: Optional[Path] = None, backends=("rk4",)) -> SweepSpec:
+    """Check a loaded spec document; ``here`` is the directory ``base`` is relative to; ``backends`` as
+    :func:`load_spec`'s."""
     if not isinstance(doc, dict):
         raise SpecError("<spec>", "expected a mapping with base, controllers, duration_s, ..., vary", source)
     for k in doc:
@@ -177,9 +179,10 @@ def parse_spec(doc: Any, source: str = "<spec>", here: Path = Path("."),
         base_path = [default_params_file()]
     pf = P.load_param_files(base_path, option="base")   # ParamError names the file and the key
     base_values = P.merged_values(pf)
-    if base_values.get("backend", "rk4") != "rk4":
-        raise SpecError("base", f"plant_sim.backend: {base_values['backend']}: the batch simulator (mwip_sweep, "
-                                "mwip_tune) runs the rk4 backend only for now; mwip_sim runs the others", source)
+    if base_values.get("backend", "rk4") not in backends:
+        raise SpecError("base", f"plant_sim.backend: {base_values['backend']}: this tool runs the "
+                                f"{' and '.join(backends)} backend only for now; mwip_sim, plant_sim and mwip_sweep "
+                                f"run mujoco", source)
 
     ctrls = doc.get("controllers", ["dsc", "dscndo"])   # the paper's comparison unless the spec says more
     known = laws.names()   # the registry (core.laws)

@@ -9,7 +9,7 @@ import pytest
 
 pytest.importorskip("mujoco")
 
-from graphproc import PARAMS, Graph  # noqa: E402
+from graphproc import PARAMS, Graph, run_lockstep  # noqa: E402
 from mwip_ros import params as P  # noqa: E402
 from mwip_ros.core.sim import simulate  # noqa: E402
 from mwip_ros.core.trajectory import POSE_COLUMNS  # noqa: E402
@@ -129,3 +129,23 @@ def test_reset_restarts_the_mujoco_plant_and_the_run_after_it_equals_mwip_sim(tm
     assert len(segs) == 2 and segs[1].states == 201, segs.describe()
     second = read_bag_run(bag, segment=1)   # the pose of the run after the reset, from true_pose
     np.testing.assert_allclose(second["x"], offline["x"], rtol=0, atol=1e-9)
+
+
+def test_lockstep_mujoco_graph_with_raw_sensors_equals_mwip_sim(tmp_path):
+    """sensors.model raw: the MuJoCo plant's raw samples (its accelerations at t_k^-, core.raw_sensors) through the
+    state estimator, the observer and the controller: the graph equals mwip_sim with backend mujoco to 1e-9."""
+    from test_graph import RAW
+    over = tmp_path / "mujoco.yaml"
+    over.write_text("plant_sim:\n  ros__parameters:\n    backend: mujoco\n    duration_s: 1.0\n")
+    params = [*RAW, over] if isinstance(RAW, (list, tuple)) else [RAW, over]
+    code, csv_path, logs = run_lockstep(tmp_path, True, params=params)
+    assert code == 0, logs["plant_sim"].output() + logs["state_estimator"].output()
+    offline = simulate(P.closed_loop(P.merged_values(P.load_param_files(params)), controller="dscndo"))
+    assert not offline.fallen and len(offline) == 201
+    graph = read_csv(csv_path)
+    assert len(graph) == 201
+    for c in STATE + POSE_COLUMNS:
+        np.testing.assert_allclose(graph[c], offline[c], rtol=0, atol=1e-9, err_msg=c)
+    mine = read_csv(tmp_path / "estimator.csv")   # every raw sample the estimator took, as mwip_sim's
+    for c in ("gyro", "accel_x", "accel_z", "encoder", "theta_b_hat"):
+        np.testing.assert_allclose(mine[c], offline[c], rtol=0, atol=1e-9, err_msg=c)

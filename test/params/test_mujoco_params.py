@@ -84,18 +84,52 @@ def test_mwip_sim_ends_a_diverging_run_as_a_fault_naming_the_law_and_time(monkey
     assert "metrics" not in out.out and "upright" not in out.out
 
 
-def test_a_sweep_of_the_mujoco_backend_is_refused_in_one_line(tmp_path):
-    from mwip_ros.sweep.spec import SpecError, load_spec
-    base = _file(tmp_path, ["backend: mujoco"])
+def _mujoco_spec(tmp_path, vary="{}"):
+    base = _file(tmp_path, ["backend: mujoco", "actual: {D_w_variance: 0.0}"])   # no per-scenario noise seed
     spec = tmp_path / "s.yaml"
-    spec.write_text(f"base: [{default_params_file()}, {base}]\nduration_s: 1.0\nvary: {{}}\n")
+    spec.write_text(f"base: [{default_params_file()}, {base}]\ncontrollers: [dscndo]\nduration_s: 1.0\n"
+                    f"metrics_window_s: [0.5, 1.0]\nvary: {vary}\n")
+    return spec
+
+
+def test_mwip_tune_refuses_the_mujoco_backend_in_one_line(tmp_path):
+    from mwip_ros.sweep.spec import SpecError, load_spec
     with pytest.raises(SpecError) as ei:
-        load_spec(spec)
-    assert "backend: mujoco" in str(ei.value) and "mwip_sim" in str(ei.value) and "\n" not in str(ei.value)
+        load_spec(_mujoco_spec(tmp_path))   # mwip_tune's call: rk4 only
+    assert "backend: mujoco" in str(ei.value) and "mwip_sweep" in str(ei.value) and "\n" not in str(ei.value)
 
 
-def test_the_batch_simulator_refuses_the_mujoco_backend():
+def test_the_batch_runs_the_mujoco_backend_scenario_by_scenario_as_mwip_sim_and_a_divergence_is_a_failure():
+    """A mujoco scenario runs the scalar loop (mwip_sim's numbers); one that diverges is that scenario's
+    ``diverged`` failure (not an error of the batch), scored neither upright nor from NaN."""
+    pytest.importorskip("mujoco")
+    from mwip_ros.core import metrics
     from mwip_ros.core.batch import simulate_batch
-    loop = P.closed_loop(dict(BASE, backend="mujoco"), duration=0.1)
-    with pytest.raises(ValueError, match="rk4 plant backend only"):
-        simulate_batch([loop], (0.0, 0.1))
+    from mwip_ros.core.sim import simulate
+    from mwip_ros.core.trajectory import FAILURES
+    good = P.closed_loop(dict(BASE, backend="mujoco"), duration=1.0, controller="dscndo")
+    bad = P.closed_loop(dict(BASE, backend="mujoco", **{"actual.I_w": 1e-6, "actual.D_b": 1e6}), duration=1.0,
+                        controller="dscndo")
+    r = simulate_batch([good, bad], (0.5, 1.0))
+    want = metrics.compute(simulate(good).columns, (0.5, 1.0), good.plant.fall_angle)
+    assert r.metrics["theta_b_rms"][0] == want.theta_b_rms and r.metrics["u_rms"][0] == want.u_rms
+    assert list(r.upright) == [True, False] and FAILURES[r.failure[1]] == "diverged" and r.t_fall[1] == 0.0
+    assert not r.fallen[0] and r.fallen[1]
+
+
+def test_mwip_sweep_runs_the_mujoco_backend(tmp_path):
+    pytest.importorskip("mujoco")
+    from mwip_ros.sweep.results import read_results
+    spec = _mujoco_spec(tmp_path, "{plant_sim.actual.m_b: {values: [280.0, 340.0]}}")
+    out = tmp_path / "out"
+    r = subprocess.run([sys.executable, "-m", "mwip_ros.cli.sweep", str(spec), "--out", str(out), "--workers", "1",
+                        "--no-figures"], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    cols = read_results(out / "results.csv")
+    assert len(cols["scenario"]) == 2 and all(float(u) == 1.0 for u in cols["upright"]), cols
+    from mwip_ros.core import metrics
+    from mwip_ros.core.sim import simulate
+    loop = P.closed_loop(dict(BASE, backend="mujoco", **{"actual.m_b": 340.0, "actual.D_w_variance": 0.0}),
+                         duration=1.0, controller="dscndo")
+    want = metrics.compute(simulate(loop).columns, (0.5, 1.0), loop.plant.fall_angle)
+    assert abs(cols["theta_b_rms"][1] - want.theta_b_rms) < 1e-12

@@ -42,6 +42,10 @@ the body, its rate and the torque that acted), both stamped t_k, and the truth o
 a ``state_estimator`` publishes ``joint_states`` (the lockstep chain waits for it first).  The sample is
 the plant's stage ``sensors`` (:meth:`mwip_ros.core.loop.PlantSide.sense`).
 
+With ``backend: mujoco`` (docs/theory.md 6.10: a plant with a 3D pose, ``Plant.spatial``) the plant publishes its
+pose per state on ``true_pose`` (geometry_msgs/PoseStamped, frame ``odom``) and its csv has the pose columns; a
+simulation that diverges (``PlantDiverged``) is the driver's fault ``diverged``: one line, no state past it, exit 1.
+
 The plant's trajectory table (its ``csv``) has the states, the commands it applied and
 the true disturbance; it does not listen to the observer: estimates join the
 trajectory by stamp where a report needs them (the bag, or the observer's own ``csv``).
