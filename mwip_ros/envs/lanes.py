@@ -16,7 +16,9 @@ over arrays (the functions the compiled loop compiles), in :data:`mwip_ros.core.
 * ``observer``: :func:`~mwip_ros.core.observer.z_start`, :func:`~mwip_ros.core.observer.z_next`,
   :func:`~mwip_ros.core.observer.tau_hat_of`;
 * ``law``: the base law's ``pure_step`` (:mod:`mwip_ros.core.laws`) and the observer term
-  :func:`~mwip_ros.core.controller.u_taud_of`, the excitation (:mod:`mwip_ros.core.excitation`), plus the action;
+  :func:`~mwip_ros.core.controller.u_taud_of` (a law without one, ``mpc``: a QP per robot, the law's own object per
+  robot, its ``step`` one robot after another; a restart is its ``reset``, a cold start), the excitation
+  (:mod:`mwip_ros.core.excitation`), plus the action;
 * ``drive``: the driver's ``bad_command`` (:data:`~mwip_ros.core.safety.PLAUSIBLE_TORQUE`), the torque limit, the
   actuator delay (the queue of :class:`~mwip_ros.core.sensing.Actuator`);
 * ``plant``: D_w (:func:`~mwip_ros.core.plant.D_w_of`'s arithmetic, each robot's own stream), tau_ext at each robot's
@@ -58,8 +60,6 @@ def refusal(s: EnvSetup) -> Optional[str]:
         return f"plant_sim.backend: the vector env runs the rk4 plant only, got {pc.backend!r} (MwipEnv runs it)"
     if pc.require_enable:
         return "require_enable: the vector env's driver is always enabled (MwipEnv runs the driver's state machine)"
-    if s.base_law is not None and pure_form(loop.law_class) is None:
-        return f"base_law: {s.base_law} has no pure step (Law.pure_step) to run over arrays (MwipEnv runs it)"
     return None
 
 
@@ -104,12 +104,15 @@ class Lanes:
         pc = self.pc = loop.plant
         self.n, self.h, self.substeps, self.setup = n, pc.h, pc.substeps, s
         self.c = tuple(float(v) for v in np.asarray(loop.X, dtype=float).ravel())   # c1..c4 (eq. 14)
-        self.law = None
+        self.law = self.laws = None
         if s.base_law is not None:
             cls = loop.law_class
             self.law = pure_form(cls)
-            self.P = getattr(cls, "base", cls).pure_params(loop.params)
-            self.observer_term = bool(cls.observer)
+            if self.law is not None:
+                self.P = getattr(cls, "base", cls).pure_params(loop.params)
+                self.observer_term = bool(cls.observer)
+            else:   # no pure step (mpc: a QP per robot): the law's own object per robot, stepped one by one
+                self.laws = [cls(loop.params, pc.nominal, pc.h) for _ in range(n)]
         sc = pc.sensing
         self.delay, self.act_delay, self.counts = sc.delay_periods, sc.actuator_delay_periods, sc.encoder_counts_per_rev
         self.raw = pc.raw
@@ -164,6 +167,9 @@ class Lanes:
         self.qa[:, idx] = 0.0
         if self.raw is not None:
             self.bias[idx] = float(self.raw.gyro_bias)
+        if self.laws is not None:   # a cold start (the scalar env builds the law again)
+            for i in idx:
+                self.laws[i].reset()
 
     def observe(self) -> tuple:
         """Stages ``sensors``, ``observer`` and ``law`` (the base law's command, kept in :attr:`u_base`) of every
@@ -206,6 +212,10 @@ class Lanes:
             if self.observer_term:   # core.laws.ndo.WithObserver.step
                 u = u - u_taud_of(p, p.m12 * np.cos(xm[1]), th)
             self.s = s_next
+        elif self.laws is not None:   # core.loop.command: the law's step with the state and tau_hat it sees
+            xs, ts = [np.asarray(v, dtype=float).tolist() for v in xm], [v.tolist() for v in th]
+            u = np.array([float(lw.step((xs[0][i], xs[1][i], xs[2][i], xs[3][i]), (ts[0][i], ts[1][i]))[0])
+                          for i, lw in enumerate(self.laws)])
         else:
             u = np.zeros(n)   # no base law: the action is the whole command
         if self.ext is not None:   # core.loop.command: the law's command plus the excitation of period k

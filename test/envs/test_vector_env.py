@@ -224,11 +224,41 @@ def test_what_the_vector_env_does_not_run_is_refused_naming_the_key(files, key):
     assert str(err.value).startswith(f"{key}:"), err.value
 
 
-def test_a_law_without_a_pure_step_is_refused_naming_base_law():
+@pytest.mark.parametrize("files, law", [(PAPER, "mpc"), (SENSING, "mpc_ndo")])
+def test_mpc_a_law_without_a_pure_step_with_a_zero_residual_equals_the_batch_simulator(files, law):
+    """MPC's QP per robot (the law's own object each); the batch runs it over arrays (its QPs one by one)."""
     pytest.importorskip("daqp")
-    with pytest.raises(ValueError) as err:
-        MwipVectorEnv(2, PAPER, base_law="mpc")
-    assert str(err.value).startswith("base_law:"), err.value
+    env = MwipVectorEnv(N, files, duration=DURATION, base_law=law)
+    assert env.lanes.law is None and len(env.lanes.laws) == N
+    xs, us = run(env, lambda obs, u: np.zeros((N, 1)))
+    trajectories, metrics = batch(files, law)
+    check_against_batch(xs, us, trajectories, metrics, env.setup.loop.plant.h)
+    assert np.max(np.abs(us)) > 0.9 * env.setup.loop.params.u_max   # the bound was reached: the QP's, not free
+
+
+def test_autoreset_gives_mpc_a_cold_start_of_the_restarted_robot_only():
+    """Robot 1's command is not a number in step 2 (the drive refuses it, its episode ends): its law's reset (a cold
+    start, no active set) is called in the step that restarts it, robot 0's not; robot 0's second episode repeats its
+    first."""
+    pytest.importorskip("daqp")
+    env = MwipVectorEnv(2, deterministic(), duration=0.05, base_law="mpc", torque_scale=4096.0)
+    env.reset(seed=1)
+    resets = [0, 0]
+    for i, lw in enumerate(env.lanes.laws):
+        lw.reset = (lambda i, old: lambda: (resets.__setitem__(i, resets[i] + 1), old())[1])(i, lw.reset)
+    n, first, second = env.setup.n_steps, [], []
+    nan = np.array([[0.0], [np.nan]])
+    for step in range(2 * n + 1):
+        restart = env._restart.copy()
+        before = list(resets)
+        obs, r, term, trunc, info = env.step(nan if step == 2 else np.zeros((2, 1)))
+        assert term[1] == (step == 2)
+        assert [resets[i] - before[i] for i in range(2)] == restart.astype(int).tolist(), step
+        (first if step < n else second).append(obs[0].copy())
+        if step == n - 1:
+            assert not env.lanes.laws[0]._qps[0].cold   # robot 0's QP holds an active set when it restarts
+    assert resets == [1, 2]   # robot 0 at its end (0.05 s); robot 1 in step 3, then at its end
+    assert np.array_equal(np.array(first), np.array(second[1:n + 1]))
 
 
 def test_the_stepper_holds_every_stage_of_the_loop_in_its_order():
