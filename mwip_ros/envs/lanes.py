@@ -25,8 +25,10 @@ over arrays (the functions the compiled loop compiles), in :data:`mwip_ros.core.
   own t_k (:func:`~mwip_ros.core.plant.stage_torques`, a table of the episode's periods), one RK4 period with the
   motor when the files have it (:func:`~mwip_ros.core.plant.rk4_driven` compiled: :mod:`.kernels`), the fall check.
 
-The driver's enable is not here (the scalar env, :class:`~mwip_ros.envs.scalar.MwipEnv`, has every stage): the
-vector env refuses such files, naming the key.
+With ``require_enable: true`` the driver starts disabled and nobody enables it (as in ``mwip_sim``): its bridge is
+open in every period, no torque acts and the motor carries no current (:func:`~mwip_ros.core.plant.gated_drive`);
+a command that is not plausible still faults it.  Another plant backend is refused, naming the key
+(``plant_sim.backend``; the scalar env, :class:`~mwip_ros.envs.scalar.MwipEnv`, runs it).
 A restarted robot keeps its noise streams (its next draws), so no generator is built again.
 """
 from __future__ import annotations
@@ -40,6 +42,7 @@ from mwip_ros.core.compiled import pure_form
 from mwip_ros.core.controller import u_taud_of
 from mwip_ros.core.excitation import Excitation
 from mwip_ros.core.observer import tau_hat_of, z_next, z_start
+from mwip_ros.core.plant import NO_MOTOR
 from mwip_ros.core.raw_sensors import raw_rng
 from mwip_ros.core.safety import PLAUSIBLE_TORQUE
 from mwip_ros.core.sensing import NOISE_BLOCK, measure, sensor_rng
@@ -58,8 +61,6 @@ def refusal(s: EnvSetup) -> Optional[str]:
     pc = loop.plant
     if pc.backend != "rk4":
         return f"plant_sim.backend: the vector env runs the rk4 plant only, got {pc.backend!r} (MwipEnv runs it)"
-    if pc.require_enable:
-        return "require_enable: the vector env's driver is always enabled (MwipEnv runs the driver's state machine)"
     return None
 
 
@@ -103,6 +104,9 @@ class Lanes:
         loop = s.loop
         pc = self.pc = loop.plant
         self.n, self.h, self.substeps, self.setup = n, pc.h, pc.substeps, s
+        # the driver's bridge: require_enable and nobody to enable it, open in every period (core.safety)
+        self.enabled = not pc.require_enable
+        self.motor = tuple(float(c) for c in pc.motor_constants) if self.enabled else NO_MOTOR
         self.c = tuple(float(v) for v in np.asarray(loop.X, dtype=float).ravel())   # c1..c4 (eq. 14)
         self.law = self.laws = None
         if s.base_law is not None:
@@ -231,7 +235,7 @@ class Lanes:
     def _sense_raw(self) -> tuple:
         """The raw sample of every robot's period k, delayed, and its estimate: (the estimate, four arrays; the
         torque reported with the sample); :attr:`sample` the delayed samples."""
-        pc, n, raw = self.pc, self.n, self.raw
+        n, raw = self.n, self.raw
         first = self.k == 0
         if first.any() and self.dw is not None:   # D_w of period 0 (the draw the plant stage takes next)
             self.D_w = np.where(first, self._D_w(self.dw.peek(first)[:, 0]), self.D_w)
@@ -240,7 +244,7 @@ class Lanes:
         xm, u_m = np.empty((4, n)), np.empty(n)
         with np.errstate(all="ignore"):
             self.kernel(*self.robot, self.D_w, self.tau.T1, self.tau.T2, self.k, *self.x, self.u_prev, self.u_drive,
-                        *(float(c) for c in pc.motor_constants), Z, self.zs is not None, self.bias, self.phi,
+                        *self.motor, Z, self.zs is not None, self.bias, self.phi,
                         float(raw.offset), float(raw.gyro_noise_std), float(raw.gyro_bias_walk),
                         float(raw.accel_noise_std), int(raw.encoder_counts_per_rev), self.h, self.delay, self.qr,
                         self.PE, self.ES, self.sample, xm, u_m)
@@ -260,6 +264,8 @@ class Lanes:
             self.qa[slot, self.rows] = np.where(go, u, self.qa[slot, self.rows])
             u = np.where(k >= self.act_delay, self.qa[(k - self.act_delay) % a1, self.rows], 0.0)
         u = np.where(bad, 0.0, u)
+        if not self.enabled:   # core.safety.DriverStateMachine.torque_gate: disabled, zero torque acts
+            u = np.zeros(self.n)
         # stage: plant (D_w of the period, tau_ext at each robot's own t_k, RK4)
         run = go & ~bad
         if self.dw is not None:   # core.plant.D_w_of over arrays
@@ -272,7 +278,7 @@ class Lanes:
         with np.errstate(all="ignore"):
             self.tau.cover(int(k.max()))
             args = (*self.robot[:5], D_w, self.tau.T1, self.tau.T2, k, *x, u, self.h, self.substeps, run)
-            advance(*args, *(float(c) for c in pc.motor_constants), acted)
+            advance(*args, *self.motor, acted)
             self.x = x
             finite = np.isfinite(x[0]) & np.isfinite(x[1]) & np.isfinite(x[2]) & np.isfinite(x[3])
             fell = run & ~(np.abs(x[1]) <= pc.fall_angle)

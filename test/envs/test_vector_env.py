@@ -215,8 +215,37 @@ def test_autoreset_restarts_the_estimator_of_a_done_robot_in_place():
     assert np.array_equal(np.array(first), np.array(second[1:n + 1]))   # robot 0's second episode repeats its first
 
 
+@pytest.mark.parametrize("files", [MOTOR, RAW])
+def test_require_enable_a_driver_nobody_enables_equals_the_batch_simulator(files):
+    """require_enable: true, nobody enables the driver (as mwip_sim): no torque acts, the motor carries no current,
+    the robots fall; each one's trajectory and the time it fell are the batch simulator's (its scalar loop, 1e-9)."""
+    values = {**load_values(files), "require_enable": True}
+    env = MwipVectorEnv(N, values, duration=DURATION, base_law="dscndo")
+    env.reset(seed=SEED)
+    xs, us, fell = [np.stack(env.lanes.x, 1)], [], np.full(N, -1)
+    for step in range(env.setup.n_steps):
+        obs, r, term, trunc, info = env.step(np.zeros((N, 1)))
+        live = fell < 0
+        us.append(np.where(live, info["u"], np.nan))
+        xs.append(np.where(live[:, None], np.stack(env.lanes.x, 1), np.nan))
+        fell[term & live] = step
+        assert not trunc.any() and np.all(info["failure"][term] == 1)   # FALL
+        if (fell >= 0).all():
+            break
+    assert (fell >= 0).all() and np.all(np.array(us)[~np.isnan(us)] == 0.0)
+    trajectories, _ = batch(values, "dscndo")
+    xs = np.array(xs)
+    for i, tr in enumerate(trajectories):
+        c = tr.columns
+        rows = fell[i] + 2   # the states x_0 .. x_(fall period + 1): the batch records the fallen state too
+        assert len(c["theta_b"]) == rows, (i, len(c["theta_b"]), rows)
+        for j, name in enumerate(("theta_w", "theta_b", "dtheta_w", "dtheta_b")):
+            assert np.allclose(xs[:rows, i, j], c[name], rtol=0, atol=1e-9), (i, name)
+        assert np.all(c["u"] == 0.0)
+
+
 @pytest.mark.parametrize("files, key", [
-    ({**load_values(PAPER), "require_enable": True}, "require_enable"),
+    ({**load_values(PAPER), "backend": "mujoco"}, "plant_sim.backend"),
 ])
 def test_what_the_vector_env_does_not_run_is_refused_naming_the_key(files, key):
     with pytest.raises(ValueError) as err:
