@@ -10,7 +10,9 @@ Rows (config/paper.yaml unless --params; best of --repeat, after a warm-up that 
 * ``MwipVectorEnv, base_law dscndo``: the same with a zero residual on DSCNDO (no falls);
 * ``simulate_batch (compiled)``: the batch simulator over the same N scenarios (DSCNDO, seeds 0 .. N - 1) for the
   same number of periods, its compiled loop (``core.compiled``): scenario-steps/s;
-* ``MwipEnv``: one robot, a random policy, env-steps/s.
+* ``MwipEnv``: one robot, a random policy, env-steps/s;
+* the two ``raw sensors, kalman`` rows: the vector env with a random policy and the batch simulator as above, with
+  ``config/sensors_raw_realistic.yaml`` added (raw IMU and encoder samples, the EKF per robot).
 
 Everything runs in this one process (one core; the batch's kernel and the vector env's RK4 are single-threaded).
 The table goes to stdout; ``--json`` also writes the numbers.
@@ -21,6 +23,13 @@ import argparse
 import dataclasses
 import json
 import time
+
+
+def _with_raw(params):
+    """``params`` (None: config/paper.yaml) with config/sensors_raw_realistic.yaml after them."""
+    from mwip_ros.params.paths import default_params_file
+    config = default_params_file().parent
+    return [*(params or [config / "paper.yaml"]), config / "sensors_raw_realistic.yaml"]
 
 
 def _vector(n, steps, params, base_law):
@@ -79,6 +88,10 @@ def main(argv=None) -> int:
             lambda: _vector(args.n, args.steps, args.params, "dscndo"),
         "simulate_batch, compiled, DSCNDO [scenario-steps/s]": lambda: _batch(args.n, args.steps, args.params),
         "MwipEnv, random policy [env-steps/s]": lambda: _scalar(args.steps * 4, args.params),
+        "MwipVectorEnv, raw sensors, kalman, random policy [env-steps/s]":
+            lambda: _vector(args.n, args.steps, _with_raw(args.params), None),
+        "simulate_batch, compiled, DSCNDO, raw sensors, kalman [scenario-steps/s]":
+            lambda: _batch(args.n, args.steps, _with_raw(args.params)),
     }
     best = {name: max(f() for _ in range(args.repeat)) for name, f in rows.items()}
     ref = best["simulate_batch, compiled, DSCNDO [scenario-steps/s]"]

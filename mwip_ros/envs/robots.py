@@ -21,13 +21,13 @@ from mwip_ros.sweep.scenarios import expand
 __all__ = ["ROBOT_KEYS", "TERMS", "SpecRobots", "terms_of"]
 
 ROBOT_KEYS = tuple(f"actual.{f.name}" for f in dataclasses.fields(PhysicalParams)) + ("actual.D_b",)
-TERMS = ("m11", "m12", "m22", "G_b")   # what core.compiled.Inertia holds, then D_b
+TERMS = ("m11", "m12", "m22", "G_b")   # what core.compiled.Inertia holds, then D_b, then r and g (the raw sensors)
 
 
 def terms_of(values) -> Tuple[float, ...]:
-    """(m11, m12, m22, G_b, D_b) of the true robot of the merged ``values``."""
+    """(m11, m12, m22, G_b, D_b, r, g) of the true robot of the merged ``values``."""
     p = P.physical(values, "actual")
-    return (*(float(getattr(p, t)) for t in TERMS), float(values["actual.D_b"]))
+    return (*(float(getattr(p, t)) for t in TERMS), float(values["actual.D_b"]), float(p.r), float(p.g))
 
 
 class SpecRobots:
@@ -41,7 +41,7 @@ class SpecRobots:
         self.spec, self.n = spec, n
 
     def pool(self, seed: int) -> Tuple[np.ndarray, np.ndarray]:
-        """(a row (m11, m12, m22, G_b, D_b) per robot, their noise seeds): the scenarios of the spec with
+        """(a row (m11, m12, m22, G_b, D_b, r, g) per robot, their noise seeds): the scenarios of the spec with
         ``seed: seed`` and ``samples: n``, in the sweep's order."""
         sc = expand(dataclasses.replace(self.spec, seed=int(seed), samples=self.n))
         base = self.spec.base_values

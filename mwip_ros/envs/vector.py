@@ -29,10 +29,11 @@ SEED_RANGE = 2 ** 31
 
 
 class MwipVectorEnv(VectorEnv):
-    """``num_envs`` robots of the parameter files (the arguments as :class:`~mwip_ros.envs.scalar.MwipEnv`'s, but
-    ``observation``: the state only).  The files may set the state sensors (noise, encoder, delay), the torque limit,
-    the actuator delay, the motor, D_w, tau_ext, the model error and the excitation; raw sensors and the driver's
-    enable are refused, naming the key (``MwipEnv`` runs them).  ``sweep``: a sweep spec instead of ``params``
+    """``num_envs`` robots of the parameter files (the arguments as :class:`~mwip_ros.envs.scalar.MwipEnv`'s).  The
+    files may set the state sensors (noise, encoder, delay) or raw sensors with their estimator (``observation``:
+    ``state`` the estimate, ``raw`` the raw samples), the torque limit, the actuator delay, the motor, D_w, tau_ext,
+    the model error and the excitation; the driver's enable is refused, naming the key (``MwipEnv`` runs it).
+    ``sweep``: a sweep spec instead of ``params``
     (:class:`~mwip_ros.envs.robots.SpecRobots`: it may vary the true robot only): ``reset(seed=s)`` gives robot i
     scenario i of the spec with ``seed: s`` and ``samples: num_envs`` (its true robot and its noise seed); a restarted
     robot takes the next scenario, then those of the spec with seed s + 1, s + 2, ...  ``infos``: ``u`` (the torque
@@ -46,8 +47,6 @@ class MwipVectorEnv(VectorEnv):
                  torque_scale: Optional[float] = None, normalize_action: bool = True, sweep=None):
         if int(num_envs) < 1:
             raise ValueError(f"num_envs: must be >= 1, got {num_envs!r}")
-        if observation != "state":
-            raise ValueError(f"observation: the vector env observes the state only, got {observation!r}")
         self.num_envs = n = int(num_envs)
         self.robots = None
         if sweep is not None:
@@ -62,14 +61,17 @@ class MwipVectorEnv(VectorEnv):
         self.setup = s = setup(params, duration, base_law, observation, reward, torque_scale, normalize_action)
         self.lanes = Lanes(s, n)
         self.single_action_space = spaces.Box(-s.bound, s.bound, (1,), np.float64)
-        self.single_observation_space = spaces.Box(-np.inf, np.inf, (4,), np.float64)
+        width = 5 if observation == "raw" else 4
+        self.single_observation_space = spaces.Box(-np.inf, np.inf, (width,), np.float64)
         self.action_space = batch_space(self.single_action_space, n)
         self.observation_space = batch_space(self.single_observation_space, n)
         self._restart = np.zeros(n, dtype=bool)
-        self._obs = np.zeros((n, 4))
+        self._obs = np.zeros((n, width))
 
     def _observation(self) -> np.ndarray:
         xm = self.lanes.observe()
+        if self.setup.observation == "raw":   # the raw samples (delayed, as the estimator got them)
+            return self.lanes.sample.copy()
         for j in range(4):
             self._obs[:, j] = xm[j]
         return self._obs.copy()

@@ -1,4 +1,4 @@
-"""scripts/bench_envs.py runs (a small N) and prints its four rows with their ratios to the batch simulator."""
+"""scripts/bench_envs.py runs (a small N) and prints its six rows with their ratios to the batch simulator."""
 import importlib.util
 from pathlib import Path
 
@@ -17,7 +17,7 @@ def test_the_benchmark_prints_every_row_beside_the_batch(capsys):
     spec.loader.exec_module(mod)
     assert mod.main(["--n", "64", "--steps", "20", "--repeat", "1"]) == 0
     rows = [line for line in capsys.readouterr().out.splitlines() if line.startswith("| ") and " M | " in line]
-    assert len(rows) == 4, rows
+    assert len(rows) == 6, rows
     ratios = {r.split(" | ")[0][2:]: float(r.rstrip(" |").split(" | ")[-1]) for r in rows}
     assert ratios["simulate_batch, compiled, DSCNDO [scenario-steps/s]"] == 1.0
     assert all(v > 0 for v in ratios.values())

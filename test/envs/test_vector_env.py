@@ -23,6 +23,7 @@ PAPER = [CONFIG / "paper.yaml"]
 SENSING = PAPER + [CONFIG / "sensing_realistic.yaml"]
 MOTOR = SENSING + [CONFIG / "motor_realistic.yaml"]
 CHIRP = PAPER + [CONFIG / "identify.yaml"]   # the identification's chirp added to the law's command
+RAW = PAPER + [CONFIG / "sensors_raw_realistic.yaml"]   # raw sensors, the kalman estimator
 N, SEED, DURATION, WINDOW = 6, 40, 2.0, (1.0, 2.0)
 
 
@@ -140,8 +141,111 @@ def test_make_vec_of_the_registered_id_runs_the_vector_env():
     assert term.dtype == trunc.dtype == np.bool_
 
 
+def raw(method, **more):
+    """The raw sensors of sensors_raw_realistic.yaml with the estimator ``method``."""
+    return {**load_values(RAW), "method": method, **more}
+
+
+@pytest.mark.parametrize("method", ["kalman", "complementary"])
+@pytest.mark.parametrize("law", ["dscndo", "lqr"])
+def test_raw_sensors_and_the_estimator_with_a_zero_residual_equal_the_batch_simulator(method, law):
+    """The raw samples per robot, the estimator's pure step per robot, the estimate the law sees: simulate_batch's
+    trajectories (the scalar loop's) and the compiled loop's metrics, to 1e-9; the estimate is the batch's
+    theta_b_hat (its estimate-error metric)."""
+    files = raw(method)
+    env = MwipVectorEnv(N, files, duration=DURATION, base_law=law)
+    obs, _ = env.reset(seed=SEED)
+    xs, us, est = [np.stack(env.lanes.x, 1)], [], [obs[:, 1]]
+    while True:
+        obs, r, terminated, truncated, info = env.step(np.zeros((N, 1)))
+        us.append(info["u"])
+        xs.append(np.stack(env.lanes.x, 1))
+        est.append(obs[:, 1])
+        assert not terminated.any()
+        if truncated.any():
+            assert truncated.all()
+            break
+    xs, us, est = np.array(xs), np.array(us), np.array(est)
+    trajectories, metrics = batch(files, law)
+    check_against_batch(xs, us, trajectories, metrics, env.setup.loop.plant.h)
+    first, count = window_samples(us.shape[0], env.setup.loop.plant.h, WINDOW)
+    rows = slice(first, first + count)
+    err = np.sqrt(np.mean((est[rows] - xs[rows, :, 1]) ** 2, axis=0))
+    key = next(k for k in metrics if "theta_b" in k and "err" in k and "rms" in k)
+    assert np.allclose(err, metrics[key], rtol=1e-9, atol=0), key
+    assert np.all(err > 0)   # the estimate is not the true state
+
+
+def test_the_raw_observation_is_the_scalar_envs_raw_sample():
+    """observation='raw': (gyro, accel_x, accel_z, encoder, encoder_rate) delayed, robot i's those of MwipEnv's
+    episode with seed SEED + i (the scalar loop's own sensors), to 1e-9."""
+    from mwip_ros.envs import MwipEnv
+    files = raw("kalman", **{"sensors.delay_periods": 2})
+    env = MwipVectorEnv(2, files, duration=0.3, base_law="dscndo", observation="raw")
+    assert env.observation_space.shape == (2, 5)
+    obs = [env.reset(seed=SEED)[0]]
+    for _ in range(30):
+        obs.append(env.step(np.zeros((2, 1)))[0])
+    obs = np.array(obs)
+    for i in range(2):
+        one = MwipEnv(files, duration=0.3, base_law="dscndo", observation="raw")
+        want = [one.reset(seed=SEED + i)[0]] + [one.step(np.zeros(1))[0] for _ in range(30)]
+        assert np.allclose(obs[:, i], np.array(want), rtol=0, atol=1e-9), i
+    assert np.ptp(obs[:, 0, 0]) > 0 and np.all(obs[1:3, :, 4] == 0.0)   # the encoder rate: 0 at k = 0 (delayed 2)
+
+
+def test_autoreset_restarts_the_estimator_of_a_done_robot_in_place():
+    """A robot pushed over restarts with a first estimator step, in the same arrays: with deterministic sensors and
+    friction, robot 0's second episode repeats its first (the estimate, bit for bit)."""
+    values = raw("kalman", **{"actual.D_w_variance": 0.0, "sensors.imu.gyro_noise_std": 0.0,
+                              "sensors.imu.gyro_bias_walk": 0.0, "sensors.imu.accel_noise_std": 0.0,
+                              "sensors.delay_periods": 1})
+    env = MwipVectorEnv(2, values, duration=0.3, base_law="dscndo", torque_scale=4096.0)
+    env.reset(seed=1)
+    ES, first, second, fell = env.lanes.ES, [], [], False
+    push = np.array([[0.0], [1.0]])
+    n = env.setup.n_steps   # 60 periods of 5 ms
+    for step in range(2 * n + 1):
+        obs, r, term, trunc, info = env.step(push if step < n else np.zeros((2, 1)))
+        (first if step < n else second).append(obs[0].copy())
+        fell |= bool(term[1])
+        if step == n - 1:
+            assert trunc[0] and not term[0]
+    assert fell and env.lanes.ES is ES   # robot 1 fell and restarted; no array built again
+    assert np.array_equal(np.array(first), np.array(second[1:n + 1]))   # robot 0's second episode repeats its first
+
+
+@pytest.mark.parametrize("files", [MOTOR, RAW])
+def test_require_enable_a_driver_nobody_enables_equals_the_batch_simulator(files):
+    """require_enable: true, nobody enables the driver (as mwip_sim): no torque acts, the motor carries no current,
+    the robots fall; each one's trajectory and the time it fell are the batch simulator's (its scalar loop, 1e-9)."""
+    values = {**load_values(files), "require_enable": True}
+    env = MwipVectorEnv(N, values, duration=DURATION, base_law="dscndo")
+    env.reset(seed=SEED)
+    xs, us, fell = [np.stack(env.lanes.x, 1)], [], np.full(N, -1)
+    for step in range(env.setup.n_steps):
+        obs, r, term, trunc, info = env.step(np.zeros((N, 1)))
+        live = fell < 0
+        us.append(np.where(live, info["u"], np.nan))
+        xs.append(np.where(live[:, None], np.stack(env.lanes.x, 1), np.nan))
+        fell[term & live] = step
+        assert not trunc.any() and np.all(info["failure"][term] == 1)   # FALL
+        if (fell >= 0).all():
+            break
+    assert (fell >= 0).all() and np.all(np.array(us)[~np.isnan(us)] == 0.0)
+    trajectories, _ = batch(values, "dscndo")
+    xs = np.array(xs)
+    for i, tr in enumerate(trajectories):
+        c = tr.columns
+        rows = fell[i] + 2   # the states x_0 .. x_(fall period + 1): the batch records the fallen state too
+        assert len(c["theta_b"]) == rows, (i, len(c["theta_b"]), rows)
+        for j, name in enumerate(("theta_w", "theta_b", "dtheta_w", "dtheta_b")):
+            assert np.allclose(xs[:rows, i, j], c[name], rtol=0, atol=1e-9), (i, name)
+        assert np.all(c["u"] == 0.0)
+
+
 @pytest.mark.parametrize("files, key", [
-    (PAPER + [CONFIG / "sensors_raw_realistic.yaml"], "sensors.model"),
+    ({**load_values(PAPER), "backend": "mujoco"}, "plant_sim.backend"),
 ])
 def test_what_the_vector_env_does_not_run_is_refused_naming_the_key(files, key):
     with pytest.raises(ValueError) as err:
@@ -149,11 +253,41 @@ def test_what_the_vector_env_does_not_run_is_refused_naming_the_key(files, key):
     assert str(err.value).startswith(f"{key}:"), err.value
 
 
-def test_a_law_without_a_pure_step_is_refused_naming_base_law():
+@pytest.mark.parametrize("files, law", [(PAPER, "mpc"), (SENSING, "mpc_ndo")])
+def test_mpc_a_law_without_a_pure_step_with_a_zero_residual_equals_the_batch_simulator(files, law):
+    """MPC's QP per robot (the law's own object each); the batch runs it over arrays (its QPs one by one)."""
     pytest.importorskip("daqp")
-    with pytest.raises(ValueError) as err:
-        MwipVectorEnv(2, PAPER, base_law="mpc")
-    assert str(err.value).startswith("base_law:"), err.value
+    env = MwipVectorEnv(N, files, duration=DURATION, base_law=law)
+    assert env.lanes.law is None and len(env.lanes.laws) == N
+    xs, us = run(env, lambda obs, u: np.zeros((N, 1)))
+    trajectories, metrics = batch(files, law)
+    check_against_batch(xs, us, trajectories, metrics, env.setup.loop.plant.h)
+    assert np.max(np.abs(us)) > 0.9 * env.setup.loop.params.u_max   # the bound was reached: the QP's, not free
+
+
+def test_autoreset_gives_mpc_a_cold_start_of_the_restarted_robot_only():
+    """Robot 1's command is not a number in step 2 (the drive refuses it, its episode ends): its law's reset (a cold
+    start, no active set) is called in the step that restarts it, robot 0's not; robot 0's second episode repeats its
+    first."""
+    pytest.importorskip("daqp")
+    env = MwipVectorEnv(2, deterministic(), duration=0.05, base_law="mpc", torque_scale=4096.0)
+    env.reset(seed=1)
+    resets = [0, 0]
+    for i, lw in enumerate(env.lanes.laws):
+        lw.reset = (lambda i, old: lambda: (resets.__setitem__(i, resets[i] + 1), old())[1])(i, lw.reset)
+    n, first, second = env.setup.n_steps, [], []
+    nan = np.array([[0.0], [np.nan]])
+    for step in range(2 * n + 1):
+        restart = env._restart.copy()
+        before = list(resets)
+        obs, r, term, trunc, info = env.step(nan if step == 2 else np.zeros((2, 1)))
+        assert term[1] == (step == 2)
+        assert [resets[i] - before[i] for i in range(2)] == restart.astype(int).tolist(), step
+        (first if step < n else second).append(obs[0].copy())
+        if step == n - 1:
+            assert not env.lanes.laws[0]._qps[0].cold   # robot 0's QP holds an active set when it restarts
+    assert resets == [1, 2]   # robot 0 at its end (0.05 s); robot 1 in step 3, then at its end
+    assert np.array_equal(np.array(first), np.array(second[1:n + 1]))
 
 
 def test_the_stepper_holds_every_stage_of_the_loop_in_its_order():
