@@ -73,8 +73,12 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--run", type=int, default=None, metavar="N",
                     help="the run of a bag that holds several (1-based; a plant reset starts a new run)")
     ap.add_argument("--cutoff", type=float, default=ID.CUTOFF_HZ, metavar="HZ",
-                    help=f"zero-phase low-pass on every regressor and the torque [Hz]; 0 = none "
-                         f"(default: {ID.CUTOFF_HZ:g})")
+                    help=f"zero-phase low-pass on every regressor and the torque [Hz], for noisy measured rates; "
+                         f"0 = none (default: {ID.CUTOFF_HZ:g}: unfiltered, the period's own friction noise in its "
+                         f"differenced rates biases the fit)")
+    ap.add_argument("--block", type=float, default=ID.BLOCK_S, metavar="S",
+                    help=f"the block of the delete-a-block jackknife that gives the intervals [s] (default: "
+                         f"{ID.BLOCK_S:g}; shorter on a log of fewer than {ID.MIN_BLOCKS} blocks)")
     ap.add_argument("--max-condition", type=float, default=ID.MAX_CONDITION, metavar="X",
                     help=f"refuse a regressor whose condition number passes X (default: {ID.MAX_CONDITION:g})")
     ap.add_argument("--max-relative-ci", type=float, default=ID.MAX_RELATIVE_CI, metavar="F",
@@ -99,6 +103,8 @@ def _options_refusal(args):
         return f"--run: 1 or more, got {args.run}"
     if not (math.isfinite(args.cutoff) and args.cutoff >= 0):
         return f"--cutoff: a frequency >= 0 Hz, got {args.cutoff:g}"
+    if not (math.isfinite(args.block) and args.block > 0):
+        return f"--block: a duration > 0 s, got {args.block:g}"
     if not (args.max_condition > 1):
         return f"--max-condition: more than 1, got {args.max_condition:g}"
     if not (math.isfinite(args.max_relative_ci) and args.max_relative_ci > 0):
@@ -163,7 +169,8 @@ def main(argv=None) -> int:
     try:
         res = ID.identify(c["t"], c.get("theta_w", np.zeros_like(c["t"])), c["theta_b"], c["dtheta_w"],
                           c["dtheta_b"], c[torque], known, cutoff_hz=args.cutoff, min_samples=args.min_samples,
-                          max_condition=args.max_condition, max_relative_ci=args.max_relative_ci)
+                          max_condition=args.max_condition, max_relative_ci=args.max_relative_ci,
+                          block_s=args.block)
     except ID.IdentificationError as exc:
         return _fail(f"{args.log}: {exc}")
     _print(args, res, torque, known)
@@ -197,8 +204,9 @@ def _print(args, res: ID.IdentificationResult, torque: str, known) -> None:
           f"{chk.value:+.4g} N m ({100 * chk.value / res.G_b_model.value:+.3g} %), {within} its 95 % interval "
           f"+-{chk.half_width:.3g}")
     print(f"  residual RMS: row 1 (wheel) {res.residual_rms[0]:.4g} N m, row 2 (body) {res.residual_rms[1]:.4g} N m; "
-          f"condition number {res.condition_number:.4g}; intervals widened x{res.inflation:.3g} for correlated "
-          f"residuals (delta method for m_b, I_b, l)")
+          f"condition number {res.condition_number:.4g}; intervals from a delete-a-block jackknife over "
+          f"{res.blocks} blocks of {res.block_s:.3g} s (Student's t, {res.blocks - 1} degrees of freedom: "
+          f"x{res.m_b.quantile:.3g}; delta method for m_b, I_b, l)")
 
 
 def _write(args, base, res: ID.IdentificationResult):
