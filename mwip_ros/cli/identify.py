@@ -84,6 +84,11 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--max-relative-ci", type=float, default=ID.MAX_RELATIVE_CI, metavar="F",
                     help=f"refuse when the 95 %% interval of m_b, I_b or l is wider than F of its value "
                          f"(default: {ID.MAX_RELATIVE_CI:g})")
+    ap.add_argument("--drive", action="store_true",
+                    help="identify the drive instead of the body: K_t, R and I_max (docs/theory.md 6.7) from the "
+                         "command u, the torque that acted u_applied and the wheel speed, with V_max the base file's "
+                         "motor.voltage_limit (the battery's voltage: only three combinations of the four constants "
+                         "reach the torque); writes plant_sim's motor.* overlay. The log of config/identify_drive.yaml")
     ap.add_argument("--min-samples", type=int, default=ID.MIN_SAMPLES, metavar="N",
                     help=f"refuse a log of fewer than N periods (default: {ID.MIN_SAMPLES})")
     return ap
@@ -143,7 +148,9 @@ def _load(args):
     keep = np.ones(len(cols["t"]), dtype=bool)
     if args.window is not None:
         keep = (cols["t"] >= args.window[0]) & (cols["t"] <= args.window[1])
-    return {c: np.asarray(cols[c], dtype=float)[keep] for c in (*NEEDED, "theta_w", torque) if c in cols}, torque
+    if args.drive and not ("u" in cols and "u_applied" in cols):
+        raise ValueError(f"{p}: --drive needs the columns u and u_applied (a run with motor.enabled: true)")
+    return {c: np.asarray(cols[c], dtype=float)[keep] for c in (*NEEDED, "theta_w", "u", torque) if c in cols}, torque
 
 
 def main(argv=None) -> int:
@@ -165,6 +172,8 @@ def main(argv=None) -> int:
         cols, torque = _load(args)
     except (ValueError, OSError) as exc:
         return _fail(str(exc))
+    if args.drive:
+        return _drive(args, base, values, cols)
     c = cols
     try:
         res = ID.identify(c["t"], c.get("theta_w", np.zeros_like(c["t"])), c["theta_b"], c["dtheta_w"],
@@ -175,6 +184,30 @@ def main(argv=None) -> int:
         return _fail(f"{args.log}: {exc}")
     _print(args, res, torque, known)
     why = _write(args, base, res)
+    if why:
+        return _fail(why)
+    print(f"wrote {args.out}")
+    return 0
+
+
+def _drive(args, base, values, cols) -> int:
+    """--drive: fit, print and write plant_sim's motor.* overlay; the exit status."""
+    from mwip_ros.core.drive_identify import DriveIdentificationError, identify_drive
+    v_max = float(values.get("motor.voltage_limit", float("nan")))
+    try:
+        d = identify_drive(cols["u"], cols["u_applied"], cols["dtheta_w"], cols["dtheta_b"], v_max)
+    except DriveIdentificationError as exc:
+        return _fail(f"{args.log}: {exc}")
+    free, cur, volt = d.periods
+    print(f"{args.log}: drive from {free + cur + volt} periods ({free} unsaturated, {cur} on the current limit, "
+          f"{volt} on the voltage limit); V_max = {d.voltage_limit:g} V known (motor.voltage_limit)")
+    print(f"  K_t   = {d.torque_constant:.5g} N m/A\n  R     = {d.resistance:.5g} ohm\n"
+          f"  I_max = {d.current_limit:.5g} A\n  peak torque K_t I_max = {d.peak_torque:.5g} N m, stall torque "
+          f"K_t V_max / R = {d.stall_torque:.5g} N m, back-EMF slope K_t^2 / R = {d.slope:.5g} N m s/rad")
+    print(f"  residual RMS of u_applied against the drive's model {d.residual_rms:.4g} N m")
+    placed = {("plant_sim", f"motor.{k}"): float(f"{getattr(d, k):.6g}")
+              for k in ("torque_constant", "resistance", "voltage_limit", "current_limit")}
+    why = _overlay(args, base, placed, f"# {PROG} --drive: the drive identified from {args.log}\n")
     if why:
         return _fail(why)
     print(f"wrote {args.out}")
@@ -210,8 +243,7 @@ def _print(args, res: ID.IdentificationResult, torque: str, known) -> None:
 
 
 def _write(args, base, res: ID.IdentificationResult):
-    """Write the overlay atomically, checked by merging it over the base file; the reason it cannot, or None."""
-    from mwip_ros.sweep.scenarios import parameter_overlay
+    """Write the body's overlay (:func:`_overlay`); the reason it cannot, or None."""
     placed = {("/**", f"nominal.{k}"): float(f"{getattr(res, k).value:.6g}") for k in ("m_b", "I_b", "l")}
     header = (f"# {PROG}: nominal body identified from {args.log} ({res.samples} periods)\n"
               f"#   m_b {res.m_b.text('kg')}\n#   I_b {res.I_b.text('kg m^2')}\n#   l   {res.l.text('m')}\n"
@@ -219,6 +251,13 @@ def _write(args, base, res: ID.IdentificationResult):
               f"{res.condition_number:.4g}\n"
               f"# an overlay: pass it after the base file(s), e.g. mwip_sim --params "
               f"{' '.join(map(str, base))} {args.out}\n")
+    return _overlay(args, base, placed, header)
+
+
+def _overlay(args, base, placed, header):
+    """Write ``placed`` to --out atomically, checked by merging it over the base file; the reason it cannot, or
+    None."""
+    from mwip_ros.sweep.scenarios import parameter_overlay
     out = Path(args.out)
     tmp = out.with_name(f".{out.name}.{os.getpid()}.tmp")
     try:

@@ -152,3 +152,38 @@ def test_the_g_b_check_gives_no_verdict_from_nan():
     assert g_b_verdict(Estimate(0.1, 1.0)) == "within" and g_b_verdict(Estimate(5.0, 1.0)) == "OUTSIDE"
     for chk in (Estimate(math.nan, 1.0), Estimate(0.1, math.nan), Estimate(0.1, math.inf)):
         assert g_b_verdict(chk) == "with no verdict (not a number)", chk
+
+
+@pytest.mark.parametrize("drive", [None, {"torque_constant": 2.5, "resistance": 0.2, "current_limit": 48.0}],
+                         ids=["motor_realistic", "other-drive"])
+def test_the_shipped_drive_experiment_identifies_the_drive(drive, tmp_path, capsys):
+    """config/identify_drive.yaml on the paper's robot under DSCNDO stays upright, reaches both limits and
+    mwip_identify --drive gives K_t, R, I_max within 5 % (V_max from the base files), written as plant_sim's motor.*"""
+    import yaml
+    from graphproc import REPO
+    from mwip_ros.core.sim import simulate
+    files = [REPO / "config" / f for f in ("paper.yaml", "motor_realistic.yaml")]
+    if drive:
+        overlay = tmp_path / "drive_truth.yaml"
+        overlay.write_text(yaml.safe_dump({"plant_sim": {"ros__parameters": {"motor": drive}}}))
+        files.append(overlay)
+    experiment = [REPO / "config" / "identify_drive.yaml"]
+    if drive:   # the top speed 1 rad/s above (V_max - R I_max) / K_t of this drive, as the config's comment says
+        top = round(0.254 * ((48.0 - drive["resistance"] * drive["current_limit"]) / drive["torque_constant"] + 1), 2)
+        speed = tmp_path / "speed.yaml"
+        speed.write_text(yaml.safe_dump({"dscndo_controller": {"ros__parameters": {"motion": {
+            "max_speed": top, "max_accel": top / 10, "profile": [0.0, top, 10.0, 0.0]}}}}))
+        experiment.append(speed)
+    v = P.merged_values(P.load_param_files([*files, *experiment]))
+    traj = simulate(P.closed_loop(v, controller="dscndo"))
+    csv = tmp_path / "drive.csv"
+    write_csv(traj, csv)
+    assert not traj.fallen and len(traj) == 4801 and np.max(np.abs(traj["theta_b"])) < 0.5   # 24 s, upright
+    out = tmp_path / "drive.yaml"
+    assert main([str(csv), "--params", *map(str, files), "--drive", "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "on the current limit" in text and "on the voltage limit" in text
+    got = yaml.safe_load(out.read_text())["plant_sim"]["ros__parameters"]["motor"]
+    for k in ("torque_constant", "resistance", "current_limit"):
+        assert got[k] == pytest.approx(v[f"motor.{k}"], rel=0.05), k
+    assert got["voltage_limit"] == v["motor.voltage_limit"]
