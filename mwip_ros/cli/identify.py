@@ -15,6 +15,10 @@ number, D_w, D_b and the check of G_b against m_b g l; writes a ROS 2 parameter 
 ``nominal.m_b``, ``nominal.I_b``, ``nominal.l`` under ``/**`` (where the base file keeps the nominal model
 that the observer and the controller share), checked by merging it over the base file.
 
+``--drive`` fits the drive instead (:mod:`mwip_ros.core.drive_identify`: K_t, R, I_max with V_max the base
+file's ``motor.voltage_limit``) from ``u``, ``u_applied`` and the wheel speed, and writes ``plant_sim``'s
+``motor.*`` overlay; ``config/identify_drive.yaml`` is its experiment.
+
 Exit 0 when written; 2 (one line on stderr saying why) for a log that is too short or does not excite
 the parameters, for an unreadable log or parameter file, or for an existing ``--out`` without ``--force``
 (checked before the log is read).
