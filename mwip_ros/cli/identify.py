@@ -93,6 +93,10 @@ def _parser() -> argparse.ArgumentParser:
                          "command u, the torque that acted u_applied and the wheel speed, with V_max the base file's "
                          "motor.voltage_limit (the battery's voltage: only three combinations of the four constants "
                          "reach the torque); writes plant_sim's motor.* overlay. The log of config/identify_drive.yaml")
+    ap.add_argument("--validate", type=Path, default=None, metavar="LOG2",
+                    help="check the identified model on another log (CSV or bag, read as the first): re-simulate it "
+                         "open-loop with LOG2's torque over 1 s windows, each from its measured start, and print the "
+                         "pitch prediction error (RMS, worst) against the nominal model of the base file(s)")
     ap.add_argument("--min-samples", type=int, default=ID.MIN_SAMPLES, metavar="N",
                     help=f"refuse a log of fewer than N periods (default: {ID.MIN_SAMPLES})")
     return ap
@@ -123,10 +127,10 @@ def _options_refusal(args):
     return None
 
 
-def _load(args):
-    """(columns, torque column name) of the log, or raise ValueError (one line)."""
+def _load(args, p=None):
+    """(columns, torque column name) of the log (``p``, default ``args.log``), or raise ValueError (one line)."""
     from mwip_ros.runs import load_run, read_bag_run
-    p = args.log
+    p = args.log if p is None else p
     if not p.exists():
         raise ValueError(f"{p}: no such file or directory")
     if p.is_file() and p.suffix == ".csv":
@@ -187,6 +191,10 @@ def main(argv=None) -> int:
     except ID.IdentificationError as exc:
         return _fail(f"{args.log}: {exc}")
     _print(args, res, torque, known)
+    if args.validate is not None:
+        why = _validate(args, res, P.physical(values, "nominal"))
+        if why:
+            return _fail(why)
     why = _write(args, base, res)
     if why:
         return _fail(why)
@@ -216,6 +224,25 @@ def _drive(args, base, values, cols) -> int:
         return _fail(why)
     print(f"wrote {args.out}")
     return 0
+
+
+def _validate(args, res: ID.IdentificationResult, nominal):
+    """--validate: print the pitch prediction errors on LOG2 of the identified and the nominal model; the reason it
+    cannot, or None."""
+    from mwip_ros.core.identify_validate import prediction_errors
+    try:
+        c, torque = _load(args, args.validate)
+        cols = [c["t"], c.get("theta_w", np.zeros_like(c["t"])), c["theta_b"], c["dtheta_w"], c["dtheta_b"], c[torque]]
+        got = {name: prediction_errors(*cols, p, res.D_w.value, res.D_b.value)
+               for name, p in (("identified", res.physical()), ("nominal", nominal))}
+    except (ValueError, OSError) as exc:
+        return f"--validate {args.validate}: {exc}"
+    print(f"validation on {args.validate}: open-loop pitch prediction over {got['identified'].windows} windows of "
+          f"1 s from each window's measured start, the log's torque {torque!r}, D_w and D_b as identified")
+    for name, e in got.items():
+        print(f"  {name:<10} pitch error RMS {e.rms:.4g} rad ({np.degrees(e.rms):.3g} deg), worst {e.worst:.4g} rad "
+              f"({np.degrees(e.worst):.3g} deg)")
+    return None
 
 
 def g_b_verdict(chk: ID.Estimate) -> str:
