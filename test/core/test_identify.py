@@ -182,3 +182,15 @@ def test_the_95_percent_intervals_cover_the_truth_in_90_to_99_percent_of_runs(co
     assert np.mean([e.std for e in est]) == pytest.approx(spread, rel=0.25), name
     assert all(e.quantile == pytest.approx(2.093, abs=1e-3) for e in est)   # Student's t, 19 degrees of freedom
     assert {r.blocks for r in coverage_fits} == {20}
+
+
+def test_prediction_with_the_true_model_is_the_log():
+    """core.identify_validate: with the plant's own model and a constant D_w the open-loop prediction is the log to
+    rounding (the torque of row k acts over [t_k, t_k+1)); shifted by one period it is not."""
+    from mwip_ros.core.identify_validate import prediction_errors
+    log = record(CHIRP, duration=5.0, D_w_variance=0.0)
+    e = prediction_errors(*log, ROBOT, 0.5, 0.1, substeps=BASE.substeps)
+    assert e.windows == 5 and e.worst < 1e-9
+    shifted = log.copy()
+    shifted[5] = np.roll(log[5], 1)
+    assert prediction_errors(*shifted, ROBOT, 0.5, 0.1, substeps=BASE.substeps).worst > 1e-4
