@@ -42,6 +42,7 @@ from mwip_ros.params.paths import default_params_file
 PROG = "mwip_identify"
 EXIT_REFUSED = 2
 NEEDED = ("t", "theta_b", "dtheta_w", "dtheta_b")
+RAW = ("gyro", "accel_x", "accel_z", "encoder", "encoder_rate", "u_applied")
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -93,6 +94,11 @@ def _parser() -> argparse.ArgumentParser:
                          "command u, the torque that acted u_applied and the wheel speed, with V_max the base file's "
                          "motor.voltage_limit (the battery's voltage: only three combinations of the four constants "
                          "reach the torque); writes plant_sim's motor.* overlay. The log of config/identify_drive.yaml")
+    ap.add_argument("--raw", action="store_true",
+                    help="identify from the raw sensors alone (gyro, accel_x, accel_z, encoder, encoder_rate and the "
+                         "torque; neither the state nor the estimate): a prediction-error fit over 0.25 s windows "
+                         "that also fits D_w, D_b, the gyro bias and the IMU offset, starting from the base file's "
+                         "nominal body and sensors.imu.offset (docs/theory.md 6.9)")
     ap.add_argument("--validate", type=Path, default=None, metavar="LOG2",
                     help="check the identified model on another log (CSV or bag, read as the first): re-simulate it "
                          "open-loop with LOG2's torque over 1 s windows, each from its measured start, and print the "
@@ -112,6 +118,10 @@ def _options_refusal(args):
         t0, t1 = args.window
         if not (math.isfinite(t0) and math.isfinite(t1) and t0 < t1):
             return f"--window: T0 < T1 and both finite, got {t0:g} {t1:g}"
+    if args.raw and args.drive:
+        return "--raw and --drive: one at a time (the body from the raw sensors, or the drive)"
+    if args.validate is not None and (args.raw or args.drive):
+        return "--validate: checks the state fit's body; not with --raw or --drive, for now"
     if args.run is not None and args.run < 1:
         return f"--run: 1 or more, got {args.run}"
     if not (math.isfinite(args.cutoff) and args.cutoff >= 0):
@@ -142,6 +152,17 @@ def _load(args, p=None):
     else:
         raise ValueError(f"{p}: not a bag directory, .mcap file or .csv file")
     cols = dict(run.columns)
+    if args.raw:
+        missing = [c for c in ("t", *RAW) if c not in cols]
+        if "u_applied" in missing and "u" in cols:
+            missing.remove("u_applied")
+            cols["u_applied"] = cols["u"]
+        if missing:
+            raise ValueError(f"{p}: no {', '.join(missing)} column(s): --raw is for a log of the raw sensors")
+        keep = np.ones(len(cols["t"]), dtype=bool)
+        if args.window is not None:
+            keep = (cols["t"] >= args.window[0]) & (cols["t"] <= args.window[1])
+        return {c: np.asarray(cols[c], dtype=float)[keep] for c in ("t", *RAW)}, "u_applied"
     estimated = "theta_b_hat" in cols
     if args.state == "estimate" and not estimated:
         raise ValueError(f"{p}: no estimate columns (theta_b_hat, ...): --state estimate is for a raw-sensor run")
@@ -182,6 +203,8 @@ def main(argv=None) -> int:
         return _fail(str(exc))
     if args.drive:
         return _drive(args, base, values, cols)
+    if args.raw:
+        return _raw(args, base, values, known, cols)
     c = cols
     try:
         res = ID.identify(c["t"], c.get("theta_w", np.zeros_like(c["t"])), c["theta_b"], c["dtheta_w"],
@@ -220,6 +243,34 @@ def _drive(args, base, values, cols) -> int:
     placed = {("plant_sim", f"motor.{k}"): float(f"{getattr(d, k):.6g}")
               for k in ("torque_constant", "resistance", "voltage_limit", "current_limit")}
     why = _overlay(args, base, placed, f"# {PROG} --drive: the drive identified from {args.log}\n")
+    if why:
+        return _fail(why)
+    print(f"wrote {args.out}")
+    return 0
+
+
+def _raw(args, base, values, known, c) -> int:
+    """--raw: fit, print and write the nominal overlay; the exit status."""
+    from mwip_ros.core.identify_raw import identify_raw
+    try:
+        res = identify_raw(c["t"], *(c[k] for k in RAW), known=known, start=known,
+                           imu_offset=float(values.get("sensors.imu.offset", 0.0)))
+    except ValueError as exc:
+        return _fail(f"{args.log}: {exc}")
+    got = res.values
+    for k in ("m_b", "I_b", "l"):
+        if not got[k] > 0:
+            return _fail(f"{args.log}: unphysical: {k} = {got[k]:.4g}; the model does not fit this log")
+    print(f"{args.log}: raw sensors only, {res.windows} windows of 0.25 s, {res.evaluations} evaluations; known m_w = "
+          f"{known.m_w:g} kg, I_w = {known.I_w:g} kg m^2, r = {known.r:g} m")
+    units = {"m_b": "kg", "I_b": "kg m^2", "l": "m", "D_w": "N m s", "D_b": "N m s", "gyro_bias": "rad/s",
+             "imu_offset": "m"}
+    for k, unit in units.items():
+        print(f"  {k:<10} = {got[k]:.5g} {unit}  (+-{1.96 * res.std[k]:.2g}, 95 % from the Jacobian: a lower bound)")
+    g, ax, az, e = res.residual_rms
+    print(f"  residual RMS: gyro {g:.3g} rad/s, accel_x {ax:.3g} m/s^2, accel_z {az:.3g} m/s^2, encoder {e:.3g} rad")
+    placed = {("/**", f"nominal.{k}"): float(f"{got[k]:.6g}") for k in ("m_b", "I_b", "l")}
+    why = _overlay(args, base, placed, f"# {PROG} --raw: nominal body identified from the raw sensors of {args.log}\n")
     if why:
         return _fail(why)
     print(f"wrote {args.out}")
