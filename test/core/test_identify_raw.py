@@ -5,6 +5,7 @@ nominal body and IMU offset."""
 import pytest
 
 from graphproc import REPO
+from test_docs_numbers import page_with, table_after
 from mwip_ros import params as P
 from mwip_ros.core.identify_raw import identify_raw
 from mwip_ros.core.sim import simulate
@@ -14,6 +15,19 @@ pytestmark = pytest.mark.unit
 ROBOTS = [dict(m_b=250.0, I_b=50.0, l=0.25, offset=0.2, bias=-0.01),
           dict(m_b=360.0, I_b=80.0, l=0.35, offset=0.45, bias=-0.02),
           dict(m_b=280.0, I_b=58.0, l=0.29, offset=0.15, bias=0.015)]
+TABLE = "| robot (m_b, I_b, l; IMU offset, gyro bias)"   # docs/theory.md 6.9: every number of it checked here
+
+
+def _printed(cell: str, value: float, truth: float = None) -> bool:
+    """A cell 'v' or 'v (+p %)' is ``value`` to its decimals (and p the error from ``truth`` to its decimals)."""
+    parts = cell.split()
+    def same(text, x):
+        decimals = len(text.split(".")[1]) if "." in text else 0
+        return f"{x:+.{decimals}f}" == text if text[0] in "+-" else f"{x:.{decimals}f}" == text
+    ok = same(parts[0], value)
+    if truth is not None:
+        ok &= same(parts[1].lstrip("("), 100 * (value / truth - 1))
+    return ok
 RAW = ("gyro", "accel_x", "accel_z", "encoder", "encoder_rate", "u_applied")
 
 
@@ -37,3 +51,9 @@ def test_identifies_the_body_from_the_raw_log_within_3_percent(robot):
     # the model explains the samples down to the sensors' own noise (0.004 rad/s, 0.02 m/s^2, 4.4e-4 rad)
     for rms, noise in zip(res.residual_rms, (0.004, 0.02, 0.02, 0.00044)):
         assert rms < 1.15 * noise
+    _, rows = table_after(page_with(TABLE).read_text(), TABLE)
+    label = f"{robot['m_b']:g}, {robot['I_b']:g}, {robot['l']:g}; {robot['offset']:g} m, {robot['bias']:+g}"
+    row = next(r for r in rows if r[0] == label)
+    assert _printed(row[1], got["m_b"], robot["m_b"]) and _printed(row[2], got["I_b"], robot["I_b"]), row
+    assert _printed(row[3], got["l"], robot["l"]) and _printed(row[4], got["imu_offset"]), row
+    assert _printed(row[5], got["gyro_bias"]), row
