@@ -131,3 +131,19 @@ def test_an_edited_cell_is_caught(monkeypatch):
     monkeypatch.setattr(Path, "read_text", lambda self, *a, **k: read(self, *a, **k).replace(line, edited))
     with pytest.raises(AssertionError, match="kalman, bias unknown / pitch error RMS"):
         test_the_estimators_table()
+
+
+def test_the_drive_identification_table():
+    """config/identify_drive.yaml under DSCNDO with the realistic motor, fitted by core.drive_identify (what
+    mwip_identify --drive prints)."""
+    from mwip_ros.core.drive_identify import identify_drive
+    files = [PAPER, MOTOR, CONFIG / "identify_drive.yaml"]
+    v = P.merged_values(P.load_param_files(files))
+    r = simulate(P.closed_loop(v, controller="dscndo"))
+    c = r.columns
+    d = identify_drive(c["u"], c["u_applied"], c["dtheta_w"], c["dtheta_b"], v["motor.voltage_limit"])
+    for k in ("torque_constant", "resistance", "current_limit"):
+        assert getattr(d, k) == pytest.approx(v[f"motor.{k}"], rel=1e-4)   # "to 1e-5 of each" (measured)
+    cells = {"K_t [N m/A]": d.torque_constant, "R [ohm]": d.resistance, "I_max [A]": d.current_limit,
+             "periods on the current limit": d.periods[1], "periods on the voltage limit": d.periods[2]}
+    _check("| drive identified", ["config/motor_realistic.yaml"], lambda label, col: cells[col])

@@ -15,6 +15,10 @@ number, D_w, D_b and the check of G_b against m_b g l; writes a ROS 2 parameter 
 ``nominal.m_b``, ``nominal.I_b``, ``nominal.l`` under ``/**`` (where the base file keeps the nominal model
 that the observer and the controller share), checked by merging it over the base file.
 
+``--drive`` fits the drive instead (:mod:`mwip_ros.core.drive_identify`: K_t, R, I_max with V_max the base
+file's ``motor.voltage_limit``) from ``u``, ``u_applied`` and the wheel speed, and writes ``plant_sim``'s
+``motor.*`` overlay; ``config/identify_drive.yaml`` is its experiment.
+
 Exit 0 when written; 2 (one line on stderr saying why) for a log that is too short or does not excite
 the parameters, for an unreadable log or parameter file, or for an existing ``--out`` without ``--force``
 (checked before the log is read).
@@ -38,6 +42,7 @@ from mwip_ros.params.paths import default_params_file
 PROG = "mwip_identify"
 EXIT_REFUSED = 2
 NEEDED = ("t", "theta_b", "dtheta_w", "dtheta_b")
+RAW = ("gyro", "accel_x", "accel_z", "encoder", "encoder_rate", "u_applied")
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -73,13 +78,31 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--run", type=int, default=None, metavar="N",
                     help="the run of a bag that holds several (1-based; a plant reset starts a new run)")
     ap.add_argument("--cutoff", type=float, default=ID.CUTOFF_HZ, metavar="HZ",
-                    help=f"zero-phase low-pass on every regressor and the torque [Hz]; 0 = none "
-                         f"(default: {ID.CUTOFF_HZ:g})")
+                    help=f"zero-phase low-pass on every regressor and the torque [Hz], for noisy measured rates; "
+                         f"0 = none (default: {ID.CUTOFF_HZ:g}: unfiltered, the period's own friction noise in its "
+                         f"differenced rates biases the fit)")
+    ap.add_argument("--block", type=float, default=ID.BLOCK_S, metavar="S",
+                    help=f"the block of the delete-a-block jackknife that gives the intervals [s] (default: "
+                         f"{ID.BLOCK_S:g}; shorter on a log of fewer than {ID.MIN_BLOCKS} blocks)")
     ap.add_argument("--max-condition", type=float, default=ID.MAX_CONDITION, metavar="X",
                     help=f"refuse a regressor whose condition number passes X (default: {ID.MAX_CONDITION:g})")
     ap.add_argument("--max-relative-ci", type=float, default=ID.MAX_RELATIVE_CI, metavar="F",
                     help=f"refuse when the 95 %% interval of m_b, I_b or l is wider than F of its value "
                          f"(default: {ID.MAX_RELATIVE_CI:g})")
+    ap.add_argument("--drive", action="store_true",
+                    help="identify the drive instead of the body: K_t, R and I_max (docs/theory.md 6.7) from the "
+                         "command u, the torque that acted u_applied and the wheel speed, with V_max the base file's "
+                         "motor.voltage_limit (the battery's voltage: only three combinations of the four constants "
+                         "reach the torque); writes plant_sim's motor.* overlay. The log of config/identify_drive.yaml")
+    ap.add_argument("--raw", action="store_true",
+                    help="identify from the raw sensors alone (gyro, accel_x, accel_z, encoder, encoder_rate and the "
+                         "torque; neither the state nor the estimate): a prediction-error fit over 0.25 s windows "
+                         "that also fits D_w, D_b, the gyro bias and the IMU offset, starting from the base file's "
+                         "nominal body and sensors.imu.offset (docs/theory.md 6.9)")
+    ap.add_argument("--validate", type=Path, default=None, metavar="LOG2",
+                    help="check the identified model on another log (CSV or bag, read as the first): re-simulate it "
+                         "open-loop with LOG2's torque over 1 s windows, each from its measured start, and print the "
+                         "pitch prediction error (RMS, worst) against the nominal model of the base file(s)")
     ap.add_argument("--min-samples", type=int, default=ID.MIN_SAMPLES, metavar="N",
                     help=f"refuse a log of fewer than N periods (default: {ID.MIN_SAMPLES})")
     return ap
@@ -95,10 +118,16 @@ def _options_refusal(args):
         t0, t1 = args.window
         if not (math.isfinite(t0) and math.isfinite(t1) and t0 < t1):
             return f"--window: T0 < T1 and both finite, got {t0:g} {t1:g}"
+    if args.raw and args.drive:
+        return "--raw and --drive: one at a time (the body from the raw sensors, or the drive)"
+    if args.validate is not None and (args.raw or args.drive):
+        return "--validate: checks the state fit's body; not with --raw or --drive, for now"
     if args.run is not None and args.run < 1:
         return f"--run: 1 or more, got {args.run}"
     if not (math.isfinite(args.cutoff) and args.cutoff >= 0):
         return f"--cutoff: a frequency >= 0 Hz, got {args.cutoff:g}"
+    if not (math.isfinite(args.block) and args.block > 0):
+        return f"--block: a duration > 0 s, got {args.block:g}"
     if not (args.max_condition > 1):
         return f"--max-condition: more than 1, got {args.max_condition:g}"
     if not (math.isfinite(args.max_relative_ci) and args.max_relative_ci > 0):
@@ -108,10 +137,10 @@ def _options_refusal(args):
     return None
 
 
-def _load(args):
-    """(columns, torque column name) of the log, or raise ValueError (one line)."""
+def _load(args, p=None):
+    """(columns, torque column name) of the log (``p``, default ``args.log``), or raise ValueError (one line)."""
     from mwip_ros.runs import load_run, read_bag_run
-    p = args.log
+    p = args.log if p is None else p
     if not p.exists():
         raise ValueError(f"{p}: no such file or directory")
     if p.is_file() and p.suffix == ".csv":
@@ -123,6 +152,17 @@ def _load(args):
     else:
         raise ValueError(f"{p}: not a bag directory, .mcap file or .csv file")
     cols = dict(run.columns)
+    if args.raw:
+        missing = [c for c in ("t", *RAW) if c not in cols]
+        if "u_applied" in missing and "u" in cols:
+            missing.remove("u_applied")
+            cols["u_applied"] = cols["u"]
+        if missing:
+            raise ValueError(f"{p}: no {', '.join(missing)} column(s): --raw is for a log of the raw sensors")
+        keep = np.ones(len(cols["t"]), dtype=bool)
+        if args.window is not None:
+            keep = (cols["t"] >= args.window[0]) & (cols["t"] <= args.window[1])
+        return {c: np.asarray(cols[c], dtype=float)[keep] for c in ("t", *RAW)}, "u_applied"
     estimated = "theta_b_hat" in cols
     if args.state == "estimate" and not estimated:
         raise ValueError(f"{p}: no estimate columns (theta_b_hat, ...): --state estimate is for a raw-sensor run")
@@ -137,7 +177,9 @@ def _load(args):
     keep = np.ones(len(cols["t"]), dtype=bool)
     if args.window is not None:
         keep = (cols["t"] >= args.window[0]) & (cols["t"] <= args.window[1])
-    return {c: np.asarray(cols[c], dtype=float)[keep] for c in (*NEEDED, "theta_w", torque) if c in cols}, torque
+    if args.drive and not ("u" in cols and "u_applied" in cols):
+        raise ValueError(f"{p}: --drive needs the columns u and u_applied (a run with motor.enabled: true)")
+    return {c: np.asarray(cols[c], dtype=float)[keep] for c in (*NEEDED, "theta_w", "u", torque) if c in cols}, torque
 
 
 def main(argv=None) -> int:
@@ -159,19 +201,99 @@ def main(argv=None) -> int:
         cols, torque = _load(args)
     except (ValueError, OSError) as exc:
         return _fail(str(exc))
+    if args.drive:
+        return _drive(args, base, values, cols)
+    if args.raw:
+        return _raw(args, base, values, known, cols)
     c = cols
     try:
         res = ID.identify(c["t"], c.get("theta_w", np.zeros_like(c["t"])), c["theta_b"], c["dtheta_w"],
                           c["dtheta_b"], c[torque], known, cutoff_hz=args.cutoff, min_samples=args.min_samples,
-                          max_condition=args.max_condition, max_relative_ci=args.max_relative_ci)
+                          max_condition=args.max_condition, max_relative_ci=args.max_relative_ci,
+                          block_s=args.block)
     except ID.IdentificationError as exc:
         return _fail(f"{args.log}: {exc}")
     _print(args, res, torque, known)
+    if args.validate is not None:
+        why = _validate(args, res, P.physical(values, "nominal"))
+        if why:
+            return _fail(why)
     why = _write(args, base, res)
     if why:
         return _fail(why)
     print(f"wrote {args.out}")
     return 0
+
+
+def _drive(args, base, values, cols) -> int:
+    """--drive: fit, print and write plant_sim's motor.* overlay; the exit status."""
+    from mwip_ros.core.drive_identify import DriveIdentificationError, identify_drive
+    v_max = float(values.get("motor.voltage_limit", float("nan")))
+    try:
+        d = identify_drive(cols["u"], cols["u_applied"], cols["dtheta_w"], cols["dtheta_b"], v_max)
+    except DriveIdentificationError as exc:
+        return _fail(f"{args.log}: {exc}")
+    free, cur, volt = d.periods
+    print(f"{args.log}: drive from {free + cur + volt} periods ({free} unsaturated, {cur} on the current limit, "
+          f"{volt} on the voltage limit); V_max = {d.voltage_limit:g} V known (motor.voltage_limit)")
+    print(f"  K_t   = {d.torque_constant:.5g} N m/A\n  R     = {d.resistance:.5g} ohm\n"
+          f"  I_max = {d.current_limit:.5g} A\n  peak torque K_t I_max = {d.peak_torque:.5g} N m, stall torque "
+          f"K_t V_max / R = {d.stall_torque:.5g} N m, back-EMF slope K_t^2 / R = {d.slope:.5g} N m s/rad")
+    print(f"  residual RMS of u_applied against the drive's model {d.residual_rms:.4g} N m")
+    placed = {("plant_sim", f"motor.{k}"): float(f"{getattr(d, k):.6g}")
+              for k in ("torque_constant", "resistance", "voltage_limit", "current_limit")}
+    why = _overlay(args, base, placed, f"# {PROG} --drive: the drive identified from {args.log}\n")
+    if why:
+        return _fail(why)
+    print(f"wrote {args.out}")
+    return 0
+
+
+def _raw(args, base, values, known, c) -> int:
+    """--raw: fit, print and write the nominal overlay; the exit status."""
+    from mwip_ros.core.identify_raw import identify_raw
+    try:
+        res = identify_raw(c["t"], *(c[k] for k in RAW), known=known, start=known,
+                           imu_offset=float(values.get("sensors.imu.offset", 0.0)))
+    except ValueError as exc:
+        return _fail(f"{args.log}: {exc}")
+    got = res.values
+    for k in ("m_b", "I_b", "l"):
+        if not got[k] > 0:
+            return _fail(f"{args.log}: unphysical: {k} = {got[k]:.4g}; the model does not fit this log")
+    print(f"{args.log}: raw sensors only, {res.windows} windows of 0.25 s, {res.evaluations} evaluations; known m_w = "
+          f"{known.m_w:g} kg, I_w = {known.I_w:g} kg m^2, r = {known.r:g} m")
+    units = {"m_b": "kg", "I_b": "kg m^2", "l": "m", "D_w": "N m s", "D_b": "N m s", "gyro_bias": "rad/s",
+             "imu_offset": "m"}
+    for k, unit in units.items():
+        print(f"  {k:<10} = {got[k]:.5g} {unit}  (+-{1.96 * res.std[k]:.2g}, 95 % from the Jacobian: a lower bound)")
+    g, ax, az, e = res.residual_rms
+    print(f"  residual RMS: gyro {g:.3g} rad/s, accel_x {ax:.3g} m/s^2, accel_z {az:.3g} m/s^2, encoder {e:.3g} rad")
+    placed = {("/**", f"nominal.{k}"): float(f"{got[k]:.6g}") for k in ("m_b", "I_b", "l")}
+    why = _overlay(args, base, placed, f"# {PROG} --raw: nominal body identified from the raw sensors of {args.log}\n")
+    if why:
+        return _fail(why)
+    print(f"wrote {args.out}")
+    return 0
+
+
+def _validate(args, res: ID.IdentificationResult, nominal):
+    """--validate: print the pitch prediction errors on LOG2 of the identified and the nominal model; the reason it
+    cannot, or None."""
+    from mwip_ros.core.identify_validate import prediction_errors
+    try:
+        c, torque = _load(args, args.validate)
+        cols = [c["t"], c.get("theta_w", np.zeros_like(c["t"])), c["theta_b"], c["dtheta_w"], c["dtheta_b"], c[torque]]
+        got = {name: prediction_errors(*cols, p, res.D_w.value, res.D_b.value)
+               for name, p in (("identified", res.physical()), ("nominal", nominal))}
+    except (ValueError, OSError) as exc:
+        return f"--validate {args.validate}: {exc}"
+    print(f"validation on {args.validate}: open-loop pitch prediction over {got['identified'].windows} windows of "
+          f"1 s from each window's measured start, the log's torque {torque!r}, D_w and D_b as identified")
+    for name, e in got.items():
+        print(f"  {name:<10} pitch error RMS {e.rms:.4g} rad ({np.degrees(e.rms):.3g} deg), worst {e.worst:.4g} rad "
+              f"({np.degrees(e.worst):.3g} deg)")
+    return None
 
 
 def g_b_verdict(chk: ID.Estimate) -> str:
@@ -197,13 +319,13 @@ def _print(args, res: ID.IdentificationResult, torque: str, known) -> None:
           f"{chk.value:+.4g} N m ({100 * chk.value / res.G_b_model.value:+.3g} %), {within} its 95 % interval "
           f"+-{chk.half_width:.3g}")
     print(f"  residual RMS: row 1 (wheel) {res.residual_rms[0]:.4g} N m, row 2 (body) {res.residual_rms[1]:.4g} N m; "
-          f"condition number {res.condition_number:.4g}; intervals widened x{res.inflation:.3g} for correlated "
-          f"residuals (delta method for m_b, I_b, l)")
+          f"condition number {res.condition_number:.4g}; intervals from a delete-a-block jackknife over "
+          f"{res.blocks} blocks of {res.block_s:.3g} s (Student's t, {res.blocks - 1} degrees of freedom: "
+          f"x{res.m_b.quantile:.3g}; delta method for m_b, I_b, l)")
 
 
 def _write(args, base, res: ID.IdentificationResult):
-    """Write the overlay atomically, checked by merging it over the base file; the reason it cannot, or None."""
-    from mwip_ros.sweep.scenarios import parameter_overlay
+    """Write the body's overlay (:func:`_overlay`); the reason it cannot, or None."""
     placed = {("/**", f"nominal.{k}"): float(f"{getattr(res, k).value:.6g}") for k in ("m_b", "I_b", "l")}
     header = (f"# {PROG}: nominal body identified from {args.log} ({res.samples} periods)\n"
               f"#   m_b {res.m_b.text('kg')}\n#   I_b {res.I_b.text('kg m^2')}\n#   l   {res.l.text('m')}\n"
@@ -211,6 +333,13 @@ def _write(args, base, res: ID.IdentificationResult):
               f"{res.condition_number:.4g}\n"
               f"# an overlay: pass it after the base file(s), e.g. mwip_sim --params "
               f"{' '.join(map(str, base))} {args.out}\n")
+    return _overlay(args, base, placed, header)
+
+
+def _overlay(args, base, placed, header):
+    """Write ``placed`` to --out atomically, checked by merging it over the base file; the reason it cannot, or
+    None."""
+    from mwip_ros.sweep.scenarios import parameter_overlay
     out = Path(args.out)
     tmp = out.with_name(f".{out.name}.{os.getpid()}.tmp")
     try:

@@ -152,3 +152,92 @@ def test_the_g_b_check_gives_no_verdict_from_nan():
     assert g_b_verdict(Estimate(0.1, 1.0)) == "within" and g_b_verdict(Estimate(5.0, 1.0)) == "OUTSIDE"
     for chk in (Estimate(math.nan, 1.0), Estimate(0.1, math.nan), Estimate(0.1, math.inf)):
         assert g_b_verdict(chk) == "with no verdict (not a number)", chk
+
+
+@pytest.mark.parametrize("drive", [None, {"torque_constant": 2.5, "resistance": 0.2, "current_limit": 48.0}],
+                         ids=["motor_realistic", "other-drive"])
+def test_the_shipped_drive_experiment_identifies_the_drive(drive, tmp_path, capsys):
+    """config/identify_drive.yaml on the paper's robot under DSCNDO stays upright, reaches both limits and
+    mwip_identify --drive gives K_t, R, I_max within 5 % (V_max from the base files), written as plant_sim's motor.*"""
+    import yaml
+    from graphproc import REPO
+    from mwip_ros.core.sim import simulate
+    files = [REPO / "config" / f for f in ("paper.yaml", "motor_realistic.yaml")]
+    if drive:
+        overlay = tmp_path / "drive_truth.yaml"
+        overlay.write_text(yaml.safe_dump({"plant_sim": {"ros__parameters": {"motor": drive}}}))
+        files.append(overlay)
+    experiment = [REPO / "config" / "identify_drive.yaml"]
+    if drive:   # the top speed 1 rad/s above (V_max - R I_max) / K_t of this drive, as the config's comment says
+        top = round(0.254 * ((48.0 - drive["resistance"] * drive["current_limit"]) / drive["torque_constant"] + 1), 2)
+        speed = tmp_path / "speed.yaml"
+        speed.write_text(yaml.safe_dump({"dscndo_controller": {"ros__parameters": {"motion": {
+            "max_speed": top, "max_accel": top / 10, "profile": [0.0, top, 10.0, 0.0]}}}}))
+        experiment.append(speed)
+    v = P.merged_values(P.load_param_files([*files, *experiment]))
+    traj = simulate(P.closed_loop(v, controller="dscndo"))
+    csv = tmp_path / "drive.csv"
+    write_csv(traj, csv)
+    assert not traj.fallen and len(traj) == 4801 and np.max(np.abs(traj["theta_b"])) < 0.5   # 24 s, upright
+    out = tmp_path / "drive.yaml"
+    assert main([str(csv), "--params", *map(str, files), "--drive", "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "on the current limit" in text and "on the voltage limit" in text
+    got = yaml.safe_load(out.read_text())["plant_sim"]["ros__parameters"]["motor"]
+    for k in ("torque_constant", "resistance", "current_limit"):
+        assert got[k] == pytest.approx(v[f"motor.{k}"], rel=0.05), k
+    assert got["voltage_limit"] == v["motor.voltage_limit"]
+
+
+def test_validate_on_another_log(chirp_csv, tmp_path, capsys):
+    """--validate: the model identified on the chirp predicts a PRBS run's pitch (open loop, 1 s windows) far better
+    than the paper's nominal model it started from, and within 0.5 deg RMS."""
+    import re
+    log2 = write_log(tmp_path / "prbs.csv", ExcitationConfig("prbs", 20.0, f1=5.0, duration_s=12.0, seed=4))
+    out = tmp_path / "identified.yaml"
+    assert main([str(chirp_csv), "--params", str(P_FILE), "--out", str(out), "--validate", str(log2)]) == 0
+    text = capsys.readouterr().out
+    assert "over 12 windows of 1 s" in text
+    pattern = r"(identified|nominal) +pitch error RMS \S+ rad \((\S+) deg\), worst \S+ rad \((\S+) deg"
+    got = {m[0]: (float(m[1]), float(m[2])) for m in re.findall(pattern, text)}
+    assert set(got) == {"identified", "nominal"}
+    assert got["identified"][0] < 0.5 and got["identified"][0] < 0.1 * got["nominal"][0]
+    assert got["identified"][1] < got["nominal"][1]
+
+
+def test_validate_refuses_a_missing_log(chirp_csv, tmp_path, capsys):
+    out = tmp_path / "identified.yaml"
+    assert main([str(chirp_csv), "--params", str(P_FILE), "--out", str(out), "--validate",
+                 str(tmp_path / "nothing.csv")]) == 2
+    assert "--validate" in capsys.readouterr().err
+
+
+def test_raw_identifies_from_the_raw_sensors_alone(tmp_path, capsys):
+    """--raw on a CSV of the realistic raw sensors (a robot that is not the paper's, its IMU lower and its bias
+    negative), 15 s of the shipped chirp: the overlay is the true body to 3 %, and the tool never reads the state:
+    the CSV has no estimate and its state columns are not a number."""
+    from graphproc import REPO
+    from mwip_ros.core.sim import simulate
+    files = [REPO / "config" / f for f in ("paper.yaml", "sensors_raw_realistic.yaml", "identify.yaml")]
+    v = P.merged_values(P.load_param_files(files))
+    v.update({"actual.m_b": 250.0, "actual.I_b": 50.0, "actual.l": 0.25, "sensors.imu.offset": 0.2,
+              "sensors.imu.gyro_bias": -0.01})
+    c = simulate(P.closed_loop(v, controller="dscndo")).columns
+    names = ("t", "gyro", "accel_x", "accel_z", "encoder", "encoder_rate", "u_applied")
+    hidden = ("theta_w", "theta_b", "dtheta_w", "dtheta_b", "u")    # a run's CSV has them: not a number here
+    csv = tmp_path / "raw.csv"
+    table = np.column_stack([c[k] for k in names] + [np.full(len(c["t"]), np.nan)] * len(hidden))
+    np.savetxt(csv, table, delimiter=",", header=",".join(names + hidden), comments="", fmt="%.17g")
+    out = tmp_path / "identified.yaml"
+    assert main([str(csv), "--params", str(files[0]), "--raw", "--window", "0", "15", "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    for word in ("raw sensors only", "gyro_bias", "imu_offset", "residual RMS: gyro"):
+        assert word in text, word
+    got = P.load_param_file(out).sections["/**"]
+    for k, truth in (("m_b", 250.0), ("I_b", 50.0), ("l", 0.25)):
+        assert got[f"nominal.{k}"] == pytest.approx(truth, rel=0.03), k
+
+
+def test_raw_needs_the_raw_columns(chirp_csv, tmp_path, capsys):
+    assert main([str(chirp_csv), "--params", str(P_FILE), "--raw", "--out", str(tmp_path / "o.yaml")]) == 2
+    assert "--raw is for a log of the raw sensors" in capsys.readouterr().err
