@@ -151,7 +151,7 @@ KEY_TO_PIP = {
     'python3-llvmlite-pip': 'llvmlite', 'python3-daqp-pip': 'daqp', 'python3-mcap-pip': 'mcap',
     'python3-mcap-ros2-support-pip': 'mcap-ros2-support', 'python3-zstandard-pip': 'zstandard',
     'python3-lz4-pip': 'lz4', 'python3-foxglove-sdk-pip': 'foxglove-sdk', 'python3-dask-pip': 'dask[distributed]',
-    'python3-distributed-pip': 'distributed', 'python3-mujoco-pip': 'mujoco',
+    'python3-distributed-pip': 'distributed', 'python3-mujoco-pip': 'mujoco', 'python3-gymnasium-pip': 'gymnasium',
     'nav_msgs': 'ros-jazzy-common-interfaces',
     'tf2_msgs': None,   # no PyPI wheel: robot_state's /tf only where a full ROS install has it (optional)
 }
