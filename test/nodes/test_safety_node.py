@@ -225,8 +225,11 @@ def test_require_enable_holds_zero_torque_until_enable_then_the_loop_balances(tm
             answer = _call(inj, clients["enable"])
             assert answer.success and answer.message == "enabled", answer.message
             _, enabled = _wait_record(inj, ds, plant, state="enabled", reason="enable")
-            n = len(states)
-            assert inj.wait(lambda: len(states) > n + 800, 120), plant.output()[-2000:]
+            # 800 periods after the enable by the states' stamps (h = 5 ms), not by what this reader counted when
+            # the record reached it: on a loaded machine the reader lags, and a count would end the run early
+            until = enabled["stamp_ns"] + 805 * 5_000_000
+            assert inj.wait(lambda: bool(states) and L.parse_joint_state(states[-1][1])[0] >= until, 120), \
+                plant.output()[-2000:]
         assert plant.stop() == 0, plant.output()[-3000:]
         assert ctl.stop() == 0
     run = np.genfromtxt(csv_path, delimiter=",", names=True)
