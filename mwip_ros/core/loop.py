@@ -163,14 +163,16 @@ class PlantSide:
         self.yaw_queue.append(self.plant.yaw_rate)
         return self.yaw_queue[0]
 
-    def act(self, u_cmd: float, extra=(0.0, 0.0), u_psi: Optional[float] = None):
+    def act(self, u_cmd: float, extra=(0.0, 0.0), wheels: Optional[Tuple[float, float]] = None):
         """Stage ``drive``: the torque acting over [t_k, t_k+1) for the command ``u_cmd``, and the true tau_d
         at t_k with it (what row k records).  A command that is not a finite number, or is implausible, faults the
         driver (``bad_command``, before the torque limit, which would clip NaN to a limit): zero torque acts.
-        ``u_psi`` (the yaw stage's, a spatial plant): the wheels get u_L, u_R (:func:`.yaw.wheel_torques`, each
-        clipped to half the torque limit), delayed and gated per wheel; the torque returned is u_L + u_R."""
-        if u_psi is not None:
-            return self._act_wheels(u_cmd, u_psi, extra)
+        ``wheels`` (the yaw stage's, a spatial plant; docs/theory.md 6.13): the wheels' commands (u/2 - u_psi/2,
+        u/2 + u_psi/2), each checked, clipped to half the torque limit, delayed and gated; the torque returned is
+        u_L + u_R (``u_cmd`` is not read)."""
+        if wheels is not None:
+            return self._act_wheels(wheels, extra)
+        self.wheels = None
         self.safety.check_command(self.plant.t, u_cmd)
         u = saturate(u_cmd, self.cfg.torque_limit)
         if self.actuator is not None:
@@ -179,10 +181,11 @@ class PlantSide:
         u = self.safety.torque_gate(u)   # zero unless the driver is enabled; the observer is told what acted
         return u, self.plant.lumped_disturbance(u, extra)
 
-    def _act_wheels(self, u_cmd: float, u_psi: float, extra):
-        self.safety.check_command(self.plant.t, u_cmd)
-        self.safety.check_command(self.plant.t, u_psi)
-        pair = wheel_torques(u_cmd, u_psi, self.cfg.torque_limit)
+    def _act_wheels(self, wheels, extra):
+        t, lim = self.plant.t, 0.5 * self.cfg.torque_limit
+        self.safety.check_command(t, wheels[0])
+        self.safety.check_command(t, wheels[1])
+        pair = (saturate(wheels[0], lim), saturate(wheels[1], lim))
         if self.wheel_actuator is not None:
             pair = self.wheel_actuator.apply(pair)
         self.enabled = self.safety.enabled
@@ -240,7 +243,7 @@ class Period:
             self.failure = (p.t, fall_text(p.t, p.x, p.cfg.fall_angle), FAILURES[DIVERGED])
             return True
         measured, u_m = side.sense()
-        u_psi = None
+        wheels = None
         if self.yaw is not None:   # stage yaw (after the law): u_psi from psi'* and the gyro's yaw rate
             dpsi = side.sense_yaw_rate()
         u_law, tau_hat, internals, x_m = self.decide(measured, u_m, p.k)
@@ -248,7 +251,8 @@ class Period:
             dpsi_ref = self.motion.ref.dpsi
             u_psi = self.yaw.step(dpsi_ref, dpsi)
             internals = {**internals, "dpsi_ref": dpsi_ref, "u_psi": u_psi}
-        u, tau_d = side.act(u_law, u_psi=u_psi)
+            wheels = wheel_torques(u_law, u_psi, 0.0)   # clipped per wheel in the drive stage
+        u, tau_d = side.act(u_law, wheels=wheels)
         table.append(p.t, p.x, u, tau_hat, tau_d, internals, (*measured, *x_m) if self.estimator else (), p.pose)
         self.u = u
         if p.fallen:
