@@ -43,7 +43,7 @@ NAN = math.nan
 MAX_ROWS = 2_000_000           # rows (samples): 2.8 h at 200 Hz; ~16 columns of float64 = 256 MB
 MAX_CSV_BYTES = 1 << 30        # a CSV of MAX_ROWS full rows (16 repr floats, ~330 B a row) is ~660 MB
 MAX_BAG_BYTES = 2 << 30        # a bag of MAX_ROWS periods (state, command, estimate, truth: ~600 B) is ~1.2 GB
-MAX_CSV_COLUMNS = 64           # a trajectory has 36 at most (ALL_COLUMNS and stamp)
+MAX_CSV_COLUMNS = 64           # a trajectory has 37 at most (ALL_COLUMNS and stamp)
 MAX_T = 1e10   # [s] |t| beyond this is no run; a realtime observer's CSV holds wall-clock stamps (1.8e9 s in 2026)
 _HEADER_MAX = 1 << 16          # characters of a header line
 MAX_LOG_MESSAGES = 100_000     # /rosout, /parameter_events messages of a bag kept for plant_record

@@ -32,3 +32,18 @@ def test_the_path_tables_are_what_the_code_computes(scenario):
         run = simulate(P.closed_loop(v, controller=law))
         label = law if not run.fallen else f"{law} (failed at {run.record['t_fall']:.3f} s)"
         assert row == path_rows([(label, path_metrics(run.columns, run.h))])[0], row
+
+
+def test_the_odometry_drift_table_is_what_the_code_computes():
+    """docs/real-robot.md: robot_state's integration (core.odometry.state_update) of the runs' states against the
+    true pose, on both paths."""
+    from mwip_ros.core.odometry import odometry_drift
+    head, rows = table_after((REPO / "docs" / "real-robot.md").read_text(), "Odometry drift against the true pose")
+    assert len(rows) == 4
+    for row in rows:
+        files = [REPO / "config" / "paper.yaml", REPO / row[0].split(" ")[0]]
+        v = P.merged_values(P.load_param_files(files))
+        run = simulate(P.closed_loop(v, controller=row[1]))
+        assert not run.fallen
+        d = odometry_drift(run.columns, v["actual.r"], v["actual.track_width"])
+        assert row[2:] == [f"{d['final_pos']:.4f}", f"{d['max_pos']:.4f}", f"{d['final_yaw']:.4f}"], row

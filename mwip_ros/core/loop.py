@@ -250,7 +250,7 @@ class Period:
         if self.yaw is not None:
             dpsi_ref = self.motion.ref.dpsi
             u_psi = self.yaw.step(dpsi_ref, dpsi)
-            internals = {**internals, "dpsi_ref": dpsi_ref, "u_psi": u_psi}
+            internals = {**internals, "dpsi_ref": dpsi_ref, "u_psi": u_psi, "gyro_z": dpsi}
             wheels = wheel_torques(u_law, u_psi, 0.0)   # clipped per wheel in the drive stage
         u, tau_d = side.act(u_law, wheels=wheels)
         table.append(p.t, p.x, u, tau_hat, tau_d, internals, (*measured, *x_m) if self.estimator else (), p.pose)

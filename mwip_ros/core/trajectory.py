@@ -36,7 +36,8 @@ ESTIMATE_COLUMNS = ["theta_w_hat", "theta_b_hat", "dtheta_w_hat", "dtheta_b_hat"
 DRIVE_COLUMNS = ["u_applied", "drive_saturation"]
 EXCITATION_COLUMNS = ["excitation"]   # the controller's excitation, included in u (identification)
 MOTION_COLUMNS = ["v_ref", "theta_w_ref"]   # the period's motion references (theory 6.11: v* [m/s], theta_w* [rad])
-YAW_COLUMNS = ["dpsi_ref", "u_psi"]   # the yaw stage's reference psi'* [rad/s] and yaw torque u_psi [N m] (theory 6.13)
+# the yaw stage's reference psi'* [rad/s], yaw torque u_psi [N m] and the gyro's yaw rate it read [rad/s] (theory 6.13)
+YAW_COLUMNS = ["dpsi_ref", "u_psi", "gyro_z"]
 # a spatial plant's 3D pose at t_k (core.plant.Pose, backend mujoco: docs/theory.md 6.10), after every other column
 POSE_COLUMNS = ["x", "y", "yaw", "roll", "wheel_left", "wheel_right"]
 ALL_COLUMNS = (COLUMNS + RAW_COLUMNS + ESTIMATE_COLUMNS + DRIVE_COLUMNS + EXCITATION_COLUMNS + MOTION_COLUMNS
