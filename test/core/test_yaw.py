@@ -98,3 +98,15 @@ def test_the_default_gains_row_of_theory_6_13():
     e = np.diff(yaw) / 0.005 - run["dpsi_ref"][:-1]
     assert f"{np.sqrt(np.mean(e ** 2)):.4f}" == "0.0319" and f"{yaw[-1]:.4f}" == "1.9749"
     assert f"{np.max(np.abs(run['theta_b'][run['t'] > 1.0])):.4f}" == "0.0397"
+
+
+def test_with_raw_sensors_the_yaw_stage_does_not_run():
+    """docs/theory.md 6.13: the raw IMU has no yaw gyro and the estimator's state no yaw rate: no yaw stage (as in the
+    graph), the wheels get u / 2 each."""
+    pytest.importorskip("mujoco")
+    from mwip_ros.core.sim import simulate
+    files = [default_params_file(), default_params_file().parent / "sensors_raw_realistic.yaml",
+             default_params_file().parent / "motion.yaml"]
+    v = dict(P.merged_values(P.load_param_files(files)), backend="mujoco", **{"motion.yaw_profile": [0.0, 0.5]})
+    run = simulate(P.closed_loop(v, controller="dscndo", duration=0.5))
+    assert "u_psi" not in run.columns and np.max(np.abs(run["yaw"])) < 1e-12
