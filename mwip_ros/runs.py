@@ -43,7 +43,7 @@ NAN = math.nan
 MAX_ROWS = 2_000_000           # rows (samples): 2.8 h at 200 Hz; ~16 columns of float64 = 256 MB
 MAX_CSV_BYTES = 1 << 30        # a CSV of MAX_ROWS full rows (16 repr floats, ~330 B a row) is ~660 MB
 MAX_BAG_BYTES = 2 << 30        # a bag of MAX_ROWS periods (state, command, estimate, truth: ~600 B) is ~1.2 GB
-MAX_CSV_COLUMNS = 64           # a trajectory has 34 at most (ALL_COLUMNS and stamp)
+MAX_CSV_COLUMNS = 64           # a trajectory has 37 at most (ALL_COLUMNS and stamp)
 MAX_T = 1e10   # [s] |t| beyond this is no run; a realtime observer's CSV holds wall-clock stamps (1.8e9 s in 2026)
 _HEADER_MAX = 1 << 16          # characters of a header line
 MAX_LOG_MESSAGES = 100_000     # /rosout, /parameter_events messages of a bag kept for plant_record
@@ -317,13 +317,13 @@ def read_bag_run(bag, label: Optional[str] = None, segment: Optional[int] = None
     run.h = float(np.median(np.diff(run.t))) if len(run) > 1 else NAN
     run.record = record
     if len(odom):
-        drift = odometry_drift(odom, states)
+        drift = _bag_odometry_drift(odom, states)
         if drift is not None:
             run.record["odometry"] = drift
     return run
 
 
-def odometry_drift(odom: "_Stamped", states: "_Stamped") -> Optional[dict]:
+def _bag_odometry_drift(odom: "_Stamped", states: "_Stamped") -> Optional[dict]:
     """How far ``odom``'s last pose is from the truth (docs/theory.md 6.12): the robot moved r (theta_w - theta_w0)
     along x from the first odom stamp to the last one that has a state (r = the odom's z, base_link's height), and
     not at all along y.  None when no odom stamp has a state."""

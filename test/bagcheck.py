@@ -101,6 +101,8 @@ def make_msg(type_name: str, i: int):
         return T[type_name](data=bool(i % 2))
     if type_name == "std_msgs/msg/String":   # driver_state: a transition, JSON
         return T[type_name](data=f'{{"state": "fault", "reason": "watchdog", "t": {0.005 * i:.3f}}}')
+    if type_name == "geometry_msgs/msg/Twist":   # cmd_vel
+        return T[type_name](linear=vec(0.1 * i, 0, 0), angular=vec(0, 0, -0.05 * i))
     if type_name == "geometry_msgs/msg/Wrench":
         return T[type_name](force=vec(i, 2 * i, 3), torque=vec(-i, 0, 0.5))
     if type_name == "geometry_msgs/msg/WrenchStamped":

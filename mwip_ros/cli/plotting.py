@@ -147,6 +147,29 @@ def speed_plot(runs: Sequence, path, r: float) -> None:
     plt.close(fig)
 
 
+def path_plot(runs: Sequence, path, h: float, title: str = "") -> None:
+    """The axle's centre (x, y) of each run against the ideal path of its references (``core.path.ideal_path``),
+    equal axes; a run that failed ends where it failed."""
+    from mwip_ros.core.path import ideal_path
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(7.5, 6.5))
+    first = runs[0]
+    ix, iy, _ = ideal_path(first["v_ref"], first["dpsi_ref"], h, (first["x"][0], first["y"][0],
+                                                                 float(first["yaw"][0])))
+    ax.plot(ix, iy, lw=2.0, ls="--", color="k", label="ideal (the references)")
+    for run in runs:
+        ax.plot(run["x"], run["y"], lw=1.0, label=run.label + (" (failed)" if run.fallen else ""))
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc="best", fontsize=8)
+    ax.set_title(title or "path on the ground (axle's centre) against the ideal")
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
 def _finite(x) -> bool:
     return bool(np.isfinite(np.asarray(x, dtype=float)).any())
 

@@ -20,6 +20,7 @@ from mwip_ros.cli.outputs import refuse_existing
 from mwip_ros.cli.theorem import theorem_report
 from mwip_ros.core import budget, metrics
 from mwip_ros.core import laws
+from mwip_ros.core.path import path_metrics, path_table
 from mwip_ros.core.plant import PlantDiverged
 from mwip_ros.core.sim import simulate
 from mwip_ros.params.paths import default_params_file
@@ -210,6 +211,10 @@ def _finish(args, values, runs) -> int:
         print("motion (v* of motion.profile or cmd_vel; the hold: v* = 0 at the end, from "
               f"{metrics.HOLD_SETTLE_S:g} s after the stop):")
         print(metrics.motion_table(moving))
+    driven = [r for r in runs if "dpsi_ref" in r.columns and "x" in r.columns]
+    if driven:   # the yaw stage on a 3D plant: the path against the references' (docs/laws.md, Driving a path)
+        print("path (the axle's centre against the ideal path of v* and psi'*):")
+        print(path_table([(r.label, path_metrics(r.columns, r.h)) for r in driven]))
     by = dict(named)
     if "dsc" in by and "dscndo" in by:
         print(ratio_line(by["dsc"], by["dscndo"]))
@@ -223,6 +228,10 @@ def _finish(args, values, runs) -> int:
             speed = args.plot.with_name(f"{args.plot.stem}_speed{args.plot.suffix}")
             plotting.speed_plot([r for r in runs if "v_ref" in r.columns], speed, values["nominal.r"])
             print(f"wrote {speed}")
+        if driven:
+            where = args.plot.with_name(f"{args.plot.stem}_path{args.plot.suffix}")
+            plotting.path_plot(driven, where, driven[0].h)
+            print(f"wrote {where}")
     return EXIT_FELL if any(not m.upright for _, m in named) else EXIT_OK
 
 

@@ -368,6 +368,7 @@ def _simulate_numpy(loops: Sequence[ClosedLoop], window: Sequence[float], record
                                                    np.where(use_obs, tau_hat[1], 0.0)))
             except Exception:   # noqa: BLE001 - over arrays a law's error can read as numpy's: run it as it runs
                 return _simulate_each(loops, window, record)   # alone, which gives the same numbers or its own
+            # stage: yaw (none: the planar plant; a spatial plant runs through the scalar loop)
             # stage: drive
             bad = ~(np.abs(u_law) <= PLAUSIBLE_TORQUE)   # the driver's bad_command (core.loop.PlantSide.act)
             u = np.where(limit > 0.0, np.clip(u_law, -limit, limit), u_law)

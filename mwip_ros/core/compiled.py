@@ -443,6 +443,7 @@ def _loop(k0, k1, n_steps, h, substeps, first_w, n_window, counts, delay, act_de
                         u = u - u_taud_of(pn, pn.m12 * math.cos(xm[1]), th)
                 if exi[i] >= 0:   # the excitation (core.loop.command)
                     u = u + EXT[exi[i], k]
+                # stage: yaw (none: the planar plant; a spatial plant runs through the scalar loop)
                 # stage: drive
                 bad = not abs(u) <= PLAUSIBLE_TORQUE   # the driver's bad_command (core.loop.PlantSide.act)
                 u = saturate(u, limit[i])

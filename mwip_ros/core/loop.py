@@ -9,6 +9,9 @@ The discrete-time contract (docs/theory.md, section 4) orders one control period
    it measures the raw IMU and encoder (``raw``, :mod:`.raw_sensors`);
 3. ``observer``  tau_hat_k from the measured state and the reported torque (eq. 12-13, :mod:`.observer`);
 4. ``law``       u_k from the measured state and tau_hat_k (:mod:`.laws`);
+4b. ``yaw``      on a spatial plant with motion references and the yaw loop (:mod:`.yaw`, docs/theory.md 6.13):
+   u_psi,k from psi'*_k and the measured yaw rate, and the two wheels' torques u_L, u_R (optional: a planar
+   plant, or motion off, has no yaw stage and nothing of it runs);
 5. ``drive``     the torque limit, the actuator delay and the driver's state machine (:mod:`.safety`:
    zero torque unless enabled): the command that acts over [t_k, t_{k+1}) (with the motor model,
    :mod:`.drive`, the drive turns it into the torque at every RK4 stage of the plant; not enabled, the
@@ -39,6 +42,7 @@ from .laws import LawError
 from .plant import Plant, PlantConfig, finite_state, make_plant, saturate
 from .raw_sensors import RawSensors
 from .safety import PLAUSIBLE_TORQUE, DriverStateMachine
+from .yaw import YawLoop, wheel_torques
 from .trajectory import BAD_COMMAND, DIVERGED, FAILURES, FALL
 from .sensing import Actuator, Sensors
 
@@ -70,6 +74,9 @@ STAGES: Tuple[Stage, ...] = (
           "tau_hat_k (eq. 12-13)", waits_for="the controller waits for it when use_observer is true"),
     Stage("law", "dscndo_controller", ("joint_states", "disturbance_estimate"), "wheel_torque_cmd",
           "u_k from the state and tau_hat_k (core.laws)"),
+    Stage("yaw", "dscndo_controller", ("joint_states",), "wheel_torques_cmd",
+          "u_psi_k from psi'*_k and the gyro's yaw rate, the wheels' torques u_L, u_R (core.yaw)", optional=True,
+          waits_for="a spatial plant with motion.enabled and the yaw loop"),
     Stage("drive", PLANT_NODE, ("wheel_torque_cmd",), None,
           "torque_limit and the actuator delay: the torque that acts over [t_k, t_k+1)"),
     Stage("plant", PLANT_NODE, (), None, "record row k and its true tau_d, integrate to t_k+1 (RK4)"),
@@ -88,18 +95,26 @@ class Answer:
     why: str = ""
 
 
+def _runs(s: Stage, estimator: bool) -> bool:
+    """Whether the stage ``s`` is in a configuration's chain: the estimator only with ``estimator``; the yaw stage
+    runs in the law's node after the law, so it adds no node and no answer to wait for."""
+    if s.name == "yaw":
+        return False
+    return estimator or not s.optional
+
+
 def answering(estimator: bool = False) -> Tuple[Answer, ...]:
     """The answering stages of the lockstep chain, in order: the stages the plant does not run itself
     (``estimator``: whether the configuration has a state estimator)."""
     return tuple(Answer(s.name, s.node, s.output, s.waits_for) for s in STAGES
-                 if s.node != PLANT_NODE and (estimator or not s.optional))
+                 if s.node != PLANT_NODE and _runs(s, estimator))
 
 
 def loop_nodes(estimator: bool = False) -> Tuple[str, ...]:
     """The nodes of the closed loop (plant first), each once, in the order of their first stage."""
     out = []
     for s in STAGES:
-        if s.node not in out and (estimator or not s.optional):
+        if s.node not in out and _runs(s, estimator):
             out.append(s.node)
     return tuple(out)
 
@@ -122,6 +137,12 @@ class PlantSide:
             self.raw_queue = deque(maxlen=sc.delay_periods + 1)
         self.sensors = Sensors.for_plant(sc, cfg.seed) if sc.measuring and self.raw is None else None
         self.actuator = Actuator(sc.actuator_delay_periods) if sc.actuator_delay_periods else None
+        # the yaw stage's inputs (docs/theory.md 6.13, a spatial plant only): the gyro's yaw rate, delayed as the
+        # state is, and the wheels' pair through the actuator's delay
+        self.yaw_queue = deque(maxlen=sc.delay_periods + 1)
+        self.wheel_actuator = (Actuator(sc.actuator_delay_periods, zero=(0.0, 0.0)) if sc.actuator_delay_periods
+                               else None)
+        self.wheels = None   # the wheels' torques (u_L, u_R) of the period :meth:`act` decided, None: u / 2 each
         # the driver's state machine (docs/theory.md 6.8): disabled or faulted, the torque that acts is zero; a
         # command that is not a number or beyond PLAUSIBLE_TORQUE is a ``bad_command`` fault (the node's own limit)
         self.safety = DriverStateMachine(require_enable=cfg.require_enable, max_command=PLAUSIBLE_TORQUE)
@@ -136,10 +157,22 @@ class PlantSide:
             return self.raw_queue[0]   # the sample of step k - d (or the first one while k < d)
         return self.sensors.sample(p.x, p.u_prev) if self.sensors else (p.x, p.u_prev)
 
-    def act(self, u_cmd: float, extra=(0.0, 0.0)):
+    def sense_yaw_rate(self) -> float:
+        """Stage ``sensors`` of a spatial plant (docs/theory.md 6.13): the gyro's yaw rate (the body's z rate) of step
+        k - d, as the state is delayed (ideal: no noise, no bias)."""
+        self.yaw_queue.append(self.plant.yaw_rate)
+        return self.yaw_queue[0]
+
+    def act(self, u_cmd: float, extra=(0.0, 0.0), wheels: Optional[Tuple[float, float]] = None):
         """Stage ``drive``: the torque acting over [t_k, t_k+1) for the command ``u_cmd``, and the true tau_d
         at t_k with it (what row k records).  A command that is not a finite number, or is implausible, faults the
-        driver (``bad_command``, before the torque limit, which would clip NaN to a limit): zero torque acts."""
+        driver (``bad_command``, before the torque limit, which would clip NaN to a limit): zero torque acts.
+        ``wheels`` (the yaw stage's, a spatial plant; docs/theory.md 6.13): the wheels' commands (u/2 - u_psi/2,
+        u/2 + u_psi/2), each checked, clipped to half the torque limit, delayed and gated; the torque returned is
+        u_L + u_R (``u_cmd`` is not read)."""
+        if wheels is not None:
+            return self._act_wheels(wheels, extra)
+        self.wheels = None
         self.safety.check_command(self.plant.t, u_cmd)
         u = saturate(u_cmd, self.cfg.torque_limit)
         if self.actuator is not None:
@@ -148,8 +181,25 @@ class PlantSide:
         u = self.safety.torque_gate(u)   # zero unless the driver is enabled; the observer is told what acted
         return u, self.plant.lumped_disturbance(u, extra)
 
+    def _act_wheels(self, wheels, extra):
+        t, lim = self.plant.t, 0.5 * self.cfg.torque_limit
+        self.safety.check_command(t, wheels[0])
+        self.safety.check_command(t, wheels[1])
+        pair = (saturate(wheels[0], lim), saturate(wheels[1], lim))
+        if self.wheel_actuator is not None:
+            pair = self.wheel_actuator.apply(pair)
+        self.enabled = self.safety.enabled
+        pair = (self.safety.torque_gate(pair[0]), self.safety.torque_gate(pair[1]))
+        self.wheels = pair
+        u = pair[0] + pair[1]
+        return u, self.plant.lumped_disturbance(u, extra, wheels=pair)
+
     def advance(self, u: float, extra=(0.0, 0.0)) -> None:
-        """Stage ``plant``: integrate t_k -> t_k+1 with the torque that acts (the bridge as :meth:`act` found it)."""
+        """Stage ``plant``: integrate t_k -> t_k+1 with the torque that acts (the bridge as :meth:`act` found it;
+        with the yaw stage, the wheels' pair)."""
+        if self.wheels is not None:
+            self.plant.step(u, extra, enabled=self.enabled, wheels=self.wheels)
+            return
         self.plant.step(u, extra, enabled=self.enabled)
 
 
@@ -158,10 +208,14 @@ class Period:
     plant measures raw: :mod:`.estimators`), the observer and the law (with ``motion``, a :class:`.motion.Shaper`,
     the law tracks its references: :func:`command`)."""
 
-    def __init__(self, side: PlantSide, observer, law, estimator=None, excitation=None, motion=None):
+    def __init__(self, side: PlantSide, observer, law, estimator=None, excitation=None, motion=None,
+                 yaw: Optional[YawLoop] = None):
         self.side, self.observer, self.law, self.estimator = side, observer, law, estimator
         self.excitation = excitation
         self.motion = motion   # the references' shaper (core.motion.Shaper, theory 6.11), None: none (the paper)
+        self.yaw = yaw   # the yaw stage (core.yaw, theory 6.13): a spatial plant with motion; None: none
+        if yaw is not None and (motion is None or not side.plant.spatial):
+            raise ValueError("the yaw stage needs the motion references and a spatial plant (backend mujoco)")
         self.failure = None   # (t, one line, cause: a FAILURES name) once the run has failed
         if (side.raw is None) != (estimator is None):
             raise ValueError("a raw plant needs a state estimator, and only a raw plant has one")
@@ -189,8 +243,16 @@ class Period:
             self.failure = (p.t, fall_text(p.t, p.x, p.cfg.fall_angle), FAILURES[DIVERGED])
             return True
         measured, u_m = side.sense()
+        wheels = None
+        if self.yaw is not None:   # stage yaw (after the law): u_psi from psi'* and the gyro's yaw rate
+            dpsi = side.sense_yaw_rate()
         u_law, tau_hat, internals, x_m = self.decide(measured, u_m, p.k)
-        u, tau_d = side.act(u_law)
+        if self.yaw is not None:
+            dpsi_ref = self.motion.ref.dpsi
+            u_psi = self.yaw.step(dpsi_ref, dpsi)
+            internals = {**internals, "dpsi_ref": dpsi_ref, "u_psi": u_psi, "gyro_z": dpsi}
+            wheels = wheel_torques(u_law, u_psi, 0.0)   # clipped per wheel in the drive stage
+        u, tau_d = side.act(u_law, wheels=wheels)
         table.append(p.t, p.x, u, tau_hat, tau_d, internals, (*measured, *x_m) if self.estimator else (), p.pose)
         self.u = u
         if p.fallen:

@@ -42,6 +42,7 @@ class MotionConfig:
     lean_gain: float = 0.03       # k_x [rad per rad/s]
     profile: Tuple[Tuple[float, float], ...] = ()   # ((t, v*), ...): offline/lockstep; () = commands
     r: float = 0.254              # m
+    yaw_profile: Tuple[Tuple[float, float], ...] = ()   # ((t, psi'*), ...) beside ``profile`` (theory 6.13)
 
 
 class Reference(NamedTuple):
@@ -71,6 +72,16 @@ def error_state(x, ref: Optional[Reference]):
 
 def _clip(v: float, lim: float) -> float:
     return lim if v > lim else (-lim if v < -lim else v)
+
+
+def _at(profile, t: float) -> float:
+    """A profile's value at ``t``: the newest point at or before it (0 before the first)."""
+    v = 0.0
+    for tp, vp in profile:
+        if tp > t + 1e-12:
+            break
+        v = vp
+    return v
 
 
 def _toward(now: float, target: float, step: float) -> float:
@@ -124,13 +135,9 @@ class Shaper:
 
     def _target(self, k: int) -> Tuple[float, float]:
         c = self.cfg
-        if c.profile:   # the newest point at or before t_k
-            t, v = k * self.h, 0.0
-            for tp, vp in c.profile:
-                if tp > t + 1e-12:
-                    break
-                v = vp
-            return _clip(v, c.max_speed), 0.0
+        if c.profile or c.yaw_profile:   # the newest point at or before t_k
+            t = k * self.h
+            return _clip(_at(c.profile, t), c.max_speed), _clip(_at(c.yaw_profile, t), c.max_yaw_rate)
         if not self.stopped and self.cmd_k is not None and (k - self.cmd_k) * self.h >= c.timeout_s - 1e-12:
             self.stopped, self.stopped_now = True, True
             self.timeouts += 1

@@ -105,6 +105,8 @@ class MujocoPlant(PlantSim):
     bookkeeping of the previous period are :class:`~.plant.PlantSim`'s."""
 
     pose: Optional[Pose] = None
+    wheels_prev: Optional[Tuple[float, float]] = None   # the yaw stage's (u_L, u_R) that acted (theory 6.13)
+    wheels_cmd_prev: Optional[Tuple[float, float]] = None   # ... and what was commanded (the motor's inputs)
     _mj: object = field(default=None, repr=False)
     spatial: ClassVar[bool] = True   # a 3D pose (Pose, core.plant)
 
@@ -146,6 +148,12 @@ class MujocoPlant(PlantSim):
         return tuple(v[:3]), tuple(v[3:6])
 
     @property
+    def yaw_rate(self) -> float:
+        """The body's angular rate about its own z axis at t_k [rad/s]: what a gyro on the body reads as yaw rate
+        (cos(theta_b) psi' when the body turns at psi' about the vertical; docs/theory.md 6.13)."""
+        return float(self._qvel[5])
+
+    @property
     def fallen(self) -> bool:
         return not all(math.isfinite(v) for v in self.x) or abs(self.x[1]) > self.cfg.fall_angle
 
@@ -160,40 +168,59 @@ class MujocoPlant(PlantSim):
         self._ctrl[:] = u_pair
         f[4], f[6], f[7] = ql + qr + e2 - e1, ql, qr
 
-    def _accel(self, u: float, D_w: float, extra) -> Tuple[float, float]:
-        """(theta_w'', theta_b'') at the current state with the torque ``u`` (u / 2 per wheel), MuJoCo's."""
-        self._apply(self.t, (0.5 * u, 0.5 * u), D_w, extra)
+    def _accel(self, u: float, D_w: float, extra, wheels=None) -> Tuple[float, float]:
+        """(theta_w'', theta_b'') at the current state with the torque ``u`` (u / 2 per wheel, or the pair
+        ``wheels``), MuJoCo's."""
+        self._apply(self.t, (0.5 * u, 0.5 * u) if wheels is None else wheels, D_w, extra)
         self._mj.mj_forward(self.model, self.data)
         a = self.data.qacc.tolist()
         return a[4] + 0.5 * (a[6] + a[7]), a[4]
 
-    def lumped_disturbance(self, u: float, extra=(0.0, 0.0)) -> Tuple[float, float]:
-        return lumped_disturbance(self.cfg.nominal, self.x, self._accel(u, self.D_w, extra), u)
+    def lumped_disturbance(self, u: float, extra=(0.0, 0.0), wheels=None) -> Tuple[float, float]:
+        return lumped_disturbance(self.cfg.nominal, self.x, self._accel(u, self.D_w, extra, wheels), u)
 
     def sample_accel(self) -> Tuple[float, float]:
         c = self.cfg
-        u = self.u_prev
+        u, wheels = self.u_prev, self.wheels_prev
         if c.motor.enabled and self.k > 0 and self.enabled_prev:
-            u = motor_torque(self.u_cmd_prev, self.x[2] - self.x[3], *c.motor_constants)[0]
-        return self._accel(u, self.D_w_prev, self.extra_prev)
+            if wheels is not None:   # the yaw stage's pair: each wheel's half motor at its own rate
+                half = self._half_motor(c.motor_constants)
+                wheels = (motor_torque(self.wheels_cmd_prev[0], float(self._qvel[6]), *half)[0],
+                          motor_torque(self.wheels_cmd_prev[1], float(self._qvel[7]), *half)[0])
+                u = wheels[0] + wheels[1]
+            else:
+                u = motor_torque(self.u_cmd_prev, self.x[2] - self.x[3], *c.motor_constants)[0]
+        return self._accel(u, self.D_w_prev, self.extra_prev, wheels)
 
-    def step(self, u: float, extra=(0.0, 0.0), enabled: bool = True) -> None:
+    @staticmethod
+    def _half_motor(motor):
+        """One wheel's drive: half the lumped motor (K_t, 2 R, V_max, I_max / 2; theory 6.10)."""
+        return (motor[0], 2.0 * motor[1], motor[2], 0.5 * motor[3])
+
+    def step(self, u: float, extra=(0.0, 0.0), enabled: bool = True, wheels=None) -> None:
         """Integrate t_k -> t_{k+1}: :attr:`n` MuJoCo steps, each wheel's torque and the generalized forces held over
         each (tau_ext at its midpoint, D_w's term from its start); with the motor model, each wheel's drive is
-        half the motor (K_t, 2 R, V_max, I_max / 2: the two sum to the one of eq. 1) with half the command."""
+        half the motor (K_t, 2 R, V_max, I_max / 2: the two sum to the one of eq. 1) with half the command.
+        ``wheels``: the yaw stage's commands (u_L, u_R) (docs/theory.md 6.13) instead of u / 2 each."""
         c, mj, d = self.cfg, self._mj, self.data
         u, motor = gated_drive(u, c.motor_constants, enabled)
+        if wheels is not None and not enabled:
+            wheels = (0.0, 0.0)
         driven = motor[0] > 0.0
-        half = (motor[0], 2.0 * motor[1], motor[2], 0.5 * motor[3])
+        half = self._half_motor(motor)
+        cl, cr = (0.5 * u, 0.5 * u) if wheels is None else wheels
         dt = c.h / self.n
         acted, sat = 0.0, 0
+        acted_l = acted_r = 0.0
         for i in range(self.n):
-            ul = ur = 0.5 * u
+            ul, ur = cl, cr
             if driven:
-                ul, sl = motor_torque(0.5 * u, self._qvel[6], *half)
-                ur, sr = motor_torque(0.5 * u, self._qvel[7], *half)
+                ul, sl = motor_torque(cl, self._qvel[6], *half)
+                ur, sr = motor_torque(cr, self._qvel[7], *half)
                 sat = max(sat, sl, sr)
             acted += ul + ur
+            acted_l += ul
+            acted_r += ur
             self._apply(self.t + (i + 0.5) * dt, (ul, ur), self.D_w, extra)
             mj.mj_step(self.model, d)
         x, pose = self.x, self.pose
@@ -206,6 +233,11 @@ class MujocoPlant(PlantSim):
         self.k += 1
         self.saturation = sat
         self.u_prev, self.u_cmd_prev, self.enabled_prev = (acted / self.n if driven else u), u, bool(enabled)
+        if wheels is not None:
+            self.wheels_prev = (acted_l / self.n, acted_r / self.n) if driven else (cl, cr)
+            self.wheels_cmd_prev = (cl, cr)
+            if not driven:
+                self.u_prev = cl + cr
         self.D_w_prev, self.extra_prev = self.D_w, (float(extra[0]), float(extra[1]))
         self.D_w = self._draw_D_w()
 

@@ -43,7 +43,7 @@ from typing import Optional, Tuple
 import numpy as np
 
 __all__ = ["OdometryNoise", "odometry_noise", "encoder_rate_std", "absolute_wheel_rates", "body_twist", "arc_step",
-           "Odometry", "RULES", "yaw_quaternion"]
+           "Odometry", "RULES", "yaw_quaternion", "gyro_yaw_rate", "state_update", "odometry_drift"]
 
 RULES = ("rectangle", "trapezoid")
 
@@ -200,3 +200,35 @@ class Odometry:
         out[0] = self.noise.speed_std ** 2
         out[35] = self.noise.yaw_rate_std ** 2
         return out
+
+
+def gyro_yaw_rate(gyro_z: float, theta_b: float) -> float:
+    """The yaw rate psi' about the vertical from a body-fixed gyro's z rate: the body pitched by theta_b turning at psi'
+    reads cos(theta_b) psi' about its own z (docs/theory.md 6.13), so psi' = gyro_z / cos(theta_b)."""
+    return gyro_z / math.cos(theta_b)
+
+
+def state_update(odom: Odometry, t: float, dtheta_w: float, theta_b: float, gyro_z: Optional[float] = None) -> bool:
+    """One state into the odometry, as ``robot_state`` takes it: both wheels at the state's theta_w' (their mean: v =
+    r theta_w' whatever their difference) and, from a 3D plant's state (its gyro's yaw rate ``gyro_z``), the yaw rate
+    :func:`gyro_yaw_rate`; without one the planar robot's 0."""
+    w = 0.0 if gyro_z is None else gyro_yaw_rate(gyro_z, theta_b)
+    return odom.update(t, dtheta_w, yaw_rate=w)
+
+
+def odometry_drift(cols, r: float, track_width: float) -> dict:
+    """The odometry of a run's measured states (columns t, dtheta_w, theta_b, gyro_z; :func:`state_update`, as
+    ``robot_state`` integrates them) against its true pose (x, y, yaw, relative to the first): ``final_pos`` and
+    ``max_pos`` [m], the distance of odom's (x, y) to the true displacement at the end and at worst; ``final_yaw``
+    [rad], odom's yaw minus the true one at the end.  Rows after the first non-finite one are left out."""
+    t, dw, tb, gz = (np.asarray(cols[c], float) for c in ("t", "dtheta_w", "theta_b", "gyro_z"))
+    x, y, yaw = (np.asarray(cols[c], float) for c in ("x", "y", "yaw"))
+    yaw = np.unwrap(yaw)
+    odom = Odometry(r, track_width)
+    err = []
+    for k in range(len(t)):
+        if not state_update(odom, float(t[k]), float(dw[k]), float(tb[k]), float(gz[k])):
+            break
+        err.append((math.hypot(odom.x - (x[k] - x[0]), odom.y - (y[k] - y[0])), odom.yaw - (yaw[k] - yaw[0])))
+    e = np.asarray(err)
+    return {"final_pos": float(e[-1, 0]), "max_pos": float(e[:, 0].max()), "final_yaw": float(e[-1, 1])}

@@ -22,6 +22,7 @@ from .motion import MotionConfig, Shaper
 from .observer import DiscreteObserver, gain_matrix
 from .plant import PlantConfig, PlantDiverged
 from .trajectory import DIVERGED, FAILURES, Trajectory, TrajectoryTable
+from .yaw import YawConfig, YawLoop
 
 __all__ = ["ClosedLoop", "simulate", "LAWS", "law_name"]
 
@@ -61,6 +62,7 @@ class ClosedLoop:
     estimator: Optional[EstimatorConfig] = None   # the state_estimator of a raw plant (plant.raw), else None
     excitation: Optional[ExcitationConfig] = None   # the controller's excitation (identification), else None
     motion: Optional[MotionConfig] = None   # the references every law tracks (theory 6.11), else None (the paper)
+    yaw: Optional[YawConfig] = None   # the yaw-rate loop's gains (theory 6.13; runs on a spatial plant), else None
 
     @property
     def name(self) -> str:
@@ -95,12 +97,16 @@ def simulate(loop: ClosedLoop, label: str = "", progress: Optional[Callable[[flo
     estimator = loop.estimator.make(h, pc.nominal.r, pc.nominal.g) if pc.raw is not None else None
     excitation = Excitation(loop.excitation, h) if loop.excitation is not None else None
     motion = Shaper(loop.motion, h) if loop.motion is not None else None
-    period = Period(PlantSide(pc), DiscreteObserver(pc.nominal, gain_matrix(loop.X), h),
-                    loop.law_class(loop.params, pc.nominal, h), estimator, excitation, motion)   # core.loop's stages
+    side = PlantSide(pc)
+    # the yaw stage (theory 6.13): a spatial plant measuring its state (the raw IMU of 6.4 has no yaw gyro yet)
+    yaw = (YawLoop(loop.yaw, h) if loop.yaw is not None and motion is not None and side.plant.spatial
+           and pc.raw is None else None)
+    period = Period(side, DiscreteObserver(pc.nominal, gain_matrix(loop.X), h),
+                    loop.law_class(loop.params, pc.nominal, h), estimator, excitation, motion, yaw)   # the stages
     # the true state: the metrics judge it
     table = TrajectoryTable(internals=True, raw=pc.raw is not None, drive=pc.motor.enabled or pc.raw is not None,
                             excitation=excitation is not None, motion=motion is not None,
-                            pose=period.side.plant.spatial)
+                            pose=period.side.plant.spatial, yaw=yaw is not None)
     every = max(1, n_steps // 10)
     try:
         for k in range(n_steps + 1):

@@ -18,7 +18,8 @@ from typing import Any, Dict, Iterable, Sequence, Tuple
 import numpy as np
 
 __all__ = ["TRAJECTORY_COLUMNS", "INTERNAL_COLUMNS", "COLUMNS", "RAW_COLUMNS", "ESTIMATE_COLUMNS", "DRIVE_COLUMNS",
-           "EXCITATION_COLUMNS", "MOTION_COLUMNS", "POSE_COLUMNS", "ALL_COLUMNS", "FAILURES", "FALL", "BAD_COMMAND",
+           "EXCITATION_COLUMNS", "MOTION_COLUMNS", "YAW_COLUMNS", "POSE_COLUMNS",
+           "ALL_COLUMNS", "FAILURES", "FALL", "BAD_COMMAND",
            "DIVERGED", "FAILURE_COLUMNS", "Trajectory", "TrajectoryTable",
            "join_estimates", "stamp_key"]
 
@@ -35,10 +36,12 @@ ESTIMATE_COLUMNS = ["theta_w_hat", "theta_b_hat", "dtheta_w_hat", "dtheta_b_hat"
 DRIVE_COLUMNS = ["u_applied", "drive_saturation"]
 EXCITATION_COLUMNS = ["excitation"]   # the controller's excitation, included in u (identification)
 MOTION_COLUMNS = ["v_ref", "theta_w_ref"]   # the period's motion references (theory 6.11: v* [m/s], theta_w* [rad])
+# the yaw stage's reference psi'* [rad/s], yaw torque u_psi [N m] and the gyro's yaw rate it read [rad/s] (theory 6.13)
+YAW_COLUMNS = ["dpsi_ref", "u_psi", "gyro_z"]
 # a spatial plant's 3D pose at t_k (core.plant.Pose, backend mujoco: docs/theory.md 6.10), after every other column
 POSE_COLUMNS = ["x", "y", "yaw", "roll", "wheel_left", "wheel_right"]
 ALL_COLUMNS = (COLUMNS + RAW_COLUMNS + ESTIMATE_COLUMNS + DRIVE_COLUMNS + EXCITATION_COLUMNS + MOTION_COLUMNS
-               + POSE_COLUMNS)
+               + YAW_COLUMNS + POSE_COLUMNS)
 _NAN_POSE = (math.nan,) * len(POSE_COLUMNS)
 _NAN2 = (math.nan, math.nan)
 
@@ -94,15 +97,17 @@ class TrajectoryTable:
     """
 
     def __init__(self, internals: bool = False, raw: bool = False, drive: bool = False, excitation: bool = False,
-                 keep_until: float = math.inf, sink=None, motion: bool = False, pose: bool = False):
+                 keep_until: float = math.inf, sink=None, motion: bool = False, pose: bool = False,
+                 yaw: bool = False):
         self.internals = internals
+        self.yaw = yaw
         self.excitation = excitation
         self.motion = motion
         self.pose = pose
         self.names = ((COLUMNS if internals else TRAJECTORY_COLUMNS) + ((RAW_COLUMNS + ESTIMATE_COLUMNS) if raw
                                                                          else []) + (DRIVE_COLUMNS if drive else [])
                       + (EXCITATION_COLUMNS if excitation else []) + (MOTION_COLUMNS if motion else [])
-                      + (POSE_COLUMNS if pose else []))
+                      + (YAW_COLUMNS if yaw else []) + (POSE_COLUMNS if pose else []))
         self.width = len(self.names)
         self.n_extra = len(RAW_COLUMNS + ESTIMATE_COLUMNS) if raw else 0
         self.drive = drive
@@ -157,6 +162,8 @@ class TrajectoryTable:
             self.rows.append(out.get("excitation", math.nan) if isinstance(out, dict) else math.nan)
         if self.motion:
             self.rows.extend([out.get(c, math.nan) if isinstance(out, dict) else math.nan for c in MOTION_COLUMNS])
+        if self.yaw:
+            self.rows.extend([out.get(c, math.nan) if isinstance(out, dict) else math.nan for c in YAW_COLUMNS])
         if self.pose:
             self.rows.extend(_NAN_POSE if pose is None else (pose.x, pose.y, pose.yaw, pose.roll, pose.wheel_left,
                                                               pose.wheel_right))

@@ -34,7 +34,7 @@ values, and values no robot of this kind can have (:data:`LIMITS`; the raw senso
 from __future__ import annotations
 
 import math
-from typing import Dict, Sequence, Tuple
+from typing import Dict, Optional, Sequence, Tuple
 
 from mwip_ros.core.markers import pose_angles, pose_quaternion
 from mwip_ros.core.model import State
@@ -48,9 +48,12 @@ __all__ = ["JOINT_NAMES", "INTERNAL_NAMES", "LIMITS", "RAW_LIMITS", "IMU_FRAME",
            "encode_command", "encode_clock", "encode_external_wrench", "parse_joint_state", "parse_wrench",
            "parse_command", "parse_clock", "parse_internals", "parse_external_wrench", "encode_imu", "parse_imu",
            "encode_encoder", "parse_encoder", "parse_odometry", "check_state", "RAW_FILTERS", "encode_twist",
-           "parse_twist", "POSE_FRAME", "encode_pose", "parse_pose", "parse_bool"]
+           "parse_twist", "POSE_FRAME", "encode_pose", "parse_pose", "parse_bool", "YAW_JOINT", "parse_yaw_rate",
+           "WHEEL_TORQUE_JOINTS", "encode_wheel_torques", "parse_wheel_torques"]
 
 JOINT_NAMES = ("wheel", "body_pitch")
+YAW_JOINT = "yaw"   # joint_states' third joint from a spatial plant: velocity = the gyro's yaw rate (theory 6.13)
+WHEEL_TORQUE_JOINTS = ("wheel_left_joint", "wheel_right_joint")   # wheel_torques_cmd's names (the URDF's joints)
 INTERNAL_NAMES = ("S1", "S2", "x4d", "x4_bar", "u_dsc", "u_taud", "u", "x1")
 
 # Plausible values, far beyond anything the robot reaches (in the paper's scenario |theta_b| stays
@@ -104,6 +107,8 @@ RAW_FILTERS = {
 }
 
 _STATE = cdr.JointStateEncoder(JOINT_NAMES)
+_STATE_YAW = cdr.JointStateEncoder(JOINT_NAMES + (YAW_JOINT,))
+_WHEEL_TORQUES = cdr.JointStateEncoder(WHEEL_TORQUE_JOINTS)
 _IMU = cdr.ImuEncoder(IMU_FRAME)
 _ENCODER = cdr.JointStateEncoder((ENCODER_JOINT,), ENCODER_FRAME)
 _NO_ORIENTATION = (0.0, 0.0, 0.0, 0.0)
@@ -141,9 +146,34 @@ def _decoded(decode, data, type_name: str):
 
 # --- encoding ----------------------------------------------------------------------------------------
 
-def encode_state(stamp: int, x, u_prev: float) -> bytes:
-    """joint_states: positions q, velocities q', effort [u_{k-1}, 0]."""
-    return _STATE(stamp, (float(x[0]), float(x[1])), (float(x[2]), float(x[3])), (float(u_prev), 0.0))
+def encode_state(stamp: int, x, u_prev: float, yaw_rate: Optional[float] = None) -> bytes:
+    """joint_states: positions q, velocities q', effort [u_{k-1}, 0]; with ``yaw_rate`` (a spatial plant, theory
+    6.13) a third joint :data:`YAW_JOINT` whose position is 0 and velocity the gyro's yaw rate."""
+    if yaw_rate is None:
+        return _STATE(stamp, (float(x[0]), float(x[1])), (float(x[2]), float(x[3])), (float(u_prev), 0.0))
+    return _STATE_YAW(stamp, (float(x[0]), float(x[1]), 0.0), (float(x[2]), float(x[3]), float(yaw_rate)),
+                      (float(u_prev), 0.0))
+
+
+def encode_wheel_torques(stamp: int, u_left: float, u_right: float) -> bytes:
+    """wheel_torques_cmd (sensor_msgs/JointState): name :data:`WHEEL_TORQUE_JOINTS`, no position or velocity, effort
+    [u_L, u_R] [N m], stamped with the state it answers (theory 6.13)."""
+    return _WHEEL_TORQUES(stamp, (), (), (float(u_left), float(u_right)))
+
+
+def parse_wheel_torques(data) -> Tuple[int, float, float]:
+    """(stamp_ns, u_L, u_R) of a wheel_torques_cmd, or BadMessage: the names :data:`WHEEL_TORQUE_JOINTS` in that order,
+    two efforts, each finite and plausible."""
+    stamp, _frame, names, _position, _velocity, effort = _decoded(cdr.decode_joint_state, data,
+                                                                  "sensor_msgs/JointState")
+    if tuple(names) != WHEEL_TORQUE_JOINTS:
+        raise BadMessage(f"joint names {names}, expected {list(WHEEL_TORQUE_JOINTS)}")
+    if len(effort) != 2:
+        raise BadMessage(f"effort has {len(effort)} entries, expected 2 (u_L, u_R)")
+    _finite(effort, "wheel torques")
+    for v in effort:
+        _within(v, "torque", "wheel torque")
+    return stamp, float(effort[0]), float(effort[1])
 
 
 def encode_wrench(stamp: int, t1: float, t2: float) -> bytes:
@@ -204,6 +234,12 @@ def parse_joint_state(data) -> Tuple[int, State, float]:
     """(stamp_ns, state, u_prev) of a joint_states message, or BadMessage. Joints are looked up by name."""
     stamp, _frame, names, position, velocity, effort = _decoded(cdr.decode_joint_state, data,
                                                                 "sensor_msgs/JointState")
+    if len(names) == 3 and names[2] == YAW_JOINT:   # a spatial plant's yaw joint (theory 6.13): read by parse_yaw_rate
+        names = names[:2]
+        if len(position) != 3 or len(velocity) != 3:
+            raise BadMessage(f"array lengths position={len(position)} velocity={len(velocity)}, expected 3, 3 with "
+                             f"the joint {YAW_JOINT!r}")
+        position, velocity = position[:2], velocity[:2]
     if len(names) != 2 or len(set(names)) != 2 or set(names) != set(JOINT_NAMES):
         raise BadMessage(f"joint names {names}, expected {list(JOINT_NAMES)}")
     if len(position) != 2 or len(velocity) != 2 or len(effort) not in (1, 2):
@@ -216,6 +252,19 @@ def parse_joint_state(data) -> Tuple[int, State, float]:
     u_prev = effort[iw]
     check_state(x, u_prev)
     return stamp, x, u_prev
+
+
+def parse_yaw_rate(data) -> Optional[float]:
+    """The gyro's yaw rate of a joint_states message from a spatial plant (its third joint :data:`YAW_JOINT`), None
+    without one; BadMessage when it is not finite or implausible (call after :func:`parse_joint_state`)."""
+    _stamp, _frame, names, _position, velocity, _effort = _decoded(cdr.decode_joint_state, data,
+                                                                   "sensor_msgs/JointState")
+    if len(names) != 3 or names[2] != YAW_JOINT or len(velocity) != 3:
+        return None
+    w = velocity[2]
+    _finite((w,), "yaw rate")
+    _within(w, "rate", "yaw rate")
+    return float(w)
 
 
 def check_state(x, u_prev: float = 0.0) -> None:

@@ -19,6 +19,8 @@ GRAPH_TOPICS: Dict[str, str] = {
     "imu/data_raw": "sensor_msgs/msg/Imu",               # raw sensors (sensors.model: raw): the body's IMU
     "wheel_encoder": "sensor_msgs/msg/JointState",       # raw sensors: the wheel's angle relative to the body
     "wheel_torque_cmd": "std_msgs/msg/Float64",
+    "wheel_torques_cmd": "sensor_msgs/msg/JointState",  # the yaw stage (mujoco, motion): [u_L, u_R] (theory 6.13)
+    "cmd_vel": "geometry_msgs/msg/Twist",                # motion: v* (linear.x) and psi'* (angular.z) (theory 6.11)
     "disturbance_estimate": "geometry_msgs/msg/WrenchStamped",
     "lumped_disturbance": "geometry_msgs/msg/WrenchStamped",
     "external_wrench": "geometry_msgs/msg/Wrench",
@@ -32,7 +34,7 @@ GRAPH_TOPICS: Dict[str, str] = {
     "wheel_joint_states": "sensor_msgs/msg/JointState",  # robot_state: the URDF's wheel joints (robot_state_publisher)
 }
 # published by users (any QoS), not by the graph's nodes with GRAPH_QOS
-USER_TOPICS = {"external_wrench", "emergency_stop"}
+USER_TOPICS = {"external_wrench", "emergency_stop", "cmd_vel"}
 SYSTEM_TOPICS: Dict[str, str] = {    # ROS's own topics, which every node publishes (absolute names)
     "/rosout": "rcl_interfaces/msg/Log",
     "/parameter_events": "rcl_interfaces/msg/ParameterEvent",

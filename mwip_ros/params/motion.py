@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from typing import Any, List, Mapping, Optional
 
-__all__ = ["specs", "motion", "profile_rule", "PROFILE_MAX_POINTS", "ABSURD_SPEED"]
+__all__ = ["specs", "motion", "yaw", "profile_rule", "yaw_profile_rule", "PROFILE_MAX_POINTS", "ABSURD_SPEED"]
 
 PROFILE_MAX_POINTS = 10000
 ABSURD_SPEED = 1e3   # m/s: a profile's (and a cmd_vel's, core.motion) speed beyond this is no robot's
@@ -25,6 +25,20 @@ def profile_rule(v) -> Optional[str]:
         return f"the times must be >= 0 and increase, got {list(times)!r}"
     if any(abs(s) > ABSURD_SPEED for s in speeds):
         return f"speeds must be within +/-{ABSURD_SPEED:g} m/s, got {list(speeds)!r}"
+    return None
+
+
+def yaw_profile_rule(v) -> Optional[str]:
+    """None when ``v`` is a yaw-rate profile [t0, w0, t1, w1, ...]: pairs, times from 0 increasing, finite rates."""
+    if len(v) % 2:
+        return f"give pairs [t0, w0, t1, w1, ...] (time [s], yaw rate [rad/s]), got {len(v)} entries"
+    if len(v) > 2 * PROFILE_MAX_POINTS:
+        return f"at most {PROFILE_MAX_POINTS} points, got {len(v) // 2}"
+    times, rates = v[0::2], v[1::2]
+    if any(t < 0 for t in times) or any(b <= a for a, b in zip(times, times[1:])):
+        return f"the times must be >= 0 and increase, got {list(times)!r}"
+    if any(abs(w) > ABSURD_SPEED for w in rates):
+        return f"yaw rates must be within +/-{ABSURD_SPEED:g} rad/s, got {list(rates)!r}"
     return None
 
 
@@ -53,6 +67,15 @@ def specs() -> List[Any]:
         ParamSpec("motion.profile", "double_array", [], "motion: a speed profile for offline and lockstep runs, "
                   "[t0, v0, t1, v1, ...] (time [s], v* [m/s] from then on); empty = follow cmd_vel",
                   rule=profile_rule, words="pairs [t0, v0, t1, v1, ...], times from 0 increasing"),
+        ParamSpec("motion.yaw_profile", "double_array", [], "motion: a yaw-rate profile for offline and lockstep "
+                  "runs, [t0, w0, t1, w1, ...] (time [s], psi'* [rad/s] from then on), beside motion.profile; "
+                  "empty = psi'* 0 with a profile, else cmd_vel's angular.z", rule=yaw_profile_rule,
+                  words="pairs [t0, w0, t1, w1, ...], times from 0 increasing"),
+        ParamSpec("motion.yaw_kp", "double", 400.0, "motion, a spatial plant (backend mujoco): the yaw-rate loop's "
+                  "proportional gain, u_psi = kp e + ki integral(e), e = psi'* - the gyro's yaw rate "
+                  "(docs/theory.md 6.13) [N m per rad/s]", lo=0.0, hi=1e4, unit="N m s/rad"),
+        ParamSpec("motion.yaw_ki", "double", 4000.0, "motion, a spatial plant: the yaw-rate loop's integral gain "
+                  "[N m per rad]", lo=0.0, hi=1e5, unit="N m/rad"),
     ]
 
 
@@ -65,4 +88,19 @@ def motion(v: Mapping[str, Any]):
     return MotionConfig(max_speed=v["motion.max_speed"], max_accel=v["motion.max_accel"],
                         max_yaw_rate=v["motion.max_yaw_rate"], timeout_s=v["motion.cmd_vel_timeout_s"],
                         position_gain=v["motion.position_gain"], lean_gain=v["motion.lean_gain"],
-                        profile=tuple(zip(prof[0::2], prof[1::2])), r=v["nominal.r"])
+                        profile=tuple(zip(prof[0::2], prof[1::2])), r=v["nominal.r"],
+                        yaw_profile=_pairs(v.get("motion.yaw_profile", ())))
+
+
+def _pairs(flat):
+    f = [float(x) for x in flat]
+    return tuple(zip(f[0::2], f[1::2]))
+
+
+def yaw(v: Mapping[str, Any]):
+    """The :class:`~mwip_ros.core.yaw.YawConfig` of merged values (the yaw stage runs on a spatial plant), or None
+    while ``motion.enabled`` is false."""
+    if not v.get("motion.enabled", False):
+        return None
+    from mwip_ros.core.yaw import YawConfig
+    return YawConfig(kp=v["motion.yaw_kp"], ki=v["motion.yaw_ki"])

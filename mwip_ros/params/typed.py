@@ -14,7 +14,7 @@ from mwip_ros.core.raw_sensors import RawSensorConfig
 from mwip_ros.core.sensing import SensingConfig
 from mwip_ros.core.sim import ClosedLoop
 
-from .motion import motion as motion_config
+from .motion import motion as motion_config, yaw as yaw_config
 
 from .schema import PAPER_NOMINAL
 
@@ -161,4 +161,4 @@ def closed_loop(v: Mapping[str, Any], use_observer: Optional[bool] = None,
                       params=cls.design(v, plant.nominal, plant.h),
                       duration_s=v["duration_s"] if duration is None else duration,
                       estimator=estimator(v) if plant.raw is not None else None, excitation=excitation(v),
-                      motion=motion_config(v))
+                      motion=motion_config(v), yaw=yaw_config(v))

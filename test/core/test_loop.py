@@ -25,7 +25,7 @@ def _stages_in(fn) -> list:
 
 
 def test_the_stages_are_the_contract_s_order():
-    assert loop.STAGE_NAMES == ("sensors", "estimator", "observer", "law", "drive", "plant")
+    assert loop.STAGE_NAMES == ("sensors", "estimator", "observer", "law", "yaw", "drive", "plant")
 
 
 @pytest.mark.parametrize("runner", [batch._simulate_numpy, compiled._loop], ids=["batch numpy", "compiled"])

@@ -168,3 +168,19 @@ def test_drift_against_the_true_wheel_in_the_paper_scenario_with_realistic_raw_s
         o.update(float(t), float(w))
     rect_end = abs(o.x - pc.actual.r * (ci["theta_w"][-1] - ci["theta_w"][0]))
     assert f"| {ideal_end * 1e3:.4f} mm ({rect_end * 1e3:.2f} mm with the rectangle rule) |" in table
+
+
+def test_the_state_update_takes_the_gyro_s_yaw_about_the_vertical():
+    """docs/theory.md 6.13: a body pitched by theta_b reads cos(theta_b) psi' about its z; state_update divides it
+    back.  A turn in place at psi' = 0.5 rad/s for 1 s with theta_b = 0.3 turns 0.5 rad; without a gyro, none."""
+    import math as _m
+
+    from mwip_ros.core.odometry import Odometry, state_update
+    o = Odometry(0.25, 0.5)
+    for k in range(101):
+        assert state_update(o, k * 0.01, 0.0, 0.3, 0.5 * _m.cos(0.3))
+    assert o.yaw == pytest.approx(0.5, abs=1e-12) and (o.x, o.y) == (0.0, 0.0)
+    p = Odometry(0.25, 0.5)
+    for k in range(101):
+        state_update(p, k * 0.01, 2.0, 0.3)
+    assert p.yaw == 0.0 and p.x == pytest.approx(0.5, abs=1e-12)

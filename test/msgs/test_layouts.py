@@ -151,3 +151,24 @@ def test_check_state_is_what_parse_joint_state_accepts():
             L.check_state(x, u)
         with pytest.raises(BadMessage, match=words):
             L.parse_joint_state(L.encode_state(1, x, u))
+
+
+def test_the_yaw_joint_and_the_two_torques():
+    """docs/graph.md: a spatial plant's joint_states has a third joint 'yaw' (velocity = the gyro's yaw rate), which
+    the planar parsers skip; wheel_torques_cmd is [wheel_left_joint, wheel_right_joint] with effort [u_L, u_R]."""
+    import math as _m
+    data = L.encode_state(7, (0.5, -0.1, 1.25, -2.5), 12.5, 0.75)
+    stamp, x, u = L.parse_joint_state(data)
+    assert (stamp, tuple(x), u) == (7, (0.5, -0.1, 1.25, -2.5), 12.5)
+    assert L.parse_yaw_rate(data) == 0.75
+    assert L.parse_yaw_rate(L.encode_state(7, (0.5, -0.1, 1.25, -2.5), 12.5)) is None
+    with pytest.raises(BadMessage, match="yaw rate"):
+        L.parse_yaw_rate(L.encode_state(7, (0.5, -0.1, 1.25, -2.5), 12.5, _m.nan))
+    assert L.parse_wheel_torques(L.encode_wheel_torques(9, -3.0, 4.5)) == (9, -3.0, 4.5)
+    for bad, why in ((cdr.JointStateEncoder(("wheel_right_joint", "wheel_left_joint"))(1, (), (), (1.0, 2.0)),
+                      "joint names"),
+                     (cdr.JointStateEncoder(L.WHEEL_TORQUE_JOINTS)(1, (), (), (1.0,)), "expected 2"),
+                     (L.encode_wheel_torques(1, _m.inf, 0.0), "finite"),
+                     (L.encode_wheel_torques(1, 0.0, 1e9), "implausible")):
+        with pytest.raises(BadMessage, match=why):
+            L.parse_wheel_torques(bad)

@@ -36,6 +36,11 @@ def test_off_by_default_and_in_paper_yaml():
     ("motion: {profile: [1.0, 1.0, 0.5, 0.0]}", "motion.profile"),
     ("motion: {profile: [0.0, 1.0e4]}", "motion.profile"),
     ("motion: {enabled: 1}", "motion.enabled"),
+    ("motion: {yaw_kp: -1.0}", "motion.yaw_kp"),
+    ("motion: {yaw_ki: 1.0e9}", "motion.yaw_ki"),
+    ("motion: {yaw_profile: [0.0, 1.0, 2.0]}", "motion.yaw_profile"),
+    ("motion: {yaw_profile: [1.0, 1.0, 0.5, 0.0]}", "motion.yaw_profile"),
+    ("motion: {yaw_profile: [0.0, 1.0e4]}", "motion.yaw_profile"),
 ])
 def test_out_of_range_is_one_line_naming_the_key(tmp_path, line, key):
     with pytest.raises(P.ParamError) as ei:

@@ -23,6 +23,10 @@ REP-103: linear.x, angular.z).  A Twist only sets the target (:class:`mwip_ros.c
 of period k are made inside the period, in ``core.loop.command``, as offline.  A Twist that is not one, not finite or
 absurd is rejected and counted; one over the limits is clipped and counted; no cmd_vel for
 ``motion.cmd_vel_timeout_s`` ramps the references to zero (logged once per silence, counted on /diagnostics).
+With motion on and a state that carries the gyro's yaw rate (a spatial plant's ``joint_states``: the joint ``yaw``),
+the yaw stage runs after the law (docs/theory.md 6.13, ``core.yaw``) and the answer is the two wheels' torques on
+``wheel_torques_cmd`` (sensor_msgs/JointState, names wheel_left_joint, wheel_right_joint, effort [u_L, u_R]) instead
+of ``wheel_torque_cmd``.
 """
 from __future__ import annotations
 
@@ -39,10 +43,11 @@ from mwip_ros.core import laws
 from mwip_ros.core.excitation import Excitation
 from mwip_ros.core.loop import command
 from mwip_ros.core.motion import Shaper
+from mwip_ros.core.yaw import YawLoop, wheel_torques
 from mwip_ros.msgs import BadMessage
 from mwip_ros.msgs import layouts as L
 from mwip_ros.msgs.qos import qos_for
-from mwip_ros.params.motion import motion as motion_config
+from mwip_ros.params.motion import motion as motion_config, yaw as yaw_config
 from mwip_ros.nodes.runtime.diagnostics import OK
 from mwip_ros.nodes.runtime.guards import REPEAT, RESTART, STAMP_WINDOW_PERIODS, PublisherWatch, Rejects
 from mwip_ros.nodes.runtime.state_input import StateInput
@@ -83,6 +88,7 @@ class DscndoController(Node, GracefulNodeMixin):
         self.rejects = Rejects(self.get_logger())
         pub_qos, in_qos = qos_for(self.v["mode"])   # msgs.qos: lockstep loses nothing, realtime keeps the newest
         self.cmd_pub = self.create_publisher(Float64, "wheel_torque_cmd", pub_qos)
+        self.cmds_pub = self.create_publisher(JointState, "wheel_torques_cmd", pub_qos)   # the yaw stage's pair
         self.int_pub = self.create_publisher(JointState, "controller_internals", pub_qos)
         self.create_subscription(JointState, "joint_states", self._on_state, in_qos, raw=True)
         self.create_subscription(WrenchStamped, "disturbance_estimate", self._on_estimate, in_qos, raw=True)
@@ -91,6 +97,8 @@ class DscndoController(Node, GracefulNodeMixin):
         self.watch = PublisherWatch(self, ["joint_states", "disturbance_estimate"])
         mc = motion_config(self.v)   # docs/theory.md 6.11: None while motion.enabled is false (nothing changes)
         self.motion = Shaper(mc, self.h) if mc is not None else None
+        self.yaw = YawLoop(yaw_config(self.v), self.h) if mc is not None else None   # theory 6.13: with a yaw rate
+        self.yaw_rates = {}   # stamp -> the gyro's yaw rate of that state (a spatial plant's joint_states)
         if mc is not None and not mc.profile:   # cmd_vel sets the target; the newest one counts
             from rclpy.qos import QoSProfile, ReliabilityPolicy
             self.create_subscription(Twist, "cmd_vel", self._on_cmd_vel,
@@ -168,8 +176,18 @@ class DscndoController(Node, GracefulNodeMixin):
             self.stamp0 = None
             if self.motion is not None:
                 self.motion.reset()   # the references start again from the new stream's first state
+                self.yaw.reset()
+            self.yaw_rates.clear()
         if self.stamp0 is None:
             self.stamp0 = stamp
+        if self.yaw is not None:
+            try:
+                w = L.parse_yaw_rate(data)
+            except BadMessage as exc:
+                self.rejects("joint_states", str(exc))
+                return
+            if w is not None:
+                self.yaw_rates[stamp] = w
         self.states[stamp] = x
         self._try(stamp)
 
@@ -215,13 +233,18 @@ class DscndoController(Node, GracefulNodeMixin):
         if self.motion is not None and self.motion.stopped_now:
             self.get_logger().warning(f"cmd_vel: none for {self.motion.cfg.timeout_s:g} s: the references ramp to zero "
                                       f"and the robot holds its position (stop #{self.motion.timeouts})")
-        self.cmd_pub.publish(L.encode_command(u))
+        w = self.yaw_rates.pop(stamp, None)
+        if w is not None:   # stage yaw (docs/theory.md 6.13): the two wheels' torques answer the state
+            u_psi = self.yaw.step(self.motion.ref.dpsi, w)
+            self.cmds_pub.publish(L.encode_wheel_torques(stamp, *wheel_torques(u, u_psi, 0.0)))
+        else:
+            self.cmd_pub.publish(L.encode_command(u))
         names = ctrl.internal_names + (("excitation",) if self.excitation is not None else ())
         self.int_pub.publish(L.encode_internals(stamp, internals, names))
         self.input.answered(stamp)
         self.last_answered = stamp
         self.count += 1
-        for d in (self.states, self.estimates):  # usually empty by now: drop what is older than this state
+        for d in (self.states, self.estimates, self.yaw_rates):  # usually empty by now: drop what is older
             if d:
                 for s in [s for s in d if s < stamp]:
                     del d[s]
@@ -239,7 +262,7 @@ class DscndoController(Node, GracefulNodeMixin):
             self.rejects("cmd_vel", why)
 
     def _trim(self):
-        for d in (self.states, self.estimates):
+        for d in (self.states, self.estimates, self.yaw_rates):
             while len(d) > _MAX_PENDING:
                 d.pop(min(d))
 

@@ -153,6 +153,8 @@ class PlantSimNode(Node, GracefulNodeMixin):
         self.pose_pub = self.create_publisher(PoseStamped, "true_pose", pub_qos) if self.plant.spatial else None
         self.clock_pub = self.create_publisher(Clock, "/clock", pub_qos) if runner.publishes_clock else None
         cmd_sub = self.create_subscription(Float64, "wheel_torque_cmd", self._on_cmd, in_qos, raw=True)
+        if self.plant.spatial:   # the yaw stage's two torques (docs/theory.md 6.13), instead of wheel_torque_cmd
+            self.create_subscription(JointState, "wheel_torques_cmd", self._on_wheel_cmd, in_qos, raw=True)
         self.create_subscription(Wrench, "external_wrench", self._on_wrench, INPUT_QOS, raw=True)
         self.create_service(Trigger, "~/reset", self._on_reset, qos_profile=SERVICE_QOS)
         self.create_service(Trigger, "~/enable", self._on_enable, qos_profile=SERVICE_QOS)
@@ -171,6 +173,7 @@ class PlantSimNode(Node, GracefulNodeMixin):
             self.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, INPUT_QOS, raw=True)
         # one graph, one controller: a second publisher of commands or states means mixed streams
         self.watch = PublisherWatch(self, ["wheel_torque_cmd", "joint_states",
+                                           *(("wheel_torques_cmd",) if self.plant.spatial else ()),
                                            *(("imu/data_raw", "wheel_encoder") if self.raw else ())])
         # both runners wait for the graph of core.loop.STAGES' answering stages (lockstep also steps with it):
         # a raw plant's chain starts with the state estimator, the one node listening to the first topic
@@ -357,6 +360,26 @@ class PlantSimNode(Node, GracefulNodeMixin):
         self._watch_stamp = self._stamp()
         self.runner.on_command(u)
 
+    def _on_wheel_cmd(self, data: bytes) -> None:
+        """wheel_torques_cmd (theory 6.13): (u_L, u_R) answers the state; malformed: rejected and counted, and a torque
+        not finite or implausible faults the driver (``bad_command``), as on wheel_torque_cmd."""
+        try:
+            _stamp, ul, ur = L.parse_wheel_torques(data)
+        except BadMessage as exc:
+            self.rejects("wheel_torques_cmd", str(exc))
+            try:
+                effort = cdr.decode_joint_state(data)[5]
+            except cdr.CdrError:
+                return
+            bad = [v for v in effort if not (math.isfinite(v) and abs(v) <= self.safety.max_command)]
+            if bad:
+                self._publish_transition(self.safety.check_command(self.plant.t, bad[0]))
+                self.runner.on_bad_command()
+            return
+        self.watchdog.feed(time.monotonic())
+        self._watch_stamp = self._stamp()
+        self.runner.on_command((ul, ur))
+
     # --- the driver's state machine (docs/theory.md 6.8) ----------------------------------------------------
     def _fault(self, reason: str, detail: str, **extra) -> None:
         self._publish_transition(self.safety.fault(self.plant.t, reason, detail), **extra)
@@ -399,19 +422,22 @@ class PlantSimNode(Node, GracefulNodeMixin):
         if self.pose_pub is not None:
             self.pose_pub.publish(L.encode_pose(stamp, p.pose))
         measured, u_prev = self.side.sense()
-        if not self.raw:
-            return [(self.state_pub, L.encode_state(stamp, measured, u_prev))]
+        if not self.raw:   # a spatial plant adds the gyro's yaw rate (the yaw stage's input, docs/theory.md 6.13)
+            yaw_rate = self.side.sense_yaw_rate() if p.spatial else None
+            return [(self.state_pub, L.encode_state(stamp, measured, u_prev, yaw_rate))]
         gyro_var, accel_var = self.imu_variances
         return [(self.imu_pub, L.encode_imu(stamp, measured.gyro, measured.accel_x, measured.accel_z, gyro_var,
                                             accel_var)),
                 (self.encoder_pub, L.encode_encoder(stamp, measured.encoder, measured.encoder_rate, u_prev))]
 
-    def _finish_period(self, u_cmd: float) -> bool:
-        """Stages ``drive`` and ``plant`` for the command answering state k: record row k with the torque that
-        acts, publish tau_d at t_k; integrate unless the run ends. True = ended."""
+    def _finish_period(self, u_cmd) -> bool:
+        """Stages ``drive`` and ``plant`` for the command answering state k (a torque, or the yaw stage's pair
+        (u_L, u_R)): record row k with the torque that acts, publish tau_d at t_k; integrate unless the run ends.
+        True = ended."""
         p = self.plant
         self.steps += 1
-        u, tau_d = self.side.act(u_cmd, self.extra)
+        pair = u_cmd if isinstance(u_cmd, tuple) else None
+        u, tau_d = self.side.act(0.0 if pair else u_cmd, self.extra, wheels=pair)
         self.truth_pub.publish(L.encode_wrench(self._stamp(), tau_d[0], tau_d[1]))
         self.table.append(p.t, p.x, u, tau_d=tau_d, pose=p.pose)
         if p.fallen and not self.fallen:

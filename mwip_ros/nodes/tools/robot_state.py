@@ -1,7 +1,8 @@
 """``robot_state``: odometry, the URDF, wheel joint states and the frame tree, as a ROS mobile base has them.
 
 Subscribes ``joint_states`` (the plant's state, or the state estimator's with raw sensors: theta_w' = phi' +
-theta_b', the encoder's rate plus the bias-corrected pitch rate) and publishes (docs/graph.md):
+theta_b', the encoder's rate plus the bias-corrected pitch rate; from a 3D plant also the gyro's yaw rate, its joint
+``yaw``: :func:`mwip_ros.core.odometry.state_update`) and publishes (docs/graph.md):
 
 - ``odom`` (nav_msgs/Odometry, frame ``odom``, child ``base_link``): the pose integrated by
   :class:`mwip_ros.core.odometry.Odometry` (both wheels at theta_w' on the planar robot, yaw 0), pitched by theta_b,
@@ -29,7 +30,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
 from mwip_ros import params as P
-from mwip_ros.core.odometry import Odometry, odometry_noise
+from mwip_ros.core.odometry import Odometry, odometry_noise, state_update
 from mwip_ros.core.urdf import BASE_LINK, KEYS, ODOM_FRAME, WHEEL_JOINTS, frame_transforms, robot_model, urdf
 from mwip_ros.msgs import BadMessage
 from mwip_ros.msgs import layouts as L
@@ -101,6 +102,7 @@ class RobotState(Node, GracefulNodeMixin):
     def _on_state(self, data: bytes) -> None:
         try:
             stamp, x, _u = L.parse_joint_state(data)
+            gyro_z = L.parse_yaw_rate(data)   # a 3D plant's gyro (docs/theory.md 6.13), None on the planar robot
         except BadMessage as exc:
             self.rejects("joint_states", str(exc))
             return
@@ -112,7 +114,7 @@ class RobotState(Node, GracefulNodeMixin):
             self.rejects("joint_states", f"stamp {stamp} ns repeats the last one")
             return
         self.last_stamp = stamp
-        self.odom.update(stamp * 1e-9, float(x[2]), yaw_rate=0.0)   # the planar robot: both wheels, no yaw
+        state_update(self.odom, stamp * 1e-9, float(x[2]), float(x[1]), gyro_z)   # the planar robot: no yaw
         self._publish(stamp, float(x[0]), float(x[1]))
         self.count += 1
 

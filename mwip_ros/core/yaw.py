@@ -1,0 +1,69 @@
+"""The yaw stage (docs/theory.md 6.13): a yaw-rate loop and the two wheel torques of the 3D plant.
+
+Once per control period k, after the law (:data:`.loop.STAGES`, stage ``yaw``), with the reference psi'*_k of the
+motion references (:class:`.motion.Shaper`) and the measured yaw rate w_k (the gyro's body-z rate of a spatial
+plant, :meth:`.loop.PlantSide.sense_yaw_rate`):
+
+    e_k     = psi'*_k - w_k
+    I_k     = I_{k-1} + h e_k                           I_{-1} = 0
+    u_psi,k = yaw_kp e_k + yaw_ki I_k                   (PI, the integral by the rectangle rule)
+
+and the wheels' torques (:func:`wheel_torques`), each clipped to half of ``torque_limit``:
+
+    u_L = clip(u / 2 - u_psi / 2),    u_R = clip(u / 2 + u_psi / 2)
+
+so u = u_L + u_R is the law's command whenever neither wheel clips, and a yaw torque pair +-u_psi / 2 turns the
+robot (+psi', to the left, REP-103: the right wheel forward).  No ROS here: the offline loop
+(:class:`.loop.Period`) runs it; a planar plant has no yaw and no stage.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Tuple
+
+__all__ = ["YawConfig", "YawLoop", "wheel_torques"]
+
+
+@dataclass(frozen=True)
+class YawConfig:
+    """The ``motion.yaw_kp`` [N m per rad/s] and ``motion.yaw_ki`` [N m per rad] gains (params.motion)."""
+
+    kp: float = 400.0
+    ki: float = 4000.0
+
+
+class YawLoop:
+    """The PI on the yaw rate (module docstring); ``h`` the control period [s]."""
+
+    def __init__(self, cfg: YawConfig, h: float):
+        self.cfg, self.h = cfg, h
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the run: the integral is zero again."""
+        self.integral = 0.0
+        self.u_psi = 0.0
+
+    def step(self, dpsi_ref: float, dpsi: float) -> float:
+        """u_psi of one period for the reference ``dpsi_ref`` and the measured yaw rate ``dpsi`` [rad/s].  A measurement
+        that is not finite leaves the integral as it was and gives u_psi = 0 (NaN never reaches a torque)."""
+        e = dpsi_ref - dpsi
+        if not math.isfinite(e):
+            self.u_psi = 0.0
+            return 0.0
+        self.integral += self.h * e
+        self.u_psi = self.cfg.kp * e + self.cfg.ki * self.integral
+        return self.u_psi
+
+
+def _clip(v: float, lim: float) -> float:
+    if lim > 0.0:
+        return -lim if v < -lim else (lim if v > lim else v)
+    return v
+
+
+def wheel_torques(u: float, u_psi: float, torque_limit: float) -> Tuple[float, float]:
+    """(u_L, u_R) = (u / 2 - u_psi / 2, u / 2 + u_psi / 2), each clipped to +-``torque_limit`` / 2 (0: no limit)."""
+    lim = 0.5 * torque_limit
+    return _clip(0.5 * u - 0.5 * u_psi, lim), _clip(0.5 * u + 0.5 * u_psi, lim)
