@@ -11,6 +11,8 @@ eq. (1) acts as generalized forces (theory 6.10):
     Q_pitch = Q_phi_L + Q_phi_R + tau_ext2 - tau_ext1       on the body's pitch axis (body y)
 
 A free joint's angular velocity and generalized force are in the body's own frame, so the pitch axis is body y.
+The ground (``ground.slope``, ``ground.bumps``; :func:`mjcf`) is a plane tilted about y and steps across the path as
+boxes; ``external_wrench``'s force.y and torque.z act on the body at its centre of gravity (:meth:`MujocoPlant._push`).
 The laws see the planar :class:`~.model.State`: theta_b the body's pitch, theta_w the mean of the two wheels'
 absolute angles; :attr:`MujocoPlant.pose` is the 3D pose.  ``D_w`` is drawn per period from the same seeded
 generator as :class:`~.plant.PlantSim`'s, so both backends see the same friction sequence.  A simulation that
@@ -130,6 +132,7 @@ class MujocoPlant(PlantSim):
 
     pose: Optional[Pose] = None
     _mj: object = field(default=None, repr=False)
+    _pushed: bool = False   # external_wrench's force.y or torque.z acts on the body (xfrc_applied, :meth:`_push`)
     spatial: ClassVar[bool] = True   # a 3D pose (Pose, core.plant)
 
     def __post_init__(self):
@@ -185,6 +188,16 @@ class MujocoPlant(PlantSim):
         qr = -0.5 * D_w * (pitch_rate + v[7]) + 0.5 * e1
         self._ctrl[:] = u_pair
         f[4], f[6], f[7] = ql + qr + e2 - e1, ql, qr
+        if len(extra) > 2 and (extra[2] or extra[3] or self._pushed):   # external_wrench's force.y, torque.z
+            self._push(extra[2], extra[3])
+
+    def _push(self, fy: float, tz: float) -> None:
+        """external_wrench's lateral force ``fy`` [N] at the body's centre of gravity, along the robot's heading
+        frame's y (REP-103: left), and its yaw torque ``tz`` [N m] about the vertical (docs/theory.md 6.10)."""
+        w, x, y, z = self._qpos[3:7].tolist()
+        yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+        self.data.xfrc_applied[1, :] = (-math.sin(yaw) * fy, math.cos(yaw) * fy, 0.0, 0.0, 0.0, tz)
+        self._pushed = bool(fy or tz)
 
     def _accel(self, u: float, D_w: float, extra) -> Tuple[float, float]:
         """(theta_w'', theta_b'') at the current state with the torque ``u`` (u / 2 per wheel), MuJoCo's."""
@@ -232,7 +245,7 @@ class MujocoPlant(PlantSim):
         self.k += 1
         self.saturation = sat
         self.u_prev, self.u_cmd_prev, self.enabled_prev = (acted / self.n if driven else u), u, bool(enabled)
-        self.D_w_prev, self.extra_prev = self.D_w, (float(extra[0]), float(extra[1]))
+        self.D_w_prev, self.extra_prev = self.D_w, tuple(float(e) for e in extra)
         self.D_w = self._draw_D_w()
 
     def _check(self) -> None:
