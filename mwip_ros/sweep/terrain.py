@@ -8,8 +8,8 @@ of scalar ``mwip_sim`` runs (:func:`~mwip_ros.core.sim.simulate`, ``backend: muj
 - **slope** (``ground.slope`` 0, 1, ... 15 deg, uphill ahead, the paper's scenario otherwise): *balances* = stays up
   for the run (``motion.enabled`` false, as the paper); *holds* = with ``motion.enabled`` and the profile [0, 0]
   (hold the start) it stays up and ends within :data:`HOLD_DRIFT` of where it started, along the slope.
-- **step** (``ground.bumps`` [``STEP_AT``, h]): with ``motion.enabled`` and the profile [0, 0.5] (0.5 m/s) it
-  stays up and its axle ends past the step by more than a metre.
+- **step** (``ground.bumps`` [``STEP_AT``, h]): with ``motion.enabled`` and the profile [0, 0, 2, 0.5] (0.5 m/s
+  from 2 s, as config/motion.yaml starts) it stays up and its axle ends past the step by more than a metre.
 - **friction** (``ground.friction``): the paper's scenario; slip = r theta_w' - x' (the wheel's rim speed less the
   axle's, along x), its largest magnitude and the distance slipped, r theta_w(T) - x(T).
 - **push**: force.y for :data:`PUSH_S` from :data:`PUSH_AT` (external_wrench's lateral force, on the body's centre
@@ -45,6 +45,7 @@ PUSH_AT, PUSH_S = 5.0, 0.1   # s: the push starts once the paper's initial tilt 
 ROLL_LIMIT = 0.5     # rad: a body rolled further is on its way onto its side
 DURATION = 10.0
 STEP_DURATION = 12.0
+DRIVE_AT = 2.0       # s: the drive starts once the paper's initial tilt is recovered (as config/motion.yaml)
 REALISTIC = ("sensors_raw_realistic.yaml", "motor_realistic.yaml")
 TORQUE_LIMIT = 300.0   # N m, as config/sweeps/roa.yaml and disturbance.yaml (a plausible drive for this robot)
 
@@ -99,7 +100,7 @@ def slope_run(values, law: str, deg: float, hold: bool) -> Outcome:
 
 def step_run(values, law: str, height: float, speed: float = 0.5) -> Outcome:
     """Drives over a step ``height`` high at ``STEP_AT`` at ``speed``: stays up, ends past it by a metre."""
-    v = dict(values, **{"motion.enabled": True, "motion.profile": [0.0, speed],
+    v = dict(values, **{"motion.enabled": True, "motion.profile": [0.0, 0.0, DRIVE_AT, speed],
                         "ground.bumps": [STEP_AT, height] if height > 0 else []})
     c = _simulate(v, law, STEP_DURATION)
     if c is None:
@@ -213,7 +214,7 @@ def tables(laws: Sequence[str] = LAWS, realistic: bool = False, which: Sequence[
             out["friction"][law] = [friction_run(base, law, f) for f in FRICTIONS]
         if "push" in which:
             best, seen = scan(lambda f: push_run(base, law, f), PUSHES)
-            out["push"][law] = (best, seen[0].value)
+            out["push"][law] = (best, seen[PUSHES.index(best)].value if best is not None else math.nan)
     return out
 
 
@@ -234,14 +235,14 @@ def markdown(res: Dict[str, Dict[str, object]]) -> str:
             lines.append(f"| {law} | {_fmt(best)} | {how} |")
         lines.append("")
     if res.get("friction"):
-        lines += ["| law | " + " | ".join(f"mu {f:g}" for f in FRICTIONS) + " |",
+        lines += ["| law | " + " | ".join(f"mu {f:g}" for f in FRICTIONS) + " |",  # largest slip [m/s] / slipped [m]
                   "|---|" + "---|" * len(FRICTIONS)]
         for law, row in res["friction"].items():
-            lines.append(f"| {law} | " + " | ".join(f"{o.value:.3f} / {o.extra:.3f}" if o.ok else "falls"
+            lines.append(f"| {law} | " + " | ".join(f"{o.value:.2g} / {o.extra:.2g}" if o.ok else "falls"
                                                     for o in row) + " |")
         lines.append("")
     if res.get("push"):
-        lines += [f"| law | largest force.y survived for {PUSH_S:g} s [N] | max abs roll at {PUSHES[0]:g} N [rad] |",
+        lines += [f"| law | largest force.y survived for {PUSH_S:g} s [N] | its max abs roll [rad] |",
                   "|---|---|---|"]
         lines += [f"| {law} | {_fmt(b)} | {r:.4f} |" for law, (b, r) in res["push"].items()]
         lines.append("")
@@ -262,13 +263,15 @@ def figure(res: Dict[str, Dict[str, object]], path) -> None:
     a.bar([x + 0.2 for x in xs], hold, 0.4, label=f"holds (drift < {HOLD_DRIFT:g} m)")
     a.set_ylabel("steepest slope [deg]")
     a.set_xticks(list(xs), laws, rotation=30)
-    a.legend()
+    a.set_ylim(0, SLOPES_DEG[-1] + 5)
+    a.legend(loc="upper right", ncol=2, fontsize="small")
     a.set_title(f"slope (0..{SLOPES_DEG[-1]} deg in 1 deg steps)")
     b.bar(list(xs), [100 * (res["step"][k][0] or 0) for k in laws], 0.6, color="tab:green")
     b.set_ylabel("highest step [cm]")
     b.set_xticks(list(xs), laws, rotation=30)
     b.set_title("a step driven over at 0.5 m/s")
-    fig.suptitle("MuJoCo, the paper's robot and scenario")
+    fig.suptitle(f"MuJoCo, the paper's robot and scenario, torque at most {TORQUE_LIMIT:g} N m "
+                 "(a bar at 0: not even 1 deg, 1 cm)")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
 
