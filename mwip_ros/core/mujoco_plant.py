@@ -11,6 +11,8 @@ eq. (1) acts as generalized forces (theory 6.10):
     Q_pitch = Q_phi_L + Q_phi_R + tau_ext2 - tau_ext1       on the body's pitch axis (body y)
 
 A free joint's angular velocity and generalized force are in the body's own frame, so the pitch axis is body y.
+The ground (``ground.slope``, ``ground.bumps``; :func:`mjcf`) is a plane tilted about y and steps across the path as
+boxes; ``external_wrench``'s force.y and torque.z act on the body at its centre of gravity (:meth:`MujocoPlant._push`).
 The laws see the planar :class:`~.model.State`: theta_b the body's pitch, theta_w the mean of the two wheels'
 absolute angles; :attr:`MujocoPlant.pose` is the 3D pose.  ``D_w`` is drawn per period from the same seeded
 generator as :class:`~.plant.PlantSim`'s, so both backends see the same friction sequence.  A simulation that
@@ -56,6 +58,8 @@ class MujocoConfig:
     I_b_yaw: float = 20.0        # ... about its z axis [kg m^2]
     friction: float = 2.0        # ground sliding friction coefficient
     timestep: float = 1e-3       # largest physics step [s]; a control period is an integer number of steps
+    slope: float = 0.0           # the ground's slope about y [rad], uphill ahead for > 0 (ground.slope)
+    bumps: Tuple[float, ...] = ()   # steps [x0, h0, x1, h1, ...] along the slope [m] (ground.bumps, params.ground)
 
 
 _D0, _DMAX = 0.99, 0.999   # the contact's impedance (solimp) at rest and deep in
@@ -74,6 +78,10 @@ def mjcf(cfg) -> str:
     # the wheels start where the contact holds them at rest: MuJoCo's soft contact at rest sinks by
     # (1 - d0) g / (d0 k), k = 1 / (dmax tc)^2 (its reference acceleration, damping ratio 1): no transient at t = 0
     z0 = p.r - (1.0 - _D0) * p.g * (_DMAX * tc) ** 2 / _D0
+    a = mc.slope   # the wheel's centre: r theta_w along the slope, z0 above it (the plane's normal)
+    along = p.r * th_w
+    cx, cz = (along, z0) if a == 0.0 else (along * math.cos(a) - z0 * math.sin(a),
+                                           along * math.sin(a) + z0 * math.cos(a))
     wheels = "".join(
         f'<body name="wheel_{side}" pos="0 {y!r} 0">'
         f'<joint name="wheel_{side}" type="hinge" axis="0 1 0" damping="{cfg.D_b / 2.0!r}" ref="0"/>'
@@ -90,13 +98,31 @@ def mjcf(cfg) -> str:
         '<mujoco model="mwip"><compiler angle="radian" autolimits="true"/>'
         f'<option timestep="{cfg.h / n!r}" integrator="RK4" cone="elliptic" gravity="0 0 {-p.g!r}"/>'
         '<worldbody>'
-        f'<geom name="ground" type="plane" size="0 0 1" {contact}/>'
-        f'<body name="body" pos="{p.r * th_w!r} 0 {z0!r}" quat="{math.cos(th_b / 2)!r} 0 {math.sin(th_b / 2)!r} 0">'
+        f'{_ground(mc, contact)}'
+        f'<body name="body" pos="{cx!r} 0 {cz!r}" quat="{math.cos(th_b / 2)!r} 0 {math.sin(th_b / 2)!r} 0">'
         '<freejoint name="base"/>'
         f'<inertial pos="0 0 {p.l!r}" mass="{p.m_b!r}" diaginertia="{mc.I_b_roll!r} {p.I_b!r} {mc.I_b_yaw!r}"/>'
         f'{wheels}{imu_site}</body></worldbody>'
         '<actuator><motor name="wheel_left" joint="wheel_left"/><motor name="wheel_right" joint="wheel_right"/>'
         f'</actuator>{imu_sensors}</mujoco>')
+
+
+def _ground(mc: MujocoConfig, contact: str) -> str:
+    """The ground's geoms: a plane tilted by ``mc.slope`` about y (uphill ahead), and each step of ``mc.bumps`` a box
+    across the path from x_i to the next step (the last 100 m long), h_i high, 0.1 m deep, in the plane's frame."""
+    a = mc.slope
+    tilt = "" if a == 0.0 else f' quat="{math.cos(a / 2)!r} 0 {-math.sin(a / 2)!r} 0"'
+    out = [f'<geom name="ground" type="plane" size="0 0 1"{tilt} {contact}/>']
+    xs, hs = mc.bumps[0::2], mc.bumps[1::2]
+    for i, (x, h) in enumerate(zip(xs, hs)):
+        if h <= 0.0:
+            continue
+        end = xs[i + 1] if i + 1 < len(xs) else x + 100.0
+        px, pz = 0.5 * (x + end), 0.5 * (h - 0.1)   # the box's centre in the plane's frame
+        wx, wz = px * math.cos(a) - pz * math.sin(a), px * math.sin(a) + pz * math.cos(a)
+        out.append(f'<geom name="step_{i}" type="box" size="{0.5 * (end - x)!r} {mc.track_width + 1.0!r} '
+                   f'{0.5 * (h + 0.1)!r}" pos="{wx!r} 0 {wz!r}"{tilt} {contact}/>')
+    return "".join(out)
 
 
 @dataclass
@@ -108,6 +134,7 @@ class MujocoPlant(PlantSim):
     wheels_prev: Optional[Tuple[float, float]] = None   # the yaw stage's (u_L, u_R) that acted (theory 6.13)
     wheels_cmd_prev: Optional[Tuple[float, float]] = None   # ... and what was commanded (the motor's inputs)
     _mj: object = field(default=None, repr=False)
+    _pushed: bool = False   # external_wrench's force.y or torque.z acts on the body (xfrc_applied, :meth:`_push`)
     spatial: ClassVar[bool] = True   # a 3D pose (Pose, core.plant)
 
     def __post_init__(self):
@@ -122,7 +149,9 @@ class MujocoPlant(PlantSim):
         self._warnings = d.warning.number                                    # MuJoCo's warning counts, live
         x0 = self.x
         d.qpos[7] = d.qpos[8] = x0[0] - x0[1]                                 # phi_i = theta_w - theta_b
-        d.qvel[0] = c.actual.r * x0[2]                                       # rolling, no slip
+        slope = (c.mujoco or MujocoConfig()).slope
+        d.qvel[0] = c.actual.r * x0[2] * math.cos(slope)                    # rolling along the slope, no slip
+        d.qvel[2] = c.actual.r * x0[2] * math.sin(slope)
         d.qvel[4] = x0[3]                                                    # the pitch rate, body y
         d.qvel[6] = d.qvel[7] = x0[2] - x0[3]
         mj.mj_forward(self.model, d)
@@ -167,6 +196,16 @@ class MujocoPlant(PlantSim):
         qr = -0.5 * D_w * (pitch_rate + v[7]) + 0.5 * e1
         self._ctrl[:] = u_pair
         f[4], f[6], f[7] = ql + qr + e2 - e1, ql, qr
+        if len(extra) > 2 and (extra[2] or extra[3] or self._pushed):   # external_wrench's force.y, torque.z
+            self._push(extra[2], extra[3])
+
+    def _push(self, fy: float, tz: float) -> None:
+        """external_wrench's lateral force ``fy`` [N] at the body's centre of gravity, along the robot's heading
+        frame's y (REP-103: left), and its yaw torque ``tz`` [N m] about the vertical (docs/theory.md 6.10)."""
+        w, x, y, z = self._qpos[3:7].tolist()
+        yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+        self.data.xfrc_applied[1, :] = (-math.sin(yaw) * fy, math.cos(yaw) * fy, 0.0, 0.0, 0.0, tz)
+        self._pushed = bool(fy or tz)
 
     def _accel(self, u: float, D_w: float, extra, wheels=None) -> Tuple[float, float]:
         """(theta_w'', theta_b'') at the current state with the torque ``u`` (u / 2 per wheel, or the pair
@@ -238,7 +277,7 @@ class MujocoPlant(PlantSim):
             self.wheels_cmd_prev = (cl, cr)
             if not driven:
                 self.u_prev = cl + cr
-        self.D_w_prev, self.extra_prev = self.D_w, (float(extra[0]), float(extra[1]))
+        self.D_w_prev, self.extra_prev = self.D_w, tuple(float(e) for e in extra)
         self.D_w = self._draw_D_w()
 
     def _check(self) -> None:

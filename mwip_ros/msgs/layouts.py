@@ -9,7 +9,8 @@
                                                     dsc, dscndo, lqr, lqr_ndo), values in position
     /clock                rosgraph_msgs/Clock       simulation time
 
-    external_wrench       geometry_msgs/Wrench      torque.x, torque.y added to tau_ext1, tau_ext2
+    external_wrench       geometry_msgs/Wrench      torque.x, torque.y added to tau_ext1, tau_ext2; force.y, torque.z
+                                                    a lateral push and a yaw torque on a 3D plant's body (mujoco)
     true_pose             geometry_msgs/PoseStamped a spatial plant's (backend mujoco) true 3D pose: frame_id
                                                     odom (REP-105), position the axle's centre, orientation
                                                     from yaw, pitch, roll (core.markers.pose_quaternion); stamp t_k
@@ -367,16 +368,20 @@ def parse_command(data) -> float:
     return u
 
 
-def encode_external_wrench(t1: float, t2: float) -> bytes:
-    """external_wrench: torque.x adds to tau_ext1, torque.y to tau_ext2."""
-    return cdr.encode_wrench(_ZERO3, (float(t1), float(t2), 0.0))
+def encode_external_wrench(t1: float, t2: float, fy: float = 0.0, tz: float = 0.0) -> bytes:
+    """external_wrench: torque.x adds to tau_ext1, torque.y to tau_ext2; force.y (``fy``, a lateral push) and torque.z
+    (``tz``, a yaw torque) act on a spatial plant's body (backend mujoco), the planar one ignores them."""
+    return cdr.encode_wrench((0.0, float(fy), 0.0), (float(t1), float(t2), float(tz)))
 
 
-def parse_external_wrench(data) -> Tuple[float, float]:
-    """(torque.x, torque.y) of an external_wrench message, or BadMessage."""
-    _force, torque = _decoded(cdr.decode_wrench, data, "geometry_msgs/Wrench")
-    _torques(torque[:2], "torque")
-    return torque[0], torque[1]
+def parse_external_wrench(data) -> Tuple[float, float, float, float]:
+    """(torque.x, torque.y, force.y, torque.z) of an external_wrench message, or BadMessage (force.y is held to
+    the torques' bound, in N)."""
+    force, torque = _decoded(cdr.decode_wrench, data, "geometry_msgs/Wrench")
+    _torques((torque[0], torque[1], torque[2]), "torque")
+    _finite(force[1:2], "force")
+    _within(force[1], "torque", "force.y")
+    return torque[0], torque[1], force[1], torque[2]
 
 
 def encode_twist(vx: float, wz: float) -> bytes:

@@ -12,6 +12,7 @@ ROS and is refused (write ``200.0``).
 from __future__ import annotations
 
 import difflib
+import importlib
 import math
 from dataclasses import dataclass
 from typing import Any, Callable, Dict, Iterable, List, Mapping, Optional
@@ -251,9 +252,9 @@ def _law_parameters() -> List[ParamSpec]:
     return out
 
 
-def _motion_parameters() -> List[ParamSpec]:
-    from .motion import specs
-    return specs()
+def _specs_of(module: str) -> List[ParamSpec]:
+    """The ParamSpecs a small module of this package lists (``params.motion``, ``params.ground``: ``specs()``)."""
+    return importlib.import_module(f".{module}", __package__).specs()
 
 
 def _estimator_parameters() -> List[ParamSpec]:
@@ -285,8 +286,7 @@ NODE_SPECS: Dict[str, List[ParamSpec]] = {
                     "through the centre of gravity [kg m^2] (actual.I_b is the pitch axis)",
                     **_positive_from(1e-6, 1e6, "a body inertia below 1e-6 kg m^2"), unit="kg m^2")
           for ax, v in (("roll", 65.0), ("yaw", 20.0))],
-        ParamSpec("ground.friction", "double", 2.0, "mujoco: the ground's sliding friction coefficient (wheel on "
-                  "ground)", **_positive_from(1e-3, 100.0, "ground with no grip")),
+        *_specs_of("ground"),   # ground.*: friction, slope, bumps (params.ground)
         ParamSpec("seed", "integer", 0, "seed of the D_w friction noise", **_at_least_zero),
         *_body("actual", PAPER_ACTUAL, "true"),
         ParamSpec("actual.D_b", "double", 0.1, "true drive viscous friction D_b [N m s/rad]", **_non_negative()),
@@ -393,7 +393,7 @@ NODE_SPECS: Dict[str, List[ParamSpec]] = {
                   **_lqr_q, dynamic=True),
         ParamSpec("lqr.R", "double", 0.01, "LQR input weight (> 0)", **_positive(), dynamic=True),
         *_law_parameters(),   # what a plug-in law declares itself (core.laws.Law.parameters)
-        *_motion_parameters(),   # motion.*: the references the laws track (params.motion, docs/theory.md 6.11)
+        *_specs_of("motion"),   # motion.*: the references the laws track (params.motion, docs/theory.md 6.11)
         ParamSpec("excitation.type", "string", "none", "a known torque added to the law's command, recorded, for "
                   "identification (mwip_identify): none, chirp (a linear sweep f0 -> f1) or prbs (+-amplitude, "
                   "random bits)", **_one_of("none", "chirp", "prbs")),
@@ -565,6 +565,7 @@ def check_derived(values: Mapping[str, Any], source: Optional[str] = None) -> No
                                               f"{prefix}.{{m_b, m_w, I_b, I_w, l, r, g}}", source)
     if values.get("backend") == "mujoco":
         _check_mujoco(values, source)
+        importlib.import_module(".ground", __package__).check(values, source)
     if values.get("excitation.f0", 0.0) > values.get("excitation.f1", math.inf):
         raise ParamError("excitation.f0", f"must be <= excitation.f1 ({values['excitation.f1']:g} Hz), got "
                                           f"{values['excitation.f0']:g}", source)

@@ -65,7 +65,8 @@ def mujoco(v: Mapping[str, Any]):
         return None
     from mwip_ros.core.mujoco_plant import MujocoConfig
     return MujocoConfig(track_width=v["actual.track_width"], I_b_roll=v["actual.I_b_roll"],
-                        I_b_yaw=v["actual.I_b_yaw"], friction=v["ground.friction"], timestep=v["mujoco.timestep"])
+                        I_b_yaw=v["actual.I_b_yaw"], friction=v["ground.friction"], timestep=v["mujoco.timestep"],
+                        slope=v.get("ground.slope", 0.0), bumps=tuple(float(x) for x in v.get("ground.bumps", ())))
 
 
 def excitation(v: Mapping[str, Any]) -> Optional[ExcitationConfig]:

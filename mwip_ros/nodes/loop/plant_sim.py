@@ -22,7 +22,9 @@ is pending joins it.  So the new state 0 always goes back below a stamp the loop
 never repeats it (a repeat would be taken for a resend).  The service keeps every request
 (:data:`~mwip_ros.msgs.qos.SERVICE_QOS`) and answers each one.  To push
 the robot, publish ``external_wrench`` (``geometry_msgs/Wrench``: ``torque.x`` adds to
-tau_ext1, ``torque.y`` to tau_ext2, until the next one; a zero wrench clears it).
+tau_ext1, ``torque.y`` to tau_ext2, until the next one; a zero wrench clears it; with
+``backend: mujoco`` ``force.y`` pushes the body sideways at its centre of gravity and
+``torque.z`` turns it about the vertical, both in the robot's heading frame; rk4 ignores them).
 
 The driver's state machine (docs/theory.md 6.8; the pure machine, its states, faults, levels and answers:
 :mod:`mwip_ros.core.safety`; one machine for the node's life) stands between the command and the plant: not
@@ -227,8 +229,8 @@ class PlantSimNode(Node, GracefulNodeMixin):
             self.rejects("external_wrench", str(exc))
             return
         self.extra = e
-        self.get_logger().info(f"external wrench: tau_ext1 += {e[0]:g}, tau_ext2 += {e[1]:g} N m"
-                               if any(e) else "external wrench cleared")
+        self.get_logger().info(f"external wrench: tau_ext1 += {e[0]:g}, tau_ext2 += {e[1]:g} N m, force.y {e[2]:g} N, "
+                               f"torque.z {e[3]:g} N m" if any(e) else "external wrench cleared")
 
     def _on_estop(self, data: bytes, via: str = "reliable") -> None:
         """``emergency_stop``, a level (module doc): true asserts it (a fault, held), false releases it."""
