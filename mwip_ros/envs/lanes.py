@@ -255,6 +255,7 @@ class Lanes:
         drive's torque (after the limit and the delay), each robot's failure code: 0, or FALL, BAD_COMMAND, DIVERGED
         of :mod:`mwip_ros.core.trajectory`)."""
         pc, k = self.pc, self.k
+        # stage: yaw (none: the vector env runs the planar plant)
         # stage: drive
         bad = go & ~(np.abs(u_cmd) <= PLAUSIBLE_TORQUE)   # the driver's bad_command (core.loop.PlantSide.act)
         u = np.clip(u_cmd, -pc.torque_limit, pc.torque_limit) if pc.torque_limit > 0.0 else u_cmd

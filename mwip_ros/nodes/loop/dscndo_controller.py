@@ -99,7 +99,7 @@ class DscndoController(Node, GracefulNodeMixin):
         self.motion = Shaper(mc, self.h) if mc is not None else None
         self.yaw = YawLoop(yaw_config(self.v), self.h) if mc is not None else None   # theory 6.13: with a yaw rate
         self.yaw_rates = {}   # stamp -> the gyro's yaw rate of that state (a spatial plant's joint_states)
-        if mc is not None and not mc.profile:   # cmd_vel sets the target; the newest one counts
+        if mc is not None and not (mc.profile or mc.yaw_profile):   # cmd_vel sets the target; the newest counts
             from rclpy.qos import QoSProfile, ReliabilityPolicy
             self.create_subscription(Twist, "cmd_vel", self._on_cmd_vel,
                                      QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT), raw=True)
@@ -133,7 +133,8 @@ class DscndoController(Node, GracefulNodeMixin):
                          if family != self.v["law"] and law.announce and law.design_text(self.v))
         mc = self.motion.cfg if self.motion is not None else None
         moving = "" if mc is None else (
-            f"; tracking motion.profile ({len(mc.profile)} points; cmd_vel is not read)" if mc.profile else
+            f"; tracking motion.profile ({len(mc.profile)} points, yaw_profile {len(mc.yaw_profile)}; cmd_vel is not "
+            f"read)" if mc.profile or mc.yaw_profile else
             f"; tracking cmd_vel (|v| <= {mc.max_speed:g} m/s, {mc.max_accel:g} m/s^2, |psi'| <= {mc.max_yaw_rate:g} "
             f"rad/s, stop after {mc.timeout_s:g} s without one)")
         return f"{self._name()} ready: {own}{others}{moving}"
