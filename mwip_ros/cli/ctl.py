@@ -8,7 +8,7 @@ drive its driver's state machine (docs/theory.md 6.8), drive the robot on cmd_ve
     mwip_ctl enable [--node plant_sim]     # std_srvs/Trigger /plant_sim/enable
     mwip_ctl disable [--node plant_sim]    # std_srvs/Trigger /plant_sim/disable
     mwip_ctl estop [--release]             # std_msgs/Bool true (false: --release) on emergency_stop
-    mwip_ctl push [--wheel NM] [--body NM] [--duration S] [--rate HZ]   # external_wrench, then a zero one
+    mwip_ctl push [--wheel NM] [--body NM] [--lateral N] [--yaw NM] [--duration S] [--rate HZ]   # external_wrench
     mwip_ctl cmd --vx V --wz W --duration S [--rate HZ]   # cmd_vel (geometry_msgs/Twist), then a zero one
     mwip_ctl drive [--params FILE ...] [--rate HZ]        # keyboard teleop on cmd_vel (cli.teleop)
 
@@ -235,7 +235,7 @@ def _push(ros: Ros, args) -> int:
     # Fast DDS acknowledges it at once (at depth 1000, only at its heartbeat, 3 s later)
     from mwip_ros.msgs.qos import REALTIME_INPUT_QOS
     t1, t2 = args.wheel, args.wheel + args.body   # the body row of eq. 1 carries tau_ext2 - tau_ext1
-    push = L.encode_external_wrench(t1, t2)
+    push = L.encode_external_wrench(t1, t2, args.lateral, args.yaw)
     pub = ros.node.create_publisher(Wrench, "external_wrench", REALTIME_INPUT_QOS)
     topic, plant = pub.topic_name, args.node.rstrip("/").rsplit("/", 1)[-1]
     if not ros.until(lambda: _plant_listens(ros, pub, args.node), args.timeout):
@@ -246,8 +246,9 @@ def _push(ros: Ros, args) -> int:
         acked = pub.wait_for_all_acked(Duration(seconds=args.timeout))
     if not acked:
         raise Failure(f"{plant} did not acknowledge the end of the push on {topic} within {args.timeout:g} s")
+    side = f", force.y {args.lateral:g} N, torque.z {args.yaw:g} N m" if args.lateral or args.yaw else ""
     print(f"pushed {plant}: tau_ext1 += {t1:g}, tau_ext2 += {t2:g} N m (wheel row {args.wheel:g}, body row "
-          f"{args.body:g}) for {lasted:.2f} s ({sent} message(s)), then a zero wrench")
+          f"{args.body:g}){side} for {lasted:.2f} s ({sent} message(s)), then a zero wrench")
     return 0
 
 
@@ -292,9 +293,11 @@ def _checked(ap: argparse.ArgumentParser, args) -> argparse.Namespace:
         if not args.duration > 0:   # the plant holds a wrench until the next one: 0 s would be no push at all
             ap.error("--duration must be > 0")
         try:   # the plant's own check of an external_wrench
-            L.parse_external_wrench(L.encode_external_wrench(args.wheel, args.wheel + args.body))
+            L.parse_external_wrench(L.encode_external_wrench(args.wheel, args.wheel + args.body, args.lateral,
+                                                             args.yaw))
         except BadMessage as exc:
-            ap.error(f"--wheel {args.wheel:g} --body {args.body:g}: {exc}")
+            ap.error(f"--wheel {args.wheel:g} --body {args.body:g} --lateral {args.lateral:g} --yaw {args.yaw:g}: "
+                     f"{exc}")
     return args
 
 
@@ -350,6 +353,10 @@ def parser() -> argparse.ArgumentParser:
                    "(tau_ext1 += NM)")
     p.add_argument("--body", type=_number, default=0.0, metavar="NM", help="torque on the body-pitch row [N m] "
                    "(tau_ext2 += WHEEL + NM)")
+    p.add_argument("--lateral", type=_number, default=0.0, metavar="N", help="a sideways force at the body's centre "
+                   "of gravity [N], +y left (force.y; backend mujoco, the rk4 plant ignores it)")
+    p.add_argument("--yaw", type=_number, default=0.0, metavar="NM", help="a torque about the vertical [N m], "
+                   "counterclockwise (torque.z; backend mujoco, the rk4 plant ignores it)")
     p.add_argument("--duration", type=_number, default=0.5, metavar="S", help="how long the push lasts [s] "
                    "(default 0.5)")
     p.add_argument("--rate", type=_number, default=10.0, metavar="HZ", help="resend the push at this rate while "

@@ -79,6 +79,9 @@ def test_push_reaches_the_plant_with_its_torques_and_ends_with_a_zero_wrench(gra
     # the body row alone: torque.y only (eq. 1's body row carries tau_ext2 - tau_ext1)
     r = ctl(graph, "push", "--body", "20", "--duration", "0.1", "--rate", "0")
     assert r.returncode == 0 and graph.plant.wait_for_output("tau_ext1 += 0, tau_ext2 += 20 N m", 10)
+    r = ctl(graph, "push", "--lateral", "300", "--yaw", "5", "--duration", "0.1", "--rate", "0")   # mujoco's
+    assert r.returncode == 0 and "force.y 300 N, torque.z 5 N m" in r.stdout, (r.stdout, r.stderr)
+    assert graph.plant.wait_for_output("force.y 300 N, torque.z 5 N m", 10), graph.plant.output()[-2000:]
     assert graph.plant.poll() is None, graph.plant.output()[-2000:]   # pushed, not fallen
 
 
@@ -170,6 +173,7 @@ def test_help_of_every_subcommand_exits_0_without_ros_and_usage_errors_exit_2_in
     r = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60)
     assert r.returncode == 0 and r.stdout.strip() == "False", (r.stdout, r.stderr)
     for args in (["param", "set", "dscndo_controller", "k1"], ["param", "set", "dscndo_controller", "k1", "{a: 1}"],
-                 ["push", "--wheel", "nan"], ["push", "--wheel", "2e6"], ["push", "--duration", "0"], ["jump"]):
+                 ["push", "--wheel", "nan"], ["push", "--wheel", "2e6"], ["push", "--duration", "0"], ["jump"],
+                 ["push", "--lateral", "nan"], ["push", "--lateral", "2e6"], ["push", "--yaw", "2e6"]):
         r = subprocess.run([str(MWIP_CTL), *args], capture_output=True, text=True, timeout=60)
         assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, (args, r.stderr)
