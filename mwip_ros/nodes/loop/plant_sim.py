@@ -10,17 +10,11 @@ under ``use_sim_time`` with a ``/clock``): the stamps are the clock's, on one gr
 observer counts periods by them; the ``csv`` then has a ``stamp`` column beside ``t``
 (time since the start).  Lockstep stamps are simulated time from 0.
 
-Services: ``~/reset`` (``std_srvs/Trigger``) puts the robot back in its initial state and
-its time back to the run's start, at a period boundary: lockstep once the state in flight
-is answered, realtime at the next tick (state 0 of the new run is published instead of
-the next state).  Stamps restart at the run's start (lockstep 0, realtime t_0), so the
-observer and the controller see them go back and re-initialise (logged), and a reader of a
-recording splits it where they go back (:mod:`mwip_ros.bag.segments`).  A reset asked
-while the robot is still at its initial state (no period has run since the start or the
-last reset: state 0 is in flight) changes nothing and says so; one asked while another
-is pending joins it.  So the new state 0 always goes back below a stamp the loop answered,
-never repeats it (a repeat would be taken for a resend).  The service keeps every request
-(:data:`~mwip_ros.msgs.qos.SERVICE_QOS`) and answers each one.  To push
+Services: ``~/reset`` (``std_srvs/Trigger``) puts the robot back in its initial state and its time back to the
+run's start, at a period boundary (lockstep once the state in flight is answered, realtime at the next tick);
+stamps restart at the run's start, so the loop re-initialises and a recording splits there
+(:mod:`mwip_ros.bag.segments`).  A reset at the initial state changes nothing; one asked while another is pending
+joins it; every request is answered (docs/graph.md, "Reset and push").  To push
 the robot, publish ``external_wrench`` (``geometry_msgs/Wrench``: ``torque.x`` adds to
 tau_ext1, ``torque.y`` to tau_ext2, until the next one; a zero wrench clears it; with
 ``backend: mujoco`` ``force.y`` pushes the body sideways at its centre of gravity and
