@@ -15,7 +15,7 @@ from typing import Mapping, Optional, Sequence, Tuple
 import numpy as np
 
 __all__ = ["WINDOW", "Metrics", "compute", "window_metrics", "fall_time", "fit_window", "WindowError",
-           "markdown_table", "text_table", "json_safe", "motion_metrics", "motion_rows", "motion_table",
+           "layout", "markdown_table", "text_table", "json_safe", "motion_metrics", "motion_rows", "motion_table",
            "HOLD_SETTLE_S"]
 
 WINDOW = (5.0, 10.0)
@@ -188,21 +188,24 @@ def table_rows(named: Sequence[tuple]) -> list:
     return rows
 
 
+def layout(head: Sequence[str], rows: Sequence[Sequence[str]], markdown: bool = False) -> str:
+    """Cells under ``head`` as a Markdown table, or a fixed-width one for terminals (every table a tool prints)."""
+    if markdown:
+        return "\n".join(["| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in head) + "|",
+                          *("| " + " | ".join(r) + " |" for r in rows)])
+    widths = [max(len(head[i]), *(len(r[i]) for r in rows)) for i in range(len(head))]
+    fmt = "  ".join("{:<%d}" % w for w in widths)
+    return "\n".join([fmt.format(*head)] + [fmt.format(*r) for r in rows])
+
+
 def markdown_table(named: Sequence[tuple]) -> str:
     """A Markdown table, one row per (name, Metrics)."""
-    head = [h for h, _ in _headers(named)]
-    lines = ["| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in head) + "|"]
-    lines += ["| " + " | ".join(r) + " |" for r in table_rows(named)]
-    return "\n".join(lines)
+    return layout([h for h, _ in _headers(named)], table_rows(named), markdown=True)
 
 
 def text_table(named: Sequence[tuple]) -> str:
     """A fixed-width table for terminals."""
-    head = [h for h, _ in _headers(named)]
-    rows = table_rows(named)
-    widths = [max(len(head[i]), *(len(r[i]) for r in rows)) for i in range(len(head))]
-    fmt = "  ".join("{:<%d}" % w for w in widths)
-    return "\n".join([fmt.format(*head)] + [fmt.format(*r) for r in rows])
+    return layout([h for h, _ in _headers(named)], table_rows(named))
 
 
 HOLD_SETTLE_S = 2.0   # the hold's first seconds after v* reached 0 are the stop, not the hold
@@ -250,10 +253,4 @@ def motion_rows(named: Sequence[tuple]) -> list:
 
 def motion_table(named: Sequence[tuple], markdown: bool = False) -> str:
     """The motion metrics as a fixed-width (or Markdown) table."""
-    head, rows = [h for h, _ in MOTION_HEADERS], motion_rows(named)
-    if markdown:
-        return "\n".join(["| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in head) + "|",
-                          *("| " + " | ".join(r) + " |" for r in rows)])
-    widths = [max(len(head[i]), *(len(r[i]) for r in rows)) for i in range(len(head))]
-    fmt = "  ".join("{:<%d}" % w for w in widths)
-    return "\n".join([fmt.format(*head)] + [fmt.format(*r) for r in rows])
+    return layout([h for h, _ in MOTION_HEADERS], motion_rows(named), markdown)

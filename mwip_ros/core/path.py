@@ -14,6 +14,7 @@ from typing import Mapping, Sequence, Tuple
 
 import numpy as np
 
+from .metrics import layout
 from .odometry import arc_step
 
 __all__ = ["ideal_path", "cross_track", "path_metrics", "PATH_HEADERS", "path_rows", "path_table"]
@@ -83,10 +84,4 @@ def path_rows(named: Sequence[tuple]) -> list:
 
 def path_table(named: Sequence[tuple], markdown: bool = False) -> str:
     """The path metrics as a fixed-width (or Markdown) table."""
-    head, rows = [h for h, _ in PATH_HEADERS], path_rows(named)
-    if markdown:
-        return "\n".join(["| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in head) + "|",
-                          *("| " + " | ".join(r) + " |" for r in rows)])
-    widths = [max(len(head[i]), *(len(r[i]) for r in rows)) for i in range(len(head))]
-    fmt = "  ".join("{:<%d}" % w for w in widths)
-    return "\n".join([fmt.format(*head)] + [fmt.format(*r) for r in rows])
+    return layout([h for h, _ in PATH_HEADERS], path_rows(named), markdown)

@@ -14,32 +14,29 @@ PROFILE_MAX_POINTS = 10000
 ABSURD_SPEED = 1e3   # m/s: a profile's (and a cmd_vel's, core.motion) speed beyond this is no robot's
 
 
-def profile_rule(v) -> Optional[str]:
-    """None when ``v`` is a speed profile [t0, v0, t1, v1, ...]: pairs, times from 0 increasing, finite speeds."""
+def _timed_pairs_rule(v, what: str, unit: str) -> Optional[str]:
+    """None when ``v`` is a profile [t0, a0, t1, a1, ...] of ``what`` [``unit``]: pairs, times from 0 increasing,
+    values within +/-:data:`ABSURD_SPEED`."""
     if len(v) % 2:
-        return f"give pairs [t0, v0, t1, v1, ...] (time [s], speed [m/s]), got {len(v)} entries"
+        return f"give pairs [t0, v0, t1, v1, ...] (time [s], {what} [{unit}]), got {len(v)} entries"
     if len(v) > 2 * PROFILE_MAX_POINTS:
         return f"at most {PROFILE_MAX_POINTS} points, got {len(v) // 2}"
-    times, speeds = v[0::2], v[1::2]
+    times, values = v[0::2], v[1::2]
     if any(t < 0 for t in times) or any(b <= a for a, b in zip(times, times[1:])):
         return f"the times must be >= 0 and increase, got {list(times)!r}"
-    if any(abs(s) > ABSURD_SPEED for s in speeds):
-        return f"speeds must be within +/-{ABSURD_SPEED:g} m/s, got {list(speeds)!r}"
+    if any(abs(a) > ABSURD_SPEED for a in values):
+        return f"{what}s must be within +/-{ABSURD_SPEED:g} {unit}, got {list(values)!r}"
     return None
+
+
+def profile_rule(v) -> Optional[str]:
+    """None when ``v`` is a speed profile [t0, v0, t1, v1, ...]: pairs, times from 0 increasing, finite speeds."""
+    return _timed_pairs_rule(v, "speed", "m/s")
 
 
 def yaw_profile_rule(v) -> Optional[str]:
     """None when ``v`` is a yaw-rate profile [t0, w0, t1, w1, ...]: pairs, times from 0 increasing, finite rates."""
-    if len(v) % 2:
-        return f"give pairs [t0, w0, t1, w1, ...] (time [s], yaw rate [rad/s]), got {len(v)} entries"
-    if len(v) > 2 * PROFILE_MAX_POINTS:
-        return f"at most {PROFILE_MAX_POINTS} points, got {len(v) // 2}"
-    times, rates = v[0::2], v[1::2]
-    if any(t < 0 for t in times) or any(b <= a for a, b in zip(times, times[1:])):
-        return f"the times must be >= 0 and increase, got {list(times)!r}"
-    if any(abs(w) > ABSURD_SPEED for w in rates):
-        return f"yaw rates must be within +/-{ABSURD_SPEED:g} rad/s, got {list(rates)!r}"
-    return None
+    return _timed_pairs_rule(v, "yaw rate", "rad/s")
 
 
 def specs() -> List[Any]:
