@@ -33,6 +33,7 @@ import sys
 import time
 
 from mwip_ros import params as P
+from mwip_ros.cli import interrupts
 from mwip_ros.msgs import BadMessage
 from mwip_ros.msgs import layouts as L
 
@@ -390,17 +391,20 @@ def main(argv=None) -> int:
         args = _checked(ap, ap.parse_args(argv))
         if args.command == "drive" and not sys.stdin.isatty():
             raise Failure("drive needs a terminal on stdin (use 'mwip_ctl cmd' in scripts)", 2)
-        ros = Ros(args.namespace, args.timeout)
-        try:
-            return {"param": _param, "reset": _trigger, "enable": _trigger, "disable": _trigger, "estop": _estop,
-                    "push": _push, "cmd": _cmd, "drive": _drive}[args.command](ros, args)
-        finally:
-            ros.close()
+        # SIGINT and SIGTERM raise KeyboardInterrupt whatever this process inherited (a script's background job
+        # starts with SIGINT ignored): a push ends with its zero wrench, a drive with its zero Twist, exit 130 / 143
+        with interrupts.handled():
+            ros = Ros(args.namespace, args.timeout)
+            try:
+                return {"param": _param, "reset": _trigger, "enable": _trigger, "disable": _trigger, "estop": _estop,
+                        "push": _push, "cmd": _cmd, "drive": _drive}[args.command](ros, args)
+            finally:
+                ros.close()
     except Failure as exc:
         print(f"{PROG}: {exc}", file=sys.stderr)
         return exc.code
     except KeyboardInterrupt:
-        return 130
+        return interrupts.exit_code()
     except SystemExit as exc:   # --help (0) and usage errors (2), also when main() is called as a function
         return exc.code if isinstance(exc.code, int) else 2
 
