@@ -29,13 +29,13 @@ __all__ = ["Ledger", "Runs", "GAPS_KEY", "MAX_STAMPS", "MAX_RUNS"]
 GAPS_KEY = "mwip_ros.lockstep_gaps"    # the bag's custom_data entry that says what a lockstep recording lacks
 STAMPED = {"sensor_msgs/msg/JointState", "geometry_msgs/msg/WrenchStamped", "rosgraph_msgs/msg/Clock",
            "geometry_msgs/msg/PoseStamped"}
-NOT_COMPARED = {"external_wrench", "emergency_stop",     # what a user sent;
+NOT_COMPARED = {"external_wrench", "emergency_stop", "cmd_vel",   # what a user sent;
                 "robot_markers", "driver_state",          # a view, not the loop; the driver's transitions;
                 "odom", "robot_description", "wheel_joint_states",   # robot_state's view of the states;
                 "rosout", "parameter_events", "diagnostics"}   # ROS's own topics
-# published only with sensing options on (the truth), raw sensors (the IMU, the encoder) or a spatial plant (its
-# pose): judged when they have messages
-OPTIONAL = {"true_joint_states", "data_raw", "wheel_encoder", "true_pose"}
+# published only with sensing options on (the truth), raw sensors (the IMU, the encoder), a spatial plant (its
+# pose) or the yaw stage (the two wheel torques): judged when they have messages
+OPTIONAL = {"true_joint_states", "data_raw", "wheel_encoder", "true_pose", "wheel_torques_cmd"}
 MAX_STAMPS = 10_000_000     # per topic; past it a topic is only counted (its judgement would hold them all at once)
 MAX_RUNS = 100_000          # per topic (2.4 MB); past it (stamps on no grid) a topic is only counted
 
