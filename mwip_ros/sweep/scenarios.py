@@ -116,8 +116,12 @@ def parameter_overlay(placed: Dict[tuple, Any], path: Path, header: str = "") ->
 
 
 def _write(sections: Dict[str, Dict[str, Any]], path: Path, header: str) -> None:
-    """{section: {dotted name: value}} as a ROS 2 parameter file, checked by reading it back."""
-    doc = {sec: {"ros__parameters": _nest(values)} for sec, values in sections.items()}
+    """{section: {dotted name: value}} as a ROS 2 parameter file, checked by reading it back.  An empty array (the
+    default of ``motion.profile``, ``ground.bumps``, ...) is left out: ROS reads ``[]`` as a byte array, not as an
+    empty double array, and the node would refuse the file; left out, the parameter takes its default, empty."""
+    doc = {sec: {"ros__parameters": _nest({k: v for k, v in values.items() if not (isinstance(v, (list, tuple))
+                                                                              and len(v) == 0)})}
+           for sec, values in sections.items()}
     path.write_text(header + yaml.dump(doc, Dumper=_Dumper, sort_keys=False, default_flow_style=False, width=120))
     P.load_param_file(path)   # what was written reads back as a valid file
 

@@ -201,7 +201,7 @@ def test_help_shows_defaults_ranges_topics_and_exit_codes(tmp_path):
                        for n, flag in (("dscndo_controller", "-h"), ("foxglove_server", "--help"), ("plant_sim", "-h")))
     assert "  tau4  (double, default 0.1, [1e-06, 1e+06], changeable at run time)" in ctl
     assert "  law  (string, default 'dsc', one of 'dsc', 'lqr', 'smc', 'mpc', changeable at run time)" in ctl
-    assert "  publishes: wheel_torque_cmd, controller_internals, /diagnostics" in ctl
+    assert "  publishes: wheel_torque_cmd, wheel_torques_cmd, controller_internals, /diagnostics" in ctl
     assert "  subscribes: joint_states, disturbance_estimate" in ctl
     assert "  port  (integer, default 8765, 1..65535)" in fox and "  topics  (string_array, default [])" in fox
     assert "  duration_s  (double, default 10.0, [0, 1e+07])" in plant and "  services: ~/reset" in plant
