@@ -34,7 +34,7 @@ from mwip_ros.core.odometry import Odometry, odometry_noise, state_update
 from mwip_ros.core.urdf import BASE_LINK, KEYS, ODOM_FRAME, WHEEL_JOINTS, frame_transforms, robot_model, urdf
 from mwip_ros.msgs import BadMessage
 from mwip_ros.msgs import layouts as L
-from mwip_ros.msgs.qos import GRAPH_QOS, INPUT_QOS
+from mwip_ros.msgs.qos import GRAPH_QOS, RECORD_QOS
 from mwip_ros.msgs.stamps import to_time
 from mwip_ros.nodes.runtime.guards import Rejects
 from mwip_ros.nodes.runtime.params import declare, ros_arguments, start_values
@@ -94,7 +94,9 @@ class RobotState(Node, GracefulNodeMixin):
         self.pub_joints = self.create_publisher(JointState, "wheel_joint_states", GRAPH_QOS)
         self.tf_type = _tf_message_type(self.get_logger())
         self.pub_tf = self.create_publisher(self.tf_type, "/tf", GRAPH_QOS) if self.tf_type else None
-        self.create_subscription(JointState, "joint_states", self._on_state, INPUT_QOS, raw=True)
+        # as the recorder: transient local, so states published before discovery matched this reader (a lockstep
+        # run can be over in a second, before the next discovery announcement) still reach it, in order
+        self.create_subscription(JointState, "joint_states", self._on_state, RECORD_QOS, raw=True)
         self.get_logger().info(f"robot state ready: r {self.model.r} m, track {self.model.track_width} m, odom "
                                f"speed noise {noise.speed_std:.3g} m/s, {rule} rule; robot_description "
                                f"{len(self.description)} B")
