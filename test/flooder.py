@@ -42,6 +42,11 @@ def main(argv) -> int:
     node.create_subscription(JointState, "joint_states", lambda data: heard.append(1), REALTIME_INPUT_QOS, raw=True)
     imu, enc = messages()
     end = time.monotonic() + 120
+    # matched with the joint_states publisher before the test starts the plant: a short run can end before a late
+    # discovery would match this reader, and then no state would ever come
+    while node.count_publishers("joint_states") < 1 and time.monotonic() < end:
+        rclpy.spin_once(node, timeout_sec=0.05)
+    print("flooder: listening to joint_states", flush=True)
     while len(heard) < states and time.monotonic() < end:
         rclpy.spin_once(node, timeout_sec=0.05)
     pubs = (node.create_publisher(Imu, "imu/data_raw", REALTIME_QOS),   # now: the stream started alone

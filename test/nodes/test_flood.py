@@ -39,6 +39,7 @@ def _flooded_run(tmp_path, rate, flood_s, run_s=RUN_S, upright=True):
         g.start("dscndo_controller", "-p", "mode:=realtime", params=RAW)
         flood = g.start("flooder", cmd=[sys.executable, str(FLOODER), str(rate), str(flood_s), "100"], params=None,
                         as_given=True)   # from the 100th state the loop answers on (t = 0.5 s)
+        assert flood.wait_for_output("flooder: listening to joint_states", 60), flood.output()
         plant = g.start("plant_sim", "-p", "mode:=realtime", "-p", f"duration_s:={run_s}",
                         "-p", f"csv:={tmp_path / 'rt.csv'}", params=RAW)
         code = plant.wait(120)
