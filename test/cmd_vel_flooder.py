@@ -9,6 +9,8 @@ controller must reject.  Prints ``flooded N in S s`` and exits 0.  Bursts every 
 import sys
 import time
 
+from flooder import await_loop, flood   # the same wait for the loop and the same bursts
+
 
 def main(argv) -> int:
     args = argv[1:argv.index("--ros-args")] if "--ros-args" in argv else argv[1:]
@@ -16,30 +18,15 @@ def main(argv) -> int:
     states = int(args[2]) if len(args) > 2 else 100
     import rclpy
     from geometry_msgs.msg import Twist
-    from sensor_msgs.msg import JointState
 
     from mwip_ros.msgs import layouts as L
-    from mwip_ros.msgs.qos import REALTIME_INPUT_QOS
     rclpy.init()
     node = rclpy.create_node("cmd_vel_flooder")
-    heard = []
-    node.create_subscription(JointState, "joint_states", lambda data: heard.append(1), REALTIME_INPUT_QOS, raw=True)
     end = time.monotonic() + 120
-    while len(heard) < states and time.monotonic() < end:
-        rclpy.spin_once(node, timeout_sec=0.05)
+    await_loop(node, states, end)
     pub = node.create_publisher(Twist, "cmd_vel", 10)
-    while pub.get_subscription_count() < 1 and time.monotonic() < end:
-        time.sleep(0.01)
-    msgs = (L.encode_twist(0.3, 0.0), L.encode_twist(float("nan"), 0.0))
-    sent, start, burst = 0, time.monotonic(), 0.005
-    per_burst = max(1, round(rate * burst)) if rate > 0 else 50
-    while time.monotonic() - start < duration:
-        t0 = time.monotonic()
-        for i in range(per_burst):
-            pub.publish(msgs[(sent + i) % 2])
-        sent += per_burst
-        if rate > 0:
-            time.sleep(max(0.0, burst - (time.monotonic() - t0)))
+    start = time.monotonic()
+    sent = flood((pub,), ((L.encode_twist(0.3, 0.0), L.encode_twist(float("nan"), 0.0)),), rate, duration, end)
     print(f"flooded {sent} in {time.monotonic() - start:.2f} s", flush=True)
     node.destroy_node()
     rclpy.shutdown()

@@ -28,29 +28,27 @@ def messages():
     return imu, enc
 
 
-def main(argv) -> int:
-    args = argv[1:argv.index("--ros-args")] if "--ros-args" in argv else argv[1:]
-    rate, duration = float(args[0]), float(args[1])
-    states = int(args[2]) if len(args) > 2 else 100
+def await_loop(node, states: int, end: float) -> None:
+    """Spin ``node`` until it has heard ``states`` joint_states (the loop runs), or until ``end`` (monotonic s).  It
+    first waits to see the joint_states publisher and says so (``flooder: listening to joint_states``): a test starts
+    the plant only then, since a short run can end before a late discovery would match this reader."""
     import rclpy
-    from sensor_msgs.msg import Imu, JointState
+    from sensor_msgs.msg import JointState
 
-    from mwip_ros.msgs.qos import REALTIME_INPUT_QOS, REALTIME_QOS
-    rclpy.init()
-    node = rclpy.create_node("flooder")
+    from mwip_ros.msgs.qos import REALTIME_INPUT_QOS
     heard = []
     node.create_subscription(JointState, "joint_states", lambda data: heard.append(1), REALTIME_INPUT_QOS, raw=True)
-    imu, enc = messages()
-    end = time.monotonic() + 120
-    # matched with the joint_states publisher before the test starts the plant: a short run can end before a late
-    # discovery would match this reader, and then no state would ever come
     while node.count_publishers("joint_states") < 1 and time.monotonic() < end:
         rclpy.spin_once(node, timeout_sec=0.05)
     print("flooder: listening to joint_states", flush=True)
     while len(heard) < states and time.monotonic() < end:
         rclpy.spin_once(node, timeout_sec=0.05)
-    pubs = (node.create_publisher(Imu, "imu/data_raw", REALTIME_QOS),   # now: the stream started alone
-            node.create_publisher(JointState, "wheel_encoder", REALTIME_QOS))
+
+
+def flood(pubs, streams, rate: float, duration: float, end: float) -> int:
+    """Once every publisher of ``pubs`` is matched (or at ``end``), publish ``rate`` messages a second on each for
+    ``duration`` s of wall time, cycling through its stream of ``streams``, in bursts every 5 ms (``rate`` 0: as
+    fast as it can); the messages sent, all publishers together."""
     while min(p.get_subscription_count() for p in pubs) < 1 and time.monotonic() < end:
         time.sleep(0.01)
     sent, start, burst = 0, time.monotonic(), 0.005
@@ -58,12 +56,31 @@ def main(argv) -> int:
     while time.monotonic() - start < duration:
         t0 = time.monotonic()
         for i in range(per_burst):
-            pubs[0].publish(imu[(sent + i) % len(imu)])
-            pubs[1].publish(enc[(sent + i) % len(enc)])
+            for pub, stream in zip(pubs, streams):
+                pub.publish(stream[(sent + i) % len(stream)])
         sent += per_burst
         if rate > 0:
             time.sleep(max(0.0, burst - (time.monotonic() - t0)))
-    print(f"flooded {2 * sent} in {time.monotonic() - start:.2f} s", flush=True)
+    return len(pubs) * sent
+
+
+def main(argv) -> int:
+    args = argv[1:argv.index("--ros-args")] if "--ros-args" in argv else argv[1:]
+    rate, duration = float(args[0]), float(args[1])
+    states = int(args[2]) if len(args) > 2 else 100
+    import rclpy
+    from sensor_msgs.msg import Imu, JointState
+
+    from mwip_ros.msgs.qos import REALTIME_QOS
+    rclpy.init()
+    node = rclpy.create_node("flooder")
+    end = time.monotonic() + 120
+    await_loop(node, states, end)
+    pubs = (node.create_publisher(Imu, "imu/data_raw", REALTIME_QOS),   # now: the stream started alone
+            node.create_publisher(JointState, "wheel_encoder", REALTIME_QOS))
+    start = time.monotonic()
+    sent = flood(pubs, messages(), rate, duration, end)
+    print(f"flooded {sent} in {time.monotonic() - start:.2f} s", flush=True)
     node.destroy_node()
     rclpy.shutdown()
     return 0
