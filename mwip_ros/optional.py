@@ -26,9 +26,11 @@ from __future__ import annotations
 
 import contextlib
 import importlib
+import os
+import sys
 from typing import Dict, Iterator, NamedTuple, Optional
 
-__all__ = ["OptionalPackage", "OPTIONAL", "MissingPackage", "missing", "required"]
+__all__ = ["OptionalPackage", "OPTIONAL", "MissingPackage", "headless_gl", "missing", "required"]
 
 
 class OptionalPackage(NamedTuple):
@@ -68,10 +70,19 @@ def required(module: str, feature: Optional[str] = None) -> Iterator[None]:
         with required("daqp", "the law mpc"):
             import daqp
     """
+    if module.split(".")[0] == "mujoco":
+        headless_gl()
     try:
         yield
     except ImportError as exc:
         raise MissingPackage(_text(module, str(exc) or type(exc).__name__, feature)) from None
+
+
+def headless_gl() -> None:
+    """Before ``import mujoco``: with no display and no ``MUJOCO_GL`` of the user's, MuJoCo's renderer (``mwip_sim
+    --render``) uses EGL; MuJoCo reads the variable once, when it is imported, and a missing EGL only disables drawing."""
+    if sys.platform.startswith("linux") and not os.environ.get("MUJOCO_GL") and not os.environ.get("DISPLAY"):
+        os.environ["MUJOCO_GL"] = "egl"
 
 
 def missing(module: str, feature: Optional[str] = None) -> Optional[str]:

@@ -29,6 +29,10 @@ import pytest
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
+from mwip_ros.optional import headless_gl  # noqa: E402
+
+headless_gl()   # before a test module imports mujoco itself: MuJoCo picks its GL platform then (mwip_sim --render)
+
 TIERS = ("unit", "graph", "e2e", "bench")
 
 

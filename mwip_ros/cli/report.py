@@ -255,7 +255,20 @@ def _main(argv=None) -> int:
     ap.add_argument("--gif-fps", type=float, default=animation.FPS, metavar="FPS",
                     help=f"animation.gif's frames per second of simulated time, played in real time (default: "
                          f"{animation.FPS:g}; at most 50: browsers slow down shorter GIF frames)")
+    ap.add_argument("--render", type=Path, default=None, metavar="FILE",
+                    help="also draw the robot in 3D as a viewer of the bag's robot_description and frames shows it "
+                         "(Foxglove's 3D panel, RViz): the URDF placed by robot_state's odom and wheel joints; a .png "
+                         "sheet of 6 frames or a .gif; one bag recorded with robot_state (run_experiment.sh "
+                         "--robot-state); needs OpenGL (headless: MUJOCO_GL=egl or osmesa)")
     args = ap.parse_args(argv)
+    if args.render is not None:
+        from mwip_ros.cli import render3d
+        reason = ("--render draws one bag: give one" if len(args.runs) != 1 or str(args.runs[0]).endswith(".csv")
+                  else render3d.suffix_refusal(args.render) or outputs.refuse_existing(args.render, args.force,
+                                                                                         "--render")
+                  or render3d.gl_refusal())
+        if reason:
+            return _fail(reason)
     if not 0 < args.gif_fps <= 50:
         ap.error(f"--gif-fps must be in (0, 50], got {args.gif_fps:g}")
     for opt in ("labels", "estimates"):
@@ -319,6 +332,12 @@ def _main(argv=None) -> int:
         print(f"FELL: {name} at t = {t:.3f} s")
     for f in res["files"]:
         print(f"wrote {args.out / f}")
+    if args.render is not None:
+        try:
+            drawn, trees = render3d.film_bag(args.runs[0], args.render)
+        except ValueError as exc:
+            return _fail(f"--render: {exc}")
+        print(f"wrote {drawn} ({trees} frame trees of odom and the wheels)")
     return 0
 
 

@@ -14,7 +14,7 @@ import sys
 from pathlib import Path
 
 from mwip_ros import params as P
-from mwip_ros.cli import interrupts, plotting
+from mwip_ros.cli import interrupts, plotting, render3d
 from mwip_ros.cli.exits import EXIT_FELL, EXIT_OK, EXIT_USAGE, epilog
 from mwip_ros.cli.outputs import refuse_existing
 from mwip_ros.cli.theorem import theorem_report
@@ -55,7 +55,11 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--csv", type=Path, default=None, metavar="FILE",
                     help="write the trajectory; with --compare, FILE gets _dsc / _dscndo suffixes")
     ap.add_argument("--plot", type=Path, default=None, metavar="FILE.png", help="write the Fig. 3 plot")
-    ap.add_argument("--force", action="store_true", help="overwrite a --csv or --plot file that exists")
+    ap.add_argument("--render", type=Path, default=None, metavar="FILE",
+                    help="draw the robot in 3D with MuJoCo's renderer as it runs (plant_sim.backend: mujoco): a .gif "
+                         "of the run in real time, or a .png sheet of 6 frames; with --compare, FILE gets a suffix "
+                         "per law; needs OpenGL (headless: MUJOCO_GL=egl or osmesa)")
+    ap.add_argument("--force", action="store_true", help="overwrite a --csv, --plot or --render file that exists")
     ap.add_argument("--window", type=float, nargs=2, default=metrics.WINDOW, metavar=("T0", "T1"),
                     help="metrics window [s] (default: 5 10)")
     ap.add_argument("-q", "--quiet", action="store_true", help="no progress output")
@@ -138,10 +142,17 @@ def _main(argv=None) -> int:
     reason = reason or _memory_refusal(values, args.duration, len(names))
     if reason:
         return _fail(reason)
-    csv_paths = {}
+    csv_paths, render_paths = {}, {}
     if args.csv:
         csv_paths = {label: _suffixed(args.csv, label) if len(names) > 1 else args.csv for label in names}
-    outputs = [("--csv", p) for p in csv_paths.values()] + ([("--plot", args.plot)] if args.plot else [])
+    if args.render:
+        reason = _render_refusal(args.render, values)
+        if reason:
+            return _fail(reason)
+        render_paths = {label: _suffixed(args.render, label) if len(names) > 1 else args.render for label in names}
+    args.render_paths = render_paths
+    outputs = ([("--csv", p) for p in csv_paths.values()] + ([("--plot", args.plot)] if args.plot else [])
+               + [("--render", p) for p in render_paths.values()])
     for option, path in outputs:   # before any work: a run is not lost to an output it cannot write
         reason = refuse_existing(path, args.force, option)
         if reason:
@@ -175,17 +186,29 @@ def _main(argv=None) -> int:
     return _finish(args, values, runs)
 
 
+def _render_refusal(path: Path, values):
+    """Why ``--render path`` cannot be drawn (the suffix, the backend, no OpenGL), or None (cli.render3d)."""
+    if values["backend"] != "mujoco":
+        return (f"--render draws the MuJoCo model, and plant_sim.backend is {values['backend']}: add a parameter file "
+                "that sets plant_sim's backend: mujoco (config/square.yaml does)")
+    return render3d.suffix_refusal(path) or render3d.gl_refusal()
+
+
 def _run_laws(args, values, names, csv_paths, runs, written) -> None:
     for label in names:
         def progress(frac, label=label):
             if not args.quiet and sys.stderr.isatty():
                 print(f"\r  {label}: {frac * 100:5.1f} %", end="", file=sys.stderr, flush=True)
 
-        run = simulate(P.closed_loop(values, duration=args.duration, controller=label), label, progress)
+        loop = P.closed_loop(values, duration=args.duration, controller=label)
+        filmer = render3d.Filmer(loop.plant, loop.duration_s, args.render_paths[label]) if args.render else None
+        run = simulate(loop, label, progress, on_period=filmer)
         if not args.quiet:
             print(f"\r  {label}: done, {len(run)} samples, h = {run.h * 1e3:.3f} ms"
                   + (f"  FAILED ({run.record.get('failure', 'fall')})" if run.fallen else ""), file=sys.stderr)
         runs.append(run)
+        if filmer is not None:
+            print(f"wrote {filmer.write(label)}")
         if args.csv:
             out = csv_paths[label]
             _write_atomic(run, out)

@@ -84,13 +84,14 @@ class ClosedLoop:
 
 
 def simulate(loop: ClosedLoop, label: str = "", progress: Optional[Callable[[float], None]] = None,
-             diverged_fails: bool = False) -> Trajectory:
+             diverged_fails: bool = False, on_period: Optional[Callable[[object], None]] = None) -> Trajectory:
     """Run the closed loop; stops early (``fallen``) when it fails: |theta_b| passes the fall angle, the state is not
     a finite number (diverged), or the law's command is (a ``bad_command``: NaN, infinite, beyond
     :data:`.safety.PLAUSIBLE_TORQUE`).  The trajectory's ``record`` then holds ``t_fall``, ``fall_text`` (the
     line saying when and why) and ``failure`` (the cause, a :data:`.trajectory.FAILURES` name).  A plant whose
     simulation diverges (:class:`~.plant.PlantDiverged`, backend mujoco) raises it, or with ``diverged_fails``
-    (a sweep's scenario) ends the run as a ``diverged`` failure at the period it happened in."""
+    (a sweep's scenario) ends the run as a ``diverged`` failure at the period it happened in.  ``on_period`` sees
+    the plant at t_k each period, once its row is taken (``mwip_sim --render`` draws it); it must not change it."""
     pc = loop.plant
     h = pc.h
     n_steps = int(round(loop.duration_s / h))
@@ -110,7 +111,10 @@ def simulate(loop: ClosedLoop, label: str = "", progress: Optional[Callable[[flo
     every = max(1, n_steps // 10)
     try:
         for k in range(n_steps + 1):
-            if period.run(table) or k == n_steps or period.advance(table):
+            ended = period.run(table)
+            if on_period is not None:
+                on_period(period.side.plant)
+            if ended or k == n_steps or period.advance(table):
                 break
             if progress is not None and k % every == 0:
                 progress(k / n_steps)
