@@ -80,7 +80,7 @@ def required(module: str, feature: Optional[str] = None) -> Iterator[None]:
 
 def headless_gl() -> None:
     """Before ``import mujoco``: with no display and no ``MUJOCO_GL`` of the user's, MuJoCo's renderer (``mwip_sim
-    --render``) uses EGL; MuJoCo reads the variable once, when it is imported, and a missing EGL only disables drawing."""
+    --render``) uses EGL; MuJoCo reads the variable once, when it is imported; a missing EGL only disables drawing."""
     if sys.platform.startswith("linux") and not os.environ.get("MUJOCO_GL") and not os.environ.get("DISPLAY"):
         os.environ["MUJOCO_GL"] = "egl"
 

@@ -23,7 +23,7 @@ from .sensing import NOISE_BLOCK, SensingConfig
 
 __all__ = ["Plant", "PLANTS", "make_plant", "PlantConfig", "PlantSim", "RK4Plant", "stage_torques", "rk4_period",
            "rk4_driven", "NO_MOTOR", "saturate", "D_w_of", "gated_drive", "finite_state", "PlantDiverged",
-           "Pose", "POSE_COLUMNS"]
+           "Pose"]
 
 
 @dataclass(frozen=True)
@@ -89,9 +89,6 @@ class Pose(NamedTuple):
     wheel_right: float
 
 
-POSE_COLUMNS = ("x", "y", "yaw", "roll", "wheel_left", "wheel_right")   # a spatial plant's csv, after the others
-
-
 class PlantDiverged(RuntimeError):
     """A plant's simulation diverged (a physics engine's warning, a state that is not finite); the message names
     the time and the cause.  The run ends there: no row of it is scored."""
@@ -105,7 +102,7 @@ class Plant(Protocol):
     :class:`~.mujoco_plant.MujocoPlant` (MuJoCo, docs/theory.md 6.10); a backend is one more entry in :data:`PLANTS`.
 
     ``spatial`` says whether the plant has a 3D pose: then :attr:`pose` is the :class:`Pose` at t_k (the runners
-    record :data:`POSE_COLUMNS` and publish it), else None.  ``integration`` says in words how a period is
+    record :data:`.trajectory.POSE_COLUMNS` and publish it), else None.  ``integration`` says in words how a period is
     integrated (the node's start line).  :meth:`step` raises :class:`PlantDiverged` when the simulation
     diverges."""
 
