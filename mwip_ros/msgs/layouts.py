@@ -14,6 +14,9 @@
     true_pose             geometry_msgs/PoseStamped a spatial plant's (backend mujoco) true 3D pose: frame_id
                                                     odom (REP-105), position the axle's centre, orientation
                                                     from yaw, pitch, roll (core.markers.pose_quaternion); stamp t_k
+    true_wheel_states     sensor_msgs/JointState    a spatial plant's wheels: name [wheel_left_joint,
+                                                    wheel_right_joint] (the URDF's), position each wheel's
+                                                    absolute angle [rad]; stamp t_k
 
     raw sensors (plant_sim with sensors.model: raw, docs/theory.md 6.4; the state_estimator reads them):
     imu/data_raw          sensor_msgs/Imu           frame_id imu_link; no orientation (all 0,
@@ -50,7 +53,8 @@ __all__ = ["JOINT_NAMES", "INTERNAL_NAMES", "LIMITS", "RAW_LIMITS", "IMU_FRAME",
            "parse_command", "parse_clock", "parse_internals", "parse_external_wrench", "encode_imu", "parse_imu",
            "encode_encoder", "parse_encoder", "parse_odometry", "check_state", "RAW_FILTERS", "encode_twist",
            "parse_twist", "POSE_FRAME", "encode_pose", "parse_pose", "parse_bool", "YAW_JOINT", "parse_yaw_rate",
-           "WHEEL_TORQUE_JOINTS", "encode_wheel_torques", "parse_wheel_torques"]
+           "WHEEL_TORQUE_JOINTS", "encode_wheel_torques", "parse_wheel_torques", "encode_wheel_states",
+           "parse_wheel_states"]
 
 JOINT_NAMES = ("wheel", "body_pitch")
 YAW_JOINT = "yaw"   # joint_states' third joint from a spatial plant: velocity = the gyro's yaw rate (theory 6.13)
@@ -175,6 +179,27 @@ def parse_wheel_torques(data) -> Tuple[int, float, float]:
     for v in effort:
         _within(v, "torque", "wheel torque")
     return stamp, float(effort[0]), float(effort[1])
+
+
+def encode_wheel_states(stamp: int, left: float, right: float) -> bytes:
+    """true_wheel_states (sensor_msgs/JointState): name :data:`WHEEL_TORQUE_JOINTS` (the URDF's wheel joints), position
+    each wheel's absolute angle [rad] (:class:`~mwip_ros.core.plant.Pose`'s wheel_left, wheel_right), stamp t_k."""
+    return _WHEEL_TORQUES(stamp, (float(left), float(right)))
+
+
+def parse_wheel_states(data) -> Tuple[int, float, float]:
+    """(stamp_ns, left, right) of a true_wheel_states, or BadMessage: the names :data:`WHEEL_TORQUE_JOINTS` in that
+    order, two positions, each finite and plausible (:data:`LIMITS` theta_w)."""
+    stamp, _frame, names, position, _velocity, _effort = _decoded(cdr.decode_joint_state, data,
+                                                                   "sensor_msgs/JointState")
+    if tuple(names) != WHEEL_TORQUE_JOINTS:
+        raise BadMessage(f"joint names {names}, expected {list(WHEEL_TORQUE_JOINTS)}")
+    if len(position) != 2:
+        raise BadMessage(f"position has {len(position)} entries, expected 2 (left, right)")
+    _finite(position, "wheel angles")
+    for v in position:
+        _within(v, "theta_w", "wheel angle")
+    return stamp, float(position[0]), float(position[1])
 
 
 def encode_wrench(stamp: int, t1: float, t2: float) -> bytes:
