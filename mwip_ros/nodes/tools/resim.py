@@ -20,6 +20,13 @@ change mid-way re-simulates exactly.  Changes of the nodes named ``disturbance_o
 take (an unknown type code, no value, an array too long: :func:`.rclpy_compat.parameter_from_msg`)
 is skipped with a warning naming it, and counted in the report; a value the running node refuses
 is logged with its reason, counted, and the re-simulation goes on without it.
+
+A controller that tracks ``cmd_vel`` (``motion.enabled`` without a ``motion.profile``, docs/theory.md 6.11) is
+given the recorded ``cmd_vel`` where the recording has them: a Twist sets the target of the periods after the one
+the controller last answered (``core.motion.Shaper.command``), so each recorded Twist (the newest of those between
+two states, in the bag's order) is published before the first state recorded after it, and that state is sent
+only once the controller has answered a ``get_parameters`` request sent after the Twist (its executor took the
+Twist first).  A profile is made inside each period from the state's stamp and re-simulates as it is.
 """
 from __future__ import annotations
 
@@ -40,7 +47,7 @@ from mwip_ros.msgs.topics import leaf
 from mwip_ros.nodes.tools.comparison import Stat, compare_stamped, diff
 from mwip_ros.nodes.runtime.guards import Rejects
 from mwip_ros.nodes.runtime.lockstep import CHAIN, LockstepDriver
-from mwip_ros.nodes.runtime.process import EXIT_BAD_PARAMS, EXIT_ERROR, EXIT_OK
+from mwip_ros.nodes.runtime.process import EXIT_ERROR, EXIT_OK
 from mwip_ros.params import ParamError
 
 __all__ = ["Resim", "EXIT_DIFFERENT"]
@@ -85,8 +92,10 @@ class Resim:
         self.failed = False
         self._param_clients: Dict[str, object] = {}
         self._param_wait: Optional[Tuple[float, list]] = None   # (since, futures) of changes being applied
-        self._motion_asked = None   # the future of the controller's motion.* (theory 6.11), then True once judged
-        self.refused = False
+        self._motion_asked = None   # the futures of the controller's motion.* (theory 6.11), then True once judged
+        self.cmd_vel_pub = None     # set when the running controller tracks cmd_vel: the recorded ones are replayed
+        self._barrier = None        # (since, future): a replayed cmd_vel's get_parameters round trip under way
+        self.replayed_cmd_vel = 0
         self.applied_changes = 0
 
         clock_pub = node.create_publisher(Clock, "/clock", GRAPH_QOS)
@@ -128,8 +137,9 @@ class Resim:
     def _read_bag(self) -> None:
         bag = self.node.bag
         topics = {"joint_states": self._bag_topic("joint_states", True)}
-        topics.update({name: self._bag_topic(name, False) for name in OUTPUTS})
+        topics.update({name: self._bag_topic(name, False) for name in OUTPUTS + ("cmd_vel",)})
         by_topic = {t: name for name, t in topics.items() if t}
+        self.cmd_vels: Dict[int, bytes] = {}   # the state index k -> the newest recorded cmd_vel before state k
         self.has = {name: topics[name] is not None for name in OUTPUTS}
         self.states: List[Tuple[int, bytes]] = []
         self.rec_cmds: List[float] = []
@@ -159,6 +169,9 @@ class Resim:
                         self.state_keys.append((seg, stamp))
                     elif name == "wheel_torque_cmd":
                         self.rec_cmds.append(L.parse_command(data))
+                    elif name == "cmd_vel":
+                        L.parse_twist(data)   # a Twist; its numbers the controller judges, as it did
+                        self.cmd_vels[len(self.states)] = bytes(data)
                     else:
                         stamp, fields = _estimate(data) if name == "disturbance_estimate" else L.parse_internals(data)
                         self.rec[name].setdefault((seg or 0, stamp), fields)
@@ -317,6 +330,8 @@ class Resim:
             self._send_now()
 
     def _send_now(self) -> None:
+        if self._replay_cmd_vel():
+            return   # the state goes once the controller has taken the Twist (step)
         stamp, data = self.states[self.k]
         self._fed_run[stamp] = self.state_keys[self.k][0]
         self.lockstep.send(self.k, stamp, data)
@@ -325,16 +340,31 @@ class Resim:
         self.failed = True
         self.node.finish(EXIT_ERROR, text)
 
-    def _motion_refused(self) -> Optional[bool]:
-        """Ask the running controller for motion.enabled and motion.profile once the graph is there: with cmd_vel
-        (enabled, no profile) its references came from commands the bag does not hold, so resim refuses in one line
-        (exit 2); a profile is made inside each period from the state's stamp and re-simulates.  None while the
-        answer is awaited, else whether it refused."""
+    def _replay_cmd_vel(self) -> bool:
+        """Publish the recorded cmd_vel due before state k, if any, and ask the controller for a parameter: its answer
+        comes after the Twist was taken (True: the state waits for it, :meth:`step`)."""
         from rcl_interfaces.srv import GetParameters
+        data = self.cmd_vels.pop(self.k, None) if self.cmd_vel_pub is not None else None
+        if data is None:
+            return False
+        self.cmd_vel_pub.publish(data)
+        self.replayed_cmd_vel += 1
+        self._barrier = (time.monotonic(), self._params_client.call_async(GetParameters.Request(
+            names=["motion.enabled"])))
+        return True
+
+    def _motion_check(self) -> Optional[bool]:
+        """Ask the running controller for motion.enabled and motion.profile once the graph is there: with cmd_vel
+        (enabled, no profile) the recorded cmd_vel are replayed (a publisher that must first match the controller's
+        subscription).  None while the answer (or the match) is awaited, else False (go)."""
+        from rcl_interfaces.srv import GetParameters
+        from geometry_msgs.msg import Twist
         if self._motion_asked is True:
+            if self.cmd_vel_pub is not None and self.cmd_vel_pub.get_subscription_count() < 1:
+                return None   # the controller's cmd_vel subscription not matched yet
             return False
         if self._motion_asked is None:
-            client = self.node.create_client(GetParameters, "dscndo_controller/get_parameters")
+            client = self._params_client = self.node.create_client(GetParameters, "dscndo_controller/get_parameters")
             if not client.wait_for_service(timeout_sec=self.v["timeout_s"]):
                 self._motion_asked = True   # no such service to ask: the lockstep's own checks name what is missing
                 return False
@@ -347,19 +377,20 @@ class Resim:
         enabled, profile = (list(f.result().values) for f in self._motion_asked)
         self._motion_asked = True
         if enabled and enabled[0].bool_value and not (profile and len(profile[0].double_array_value)):
-            self.refused = True   # nothing fed, nothing to compare: the one line, exit 2 (no table)
-            self.node.finish(EXIT_BAD_PARAMS, "motion.enabled: the running dscndo_controller tracks cmd_vel, which "
-                                              "resim cannot replay yet; re-simulate with motion.enabled: false or "
-                                              "a motion.profile")
-            return True
+            self.cmd_vel_pub = self.node.create_publisher(Twist, "cmd_vel", 10)   # reliable, volatile: as a user
+            self.log.info(f"resim: the running dscndo_controller tracks cmd_vel: replaying the {len(self.cmd_vels)} "
+                          f"recorded cmd_vel (each before the first state recorded after it)")
+            return None
+        if self.cmd_vels:
+            self.log.info("resim: the bag has cmd_vel, which the running dscndo_controller does not read (motion "
+                          "off, or a motion.profile): not replayed")
         return False
 
     def step(self, executor) -> None:
         if not self.started:
             ready = self.lockstep.wait_for_graph()
             if ready:
-                refused = self._motion_refused()
-                if refused is not False:   # asking (spin for the answer), or refused (finished)
+                if self._motion_check() is not False:   # asking (spin for the answer)
                     executor.spin_once(timeout_sec=0.02)
                     return
                 self.started = True
@@ -371,9 +402,18 @@ class Resim:
                 return
             executor.spin_once(timeout_sec=0.02)
             return
-        executor.spin_once(timeout_sec=0.05 if self._param_wait is None else 0.005)
+        executor.spin_once(timeout_sec=0.05 if self._param_wait is None and self._barrier is None else 0.005)
         if self._param_wait is not None and not self.failed:
             self._params_applied()
+            return
+        if self._barrier is not None and not self.failed:
+            since, future = self._barrier
+            if future.done():
+                self._barrier = None
+                self._send_now()
+            elif time.monotonic() - since > self.v["timeout_s"]:
+                self._fail(f"no answer to get_parameters after a replayed cmd_vel within timeout_s = "
+                           f"{self.v['timeout_s']:g} s")
             return
         now = time.monotonic()
         if self.collecting_since is not None:
@@ -412,8 +452,6 @@ class Resim:
         return topics, fields
 
     def report(self) -> None:
-        if self.refused:
-            return
         tol = self.v["tolerance"]
         topics, fields = self.compare()
         wall = (time.monotonic() - self.t_wall0) if self.t_wall0 else 0.0
@@ -448,6 +486,9 @@ class Resim:
         else:
             self.node.finish(EXIT_OK)
             lines.append(f"  RESULT: REPRODUCED - every compared output within tolerance {tol:g} (exit {EXIT_OK})")
+        if self.cmd_vel_pub is not None:
+            lines.append(f"  recorded cmd_vel replayed: {self.replayed_cmd_vel}"
+                         + (f" ({len(self.cmd_vels)} after the last state fed, not replayed)" if self.cmd_vels else ""))
         if self.applied_changes or self.param_events or self.refused_values:
             lines.append(f"  recorded parameter changes applied: {self.applied_changes}"
                          + (f" ({len(self.param_events)} after the last state, not applied)"
