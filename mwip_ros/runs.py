@@ -285,8 +285,8 @@ def read_bag_run(bag, label: Optional[str] = None, segment: Optional[int] = None
                 stamp, pose = L.parse_pose(data)
                 poses.put(bag, stamp, pose)
             elif name == "true_wheel_states":
-                stamp, left, right = L.parse_wheel_states(data)
-                wheels.put(bag, stamp, (left, right))
+                stamp, angles, _rates = L.parse_wheel_states(data)
+                wheels.put(bag, stamp, angles)
             elif name == "odom":
                 stamp, x, y, z = L.parse_odometry(data)
                 odom.put(bag, stamp, (x, y, z))

@@ -16,7 +16,7 @@
                                                     from yaw, pitch, roll (core.markers.pose_quaternion); stamp t_k
     true_wheel_states     sensor_msgs/JointState    a spatial plant's wheels: name [wheel_left_joint,
                                                     wheel_right_joint] (the URDF's), position each wheel's
-                                                    absolute angle [rad]; stamp t_k
+                                                    absolute angle [rad], velocity its rate; stamp t_k
 
     raw sensors (plant_sim with sensors.model: raw, docs/theory.md 6.4; the state_estimator reads them):
     imu/data_raw          sensor_msgs/Imu           frame_id imu_link; no orientation (all 0,
@@ -181,25 +181,30 @@ def parse_wheel_torques(data) -> Tuple[int, float, float]:
     return stamp, float(effort[0]), float(effort[1])
 
 
-def encode_wheel_states(stamp: int, left: float, right: float) -> bytes:
+def encode_wheel_states(stamp: int, angles: Sequence[float], rates: Sequence[float] = ()) -> bytes:
     """true_wheel_states (sensor_msgs/JointState): name :data:`WHEEL_TORQUE_JOINTS` (the URDF's wheel joints), position
-    each wheel's absolute angle [rad] (:class:`~mwip_ros.core.plant.Pose`'s wheel_left, wheel_right), stamp t_k."""
-    return _WHEEL_TORQUES(stamp, (float(left), float(right)))
+    each wheel's absolute angle [rad] (:class:`~mwip_ros.core.plant.Pose`'s wheel_left, wheel_right), velocity their
+    rates [rad/s] (empty when the plant has none), stamp t_k."""
+    return _WHEEL_TORQUES(stamp, tuple(float(a) for a in angles), tuple(float(r) for r in rates))
 
 
-def parse_wheel_states(data) -> Tuple[int, float, float]:
-    """(stamp_ns, left, right) of a true_wheel_states, or BadMessage: the names :data:`WHEEL_TORQUE_JOINTS` in that
-    order, two positions, each finite and plausible (:data:`LIMITS` theta_w)."""
-    stamp, _frame, names, position, _velocity, _effort = _decoded(cdr.decode_joint_state, data,
-                                                                   "sensor_msgs/JointState")
+def parse_wheel_states(data) -> Tuple[int, Tuple[float, float], Optional[Tuple[float, float]]]:
+    """(stamp_ns, (left, right) angles, (left, right) rates or None) of a true_wheel_states, or BadMessage: the names
+    :data:`WHEEL_TORQUE_JOINTS` in that order, two positions and none or two velocities, each finite and plausible
+    (:data:`LIMITS` theta_w, rate)."""
+    stamp, _frame, names, position, velocity, _effort = _decoded(cdr.decode_joint_state, data,
+                                                                  "sensor_msgs/JointState")
     if tuple(names) != WHEEL_TORQUE_JOINTS:
         raise BadMessage(f"joint names {names}, expected {list(WHEEL_TORQUE_JOINTS)}")
-    if len(position) != 2:
-        raise BadMessage(f"position has {len(position)} entries, expected 2 (left, right)")
-    _finite(position, "wheel angles")
+    if len(position) != 2 or len(velocity) not in (0, 2):
+        raise BadMessage(f"{len(position)} positions and {len(velocity)} velocities, expected 2 and 2 (or none)")
+    _finite((*position, *velocity), "wheel states")
     for v in position:
         _within(v, "theta_w", "wheel angle")
-    return stamp, float(position[0]), float(position[1])
+    for v in velocity:
+        _within(v, "rate", "wheel rate")
+    rates = (float(velocity[0]), float(velocity[1])) if len(velocity) else None
+    return stamp, (float(position[0]), float(position[1])), rates
 
 
 def encode_wrench(stamp: int, t1: float, t2: float) -> bytes:

@@ -54,6 +54,15 @@ def test_the_bag_carries_each_wheels_angle_equal_to_mwip_sims_csv(recording):
         assert np.isfinite(sim[c]).all(), c
         np.testing.assert_allclose(run[c], sim[c], rtol=0, atol=1e-9, err_msg=c)
     assert abs(sim["wheel_left"][-1] - sim["wheel_left"][0]) > 0.1   # the wheels turned
+    # the wheels' rates: their mean is theta_w' (each wheel = the body's pitch rate + its hinge's)
+    from mwip_ros.bag import raw_messages
+    from mwip_ros.msgs import layouts as L
+    rates = dict(L.parse_wheel_states(d)[::2] for _t, topic, d in raw_messages(bag) if topic == "/true_wheel_states")
+    t0 = min(rates)
+    mean = np.array([0.5 * sum(rates[s]) for s in sorted(rates)])
+    assert len(rates) == STATES and sorted(rates)[-1] - t0 == 1_500_000_000
+    np.testing.assert_allclose(mean, sim["dtheta_w"], rtol=0, atol=1e-9)
+    assert np.abs(mean).max() > 0.1
 
 
 def test_resim_of_the_mujoco_recording_reproduces_it_exactly(tmp_path, recording):

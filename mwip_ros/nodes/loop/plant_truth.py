@@ -5,7 +5,7 @@
   (sensing or actuation options on, or raw sensors);
 * a spatial plant's (``backend: mujoco``, docs/theory.md 6.10) ``true_pose`` (geometry_msgs/PoseStamped, frame
   ``odom``) and ``true_wheel_states`` (sensor_msgs/JointState ``[wheel_left_joint, wheel_right_joint]``, the URDF's
-  joints: each wheel's absolute angle), both stamped t_k: the bag then carries the csv's pose columns.
+  joints: each wheel's absolute angle and rate), both stamped t_k: the bag then carries the csv's pose columns.
 
 None of them is an input of the loop: a recorder and a report read them.
 """
@@ -41,7 +41,8 @@ class TruthPublishers:
         if self.pose is not None:
             pose = plant.pose
             self.pose.publish(L.encode_pose(stamp, pose))
-            self.wheels.publish(L.encode_wheel_states(stamp, pose.wheel_left, pose.wheel_right))
+            self.wheels.publish(L.encode_wheel_states(stamp, (pose.wheel_left, pose.wheel_right),
+                                                      getattr(plant, "wheel_rates", ())))
 
     def lumped_disturbance(self, stamp: int, tau_d) -> None:
         self.disturbance.publish(L.encode_wrench(stamp, tau_d[0], tau_d[1]))
