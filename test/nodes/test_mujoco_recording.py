@@ -9,7 +9,7 @@ import pytest
 
 pytest.importorskip("mujoco")
 
-from graphproc import PARAMS, Graph  # noqa: E402
+from graphproc import PARAMS, REPO, Graph  # noqa: E402
 from test_bag_replay import MODULE, parse_table  # noqa: E402
 
 pytestmark = pytest.mark.graph
@@ -97,3 +97,38 @@ def test_the_report_of_the_mujoco_bag_states_the_3d_pose(tmp_path, recording):
     line = next(ln for ln in r.stdout.splitlines() if "3D pose at t = 1.500 s" in ln)
     assert f"x {pose['x_m']:.4f} m" in line and "wheels turned" in line, r.stdout
     assert "3D pose" in (out / "metrics.md").read_text()
+
+
+def test_resim_of_a_mujoco_recording_with_the_yaw_stage_reproduces_its_wheel_torques(tmp_path):
+    """Motion on the MuJoCo plant (a speed and a yaw-rate profile): the controller answers each state with the yaw
+    stage's two wheel torques (wheel_torques_cmd, docs/theory.md 6.13) instead of wheel_torque_cmd; resim waits for
+    those answers and reproduces them exactly."""
+    turn = tmp_path / "turn.yaml"
+    turn.write_text("plant_sim:\n  ros__parameters:\n    backend: mujoco\n"
+                    "dscndo_controller:\n  ros__parameters:\n"
+                    "    motion: {profile: [0.0, 0.0, 0.5, 0.3], yaw_profile: [0.0, 0.0, 0.25, 0.5]}\n")
+    files = [PARAMS, REPO / "config" / "motion.yaml", turn]
+    bag = tmp_path / "bag"
+    for d in ("rec", "resim"):
+        (tmp_path / d).mkdir()
+    with Graph(tmp_path / "rec") as g:
+        rec = g.start("mcap_recorder", "-p", f"output:={bag}", "-p", "use_sim_time:=true", params=None)
+        g.start("disturbance_observer", "-p", "use_sim_time:=true", params=files)
+        g.start("dscndo_controller", "-p", "use_sim_time:=true", params=files)
+        plant = g.start("plant_sim", "-p", "duration_s:=1.5", "-p", "expected_subscribers:=3", params=files)
+        assert plant.wait(180) == 0, plant.output()
+        assert rec.stop() == 0, rec.output()
+    from mwip_ros.bag import topic_counts
+    counts = topic_counts(bag)
+    assert counts.get("/wheel_torques_cmd") == STATES and not counts.get("/wheel_torque_cmd"), counts
+    with Graph(tmp_path / "resim") as g:
+        g.start("disturbance_observer", "-p", "use_sim_time:=true", params=files)
+        g.start("dscndo_controller", "-p", "use_sim_time:=true", params=files)
+        br = g.start("bag_replay", "-p", f"bag:={bag}", "-p", "mode:=resim", params=None, module=MODULE)
+        code, out = br.wait(180), br.output()
+    assert code == 0, out
+    rows = parse_table(out)
+    for name in ("wheel_torques_cmd", "disturbance_estimate", "controller_internals", "u"):
+        compared, missing, diff = rows[name]
+        assert compared == STATES and missing in (0, None) and diff == 0.0, (name, out)
+    assert "wheel_torque_cmd" not in rows and "RESULT: REPRODUCED" in out

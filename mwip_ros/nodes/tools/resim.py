@@ -3,9 +3,10 @@
 It acts as the lockstep plant (:mod:`.lockstep`, the same driver ``plant_sim`` uses) with the
 recorded states: for every recorded ``joint_states`` (in order; a resent duplicate stamp
 once) it publishes ``/clock`` and the recorded bytes and waits for the one
-``wheel_torque_cmd`` that answers it, and collects the new ``disturbance_estimate`` and
-``controller_internals`` by stamp.  Then it compares them with the recorded outputs (the
-k-th recorded command answers the k-th state; estimates and internals by stamp) and prints
+``wheel_torque_cmd`` (or the yaw stage's ``wheel_torques_cmd``) that answers it, and collects
+the new ``disturbance_estimate`` and ``controller_internals`` by stamp.  Then it compares them with
+the recorded outputs (the k-th recorded command answers the k-th state; estimates and internals by
+stamp) and prints
 the largest absolute difference per topic and field, the compared and not reproduced
 samples, and whether everything is within ``tolerance``.  Every message is decoded by the
 message layer (:mod:`mwip_ros.msgs.layouts`).
@@ -55,7 +56,11 @@ __all__ = ["Resim", "EXIT_DIFFERENT"]
 EXIT_DIFFERENT = 4          # outputs differ from the recording
 COLLECT_IDLE_S = 1.0        # after the last command, wait this long without news for stragglers
 COLLECT_MAX_S = 5.0
-OUTPUTS = ("wheel_torque_cmd", "disturbance_estimate", "controller_internals")
+# the answer to a state: u, or the yaw stage's (u_L, u_R) when the controller tracks motion on a spatial plant's states
+# (docs/theory.md 6.13); each compared in order (the k-th answer to the k-th state)
+COMMANDS = {"wheel_torque_cmd": lambda data: (L.parse_command(data),),
+            "wheel_torques_cmd": lambda data: L.parse_wheel_torques(data)[1:]}
+OUTPUTS = (*COMMANDS, "disturbance_estimate", "controller_internals")
 LOOP_NODES = tuple(a.node for a in CHAIN)   # the answering nodes (core.loop.STAGES): their recorded changes apply
 
 
@@ -80,7 +85,7 @@ class Resim:
             self.log.info(f"resim: ignoring {', '.join(ignored)} (lockstep, /clock from each state's stamp)")
         self.rejects = Rejects(self.log)
         self._read_bag()
-        self.new_cmds: List[float] = []
+        self.new_cmds: Dict[str, List[tuple]] = {name: [] for name in COMMANDS}
         self.new = {"disturbance_estimate": {}, "controller_internals": {}}
         self.extra_cmds = 0
         self.k = 0
@@ -100,7 +105,10 @@ class Resim:
 
         clock_pub = node.create_publisher(Clock, "/clock", GRAPH_QOS)
         state_pub = node.create_publisher(JointState, "joint_states", GRAPH_QOS)
-        cmd_sub = node.create_subscription(Float64, "wheel_torque_cmd", self._on_cmd, INPUT_QOS, raw=True)
+        cmd_sub = node.create_subscription(Float64, "wheel_torque_cmd", lambda d: self._on_cmd("wheel_torque_cmd", d),
+                                           INPUT_QOS, raw=True)
+        node.create_subscription(JointState, "wheel_torques_cmd", lambda d: self._on_cmd("wheel_torques_cmd", d),
+                                 INPUT_QOS, raw=True)
         est_sub = node.create_subscription(WrenchStamped, "disturbance_estimate", self._on_est, INPUT_QOS, raw=True)
         int_sub = node.create_subscription(JointState, "controller_internals", self._on_int, INPUT_QOS, raw=True)
         need = v["wait_for_subscribers"]
@@ -114,7 +122,7 @@ class Resim:
                                      "disturbance_observer answer each stamp once, so restart both before every resim")
         t0, t1 = self.states[0][0] * 1e-9, self.states[-1][0] * 1e-9
         self.log.info(f"resim of {node.bag}: {len(self.states)} states (t = {t0:.3f} .. {t1:.3f} s), recorded "
-                      f"{len(self.rec_cmds)} commands, {len(self.rec['disturbance_estimate'])} estimates, "
+                      f"{self._recorded_commands()} commands, {len(self.rec['disturbance_estimate'])} estimates, "
                       f"{len(self.rec['controller_internals'])} internals; tolerance {v['tolerance']:g}")
 
     # --- the recording
@@ -142,7 +150,7 @@ class Resim:
         self.cmd_vels: Dict[int, bytes] = {}   # the state index k -> the newest recorded cmd_vel before state k
         self.has = {name: topics[name] is not None for name in OUTPUTS}
         self.states: List[Tuple[int, bytes]] = []
-        self.rec_cmds: List[float] = []
+        self.rec_cmds: Dict[str, List[tuple]] = {name: [] for name in COMMANDS}
         self.rec = {"disturbance_estimate": {}, "controller_internals": {}}
         seen = set()
         dropped = bad = 0
@@ -167,8 +175,8 @@ class Resim:
                         seen.add((seg, stamp))
                         self.states.append((stamp, data))
                         self.state_keys.append((seg, stamp))
-                    elif name == "wheel_torque_cmd":
-                        self.rec_cmds.append(L.parse_command(data))
+                    elif name in COMMANDS:
+                        self.rec_cmds[name].append(COMMANDS[name](data))
                     elif name == "cmd_vel":
                         L.parse_twist(data)   # a Twist; its numbers the controller judges, as it did
                         self.cmd_vels[len(self.states)] = bytes(data)
@@ -192,8 +200,8 @@ class Resim:
             self.log.warning(f"skipped {dropped} stray recorded state(s) (outside the recorded stream of stamps)")
         if bad:
             self.log.warning(f"skipped {bad} recorded message(s) that are not valid graph messages")
-        if self.has["wheel_torque_cmd"] and len(self.rec_cmds) != len(self.states):
-            self.log.warning(f"the bag has {len(self.rec_cmds)} wheel_torque_cmd for {len(self.states)} states; "
+        if any(self.has[name] for name in COMMANDS) and self._recorded_commands() != len(self.states):
+            self.log.warning(f"the bag has {self._recorded_commands()} commands for {len(self.states)} states; "
                              f"commands are compared in order (k-th command = answer to the k-th state)")
         self.stamp_set = seen
 
@@ -287,19 +295,22 @@ class Resim:
                 self.log.info(f"set {', '.join(done)} on {node} before the state at t = {t:.3f} s")
         self._send_now()
 
+    def _recorded_commands(self) -> int:
+        return sum(len(v) for v in self.rec_cmds.values())
+
     # --- inputs
-    def _on_cmd(self, data) -> None:
+    def _on_cmd(self, name: str, data) -> None:
         try:
-            u = L.parse_command(data)
+            u = COMMANDS[name](data)
         except BadMessage as exc:
-            self.rejects("wheel_torque_cmd", str(exc))
+            self.rejects(name, str(exc))
             return
         if not self.lockstep.take_answer():
             self.extra_cmds += 1
             if self.extra_cmds <= 3:
-                self.log.warning("a wheel_torque_cmd while no state was waiting for one (ignored)")
+                self.log.warning(f"a {name} while no state was waiting for one (ignored)")
             return
-        self.new_cmds.append(u)
+        self.new_cmds[name].append(u)
         self.k += 1
         self.last_news = time.monotonic()
         if self.k < len(self.states):
@@ -435,14 +446,18 @@ class Resim:
         fed = set(self.state_keys[:self.k])
         topics: Dict[str, Stat] = {}
         fields: Dict[str, Dict[str, Stat]] = {}
-        if self.has["wheel_torque_cmd"]:
-            st = topics["wheel_torque_cmd"] = Stat()
-            n = min(len(self.rec_cmds), len(self.new_cmds))
-            for a, b in zip(self.rec_cmds[:n], self.new_cmds[:n]):
-                st.add(diff(a, b))
+        for name in COMMANDS:
+            rec, new = self.rec_cmds[name], self.new_cmds[name]
+            if not (self.has[name] and (rec or new)):
+                continue
+            st = topics[name] = Stat()
+            n = min(len(rec), len(new))
+            for a, b in zip(rec[:n], new[:n]):
+                for x, y in zip(a, b):
+                    st.add(diff(x, y))
             st.compared = n
-            st.missing = max(0, min(len(self.rec_cmds), self.k) - n)
-            st.extra = len(self.new_cmds) - n + self.extra_cmds
+            st.missing = max(0, min(len(rec), self.k) - n)
+            st.extra = len(new) - n + (self.extra_cmds if name == "wheel_torque_cmd" else 0)
         for name, names in (("disturbance_estimate", ("tau_hat1", "tau_hat2")),
                             ("controller_internals", L.INTERNAL_NAMES)):
             if self.has[name]:
