@@ -220,8 +220,9 @@ def read_bag_run(bag, label: Optional[str] = None, segment: Optional[int] = None
     When the plant measured with noise or delay, the bag has ``true_joint_states`` too: the
     trajectory (and so every metric) is the true one, and the last row's torque is NaN (with an
     actuator delay no message holds it).  The run's ``record`` is :func:`plant_record`'s.  A spatial plant's bag
-    (backend mujoco) has ``true_pose`` too: the trajectory then has the pose columns (x, y, yaw, roll; the wheels'
-    own angles are in no message: NaN); a bag without it reads as before.
+    (backend mujoco) has ``true_pose`` and ``true_wheel_states`` too: the trajectory then has the pose columns (x, y,
+    yaw, roll from the one, wheel_left, wheel_right from the other; NaN where a stamp has none); a bag without them
+    reads as before.
 
     A bag of several runs (a reset or a new plant: the stamps go back, :mod:`mwip_ros.bag.segments`) is
     never merged: without ``segment`` it raises :class:`~mwip_ros.bag.segments.SpliceError` (a
@@ -247,6 +248,7 @@ def read_bag_run(bag, label: Optional[str] = None, segment: Optional[int] = None
     imu, enc = _Stamped(3, "imu/data_raw"), _Stamped(2, "wheel_encoder")   # raw sensors: gyro, f_x, f_z; phi, rate
     est, truth = _Stamped(2, "disturbance_estimate"), _Stamped(2, "lumped_disturbance")
     poses = _Stamped(6, "true_pose")   # a spatial plant's (backend mujoco): x, y, z, yaw, pitch, roll
+    wheels = _Stamped(2, "true_wheel_states")   # ... and each wheel's absolute angle: left, right
     odom = _Stamped(3, "odom")   # robot_state's pose (x, y, z = r): its drift from the truth
     cmds: List[float] = []
     logs: List[bytes] = []
@@ -282,6 +284,9 @@ def read_bag_run(bag, label: Optional[str] = None, segment: Optional[int] = None
             elif name == "true_pose":
                 stamp, pose = L.parse_pose(data)
                 poses.put(bag, stamp, pose)
+            elif name == "true_wheel_states":
+                stamp, angles, _rates = L.parse_wheel_states(data)
+                wheels.put(bag, stamp, angles)
             elif name == "odom":
                 stamp, x, y, z = L.parse_odometry(data)
                 odom.put(bag, stamp, (x, y, z))
@@ -308,7 +313,7 @@ def read_bag_run(bag, label: Optional[str] = None, segment: Optional[int] = None
     for i, s in enumerate(stamps):
         u = states.value(stamps[i + 1], 4) if i + 1 < len(stamps) else last_u
         extra = () if estimates is None else (*imu.get(s, nan3), *enc.get(s, nan2), *estimates.get(s, nan5)[:4])
-        pose = Pose(*poses.get(s, nan6), NAN, NAN) if len(poses) else None   # no message holds the wheels' angles
+        pose = Pose(*poses.get(s, nan6), *wheels.get(s, nan2)) if len(poses) else None
         table.append((s - t0) * 1e-9, states.get(s), u, est.get(s, nan2), truth.get(s, nan2), extra=extra, pose=pose)
         if drive:
             table.set_drive(u, math.nan)   # the drive's saturation is in no message
@@ -317,25 +322,31 @@ def read_bag_run(bag, label: Optional[str] = None, segment: Optional[int] = None
     run.h = float(np.median(np.diff(run.t))) if len(run) > 1 else NAN
     run.record = record
     if len(odom):
-        drift = _bag_odometry_drift(odom, states)
+        drift = _bag_odometry_drift(odom, states, poses)
         if drift is not None:
             run.record["odometry"] = drift
     return run
 
 
-def _bag_odometry_drift(odom: "_Stamped", states: "_Stamped") -> Optional[dict]:
-    """How far ``odom``'s last pose is from the truth (docs/theory.md 6.12): the robot moved r (theta_w - theta_w0)
-    along x from the first odom stamp to the last one that has a state (r = the odom's z, base_link's height), and
-    not at all along y.  None when no odom stamp has a state."""
-    both = sorted(s for s in odom.index if states.get(s) is not None)
+def _bag_odometry_drift(odom: "_Stamped", states: "_Stamped", poses: "_Stamped") -> Optional[dict]:
+    """How far ``odom``'s last pose is from the truth (docs/theory.md 6.12) from the first odom stamp to the last one
+    that has a state: a spatial plant's ``true_pose`` (x, y) when the bag has it (then also ``true_y_m``); else the
+    planar truth, r (theta_w - theta_w0) along x (r = the odom's z, base_link's height) and nothing along y.  None
+    when no odom stamp has a state (or, with poses, a pose)."""
+    have = poses if len(poses) else states
+    both = sorted(s for s in odom.index if have.get(s) is not None)
     if not both:
         return None
     first, last = both[0], both[-1]
     x, y, r = (odom.value(last, k) for k in range(3))
     x0, y0 = odom.value(first, 0), odom.value(first, 1)
-    true_dx = r * (states.value(last, 0) - states.value(first, 0))
-    return {"t_s": (last - first) * 1e-9, "odom_x_m": x - x0, "true_x_m": true_dx,
-            "drift_m": math.hypot(x - x0 - true_dx, y - y0)}
+    out = {"t_s": (last - first) * 1e-9, "odom_x_m": x - x0}
+    if len(poses):
+        true_dx, true_dy = (poses.value(last, k) - poses.value(first, k) for k in (0, 1))
+        out["true_y_m"] = true_dy
+    else:
+        true_dx, true_dy = r * (states.value(last, 0) - states.value(first, 0)), 0.0
+    return dict(out, true_x_m=true_dx, drift_m=math.hypot(x - x0 - true_dx, y - y0 - true_dy))
 
 
 class _Stamped:

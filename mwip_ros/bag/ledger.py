@@ -4,7 +4,8 @@ In lockstep the plant steps on a grid, t_k = k h from 0, and every state gets ex
 answer on every topic of the loop.  So a complete recording has, for every stamp of that
 grid up to the last one recorded, one message of that stamp on each stamped topic
 (``joint_states``, ``/clock``, ``disturbance_estimate``, ``lumped_disturbance``,
-``controller_internals``; with raw sensors ``imu/data_raw`` and ``wheel_encoder`` too) and as many
+``controller_internals``; with raw sensors ``imu/data_raw`` and ``wheel_encoder`` too, with a spatial plant
+``true_pose`` and ``true_wheel_states``) and as many
 ``wheel_torque_cmd`` as states; ``external_wrench`` and ``emergency_stop`` are whatever a user sent,
 ``robot_markers`` a view of the states, ``driver_state`` the driver's transitions and ``/rosout``,
 ``/parameter_events``, ``/diagnostics`` ROS's own: those are not compared.  A recorder that joined
@@ -34,8 +35,8 @@ NOT_COMPARED = {"external_wrench", "emergency_stop", "cmd_vel",   # what a user 
                 "odom", "robot_description", "wheel_joint_states",   # robot_state's view of the states;
                 "rosout", "parameter_events", "diagnostics"}   # ROS's own topics
 # published only with sensing options on (the truth), raw sensors (the IMU, the encoder), a spatial plant (its
-# pose) or the yaw stage (the two wheel torques): judged when they have messages
-OPTIONAL = {"true_joint_states", "data_raw", "wheel_encoder", "true_pose", "wheel_torques_cmd"}
+# pose and wheel angles) or the yaw stage (the two wheel torques): judged when they have messages
+OPTIONAL = {"true_joint_states", "data_raw", "wheel_encoder", "true_pose", "true_wheel_states", "wheel_torques_cmd"}
 MAX_STAMPS = 10_000_000     # per topic; past it a topic is only counted (its judgement would hold them all at once)
 MAX_RUNS = 100_000          # per topic (2.4 MB); past it (stamps on no grid) a topic is only counted
 

@@ -27,8 +27,8 @@ tells them apart, for the readers (``mwip_report``, ``bag_replay`` resim).
 * **Membership** (:meth:`Segments.which`): a message is in the segment whose range holds
   its position (from a segment's first state to the next one's; what comes before the
   first state is in the first), except the stamped answers (``disturbance_estimate``,
-  ``lumped_disturbance``, ``controller_internals``, ``true_joint_states``, ``true_pose``): they go with the
-  state of their stamp nearest them in the recording, so an answer received just after the
+  ``lumped_disturbance``, ``controller_internals``, ``true_joint_states``, ``true_pose``, ``true_wheel_states``):
+  they go with the state of their stamp nearest them in the recording, so an answer received just after the
   next run began still counts for the run it answers.  A stray state is in none (None).
 
 Nothing here imports ROS.
@@ -49,7 +49,8 @@ from mwip_ros.msgs.topics import leaf
 __all__ = ["Segment", "Segments", "SpliceError", "split", "recorded_messages", "STATE_TOPIC", "STAMPED"]
 
 STATE_TOPIC = "joint_states"
-STAMPED = ("true_joint_states", "disturbance_estimate", "lumped_disturbance", "controller_internals", "true_pose")
+STAMPED = ("true_joint_states", "disturbance_estimate", "lumped_disturbance", "controller_internals", "true_pose",
+           "true_wheel_states")
 
 Message = Tuple[int, str, bytes]   # (log time, topic, data), as raw_messages yields them
 

@@ -44,6 +44,8 @@ import sys
 from pathlib import Path
 from typing import List, Optional, Sequence
 
+import numpy as np
+
 from mwip_ros.bag import REPAIRED_KEY, BagError, read_metadata
 from mwip_ros.bag.ledger import GAPS_KEY
 from mwip_ros.cli import animation, interrupts, outputs, plotting
@@ -130,12 +132,44 @@ def ratio_table(named: Sequence[tuple], markdown: bool = True) -> List[str]:
 
 
 def run_notes(run: Trajectory, m: metrics.Metrics) -> List[str]:
-    """What a run's end was: its fall, its cut (the plant's configured duration, where the bag recorded it); with
-    robot_state's odom in the bag, its drift from the true pose (docs/theory.md 6.12)."""
+    """What a run's end was: its fall, its cut (the plant's configured duration, where the bag recorded it); a
+    spatial plant's (backend mujoco) 3D pose at the end (:func:`pose_summary`); with robot_state's odom in the bag,
+    its drift from the true pose (docs/theory.md 6.12)."""
     rec = run.record or {}
     odo = rec.get("odometry")
-    return _end_notes(run, m, rec) + ([f"odom drifts {odo['drift_m']:.4g} m from the true pose over {odo['t_s']:.3f} s "
-                                       f"(x {odo['odom_x_m']:.4g} m against {odo['true_x_m']:.4g} m)"] if odo else [])
+    pose = pose_summary(run)
+    notes = _end_notes(run, m, rec)
+    if pose:
+        f = {k: _fixed(v, 4 if k != "t_s" else 3) for k, v in pose.items()}
+        notes.append(f"3D pose at t = {f['t_s']} s: x {f['x_m']} m, y {f['y_m']} m, yaw {f['yaw_rad']} rad (max "
+                     f"|roll| {f['roll_max_abs_rad']} rad); the wheels turned {f['wheel_left_rad']} rad (left) and "
+                     f"{f['wheel_right_rad']} rad (right)")
+    if odo:
+        notes.append(f"odom drifts {odo['drift_m']:.4g} m from the true pose over {odo['t_s']:.3f} s (x "
+                     f"{odo['odom_x_m']:.4g} m against {odo['true_x_m']:.4g} m)")
+    return notes
+
+
+def _fixed(v: float, digits: int) -> str:
+    """``v`` to ``digits`` decimals, a value that rounds to zero as 0 (never '-0.0000')."""
+    return f"{round(v, digits) + 0.0:.{digits}f}"
+
+
+def pose_summary(run: Trajectory) -> Optional[dict]:
+    """A spatial plant's pose columns (core.trajectory.POSE_COLUMNS) summed up: where the axle ends relative to where
+    it started (x, y [m], in the frame ``odom`` fixed at the start), the heading at the end, the largest roll, and
+    how far each wheel turned [rad].  None for a planar run (no pose columns) or a pose that is not finite (no
+    figure from NaN)."""
+    if "x" not in run.columns or not len(run):
+        return None
+    cols = {c: np.asarray(run[c], dtype=float) for c in ("x", "y", "yaw", "roll", "wheel_left", "wheel_right")}
+    if not all(np.isfinite(v).all() for v in cols.values()):
+        return None
+    return {"t_s": float(run.t[-1]), "x_m": float(cols["x"][-1] - cols["x"][0]),
+            "y_m": float(cols["y"][-1] - cols["y"][0]), "yaw_rad": float(cols["yaw"][-1]),
+            "roll_max_abs_rad": float(np.abs(cols["roll"]).max()),
+            "wheel_left_rad": float(cols["wheel_left"][-1] - cols["wheel_left"][0]),
+            "wheel_right_rad": float(cols["wheel_right"][-1] - cols["wheel_right"][0])}
 
 
 def _end_notes(run: Trajectory, m: metrics.Metrics, rec: dict) -> List[str]:
@@ -207,7 +241,8 @@ def write_report(runs: List[Trajectory], out: Path, window=metrics.WINDOW, fall_
            "fallen": fallen, "notes": notes,
            "ratios": {"reference": ref, "why": why, "units": "ratio (run / reference)",
                       "runs": {name: dict(zip((k for k, _ in RATIOS), vals)) for name, vals in rows}},
-           "sources": {r.label: len(r) for r in runs}, "warnings": list(warnings)}
+           "sources": {r.label: len(r) for r in runs}, "warnings": list(warnings),
+           "poses": {r.label: p for r in runs for p in (pose_summary(r),) if p}}
     (out / "metrics.json").write_text(json.dumps(metrics.json_safe(doc), indent=2, allow_nan=False))
     files += ["metrics.md", "metrics.json"]
     return {"named": named, "window": window, "window_note": window_note, "fallen": fallen, "notes": notes,

@@ -20,7 +20,7 @@ from mwip_ros.sweep import progress as sweep_progress
 from mwip_ros.sweep.scenarios import expand, parameter_file
 from mwip_ros.core import batch
 from mwip_ros.core import laws as registry
-from mwip_ros.sweep.spec import SpecError, load_spec
+from mwip_ros.sweep.spec import SWEEP_BACKENDS, SpecError, load_spec
 
 PROG = "mwip_sweep"
 EXIT_BAD_INPUT, EXIT_INTERRUPTED = 2, interrupts.EXIT_SIGINT   # 143 after SIGTERM (interrupts.run_main)
@@ -164,7 +164,7 @@ def _main(argv=None) -> int:
     except ValueError as exc:
         return _fail(str(exc))
     try:
-        spec = load_spec(args.spec, backends=("rk4", "mujoco"))   # mujoco: the scalar loop (core.batch)
+        spec = load_spec(args.spec, backends=SWEEP_BACKENDS)   # mujoco: the scalar loop (core.batch)
         scenarios = expand(spec)
     except (SpecError, P.ParamError) as exc:
         return _fail(str(exc))

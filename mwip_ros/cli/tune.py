@@ -18,7 +18,7 @@ from mwip_ros.cli.exits import epilog
 from mwip_ros.cli.outputs import refuse_existing
 from mwip_ros.cli.sweep import add_runner_arguments, runner_from
 from mwip_ros.sweep.scenarios import parameter_overlay
-from mwip_ros.sweep.spec import SpecError, load_spec
+from mwip_ros.sweep.spec import SWEEP_BACKENDS, SpecError, load_spec
 from mwip_ros.sweep.tune import KNOBS, Objective, check_memory, Tuner, knobs_for, overlay, parse_bounds
 
 PROG = "mwip_tune"
@@ -29,7 +29,8 @@ def _parser() -> argparse.ArgumentParser:
         prog=PROG,
         description="Tune a law's gains on a sweep spec's scenarios with scipy's differential evolution (bounded, "
                     "seeded, in log space), every candidate judged on all scenarios at once by the batch "
-                    "simulator: J = mean over scenarios of theta_b RMS + WEIGHT * u RMS over the metrics window, a "
+                    "simulator (plant_sim.backend: mujoco: MuJoCo's scalar loop, scenario by scenario, as "
+                    "mwip_sweep): J = mean over scenarios of theta_b RMS + WEIGHT * u RMS over the metrics window, a "
                     "fall costs 1.0; for DSC/DSCNDO, Theorem 2 (gamma > 0) is a hard constraint. The result is "
                     "judged beside the base file's gains on a held-out set (the same spec, another seed) and "
                     "written as a parameter-file overlay.",
@@ -89,7 +90,7 @@ def _main(argv=None) -> int:
     if reason:
         return _fail(reason)
     try:
-        spec = load_spec(args.spec)
+        spec = load_spec(args.spec, backends=SWEEP_BACKENDS)   # mujoco: the scalar loop, as mwip_sweep's
         knobs = knobs_for(args.tune, law)
         bounds = parse_bounds(knobs, args.bounds)
         check_memory(spec, knobs, args.popsize)   # before any scenario is expanded

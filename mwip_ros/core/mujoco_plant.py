@@ -183,6 +183,13 @@ class MujocoPlant(PlantSim):
         return float(self._qvel[5])
 
     @property
+    def wheel_rates(self) -> Tuple[float, float]:
+        """Each wheel's absolute angular rate at t_k [rad/s] (left, right): the body's pitch rate plus its hinge's;
+        their mean is theta_w' (:meth:`_read`)."""
+        v = self._qvel
+        return float(v[4] + v[6]), float(v[4] + v[7])
+
+    @property
     def fallen(self) -> bool:
         return not all(math.isfinite(v) for v in self.x) or abs(self.x[1]) > self.cfg.fall_angle
 

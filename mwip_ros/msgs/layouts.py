@@ -14,6 +14,9 @@
     true_pose             geometry_msgs/PoseStamped a spatial plant's (backend mujoco) true 3D pose: frame_id
                                                     odom (REP-105), position the axle's centre, orientation
                                                     from yaw, pitch, roll (core.markers.pose_quaternion); stamp t_k
+    true_wheel_states     sensor_msgs/JointState    a spatial plant's wheels: name [wheel_left_joint,
+                                                    wheel_right_joint] (the URDF's), position each wheel's
+                                                    absolute angle [rad], velocity its rate; stamp t_k
 
     raw sensors (plant_sim with sensors.model: raw, docs/theory.md 6.4; the state_estimator reads them):
     imu/data_raw          sensor_msgs/Imu           frame_id imu_link; no orientation (all 0,
@@ -50,7 +53,8 @@ __all__ = ["JOINT_NAMES", "INTERNAL_NAMES", "LIMITS", "RAW_LIMITS", "IMU_FRAME",
            "parse_command", "parse_clock", "parse_internals", "parse_external_wrench", "encode_imu", "parse_imu",
            "encode_encoder", "parse_encoder", "parse_odometry", "check_state", "RAW_FILTERS", "encode_twist",
            "parse_twist", "POSE_FRAME", "encode_pose", "parse_pose", "parse_bool", "YAW_JOINT", "parse_yaw_rate",
-           "WHEEL_TORQUE_JOINTS", "encode_wheel_torques", "parse_wheel_torques"]
+           "WHEEL_TORQUE_JOINTS", "encode_wheel_torques", "parse_wheel_torques", "encode_wheel_states",
+           "parse_wheel_states"]
 
 JOINT_NAMES = ("wheel", "body_pitch")
 YAW_JOINT = "yaw"   # joint_states' third joint from a spatial plant: velocity = the gyro's yaw rate (theory 6.13)
@@ -175,6 +179,32 @@ def parse_wheel_torques(data) -> Tuple[int, float, float]:
     for v in effort:
         _within(v, "torque", "wheel torque")
     return stamp, float(effort[0]), float(effort[1])
+
+
+def encode_wheel_states(stamp: int, angles: Sequence[float], rates: Sequence[float] = ()) -> bytes:
+    """true_wheel_states (sensor_msgs/JointState): name :data:`WHEEL_TORQUE_JOINTS` (the URDF's wheel joints), position
+    each wheel's absolute angle [rad] (:class:`~mwip_ros.core.plant.Pose`'s wheel_left, wheel_right), velocity their
+    rates [rad/s] (empty when the plant has none), stamp t_k."""
+    return _WHEEL_TORQUES(stamp, tuple(float(a) for a in angles), tuple(float(r) for r in rates))
+
+
+def parse_wheel_states(data) -> Tuple[int, Tuple[float, float], Optional[Tuple[float, float]]]:
+    """(stamp_ns, (left, right) angles, (left, right) rates or None) of a true_wheel_states, or BadMessage: the names
+    :data:`WHEEL_TORQUE_JOINTS` in that order, two positions and none or two velocities, each finite and plausible
+    (:data:`LIMITS` theta_w, rate)."""
+    stamp, _frame, names, position, velocity, _effort = _decoded(cdr.decode_joint_state, data,
+                                                                  "sensor_msgs/JointState")
+    if tuple(names) != WHEEL_TORQUE_JOINTS:
+        raise BadMessage(f"joint names {names}, expected {list(WHEEL_TORQUE_JOINTS)}")
+    if len(position) != 2 or len(velocity) not in (0, 2):
+        raise BadMessage(f"{len(position)} positions and {len(velocity)} velocities, expected 2 and 2 (or none)")
+    _finite((*position, *velocity), "wheel states")
+    for v in position:
+        _within(v, "theta_w", "wheel angle")
+    for v in velocity:
+        _within(v, "rate", "wheel rate")
+    rates = (float(velocity[0]), float(velocity[1])) if len(velocity) else None
+    return stamp, (float(position[0]), float(position[1])), rates
 
 
 def encode_wrench(stamp: int, t1: float, t2: float) -> bytes:

@@ -16,6 +16,7 @@ GRAPH_TOPICS: Dict[str, str] = {
     "joint_states": "sensor_msgs/msg/JointState",
     "true_joint_states": "sensor_msgs/msg/JointState",   # with sensing or actuation options on, or raw sensors
     "true_pose": "geometry_msgs/msg/PoseStamped",        # a spatial plant's (backend mujoco) true 3D pose
+    "true_wheel_states": "sensor_msgs/msg/JointState",   # a spatial plant's wheels: each one's absolute angle
     "imu/data_raw": "sensor_msgs/msg/Imu",               # raw sensors (sensors.model: raw): the body's IMU
     "wheel_encoder": "sensor_msgs/msg/JointState",       # raw sensors: the wheel's angle relative to the body
     "wheel_torque_cmd": "std_msgs/msg/Float64",

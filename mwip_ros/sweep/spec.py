@@ -39,12 +39,15 @@ from mwip_ros.params.errors import bounded
 from mwip_ros.params.file import NODES_OF_THE_LOOP
 from mwip_ros.yamlio import YamlRefused, load_yaml, shown
 
-__all__ = ["SpecError", "Axis", "SweepSpec", "load_spec", "parse_spec", "GRID_KINDS", "RANDOM_KINDS"]
+__all__ = ["SpecError", "Axis", "SweepSpec", "load_spec", "parse_spec", "GRID_KINDS", "RANDOM_KINDS", "SWEEP_BACKENDS"]
 
 GRID_KINDS = ("grid", "values", "linspace")
 RANDOM_KINDS = ("uniform", "scale", "normal")
 TOP_KEYS = ("base", "controllers", "duration_s", "metrics_window_s", "seed", "samples", "vary")
 MAX_SCENARIOS = 50_000_000
+# The plant backends the sweep engine runs (mwip_sweep, mwip_tune): rk4 batched, mujoco through the scalar loop
+# scenario by scenario (core.batch.simulate_batch).
+SWEEP_BACKENDS = ("rk4", "mujoco")
 
 # Parameters of the loop's nodes that do not change the offline closed loop (or that the spec sets itself).
 NOT_SIMULATED = {
@@ -126,7 +129,9 @@ class SweepSpec:
 
 def load_spec(path, base_override: Optional[Path] = None, backends=("rk4",)) -> SweepSpec:
     """Read and check a sweep spec file; raises :class:`SpecError` (or ``ParamError`` for the base file).
-    ``backends``: the plant backends the caller runs (``mwip_sweep``: rk4 and mujoco; ``mwip_tune``: rk4)."""
+    ``backends``: the plant backends the caller runs (``mwip_sweep``, ``mwip_tune``: rk4 and mujoco, the scalar loop
+    runs a mujoco scenario; the environments: rk4); a base file, or a ``vary: plant_sim.backend`` value, with
+    another one is refused naming the key."""
     p = Path(path)
     if not p.is_file():
         raise SpecError("<spec>", f"no such file: {p}" if not p.is_dir() else f"{p} is a directory")
@@ -180,9 +185,7 @@ def parse_spec(doc: Any, source: str = "<spec>", here: Path = Path("."),
     pf = P.load_param_files(base_path, option="base")   # ParamError names the file and the key
     base_values = P.merged_values(pf)
     if base_values.get("backend", "rk4") not in backends:
-        raise SpecError("base", f"plant_sim.backend: {base_values['backend']}: this tool runs the "
-                                f"{' and '.join(backends)} backend only for now; mwip_sim, plant_sim and mwip_sweep "
-                                f"run mujoco", source)
+        raise SpecError("base", f"plant_sim.backend: {base_values['backend']}: {_runs_only(backends)}", source)
 
     ctrls = doc.get("controllers", ["dsc", "dscndo"])   # the paper's comparison unless the spec says more
     known = laws.names()   # the registry (core.laws)
@@ -222,12 +225,34 @@ def parse_spec(doc: Any, source: str = "<spec>", here: Path = Path("."),
     if not isinstance(vary, dict):
         raise SpecError("vary", "expected a mapping of parameter keys to distributions", source)
     axes = [_axis(str(k), d, base_values, source) for k, d in vary.items()]
+    for a in axes:
+        if a.name == "backend":
+            _check_backends(a, base_values, backends, source)
     spec = SweepSpec(source, base_path, base_values, pf.sections, tuple(ctrls), duration, (t0, t1), seed,
                      samples, axes)
     if spec.n_scenarios > MAX_SCENARIOS:
         raise SpecError("vary", f"{spec.n_scenarios:,} scenarios; at most {MAX_SCENARIOS:,} per sweep", source)
     check_memory(spec)
     return spec
+
+
+def _runs_only(backends) -> str:
+    return (f"this tool runs the {' and '.join(backends)} backend only; mwip_sim, plant_sim, mwip_sweep and "
+            f"mwip_tune run mujoco")
+
+
+def _check_backends(axis: Axis, base_values: Dict[str, Any], backends, source: str) -> None:
+    """An axis over ``plant_sim.backend``: every value one the caller runs, and the base file valid as each
+    backend reads it (the 3D model's checks of ``backend: mujoco`` apply only when a scenario takes it)."""
+    for b in axis.grid_values():
+        if b not in backends:
+            raise SpecError(f"vary.{axis.key}", f"{b}: {_runs_only(backends)}", source)
+        if b != base_values.get("backend", "rk4"):
+            try:
+                P.check_derived(dict(base_values, backend=b), source)
+            except P.ParamError as exc:
+                raise SpecError(f"vary.{axis.key}", f"{b}: the base file's {exc.key}: {exc.reason}",
+                                source) from None
 
 
 def _budget(source: str) -> int:

@@ -5,7 +5,7 @@ import math
 
 import pytest
 
-from bagcheck import write_graph_bag
+from bagcheck import graph_topics, write_bag, write_graph_bag
 from mwip_ros.cli import report
 from mwip_ros.msgs import cdr
 from mwip_ros.msgs import layouts as L
@@ -37,11 +37,11 @@ def test_the_odometry_codec_reads_what_rclpy_writes():
 
 
 def test_the_report_states_the_drift(tmp_path):
-    # bagcheck's graph bag: message i of every topic at stamp i s; the state's theta_w = 0.1 i (a state for odd i
-    # only: bagcheck gives the even ones no effort, which a state needs), the odom's x = 0.1 i, z (= r) 0.254, y 0:
-    # from stamp 1 to 5 the truth moved 0.254 * 0.4 = 0.1016 m, the odom 0.4 m
+    # bagcheck's graph bag without a spatial plant's true_pose: message i of every topic at stamp i s; the state's
+    # theta_w = 0.1 i (a state for odd i only: bagcheck gives the even ones no effort, which a state needs), the odom's
+    # x = 0.1 i, z (= r) 0.254, y 0: from stamp 1 to 5 the truth moved 0.254 * 0.4 = 0.1016 m, the odom 0.4 m
     bag = tmp_path / "b"
-    write_graph_bag(bag, n=7)
+    write_bag(bag, {t: ty for t, ty in graph_topics().items() if t != "/true_pose"}, n=7)
     run = read_bag_run(bag)
     odo = run.record["odometry"]
     assert odo["t_s"] == pytest.approx(4.0)
@@ -51,3 +51,15 @@ def test_the_report_states_the_drift(tmp_path):
     note = out["notes"][run.label][-1]
     assert note == "odom drifts 0.2984 m from the true pose over 4.000 s (x 0.4 m against 0.1016 m)"
     assert note in (tmp_path / "rep" / "metrics.md").read_text()
+
+
+def test_with_a_true_pose_the_drift_is_from_it(tmp_path):
+    """A spatial plant's bag (backend mujoco): the truth is true_pose's (x, y), here x = 0.1 i, y = -0.05 i at every
+    stamp: from stamp 0 to 6 it moved (0.6, -0.3) m, the odom (0.6, 0) m: 0.3 m apart (r theta_w, which ignores slip
+    and turns, would say 0.254 * 0.4 m over the states' stamps 1 to 5)."""
+    bag = tmp_path / "b"
+    write_graph_bag(bag, n=7)
+    odo = read_bag_run(bag).record["odometry"]
+    assert odo["t_s"] == pytest.approx(6.0)
+    assert odo["true_x_m"] == pytest.approx(0.6) and odo["true_y_m"] == pytest.approx(-0.3)
+    assert odo["drift_m"] == pytest.approx(0.3)

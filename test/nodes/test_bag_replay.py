@@ -104,14 +104,14 @@ def test_resim_with_a_changed_gain_reports_the_difference(tmp_path, bag):
     assert "RESULT: DIFFERENT" in out and "wheel_torque_cmd" in out.split("RESULT:")[1]
 
 
-def test_resim_refuses_a_controller_that_tracks_cmd_vel_in_one_line(tmp_path, bag):
-    """docs/theory.md 6.11: cmd_vel is not in the bag, so a controller with motion.enabled (and no profile) cannot be
-    re-simulated: one line naming motion.enabled, exit 2, before any state is fed."""
+def test_resim_of_a_controller_that_tracks_cmd_vel_replays_the_bags_and_shows_the_difference(tmp_path, bag):
+    """docs/theory.md 6.11: a controller with motion.enabled (and no profile) gets the bag's cmd_vel (none in this
+    run: its target stays 0 and it holds its start position), so against this run without motion its commands
+    differ (test_resim_motion.py: a run that tracked cmd_vel is reproduced)."""
     code, out = resim(tmp_path, bag, "-p", "motion.enabled:=true")
-    assert code == 2, out
-    errors = [ln for ln in out.splitlines() if "[ERROR]" in ln]
-    assert len(errors) == 1 and "motion.enabled" in errors[0], out
-    assert "starting the lockstep re-simulation" not in out
+    assert code == 4, out
+    assert "recorded cmd_vel replayed: 0" in out and "RESULT: DIFFERENT" in out, out
+    assert parse_table(out)["wheel_torque_cmd"][2] > 1e-6, out
 
 
 def test_replay_at_rate_4_republishes_every_message_in_a_quarter_of_the_time(tmp_path, bag):

@@ -29,7 +29,8 @@ def _paper(**over):
 
 def test_lockstep_mujoco_graph_equals_mwip_sim_with_the_pose_and_the_bag_holds_it(tmp_path):
     """Deterministic: the graph's trajectory, its pose columns included, equals mwip_sim's with backend mujoco to
-    1e-9 over 1.5 s of DSCNDO, and the recorded true_pose is that pose (the rk4 csv has no pose columns)."""
+    1e-9 over 1.5 s of DSCNDO, and the recorded true_pose and true_wheel_states are that pose (the rk4 csv has no
+    pose columns)."""
     csv_path, bag = tmp_path / "graph.csv", tmp_path / "bag"
     with Graph(tmp_path) as g:
         rec = g.start("mcap_recorder", "-p", f"output:={bag}", "-p", "use_sim_time:=true")
@@ -50,9 +51,8 @@ def test_lockstep_mujoco_graph_equals_mwip_sim_with_the_pose_and_the_bag_holds_i
     assert offline["x"][-1] != offline["x"][0] and offline["wheel_left"][-1] != offline["wheel_left"][0]  # it moved
     from_bag = read_bag_run(bag)
     assert len(from_bag) == 301
-    for c in ("x", "y", "yaw", "roll"):   # from true_pose's position and quaternion
+    for c in POSE_COLUMNS:   # true_pose's position and quaternion, true_wheel_states' positions
         np.testing.assert_allclose(from_bag[c], offline[c], rtol=0, atol=1e-9, err_msg=c)
-    assert np.isnan(from_bag["wheel_left"]).all()   # no message carries the wheels' own angles
     np.testing.assert_allclose(from_bag["theta_b"], offline["theta_b"], rtol=0, atol=1e-9)
 
 

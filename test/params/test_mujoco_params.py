@@ -1,6 +1,6 @@
 """The keys of ``plant_sim.backend: mujoco`` (docs/theory.md 6.10): out of range, or a body no rigid body can be,
 or wheels that overlap, or the package missing, is one line naming the key; mwip_sim runs the backend and a
-diverging run ends as a fault, not as a trajectory; the batch simulator refuses the backend in one line."""
+diverging run ends as a fault, not as a trajectory; a caller that runs rk4 only refuses the backend in one line."""
 import subprocess
 import sys
 
@@ -92,11 +92,11 @@ def _mujoco_spec(tmp_path, vary="{}"):
     return spec
 
 
-def test_mwip_tune_refuses_the_mujoco_backend_in_one_line(tmp_path):
+def test_an_rk4_only_caller_refuses_the_mujoco_backend_in_one_line(tmp_path):
     from mwip_ros.sweep.spec import SpecError, load_spec
     with pytest.raises(SpecError) as ei:
-        load_spec(_mujoco_spec(tmp_path))   # mwip_tune's call: rk4 only
-    assert "backend: mujoco" in str(ei.value) and "mwip_sweep" in str(ei.value) and "\n" not in str(ei.value)
+        load_spec(_mujoco_spec(tmp_path))   # the environments' call: rk4 only (mwip_sweep, mwip_tune run mujoco)
+    assert "backend: mujoco" in str(ei.value) and "mwip_tune" in str(ei.value) and "\n" not in str(ei.value)
 
 
 def test_the_batch_runs_the_mujoco_backend_scenario_by_scenario_as_mwip_sim_and_a_divergence_is_a_failure():

@@ -39,7 +39,8 @@ a ``state_estimator`` publishes ``joint_states`` (the lockstep chain waits for i
 the plant's stage ``sensors`` (:meth:`mwip_ros.core.loop.PlantSide.sense`).
 
 With ``backend: mujoco`` (docs/theory.md 6.10: a plant with a 3D pose, ``Plant.spatial``) the plant publishes its
-pose per state on ``true_pose`` (geometry_msgs/PoseStamped, frame ``odom``) and its csv has the pose columns; a
+pose per state on ``true_pose`` (geometry_msgs/PoseStamped, frame ``odom``) and each wheel's angle on
+``true_wheel_states`` (:mod:`.plant_truth`), and its csv has the pose columns; a
 simulation that diverges (``PlantDiverged``) is the driver's fault ``diverged``: one line, no state past it, exit 1.
 
 The plant's trajectory table (its ``csv``) has the states, the commands it applied and
@@ -61,7 +62,7 @@ from collections import deque
 from dataclasses import replace
 from typing import Optional
 
-from geometry_msgs.msg import PoseStamped, Wrench, WrenchStamped
+from geometry_msgs.msg import Wrench
 from rclpy.duration import Duration
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
@@ -82,6 +83,7 @@ from mwip_ros.nodes.runtime.guards import PublisherWatch, Rejects
 from mwip_ros.nodes.runtime.lockstep import LockstepDriver, subscriber_floor
 from mwip_ros.nodes.runtime.params import declare
 from mwip_ros.nodes.loop.plant_runners import RUNNERS
+from mwip_ros.nodes.loop.plant_truth import TruthPublishers
 from mwip_ros.nodes.runtime.process import EXIT_ERROR, EXIT_FALLEN, GracefulNodeMixin, run_node
 from mwip_ros.params import plant_config
 from mwip_ros.params.typed import limit_warnings
@@ -140,13 +142,9 @@ class PlantSimNode(Node, GracefulNodeMixin):
             self.imu_variances = (r.gyro_noise_std ** 2, r.accel_noise_std ** 2)
         else:
             self.state_pub = self.create_publisher(JointState, "joint_states", pub_qos)
-        # with sensing or actuation options on, or raw sensors, what the loop reads is a measurement: the truth
-        # goes here
-        self.true_pub = (self.create_publisher(JointState, "true_joint_states", pub_qos)
-                         if sc.active or self.raw else None)
-        self.truth_pub = self.create_publisher(WrenchStamped, "lumped_disturbance", pub_qos)
-        # a spatial plant (backend mujoco, docs/theory.md 6.10): its true 3D pose beside each state
-        self.pose_pub = self.create_publisher(PoseStamped, "true_pose", pub_qos) if self.plant.spatial else None
+        # the truth (.plant_truth): tau_d; the state when the loop reads a measurement (sensing or actuation options,
+        # raw sensors); a spatial plant's (backend mujoco, docs/theory.md 6.10) 3D pose and wheel angles
+        self.truth = TruthPublishers(self, pub_qos, measured=sc.active or self.raw, spatial=self.plant.spatial)
         self.clock_pub = self.create_publisher(Clock, "/clock", pub_qos) if runner.publishes_clock else None
         cmd_sub = self.create_subscription(Float64, "wheel_torque_cmd", self._on_cmd, in_qos, raw=True)
         if self.plant.spatial:   # the yaw stage's two torques (docs/theory.md 6.13), instead of wheel_torque_cmd
@@ -180,8 +178,7 @@ class PlantSimNode(Node, GracefulNodeMixin):
             need_subs=subscriber_floor(self.v["expected_subscribers"], answers),
             timeout_s=self.v["lockstep_timeout_s"], timeout_param="lockstep_timeout_s", settle_s=SETTLE_S,
             idle_hint="a wheel_torque_cmd (the controller is running but did not answer)",
-            also_published=tuple(p for p in (self.encoder_pub, self.truth_pub, self.true_pub, self.pose_pub)
-                                 if p is not None),
+            also_published=tuple(p for p in (self.encoder_pub,) if p is not None) + self.truth.publishers,
             answers=answers)
         self.runner = runner(self)
         dur = f"{self.v['duration_s']:g} s" if self.n_steps is not None else "until stopped"
@@ -413,10 +410,7 @@ class PlantSimNode(Node, GracefulNodeMixin):
         raw sensors are on."""
         p = self.plant
         stamp = self._stamp()
-        if self.true_pub is not None:
-            self.true_pub.publish(L.encode_state(stamp, p.x, p.u_prev))
-        if self.pose_pub is not None:
-            self.pose_pub.publish(L.encode_pose(stamp, p.pose))
+        self.truth.sample(stamp, p)
         measured, u_prev = self.side.sense()
         if not self.raw:   # a spatial plant adds the gyro's yaw rate (the yaw stage's input, docs/theory.md 6.13)
             yaw_rate = self.side.sense_yaw_rate() if p.spatial else None
@@ -434,7 +428,7 @@ class PlantSimNode(Node, GracefulNodeMixin):
         self.steps += 1
         pair = u_cmd if isinstance(u_cmd, tuple) else None
         u, tau_d = self.side.act(0.0 if pair else u_cmd, self.extra, wheels=pair)
-        self.truth_pub.publish(L.encode_wrench(self._stamp(), tau_d[0], tau_d[1]))
+        self.truth.lumped_disturbance(self._stamp(), tau_d)
         self.table.append(p.t, p.x, u, tau_d=tau_d, pose=p.pose)
         if p.fallen and not self.fallen:
             self.fallen, self.fell_at = True, p.t
@@ -551,8 +545,8 @@ class PlantSimNode(Node, GracefulNodeMixin):
             log.warning(f"interrupted at t = {self.plant.t:.3f} s of {self.n_steps * self.h:g} s")
         wall = (time.monotonic() - self.t_wall0) if self.t_wall0 else 0.0
         n, steps = len(self.table), self.steps   # the table holds the run since the last reset; steps all of it
-        for pub in (self.state_pub, self.imu_pub, self.encoder_pub, self.truth_pub, self.clock_pub, self.true_pub,
-                    self.pose_pub, self.driver_pub):
+        for pub in (self.state_pub, self.imu_pub, self.encoder_pub, self.clock_pub, self.driver_pub,
+                    *self.truth.publishers):
             if pub is not None:  # let a recorder receive the last states before this process exits
                 pub.wait_for_all_acked(Duration(seconds=2.0))
         summary = {"mode": self.mode, "control_rate_hz": 1.0 / self.h, "periods": n, "steps": steps, "wall_s": wall,

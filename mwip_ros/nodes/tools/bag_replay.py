@@ -27,7 +27,8 @@ subscriptions (0 = automatic: the controller, plus the observer - and its publis
 when the bag has estimates; set 1 to re-simulate plain DSC without an observer).  Recorded
 outputs that are not reproduced count as differences; new ones the bag lacks (plain DSC may
 not have recorded the last estimates) are listed but not compared.  The controller and the
-observer answer each stamp once: restart them before every resim.
+observer answer each stamp once: restart them before every resim.  A controller that tracks
+``cmd_vel`` gets the recorded Twists, each before the first state recorded after it (:mod:`.resim`).
 
 exit codes:
     0  replay: finished;  resim: every output reproduced within tolerance

@@ -3,9 +3,10 @@
 It acts as the lockstep plant (:mod:`.lockstep`, the same driver ``plant_sim`` uses) with the
 recorded states: for every recorded ``joint_states`` (in order; a resent duplicate stamp
 once) it publishes ``/clock`` and the recorded bytes and waits for the one
-``wheel_torque_cmd`` that answers it, and collects the new ``disturbance_estimate`` and
-``controller_internals`` by stamp.  Then it compares them with the recorded outputs (the
-k-th recorded command answers the k-th state; estimates and internals by stamp) and prints
+``wheel_torque_cmd`` (or the yaw stage's ``wheel_torques_cmd``) that answers it, and collects
+the new ``disturbance_estimate`` and ``controller_internals`` by stamp.  Then it compares them with
+the recorded outputs (the k-th recorded command answers the k-th state; estimates and internals by
+stamp) and prints
 the largest absolute difference per topic and field, the compared and not reproduced
 samples, and whether everything is within ``tolerance``.  Every message is decoded by the
 message layer (:mod:`mwip_ros.msgs.layouts`).
@@ -20,6 +21,13 @@ change mid-way re-simulates exactly.  Changes of the nodes named ``disturbance_o
 take (an unknown type code, no value, an array too long: :func:`.rclpy_compat.parameter_from_msg`)
 is skipped with a warning naming it, and counted in the report; a value the running node refuses
 is logged with its reason, counted, and the re-simulation goes on without it.
+
+A controller that tracks ``cmd_vel`` (``motion.enabled`` without a ``motion.profile``, docs/theory.md 6.11) is
+given the recorded ``cmd_vel`` where the recording has them: a Twist sets the target of the periods after the one
+the controller last answered (``core.motion.Shaper.command``), so each recorded Twist (the newest of those between
+two states, in the bag's order) is published before the first state recorded after it, and that state is sent
+only once the controller has answered a ``get_parameters`` request sent after the Twist (its executor took the
+Twist first).  A profile is made inside each period from the state's stamp and re-simulates as it is.
 """
 from __future__ import annotations
 
@@ -40,7 +48,7 @@ from mwip_ros.msgs.topics import leaf
 from mwip_ros.nodes.tools.comparison import Stat, compare_stamped, diff
 from mwip_ros.nodes.runtime.guards import Rejects
 from mwip_ros.nodes.runtime.lockstep import CHAIN, LockstepDriver
-from mwip_ros.nodes.runtime.process import EXIT_BAD_PARAMS, EXIT_ERROR, EXIT_OK
+from mwip_ros.nodes.runtime.process import EXIT_ERROR, EXIT_OK
 from mwip_ros.params import ParamError
 
 __all__ = ["Resim", "EXIT_DIFFERENT"]
@@ -48,7 +56,11 @@ __all__ = ["Resim", "EXIT_DIFFERENT"]
 EXIT_DIFFERENT = 4          # outputs differ from the recording
 COLLECT_IDLE_S = 1.0        # after the last command, wait this long without news for stragglers
 COLLECT_MAX_S = 5.0
-OUTPUTS = ("wheel_torque_cmd", "disturbance_estimate", "controller_internals")
+# the answer to a state: u, or the yaw stage's (u_L, u_R) when the controller tracks motion on a spatial plant's states
+# (docs/theory.md 6.13); each compared in order (the k-th answer to the k-th state)
+COMMANDS = {"wheel_torque_cmd": lambda data: (L.parse_command(data),),
+            "wheel_torques_cmd": lambda data: L.parse_wheel_torques(data)[1:]}
+OUTPUTS = (*COMMANDS, "disturbance_estimate", "controller_internals")
 LOOP_NODES = tuple(a.node for a in CHAIN)   # the answering nodes (core.loop.STAGES): their recorded changes apply
 
 
@@ -73,7 +85,7 @@ class Resim:
             self.log.info(f"resim: ignoring {', '.join(ignored)} (lockstep, /clock from each state's stamp)")
         self.rejects = Rejects(self.log)
         self._read_bag()
-        self.new_cmds: List[float] = []
+        self.new_cmds: Dict[str, List[tuple]] = {name: [] for name in COMMANDS}
         self.new = {"disturbance_estimate": {}, "controller_internals": {}}
         self.extra_cmds = 0
         self.k = 0
@@ -85,13 +97,18 @@ class Resim:
         self.failed = False
         self._param_clients: Dict[str, object] = {}
         self._param_wait: Optional[Tuple[float, list]] = None   # (since, futures) of changes being applied
-        self._motion_asked = None   # the future of the controller's motion.* (theory 6.11), then True once judged
-        self.refused = False
+        self._motion_asked = None   # the futures of the controller's motion.* (theory 6.11), then True once judged
+        self.cmd_vel_pub = None     # set when the running controller tracks cmd_vel: the recorded ones are replayed
+        self._barrier = None        # (since, future): a replayed cmd_vel's get_parameters round trip under way
+        self.replayed_cmd_vel = 0
         self.applied_changes = 0
 
         clock_pub = node.create_publisher(Clock, "/clock", GRAPH_QOS)
         state_pub = node.create_publisher(JointState, "joint_states", GRAPH_QOS)
-        cmd_sub = node.create_subscription(Float64, "wheel_torque_cmd", self._on_cmd, INPUT_QOS, raw=True)
+        cmd_sub = node.create_subscription(Float64, "wheel_torque_cmd", lambda d: self._on_cmd("wheel_torque_cmd", d),
+                                           INPUT_QOS, raw=True)
+        node.create_subscription(JointState, "wheel_torques_cmd", lambda d: self._on_cmd("wheel_torques_cmd", d),
+                                 INPUT_QOS, raw=True)
         est_sub = node.create_subscription(WrenchStamped, "disturbance_estimate", self._on_est, INPUT_QOS, raw=True)
         int_sub = node.create_subscription(JointState, "controller_internals", self._on_int, INPUT_QOS, raw=True)
         need = v["wait_for_subscribers"]
@@ -105,7 +122,7 @@ class Resim:
                                      "disturbance_observer answer each stamp once, so restart both before every resim")
         t0, t1 = self.states[0][0] * 1e-9, self.states[-1][0] * 1e-9
         self.log.info(f"resim of {node.bag}: {len(self.states)} states (t = {t0:.3f} .. {t1:.3f} s), recorded "
-                      f"{len(self.rec_cmds)} commands, {len(self.rec['disturbance_estimate'])} estimates, "
+                      f"{self._recorded_commands()} commands, {len(self.rec['disturbance_estimate'])} estimates, "
                       f"{len(self.rec['controller_internals'])} internals; tolerance {v['tolerance']:g}")
 
     # --- the recording
@@ -128,11 +145,12 @@ class Resim:
     def _read_bag(self) -> None:
         bag = self.node.bag
         topics = {"joint_states": self._bag_topic("joint_states", True)}
-        topics.update({name: self._bag_topic(name, False) for name in OUTPUTS})
+        topics.update({name: self._bag_topic(name, False) for name in OUTPUTS + ("cmd_vel",)})
         by_topic = {t: name for name, t in topics.items() if t}
+        self.cmd_vels: Dict[int, bytes] = {}   # the state index k -> the newest recorded cmd_vel before state k
         self.has = {name: topics[name] is not None for name in OUTPUTS}
         self.states: List[Tuple[int, bytes]] = []
-        self.rec_cmds: List[float] = []
+        self.rec_cmds: Dict[str, List[tuple]] = {name: [] for name in COMMANDS}
         self.rec = {"disturbance_estimate": {}, "controller_internals": {}}
         seen = set()
         dropped = bad = 0
@@ -157,8 +175,11 @@ class Resim:
                         seen.add((seg, stamp))
                         self.states.append((stamp, data))
                         self.state_keys.append((seg, stamp))
-                    elif name == "wheel_torque_cmd":
-                        self.rec_cmds.append(L.parse_command(data))
+                    elif name in COMMANDS:
+                        self.rec_cmds[name].append(COMMANDS[name](data))
+                    elif name == "cmd_vel":
+                        L.parse_twist(data)   # a Twist; its numbers the controller judges, as it did
+                        self.cmd_vels[len(self.states)] = bytes(data)
                     else:
                         stamp, fields = _estimate(data) if name == "disturbance_estimate" else L.parse_internals(data)
                         self.rec[name].setdefault((seg or 0, stamp), fields)
@@ -179,8 +200,8 @@ class Resim:
             self.log.warning(f"skipped {dropped} stray recorded state(s) (outside the recorded stream of stamps)")
         if bad:
             self.log.warning(f"skipped {bad} recorded message(s) that are not valid graph messages")
-        if self.has["wheel_torque_cmd"] and len(self.rec_cmds) != len(self.states):
-            self.log.warning(f"the bag has {len(self.rec_cmds)} wheel_torque_cmd for {len(self.states)} states; "
+        if any(self.has[name] for name in COMMANDS) and self._recorded_commands() != len(self.states):
+            self.log.warning(f"the bag has {self._recorded_commands()} commands for {len(self.states)} states; "
                              f"commands are compared in order (k-th command = answer to the k-th state)")
         self.stamp_set = seen
 
@@ -274,19 +295,22 @@ class Resim:
                 self.log.info(f"set {', '.join(done)} on {node} before the state at t = {t:.3f} s")
         self._send_now()
 
+    def _recorded_commands(self) -> int:
+        return sum(len(v) for v in self.rec_cmds.values())
+
     # --- inputs
-    def _on_cmd(self, data) -> None:
+    def _on_cmd(self, name: str, data) -> None:
         try:
-            u = L.parse_command(data)
+            u = COMMANDS[name](data)
         except BadMessage as exc:
-            self.rejects("wheel_torque_cmd", str(exc))
+            self.rejects(name, str(exc))
             return
         if not self.lockstep.take_answer():
             self.extra_cmds += 1
             if self.extra_cmds <= 3:
-                self.log.warning("a wheel_torque_cmd while no state was waiting for one (ignored)")
+                self.log.warning(f"a {name} while no state was waiting for one (ignored)")
             return
-        self.new_cmds.append(u)
+        self.new_cmds[name].append(u)
         self.k += 1
         self.last_news = time.monotonic()
         if self.k < len(self.states):
@@ -317,6 +341,8 @@ class Resim:
             self._send_now()
 
     def _send_now(self) -> None:
+        if self._replay_cmd_vel():
+            return   # the state goes once the controller has taken the Twist (step)
         stamp, data = self.states[self.k]
         self._fed_run[stamp] = self.state_keys[self.k][0]
         self.lockstep.send(self.k, stamp, data)
@@ -325,16 +351,31 @@ class Resim:
         self.failed = True
         self.node.finish(EXIT_ERROR, text)
 
-    def _motion_refused(self) -> Optional[bool]:
-        """Ask the running controller for motion.enabled and motion.profile once the graph is there: with cmd_vel
-        (enabled, no profile) its references came from commands the bag does not hold, so resim refuses in one line
-        (exit 2); a profile is made inside each period from the state's stamp and re-simulates.  None while the
-        answer is awaited, else whether it refused."""
+    def _replay_cmd_vel(self) -> bool:
+        """Publish the recorded cmd_vel due before state k, if any, and ask the controller for a parameter: its answer
+        comes after the Twist was taken (True: the state waits for it, :meth:`step`)."""
         from rcl_interfaces.srv import GetParameters
+        data = self.cmd_vels.pop(self.k, None) if self.cmd_vel_pub is not None else None
+        if data is None:
+            return False
+        self.cmd_vel_pub.publish(data)
+        self.replayed_cmd_vel += 1
+        self._barrier = (time.monotonic(), self._params_client.call_async(GetParameters.Request(
+            names=["motion.enabled"])))
+        return True
+
+    def _motion_check(self) -> Optional[bool]:
+        """Ask the running controller for motion.enabled and motion.profile once the graph is there: with cmd_vel
+        (enabled, no profile) the recorded cmd_vel are replayed (a publisher that must first match the controller's
+        subscription).  None while the answer (or the match) is awaited, else False (go)."""
+        from rcl_interfaces.srv import GetParameters
+        from geometry_msgs.msg import Twist
         if self._motion_asked is True:
+            if self.cmd_vel_pub is not None and self.cmd_vel_pub.get_subscription_count() < 1:
+                return None   # the controller's cmd_vel subscription not matched yet
             return False
         if self._motion_asked is None:
-            client = self.node.create_client(GetParameters, "dscndo_controller/get_parameters")
+            client = self._params_client = self.node.create_client(GetParameters, "dscndo_controller/get_parameters")
             if not client.wait_for_service(timeout_sec=self.v["timeout_s"]):
                 self._motion_asked = True   # no such service to ask: the lockstep's own checks name what is missing
                 return False
@@ -347,19 +388,20 @@ class Resim:
         enabled, profile = (list(f.result().values) for f in self._motion_asked)
         self._motion_asked = True
         if enabled and enabled[0].bool_value and not (profile and len(profile[0].double_array_value)):
-            self.refused = True   # nothing fed, nothing to compare: the one line, exit 2 (no table)
-            self.node.finish(EXIT_BAD_PARAMS, "motion.enabled: the running dscndo_controller tracks cmd_vel, which "
-                                              "resim cannot replay yet; re-simulate with motion.enabled: false or "
-                                              "a motion.profile")
-            return True
+            self.cmd_vel_pub = self.node.create_publisher(Twist, "cmd_vel", 10)   # reliable, volatile: as a user
+            self.log.info(f"resim: the running dscndo_controller tracks cmd_vel: replaying the {len(self.cmd_vels)} "
+                          f"recorded cmd_vel (each before the first state recorded after it)")
+            return None
+        if self.cmd_vels:
+            self.log.info("resim: the bag has cmd_vel, which the running dscndo_controller does not read (motion "
+                          "off, or a motion.profile): not replayed")
         return False
 
     def step(self, executor) -> None:
         if not self.started:
             ready = self.lockstep.wait_for_graph()
             if ready:
-                refused = self._motion_refused()
-                if refused is not False:   # asking (spin for the answer), or refused (finished)
+                if self._motion_check() is not False:   # asking (spin for the answer)
                     executor.spin_once(timeout_sec=0.02)
                     return
                 self.started = True
@@ -371,9 +413,18 @@ class Resim:
                 return
             executor.spin_once(timeout_sec=0.02)
             return
-        executor.spin_once(timeout_sec=0.05 if self._param_wait is None else 0.005)
+        executor.spin_once(timeout_sec=0.05 if self._param_wait is None and self._barrier is None else 0.005)
         if self._param_wait is not None and not self.failed:
             self._params_applied()
+            return
+        if self._barrier is not None and not self.failed:
+            since, future = self._barrier
+            if future.done():
+                self._barrier = None
+                self._send_now()
+            elif time.monotonic() - since > self.v["timeout_s"]:
+                self._fail(f"no answer to get_parameters after a replayed cmd_vel within timeout_s = "
+                           f"{self.v['timeout_s']:g} s")
             return
         now = time.monotonic()
         if self.collecting_since is not None:
@@ -395,14 +446,18 @@ class Resim:
         fed = set(self.state_keys[:self.k])
         topics: Dict[str, Stat] = {}
         fields: Dict[str, Dict[str, Stat]] = {}
-        if self.has["wheel_torque_cmd"]:
-            st = topics["wheel_torque_cmd"] = Stat()
-            n = min(len(self.rec_cmds), len(self.new_cmds))
-            for a, b in zip(self.rec_cmds[:n], self.new_cmds[:n]):
-                st.add(diff(a, b))
+        for name in COMMANDS:
+            rec, new = self.rec_cmds[name], self.new_cmds[name]
+            if not (self.has[name] and (rec or new)):
+                continue
+            st = topics[name] = Stat()
+            n = min(len(rec), len(new))
+            for a, b in zip(rec[:n], new[:n]):
+                for x, y in zip(a, b):
+                    st.add(diff(x, y))
             st.compared = n
-            st.missing = max(0, min(len(self.rec_cmds), self.k) - n)
-            st.extra = len(self.new_cmds) - n + self.extra_cmds
+            st.missing = max(0, min(len(rec), self.k) - n)
+            st.extra = len(new) - n + (self.extra_cmds if name == "wheel_torque_cmd" else 0)
         for name, names in (("disturbance_estimate", ("tau_hat1", "tau_hat2")),
                             ("controller_internals", L.INTERNAL_NAMES)):
             if self.has[name]:
@@ -412,8 +467,6 @@ class Resim:
         return topics, fields
 
     def report(self) -> None:
-        if self.refused:
-            return
         tol = self.v["tolerance"]
         topics, fields = self.compare()
         wall = (time.monotonic() - self.t_wall0) if self.t_wall0 else 0.0
@@ -448,6 +501,9 @@ class Resim:
         else:
             self.node.finish(EXIT_OK)
             lines.append(f"  RESULT: REPRODUCED - every compared output within tolerance {tol:g} (exit {EXIT_OK})")
+        if self.cmd_vel_pub is not None:
+            lines.append(f"  recorded cmd_vel replayed: {self.replayed_cmd_vel}"
+                         + (f" ({len(self.cmd_vels)} after the last state fed, not replayed)" if self.cmd_vels else ""))
         if self.applied_changes or self.param_events or self.refused_values:
             lines.append(f"  recorded parameter changes applied: {self.applied_changes}"
                          + (f" ({len(self.param_events)} after the last state, not applied)"

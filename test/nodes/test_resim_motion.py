@@ -1,0 +1,92 @@
+"""bag_replay resim of lockstep recordings in which the controller tracked motion (docs/theory.md 6.11): a
+``motion.profile`` (config/motion.yaml) and ``cmd_vel`` (the recorded Twists replayed before the states recorded
+after them) are both reproduced exactly."""
+import signal
+
+import pytest
+
+from graphproc import PARAMS, REPO, Graph
+from test_bag_replay import MODULE, parse_table
+
+pytestmark = pytest.mark.graph
+
+DURATION = 2.5
+STATES = 501   # 2.5 s at 200 Hz
+MOTION = REPO / "config" / "motion.yaml"
+
+
+def _record(work, files, twist=None):
+    """A lockstep DSCNDO run of ``files`` recorded by mcap_recorder; ``twist``: a cmd_vel (linear.x) the controller
+    and the recorder have before the plant starts."""
+    from geometry_msgs.msg import Twist
+
+    from injector import Injector
+    work.mkdir(parents=True, exist_ok=True)
+    bag = work / "bag"
+    with Graph(work) as g, Injector(g.domain_id) as inj:
+        rec = g.start("mcap_recorder", "-p", f"output:={bag}", "-p", "use_sim_time:=true", params=None)
+        g.start("disturbance_observer", "-p", "use_sim_time:=true", params=files)
+        ctl = g.start("dscndo_controller", "-p", "use_sim_time:=true", params=files)
+        assert ctl.wait_for_output("ready", timeout=30), ctl.output()
+        if twist is not None:
+            pub = inj.publisher("cmd_vel", Twist, qos=10)
+            # the controller's subscription and the recorder's (made once it discovers this publisher) both matched
+            assert inj.wait(lambda: pub.get_subscription_count() >= 2, 30), pub.get_subscription_count()
+            msg = Twist()
+            msg.linear.x = twist
+            pub.publish(msg)
+        plant = g.start("plant_sim", "-p", f"duration_s:={DURATION}", "-p", "expected_subscribers:=3", params=files)
+        assert plant.wait(180) == 0, plant.output()
+        assert rec.stop(signal.SIGINT, timeout=20) == 0, rec.output()
+    return bag
+
+
+def _resim(tmp_path, bag, files):
+    tmp_path.mkdir(parents=True, exist_ok=True)
+    with Graph(tmp_path) as g:
+        g.start("disturbance_observer", "-p", "use_sim_time:=true", params=files)
+        g.start("dscndo_controller", "-p", "use_sim_time:=true", params=files)
+        br = g.start("bag_replay", "-p", f"bag:={bag}", "-p", "mode:=resim", params=None, module=MODULE)
+        code = br.wait(180)
+    return code, br.output()
+
+
+def _reproduced(code, out):
+    assert code == 0, out
+    rows = parse_table(out)
+    for name in ("wheel_torque_cmd", "disturbance_estimate", "controller_internals", "u"):
+        compared, missing, diff = rows[name]
+        assert compared == STATES and missing in (0, None) and diff == 0.0, (name, out)
+    assert "RESULT: REPRODUCED" in out
+
+
+def test_resim_of_a_recording_with_a_motion_profile_reproduces_it(tmp_path):
+    files = [PARAMS, MOTION]   # at rest, then 1 m/s from t = 2 s
+    bag = _record(tmp_path / "rec", files)
+    _reproduced(*_resim(tmp_path / "resim", bag, files))
+
+
+def test_resim_replays_the_recorded_cmd_vel_and_reproduces_the_run(tmp_path):
+    import numpy as np
+
+    from mwip_ros import params as P
+    from mwip_ros.core.sim import simulate
+    from mwip_ros.runs import read_bag_run
+    gains = "      max_accel: 0.5\n      position_gain: 0.2\n      lean_gain: 0.03\n"   # config/motion.yaml's
+    over = tmp_path / "cmd_vel.yaml"   # no profile: the controller tracks cmd_vel (no timeout within the run)
+    over.write_text("dscndo_controller:\n  ros__parameters:\n    motion:\n      enabled: true\n" + gains
+                    + "      cmd_vel_timeout_s: 10.0\n")
+    files = [PARAMS, over]
+    bag = _record(tmp_path / "rec", files, twist=0.5)
+    # the recording is the run with v* = 0.5 m/s from state 0 (mwip_sim with that profile): the controller had the
+    # Twist before the first state
+    prof = tmp_path / "profile.yaml"
+    prof.write_text("dscndo_controller:\n  ros__parameters:\n    motion:\n      enabled: true\n" + gains
+                    + "      profile: [0.0, 0.5]\n")
+    offline = simulate(P.closed_loop(P.merged_values(P.load_param_files([PARAMS, prof])), duration=DURATION,
+                                     controller="dscndo"))
+    recorded = read_bag_run(bag)
+    np.testing.assert_allclose(recorded["theta_w"], offline["theta_w"], rtol=0, atol=1e-9)
+    code, out = _resim(tmp_path / "resim", bag, files)
+    assert "recorded cmd_vel replayed: 1" in out, out
+    _reproduced(code, out)
