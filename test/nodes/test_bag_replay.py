@@ -1,6 +1,7 @@
 """bag_replay as a process: resim of a recorded lockstep DSCNDO run, timed replay, bad parameters."""
 import signal
 import subprocess
+import re
 import sys
 import time
 
@@ -157,8 +158,11 @@ def test_replay_at_rate_4_republishes_every_message_in_a_quarter_of_the_time(tmp
     assert got == counts, (got, counts)
     js = received["/joint_states"]
     wall = js[-1] - js[0]
-    print(f"bag span {span:.3f} s; replay at rate 4 took {wall:.3f} s (expected ~{span / 4:.3f} s)")
-    assert wall < span, (wall, span)
+    # the schedule is the bag's at rate 4: beyond a quarter of the span, only what the replayer says it was behind
+    # (a loaded machine) and the delivery of the first and last message (a 200 ms stall each)
+    behind = float(re.search(r"at most ([0-9.]+) s behind the bag's timing", br.output()).group(1))
+    print(f"bag span {span:.3f} s; replay at rate 4 took {wall:.3f} s (expected ~{span / 4:.3f} s, {behind} s behind)")
+    assert wall < span / 4 + behind + 0.5, (wall, span, behind)
     assert wall > span / 4 * 0.5, (wall, span)  # the recorded timing is kept, not a burst
     assert f"replayed {sum(counts.values())} of {sum(counts.values())} messages" in br.output(), br.output()
 

@@ -70,6 +70,7 @@ class Replay:
         self.started = False
         self.t_wall0: Optional[float] = None
         self.wait_since = time.monotonic()
+        self.behind = 0.0   # the most a message was published after its time [s]
         self.last_wait_log = 0.0
         self.stream: Optional[Iterator] = None
         self.pending: Optional[Tuple[int, str, bytes]] = None
@@ -150,6 +151,8 @@ class Replay:
             return
         if wait > 0:
             time.sleep(wait)
+        else:   # behind the bag's timing (a loaded machine): said in the report
+            self.behind = max(self.behind, -wait)
         if self.clock_pub is not None and log_time != self.last_clock:
             self.clock_pub.publish(encode_clock(log_time))
             self.last_clock = log_time
@@ -191,4 +194,4 @@ class Replay:
         if self.resends:
             per += f"; {self.resends} resent message(s) (a stamp repeated on its topic) replayed once"
         self.log.info(f"replayed {what} in {wall:.3f} s wall (bag span {self.bag_duration:.3f} s, "
-                      f"rate {self.rate:g}): {per}")
+                      f"rate {self.rate:g}, at most {self.behind:.3f} s behind the bag's timing): {per}")
