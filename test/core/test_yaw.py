@@ -100,13 +100,17 @@ def test_the_default_gains_row_of_theory_6_13():
     assert f"{np.max(np.abs(run['theta_b'][run['t'] > 1.0])):.4f}" == "0.0397"
 
 
-def test_with_raw_sensors_the_yaw_stage_does_not_run():
-    """docs/theory.md 6.13: the raw IMU has no yaw gyro and the estimator's state no yaw rate: no yaw stage (as in the
-    graph), the wheels get u / 2 each."""
+def test_with_raw_sensors_the_yaw_stage_runs_on_the_imus_z_gyro():
+    """docs/theory.md 6.13: with raw sensors the yaw stage reads the IMU's z-axis gyro (core.raw_sensors.YawGyro, the
+    realistic overlay's bias 0.01 rad/s): at rest before any turn it reads the bias, not the ideal 0, and the stage
+    turns the robot when psi'* says so."""
     pytest.importorskip("mujoco")
     from mwip_ros.core.sim import simulate
     files = [default_params_file(), default_params_file().parent / "sensors_raw_realistic.yaml",
              default_params_file().parent / "motion.yaml"]
-    v = dict(P.merged_values(P.load_param_files(files)), backend="mujoco", **{"motion.yaw_profile": [0.0, 0.5]})
-    run = simulate(P.closed_loop(v, controller="dscndo", duration=0.5))
-    assert "u_psi" not in run.columns and np.max(np.abs(run["yaw"])) < 1e-12
+    v = dict(P.merged_values(P.load_param_files(files)), backend="mujoco", **{"kalman.accel_noise_std": 1.0},
+             **{"motion.profile": [0.0, 0.0], "motion.yaw_profile": [0.0, 0.0, 3.0, 0.0, 3.5, 0.5]})
+    run = simulate(P.closed_loop(v, controller="dscndo", duration=6.0))
+    assert not run.fallen and "u_psi" in run.columns
+    assert abs(run["gyro_z"][0] - 0.01) < 0.02   # the turn-on bias, within the noise (0.004) and the first rate
+    assert np.unwrap(run["yaw"])[-1] - run["yaw"][0] > 0.5
