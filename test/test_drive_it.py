@@ -6,7 +6,6 @@ import re
 import signal
 import subprocess
 import threading
-import time
 
 import numpy as np
 import pytest

@@ -32,6 +32,18 @@ def test_the_pi_by_hand():
     assert loop.integral == 0.0
 
 
+def test_the_calibration_by_hand():
+    """motion.yaw_gyro_calibration_s = 0.03 s at h = 0.01: three readings averaged, no torque, then the PI on the
+    reading less their mean; reset calibrates again."""
+    loop = YawLoop(YawConfig(kp=2.0, ki=10.0, calibration_s=0.03), 0.01)
+    assert [loop.step(1.0, w) for w in (0.01, 0.02, 0.03)] == [0.0, 0.0, 0.0] and loop.integral == 0.0
+    assert loop.bias == pytest.approx(0.02, abs=1e-15)
+    # e = 1.0 - (0.52 - 0.02) = 0.5: as the PI by hand's first step
+    assert loop.step(1.0, 0.52) == pytest.approx(1.05, abs=1e-14)
+    loop.reset()
+    assert loop.step(1.0, 0.52) == 0.0 and loop.bias == 0.52
+
+
 def _values(backend, **over):
     files = [default_params_file(), default_params_file().parent / "motion.yaml"]
     v = dict(P.merged_values(P.load_param_files(files)), backend=backend)
