@@ -40,7 +40,7 @@ from typing import Optional, Tuple
 
 from .laws import LawError
 from .plant import Plant, PlantConfig, finite_state, make_plant, saturate
-from .raw_sensors import RawSensors
+from .raw_sensors import RawSensors, YawGyro
 from .safety import PLAUSIBLE_TORQUE, DriverStateMachine
 from .yaw import YawLoop, wheel_torques
 from .trajectory import BAD_COMMAND, DIVERGED, FAILURES, FALL
@@ -140,6 +140,9 @@ class PlantSide:
         # the yaw stage's inputs (docs/theory.md 6.13, a spatial plant only): the gyro's yaw rate, delayed as the
         # state is, and the wheels' pair through the actuator's delay
         self.yaw_queue = deque(maxlen=sc.delay_periods + 1)
+        # with raw sensors the IMU's z-axis gyro measures it, with the pitch axis's noise and bias (theory 6.4)
+        self.yaw_gyro = (YawGyro.for_plant(cfg.raw, cfg.seed, cfg.h) if cfg.raw is not None and self.plant.spatial
+                         else None)
         self.wheel_actuator = (Actuator(sc.actuator_delay_periods, zero=(0.0, 0.0)) if sc.actuator_delay_periods
                                else None)
         self.wheels = None   # the wheels' torques (u_L, u_R) of the period :meth:`act` decided, None: u / 2 each
@@ -153,14 +156,18 @@ class PlantSide:
         measurement is a state (``sensors.model: state``) or a :class:`~.raw_sensors.RawSample` (``raw``)."""
         p = self.plant
         if self.raw is not None:
-            self.raw_queue.append((self.raw.sample(p.x, p.sample_accel()), p.u_prev))
+            ddq = p.sample_accel()   # a spatial plant: its own accelerometer (MuJoCo's, read at t_k^- after this)
+            force = p.imu_reading()[1][::2] if p.spatial else None
+            self.raw_queue.append((self.raw.sample(p.x, ddq, force), p.u_prev))
             return self.raw_queue[0]   # the sample of step k - d (or the first one while k < d)
         return self.sensors.sample(p.x, p.u_prev) if self.sensors else (p.x, p.u_prev)
 
     def sense_yaw_rate(self) -> float:
         """Stage ``sensors`` of a spatial plant (docs/theory.md 6.13): the gyro's yaw rate (the body's z rate) of step
-        k - d, as the state is delayed (ideal: no noise, no bias)."""
-        self.yaw_queue.append(self.plant.yaw_rate)
+        k - d, as the state is delayed (ideal: no noise, no bias; with raw sensors the IMU's z-axis gyro,
+        :class:`~.raw_sensors.YawGyro`).  Called once per period, after :meth:`sense`."""
+        w = self.plant.yaw_rate
+        self.yaw_queue.append(w if self.yaw_gyro is None else self.yaw_gyro.sample(w))
         return self.yaw_queue[0]
 
     def act(self, u_cmd: float, extra=(0.0, 0.0), wheels: Optional[Tuple[float, float]] = None):

@@ -22,6 +22,14 @@ n_z from ``default_rng([seed, 2])``)::
 
 At rest and upright the IMU reads (0, 0, +g).
 
+**The yaw gyro** (a spatial plant, backend mujoco; docs/theory.md 6.13): the IMU's z axis (REP-145 ``imu_link``, the
+body's z_b) reads the body's own z rate w_z (cos(th_b) psi' when the robot turns at psi' about the vertical) with a
+bias and noise of the same parameters as the pitch axis, drawn independently from ``default_rng([seed, 3])``
+(:class:`YawGyro`: the planar model's draws above are not touched)::
+
+    bias_z,k = bias_z,k-1 + gyro_bias_walk sqrt(h) n_walk,z      bias_z,-1 = gyro_bias
+    gyro_z,k = w_z + bias_z,k + gyro_noise_std n_gyro,z
+
 Draws: when any of ``gyro_noise_std``, ``gyro_bias_walk``, ``accel_noise_std`` is nonzero, every period
 draws its four normals (even a zero parameter's: turning one noise on never reorders another's); when
 all three are zero, nothing is drawn.  The draws come in blocks of :data:`~.sensing.NOISE_BLOCK` periods
@@ -48,9 +56,11 @@ import numpy as np
 
 from .sensing import Normals, quantize
 
-__all__ = ["RAW_STREAM", "raw_rng", "RawSensorConfig", "RawSample", "specific_force", "raw_sample", "RawSensors"]
+__all__ = ["RAW_STREAM", "YAW_GYRO_STREAM", "raw_rng", "YawGyro", "RawSensorConfig", "RawSample", "specific_force",
+           "raw_sample", "RawSensors"]
 
 RAW_STREAM = 2   # the raw sensors' generator is default_rng([seed, RAW_STREAM]); stream 1: state-mode noise
+YAW_GYRO_STREAM = 3   # the yaw gyro's own generator (a spatial plant): default_rng([seed, YAW_GYRO_STREAM])
 
 
 def raw_rng(seed: int) -> np.random.Generator:
@@ -171,12 +181,43 @@ class RawSensors:
         """Back to k = 0: the bias at ``gyro_bias``, no previous phi (the generator is not rewound)."""
         self.bias, self.phi, self.first = float(self.cfg.gyro_bias), 0.0, True
 
-    def sample(self, x, ddq) -> RawSample:
-        """The raw sample of the state ``x`` at t_k and its accelerations ``ddq`` at t_k^-."""
+    def sample(self, x, ddq, force: Optional[Tuple[float, float]] = None) -> RawSample:
+        """The raw sample of the state ``x`` at t_k and its accelerations ``ddq`` at t_k^-.  ``force``: the specific
+        force (f_x, f_z) the physics measures at the IMU (a spatial plant's own accelerometer, MuJoCo's), used
+        instead of :func:`specific_force`, whose a_x = r th_w'' + ... assumes the wheels roll without slipping (a
+        turn in place scrubs them: they slip, the body does not follow); the noise is drawn and added alike."""
         c = self.cfg
         z = self.normals() if self.normals is not None else (0.0, 0.0, 0.0, 0.0)
         gyro, ax, az, phi, rate, self.bias = raw_sample(
             x, ddq, z, self.bias, self.phi, self.first, self.h, self.r, c.offset, self.g, c.gyro_noise_std,
             c.gyro_bias_walk, c.accel_noise_std, int(c.encoder_counts_per_rev))
+        if force is not None:
+            ax, az = force[0] + c.accel_noise_std * z[2], force[1] + c.accel_noise_std * z[3]
         self.phi, self.first = phi, False
         return RawSample(gyro, ax, az, phi, rate)
+
+
+class YawGyro:
+    """The IMU's z-axis gyro of a spatial plant (module docstring, "The yaw gyro"): ``sample(w_z)`` once per period,
+    in order from k = 0, after the planar sample of the same period."""
+
+    def __init__(self, cfg: RawSensorConfig, h: float, normals: Optional[Normals] = None):
+        self.cfg, self.h, self.normals = cfg, float(h), normals
+        self.reset()
+
+    @classmethod
+    def for_plant(cls, cfg: RawSensorConfig, seed: int, h: float) -> "YawGyro":
+        """The yaw gyro of a plant with ``seed``: its draws from ``default_rng([seed, 3])`` when ``cfg.noisy``."""
+        rng = np.random.default_rng([int(seed), YAW_GYRO_STREAM])
+        return cls(cfg, h, Normals(rng) if cfg.noisy else None)
+
+    def reset(self) -> None:
+        """Back to k = 0: the bias at ``gyro_bias`` (the generator is not rewound)."""
+        self.bias = float(self.cfg.gyro_bias)
+
+    def sample(self, rate_z: float) -> float:
+        """gyro_z,k for the body's true z rate ``rate_z`` [rad/s]."""
+        c = self.cfg
+        z = self.normals() if self.normals is not None else (0.0, 0.0)
+        self.bias += c.gyro_bias_walk * math.sqrt(self.h) * z[1]
+        return rate_z + self.bias + c.gyro_noise_std * z[0]

@@ -99,9 +99,8 @@ def simulate(loop: ClosedLoop, label: str = "", progress: Optional[Callable[[flo
     excitation = Excitation(loop.excitation, h) if loop.excitation is not None else None
     motion = Shaper(loop.motion, h) if loop.motion is not None else None
     side = PlantSide(pc)
-    # the yaw stage (theory 6.13): a spatial plant measuring its state (the raw IMU of 6.4 has no yaw gyro yet)
-    yaw = (YawLoop(loop.yaw, h) if loop.yaw is not None and motion is not None and side.plant.spatial
-           and pc.raw is None else None)
+    # the yaw stage (theory 6.13): a spatial plant, its gyro's yaw rate (raw sensors: the IMU's z axis, 6.4)
+    yaw = YawLoop(loop.yaw, h) if loop.yaw is not None and motion is not None and side.plant.spatial else None
     period = Period(side, DiscreteObserver(pc.nominal, gain_matrix(loop.X), h),
                     loop.law_class(loop.params, pc.nominal, h), estimator, excitation, motion, yaw)   # the stages
     # the true state: the metrics judge it

@@ -15,6 +15,11 @@ and the wheels' torques (:func:`wheel_torques`), each clipped to half of ``torqu
 so u = u_L + u_R is the law's command whenever neither wheel clips, and a yaw torque pair +-u_psi / 2 turns the
 robot (+psi', to the left, REP-103: the right wheel forward).  No ROS here: the offline loop
 (:class:`.loop.Period`) runs it; a planar plant has no yaw and no stage.
+
+With ``calibration_s`` = T > 0 (``motion.yaw_gyro_calibration_s``: a gyro with a bias, the raw sensors' IMU) the
+first N = round(T / h) periods calibrate the gyro: u_psi = 0, I stays 0, and from period N on the measurement is
+w_k - b with b the mean of w_0 .. w_{N-1} (a gyro's zero-rate offset taken at start-up, while the robot does not
+turn: a PI on a biased rate would turn the robot at -bias and wind its integral up against the scrubbing wheels).
 """
 from __future__ import annotations
 
@@ -31,6 +36,7 @@ class YawConfig:
 
     kp: float = 400.0
     ki: float = 4000.0
+    calibration_s: float = 0.0   # ``motion.yaw_gyro_calibration_s`` [s]: 0 = the gyro is not calibrated
 
 
 class YawLoop:
@@ -38,12 +44,14 @@ class YawLoop:
 
     def __init__(self, cfg: YawConfig, h: float):
         self.cfg, self.h = cfg, h
+        self.calibration = int(round(cfg.calibration_s / h))   # N periods
         self.reset()
 
     def reset(self) -> None:
         """Forget the run: the integral is zero again."""
         self.integral = 0.0
         self.u_psi = 0.0
+        self.samples, self.total, self.bias = 0, 0.0, 0.0   # the calibration's count, sum and mean
 
     def step(self, dpsi_ref: float, dpsi: float) -> float:
         """u_psi of one period for the reference ``dpsi_ref`` and the measured yaw rate ``dpsi`` [rad/s].  A measurement
@@ -52,6 +60,13 @@ class YawLoop:
         if not math.isfinite(e):
             self.u_psi = 0.0
             return 0.0
+        if self.samples < self.calibration:   # calibrating: the mean of the first N readings, no torque
+            self.samples += 1
+            self.total += dpsi
+            self.bias = self.total / self.samples
+            self.u_psi = 0.0
+            return 0.0
+        e += self.bias
         self.integral += self.h * e
         self.u_psi = self.cfg.kp * e + self.cfg.ki * self.integral
         return self.u_psi

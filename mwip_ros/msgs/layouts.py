@@ -224,11 +224,12 @@ def _diagonal(variance: float) -> Tuple[float, ...]:
 
 
 def encode_imu(stamp: int, gyro: float, accel_x: float, accel_z: float, gyro_variance: float = 0.0,
-               accel_variance: float = 0.0) -> bytes:
-    """imu/data_raw: no orientation (orientation_covariance[0] = -1), angular_velocity (0, gyro, 0),
-    linear_acceleration (accel_x, 0, accel_z), each covariance ``variance`` times the identity (0 = unknown)."""
-    return _IMU(stamp, _NO_ORIENTATION, _NO_ORIENTATION_COV, (0.0, float(gyro), 0.0), _diagonal(gyro_variance),
-                (float(accel_x), 0.0, float(accel_z)), _diagonal(accel_variance))
+               accel_variance: float = 0.0, gyro_z: float = 0.0) -> bytes:
+    """imu/data_raw: no orientation (orientation_covariance[0] = -1), angular_velocity (0, gyro, gyro_z: a spatial
+    plant's yaw gyro, docs/theory.md 6.13), linear_acceleration (accel_x, 0, accel_z), each covariance ``variance``
+    times the identity (0 = unknown)."""
+    return _IMU(stamp, _NO_ORIENTATION, _NO_ORIENTATION_COV, (0.0, float(gyro), float(gyro_z)),
+                _diagonal(gyro_variance), (float(accel_x), 0.0, float(accel_z)), _diagonal(accel_variance))
 
 
 def encode_encoder(stamp: int, phi: float, rate: float, torque: float) -> bytes:
@@ -315,8 +316,9 @@ def _raw_within(values: Sequence[float], limit: str, what: str) -> None:
             raise BadMessage(f"implausible {what} {v:g} (|{what}| must be <= {RAW_LIMITS[limit]:g})")
 
 
-def parse_imu(data) -> Tuple[int, float, float, float]:
-    """(stamp_ns, gyro = angular_velocity.y, accel_x, accel_z) of an imu/data_raw message, or BadMessage (every
+def parse_imu(data, yaw: bool = False) -> Tuple[float, ...]:
+    """(stamp_ns, gyro = angular_velocity.y, accel_x, accel_z), with ``yaw`` then angular_velocity.z (a spatial
+    plant's yaw gyro, docs/theory.md 6.13), of an imu/data_raw message, or BadMessage (every
     axis of angular_velocity and linear_acceleration must be finite and plausible, the frame :data:`IMU_FRAME`;
     the orientation and the covariances are not read)."""
     stamp, frame, _q, _qc, w, _wc, a, _ac = _decoded(cdr.decode_imu, data, "sensor_msgs/Imu")
@@ -325,7 +327,7 @@ def parse_imu(data) -> Tuple[int, float, float, float]:
     _finite((*w, *a), "IMU reading")
     _raw_within(w, "gyro", "angular_velocity")
     _raw_within(a, "accel", "linear_acceleration")
-    return stamp, w[1], a[0], a[2]
+    return (stamp, w[1], a[0], a[2], w[2]) if yaw else (stamp, w[1], a[0], a[2])
 
 
 def parse_encoder(data) -> Tuple[int, float, float, float]:

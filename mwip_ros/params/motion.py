@@ -73,6 +73,10 @@ def specs() -> List[Any]:
                   "(docs/theory.md 6.13) [N m per rad/s]", lo=0.0, hi=1e4, unit="N m s/rad"),
         ParamSpec("motion.yaw_ki", "double", 4000.0, "motion, a spatial plant: the yaw-rate loop's integral gain "
                   "[N m per rad]", lo=0.0, hi=1e5, unit="N m/rad"),
+        ParamSpec("motion.yaw_gyro_calibration_s", "double", 0.0, "motion, a spatial plant: the yaw stage first "
+                  "averages the gyro's yaw rate for this long, u_psi = 0, and subtracts the mean from then on (its "
+                  "bias at start-up, the robot not turning; docs/theory.md 6.13); 0 = none (an ideal gyro)",
+                  lo=0.0, hi=60.0, unit="s"),
     ]
 
 
@@ -100,4 +104,5 @@ def yaw(v: Mapping[str, Any]):
     if not v.get("motion.enabled", False):
         return None
     from mwip_ros.core.yaw import YawConfig
-    return YawConfig(kp=v["motion.yaw_kp"], ki=v["motion.yaw_ki"])
+    return YawConfig(kp=v["motion.yaw_kp"], ki=v["motion.yaw_ki"],
+                     calibration_s=v.get("motion.yaw_gyro_calibration_s", 0.0))

@@ -161,3 +161,45 @@ def test_raw_sample_compiles_with_numba_and_equals_python():
         args = (x, ddq, z, 0.01, 2.9, first, H, R, D, G, 0.004, 0.0005, 0.02, 4096)
         py, nb = raw_sample(*args), fn(*args)
         assert nb == pytest.approx(py, abs=1e-12, rel=0)
+
+
+def test_the_yaw_gyro_is_the_z_rate_with_its_own_bias_walk_and_noise_on_stream_3():
+    """core.raw_sensors.YawGyro (the module docstring's yaw gyro): bias_z,k = bias_z,k-1 + walk sqrt(h) n_walk,z,
+    gyro_z = w_z + bias_z,k + std n_gyro,z, the normals (n_gyro,z, n_walk,z, -, -) of default_rng([seed, 3]) in
+    blocks; written here from the generator itself."""
+    from mwip_ros.core.raw_sensors import YawGyro
+    gyro = YawGyro.for_plant(NOISY, 7, H)
+    z = np.random.default_rng([7, 3]).standard_normal((NOISE_BLOCK, 4))
+    bias, rates = 0.01, [0.3 * math.sin(k) for k in range(50)]
+    for k, w in enumerate(rates):
+        bias += 0.0005 * math.sqrt(H) * z[k, 1]
+        assert gyro.sample(w) == pytest.approx(w + bias + 0.004 * z[k, 0], abs=1e-15)
+    ideal = YawGyro.for_plant(RawSensorConfig(), 7, H)
+    assert [ideal.sample(w) for w in rates] == rates
+
+
+def test_the_yaw_gyro_leaves_the_planar_samples_as_they_were():
+    """Its own stream: the raw sensors' samples of a seed are the same whether a yaw gyro draws beside them or not."""
+    from mwip_ros.core.raw_sensors import YawGyro
+    x, ddq = (0.1, 0.02, 0.5, -0.1), (0.3, -0.2)
+    alone, paired = RawSensors.for_plant(NOISY, 7, H, R, G), RawSensors.for_plant(NOISY, 7, H, R, G)
+    gyro = YawGyro.for_plant(NOISY, 7, H)
+    for _ in range(300):
+        a = alone.sample(x, ddq)
+        b = paired.sample(x, ddq)
+        gyro.sample(0.5)
+        assert a == b
+
+
+def test_a_measured_specific_force_replaces_the_model_s_with_the_same_noise():
+    """RawSensors.sample(..., force): a spatial plant's own accelerometer (f_x, f_z) plus the draws the model's
+    would get; the gyro and the encoder as without it."""
+    x, ddq = (0.1, 0.02, 0.5, -0.1), (0.3, -0.2)
+    model, measured = RawSensors.for_plant(NOISY, 7, H, R, G), RawSensors.for_plant(NOISY, 7, H, R, G)
+    for _ in range(20):
+        a, b = model.sample(x, ddq), measured.sample(x, ddq, (1.5, 9.0))
+        fx, fz = specific_force(x, ddq, R, D, G)
+        assert (b.gyro, b.encoder, b.encoder_rate) == (a.gyro, a.encoder, a.encoder_rate)
+        assert b.accel_x - 1.5 == pytest.approx(a.accel_x - fx, abs=1e-12)
+        assert b.accel_z - 9.0 == pytest.approx(a.accel_z - fz, abs=1e-12)
+        assert abs(b.accel_x - 1.5) < 0.1 and b.accel_x != 1.5

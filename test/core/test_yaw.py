@@ -32,6 +32,18 @@ def test_the_pi_by_hand():
     assert loop.integral == 0.0
 
 
+def test_the_calibration_by_hand():
+    """motion.yaw_gyro_calibration_s = 0.03 s at h = 0.01: three readings averaged, no torque, then the PI on the
+    reading less their mean; reset calibrates again."""
+    loop = YawLoop(YawConfig(kp=2.0, ki=10.0, calibration_s=0.03), 0.01)
+    assert [loop.step(1.0, w) for w in (0.01, 0.02, 0.03)] == [0.0, 0.0, 0.0] and loop.integral == 0.0
+    assert loop.bias == pytest.approx(0.02, abs=1e-15)
+    # e = 1.0 - (0.52 - 0.02) = 0.5: as the PI by hand's first step
+    assert loop.step(1.0, 0.52) == pytest.approx(1.05, abs=1e-14)
+    loop.reset()
+    assert loop.step(1.0, 0.52) == 0.0 and loop.bias == 0.52
+
+
 def _values(backend, **over):
     files = [default_params_file(), default_params_file().parent / "motion.yaml"]
     v = dict(P.merged_values(P.load_param_files(files)), backend=backend)
@@ -100,13 +112,17 @@ def test_the_default_gains_row_of_theory_6_13():
     assert f"{np.max(np.abs(run['theta_b'][run['t'] > 1.0])):.4f}" == "0.0397"
 
 
-def test_with_raw_sensors_the_yaw_stage_does_not_run():
-    """docs/theory.md 6.13: the raw IMU has no yaw gyro and the estimator's state no yaw rate: no yaw stage (as in the
-    graph), the wheels get u / 2 each."""
+def test_with_raw_sensors_the_yaw_stage_runs_on_the_imus_z_gyro():
+    """docs/theory.md 6.13: with raw sensors the yaw stage reads the IMU's z-axis gyro (core.raw_sensors.YawGyro, the
+    realistic overlay's bias 0.01 rad/s): at rest before any turn it reads the bias, not the ideal 0, and the stage
+    turns the robot when psi'* says so."""
     pytest.importorskip("mujoco")
     from mwip_ros.core.sim import simulate
     files = [default_params_file(), default_params_file().parent / "sensors_raw_realistic.yaml",
              default_params_file().parent / "motion.yaml"]
-    v = dict(P.merged_values(P.load_param_files(files)), backend="mujoco", **{"motion.yaw_profile": [0.0, 0.5]})
-    run = simulate(P.closed_loop(v, controller="dscndo", duration=0.5))
-    assert "u_psi" not in run.columns and np.max(np.abs(run["yaw"])) < 1e-12
+    v = dict(P.merged_values(P.load_param_files(files)), backend="mujoco", **{"kalman.accel_noise_std": 1.0},
+             **{"motion.profile": [0.0, 0.0], "motion.yaw_profile": [0.0, 0.0, 3.0, 0.0, 3.5, 0.5]})
+    run = simulate(P.closed_loop(v, controller="dscndo", duration=6.0))
+    assert not run.fallen and "u_psi" in run.columns
+    assert abs(run["gyro_z"][0] - 0.01) < 0.02   # the turn-on bias, within the noise (0.004) and the first rate
+    assert np.unwrap(run["yaw"])[-1] - run["yaw"][0] > 0.5

@@ -40,6 +40,29 @@ def test_lockstep_mujoco_graph_with_the_yaw_stage_equals_mwip_sim(tmp_path, cont
         np.testing.assert_allclose(graph[c], offline[c], rtol=0, atol=1e-9, err_msg=c)
 
 
+def test_lockstep_graph_with_raw_sensors_and_the_yaw_stage_equals_mwip_sim(tmp_path):
+    """Raw sensors (config/sensors_raw_realistic.yaml) on the MuJoCo plant, turning from 1 s: the plant's IMU carries
+    its z gyro (angular_velocity.z, core.raw_sensors.YawGyro), the state estimator passes it on as the yaw joint
+    (its files say backend mujoco), the controller answers with the wheels' pair; the graph equals mwip_sim to 1e-9,
+    the turn and the yaw gyro's bias and noise included."""
+    from test_graph import RAW
+    turn = tmp_path / "turn.yaml"
+    turn.write_text("plant_sim:\n  ros__parameters:\n    backend: mujoco\n"
+                    "state_estimator:\n  ros__parameters:\n    kalman: {accel_noise_std: 1.0}\n"
+                    "dscndo_controller:\n  ros__parameters:\n"
+                    "    motion: {profile: [0.0, 0.0, 0.5, 0.3], yaw_profile: [0.0, 0.0, 1.0, 0.0, 1.25, 0.5]}\n")
+    files = [*RAW, MOTION, turn]
+    code, csv_path, logs = run_lockstep(tmp_path, True, "-p", "duration_s:=3.0", params=files, law="dsc")
+    assert code == 0, logs["plant_sim"].output() + logs["state_estimator"].output()
+    offline = simulate(P.closed_loop(P.merged_values(P.load_param_files(files)), controller="dscndo",
+                                     duration=3.0))
+    graph = read_csv(csv_path)
+    assert not offline.fallen and len(graph) == len(offline) == 601
+    assert np.unwrap(offline["yaw"])[-1] - offline["yaw"][0] > 0.4 and np.max(np.abs(offline["u_psi"])) > 100.0
+    for c in STATE + POSE_COLUMNS:
+        np.testing.assert_allclose(graph[c], offline[c], rtol=0, atol=1e-9, err_msg=c)
+
+
 def test_robot_state_on_the_3d_plant_integrates_the_gyro_s_yaw(tmp_path):
     """robot_state beside the lockstep mujoco graph turning: its last odom is the offline states integrated as
     core.odometry.state_update does (1e-9), and within the drift of docs/real-robot.md of the true pose (5 cm,

@@ -412,12 +412,12 @@ class PlantSimNode(Node, GracefulNodeMixin):
         stamp = self._stamp()
         self.truth.sample(stamp, p)
         measured, u_prev = self.side.sense()
-        if not self.raw:   # a spatial plant adds the gyro's yaw rate (the yaw stage's input, docs/theory.md 6.13)
-            yaw_rate = self.side.sense_yaw_rate() if p.spatial else None
+        yaw_rate = self.side.sense_yaw_rate() if p.spatial else None   # the yaw stage's input (theory 6.13)
+        if not self.raw:   # a spatial plant adds the gyro's yaw rate (raw: the IMU's z axis)
             return [(self.state_pub, L.encode_state(stamp, measured, u_prev, yaw_rate))]
         gyro_var, accel_var = self.imu_variances
         return [(self.imu_pub, L.encode_imu(stamp, measured.gyro, measured.accel_x, measured.accel_z, gyro_var,
-                                            accel_var)),
+                                            accel_var, yaw_rate or 0.0)),
                 (self.encoder_pub, L.encode_encoder(stamp, measured.encoder, measured.encoder_rate, u_prev))]
 
     def _finish_period(self, u_cmd) -> bool:

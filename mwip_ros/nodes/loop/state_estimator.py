@@ -3,7 +3,9 @@
 Subscribes ``imu/data_raw`` and ``wheel_encoder``, pairs the two samples of one stamp, runs the configured
 estimator (``method``: complementary or kalman, :mod:`mwip_ros.core.estimators`; ``imu_offset`` and the
 method's own parameters) and publishes ``joint_states`` in the layout of section 7 (the estimate's positions
-and velocities, effort = the torque the encoder's driver reported) with the sample's stamp.
+and velocities, effort = the torque the encoder's driver reported) with the sample's stamp; when the plant_sim
+sections of its parameter files choose ``backend: mujoco``, a third joint ``yaw`` carries the IMU's z gyro
+(angular_velocity.z), the yaw stage's input (docs/theory.md 6.13).
 
 In lockstep each stamp is answered once; a repeated stamp (the plant resending a sample nobody answered) is
 answered again with the same message and integrated nothing.  A sample it cannot use (malformed, non-finite,
@@ -45,7 +47,7 @@ from mwip_ros.nodes.runtime.diagnostics import ERROR, OK
 from mwip_ros.nodes.runtime.guards import (NEW, REPEAT, RESTART, STAMP_WINDOW_PERIODS, PublisherWatch, Rejects,
                                            StampGuard,
                                            sole_publisher)
-from mwip_ros.nodes.runtime.params import declare
+from mwip_ros.nodes.runtime.params import declare, plant_file_values
 from mwip_ros.nodes.runtime.process import GracefulNodeMixin, run_node
 from mwip_ros.runs import CsvStream
 
@@ -66,6 +68,8 @@ class StateEstimatorNode(Node, GracefulNodeMixin):
         self.period_ns = round(self.h * 1e9)
         nominal = P.physical(self.v, "nominal")
         self.config = P.typed.estimator(self.v)   # the method, its parameters, the IMU offset it believes
+        # a spatial plant (its files' backend mujoco): the IMU's z gyro goes on as the yaw joint (theory 6.13)
+        self.spatial = plant_file_values(argv, ("backend",)).get("backend") == "mujoco"
         try:
             self.est = self.config.make(self.h, nominal.r, nominal.g)
         except (KeyError, ValueError) as exc:   # the schema checked them; a plug-in estimator's own check
@@ -110,7 +114,7 @@ class StateEstimatorNode(Node, GracefulNodeMixin):
 
     # --- inputs ---------------------------------------------------------------------------------------
     def _on_imu(self, data: bytes) -> None:
-        self._take(IMU_TOPIC, L.parse_imu, data)
+        self._take(IMU_TOPIC, lambda d: L.parse_imu(d, yaw=True), data)
 
     def _on_encoder(self, data: bytes) -> None:
         self._take(ENCODER_TOPIC, L.parse_encoder, data)
@@ -176,7 +180,7 @@ class StateEstimatorNode(Node, GracefulNodeMixin):
 
     # --- the core's step ------------------------------------------------------------------------------
     def _estimate(self, stamp: int, imu, enc, restart: bool) -> None:
-        _s, gyro, accel_x, accel_z = imu
+        _s, gyro, accel_x, accel_z, gyro_z = imu
         _s, phi, phi_rate, torque = enc
         sample = RawSample(gyro, accel_x, accel_z, phi, phi_rate)
         snap = self.est.snapshot()
@@ -226,7 +230,7 @@ class StateEstimatorNode(Node, GracefulNodeMixin):
                 self.get_logger().warning(f"the {self.est.title} estimator recovered at t = {stamp * 1e-9:.3f} s")
         if diverged:
             return
-        self.last_msg = L.encode_state(stamp, x, torque)
+        self.last_msg = L.encode_state(stamp, x, torque, gyro_z if self.spatial else None)
         self.pub.publish(self.last_msg)
 
     def spin_step(self, executor) -> None:

@@ -38,6 +38,17 @@ _TYPES = {"double": ParameterType.PARAMETER_DOUBLE, "integer": ParameterType.PAR
 _ARRAY_TYPES = {"double_array": Parameter.Type.DOUBLE_ARRAY, "string_array": Parameter.Type.STRING_ARRAY}
 
 
+def plant_file_values(argv: Sequence[str], keys: Sequence[str]) -> Dict[str, Any]:
+    """``keys`` of the plant_sim sections of the command line's parameter files, the later file winning: what a node
+    other than the plant must know of it (robot_state the robot's geometry, the state estimator its backend)."""
+    out = {}
+    for kind, arg in ros_arguments(argv):
+        if kind == "--params-file":
+            section = P.load_param_file(arg).sections.get("plant_sim", {})
+            out.update({k: v for k, v in section.items() if k in keys})
+    return out
+
+
 def ros_arguments(argv: Sequence[str]) -> Iterator[Tuple[str, str]]:
     """``("--params-file", path)`` and ``("-p", rule)`` of a ROS command line, in command-line order: the
     arguments between ``--ros-args`` and ``--`` (or the end), where rcl reads them."""

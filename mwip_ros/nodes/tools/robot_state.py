@@ -37,7 +37,7 @@ from mwip_ros.msgs import layouts as L
 from mwip_ros.msgs.qos import GRAPH_QOS, RECORD_QOS
 from mwip_ros.msgs.stamps import to_time
 from mwip_ros.nodes.runtime.guards import Rejects
-from mwip_ros.nodes.runtime.params import declare, ros_arguments, start_values
+from mwip_ros.nodes.runtime.params import declare, plant_file_values, start_values
 from mwip_ros.nodes.runtime.process import GracefulNodeMixin, run_node
 
 __all__ = ["NAME", "LATCHED_QOS", "RobotState", "plant_values", "main"]
@@ -52,12 +52,7 @@ MODEL_KEYS = KEYS + ("sensors.model", "sensors.encoder_counts_per_rev", "sensors
 def plant_values(argv) -> dict:
     """The robot's geometry and sensors (:data:`MODEL_KEYS`) from the plant_sim sections of the command line's
     parameter files, the later file winning."""
-    out = {}
-    for kind, arg in ros_arguments(argv):
-        if kind == "--params-file":
-            section = P.load_param_file(arg).sections.get("plant_sim", {})
-            out.update({k: v for k, v in section.items() if k in MODEL_KEYS})
-    return out
+    return plant_file_values(argv, MODEL_KEYS)
 
 
 def _tf_message_type(logger):
