@@ -57,5 +57,5 @@ def test_the_odometry_drift_table_is_what_the_code_computes():
         v = P.merged_values(P.load_param_files(files))
         run = simulate(P.closed_loop(v, controller=row[1]))
         assert not run.fallen
-        d = odometry_drift(run.columns, v["actual.r"], v["actual.track_width"])
+        d = odometry_drift(run.columns, v["actual.r"], v["actual.track_width"], v["sensors.model"])
         assert row[2:] == [f"{d['final_pos']:.4f}", f"{d['max_pos']:.4f}", f"{d['final_yaw']:.4f}"], row

@@ -43,7 +43,7 @@ from typing import Optional, Tuple
 import numpy as np
 
 __all__ = ["OdometryNoise", "odometry_noise", "encoder_rate_std", "absolute_wheel_rates", "body_twist", "arc_step",
-           "Odometry", "RULES", "yaw_quaternion", "gyro_yaw_rate", "state_update", "odometry_drift"]
+           "Odometry", "RULES", "yaw_quaternion", "gyro_yaw_rate", "state_update", "rule_for", "odometry_drift"]
 
 RULES = ("rectangle", "trapezoid")
 
@@ -216,15 +216,22 @@ def state_update(odom: Odometry, t: float, dtheta_w: float, theta_b: float, gyro
     return odom.update(t, dtheta_w, yaw_rate=w)
 
 
-def odometry_drift(cols, r: float, track_width: float) -> dict:
-    """The odometry of a run's measured states (columns t, dtheta_w, theta_b, gyro_z; :func:`state_update`, as
-    ``robot_state`` integrates them) against its true pose (x, y, yaw, relative to the first): ``final_pos`` and
-    ``max_pos`` [m], the distance of odom's (x, y) to the true displacement at the end and at worst; ``final_yaw``
-    [rad], odom's yaw minus the true one at the end.  Rows after the first non-finite one are left out."""
+def rule_for(sensors_model: str) -> str:
+    """The integration rule of the odometry of ``sensors.model``'s states (module docstring): ``raw``, the state
+    estimator's rates, each the period's (rectangle); otherwise the plant's state, instantaneous (trapezoid)."""
+    return "rectangle" if sensors_model == "raw" else "trapezoid"
+
+
+def odometry_drift(cols, r: float, track_width: float, sensors_model: str = "state") -> dict:
+    """The odometry of a run's measured states (columns t, dtheta_w, theta_b, gyro_z; :func:`state_update` by the
+    rule of ``sensors_model``, :func:`rule_for`, as ``robot_state`` integrates them) against its true pose (x, y,
+    yaw, relative to the first): ``final_pos`` and ``max_pos`` [m], the distance of odom's (x, y) to the true
+    displacement at the end and at worst; ``final_yaw`` [rad], odom's yaw minus the true one at the end.  Rows after
+    the first non-finite one are left out."""
     t, dw, tb, gz = (np.asarray(cols[c], float) for c in ("t", "dtheta_w", "theta_b", "gyro_z"))
     x, y, yaw = (np.asarray(cols[c], float) for c in ("x", "y", "yaw"))
     yaw = np.unwrap(yaw)
-    odom = Odometry(r, track_width)
+    odom = Odometry(r, track_width, rule=rule_for(sensors_model))
     err = []
     for k in range(len(t)):
         if not state_update(odom, float(t[k]), float(dw[k]), float(tb[k]), float(gz[k])):

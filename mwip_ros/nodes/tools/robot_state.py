@@ -30,7 +30,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
 from mwip_ros import params as P
-from mwip_ros.core.odometry import Odometry, odometry_noise, state_update
+from mwip_ros.core.odometry import Odometry, odometry_noise, rule_for, state_update
 from mwip_ros.core.urdf import BASE_LINK, KEYS, ODOM_FRAME, WHEEL_JOINTS, frame_transforms, robot_model, urdf
 from mwip_ros.msgs import BadMessage
 from mwip_ros.msgs import layouts as L
@@ -77,8 +77,7 @@ class RobotState(Node, GracefulNodeMixin):
         h = P.period(self.v)
         noise = odometry_noise(self.model.r, self.model.track_width, h, int(values["sensors.encoder_counts_per_rev"]),
                                float(values["sensors.imu.gyro_noise_std"]), encoders=1, yaw_gyro=True)
-        # raw sensors: the estimator's rate is the period's (rectangle); the plant's state: instantaneous (trapezoid)
-        rule = "rectangle" if values["sensors.model"] == "raw" else "trapezoid"
+        rule = rule_for(values["sensors.model"])
         self.odom = Odometry(self.model.r, self.model.track_width, noise, rule=rule)
         self.rejects = Rejects(self.get_logger())
         self.count, self.restarts, self.last_stamp = 0, 0, None
