@@ -1,0 +1,131 @@
+"""The compiled batch loop tracking motion references (``core.compiled_motion``, docs/theory.md 6.11) equals the scalar
+loop (:func:`.sim.simulate` with its :class:`.motion.Shaper`) scenario by scenario, for every law the compiled loop
+runs: every window metric and :func:`.metrics.motion_metrics`' speed and hold numbers to 1e-9, falls included; and it
+runs compiled, from the Shaper's and the laws' own functions."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mwip_ros import params as P
+from mwip_ros.core import batch, compiled, jitcache, metrics, motion
+from mwip_ros.core.batch import simulate_batch
+from mwip_ros.core.compiled_motion import MOTION_METRICS
+from mwip_ros.core.laws import get as law
+from mwip_ros.core.sim import simulate
+
+pytestmark = pytest.mark.unit
+
+CONFIG = Path(__file__).resolve().parents[2] / "config"
+MOTION = P.merged_values(P.load_param_files([CONFIG / "paper.yaml", CONFIG / "motion.yaml"]))
+REALISTIC = {k: v for k, v in P.merged_values(P.load_param_file(CONFIG / "sensing_realistic.yaml")).items()
+             if k.startswith(("sensors.", "actuator."))}
+WINDOW = (1.0, 20.0)
+DURATION = 22.0   # the hold of config/motion.yaml's profile: v* = 0 from 18 s, hold from 20 s (HOLD_SETTLE_S)
+COMPILED_LAWS = ["dsc", "dscndo", "lqr", "lqr_ndo", "smc", "smc_ndo"]
+
+
+def _values(sensing: dict, seed=5):
+    """Four scenarios of their own masses, seeds and start, tracking config/motion.yaml's profile; one with a profile
+    of its own that never stops (no hold: NaN drift), one without motion, one that falls at once."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for _ in range(4):
+        v = dict(MOTION, **sensing)
+        v.update({"seed": int(rng.integers(0, 1000)), "actual.m_b": MOTION["actual.m_b"] * rng.uniform(0.8, 1.2),
+                  "actual.I_b": MOTION["actual.I_b"] * rng.uniform(0.8, 1.2),
+                  "initial.theta_b": float(rng.uniform(-0.15, 0.15)),
+                  "initial.theta_w": float(rng.uniform(-1.0, 1.0))})
+        out.append(v)
+    out.append(dict(out[0], **{"motion.profile": [0.0, 0.0, 1.0, 0.4, 5.0, -0.3], "motion.max_accel": 0.8,
+                               "motion.position_gain": 0.3, "seed": 9}))
+    out.append(dict(out[1], **{"motion.enabled": False, "seed": 10}))
+    out.append(dict(out[2], **{"initial.theta_b": 1.2, "seed": 11}))   # beyond the fall angle
+    return out
+
+
+def _close(got, want):
+    return (np.isnan(want) and np.isnan(got)) or abs(got - want) <= 1e-9 * max(1.0, abs(want))
+
+
+def _check_equal(loops, r):
+    for i, lp in enumerate(loops):
+        s = simulate(lp)
+        assert bool(r.fallen[i]) == s.fallen, i
+        m = metrics.compute(s.columns, WINDOW, lp.plant.fall_angle)
+        mm = (metrics.motion_metrics(s.columns, lp.motion.r, lp.plant.fall_angle) if lp.motion is not None
+              else dict.fromkeys(MOTION_METRICS, np.nan))
+        for key, values in r.metrics.items():
+            want = mm[key] if key in MOTION_METRICS else getattr(m, key)
+            assert _close(values[i], want), (i, key, values[i], want)
+        if lp.motion is not None and not s.fallen:   # the run tracked the profile (the numbers compared mean it)
+            assert mm["speed_rms"] < 0.5, mm
+    assert set(MOTION_METRICS) <= set(r.metrics)
+
+
+@pytest.mark.parametrize("sensing", ["off", "realistic"])
+@pytest.mark.parametrize("controller", COMPILED_LAWS)
+def test_the_compiled_batch_tracks_the_profile_as_the_scalar_loop(controller, sensing, monkeypatch):
+    loops = [P.closed_loop(v, duration=DURATION, controller=controller)
+             for v in _values(REALISTIC if sensing == "realistic" else {})]
+    assert compiled.kernel_for(law(controller)) is not None
+
+    def scalar(*args, **kwargs):
+        raise AssertionError("the motion batch ran the scalar loop")
+    monkeypatch.setattr(batch, "_simulate_each", scalar)
+    r = simulate_batch(loops, WINDOW, compiled=True)
+    monkeypatch.undo()
+    _check_equal(loops, r)
+    assert r.fallen[-1] and not r.fallen[:-1].any()
+    assert np.isnan(r.metrics["hold_drift"][4]) and np.isfinite(r.metrics["hold_drift"][:4]).all()
+    assert np.isnan(r.metrics["speed_rms"][5])   # no motion: no tracking numbers
+
+
+def test_without_the_compiled_loop_a_motion_batch_runs_the_scalar_loop_with_the_same_metrics():
+    """The numpy form has no references: ``compiled=False`` (and a law without a pure form, mpc) runs the scalar loop,
+    whose metrics (the motion ones included) the compiled loop's equal."""
+    loops = [P.closed_loop(v, duration=DURATION, controller="lqr_ndo") for v in _values({})]
+    a, b = simulate_batch(loops, WINDOW, compiled=True), simulate_batch(loops, WINDOW, compiled=False)
+    assert set(a.metrics) == set(b.metrics) and a.steps == b.steps
+    for key in a.metrics:
+        assert all(_close(x, y) for x, y in zip(a.metrics[key], b.metrics[key])), key
+
+
+def test_the_kernel_tracks_with_the_shapers_and_the_laws_own_functions():
+    """No second copy: the compiled loop's references are motion.py's functions and the laws' tracking their own
+    (DSC's outer loop; the others' pure_step on the error state), and the cache stamp covers their files."""
+    from mwip_ros.core import compiled_motion
+    from mwip_ros.core.laws import dsc, lqr
+    g = compiled.kernel_for(law("dscndo")).py_func.__globals__
+    track = g["law_track"].py_func
+    assert track.__code__ is compiled_motion.law_track.__code__
+    tg = track.__globals__
+    for name, fn in (("profile_at", motion.profile_at), ("speed_start", motion.speed_start),
+                     ("speed_step", motion.speed_step), ("track_step", dsc.dsc_track_step)):
+        assert tg[name].py_func.__code__ is fn.__code__, name
+    assert g["motion_row"].py_func.__code__ is compiled_motion.motion_row.__code__
+    files, _ = jitcache.made_of(compiled.kernel_for(law("dsc")).py_func)
+    for f in (motion.__file__, compiled_motion.__file__, dsc.__file__):
+        assert str(Path(f)) in files, f
+    lq = compiled.kernel_for(law("lqr")).py_func.__globals__["law_track"].py_func.__globals__["track_step"].py_func
+    assert lq.__code__ is compiled_motion.tracked_step.__code__
+    assert lq.__globals__["law_step"].py_func.__code__ is lqr.lqr_step.__code__
+    assert lq.__globals__["error_state"].py_func.__code__ is motion.error_state.__code__
+
+
+def test_the_shaper_steps_with_the_pure_functions(monkeypatch):
+    """The scalar Shaper forms v*, theta_w'*, theta_w* with the functions the compiled loop runs."""
+    calls = []
+    real = motion.speed_step
+
+    def spy(*a):
+        calls.append(a)
+        return real(*a)
+    monkeypatch.setattr(motion, "speed_step", spy)
+    sh = motion.Shaper(motion.MotionConfig(profile=((0.0, 1.0),)), 0.01)
+    sh.reference(0, 0.5)
+    ref = sh.reference(3)
+    assert len(calls) == 3 and ref.v == pytest.approx(4 * 0.5 * 0.01)
+    assert ref.theta_w == pytest.approx(0.5 + 0.01 * (1 + 2 + 3) * 0.005 / 0.254)
