@@ -135,3 +135,45 @@ def test_the_shaper_steps_with_the_pure_functions(monkeypatch):
     ref = sh.reference(3)
     assert len(calls) == 3 and ref.v == pytest.approx(4 * 0.5 * 0.01)
     assert ref.theta_w == pytest.approx(0.5 + 0.01 * (1 + 2 + 3) * 0.005 / 0.254)
+
+
+_MOTION_CHECK = """
+from mwip_ros import params as P
+from mwip_ros.core import metrics
+from mwip_ros.core.batch import simulate_batch
+from mwip_ros.core.sim import simulate
+loop = P.closed_loop(P.merged_values(P.load_param_files({files!r})), duration=4.0, controller="dsc")
+r = simulate_batch([loop], (1.0, 4.0), compiled=True)
+m = metrics.motion_metrics(simulate(loop).columns, loop.motion.r, loop.plant.fall_angle)
+print(repr(m["speed_rms"]), repr(float(r.metrics["speed_rms"][0])))
+"""
+
+
+def test_an_edit_to_the_shaper_is_compiled_afresh_in_the_batch_loop(tmp_path):
+    """The compiled loop's cache stamp covers core/motion.py (neither the loop's file nor core/compiled_motion.py):
+    an edit to the Shaper's speed step reaches the next process's compiled loop, which still equals the scalar one."""
+    import os
+    import shutil
+    import subprocess
+    import sys
+
+    pkg = Path(compiled.__file__).resolve().parents[1]
+    shutil.copytree(pkg, tmp_path / "mwip_ros", ignore=shutil.ignore_patterns("__pycache__"))
+    env = dict(os.environ, PYTHONPATH=str(tmp_path), NUMBA_CACHE_DIR=str(tmp_path / "numba_cache"))
+    script = _MOTION_CHECK.format(files=[str(CONFIG / "paper.yaml"), str(CONFIG / "motion.yaml")])
+
+    def run():
+        out = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, timeout=600,
+                             cwd=tmp_path)
+        assert out.returncode == 0, out.stderr
+        scalar, batch = (float(v) for v in out.stdout.split())
+        assert batch == pytest.approx(scalar, rel=1e-9)   # the compiled loop runs the code as it is now
+        return batch
+
+    first = run()
+    motion_py = tmp_path / "mwip_ros" / "core" / "motion.py"
+    text = motion_py.read_text()
+    edit = "v = _toward(v, v_target, max_accel * h)"
+    assert edit in text
+    motion_py.write_text(text.replace(edit, "v = _toward(v, v_target, 0.5 * max_accel * h)"))
+    assert run() != pytest.approx(first, rel=1e-3)   # half the acceleration: another speed error
