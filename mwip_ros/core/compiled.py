@@ -139,6 +139,7 @@ class Sin(NamedTuple):
 accel, rk4_period, rk4_driven, at = model.accel, plant.rk4_period, plant.rk4_driven, model.Sinusoid.at
 law_step = None
 law_track, motion_row = compiled_motion.law_track, compiled_motion.motion_row   # motion: bound per law
+law_track_lanes = compiled_motion.law_track_lanes
 
 
 def _no_est(P, h, sample, s, first):   # pragma: no cover
@@ -285,6 +286,11 @@ def _loop(k0, k1, n_steps, h, substeps, first_w, n_window, counts, delay, act_de
     ug = np.zeros(L)           # its torque
     uog = np.zeros(L)          # and with the observer term
     live = np.zeros(L, dtype=np.bool_)
+    rg = np.zeros((5, L))      # the lanes' references (core.compiled_motion.law_track_lanes)
+    every = True   # every scenario tracks motion references: the law runs on lanes with them
+    for i in range(n):
+        every = every and NP[i] >= 0
+    lanes_law = LAW_LANES and (every or not motion)
     for i0 in range(0, n, L):
         width = min(L, n - i0)
         any_live = False
@@ -403,8 +409,12 @@ def _loop(k0, k1, n_steps, h, substeps, first_w, n_window, counts, delay, act_de
                 store(zg[1], 0, zl[1])
                 store(thg[0], 0, tl[0])
                 store(thg[1], 0, tl[1])
-                if LAW_LANES and not motion:   # the law (its pure_step), the observer term (laws.ndo.WithObserver)
-                    ul, sl, _ = law_lanes(params_lanes(Pg), pn_lanes, h, xm_lanes, load(sg, 0), k == 0)
+                if lanes_law:   # the law (its pure_step; tracking: core.compiled_motion), the observer term (ndo)
+                    if motion:
+                        ul, sl = law_track_lanes(params_lanes(Pg), pn_lanes, h, xm_lanes, sg, xmg, live, width, i0, k,
+                                                 MO, PT, PV, NP, MS, rg)
+                    else:
+                        ul, sl, _ = law_lanes(params_lanes(Pg), pn_lanes, h, xm_lanes, load(sg, 0), k == 0)
                     store(ug, 0, ul)
                     store(sg, 0, sl)
                     if observer_law:
@@ -436,17 +446,18 @@ def _loop(k0, k1, n_steps, h, substeps, first_w, n_window, counts, delay, act_de
                 for j in range(4):
                     prev[i, j] = pvg[j, lane] = xm[j]
                 # stage: law
-                if LAW_LANES and not motion:   # computed above for every lane
+                if lanes_law:   # computed above for every lane
                     u = uog[lane] if observer_law and use_obs[i] else ug[lane]
                     s[i] = sg[lane]
                 else:
                     if NP[i] >= 0:   # period k's references and the law tracking them (core.compiled_motion)
                         u, s[i] = law_track(P[i], pn, h, xm, s[i], k, MO[i], PT[i], PV[i], NP[i], MS[i])
-                        motion_row(MA[i], t, xt, MS[i, 2], MO[i])   # row k of core.metrics.motion_metrics
                     else:
                         u, s[i], _ = law_step(P[i], pn, h, xm, s[i], k == 0)
                     if observer_law and use_obs[i]:   # core.laws.ndo.WithObserver.step
                         u = u - u_taud_of(pn, pn.m12 * math.cos(xm[1]), th)
+                if NP[i] >= 0:
+                    motion_row(MA[i], t, xt, MS[i, 2], MO[i])   # row k of core.metrics.motion_metrics
                 if exi[i] >= 0:   # the excitation (core.loop.command)
                     u = u + EXT[exi[i], k]
                 # stage: yaw (none: the planar plant; a spatial plant runs through the scalar loop)
@@ -568,6 +579,11 @@ def kernel_for(law: type, estimator: type = None):
             suffix += f"__{est.__module__}.{est.__qualname__}".replace(".", "_")
         own = getattr(core, "pure_track", None)   # the law tracking a motion reference (core.compiled_motion)
         track = _deep(own) if own is not None else _deep(compiled_motion.tracked_step, suffix, law_step=step)
+        law_l = _lanes_of(fn) if by_lanes else _jit(_no_law_lanes, _lanes_tag())
+        own_l = (_lanes_of(own) if own is not None else
+                 _deep(compiled_motion.tracked_step, suffix + "__lanes", law_step=law_l)) if by_lanes else None
+        track_l = (_deep(compiled_motion.law_track_lanes, suffix, load=load, store=store, track_lanes=own_l)
+                   if by_lanes else _jit(compiled_motion.no_track_lanes, _lanes_tag()))
         _KERNELS[fn, est] = _deep(_loop, suffix, law_step=step,
                              est_step=_deep(est) if est is not _no_est else _jit(_no_est, _lanes_tag()),
                              raw_sample=_deep(raw_sample), motor_torque=_compiled(drive.motor_torque),
@@ -575,7 +591,7 @@ def kernel_for(law: type, estimator: type = None):
                              Inertia=Inertia, Sin=Sin, at=at, _stage=_deep(_stage, at=at), accel=_accel,
                              rk4_period=_rk4_period, rk4_lanes=lanes, load=load, store=store,
                              z_next_lanes=z_lanes, LAW_LANES=by_lanes,
-                             law_lanes=_lanes_of(fn) if by_lanes else _jit(_no_law_lanes, _lanes_tag()),
+                             law_lanes=law_l, law_track_lanes=track_l,
                              params_lanes=_jit(_params3, _lanes_tag()),
                              law_track=_deep(compiled_motion.law_track, suffix, track_step=track),
                              motion_row=_deep(compiled_motion.motion_row))

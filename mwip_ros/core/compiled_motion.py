@@ -25,7 +25,8 @@ import numpy as np
 from .metrics import HOLD_SETTLE_S
 from .motion import Reference, _clip, error_state, profile_at, speed_start, speed_step
 
-__all__ = ["law_track", "tracked_step", "motion_row", "motion_arrays", "motion_sums_metrics", "MOTION_METRICS"]
+__all__ = ["law_track", "law_track_lanes", "no_track_lanes", "motion_reference", "tracked_step", "motion_row",
+           "motion_arrays", "motion_sums_metrics", "MOTION_METRICS"]
 
 MOTION_METRICS = ("speed_rms", "hold_drift", "hold_rate", "max_lean")   # core.metrics.motion_metrics' numbers
 
@@ -40,23 +41,56 @@ def tracked_step(P, p, h, x, s, s2, first, ref):   # pragma: no cover - compiled
     return u, s_next, s2, internals
 
 
-track_step = tracked_step   # the law's pure_track: bound per law by core.compiled.kernel_for
+track_step = track_lanes = tracked_step   # the law's pure_track (and on lanes): bound per law by compiled.kernel_for
+load = store = None   # core.simd's: bound by core.compiled.kernel_for
 
 
-def law_track(P, p, h, x, s, k, MO, PT, PV, n_points, MS):   # pragma: no cover - compiled
-    """Period k's references (as :meth:`.motion.Shaper.reference` with a profile; ``MS`` = theta_w*, theta_w'*, v*,
-    the law's second state, updated in place) and the law's (u, next state) tracking them for the measured state
-    ``x``.  ``MO`` = max_speed, max_accel, position_gain, lean_gain, r, settle; the profile ``PT[:n_points]``,
-    ``PV[:n_points]`` (:func:`motion_arrays`)."""
+def motion_reference(MO, PT, PV, n_points, MS, k, h, theta_w):   # pragma: no cover - compiled
+    """Period k's (theta_w*, theta_w'*, v*) as :meth:`.motion.Shaper.reference` with a profile makes them, into ``MS``
+    (theta_w*, theta_w'*, v*, the law's second state) from the previous period's; ``theta_w`` the measured wheel
+    angle (theta_w*(0)).  ``MO`` = max_speed, max_accel, position_gain, lean_gain, r, settle; the profile
+    ``PT[:n_points]``, ``PV[:n_points]`` (:func:`motion_arrays`)."""
     vt = _clip(profile_at(PT[:n_points], PV[:n_points], k * h), MO[0])
     if k == 0:
-        tw, dtw, v = speed_start(vt, x[0], MO[1], h, MO[4])
+        tw, dtw, v = speed_start(vt, theta_w, MO[1], h, MO[4])
     else:
         tw, dtw, v = speed_step(MS[0], MS[1], MS[2], vt, MO[1], h, MO[4])
     MS[0], MS[1], MS[2] = tw, dtw, v
+    return tw, dtw, v
+
+
+def law_track(P, p, h, x, s, k, MO, PT, PV, n_points, MS):   # pragma: no cover - compiled
+    """Period k's references (:func:`motion_reference`) and the law's (u, next state) tracking them for the measured
+    state ``x`` (its second state in ``MS[3]``)."""
+    tw, dtw, v = motion_reference(MO, PT, PV, n_points, MS, k, h, x[0])
     u, s_next, s2, _ = track_step(P, p, h, x, s, MS[3], k == 0, Reference(tw, dtw, v, 0.0, MO[2], MO[3]))
     MS[3] = s2
     return u, s_next
+
+
+def law_track_lanes(Pl, pl, h, xl, sg, xmg, live, width, i0, k, MO, PT, PV, NP, MS, R):   # pragma: no cover
+    """:func:`law_track` for the lanes of scenarios ``i0`` .. ``i0 + width - 1`` (every one with motion): the
+    references scenario by scenario (:func:`motion_reference`, the measured wheel angles ``xmg[0]``), gathered in
+    ``R`` (theta_w*, theta_w'*, lambda, k_x, the law's second state: a row each, a column per lane), then the law's
+    tracking for all lanes at once (``track_lanes``: its ``pure_track``, or ``pure_step`` on the error state, on
+    :data:`.simd.lanes`).  Returns the lanes' (u, next state)."""
+    for lane in range(width):
+        if live[lane]:
+            i = i0 + lane
+            R[0, lane], R[1, lane], _ = motion_reference(MO[i], PT[i], PV[i], NP[i], MS[i], k, h, xmg[0, lane])
+            R[2, lane], R[3, lane], R[4, lane] = MO[i, 2], MO[i, 3], MS[i, 3]
+    ref = Reference(load(R[0], 0), load(R[1], 0), 0.0, 0.0, load(R[2], 0), load(R[3], 0))
+    u, s_next, s2, _ = track_lanes(Pl, pl, h, xl, load(sg, 0), load(R[4], 0), k == 0, ref)
+    store(R[4], 0, s2)
+    for lane in range(width):
+        if live[lane]:
+            MS[i0 + lane, 3] = R[4, lane]
+    return u, s_next
+
+
+def no_track_lanes(Pl, pl, h, xl, sg, xmg, live, width, i0, k, MO, PT, PV, NP, MS, R):   # pragma: no cover
+    """:func:`law_track_lanes` of a kernel whose law does not run on lanes: never called."""
+    return xl[0], xl[0]
 
 
 def motion_row(MA, t, x, v_ref, MO):   # pragma: no cover - compiled

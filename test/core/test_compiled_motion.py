@@ -55,9 +55,11 @@ def _close(got, want):
     return (np.isnan(want) and np.isnan(got)) or abs(got - want) <= 1e-9 * max(1.0, abs(want))
 
 
-def _check_equal(loops, r):
+def _check_equal(loops, r, runs=None):
+    """Each scenario of ``r`` against the scalar loop (``runs``: the scalar runs by loop, filled as they are made)."""
+    runs = {} if runs is None else runs
     for i, lp in enumerate(loops):
-        s = simulate(lp)
+        s = runs[id(lp)] = runs[id(lp)] if id(lp) in runs else simulate(lp)
         assert bool(r.fallen[i]) == s.fallen, i
         m = metrics.compute(s.columns, WINDOW, lp.plant.fall_angle)
         mm = (metrics.motion_metrics(s.columns, lp.motion.r, lp.plant.fall_angle) if lp.motion is not None
@@ -80,9 +82,12 @@ def test_the_compiled_batch_tracks_the_profile_as_the_scalar_loop(controller, se
     def scalar(*args, **kwargs):
         raise AssertionError("the motion batch ran the scalar loop")
     monkeypatch.setattr(batch, "_simulate_each", scalar)
-    r = simulate_batch(loops, WINDOW, compiled=True)
+    moving = [lp for lp in loops if lp.motion is not None]   # every one with motion: the law on the SIMD lanes
+    r, r_moving = simulate_batch(loops, WINDOW, compiled=True), simulate_batch(moving, WINDOW, compiled=True)
     monkeypatch.undo()
-    _check_equal(loops, r)
+    runs = {}
+    _check_equal(loops, r, runs)
+    _check_equal(moving, r_moving, runs)
     assert r.fallen[-1] and (sensing == "raw_motor" or not r.fallen[:-1].any())   # raw + the drive: some laws fall
     assert not r.fallen[:4].all()
     assert np.isnan(r.metrics["hold_drift"][4]) and np.isfinite(r.metrics["hold_drift"][:4][~r.fallen[:4]]).all()
@@ -107,10 +112,15 @@ def test_the_kernel_tracks_with_the_shapers_and_the_laws_own_functions():
     g = compiled.kernel_for(law("dscndo")).py_func.__globals__
     track = g["law_track"].py_func
     assert track.__code__ is compiled_motion.law_track.__code__
-    tg = track.__globals__
+    assert track.__globals__["track_step"].py_func.__code__ is dsc.dsc_track_step.__code__
+    shaper = track.__globals__["motion_reference"].py_func.__globals__
     for name, fn in (("profile_at", motion.profile_at), ("speed_start", motion.speed_start),
-                     ("speed_step", motion.speed_step), ("track_step", dsc.dsc_track_step)):
-        assert tg[name].py_func.__code__ is fn.__code__, name
+                     ("speed_step", motion.speed_step)):
+        assert shaper[name].py_func.__code__ is fn.__code__, name
+    if compiled.SIMD:   # the same tracking on lanes (DSC: pure_lanes)
+        lanes = g["law_track_lanes"].py_func.__globals__
+        assert lanes["track_lanes"].py_func.__code__ is dsc.dsc_track_step.__code__
+        assert lanes["motion_reference"] is track.__globals__["motion_reference"]
     assert g["motion_row"].py_func.__code__ is compiled_motion.motion_row.__code__
     files, _ = jitcache.made_of(compiled.kernel_for(law("dsc")).py_func)
     for f in (motion.__file__, compiled_motion.__file__, dsc.__file__):
