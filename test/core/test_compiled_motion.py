@@ -72,19 +72,20 @@ def _check_equal(loops, r, runs=None):
     assert set(MOTION_METRICS) <= set(r.metrics)
 
 
-@pytest.mark.parametrize("sensing", sorted(BASES))
-@pytest.mark.parametrize("controller", COMPILED_LAWS)
-def test_the_compiled_batch_tracks_the_profile_as_the_scalar_loop(controller, sensing, monkeypatch):
-    loops = [P.closed_loop(v, duration=DURATION, controller=controller)
-             for v in _values(BASES[sensing])]
+def check_law(controller: str, sensing: str) -> None:
+    """The batch of :func:`_values` run compiled (never the scalar fallback), mixed (a scenario without motion: the
+    law scenario by scenario) and every one with motion (the law on the SIMD lanes), against the scalar loop."""
+    loops = [P.closed_loop(v, duration=DURATION, controller=controller) for v in _values(BASES[sensing])]
     assert compiled.kernel_for(law(controller)) is not None
 
     def scalar(*args, **kwargs):
         raise AssertionError("the motion batch ran the scalar loop")
-    monkeypatch.setattr(batch, "_simulate_each", scalar)
-    moving = [lp for lp in loops if lp.motion is not None]   # every one with motion: the law on the SIMD lanes
-    r, r_moving = simulate_batch(loops, WINDOW, compiled=True), simulate_batch(moving, WINDOW, compiled=True)
-    monkeypatch.undo()
+    moving = [lp for lp in loops if lp.motion is not None]
+    each, batch._simulate_each = batch._simulate_each, scalar
+    try:
+        r, r_moving = simulate_batch(loops, WINDOW, compiled=True), simulate_batch(moving, WINDOW, compiled=True)
+    finally:
+        batch._simulate_each = each
     runs = {}
     _check_equal(loops, r, runs)
     _check_equal(moving, r_moving, runs)
@@ -92,6 +93,30 @@ def test_the_compiled_batch_tracks_the_profile_as_the_scalar_loop(controller, se
     assert not r.fallen[:4].all()
     assert np.isnan(r.metrics["hold_drift"][4]) and np.isfinite(r.metrics["hold_drift"][:4][~r.fallen[:4]]).all()
     assert np.isnan(r.metrics["speed_rms"][5])   # no motion: no tracking numbers
+
+
+@pytest.mark.parametrize("sensing", sorted(BASES))
+@pytest.mark.parametrize("controller", COMPILED_LAWS)
+def test_the_compiled_batch_tracks_the_profile_as_the_scalar_loop(controller, sensing):
+    check_law(controller, sensing)
+
+
+def test_without_simd_lanes_too():
+    """DSCNDO and LQR again with ``MWIP_BATCH_SIMD=0`` (one scenario after another), in a process of its own."""
+    import os
+    import subprocess
+    import sys
+    code = ("import importlib.util\n"
+            f"spec = importlib.util.spec_from_file_location('motion_oracle', {str(Path(__file__))!r})\n"
+            "mod = importlib.util.module_from_spec(spec); spec.loader.exec_module(mod)\n"
+            "from mwip_ros.core import simd\n"
+            "assert simd.WIDTH == 0\n"
+            "mod.check_law('dscndo', 'off')\n"
+            "mod.check_law('lqr', 'off')\n"
+            "print('ok')\n")
+    out = subprocess.run([sys.executable, "-c", code], cwd=CONFIG.parent, env=dict(os.environ, MWIP_BATCH_SIMD="0"),
+                         capture_output=True, text=True, timeout=1200)
+    assert out.returncode == 0 and out.stdout.strip().endswith("ok"), out.stderr[-3000:]
 
 
 def test_without_the_compiled_loop_a_motion_batch_runs_the_scalar_loop_with_the_same_metrics():
