@@ -15,7 +15,9 @@ A command whose numbers are not finite, or beyond :data:`ABSURD_SPEED` / :data:`
 counted (:attr:`Shaper.rejected`) and changes nothing, not even the timeout: a stream of them stops the robot.  One
 within those bounds but over the limits is clipped (:attr:`Shaper.clipped`).  NaN never reaches a reference.
 
-No ROS here: the controller node and the offline loop (:class:`.loop.Period`) call the same :class:`Shaper`.
+No ROS here: the controller node and the offline loop (:class:`.loop.Period`) call the same :class:`Shaper`; the
+compiled batch (:mod:`.compiled_motion`) runs its speed step (:func:`profile_at`, :func:`speed_start`,
+:func:`speed_step`), compiled from this code.
 """
 from __future__ import annotations
 
