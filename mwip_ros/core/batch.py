@@ -48,8 +48,9 @@ import numpy as np
 
 from .budget import window_samples
 from . import laws
+from .compiled_motion import MOTION_METRICS
 from .metrics import compute as metrics_compute
-from .metrics import window_metrics
+from .metrics import motion_metrics, window_metrics
 from .model import PhysicalParams, Sinusoid, State, accel, lumped_disturbance
 from .observer import DiscreteObserver
 from .trajectory import BAD_COMMAND, DIVERGED, FAILURES, FALL
@@ -237,10 +238,9 @@ def simulate_batch(loops: Sequence[ClosedLoop], window: Sequence[float], record:
     the scalar loop scenario by scenario (:func:`_simulate_each`).  The array and compiled forms have no driver
     state machine (docs/theory.md 6.8): they always run enabled, so scenarios with ``require_enable: true`` (a
     driver nobody enables: its bridge open, no torque) run the scalar loop, which has it; so do scenarios with
-    another plant backend (``mujoco``: a simulation that diverges is the scenario's ``diverged`` failure) and
-    scenarios that track motion references (``motion``, theory 6.11: the shaping and the laws' ``track`` are not in
-    the array forms yet)."""
-    if numba_missing() or any(lp.plant.require_enable or lp.plant.backend != "rk4" or lp.motion is not None
+    another plant backend (``mujoco``: a simulation that diverges is the scenario's ``diverged`` failure).  Motion
+    references (``motion``, theory 6.11) run compiled (:mod:`.compiled_motion`), else the scalar loop."""
+    if numba_missing() or any(lp.plant.require_enable or lp.plant.backend != "rk4"
                               for lp in loops):   # both array forms need numba, a driver and eq. (1)
         return _simulate_each(loops, window, record)
     beyond = any(_beyond_arrays(lp) for lp in loops)
@@ -278,9 +278,9 @@ def _raw_stage(loops: Sequence[ClosedLoop]):
 
 
 def _beyond_arrays(loop: ClosedLoop) -> bool:
-    """Stages the array forms do not run yet: the raw sensors and their estimator, the motor, the excitation."""
+    """Stages the numpy form does not run: the raw sensors and their estimator, the motor, the excitation, motion."""
     pc = loop.plant
-    return pc.raw is not None or pc.motor.enabled or loop.excitation is not None
+    return pc.raw is not None or pc.motor.enabled or loop.excitation is not None or loop.motion is not None
 
 
 def _simulate_each(loops: Sequence[ClosedLoop], window: Sequence[float], record: bool = False) -> BatchResult:
@@ -303,6 +303,10 @@ def _simulate_each(loops: Sequence[ClosedLoop], window: Sequence[float], record:
             "theta_b_est_err_rms", "dtheta_b_est_err_rms", "u_applied_rms", "saturated_s")
     out = {k: np.array([getattr(m, k) for m in named], dtype=float) for k in keys}
     out = {k: v for k, v in out.items() if k in keys[:6] or np.isfinite(v).any()}
+    if any(lp.motion is not None for lp in loops):   # core.metrics.motion_metrics (NaN: a scenario without motion)
+        mm = [motion_metrics(r.columns, lp.motion.r, lp.plant.fall_angle) if lp.motion else {}
+              for r, lp in zip(runs, loops)]
+        out.update({k: np.array([m.get(k, np.nan) for m in mm], dtype=float) for k in MOTION_METRICS})
     steps = sum(len(r) - 1 for r in runs)
     failure = np.array([FAILURES.index(r.record.get("failure", "fall")) if r.fallen else 0 for r in runs],
                        dtype=np.int64)
@@ -423,6 +427,7 @@ def _simulate_compiled(loops: Sequence[ClosedLoop], window: Sequence[float], law
     plants measure raw (every one), ``estimator`` the class of their state estimator; the motor and the
     excitation are per scenario."""
     from .compiled import Inertia, load_cached
+    from .compiled_motion import motion_arrays, motion_sums_metrics
     from .excitation import Excitation
     from .kernel_args import LoopArgs
     from .raw_sensors import raw_rng
@@ -488,6 +493,7 @@ def _simulate_compiled(loops: Sequence[ClosedLoop], window: Sequence[float], law
     ext[:, 0], ext[:, 1], ext[:, 2] = -np.inf, np.inf, -np.inf
     tau1, tau2 = np.zeros(2 * substeps + 1), np.zeros(2 * substeps + 1)
     first_w, n_window = window_samples(n_steps, h, window)
+    motion, MO, PT, PV, NP, MS, MA = motion_arrays(loops)   # the references (docs/theory.md 6.11), their metrics
     # the raw sensors (r, d, g, gyro_noise_std, gyro_bias_walk, accel_noise_std, counts) and their state (bias,
     # phi, D_w and the command of the previous period); the estimator's numbers and state
     RW = arr([[pc.actual.r, pc.raw.offset, pc.actual.g, pc.raw.gyro_noise_std, pc.raw.gyro_bias_walk,
@@ -532,7 +538,8 @@ def _simulate_compiled(loops: Sequence[ClosedLoop], window: Sequence[float], law
                 x=x, u_prev=u_prev, z=z, prev=prev, s=s, qx=qx, qa=qa, active=active,
                 t_fall=t_fall, steps=steps, acc=acc, ext=ext, T=T, tau1=tau1, tau2=tau2,
                 raw=raw, RW=RW, RS=RS, raw_noisy=raw_noisy, PE=PE, ES=ES,
-                motor_any=bool(motor.any()), MC=MC, EXT=EXT, exi=exi, failure=failure)
+                motor_any=bool(motor.any()), MC=MC, EXT=EXT, exi=exi, failure=failure,
+                motion=motion, MO=MO, PT=PT, PV=PV, NP=NP, MS=MS, MA=MA)
             if k0 == 0:
                 load_cached(kernel, tuple(args))
             kernel(*args)
@@ -541,6 +548,8 @@ def _simulate_compiled(loops: Sequence[ClosedLoop], window: Sequence[float], law
             m.update(_stage_metrics(acc, steps, h, motor, raw=True, motor_on=False))
         if motor.any():
             m.update(_stage_metrics(acc, steps, h, motor, raw=False, motor_on=True))
+        if motion:
+            m.update(motion_sums_metrics(MA, MO, NP))
     fallen = ~np.isnan(t_fall)
     upright = ~fallen & (n_steps * h >= window[1] - 1e-9)
     return BatchResult(fallen, t_fall, upright, m, int(steps.sum()), None, failure)

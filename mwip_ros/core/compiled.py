@@ -40,10 +40,11 @@ from typing import NamedTuple
 
 import numpy as np
 
-from . import drive, model, observer, plant, simd
+from . import compiled_motion, drive, model, observer, plant, simd
 from .controller import u_taud_of
 from .drive import motor_torque
 from .jitcache import jit as _jit
+from .jitcache import load_cached
 from .model import lumped_disturbance
 from .observer import tau_hat_of, z_next, z_start
 from .plant import D_w_of, saturate
@@ -137,6 +138,8 @@ class Sin(NamedTuple):
 # step, which depends on the law)
 accel, rk4_period, rk4_driven, at = model.accel, plant.rk4_period, plant.rk4_driven, model.Sinusoid.at
 law_step = None
+law_track, motion_row = compiled_motion.law_track, compiled_motion.motion_row   # motion: bound per law
+law_track_lanes = compiled_motion.law_track_lanes
 
 
 def _no_est(P, h, sample, s, first):   # pragma: no cover
@@ -235,7 +238,8 @@ def _stage(tau1, tau2, f1, f2, t, dt, substeps):   # pragma: no cover
 def _loop(k0, k1, n_steps, h, substeps, first_w, n_window, counts, delay, act_delay, observer_law,
           act, nom, D_b, sins, shared, limit, fall, X, P, use_obs, noisy, std, D_w_mean, D_w_sd, D_w_random,
           Nw, Z, x, u_prev, z, prev, s, qx, qa, active, t_fall, steps, acc, ext, T, tau1, tau2,
-          raw, RW, RS, raw_noisy, PE, ES, motor_any, MC, EXT, exi, failure):   # pragma: no cover
+          raw, RW, RS, raw_noisy, PE, ES, motor_any, MC, EXT, exi, failure,
+          motion, MO, PT, PV, NP, MS, MA):   # pragma: no cover
     """Periods k0 .. k1 - 1 of every active scenario (the arguments by name and meaning: :class:`.kernel_args.LoopArgs`,
     as :mod:`.batch` builds them): the scalar loop of :func:`.sim.simulate` (sensors, observer,
     law, saturation, actuator, true tau_d in the window, fall, RK4), calling its own functions compiled; the
@@ -282,6 +286,11 @@ def _loop(k0, k1, n_steps, h, substeps, first_w, n_window, counts, delay, act_de
     ug = np.zeros(L)           # its torque
     uog = np.zeros(L)          # and with the observer term
     live = np.zeros(L, dtype=np.bool_)
+    rg = np.zeros((5, L))      # the lanes' references (core.compiled_motion.law_track_lanes)
+    every = True   # every scenario tracks motion references: the law runs on lanes with them
+    for i in range(n):
+        every = every and NP[i] >= 0
+    lanes_law = LAW_LANES and (every or not motion)
     for i0 in range(0, n, L):
         width = min(L, n - i0)
         any_live = False
@@ -400,8 +409,12 @@ def _loop(k0, k1, n_steps, h, substeps, first_w, n_window, counts, delay, act_de
                 store(zg[1], 0, zl[1])
                 store(thg[0], 0, tl[0])
                 store(thg[1], 0, tl[1])
-                if LAW_LANES:   # the law (its pure_step) and the observer term (core.laws.ndo.WithObserver.step)
-                    ul, sl, _ = law_lanes(params_lanes(Pg), pn_lanes, h, xm_lanes, load(sg, 0), k == 0)
+                if lanes_law:   # the law (its pure_step; tracking: core.compiled_motion), the observer term (ndo)
+                    if motion:
+                        ul, sl = law_track_lanes(params_lanes(Pg), pn_lanes, h, xm_lanes, sg, xmg, live, width, i0, k,
+                                                 MO, PT, PV, NP, MS, rg)
+                    else:
+                        ul, sl, _ = law_lanes(params_lanes(Pg), pn_lanes, h, xm_lanes, load(sg, 0), k == 0)
                     store(ug, 0, ul)
                     store(sg, 0, sl)
                     if observer_law:
@@ -433,14 +446,18 @@ def _loop(k0, k1, n_steps, h, substeps, first_w, n_window, counts, delay, act_de
                 for j in range(4):
                     prev[i, j] = pvg[j, lane] = xm[j]
                 # stage: law
-                if LAW_LANES:   # computed above for every lane
+                if lanes_law:   # computed above for every lane
                     u = uog[lane] if observer_law and use_obs[i] else ug[lane]
                     s[i] = sg[lane]
                 else:
-                    u, si, _ = law_step(P[i], pn, h, xm, s[i], k == 0)
-                    s[i] = si
+                    if NP[i] >= 0:   # period k's references and the law tracking them (core.compiled_motion)
+                        u, s[i] = law_track(P[i], pn, h, xm, s[i], k, MO[i], PT[i], PV[i], NP[i], MS[i])
+                    else:
+                        u, s[i], _ = law_step(P[i], pn, h, xm, s[i], k == 0)
                     if observer_law and use_obs[i]:   # core.laws.ndo.WithObserver.step
                         u = u - u_taud_of(pn, pn.m12 * math.cos(xm[1]), th)
+                if NP[i] >= 0:
+                    motion_row(MA[i], t, xt, MS[i, 2], MO[i])   # row k of core.metrics.motion_metrics
                 if exi[i] >= 0:   # the excitation (core.loop.command)
                     u = u + EXT[exi[i], k]
                 # stage: yaw (none: the planar plant; a spatial plant runs through the scalar loop)
@@ -538,30 +555,6 @@ def pure_form(law: type):
     return None if fn is None or _owner(core, "step") is not _owner(core, "pure_step") else fn
 
 
-def load_cached(kernel, args) -> None:
-    """Load ``kernel``'s machine code for ``args``' types from numba's cache, if there and not yet loaded, without
-    the refresh of its whole compiler that numba's own first call makes (about 0.2 s of a sweep worker's start-up:
-    numba's lowering modules and, through them, scipy.linalg); the machine code needs only numba's runtime.  Anything
-    else (nothing cached, numba's internals changed) is left to the first call, which loads or compiles as usual."""
-    try:
-        from numba.core.compiler_lock import global_compiler_lock
-        from numba.core.runtime import rtsys
-        if kernel.overloads:
-            return
-        cache = kernel._cache
-        if not hasattr(cache, "_load_overload"):
-            return   # no cache (no writable directory)
-        with global_compiler_lock:   # as numba's own loading
-            ctx = kernel.targetctx
-            sig = tuple(kernel.typeof_pyval(a) for a in args)
-            rtsys.initialize(ctx)
-            cres = cache._load_overload(sig, ctx)   # numba's Cache.load_overload but for its ctx.refresh()
-            if cres is not None and not kernel.overloads:
-                kernel.add_overload(cres)
-    except Exception:  # noqa: BLE001 - the first call loads it the usual way
-        pass
-
-
 def kernel_for(law: type, estimator: type = None):
     """The compiled batch loop of the law class ``law`` (its ``pure_step``, or its base's for an observer
     variant) and, for raw sensors, of the estimator class ``estimator`` (:mod:`.estimators`: its ``pure_step``),
@@ -584,6 +577,13 @@ def kernel_for(law: type, estimator: type = None):
         suffix = f"__{fn.__module__}.{fn.__qualname__}".replace(".", "_")
         if est is not _no_est:
             suffix += f"__{est.__module__}.{est.__qualname__}".replace(".", "_")
+        own = getattr(core, "pure_track", None)   # the law tracking a motion reference (core.compiled_motion)
+        track = _deep(own) if own is not None else _deep(compiled_motion.tracked_step, suffix, law_step=step)
+        law_l = _lanes_of(fn) if by_lanes else _jit(_no_law_lanes, _lanes_tag())
+        own_l = (_lanes_of(own) if own is not None else
+                 _deep(compiled_motion.tracked_step, suffix + "__lanes", law_step=law_l)) if by_lanes else None
+        track_l = (_deep(compiled_motion.law_track_lanes, suffix, load=load, store=store, track_lanes=own_l)
+                   if by_lanes else _jit(compiled_motion.no_track_lanes, _lanes_tag()))
         _KERNELS[fn, est] = _deep(_loop, suffix, law_step=step,
                              est_step=_deep(est) if est is not _no_est else _jit(_no_est, _lanes_tag()),
                              raw_sample=_deep(raw_sample), motor_torque=_compiled(drive.motor_torque),
@@ -591,6 +591,8 @@ def kernel_for(law: type, estimator: type = None):
                              Inertia=Inertia, Sin=Sin, at=at, _stage=_deep(_stage, at=at), accel=_accel,
                              rk4_period=_rk4_period, rk4_lanes=lanes, load=load, store=store,
                              z_next_lanes=z_lanes, LAW_LANES=by_lanes,
-                             law_lanes=_lanes_of(fn) if by_lanes else _jit(_no_law_lanes, _lanes_tag()),
-                             params_lanes=_jit(_params3, _lanes_tag()))
+                             law_lanes=law_l, law_track_lanes=track_l,
+                             params_lanes=_jit(_params3, _lanes_tag()),
+                             law_track=_deep(compiled_motion.law_track, suffix, track_step=track),
+                             motion_row=_deep(compiled_motion.motion_row))
     return _KERNELS[fn, est]

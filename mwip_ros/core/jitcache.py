@@ -20,7 +20,7 @@ import numpy as np
 from numba.core.caching import (CompileResultCacheImpl, FunctionCache, InTreeCacheLocator, UserProvidedCacheLocator,
                                 UserWideCacheLocator)
 
-__all__ = ["jit", "made_of", "stamp_of", "cache_for", "stamped_cache"]
+__all__ = ["jit", "made_of", "stamp_of", "cache_for", "stamped_cache", "load_cached"]
 
 
 def _digest(path: str) -> str:
@@ -181,3 +181,27 @@ def jit(fn, tag: str = ""):
     except RuntimeError:   # no writable cache directory: compile in every process
         pass
     return compiled
+
+
+def load_cached(kernel, args) -> None:
+    """Load ``kernel``'s machine code for ``args``' types from numba's cache, if there and not yet loaded, without
+    the refresh of its whole compiler that numba's own first call makes (about 0.2 s of a sweep worker's start-up:
+    numba's lowering modules and, through them, scipy.linalg); the machine code needs only numba's runtime.  Anything
+    else (nothing cached, numba's internals changed) is left to the first call, which loads or compiles as usual."""
+    try:
+        from numba.core.compiler_lock import global_compiler_lock
+        from numba.core.runtime import rtsys
+        if kernel.overloads:
+            return
+        cache = kernel._cache
+        if not hasattr(cache, "_load_overload"):
+            return   # no cache (no writable directory)
+        with global_compiler_lock:   # as numba's own loading
+            ctx = kernel.targetctx
+            sig = tuple(kernel.typeof_pyval(a) for a in args)
+            rtsys.initialize(ctx)
+            cres = cache._load_overload(sig, ctx)   # numba's Cache.load_overload but for its ctx.refresh()
+            if cres is not None and not kernel.overloads:
+                kernel.add_overload(cres)
+    except Exception:  # noqa: BLE001 - the first call loads it the usual way
+        pass

@@ -1,6 +1,6 @@
 """The batch kernel's arguments by name: :class:`LoopArgs`, the one call of :func:`.compiled.kernel_for`'s loop.
 
-The compiled loop (:func:`.compiled._loop`) takes its 53 arguments positionally (numba compiles one signature of
+The compiled loop (:func:`.compiled._loop`) takes its 60 arguments positionally (numba compiles one signature of
 plain arrays and numbers); :mod:`.batch` builds them as a :class:`LoopArgs` by keyword and calls
 ``kernel(*args)``.  The fields are the loop's parameters in its order (a test checks it), grouped here by meaning.
 Per-scenario arrays have a row per scenario (n rows).
@@ -79,3 +79,11 @@ class LoopArgs(NamedTuple):
     exi: np.ndarray          # (n,) int64 its row (< 0: none)
     # --- the verdict (core.trajectory.FAILURES)
     failure: np.ndarray      # (n,) int64 why each scenario failed: 0 it did not, 1 fall, 2 bad_command, 3 diverged
+    # --- the motion references (core.compiled_motion.motion_arrays, docs/theory.md 6.11)
+    motion: bool             # some scenario tracks a motion profile
+    MO: np.ndarray           # (n, 6) max_speed, max_accel, position_gain, lean_gain, r, the hold's settle time
+    PT: np.ndarray           # (n, points) the profile's times
+    PV: np.ndarray           # (n, points) and its speeds
+    NP: np.ndarray           # (n,) int64 its points (< 0: no motion)
+    MS: np.ndarray           # (n, 4) theta_w*, theta_w'*, v*, the law's second state (DSC's x_d)
+    MA: np.ndarray           # (n, 9) the sums of core.metrics.motion_metrics (core.compiled_motion.motion_row)

@@ -15,7 +15,9 @@ A command whose numbers are not finite, or beyond :data:`ABSURD_SPEED` / :data:`
 counted (:attr:`Shaper.rejected`) and changes nothing, not even the timeout: a stream of them stops the robot.  One
 within those bounds but over the limits is clipped (:attr:`Shaper.clipped`).  NaN never reaches a reference.
 
-No ROS here: the controller node and the offline loop (:class:`.loop.Period`) call the same :class:`Shaper`.
+No ROS here: the controller node and the offline loop (:class:`.loop.Period`) call the same :class:`Shaper`; the
+compiled batch (:mod:`.compiled_motion`) runs its speed step (:func:`profile_at`, :func:`speed_start`,
+:func:`speed_step`), compiled from this code.
 """
 from __future__ import annotations
 
@@ -23,8 +25,8 @@ import math
 from dataclasses import dataclass
 from typing import NamedTuple, Optional, Tuple
 
-__all__ = ["MotionConfig", "Reference", "Shaper", "rate_reference", "error_state", "ABSURD_SPEED",
-           "ABSURD_YAW_RATE"]
+__all__ = ["MotionConfig", "Reference", "Shaper", "rate_reference", "error_state", "profile_at", "speed_start",
+           "speed_step", "ABSURD_SPEED", "ABSURD_YAW_RATE"]
 
 ABSURD_SPEED = 1e3       # m/s: a command beyond this is no robot's: rejected, not clipped
 ABSURD_YAW_RATE = 1e3    # rad/s
@@ -74,14 +76,34 @@ def _clip(v: float, lim: float) -> float:
     return lim if v > lim else (-lim if v < -lim else v)
 
 
-def _at(profile, t: float) -> float:
-    """A profile's value at ``t``: the newest point at or before it (0 before the first)."""
+def profile_at(times, values, t: float) -> float:
+    """A profile's value at ``t``: the newest point (``times[j]``, ``values[j]``) at or before it (0 before the
+    first).  Plain arithmetic on two sequences: the compiled batch (:mod:`.compiled_motion`) runs this code too."""
     v = 0.0
-    for tp, vp in profile:
-        if tp > t + 1e-12:
+    for j in range(len(times)):
+        if times[j] > t + 1e-12:
             break
-        v = vp
+        v = values[j]
     return v
+
+
+def _at(profile, t: float) -> float:
+    """:func:`profile_at` of a profile of (t, value) pairs."""
+    return profile_at(tuple(tp for tp, _ in profile), tuple(vp for _, vp in profile), t)
+
+
+def speed_start(v_target: float, theta_w0: float, max_accel: float, h: float, r: float):
+    """Period 0's (theta_w*, theta_w'*, v*): v* one period's acceleration from rest toward the target, theta_w* the
+    first state's wheel angle (module docstring).  The compiled batch (:mod:`.compiled_motion`) runs this code too."""
+    v = _clip(v_target, max_accel * h)
+    return theta_w0, v / r, v
+
+
+def speed_step(theta_w: float, dtheta_w: float, v: float, v_target: float, max_accel: float, h: float, r: float):
+    """The next period's (theta_w*, theta_w'*, v*) from this one's: v* at most ``max_accel`` h toward the target,
+    theta_w* the exact integral of theta_w'* held over the period (module docstring)."""
+    v = _toward(v, v_target, max_accel * h)
+    return theta_w + h * dtheta_w, v / r, v
 
 
 def _toward(now: float, target: float, step: float) -> float:
@@ -150,16 +172,16 @@ class Shaper:
         self.stopped_now = False
         if self.ref is None:
             v, w = self._target(k)
-            dv, dw = c.max_accel * h, c.max_yaw_rate * h
-            v, w = _clip(v, dv), _clip(w, dw)   # from rest
-            self.ref = Reference(float(theta_w0), v / c.r, v, w, c.position_gain, c.lean_gain)
+            tw, dtw, v = speed_start(v, float(theta_w0), c.max_accel, h, c.r)   # from rest
+            w = _clip(w, c.max_yaw_rate * h)
+            self.ref = Reference(tw, dtw, v, w, c.position_gain, c.lean_gain)
             self.k = k
             return self.ref
         while self.k < k:
             self.k += 1
             r = self.ref
             vt, wt = self._target(self.k)
-            v = _toward(r.v, vt, c.max_accel * h)
+            tw, dtw, v = speed_step(r.theta_w, r.dtheta_w, r.v, vt, c.max_accel, h, c.r)
             w = _toward(r.dpsi, wt, c.max_yaw_rate * h)
-            self.ref = Reference(r.theta_w + h * r.dtheta_w, v / c.r, v, w, c.position_gain, c.lean_gain)
+            self.ref = Reference(tw, dtw, v, w, c.position_gain, c.lean_gain)
         return self.ref

@@ -84,6 +84,11 @@ class Law:
         ``first``, the first step).  When a law has one, its :meth:`step` calls it, and the batch simulator runs
         it compiled by numba inside one compiled loop (``core.compiled``); None: the batch runs :meth:`step`
         over numpy arrays.
+    pure_track : function or None
+        The law's period tracking a motion reference (docs/theory.md 6.11) as a pure function, ``pure_track(P,
+        nominal, h, x, s, s2, first, ref, m=math)`` -> ``(u, s_next, s2_next, internals tuple)`` with a second float
+        of state ``s2`` (DSC's x_d); None (the default): ``pure_step`` on the error state (:meth:`tracked`), as
+        :meth:`step` does.  The compiled batch runs it (``core.compiled_motion``).
     limit_key : str or None
         The parameter of the law's own torque limit, when it has one (``mpc.u_max``): its command, the observer
         term included, holds |u| <= that value at every step (:meth:`step_observed`); None: no limit.
@@ -106,6 +111,7 @@ class Law:
     Params: type = type(None)
     announce: bool = False
     pure_step = None
+    pure_track = None
     pure_lanes = 0
     limit_key: Optional[str] = None
     requires: Tuple[str, ...] = ()

@@ -14,7 +14,7 @@ from ..controller import DscGains, dsc_terms, dsc_terms_tracking, filter_step
 from ..motion import rate_reference
 from . import Law
 
-__all__ = ["DscLaw", "INTERNALS", "dsc_step", "lean_reference"]
+__all__ = ["DscLaw", "INTERNALS", "dsc_step", "dsc_track_step", "lean_reference"]
 
 # controller_internals of DSC and DSCNDO (docs/graph.md: plot them): msgs.layouts.INTERNAL_NAMES
 INTERNALS = ("S1", "S2", "x4d", "x4_bar", "u_dsc", "u_taud", "u", "x1")
@@ -32,6 +32,23 @@ def lean_reference(ref, x, m=math):
     """The outer loop's lean reference before its filter, x_d_bar = -k_x e with the wheel error
     e = (theta_w' - theta_w'*) + lambda (theta_w - theta_w*) (docs/theory.md 6.11)."""
     return -ref.lean_gain * (x[2] - rate_reference(ref, x[0]))
+
+
+def dsc_track_step(P, p, h, x, s, xd, first, ref, m=math):
+    """One period of DSC tracking the motion reference ``ref`` as a pure function (:attr:`~mwip_ros.core.laws.Law.
+    pure_track`, docs/theory.md 6.11): ``s`` the filter state x4d, ``xd`` the outer loop's filtered lean reference
+    x_d (both ignored when ``first``).  x_d_bar = -k_x e (:func:`lean_reference`) through the filter of eq. (25),
+    tau4 x_d' + x_d = x_d_bar, so x_d' = (x_d_bar - x_d) / tau4 exactly; then eq. (22)-(28) with S1 = x2 - x_d and
+    x4_bar's -x_d', and both filters advanced over the period.  Returns (u, the next x4d, the next x_d, (S1, S2,
+    x4d, x4_bar, u, x1))."""
+    tau4 = P[2]
+    xd_bar = lean_reference(ref, x, m)
+    if first:
+        xd = xd_bar
+    dxd = (xd_bar - xd) / tau4
+    u, S1, S2, x1, x4_bar, x4d = dsc_terms_tracking(p, P[0], P[1], tau4, x, s, first, xd, dxd, m)
+    return u, filter_step(x4d, x4_bar, h, tau4, m), filter_step(xd, xd_bar, h, tau4, m), (S1, S2, x4d, x4_bar, u,
+                                                                                          x1)
 
 
 class DscLaw(Law):
@@ -76,21 +93,16 @@ class DscLaw(Law):
                    "u_taud": 0.0, "u": u, "x1": x1}   # u_taud: 0, the term is off
 
     def _step_tracking(self, x, first):
-        """The surfaces track x_d (docs/theory.md 6.11): x_d_bar = -k_x e (:func:`lean_reference`) through the filter
-        of eq. (25), tau4 x_d' + x_d = x_d_bar, so x_d' = (x_d_bar - x_d) / tau4 exactly; then eq. (22)-(28) with
-        S1 = x2 - x_d and x4_bar's -x_d', and both filters advanced over the period."""
-        k1, k2, tau4 = self.pure_params(self.params)
-        m = self.m
-        xd_bar = lean_reference(self.ref, x, m)
-        xd = xd_bar if self.xd is None else self.xd
-        dxd = (xd_bar - xd) / tau4
-        u, S1, S2, x1, x4_bar, x4d = dsc_terms_tracking(self.nominal, k1, k2, tau4, x, 0.0 if first else self.x4d,
-                                                        first, xd, dxd, m)
-        self.x4d = filter_step(x4d, x4_bar, self.h, tau4, m)
-        self.xd = filter_step(xd, xd_bar, self.h, tau4, m)
+        """The surfaces track x_d (docs/theory.md 6.11): :func:`dsc_track_step`, x_d(0) = x_d_bar(0) at the first
+        step that has a reference (a first step, or a reference that came later)."""
+        xd = lean_reference(self.ref, x, self.m) if self.xd is None else self.xd
+        u, self.x4d, self.xd, (S1, S2, x4d, x4_bar, u_dsc, x1) = dsc_track_step(
+            self.pure_params(self.params), self.nominal, self.h, x, 0.0 if first else self.x4d, xd, first, self.ref,
+            self.m)
         return u, {"S1": S1, "S2": S2, "x4d": x4d, "x4_bar": x4_bar, "u_dsc": u, "u_taud": 0.0, "u": u, "x1": x1}
 
     pure_step = staticmethod(dsc_step)
+    pure_track = staticmethod(dsc_track_step)
     pure_lanes = 3   # P = (k1, k2, tau4)
 
     @staticmethod

@@ -1,0 +1,154 @@
+"""The motion references in the compiled batch loop (:func:`.compiled._loop`, docs/theory.md 6.11): the scalar loop's
+:class:`.motion.Shaper` and the laws' tracking, from the same functions.
+
+Per period k of a scenario with motion (:func:`law_track`, which the loop calls at its stage ``law``, as
+:func:`.loop.command` hands the references to the law): the profile's target at t_k (:func:`.motion.profile_at`,
+clipped to ``max_speed``), v*, theta_w'*, theta_w* from the previous period's (:func:`.motion.speed_start` at k = 0
+from the measured wheel angle, then :func:`.motion.speed_step`), and the law's period on them: its ``pure_track``
+(DSC's outer loop, :func:`.laws.dsc.dsc_track_step`) or, without one, its ``pure_step`` on the error state
+(:func:`.motion.error_state`, :func:`tracked_step`), as ``Law.step`` does with :meth:`.laws.Law.tracked`.  These
+are the functions the Shaper and the laws call, compiled from their own code (``compiled._deep``), no copy.
+
+The batch has only the time profile (``motion.profile``; no ``cmd_vel``), so the Shaper's command timeout does not
+arise.  The yaw reference psi'* is not formed: the batch runs the planar plant only, which has no yaw stage.
+
+Each row k also adds to the sums of :func:`.metrics.motion_metrics` (:func:`motion_row`: the speed error's sum of
+squares, the largest lean, the hold's first and last wheel angles), which :func:`motion_sums_metrics` turns into
+the same metrics.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .metrics import HOLD_SETTLE_S
+from .motion import Reference, _clip, error_state, profile_at, speed_start, speed_step
+
+__all__ = ["law_track", "law_track_lanes", "no_track_lanes", "motion_reference", "tracked_step", "motion_row",
+           "motion_arrays", "motion_sums_metrics", "MOTION_METRICS"]
+
+MOTION_METRICS = ("speed_rms", "hold_drift", "hold_rate", "max_lean")   # core.metrics.motion_metrics' numbers
+
+# the names law_track calls that core.compiled.kernel_for binds per law (here: never called)
+law_step = None
+
+
+def tracked_step(P, p, h, x, s, s2, first, ref):   # pragma: no cover - compiled
+    """A law's ``pure_track`` when it has none: its ``pure_step`` (``law_step``) on the state in the reference's
+    error coordinates (:func:`.motion.error_state`, as :meth:`.laws.Law.tracked`); ``s2`` unused."""
+    u, s_next, internals = law_step(P, p, h, error_state(x, ref), s, first)
+    return u, s_next, s2, internals
+
+
+track_step = track_lanes = tracked_step   # the law's pure_track (and on lanes): bound per law by compiled.kernel_for
+load = store = None   # core.simd's: bound by core.compiled.kernel_for
+
+
+def motion_reference(MO, PT, PV, n_points, MS, k, h, theta_w):   # pragma: no cover - compiled
+    """Period k's (theta_w*, theta_w'*, v*) as :meth:`.motion.Shaper.reference` with a profile makes them, into ``MS``
+    (theta_w*, theta_w'*, v*, the law's second state) from the previous period's; ``theta_w`` the measured wheel
+    angle (theta_w*(0)).  ``MO`` = max_speed, max_accel, position_gain, lean_gain, r, settle; the profile
+    ``PT[:n_points]``, ``PV[:n_points]`` (:func:`motion_arrays`)."""
+    vt = _clip(profile_at(PT[:n_points], PV[:n_points], k * h), MO[0])
+    if k == 0:
+        tw, dtw, v = speed_start(vt, theta_w, MO[1], h, MO[4])
+    else:
+        tw, dtw, v = speed_step(MS[0], MS[1], MS[2], vt, MO[1], h, MO[4])
+    MS[0], MS[1], MS[2] = tw, dtw, v
+    return tw, dtw, v
+
+
+def law_track(P, p, h, x, s, k, MO, PT, PV, n_points, MS):   # pragma: no cover - compiled
+    """Period k's references (:func:`motion_reference`) and the law's (u, next state) tracking them for the measured
+    state ``x`` (its second state in ``MS[3]``)."""
+    tw, dtw, v = motion_reference(MO, PT, PV, n_points, MS, k, h, x[0])
+    u, s_next, s2, _ = track_step(P, p, h, x, s, MS[3], k == 0, Reference(tw, dtw, v, 0.0, MO[2], MO[3]))
+    MS[3] = s2
+    return u, s_next
+
+
+def law_track_lanes(Pl, pl, h, xl, sg, xmg, live, width, i0, k, MO, PT, PV, NP, MS, R):   # pragma: no cover
+    """:func:`law_track` for the lanes of scenarios ``i0`` .. ``i0 + width - 1`` (every one with motion): the
+    references scenario by scenario (:func:`motion_reference`, the measured wheel angles ``xmg[0]``), gathered in
+    ``R`` (theta_w*, theta_w'*, lambda, k_x, the law's second state: a row each, a column per lane), then the law's
+    tracking for all lanes at once (``track_lanes``: its ``pure_track``, or ``pure_step`` on the error state, on
+    :data:`.simd.lanes`).  Returns the lanes' (u, next state)."""
+    for lane in range(width):
+        if live[lane]:
+            i = i0 + lane
+            R[0, lane], R[1, lane], _ = motion_reference(MO[i], PT[i], PV[i], NP[i], MS[i], k, h, xmg[0, lane])
+            R[2, lane], R[3, lane], R[4, lane] = MO[i, 2], MO[i, 3], MS[i, 3]
+    ref = Reference(load(R[0], 0), load(R[1], 0), 0.0, 0.0, load(R[2], 0), load(R[3], 0))
+    u, s_next, s2, _ = track_lanes(Pl, pl, h, xl, load(sg, 0), load(R[4], 0), k == 0, ref)
+    store(R[4], 0, s2)
+    for lane in range(width):
+        if live[lane]:
+            MS[i0 + lane, 3] = R[4, lane]
+    return u, s_next
+
+
+def no_track_lanes(Pl, pl, h, xl, sg, xmg, live, width, i0, k, MO, PT, PV, NP, MS, R):   # pragma: no cover
+    """:func:`law_track_lanes` of a kernel whose law does not run on lanes: never called."""
+    return xl[0], xl[0]
+
+
+def motion_row(MA, t, x, v_ref, MO):   # pragma: no cover - compiled
+    """Row k (time ``t``, true state ``x``, reference speed ``v_ref``) into the sums of
+    :func:`.metrics.motion_metrics`: ``MA`` = sum of (r theta_w' - v*)^2 and its count (finite samples), the
+    largest finite |theta_b|, the hold's start (the row after the last with v* != 0; NaN while v* != 0), the hold's
+    first theta_w and t (from ``settle`` s after its start), its rows, its last theta_w and t."""
+    e = MO[4] * x[2] - v_ref
+    if math.isfinite(e):
+        MA[0] += e * e
+        MA[1] += 1.0
+    if math.isfinite(x[1]):
+        MA[2] = max(MA[2], abs(x[1]))
+    if not v_ref == 0.0:   # moving: the hold, if any, starts after this row
+        MA[3] = math.nan
+        MA[6] = 0.0
+        return
+    if MA[3] != MA[3]:
+        MA[3] = t
+    if t >= MA[3] + MO[5] - 1e-9:
+        if MA[6] == 0.0:
+            MA[4], MA[5] = x[0], t
+        MA[6] += 1.0
+        MA[7], MA[8] = x[0], t
+
+
+def motion_arrays(loops, settle: float = HOLD_SETTLE_S):
+    """The compiled loop's motion arguments of ``loops`` (each one's ``motion``, a :class:`.motion.MotionConfig`, or
+    None): (any has motion, MO, PT, PV, NP, MS, MA): per scenario its numbers (max_speed, max_accel, position_gain,
+    lean_gain, r, ``settle``), its profile's times and values (NP points; -1: no motion), the references' state and
+    the metrics' sums (:func:`motion_row`)."""
+    n = len(loops)
+    cfgs = [lp.motion for lp in loops]
+    width = max([1] + [len(c.profile) for c in cfgs if c is not None])
+    MO, PT, PV = np.zeros((n, 6)), np.zeros((n, width)), np.zeros((n, width))
+    NP = np.full(n, -1, dtype=np.int64)
+    for i, c in enumerate(cfgs):
+        if c is not None:
+            MO[i] = (c.max_speed, c.max_accel, c.position_gain, c.lean_gain, c.r, settle)
+            NP[i] = len(c.profile)
+            for j, (tp, vp) in enumerate(c.profile):
+                PT[i, j], PV[i, j] = tp, vp
+    MA = np.zeros((n, 9))
+    MA[:, 2] = -np.inf
+    MA[:, 4:6] = MA[:, 7:9] = np.nan
+    return bool((NP >= 0).any()), MO, PT, PV, NP, np.zeros((n, 4)), MA
+
+
+def motion_sums_metrics(MA: np.ndarray, MO: np.ndarray, NP: np.ndarray) -> dict:
+    """:func:`.metrics.motion_metrics`' numbers (:data:`MOTION_METRICS`) from :func:`motion_row`'s sums, NaN for a
+    scenario without motion (``NP`` < 0)."""
+    on = NP >= 0
+    with np.errstate(invalid="ignore", divide="ignore"):
+        held = MA[:, 6] > 1
+        drift = np.where(held, MO[:, 4] * (MA[:, 7] - MA[:, 4]), np.nan)
+        span = MA[:, 8] - MA[:, 5]
+        out = {"speed_rms": np.where(MA[:, 1] > 0, np.sqrt(MA[:, 0] / np.where(MA[:, 1] > 0, MA[:, 1], 1.0)), np.nan),
+               "hold_drift": drift, "hold_rate": np.where(held & (span > 0), drift / np.where(span > 0, span, 1.0),
+                                                          np.nan),
+               "max_lean": np.where(np.isfinite(MA[:, 2]), MA[:, 2], np.nan)}
+    return {k: np.where(on, v, np.nan) for k, v in out.items()}
