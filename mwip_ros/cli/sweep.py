@@ -257,11 +257,12 @@ def _sweep_info(spec, args) -> dict:
 
 
 def _has_stages(spec) -> bool:
-    """Whether the sweep's loop has raw sensors or the motor, in its base file or on an axis (their metrics)."""
+    """Whether the sweep's loop has raw sensors, the motor or motion references, in its base file or on an axis
+    (their metrics: results.EXTRA_METRICS)."""
     v = spec.base_values
     names = {a.name for a in spec.axes}
-    return v.get("sensors.model") == "raw" or bool(v.get("motor.enabled")) or bool(
-        {"sensors.model", "motor.enabled"} & names)
+    return v.get("sensors.model") == "raw" or bool(v.get("motor.enabled")) or bool(v.get("motion.enabled")) or bool(
+        {"sensors.model", "motor.enabled", "motion.enabled"} & names)
 
 
 def _figures(cols, spec, doc, out: Path) -> list:

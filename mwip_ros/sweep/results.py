@@ -36,12 +36,14 @@ UNITS = {"theta_b_p2p": "rad", "theta_b_rms": "rad", "max_abs_theta_b": "rad", "
          "tau_hat1_err_rms": "N m", "tau_hat2_err_rms": "N m"}
 REFERENCE = "dscndo"          # the law each law's medians are compared to (else the last law)
 RATIO_METRICS = ("theta_b_p2p", "theta_b_rms", "u_rms")
-# what a run has beside them when its loop has the stage (raw sensors' estimator, the motor): written always (NaN
-# without the stage), summarized where some run has a value; a results.csv of before them still reads
+# what a run has beside them when its loop has the stage (raw sensors' estimator, the motor, motion references:
+# core.metrics.motion_metrics): written always (NaN without the stage), summarized where some run has a value; a
+# results.csv of before them still reads
 EXTRA_METRICS = {"theta_b_est_err_rms": "theta_b_est_err_rms", "dtheta_b_est_err_rms": "dtheta_b_est_err_rms",
-                 "u_applied_rms": "u_applied_rms", "saturated_s": "saturated_s"}
+                 "u_applied_rms": "u_applied_rms", "saturated_s": "saturated_s", "speed_rms": "speed_rms",
+                 "hold_drift": "hold_drift", "hold_rate": "hold_rate", "max_lean": "max_lean"}
 UNITS.update({"theta_b_est_err_rms": "rad", "dtheta_b_est_err_rms": "rad/s", "u_applied_rms": "N m",
-              "saturated_s": "s"})
+              "saturated_s": "s", "speed_rms": "m/s", "hold_drift": "m", "hold_rate": "m/s", "max_lean": "rad"})
 ALL_METRICS = {**METRICS, **EXTRA_METRICS}
 
 

@@ -50,6 +50,11 @@ def test_mwip_sweep_and_mwip_tune_run_a_motion_spec(tmp_path):
                        capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stdout + r.stderr
     assert "dscndo" in r.stdout and any(out.iterdir())
+    from mwip_ros.sweep.results import read_results
+    cols = read_results(out / "results.csv")   # the tracking metrics are columns of the table, one per run
+    speed = np.array(cols["speed_rms"], dtype=float)
+    assert len(speed) == 2 and np.all(np.isfinite(speed)) and np.all(speed > 0), cols
+    assert np.all(np.array(cols["max_lean"], dtype=float) > 0)
     tuned = tmp_path / "tuned.yaml"
     r = subprocess.run([sys.executable, "-m", "mwip_ros.cli.tune", str(_spec(tmp_path)), "--controller", "dscndo",
                         "--tune", "k1", "--maxiter", "1", "--popsize", "2", "--seed", "0", "--out", str(tuned)],
