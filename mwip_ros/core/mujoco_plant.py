@@ -57,7 +57,7 @@ class MujocoConfig:
     I_b_roll: float = 65.0       # the body's inertia about its x axis (through the centre of gravity) [kg m^2]
     I_b_yaw: float = 20.0        # ... about its z axis [kg m^2]
     friction: float = 2.0        # ground sliding friction coefficient
-    timestep: float = 1e-3       # largest physics step [s]; a control period is an integer number of steps
+    timestep: float = 5e-3       # largest physics step [s]; a control period is an integer number of steps
     slope: float = 0.0           # the ground's slope about y [rad], uphill ahead for > 0 (ground.slope)
     bumps: Tuple[float, ...] = ()   # steps [x0, h0, x1, h1, ...] along the slope [m] (ground.bumps, params.ground)
 
@@ -146,6 +146,8 @@ class MujocoPlant(PlantSim):
         self.n = max(1, math.ceil(c.h / (c.mujoco or MujocoConfig()).timestep - 1e-9))   # physics steps per period
         d = self.data   # dofs: free joint 0-2 (world velocity), 3-5 (body-frame rates, 4 the pitch); wheels 6, 7
         self._qpos, self._qvel, self._ctrl, self._qfrc = d.qpos, d.qvel, d.ctrl, d.qfrc_applied   # live views
+        self._qacc = d.qacc
+        self._step, self._forward = mj.mj_step, mj.mj_forward   # looked up once: a period calls each once or more
         self._warnings = d.warning.number                                    # MuJoCo's warning counts, live
         x0 = self.x
         d.qpos[7] = d.qpos[8] = x0[0] - x0[1]                                 # phi_i = theta_w - theta_b
@@ -159,11 +161,13 @@ class MujocoPlant(PlantSim):
 
     @property
     def integration(self) -> str:
-        return f"MuJoCo {self._mj.__version__}, {self.n} RK4 steps of {self.cfg.h / self.n * 1e3:g} ms"
+        steps = "1 RK4 step" if self.n == 1 else f"{self.n} RK4 steps"
+        return f"MuJoCo {self._mj.__version__}, {steps} of {self.cfg.h / self.n * 1e3:g} ms"
 
-    def _read(self) -> None:
-        """:attr:`x` and :attr:`pose` from MuJoCo's state."""
-        q, v = self._qpos.tolist(), self._qvel.tolist()
+    def _read(self, q=None, v=None) -> None:
+        """:attr:`x` and :attr:`pose` from MuJoCo's state (``q``, ``v``: qpos and qvel as lists, if read already)."""
+        if q is None:
+            q, v = self._qpos.tolist(), self._qvel.tolist()
         pitch, yaw, roll = pose_angles(q[3], q[4], q[5], q[6])
         wl, wr = pitch + q[7], pitch + q[8]
         self.x = State(0.5 * (wl + wr), pitch, v[4] + 0.5 * (v[6] + v[7]), v[4])
@@ -191,18 +195,22 @@ class MujocoPlant(PlantSim):
 
     @property
     def fallen(self) -> bool:
-        return not all(math.isfinite(v) for v in self.x) or abs(self.x[1]) > self.cfg.fall_angle
+        x = self.x   # NaN or an infinity in a sum of the components makes it not finite: one check, not four
+        return not (abs(x[1]) <= self.cfg.fall_angle and math.isfinite(x[0] + x[2] + x[3]))
 
-    def _apply(self, t: float, u_pair, D_w: float, extra) -> None:
-        """The inputs at time ``t``: the wheels' torques ``u_pair`` (left, right), D_w's and tau_ext's generalized
-        forces from the current velocities (module docstring)."""
-        c, v, f = self.cfg, self._qvel, self._qfrc
+    def _apply(self, t: float, ul: float, ur: float, D_w: float, extra) -> None:
+        """The inputs at time ``t``: the wheels' torques ``ul``, ``ur``, D_w's and tau_ext's generalized forces from
+        the current velocities (module docstring).  Element by element: a slice assignment costs numpy more."""
+        c, f, ctrl = self.cfg, self._qfrc, self._ctrl
         e1, e2 = c.tau_ext1(t) + extra[0], c.tau_ext2(t) + extra[1]
-        pitch_rate = v[4]
-        ql = -0.5 * D_w * (pitch_rate + v[6]) + 0.5 * e1
-        qr = -0.5 * D_w * (pitch_rate + v[7]) + 0.5 * e1
-        self._ctrl[:] = u_pair
-        f[4], f[6], f[7] = ql + qr + e2 - e1, ql, qr
+        pitch_rate, _, wl, wr = self._qvel[4:8].tolist()   # the pitch rate (body y), the wheels' hinges
+        ql = -0.5 * D_w * (pitch_rate + wl) + 0.5 * e1
+        qr = -0.5 * D_w * (pitch_rate + wr) + 0.5 * e1
+        ctrl[0] = ul
+        ctrl[1] = ur
+        f[4] = ql + qr + e2 - e1
+        f[6] = ql
+        f[7] = qr
         if len(extra) > 2 and (extra[2] or extra[3] or self._pushed):   # external_wrench's force.y, torque.z
             self._push(extra[2], extra[3])
 
@@ -217,10 +225,11 @@ class MujocoPlant(PlantSim):
     def _accel(self, u: float, D_w: float, extra, wheels=None) -> Tuple[float, float]:
         """(theta_w'', theta_b'') at the current state with the torque ``u`` (u / 2 per wheel, or the pair
         ``wheels``), MuJoCo's."""
-        self._apply(self.t, (0.5 * u, 0.5 * u) if wheels is None else wheels, D_w, extra)
-        self._mj.mj_forward(self.model, self.data)
-        a = self.data.qacc.tolist()
-        return a[4] + 0.5 * (a[6] + a[7]), a[4]
+        ul, ur = (0.5 * u, 0.5 * u) if wheels is None else wheels
+        self._apply(self.k * self.cfg.h, ul, ur, D_w, extra)
+        self._forward(self.model, self.data)
+        a4, _, a6, a7 = self._qacc[4:8].tolist()
+        return a4 + 0.5 * (a6 + a7), a4
 
     def lumped_disturbance(self, u: float, extra=(0.0, 0.0), wheels=None) -> Tuple[float, float]:
         return lumped_disturbance(self.cfg.nominal, self.x, self._accel(u, self.D_w, extra, wheels), u)
@@ -247,55 +256,60 @@ class MujocoPlant(PlantSim):
         """Integrate t_k -> t_{k+1}: :attr:`n` MuJoCo steps, each wheel's torque and the generalized forces held over
         each (tau_ext at its midpoint, D_w's term from its start); with the motor model, each wheel's drive is
         half the motor (K_t, 2 R, V_max, I_max / 2: the two sum to the one of eq. 1) with half the command.
-        ``wheels``: the yaw stage's commands (u_L, u_R) (docs/theory.md 6.13) instead of u / 2 each."""
-        c, mj, d = self.cfg, self._mj, self.data
+        ``wheels``: the yaw stage's commands (u_L, u_R) (docs/theory.md 6.13) instead of u / 2 each.
+
+        A period's Python is kept to a few microseconds (BENCHMARKS.md, "The lockstep graph with the MuJoCo plant"):
+        MuJoCo's arrays are read as lists once (``tolist``) and written element by element, the divergence check is
+        one sum, and its message is formatted only when it is raised (:meth:`_diverged`)."""
+        c, m, d, n = self.cfg, self.model, self.data, self.n
         u, motor = gated_drive(u, c.motor_constants, enabled)
         if wheels is not None and not enabled:
             wheels = (0.0, 0.0)
         driven = motor[0] > 0.0
-        half = self._half_motor(motor)
         cl, cr = (0.5 * u, 0.5 * u) if wheels is None else wheels
-        dt = c.h / self.n
-        acted, sat = 0.0, 0
-        acted_l = acted_r = 0.0
-        for i in range(self.n):
-            ul, ur = cl, cr
-            if driven:
-                ul, sl = motor_torque(cl, self._qvel[6], *half)
-                ur, sr = motor_torque(cr, self._qvel[7], *half)
+        t, dt, D_w, mj_step = self.k * c.h, c.h / n, self.D_w, self._step   # t = self.t
+        acted = acted_l = acted_r = 0.0
+        sat = 0
+        if driven:
+            half = self._half_motor(motor)
+            for i in range(n):
+                wl, wr = self._qvel[6:8].tolist()
+                ul, sl = motor_torque(cl, wl, *half)
+                ur, sr = motor_torque(cr, wr, *half)
                 sat = max(sat, sl, sr)
-            acted += ul + ur
-            acted_l += ul
-            acted_r += ur
-            self._apply(self.t + (i + 0.5) * dt, (ul, ur), self.D_w, extra)
-            mj.mj_step(self.model, d)
-        x, pose = self.x, self.pose
-        self._read()
-        try:
-            self._check()
-        except PlantDiverged:   # x and pose stay those of t_k: no state that is not finite leaves the plant
-            self.x, self.pose = x, pose
-            raise
+                acted += ul + ur
+                acted_l += ul
+                acted_r += ur
+                self._apply(t + (i + 0.5) * dt, ul, ur, D_w, extra)
+                mj_step(m, d)
+        else:
+            for i in range(n):
+                self._apply(t + (i + 0.5) * dt, cl, cr, D_w, extra)
+                mj_step(m, d)
+        q, v = self._qpos.tolist(), self._qvel.tolist()
+        if any(self._warnings.tolist()) or not math.isfinite(sum(q) + sum(v)):
+            self._diverged()   # x and pose stay those of t_k: no state that is not finite leaves the plant
+        self._read(q, v)
         self.k += 1
         self.saturation = sat
-        self.u_prev, self.u_cmd_prev, self.enabled_prev = (acted / self.n if driven else u), u, bool(enabled)
+        self.u_prev, self.u_cmd_prev, self.enabled_prev = (acted / n if driven else u), u, bool(enabled)
         if wheels is not None:
-            self.wheels_prev = (acted_l / self.n, acted_r / self.n) if driven else (cl, cr)
+            self.wheels_prev = (acted_l / n, acted_r / n) if driven else (cl, cr)
             self.wheels_cmd_prev = (cl, cr)
             if not driven:
                 self.u_prev = cl + cr
-        self.D_w_prev, self.extra_prev = self.D_w, tuple(float(e) for e in extra)
+        self.D_w_prev, self.extra_prev = D_w, tuple(map(float, extra))
         self.D_w = self._draw_D_w()
 
-    def _check(self) -> None:
-        """After the period [t_k, t_k+1]: raise :class:`PlantDiverged` on a MuJoCo warning (on a diverged state
-        MuJoCo warns and resets it to the model's initial one, silently) or a state that is not finite."""
+    def _diverged(self) -> None:
+        """After the period [t_k, t_k+1], on a MuJoCo warning (on a diverged state MuJoCo warns and resets it to the
+        model's initial one, silently) or a state that is not finite (a sum of qpos and qvel that is not: NaN and
+        infinities propagate through it): raise :class:`PlantDiverged` naming the time and the cause."""
         where = f"the MuJoCo simulation diverged in [{self.t:.6g}, {self.t + self.cfg.h:.6g}] s"
-        if self._warnings.any():
+        if any(self._warnings.tolist()):
             names = [self._mj.mjtWarning(i).name for i, n in enumerate(self._warnings.tolist()) if n]
             raise PlantDiverged(f"{where}: {', '.join(f'{n} ({_WHY.get(n, n)})' for n in names)}")
-        if not all(math.isfinite(v) for v in (*self.x, *self.pose)):
-            raise PlantDiverged(f"{where}: a state that is not finite")
+        raise PlantDiverged(f"{where}: a state that is not finite")
 
 
 _WHY = {"mjWARN_BADQACC": "accelerations not finite or beyond 1e10",

@@ -278,7 +278,7 @@ NODE_SPECS: Dict[str, List[ParamSpec]] = {
         ParamSpec("substeps", "integer", 5, "RK4 sub-steps per control period", **_at_least_one),
         ParamSpec("backend", "string", "rk4", "the physics: rk4 (eq. 1, RK4) or mujoco (a 3D model with two wheels "
                   "in MuJoCo, docs/theory.md 6.10)", **_one_of("rk4", "mujoco")),
-        ParamSpec("mujoco.timestep", "double", 0.001, "mujoco: the largest physics step [s]; a control period is "
+        ParamSpec("mujoco.timestep", "double", 0.005, "mujoco: the largest physics step [s]; a control period is "
                   "ceil(h / timestep) equal steps", **_positive_from(1e-5, 1.0, "a step below 10 us"), unit="s"),
         ParamSpec("actual.track_width", "double", 0.5, "mujoco: distance between the two wheels [m]",
                   **_positive_from(1e-3, 100.0, "wheels closer than a millimetre"), unit="m"),

@@ -1,14 +1,20 @@
 """The cross-check of the MuJoCo backend in full (issue 32): every law, the paper's 10 s scenario, flat ground and
-no yaw: theta_b within 1e-3 rad of the rk4 backend's at every step, its RMS over [5, 10] s within 1 %, the yaw ~0.
+no yaw, at the default physics step (5 ms): theta_b within 1e-3 rad of the rk4 backend's at every step, its RMS over
+[5, 10] s within 1 %, the yaw ~0; and docs/real-robot.md's cross-check table is these runs, to its digits.
 (test/core/test_mujoco_plant.py runs the first second of each law and DSC / DSCNDO in full in the unit tier.)"""
 import numpy as np
 import pytest
 
 pytest.importorskip("mujoco")
 
+from graphproc import REPO  # noqa: E402
 from mwip_ros.core import metrics  # noqa: E402
+from test_docs_numbers import table_after  # noqa: E402
 
 from test_mujoco_plant import LAWS, PAPER, _pair  # noqa: E402
+
+NAMES = {"dsc": "DSC", "dscndo": "DSCNDO", "lqr": "LQR", "lqr_ndo": "LQR+NDO", "smc": "SMC", "smc_ndo": "SMC+NDO",
+         "mpc": "MPC", "mpc_ndo": "MPC+NDO"}
 
 pytestmark = pytest.mark.e2e
 
@@ -21,3 +27,8 @@ def test_every_law_agrees_with_rk4_over_the_paper_run(law):
     ma, mb = (metrics.compute(r.columns, (5.0, 10.0), PAPER["fall_angle"]) for r in (a, b))
     assert mb.theta_b_rms == pytest.approx(ma.theta_b_rms, rel=0.01)
     assert np.max(np.abs(yaw)) < 1e-9
+    _, rows = table_after((REPO / "docs" / "real-robot.md").read_text(), "| law | max abs")
+    row = {r[0]: r for r in rows}[NAMES[law]]
+    d = np.max(np.abs(a["theta_b"] - b["theta_b"]))
+    assert row[1:] == [f"{d:.2e}", f"{ma.theta_b_rms:.7f}", f"{mb.theta_b_rms:.7f}",
+                       f"{100 * (mb.theta_b_rms / ma.theta_b_rms - 1):+.4f} %", f"{np.max(np.abs(yaw)):.1e}"], row

@@ -8,6 +8,7 @@ import pytest
 
 pytest.importorskip("mujoco")
 
+from graphproc import REPO  # noqa: E402
 from mwip_ros import params as P  # noqa: E402
 from mwip_ros.core import metrics  # noqa: E402
 from mwip_ros.core.loop import PlantSide  # noqa: E402
@@ -73,7 +74,10 @@ def test_the_initial_state_is_the_parameter_files():
     np.testing.assert_allclose(p.x, (0.3, 0.2, 0.5, -0.4), atol=1e-12)
     assert p.pose.yaw == 0.0 and p.pose.roll == 0.0
     assert p.pose.wheel_left == pytest.approx(0.3) and p.pose.wheel_right == pytest.approx(0.3)
-    assert p.pose.x == pytest.approx(0.254 * 0.3) and p.pose.z == pytest.approx(0.254, abs=1e-5)
+    # the wheel's centre a radius up, less the contact's sink at rest (1 - d0) g (dmax tc)^2 / d0 with the time
+    # constant tc of 4 physics steps (theory 6.10): 4.0e-5 m at the default step, 5 ms, one step a period
+    sink = (1 - 0.99) * 9.81 * (0.999 * 4 * 0.005) ** 2 / 0.99
+    assert p.n == 1 and p.pose.x == pytest.approx(0.254 * 0.3) and p.pose.z == pytest.approx(0.254 - sink, abs=1e-7)
 
 
 @pytest.mark.parametrize("law", LAWS)
@@ -98,6 +102,9 @@ def test_the_paper_figure_agrees_with_rk4_over_ten_seconds():
         assert m[law][1].theta_b_rms == pytest.approx(m[law][0].theta_b_rms, rel=0.01), law
     ratios = [m["dscndo"][i].theta_b_p2p / m["dsc"][i].theta_b_p2p for i in (0, 1)]
     assert ratios[1] == pytest.approx(ratios[0], rel=0.03)
+    page = " ".join((REPO / "docs" / "real-robot.md").read_text().split())   # the page's words, lines joined
+    assert (f"peak-to-peak ratio is {ratios[1]:.5f} against rk4's {ratios[0]:.5f} "
+            f"({100 * (ratios[1] / ratios[0] - 1):+.3f} %)") in page
 
 
 def test_the_motor_acts_per_wheel_as_the_one_motor_of_eq1():
@@ -114,8 +121,9 @@ def test_the_accelerations_a_raw_sample_reads_are_mujocos_and_agree_with_eq1():
     """sample_accel and the true tau_d are MuJoCo's accelerations and agree with eq. (1)'s: the wheels start sunk
     where the contact holds them at rest (started on the surface they fall onto the ground in the first ms, and
     the first sample reads 9x eq. 1's wheel acceleration); the soft contact takes a few ms to carry the torque's
-    step (the first tau_d is 1.2 % off), then follows to 0.5 %, and to 0.1 % from the sixth period."""
-    pc = P.plant_config(_values())
+    step (the first tau_d is 1.2 % off), then follows to 0.5 %, and to 0.1 % from the sixth period.  At a physics
+    step of 1 ms: the contact's time constant is 4 steps (theory 6.10), 5x longer at the default 5 ms."""
+    pc = P.plant_config(_values(**{"mujoco.timestep": 0.001}))
     rk, mj = make_plant(dataclasses.replace(pc, backend="rk4")), make_plant(pc)
     np.testing.assert_allclose(mj.sample_accel(), rk.sample_accel(), rtol=1e-2)
     np.testing.assert_allclose(mj.lumped_disturbance(20.0), rk.lumped_disturbance(20.0), rtol=2e-2)

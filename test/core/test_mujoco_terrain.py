@@ -39,9 +39,10 @@ def _run(p, periods, u=0.0):
 def test_on_a_slope_the_robot_starts_standing_on_the_ground_and_rolls_down_with_no_torque(slope):
     p = _plant(ground__slope=slope)
     r = PAPER["actual.r"]
-    # standing: upright, at rest, the wheel's centre a radius (less the contact's micrometres) off the plane
+    # standing: upright, at rest, the wheel's centre a radius (less the contact's sink, 4.0e-5 m at the default
+    # physics step: test_mujoco_plant) off the plane
     normal = -p.pose.x * math.sin(slope) + p.pose.z * math.cos(slope)
-    assert p.x[1] == 0.0 and p.x[2] == 0.0 and abs(normal - r) < 1e-5
+    assert p.x[1] == 0.0 and p.x[2] == 0.0 and abs(normal - r) < 5e-5
     assert abs(p.pose.x * math.cos(slope) + p.pose.z * math.sin(slope)) < 1e-12   # at x = 0 along the slope
     x0 = p.pose.x
     _run(p, 60)   # 0.3 s

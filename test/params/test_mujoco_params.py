@@ -74,7 +74,7 @@ def test_mwip_sim_ends_a_diverging_run_as_a_fault_naming_the_law_and_time(monkey
     from mwip_ros.cli import sim
     from mwip_ros.core.plant import PlantDiverged
 
-    def diverging(loop, label="", progress=None):
+    def diverging(loop, label="", progress=None, on_period=None):
         raise PlantDiverged("the MuJoCo simulation diverged in [1.2, 1.205] s: mjWARN_BADQACC (...)")
 
     monkeypatch.setattr(sim, "simulate", diverging)
@@ -108,8 +108,8 @@ def test_the_batch_runs_the_mujoco_backend_scenario_by_scenario_as_mwip_sim_and_
     from mwip_ros.core.sim import simulate
     from mwip_ros.core.trajectory import FAILURES
     good = P.closed_loop(dict(BASE, backend="mujoco"), duration=1.0, controller="dscndo")
-    bad = P.closed_loop(dict(BASE, backend="mujoco", **{"actual.I_w": 1e-6, "actual.D_b": 1e6}), duration=1.0,
-                        controller="dscndo")
+    bad = P.closed_loop(dict(BASE, backend="mujoco", **{"actual.I_w": 1e-6, "actual.D_b": 1e6,   # diverges at 1 ms
+                                                        "mujoco.timestep": 0.001}), duration=1.0, controller="dscndo")
     r = simulate_batch([good, bad], (0.5, 1.0))
     want = metrics.compute(simulate(good).columns, (0.5, 1.0), good.plant.fall_angle)
     assert r.metrics["theta_b_rms"][0] == want.theta_b_rms and r.metrics["u_rms"][0] == want.u_rms
