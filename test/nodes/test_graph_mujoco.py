@@ -97,6 +97,25 @@ def test_a_diverging_mujoco_simulation_is_a_diverged_fault_exit_1_and_nothing_no
     assert len(from_bag) == 1 and all(math.isfinite(from_bag[c][0]) for c in ("theta_b", "x", "yaw"))
 
 
+def test_a_fall_in_the_state_no_stage_answers_is_fallen_at_its_time_never_upright(tmp_path):
+    """At the default 5 ms physics step the diverging model does not overflow within a period: it lands at
+    |theta_b| = 1.31 rad, a state the observer refuses as absurd (it never answers it). The lockstep timeout then
+    ends the run; the state it did not record is FALLEN at t = 0.005 s, not the one recorded row's "upright"."""
+    summary = tmp_path / "summary.json"
+    with Graph(tmp_path) as g:
+        g.start("disturbance_observer", "-p", "use_sim_time:=true")
+        g.start("dscndo_controller", "-p", "use_sim_time:=true")
+        plant = g.start("plant_sim", "-p", "duration_s:=1.0", "-p", "expected_subscribers:=2",
+                        "-p", f"summary_json:={summary}", *MUJOCO, *DIVERGING[:4], "-p", "lockstep_timeout_s:=3.0")
+        code = plant.wait(120)
+    out = plant.output()
+    assert code == 1, out
+    verdict = out.split("lockstep run:")[1].splitlines()[0]
+    assert "FALLEN at t = 0.005 s" in verdict and "upright" not in verdict, out
+    s = json.loads(summary.read_text())
+    assert s["fallen"] is True and s["fault_reason"] == "watchdog" and s["metrics"]["upright"] is False, s
+
+
 def test_reset_restarts_the_mujoco_plant_and_the_run_after_it_equals_mwip_sim(tmp_path):
     """``~/reset`` builds the MuJoCo model afresh at the initial state: the run after it (the csv keeps it) equals
     mwip_sim's from the start, pose included, and the recording splits into two runs there."""

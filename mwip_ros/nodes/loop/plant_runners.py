@@ -103,6 +103,7 @@ class LockstepRunner(_Runner):
     def watch(self, crowded: Dict[str, list]) -> None:
         failure = self.node.lockstep.check()
         if failure:   # the lockstep timeout is the watchdog: recorded as the driver's fault, then the run ends
+            self.node.note_unanswered_state()
             self.node._fault("watchdog", failure)
         if crowded:
             failure = ("lockstep refuses mixed streams: " + "; ".join(

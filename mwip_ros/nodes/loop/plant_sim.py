@@ -534,9 +534,16 @@ class PlantSimNode(Node, GracefulNodeMixin):
         return OK, f"{self.mode} run at t = {p.t:.2f} s", values
 
     # --- end of run: the one report of both runners -------------------------------------------------
+    def note_unanswered_state(self) -> None:
+        """At the lockstep timeout: the robot down in the last state, which no stage answered, is a fall there."""
+        if self.plant.fallen and not self.fallen:
+            self.fallen, self.fell_at = True, self.plant.t
+
     def _verdict(self) -> str:
-        """The run's end in a word: a diverged simulation is never scored upright."""
-        return "DIVERGED" if self.diverged_at is not None else ("FALLEN" if self.fallen else "upright")
+        """The run's end in a word: a diverged simulation is never scored upright, nor a run a failure ended."""
+        if self.diverged_at is not None or self.fallen:
+            return "DIVERGED" if self.diverged_at is not None else f"FALLEN at t = {self.fell_at:.3f} s"
+        return f"ended by an error at t = {self.plant.t:.3f} s" if self.failure else "upright"
 
     def on_shutdown(self) -> None:
         log = self.get_logger()
