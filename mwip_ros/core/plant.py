@@ -316,5 +316,6 @@ def make_plant(cfg: PlantConfig, backend: Optional[str] = None) -> Plant:
     try:
         cls = PLANTS[backend]
     except KeyError:
-        raise ValueError(f"unknown plant backend {backend!r}; known: {', '.join(sorted(PLANTS))}") from None
+        known = ", ".join(sorted(b for b in PLANTS if not b.startswith("_")))   # "_name": a module's own, not a value
+        raise ValueError(f"unknown plant backend {backend!r}; known: {known}") from None
     return cls(cfg)

@@ -146,7 +146,7 @@ def scan(run, grid: Sequence[float]) -> Tuple[Optional[float], List[Outcome]]:
 
 
 # --- the push: external_wrench's force.y over a window, offline (a plant backend: core.plant.PLANTS) -------------
-_PUSHED = "mujoco_pushed"
+_PUSHED = "_mujoco_pushed"   # private: not a plant_sim.backend value (core.plant.make_plant)
 
 
 def _push_config():
