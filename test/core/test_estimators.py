@@ -160,6 +160,33 @@ def test_health_flags_a_broken_encoder_and_a_non_finite_sample():
         assert est.diverged
 
 
+def test_the_slip_gate_leaves_a_slipping_wheel_out_and_a_lasting_slip_still_diverges():
+    """kalman.slip_gate (theory.md 6.4, Slip): a 0.05 rad encoder jump over 5 periods (a wheel slipping) moves the
+    gated filter's pitch by microradians (the clean samples' updates it skipped), the ungated one's by milliradians
+    (and it is diverged); the gated filter stays healthy and takes the wheel's new place at once (P_22 takes the
+    jump); a wheel that spins on at 2 rad/s under a body that stays (a slip that lasts) is diverged within 1.1 s."""
+    still = list(_still(0.02, 0.0, 1000, seed=7))
+    slip = [s._replace(encoder=s.encoder + 0.05 * min(k - 399, 5) / 5) if k >= 400 else s for k, s in enumerate(still)]
+    gated, ungated, clean = (_make("kalman", **{"kalman.slip_gate": g}) for g in (150.0, 0.0, 150.0))
+    pitch = {}
+    for name, est, samples in (("gated", gated, slip), ("ungated", ungated, slip), ("clean", clean, still)):
+        pitch[name] = [est.step(s).theta_b for s in samples[:405]]
+    assert not gated.diverged and not clean.diverged
+    assert np.max(np.abs(np.subtract(pitch["gated"], pitch["clean"]))) < 2e-5   # the slipping samples left out
+    assert ungated.diverged and abs(pitch["ungated"][-1] - pitch["clean"][-1]) > 1e-3   # pulled, and reported
+    left_out = [gated.health.nis > 150.0]                                     # the ramp's last sample, then ...
+    for s in slip[405:]:                                                      # ... the wheel where it slipped to
+        e = gated.step(s)
+        left_out.append(gated.health.nis > 150.0)
+    assert sum(left_out) <= 2 and not gated.diverged and abs(e.theta_b - 0.02) < 2e-3   # p took the jump at once
+    spin = _make("kalman", **{"kalman.slip_gate": 150.0})
+    for s in still[:400]:
+        spin.step(s)
+    for k, s in enumerate(still[400:620]):
+        spin.step(s._replace(encoder=s.encoder + 2.0 * H * k))                # the wheel spins on, the body stays
+    assert spin.diverged and spin.health.nis_mean > 50
+
+
 def test_reset_gives_a_fresh_estimator():
     samples = list(_still(0.1, 0.02, 50))
     for method in estimators.names():

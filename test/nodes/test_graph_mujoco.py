@@ -111,7 +111,7 @@ def test_a_fall_in_the_state_no_stage_answers_is_fallen_at_its_time_never_uprigh
     out = plant.output()
     assert code == 1, out
     verdict = out.split("lockstep run:")[1].splitlines()[0]
-    assert "FALLEN at t = 0.005 s" in verdict and "upright" not in verdict, out
+    assert "FALLEN (fell at 0.005 s)" in verdict and "upright" not in verdict, out
     s = json.loads(summary.read_text())
     assert s["fallen"] is True and s["fault_reason"] == "watchdog" and s["metrics"]["upright"] is False, s
 

@@ -55,6 +55,7 @@ class KalmanParams(NamedTuple):
     gyro_bias: float           # the bias at the start [rad/s]
     nis_limit: float
     wheel_rate: float          # 1: phi' from the filter, 0: the driver's
+    slip_gate: float           # an encoder sample whose NIS exceeds it is not used (a slipping wheel); 0: all used
     r: float                   # nominal wheel radius [m]
     d: float                   # IMU offset [m]
     g: float                   # gravity [m/s^2]
@@ -72,7 +73,8 @@ def kalman_step(prm, dt, sample, s, first, m=math):
     ``prm`` the 13 numbers of :class:`KalmanParams`; ``dt`` the period [s] since the last sample; ``sample`` =
     (gyro, accel_x, accel_z, encoder, encoder_rate); ``s`` the 22 floats of :data:`STATE_NAMES`.  Returns
     ((theta_w, theta_b, theta_w', theta_b'), s_next, (innovation, nis, nis_mean, diverged))."""
-    sg, sw, sa, se, pitch_std0, bias_std0, speed_std0, bias0, nis_limit, wheel_rate, r, d, _g = prm
+    (sg, sw, sa, se, pitch_std0, bias_std0, speed_std0, bias0, nis_limit, wheel_rate, slip_gate, r, d,
+     _g) = prm
     gyro, f_x, f_z, phi, phi_rate = sample
     vg = sg * sg                                # the variance of one gyro sample's noise
     if first:   # pitch from the accelerometer; p, v and their covariance follow from it and the encoder
@@ -127,15 +129,21 @@ def kalman_step(prm, dt, sample, s, first, m=math):
         g3, g4 = P03 * H0 + P23 * H2, P04 * H0 + P24 * H2
         S = H0 * g0 + H2 * g2 + se * se
         iS = 1.0 / S
-        k0, k1, k2, k3, k4 = g0 * iS, g1 * iS, g2 * iS, g3 * iS, g4 * iS
+        nis = innovation * innovation * iS
+        # the slip gate: a wheel that slips turns without the body moving as the encoder says; such a sample is
+        # left out (no gain), and counts as slip_gate in the mean NIS, so a slip that lasts is still a divergence
+        slipped = slip_gate > 0.0 and nis > slip_gate
+        gain = 0.0 if slipped else iS
+        k0, k1, k2, k3, k4 = g0 * gain, g1 * gain, g2 * gain, g3 * gain, g4 * gain
         th, b, p, v, n = th + k0 * innovation, b + k1 * innovation, p + k2 * innovation, v + k3 * innovation, \
             n + k4 * innovation
         P00, P01, P02, P03, P04 = P00 - k0 * g0, P01 - k0 * g1, P02 - k0 * g2, P03 - k0 * g3, P04 - k0 * g4
         P11, P12, P13, P14 = P11 - k1 * g1, P12 - k1 * g2, P13 - k1 * g3, P14 - k1 * g4
         P22, P23, P24 = P22 - k2 * g2, P23 - k2 * g3, P24 - k2 * g4
         P33, P34, P44 = P33 - k3 * g3, P34 - k3 * g4, P44 - k4 * g4
-        nis = innovation * innovation * iS
-        nis_mean = nis_mean + (dt / (NIS_WINDOW_S + dt)) * (nis - nis_mean)
+        if slipped:          # the contact point moved by the slip: p's variance takes it, the next sample decides
+            P22 = P22 + innovation * innovation * r * r
+        nis_mean = nis_mean + (dt / (NIS_WINDOW_S + dt)) * ((slip_gate if slipped else nis) - nis_mean)
     rate = gyro - b - n
     if wheel_rate > 0.5:   # phi' from the filter's IMU velocity: v = r theta_w' + d cos(theta) theta' (cs: predicted)
         w_rate = (v - d * cs * rate) / r
@@ -180,6 +188,9 @@ class KalmanFilter(Estimator):
         EstimatorParam("kalman.wheel_rate", "integer", 1,
                        "theta_w' = phi' + theta_b' with phi' from the filter (1) or the driver's encoder rate (0)",
                        0, 1),
+        EstimatorParam("kalman.slip_gate", "double", 0.0,
+                       "an encoder sample whose NIS exceeds this is left out as wheel slip (0: every sample is used)",
+                       0.0, 1e9),
     )
 
     @staticmethod

@@ -542,7 +542,7 @@ class PlantSimNode(Node, GracefulNodeMixin):
     def _verdict(self) -> str:
         """The run's end in a word: a diverged simulation is never scored upright, nor a run a failure ended."""
         if self.diverged_at is not None or self.fallen:
-            return "DIVERGED" if self.diverged_at is not None else f"FALLEN at t = {self.fell_at:.3f} s"
+            return "DIVERGED" if self.diverged_at is not None else f"FALLEN (fell at {self.fell_at:.3f} s)"
         return f"ended by an error at t = {self.plant.t:.3f} s" if self.failure else "upright"
 
     def on_shutdown(self) -> None:
