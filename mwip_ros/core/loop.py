@@ -256,7 +256,7 @@ class Period:
         u_law, tau_hat, internals, x_m = self.decide(measured, u_m, p.k)
         if self.yaw is not None:
             dpsi_ref = self.motion.ref.dpsi
-            u_psi = self.yaw.step(dpsi_ref, dpsi)
+            u_psi = self.yaw.step(dpsi_ref, dpsi, u_law)
             internals = {**internals, "dpsi_ref": dpsi_ref, "u_psi": u_psi, "gyro_z": dpsi}
             wheels = wheel_torques(u_law, u_psi, 0.0)   # clipped per wheel in the drive stage
         u, tau_d = side.act(u_law, wheels=wheels)

@@ -8,6 +8,11 @@ plant, :meth:`.loop.PlantSide.sense_yaw_rate`):
     I_k     = I_{k-1} + h e_k                           I_{-1} = 0
     u_psi,k = yaw_kp e_k + yaw_ki I_k                   (PI, the integral by the rectangle rule)
 
+Balance first (``motion.yaw_wheel_limit`` = L > 0, a wheel's torque the drive can give): the pair may only use what
+the law's u leaves of each wheel's L, ``|u_psi| <= max(0, 2 L - |u_k|)``, so |u / 2| + |u_psi / 2| <= L and a
+saturating wheel never takes torque from the balance; while it is clipped the integral does not grow further in the
+clipped direction (conditional integration: the step's h e is taken back).
+
 and the wheels' torques (:func:`wheel_torques`), each clipped to half of ``torque_limit``:
 
     u_L = clip(u / 2 - u_psi / 2),    u_R = clip(u / 2 + u_psi / 2)
@@ -37,6 +42,7 @@ class YawConfig:
     kp: float = 400.0
     ki: float = 4000.0
     calibration_s: float = 0.0   # ``motion.yaw_gyro_calibration_s`` [s]: 0 = the gyro is not calibrated
+    wheel_limit: float = 0.0     # ``motion.yaw_wheel_limit`` [N m]: a wheel's torque, the law's first; 0 = no limit
 
 
 class YawLoop:
@@ -53,8 +59,9 @@ class YawLoop:
         self.u_psi = 0.0
         self.samples, self.total, self.bias = 0, 0.0, 0.0   # the calibration's count, sum and mean
 
-    def step(self, dpsi_ref: float, dpsi: float) -> float:
-        """u_psi of one period for the reference ``dpsi_ref`` and the measured yaw rate ``dpsi`` [rad/s].  A measurement
+    def step(self, dpsi_ref: float, dpsi: float, u: float = 0.0) -> float:
+        """u_psi of one period for the reference ``dpsi_ref`` and the measured yaw rate ``dpsi`` [rad/s], the law's
+        command ``u`` [N m] of the same period taking its share of each wheel first (``wheel_limit``).  A measurement
         that is not finite leaves the integral as it was and gives u_psi = 0 (NaN never reaches a torque)."""
         e = dpsi_ref - dpsi
         if not math.isfinite(e):
@@ -68,8 +75,15 @@ class YawLoop:
             return 0.0
         e += self.bias
         self.integral += self.h * e
-        self.u_psi = self.cfg.kp * e + self.cfg.ki * self.integral
-        return self.u_psi
+        u_psi = self.cfg.kp * e + self.cfg.ki * self.integral
+        if self.cfg.wheel_limit > 0.0:   # balance first: the pair gets what u leaves of each wheel
+            room = max(0.0, 2.0 * self.cfg.wheel_limit - abs(u)) if math.isfinite(u) else 0.0
+            if abs(u_psi) > room:
+                if u_psi * e > 0.0:      # conditional integration: no further wind-up toward the clip
+                    self.integral -= self.h * e
+                u_psi = math.copysign(room, u_psi)
+        self.u_psi = u_psi
+        return u_psi
 
 
 def _clip(v: float, lim: float) -> float:

@@ -77,6 +77,9 @@ def specs() -> List[Any]:
                   "averages the gyro's yaw rate for this long, u_psi = 0, and subtracts the mean from then on (its "
                   "bias at start-up, the robot not turning; docs/theory.md 6.13); 0 = none (an ideal gyro)",
                   lo=0.0, hi=60.0, unit="s"),
+        ParamSpec("motion.yaw_wheel_limit", "double", 0.0, "motion, a spatial plant: the torque one wheel's drive "
+                  "gives [N m]; balance first: the yaw pair uses only what the law's u leaves of it, |u_psi| <= "
+                  "2 limit - |u| (docs/theory.md 6.13); 0 = no limit", lo=0.0, hi=1e6, unit="N m"),
     ]
 
 
@@ -105,4 +108,5 @@ def yaw(v: Mapping[str, Any]):
         return None
     from mwip_ros.core.yaw import YawConfig
     return YawConfig(kp=v["motion.yaw_kp"], ki=v["motion.yaw_ki"],
-                     calibration_s=v.get("motion.yaw_gyro_calibration_s", 0.0))
+                     calibration_s=v.get("motion.yaw_gyro_calibration_s", 0.0),
+                     wheel_limit=v.get("motion.yaw_wheel_limit", 0.0))

@@ -44,6 +44,25 @@ def test_the_calibration_by_hand():
     assert loop.step(1.0, 0.52) == 0.0 and loop.bias == 0.52
 
 
+def test_balance_first_the_pair_gets_what_u_leaves_of_each_wheel_and_does_not_wind_up():
+    """motion.yaw_wheel_limit L = 60: |u_psi| <= 2 L - |u|, so neither wheel passes L; while clipped the integral
+    stops growing toward the clip (conditional integration), and grows again once there is room."""
+    loop = YawLoop(YawConfig(kp=2.0, ki=10.0, wheel_limit=60.0), 0.01)
+    # e = 50: PI 100 + 10 * 0.5 = 105; room 2 * 60 - 100 = 20: u_psi = 20, the integral taken back to 0
+    assert loop.step(50.0, 0.0, u=100.0) == 20.0 and loop.integral == 0.0
+    assert max(map(abs, wheel_torques(100.0, 20.0, 0.0))) == pytest.approx(60.0, abs=1e-12)
+    assert loop.step(50.0, 0.0, u=-130.0) == 0.0 and loop.integral == 0.0   # no room at all: no yaw, no wind-up
+    assert loop.step(50.0, 0.0, u=math.nan) == 0.0 and loop.integral == 0.0
+    assert loop.step(-50.0, 0.0, u=100.0) == -20.0 and loop.integral == 0.0  # clipped the other way: same
+    # room enough (u = 0, room 120): the PI as without a limit
+    assert loop.step(50.0, 0.0, u=0.0) == pytest.approx(105.0, abs=1e-12) and loop.integral == pytest.approx(0.5)
+    # clipped while the error opposes the clip's sign: the integral unwinds (it moves away from the clip)
+    loop.integral = 20.0                                     # PI = 2 * (-1) + 10 * (20 - 0.01) = 197.9 > room 20
+    assert loop.step(-1.0, 0.0, u=100.0) == 20.0 and loop.integral == pytest.approx(19.99, abs=1e-12)
+    unlimited = YawLoop(YawConfig(kp=2.0, ki=10.0), 0.01)
+    assert unlimited.step(50.0, 0.0, u=100.0) == pytest.approx(105.0, abs=1e-12)   # 0: no limit, u ignored
+
+
 def _values(backend, **over):
     files = [default_params_file(), default_params_file().parent / "motion.yaml"]
     v = dict(P.merged_values(P.load_param_files(files)), backend=backend)

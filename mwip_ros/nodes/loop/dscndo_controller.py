@@ -236,7 +236,7 @@ class DscndoController(Node, GracefulNodeMixin):
                                       f"and the robot holds its position (stop #{self.motion.timeouts})")
         w = self.yaw_rates.pop(stamp, None)
         if w is not None:   # stage yaw (docs/theory.md 6.13): the two wheels' torques answer the state
-            u_psi = self.yaw.step(self.motion.ref.dpsi, w)
+            u_psi = self.yaw.step(self.motion.ref.dpsi, w, u)
             self.cmds_pub.publish(L.encode_wheel_torques(stamp, *wheel_torques(u, u_psi, 0.0)))
         else:
             self.cmd_pub.publish(L.encode_command(u))
