@@ -78,6 +78,7 @@ class LockstepRunner(_Runner):
     def _send(self) -> None:
         n = self.node
         n.lockstep.send(n.plant.k, n._stamp(), n._sample_messages())
+        n.truth.flush()
 
     def start(self) -> None:
         self._send()
@@ -234,6 +235,7 @@ class RealtimeRunner(_Runner):
                 return
         for pub, data in n._sample_messages():
             pub.publish(data)
+        n.truth.flush()
 
     def _check_watchdog(self, now: float, late: bool = False) -> None:
         """At every tick: no good command for ``watchdog_s`` (counted from the first state) is a fault.

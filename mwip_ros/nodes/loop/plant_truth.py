@@ -28,6 +28,7 @@ class TruthPublishers:
         self.disturbance = node.create_publisher(WrenchStamped, "lumped_disturbance", qos)
         self.pose = node.create_publisher(PoseStamped, "true_pose", qos) if spatial else None
         self.wheels = node.create_publisher(JointState, "true_wheel_states", qos) if spatial else None
+        self._pending = []
 
     @property
     def publishers(self) -> tuple:
@@ -35,14 +36,23 @@ class TruthPublishers:
         return tuple(p for p in (self.disturbance, self.state, self.pose, self.wheels) if p is not None)
 
     def sample(self, stamp: int, plant) -> None:
-        """State k's truth, before its measurement: the true state (when measured), the pose and the wheels."""
+        """State k's truth, taken before its measurement: the true state (when measured), the pose and the wheels;
+        serialized now, published by :meth:`flush` once the loop's own messages of state k are out (the truth is
+        not on the lockstep chain: the other nodes start on state k while these go out)."""
+        out = self._pending = []
         if self.state is not None:
-            self.state.publish(L.encode_state(stamp, plant.x, plant.u_prev))
+            out.append((self.state, L.encode_state(stamp, plant.x, plant.u_prev)))
         if self.pose is not None:
             pose = plant.pose
-            self.pose.publish(L.encode_pose(stamp, pose))
-            self.wheels.publish(L.encode_wheel_states(stamp, (pose.wheel_left, pose.wheel_right),
-                                                      getattr(plant, "wheel_rates", ())))
+            out.append((self.pose, L.encode_pose(stamp, pose)))
+            out.append((self.wheels, L.encode_wheel_states(stamp, (pose.wheel_left, pose.wheel_right),
+                                                           getattr(plant, "wheel_rates", ()))))
+
+    def flush(self) -> None:
+        """Publish what :meth:`sample` took (once: a resent state does not send its truth again)."""
+        for pub, data in self._pending:
+            pub.publish(data)
+        self._pending = []
 
     def lumped_disturbance(self, stamp: int, tau_d) -> None:
         self.disturbance.publish(L.encode_wrench(stamp, tau_d[0], tau_d[1]))
