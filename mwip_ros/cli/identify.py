@@ -19,9 +19,14 @@ that the observer and the controller share), checked by merging it over the base
 file's ``motor.voltage_limit``) from ``u``, ``u_applied`` and the wheel speed, and writes ``plant_sim``'s
 ``motor.*`` overlay; ``config/identify_drive.yaml`` is its experiment.
 
+``--raw`` fits the raw sensors alone (:mod:`mwip_ros.core.identify_raw`); a bag's are read from its ``imu/data_raw``
+and ``wheel_encoder`` messages (:mod:`mwip_ros.cli.identify_bag`: a robot's bag of the realtime graph, nothing else
+needed).  ``--retune`` then tunes ``--law``'s gains on the identified model (:mod:`mwip_ros.cli.identify_retune`,
+``mwip_tune``'s search) and writes them with ``nominal.*`` into one parameter file.
+
 Exit 0 when written; 2 (one line on stderr saying why) for a log that is too short or does not excite
-the parameters, for an unreadable log or parameter file, or for an existing ``--out`` without ``--force``
-(checked before the log is read).
+the parameters, a raw log whose drive is saturated throughout, a bag cut short, for an unreadable log or
+parameter file, or for an existing ``--out`` without ``--force`` (checked before the log is read).
 """
 from __future__ import annotations
 
@@ -58,8 +63,11 @@ def _parser() -> argparse.ArgumentParser:
                     "not excite the parameters.",
         epilog="examples:\n  mwip_identify ident.csv --out identified.yaml\n"
                "  mwip_identify bags/ident --params config/paper.yaml --out identified.yaml --force\n"
+               "  mwip_identify bags/robot --params config/paper.yaml --raw --out identified.yaml   (a robot's bag)\n"
+               "  mwip_identify ident.csv --params config/paper.yaml --retune --out gains.yaml   (and tune DSCNDO)\n"
                "  mwip_sim --params config/paper.yaml identified.yaml   (use the overlay after the base file)\n\n"
-               "exit status: 0 written; 2 refused (too short, not excited, unreadable input, --out exists)",
+               "exit status: 0 written; 2 refused (too short, not excited, a drive saturated throughout, a bag cut "
+               "short, unreadable input, --out exists)",
         formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("log", type=Path, metavar="BAG_OR_CSV",
                     help="a CSV written by mwip_sim --csv / plant_sim (columns t, theta_w, theta_b, dtheta_w, "
@@ -99,7 +107,11 @@ def _parser() -> argparse.ArgumentParser:
                     help="identify from the raw sensors alone (gyro, accel_x, accel_z, encoder, encoder_rate and the "
                          "torque; neither the state nor the estimate): a prediction-error fit over 0.25 s windows "
                          "that also fits D_w, D_b, the gyro bias and the IMU offset, starting from the base file's "
-                         "nominal body and sensors.imu.offset (docs/theory.md 6.9)")
+                         "nominal body and sensors.imu.offset (docs/theory.md 6.9). A bag (a robot's, of the realtime "
+                         "graph) is read from its imu/data_raw and wheel_encoder messages alone, the torque of each "
+                         "period from the encoder's next sample; a period without one is left out of the windows, a "
+                         "sample recorded twice counts once. Refused: a drive at its limit in most periods, a body "
+                         "left unresolved (95 %% interval wider than --max-relative-ci)")
     ap.add_argument("--validate", type=Path, default=None, metavar="LOG2",
                     help="check the identified model on another log (CSV or bag, read as the first): re-simulate it "
                          "open-loop with LOG2's torque over 1 s windows, each from its measured start, and print the "
