@@ -312,9 +312,13 @@ def _retune(args, base, physical, header: str) -> int:
         return _fail(f"--retune: {exc}")
     except KeyboardInterrupt:
         return _fail("--retune: interrupted before any candidate was judged; nothing written")
-    gamma = ("Theorem 2 holds on the identified model: gamma = " if r.margin > 0 else
-             "Theorem 2 FAILS on the identified model: gamma = ") + f"{r.margin:.4g}" if math.isfinite(r.margin) \
-        else "the law has no Theorem 2 condition"
+    if r.margin == math.inf:
+        gamma = "the law has no Theorem 2 condition"
+    elif r.margin > 0:
+        gamma = f"Theorem 2 holds on the identified model: gamma = {r.margin:.4g}"
+    else:   # every candidate broke it (or it cannot be evaluated: NaN): nothing is written
+        return _fail(f"--retune: no gains of {args.law} within the search bounds satisfy Theorem 2 on the identified "
+                     f"model (gamma = {r.margin:.4g} at the best); nothing written")
     placed = {("/**", f"nominal.{k}"): float(f"{getattr(physical, k):.6g}") for k in ("m_b", "I_b", "l")}
     placed.update(r.placed)
     lines = [header.rstrip("\n"),

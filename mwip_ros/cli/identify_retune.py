@@ -58,7 +58,7 @@ class Retuned:
     generations: int
     candidates: int
     margin: float               # the law's stability margin at the tuned gains on the identified model (Theorem 2's
-                                # gamma for DSCNDO); NaN for a law without one
+                                # gamma for DSC/DSCNDO; inf for a law without a condition; NaN: not evaluated)
     placed: Dict                # {(section, parameter): value} of the tuned gains
     held_scenarios: int = 0     # the held-out set's scenarios
     holdout_seed: int = 0       # its spec seed
@@ -128,7 +128,7 @@ def retune(base: Sequence[Path], physical, law: str, maxiter: int, popsize: int,
         try:
             margin = float(cls.stability_margin(nominal, cls.design(v, nominal, P.period(v)), P.observer_gain(v),
                                                 observer=cls.observer))
-        except (ValueError, NotImplementedError):
+        except ValueError:
             margin = math.nan
         placed = overlay(knobs, x, spec.base_values)
     return Retuned(law, knobs, base_x, np.asarray(x, dtype=float), float(j), before, after, generations,

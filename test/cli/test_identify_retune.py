@@ -118,3 +118,24 @@ def test_help_names_the_retune_options(capsys):
     for word in ("--retune", "--law LAW", "--maxiter N", "--popsize N", "Theorem 2", "held-out set",
                  "ROS 2 parameter file"):
         assert word in text, word
+
+
+def test_gains_that_break_theorem_2_are_never_written(ident_csv, tmp_path, capsys, monkeypatch):
+    """Were the search to end on gains that break Theorem 2 (every candidate inadmissible: gamma <= 0, or NaN), the
+    tool says so and writes nothing."""
+    from mwip_ros.cli import identify_retune
+    real = identify_retune.retune
+
+    def broken(*a, **k):
+        r = real(*a, **k)
+        r.margin = -0.5
+        return r
+    monkeypatch.setattr(identify_retune, "retune", broken)
+    out = tmp_path / "gains.yaml"
+    assert identify.main([str(ident_csv), "--params", str(PAPER), "--retune", "--maxiter", "1", "--popsize", "1",
+                          "--out", str(out)]) == 2
+    err = capsys.readouterr().err.splitlines()   # the search's progress, then the one line that refuses
+    assert err[0].startswith("mwip_identify: generation 1/1: J = ") and len(err) == 2
+    assert err[-1].startswith("mwip_identify: error: --retune: no gains of dscndo")
+    assert "satisfy Theorem 2 on the identified model (gamma = -0.5 at the best); nothing written" in err[-1]
+    assert not out.exists()
