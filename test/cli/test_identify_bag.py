@@ -141,6 +141,23 @@ def test_every_sample_twice_counts_once_and_two_different_ones_are_refused(tmp_p
 
 
 @pytest.mark.unit
+def test_a_raw_csv_with_every_row_twice_gives_its_own_result(tmp_path, capsys):
+    """The same rule for a CSV: a row repeated with its values counts once (and the tool says how many)."""
+    csv = tmp_path / "once.csv"
+    write_csv(run(), csv)
+    lines = csv.read_text().splitlines()
+    twice = tmp_path / "twice.csv"
+    twice.write_text("\n".join([lines[0]] + [ln for ln in lines[1:] for _ in range(2)]) + "\n")
+    argv = ["--raw", "--window", "0", "12", "--params", str(FILES[0])]
+    outs = []
+    for log in (csv, twice):
+        assert identify.main([str(log), *argv, "--out", str(tmp_path / f"{log.stem}.yaml")]) == 0
+        outs.append(capsys.readouterr().out)
+    assert f"({len(lines) - 1} repeated row(s) counted once)" in outs[1]
+    assert fitted(outs[0]) == fitted(outs[1]) and len(fitted(outs[0])) == 8
+
+
+@pytest.mark.unit
 def test_periods_without_a_torque_are_left_out_of_the_fit_windows(tmp_path, capsys):
     """Three encoder samples lost at rows 700-702 (t = 3.5 s): those rows have no encoder, row 699 no torque (the
     next sample is three periods on); the window holding them is left out, the body still identified."""
