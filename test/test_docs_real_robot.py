@@ -147,3 +147,58 @@ def test_the_drive_identification_table():
     cells = {"K_t [N m/A]": d.torque_constant, "R [ohm]": d.resistance, "I_max [A]": d.current_limit,
              "periods on the current limit": d.periods[1], "periods on the voltage limit": d.periods[2]}
     _check("| drive identified", ["config/motor_realistic.yaml"], lambda label, col: cells[col])
+
+
+UNSEEN = {"m_b": 250.0, "I_b": 48.0, "l": 0.28}   # the retune table's robot, never seen by the tool
+
+
+def test_the_raw_bag_table(tmp_path):
+    """mwip_identify --raw on mwip_sim's CSV of 15 s of the chirp on a 280 / 58 / 0.29 robot (the lockstep graph's bag
+    of the same run gives the same fit to the bit: test/cli/test_identify_bag.py)."""
+    from mwip_ros.core.identify_raw import identify_raw
+    v = P.merged_values(P.load_param_files([PAPER, RAW, IDENT]))
+    v.update({"actual.m_b": 280.0, "actual.I_b": 58.0, "actual.l": 0.29, "duration_s": 15.0,
+              "excitation.duration_s": 15.0})
+    csv = tmp_path / "raw.csv"
+    write_csv(simulate(P.closed_loop(v, controller="dscndo")), csv)
+    cols, _ = identify._load_raw(identify._parser().parse_args([str(csv), "--raw", "--out", "x.yaml"]))
+    known = P.physical(P.merged_values(P.load_param_file(PAPER)), "nominal")
+    got = identify_raw(cols["t"], *(cols[k] for k in identify.RAW), known=known, start=known, imu_offset=0.3).values
+    _check("| raw log of 15 s of the chirp", ["mwip_sim's CSV, and the lockstep graph's bag of the same run"],
+           lambda label, col: got[col.split(" [")[0]])
+
+
+def test_the_retune_table(tmp_path):
+    """mwip_identify --retune (the default search) on the shipped experiment's log of the unseen robot, the same
+    search on the true model, and the paper's scenario on that robot with each row's nominal model and gains."""
+    from dataclasses import replace
+    from mwip_ros.cli.identify_retune import retune
+    v = P.merged_values(P.load_param_files([PAPER, IDENT]))
+    v.update({f"actual.{k}": x for k, x in UNSEEN.items()})
+    csv = tmp_path / "identify.csv"
+    write_csv(simulate(P.closed_loop(v, controller="dscndo")), csv)
+    out = tmp_path / "gains.yaml"
+    assert identify.main([str(csv), "--params", str(PAPER), "--retune", "--out", str(out)]) == 0
+    base = P.merged_values(P.load_param_file(PAPER))
+    true = retune([PAPER], replace(P.physical(base, "nominal"), **UNSEEN), "dscndo", 30, 8)
+    rows = {"the paper's gains and model": base, "tuned on the identified model":
+            P.merged_values(P.load_param_files([PAPER, out])),
+            "tuned on the true model": dict(base, **{f"nominal.{k}": x for k, x in UNSEEN.items()},
+                                            **{p: x for (_s, p), x in true.placed.items()})}
+    rms = {}
+
+    def cell(label, col):
+        values = rows[label]
+        key = col.split(" [")[0]
+        if key.startswith("nominal "):
+            return values[f"nominal.{key.split()[1]}"]
+        if key in ("X.c1", "X.c4"):
+            return values["X"][0 if key == "X.c1" else 3]
+        if key in ("k1", "k2", "tau4"):
+            return values[key]
+        if label not in rms:
+            w = dict(values, **{f"actual.{k}": x for k, x in UNSEEN.items()})
+            r = simulate(P.closed_loop(w, controller="dscndo"))
+            rms[label] = metrics.compute(r.columns, metrics.WINDOW, w["fall_angle"]).theta_b_rms
+        return rms[label]
+    _check("| DSCNDO on the unseen robot", rows, cell)

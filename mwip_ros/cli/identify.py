@@ -19,9 +19,14 @@ that the observer and the controller share), checked by merging it over the base
 file's ``motor.voltage_limit``) from ``u``, ``u_applied`` and the wheel speed, and writes ``plant_sim``'s
 ``motor.*`` overlay; ``config/identify_drive.yaml`` is its experiment.
 
+``--raw`` fits the raw sensors alone (:mod:`mwip_ros.core.identify_raw`); a bag's are read from its ``imu/data_raw``
+and ``wheel_encoder`` messages (:mod:`mwip_ros.cli.identify_bag`: a robot's bag of the realtime graph, nothing else
+needed).  ``--retune`` then tunes ``--law``'s gains on the identified model (:mod:`mwip_ros.cli.identify_retune`,
+``mwip_tune``'s search) and writes them with ``nominal.*`` into one parameter file.
+
 Exit 0 when written; 2 (one line on stderr saying why) for a log that is too short or does not excite
-the parameters, for an unreadable log or parameter file, or for an existing ``--out`` without ``--force``
-(checked before the log is read).
+the parameters, a raw log whose drive is saturated throughout, a bag cut short, for an unreadable log or
+parameter file, or for an existing ``--out`` without ``--force`` (checked before the log is read).
 """
 from __future__ import annotations
 
@@ -43,6 +48,7 @@ PROG = "mwip_identify"
 EXIT_REFUSED = 2
 NEEDED = ("t", "theta_b", "dtheta_w", "dtheta_b")
 RAW = ("gyro", "accel_x", "accel_z", "encoder", "encoder_rate", "u_applied")
+SATURATED_SHARE = 0.5   # --raw: refused when the torque sits at its largest magnitude in more of the periods
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -57,8 +63,11 @@ def _parser() -> argparse.ArgumentParser:
                     "not excite the parameters.",
         epilog="examples:\n  mwip_identify ident.csv --out identified.yaml\n"
                "  mwip_identify bags/ident --params config/paper.yaml --out identified.yaml --force\n"
+               "  mwip_identify bags/robot --params config/paper.yaml --raw --out identified.yaml   (a robot's bag)\n"
+               "  mwip_identify ident.csv --params config/paper.yaml --retune --out gains.yaml   (and tune DSCNDO)\n"
                "  mwip_sim --params config/paper.yaml identified.yaml   (use the overlay after the base file)\n\n"
-               "exit status: 0 written; 2 refused (too short, not excited, unreadable input, --out exists)",
+               "exit status: 0 written; 2 refused (too short, not excited, a drive saturated throughout, a bag cut "
+               "short, unreadable input, --out exists)",
         formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("log", type=Path, metavar="BAG_OR_CSV",
                     help="a CSV written by mwip_sim --csv / plant_sim (columns t, theta_w, theta_b, dtheta_w, "
@@ -98,11 +107,30 @@ def _parser() -> argparse.ArgumentParser:
                     help="identify from the raw sensors alone (gyro, accel_x, accel_z, encoder, encoder_rate and the "
                          "torque; neither the state nor the estimate): a prediction-error fit over 0.25 s windows "
                          "that also fits D_w, D_b, the gyro bias and the IMU offset, starting from the base file's "
-                         "nominal body and sensors.imu.offset (docs/theory.md 6.9)")
+                         "nominal body and sensors.imu.offset (docs/theory.md 6.9). A bag (a robot's, of the realtime "
+                         "graph) is read from its imu/data_raw and wheel_encoder messages alone, the torque of each "
+                         "period from the encoder's next sample; a period without one is left out of the windows, a "
+                         "sample recorded twice counts once. Refused: a drive at its limit in most periods, a body "
+                         "left unresolved (95 %% interval wider than --max-relative-ci)")
     ap.add_argument("--validate", type=Path, default=None, metavar="LOG2",
                     help="check the identified model on another log (CSV or bag, read as the first): re-simulate it "
                          "open-loop with LOG2's torque over 1 s windows, each from its measured start, and print the "
                          "pitch prediction error (RMS, worst) against the nominal model of the base file(s)")
+    ap.add_argument("--retune", action="store_true",
+                    help="after identifying, tune the law's gains (--law) on the identified model with mwip_tune's "
+                         "search (differential evolution, seeded): the base file's scenario with the identified body "
+                         "as the nominal model and as the robot (8 draws within +-5 %% of it), J = theta_b RMS + "
+                         "1e-4 u RMS, for DSC/DSCNDO only gains that satisfy Theorem 2 on the identified model "
+                         "(gamma > 0); judged beside the base file's gains on a held-out set. --out is then one "
+                         "ROS 2 parameter file with the identified nominal.* and the tuned gains")
+    ap.add_argument("--law", default="dscndo", metavar="LAW",
+                    help="--retune: the law whose gains are tuned (default: dscndo; one of dsc, dscndo, lqr, "
+                         "lqr_ndo, smc, smc_ndo: k1 k2 tau4, lqr.Q lqr.R, smc.k smc.boundary_layer, and the "
+                         "observer's X.c1 X.c4 with the observer term)")
+    ap.add_argument("--maxiter", type=int, default=30, metavar="N",
+                    help="--retune: generations of the search (default: %(default)s, as mwip_tune)")
+    ap.add_argument("--popsize", type=int, default=8, metavar="N",
+                    help="--retune: population per tuned number (default: %(default)s, as mwip_tune)")
     ap.add_argument("--min-samples", type=int, default=ID.MIN_SAMPLES, metavar="N",
                     help=f"refuse a log of fewer than N periods (default: {ID.MIN_SAMPLES})")
     return ap
@@ -122,6 +150,14 @@ def _options_refusal(args):
         return "--raw and --drive: one at a time (the body from the raw sensors, or the drive)"
     if args.validate is not None and (args.raw or args.drive):
         return "--validate: checks the state fit's body; not with --raw or --drive, for now"
+    if args.retune:
+        from mwip_ros.cli.identify_retune import tunable_laws
+        if args.drive:
+            return "--retune: tunes the body's law; not with --drive"
+        if args.law not in tunable_laws():
+            return f"--law: one of {', '.join(tunable_laws())} (a law with gains to tune), got {args.law!r}"
+        if args.maxiter < 1 or args.popsize < 1:
+            return f"--maxiter and --popsize: 1 or more, got {args.maxiter} and {args.popsize}"
     if args.run is not None and args.run < 1:
         return f"--run: 1 or more, got {args.run}"
     if not (math.isfinite(args.cutoff) and args.cutoff >= 0):
@@ -152,17 +188,6 @@ def _load(args, p=None):
     else:
         raise ValueError(f"{p}: not a bag directory, .mcap file or .csv file")
     cols = dict(run.columns)
-    if args.raw:
-        missing = [c for c in ("t", *RAW) if c not in cols]
-        if "u_applied" in missing and "u" in cols:
-            missing.remove("u_applied")
-            cols["u_applied"] = cols["u"]
-        if missing:
-            raise ValueError(f"{p}: no {', '.join(missing)} column(s): --raw is for a log of the raw sensors")
-        keep = np.ones(len(cols["t"]), dtype=bool)
-        if args.window is not None:
-            keep = (cols["t"] >= args.window[0]) & (cols["t"] <= args.window[1])
-        return {c: np.asarray(cols[c], dtype=float)[keep] for c in ("t", *RAW)}, "u_applied"
     estimated = "theta_b_hat" in cols
     if args.state == "estimate" and not estimated:
         raise ValueError(f"{p}: no estimate columns (theta_b_hat, ...): --state estimate is for a raw-sensor run")
@@ -182,6 +207,47 @@ def _load(args, p=None):
     return {c: np.asarray(cols[c], dtype=float)[keep] for c in (*NEEDED, "theta_w", "u", torque) if c in cols}, torque
 
 
+def _load_raw(args):
+    """--raw: the columns ``t`` and :data:`RAW` of the log (a bag: :func:`mwip_ros.cli.identify_bag.read_raw_bag`, the
+    IMU's and the encoder's messages alone; a CSV: its raw columns, ``t`` on the stamps' grid and a repeated row
+    counted once) within --window, and what the reading said (a list of phrases); or raise ValueError (one line)."""
+    from mwip_ros.cli.identify_bag import on_stamp_grid, read_raw_bag
+    from mwip_ros.runs import read_csv
+    p = args.log
+    if not p.exists():
+        raise ValueError(f"{p}: no such file or directory")
+    notes = []
+    if p.is_file() and p.suffix == ".csv":
+        if args.run is not None:
+            raise ValueError("--run is for a bag of several runs; a CSV holds one")
+        cols = dict(read_csv(p).columns)
+        missing = [c for c in ("t", *RAW) if c not in cols]
+        if "u_applied" in missing and "u" in cols:
+            missing.remove("u_applied")
+            cols["u_applied"] = cols["u"]
+        if missing:
+            raise ValueError(f"{p}: no {', '.join(missing)} column(s): --raw is for a log of the raw sensors")
+        once, dropped = ID._once(*(cols[c] for c in ("t", *RAW)))
+        cols = dict(zip(("t", *RAW), once))
+        cols["t"] = on_stamp_grid(cols["t"])
+        if dropped:
+            notes.append(f"{dropped} repeated row(s) counted once")
+    elif p.is_dir() or p.suffix == ".mcap":
+        log = read_raw_bag(p, segment=None if args.run is None else args.run - 1)
+        cols = log.columns
+        for n, what in ((log.duplicates, "sample(s) recorded twice counted once"),
+                        (log.unpaired, "sample(s) without the other sensor's left out"),
+                        (log.missing_torque, "period(s) without a reported torque left out of the windows")):
+            if n:
+                notes.append(f"{n} {what}")
+    else:
+        raise ValueError(f"{p}: not a bag directory, .mcap file or .csv file")
+    keep = np.ones(len(cols["t"]), dtype=bool)
+    if args.window is not None:
+        keep = (cols["t"] >= args.window[0]) & (cols["t"] <= args.window[1])
+    return {c: np.asarray(cols[c], dtype=float)[keep] for c in ("t", *RAW)}, notes
+
+
 def main(argv=None) -> int:
     """mwip_identify; returns the exit status."""
     args = _parser().parse_args(argv)
@@ -197,14 +263,18 @@ def main(argv=None) -> int:
     except P.ParamError as exc:
         return _fail(str(exc))
     known = P.physical(values, "nominal")
+    if args.raw:
+        try:
+            cols, notes = _load_raw(args)
+        except (ValueError, OSError) as exc:
+            return _fail(str(exc))
+        return _raw(args, base, values, known, cols, notes)
     try:
         cols, torque = _load(args)
     except (ValueError, OSError) as exc:
         return _fail(str(exc))
     if args.drive:
         return _drive(args, base, values, cols)
-    if args.raw:
-        return _raw(args, base, values, known, cols)
     c = cols
     try:
         res = ID.identify(c["t"], c.get("theta_w", np.zeros_like(c["t"])), c["theta_b"], c["dtheta_w"],
@@ -218,10 +288,50 @@ def main(argv=None) -> int:
         why = _validate(args, res, P.physical(values, "nominal"))
         if why:
             return _fail(why)
+    if args.retune:
+        return _retune(args, base, res.physical(), _header(args, base, res))
     why = _write(args, base, res)
     if why:
         return _fail(why)
     print(f"wrote {args.out}")
+    return 0
+
+
+def _retune(args, base, physical, header: str) -> int:
+    """--retune: tune the law on the identified body, write its nominal.* and the gains to --out; the exit status."""
+    from types import SimpleNamespace
+    from mwip_ros.cli.identify_retune import retune
+    from mwip_ros.cli.tune import _print_table
+    from mwip_ros.sweep.spec import SpecError
+    print(f"retuning {args.law} on the identified model (m_b = {physical.m_b:.6g} kg, I_b = {physical.I_b:.6g} kg m^2, "
+          f"l = {physical.l:.6g} m): {args.maxiter} generation(s), population {args.popsize} per gain", flush=True)
+    try:
+        r = retune(base, physical, args.law, args.maxiter, args.popsize,
+                   log=lambda text: print(f"{PROG}: {text}", file=sys.stderr, flush=True))
+    except (SpecError, P.ParamError) as exc:
+        return _fail(f"--retune: {exc}")
+    except KeyboardInterrupt:
+        return _fail("--retune: interrupted before any candidate was judged; nothing written")
+    if r.margin == math.inf:
+        gamma = "the law has no Theorem 2 condition"
+    elif r.margin > 0:
+        gamma = f"Theorem 2 holds on the identified model: gamma = {r.margin:.4g}"
+    else:   # every candidate broke it (or it cannot be evaluated: NaN): nothing is written
+        return _fail(f"--retune: no gains of {args.law} within the search bounds satisfy Theorem 2 on the identified "
+                     f"model (gamma = {r.margin:.4g} at the best); nothing written")
+    placed = {("/**", f"nominal.{k}"): float(f"{getattr(physical, k):.6g}") for k in ("m_b", "I_b", "l")}
+    placed.update(r.placed)
+    lines = [header.rstrip("\n"),
+             f"# --retune: {args.law}'s {', '.join(r.names)} tuned on the identified model ({r.generations} "
+             f"generations, {r.candidates} candidates, J = {r.j:.6g}); {gamma}",
+             f"# held-out set: J {r.before['J']:.6g} -> {r.after['J']:.6g}, theta_b RMS median "
+             f"{r.before['theta_b_rms_median']:.5g} -> {r.after['theta_b_rms_median']:.5g} rad"]
+    why = _overlay(args, base, placed, "\n".join(lines) + "\n")
+    if why:
+        return _fail(why)
+    print(f"  {gamma}")
+    _print_table(SimpleNamespace(controller=args.law, out=args.out), r.names, r.base_x, r.x, r.before, r.after,
+                 r.held_scenarios, r.holdout_seed)
     return 0
 
 
@@ -249,9 +359,27 @@ def _drive(args, base, values, cols) -> int:
     return 0
 
 
-def _raw(args, base, values, known, c) -> int:
+def _raw_refusal(args, c):
+    """Why the raw log cannot identify the body before any fit (a saturated drive, too few periods), or None."""
+    from mwip_ros.cli.identify_bag import saturated_share
+    periods, pinned, top = saturated_share(c["u_applied"])
+    if periods and pinned > SATURATED_SHARE * periods:
+        return (f"saturated drive: the torque that acted is at its limit +-{top:.4g} N m in {pinned} of {periods} "
+                f"periods ({100 * pinned / periods:.0f} %); the drive, not the body, shaped the motion: excite within "
+                f"the drive's limits")
+    usable = int(np.count_nonzero(np.isfinite(np.column_stack([c[k] for k in RAW])).all(axis=1)))
+    if usable < args.min_samples:
+        return (f"too short: {usable} period(s) with every raw sample and the torque, at least {args.min_samples} "
+                f"needed (a few seconds of excited balancing)")
+    return None
+
+
+def _raw(args, base, values, known, c, notes=()) -> int:
     """--raw: fit, print and write the nominal overlay; the exit status."""
     from mwip_ros.core.identify_raw import identify_raw
+    why = _raw_refusal(args, c)
+    if why:
+        return _fail(f"{args.log}: {why}")
     try:
         res = identify_raw(c["t"], *(c[k] for k in RAW), known=known, start=known,
                            imu_offset=float(values.get("sensors.imu.offset", 0.0)))
@@ -261,16 +389,28 @@ def _raw(args, base, values, known, c) -> int:
     for k in ("m_b", "I_b", "l"):
         if not got[k] > 0:
             return _fail(f"{args.log}: unphysical: {k} = {got[k]:.4g}; the model does not fit this log")
-    print(f"{args.log}: raw sensors only, {res.windows} windows of 0.25 s, {res.evaluations} evaluations; known m_w = "
-          f"{known.m_w:g} kg, I_w = {known.I_w:g} kg m^2, r = {known.r:g} m")
+    for k in ("m_b", "I_b", "l"):
+        rel = 1.96 * res.std[k] / abs(got[k])
+        if not rel <= args.max_relative_ci:
+            return _fail(f"{args.log}: not excited enough: {k} = {got[k]:.4g} is unresolved, its 95 % interval is "
+                         f"+-{100 * rel:.3g} % (at most {100 * args.max_relative_ci:g} %; a lower bound from the "
+                         f"Jacobian); add a chirp or PRBS excitation (config/identify.yaml)")
+    said = f" ({'; '.join(notes)})" if notes else ""
+    print(f"{args.log}: raw sensors only, {res.windows} windows of 0.25 s, {res.evaluations} evaluations{said}; known "
+          f"m_w = {known.m_w:g} kg, I_w = {known.I_w:g} kg m^2, r = {known.r:g} m")
     units = {"m_b": "kg", "I_b": "kg m^2", "l": "m", "D_w": "N m s", "D_b": "N m s", "gyro_bias": "rad/s",
              "imu_offset": "m"}
     for k, unit in units.items():
         print(f"  {k:<10} = {got[k]:.5g} {unit}  (+-{1.96 * res.std[k]:.2g}, 95 % from the Jacobian: a lower bound)")
     g, ax, az, e = res.residual_rms
     print(f"  residual RMS: gyro {g:.3g} rad/s, accel_x {ax:.3g} m/s^2, accel_z {az:.3g} m/s^2, encoder {e:.3g} rad")
+    header = (f"# {PROG} --raw: nominal body identified from the raw sensors of {args.log}\n"
+              f"# an overlay: pass it after the base file(s), e.g. mwip_sim --params {' '.join(map(str, base))} "
+              f"{args.out}\n")
+    if args.retune:
+        return _retune(args, base, res.physical(), header)
     placed = {("/**", f"nominal.{k}"): float(f"{got[k]:.6g}") for k in ("m_b", "I_b", "l")}
-    why = _overlay(args, base, placed, f"# {PROG} --raw: nominal body identified from the raw sensors of {args.log}\n")
+    why = _overlay(args, base, placed, header)
     if why:
         return _fail(why)
     print(f"wrote {args.out}")
@@ -324,16 +464,19 @@ def _print(args, res: ID.IdentificationResult, torque: str, known) -> None:
           f"x{res.m_b.quantile:.3g}; delta method for m_b, I_b, l)")
 
 
+def _header(args, base, res: ID.IdentificationResult) -> str:
+    return (f"# {PROG}: nominal body identified from {args.log} ({res.samples} periods)\n"
+            f"#   m_b {res.m_b.text('kg')}\n#   I_b {res.I_b.text('kg m^2')}\n#   l   {res.l.text('m')}\n"
+            f"#   residual RMS {res.residual_rms[0]:.4g} / {res.residual_rms[1]:.4g} N m, condition number "
+            f"{res.condition_number:.4g}\n"
+            f"# an overlay: pass it after the base file(s), e.g. mwip_sim --params "
+            f"{' '.join(map(str, base))} {args.out}\n")
+
+
 def _write(args, base, res: ID.IdentificationResult):
     """Write the body's overlay (:func:`_overlay`); the reason it cannot, or None."""
     placed = {("/**", f"nominal.{k}"): float(f"{getattr(res, k).value:.6g}") for k in ("m_b", "I_b", "l")}
-    header = (f"# {PROG}: nominal body identified from {args.log} ({res.samples} periods)\n"
-              f"#   m_b {res.m_b.text('kg')}\n#   I_b {res.I_b.text('kg m^2')}\n#   l   {res.l.text('m')}\n"
-              f"#   residual RMS {res.residual_rms[0]:.4g} / {res.residual_rms[1]:.4g} N m, condition number "
-              f"{res.condition_number:.4g}\n"
-              f"# an overlay: pass it after the base file(s), e.g. mwip_sim --params "
-              f"{' '.join(map(str, base))} {args.out}\n")
-    return _overlay(args, base, placed, header)
+    return _overlay(args, base, placed, _header(args, base, res))
 
 
 def _overlay(args, base, placed, header):

@@ -67,9 +67,11 @@ def identify_raw(t: Sequence[float], gyro, accel_x, accel_z, encoder, encoder_ra
                                                                          encoder_rate, u))
     h = float(np.median(np.diff(t)))
     W = max(2, int(round(window_s / h)))
-    u = np.where(np.isfinite(u), u, 0.0)
     starts = np.arange(1, len(t) - W, W)
-    ok = np.array([np.isfinite(np.stack([gy, ax, az, enc, er])[:, a - 1:a + W]).all() for a in starts], dtype=bool)
+    # a window needs every raw sample and the torque of each of its periods (one unknown: the window is left out)
+    ok = np.array([np.isfinite(np.stack([gy, ax, az, enc, er])[:, a - 1:a + W]).all()
+                   and np.isfinite(u[a - 1:a + W - 1]).all() for a in starts], dtype=bool)
+    u = np.where(np.isfinite(u), u, 0.0)
     starts = starts[ok]
     J = len(starts)
     if J < 4:
