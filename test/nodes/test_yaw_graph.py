@@ -44,11 +44,12 @@ def test_lockstep_graph_with_raw_sensors_and_the_yaw_stage_equals_mwip_sim(tmp_p
     """Raw sensors (config/sensors_raw_realistic.yaml) on the MuJoCo plant, turning from 1 s: the plant's IMU carries
     its z gyro (angular_velocity.z, core.raw_sensors.YawGyro), the state estimator passes it on as the yaw joint
     (its files say backend mujoco), the controller answers with the wheels' pair; the graph equals mwip_sim to 1e-9,
-    the turn and the yaw gyro's bias and noise included."""
+    the turn and the yaw gyro's bias and noise included.  The turn in place slips at the 5 ms physics step: the
+    filter leaves the slipping samples out (kalman.slip_gate, theory.md 6.4; without it it diverges at 2.04 s)."""
     from test_graph import RAW
     turn = tmp_path / "turn.yaml"
     turn.write_text("plant_sim:\n  ros__parameters:\n    backend: mujoco\n"
-                    "state_estimator:\n  ros__parameters:\n    kalman: {accel_noise_std: 1.0}\n"
+                    "state_estimator:\n  ros__parameters:\n    kalman: {accel_noise_std: 1.0, slip_gate: 150.0}\n"
                     "dscndo_controller:\n  ros__parameters:\n"
                     "    motion: {profile: [0.0, 0.0, 0.5, 0.3], yaw_profile: [0.0, 0.0, 1.0, 0.0, 1.25, 0.5]}\n")
     files = [*RAW, MOTION, turn]
