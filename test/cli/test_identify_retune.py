@@ -139,3 +139,26 @@ def test_gains_that_break_theorem_2_are_never_written(ident_csv, tmp_path, capsy
     assert err[-1].startswith("mwip_identify: error: --retune: no gains of dscndo")
     assert "satisfy Theorem 2 on the identified model (gamma = -0.5 at the best); nothing written" in err[-1]
     assert not out.exists()
+
+
+def test_retune_from_the_raw_log_alone(tmp_path, capsys):
+    """--raw --retune: the body from the raw sensors alone (a CSV whose state columns are NaN, as a robot's log),
+    then the retune on it: the file's nominal body is the unseen robot's within 3 %, and Theorem 2 holds with the
+    written gains on it."""
+    import numpy as np
+    v = P.merged_values(P.load_param_files([PAPER, CONFIG / "sensors_raw_realistic.yaml", CONFIG / "identify.yaml"]))
+    v.update({f"actual.{k}": x for k, x in UNSEEN.items()})
+    run = simulate(P.closed_loop(v, controller="dscndo", duration=15.0))
+    assert not run.fallen
+    for k in ("theta_w", "theta_b", "dtheta_w", "dtheta_b", "theta_w_hat", "theta_b_hat", "dtheta_w_hat",
+              "dtheta_b_hat"):
+        run.columns[k] = np.full_like(run.columns[k], np.nan)   # nothing but the raw samples and the torque
+    csv, out = tmp_path / "raw.csv", tmp_path / "gains.yaml"
+    write_csv(run, csv)
+    assert identify.main([str(csv), "--params", str(PAPER), "--raw", "--retune", "--maxiter", "2", "--popsize", "3",
+                          "--out", str(out)]) == 0, capsys.readouterr().err
+    assert "Theorem 2 holds on the identified model" in capsys.readouterr().out
+    doc = P.load_param_file(out).sections
+    for k, truth in UNSEEN.items():
+        assert doc["/**"][f"nominal.{k}"] == pytest.approx(truth, rel=0.03), k
+    assert margin([PAPER, out], "dscndo") > 0
