@@ -97,3 +97,43 @@ def test_the_95_percent_intervals_cover_the_truth_in_90_to_99_percent_of_runs(co
     assert np.mean([r.std[name] for r in coverage_fits]) == pytest.approx(spread, rel=0.25), name
     dof = np.array([r.dof[name] for r in coverage_fits])
     assert np.all((dof > 1) & (dof < coverage_fits[0].windows)), name   # Bell-McCaffrey: fewer than the windows
+
+
+def test_the_cr2_algebra_is_the_dense_formula():
+    """_profiled and _cr2 (each window's state profiled out, the pseudo-inverse square root and the Bell-McCaffrey
+    degrees of freedom from low-rank pieces) are the textbook formulas on the whole design: X = [globals | each
+    window's own 4 columns], H = X (X^T X)^-1 X^T, A_j = ((I - H)_jj)^(+1/2), V = the globals' block of
+    (X^T X)^-1 (sum X_j^T A_j e_j e_j^T A_j X_j) (X^T X)^-1, nu = (tr G^T G)^2 / tr (G^T G)^2 with G's column j
+    (I - H)_{:, j} A_j X_j (X^T X)^-1 c."""
+    from mwip_ros.core.identify_raw import _cr2, _profiled
+    rng = np.random.default_rng(7)
+    J, R, n = 6, 12, 3
+    G = rng.normal(size=(J, R, n))
+    G[0] *= 4.0                                                         # one window carries the globals
+    L = rng.normal(size=(J, R, 4))
+    X = np.zeros((J * R, n + 4 * J))
+    X[:, :n] = G.reshape(J * R, n)
+    for j in range(J):
+        X[j * R:(j + 1) * R, n + 4 * j:n + 4 * j + 4] = L[j]
+    y = X @ rng.normal(size=n + 4 * J) + rng.normal(size=J * R) * np.repeat(rng.uniform(0.5, 2.0, J), R)
+    XtXi = np.linalg.inv(X.T @ X)
+    H = X @ XtXi @ X.T
+    e = y - H @ y
+    A = []
+    for j in range(J):
+        w, V = np.linalg.eigh(np.eye(R) - H[j * R:(j + 1) * R, j * R:(j + 1) * R])
+        keep = w > 1e-9
+        A.append(V[:, keep] @ np.diag(w[keep] ** -0.5) @ V[:, keep].T)
+    scores = np.array([XtXi @ X[j * R:(j + 1) * R].T @ A[j] @ e[j * R:(j + 1) * R] for j in range(J)])
+    cov = (scores.T @ scores)[:n, :n]
+    dof = []
+    for c in range(n):
+        cols = [(np.eye(J * R) - H)[:, j * R:(j + 1) * R] @ A[j] @ X[j * R:(j + 1) * R] @ XtXi[:, c]
+                for j in range(J)]
+        GG = np.array(cols) @ np.array(cols).T                        # G^T G, G's columns the cols
+        dof.append(np.trace(GG) ** 2 / np.sum(GG * GG))
+    Xt, S, Q = _profiled(G, L)
+    got_cov, got_dof = _cr2(Xt, S, Q, e.reshape(J, R))
+    np.testing.assert_allclose(got_cov, cov, rtol=1e-8)
+    np.testing.assert_allclose(got_dof, dof, rtol=1e-8)
+    assert all(1.0 < d < J for d in dof)
