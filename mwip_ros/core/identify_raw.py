@@ -29,10 +29,11 @@ every window's i-th state moves at once).
 reduction in standard errors for linear regression with multi-stage samples", Survey Methodology 28, 2002;
 J. E. Pustejovsky and E. Tipton, "Small-sample methods for cluster-robust variance estimation and hypothesis
 testing in fixed effects models", J. Bus. Econ. Stat. 36, 2018; A. C. Cameron and D. L. Miller, "A
-practitioner's guide to cluster-robust inference", J. Human Resources 50, 2015).  The residuals are not white
-(the bias walk, the friction's per-period noise carried through a window's integration, the model's own
-error), so ``s^2 (J^T J)^-1`` is not the covariance.  The windows are the clusters: within one the residuals
-may be correlated in any way, between two they are taken as independent.  With ``X_j = M_j G_j`` window j's
+practitioner's guide to cluster-robust inference", J. Human Resources 50, 2015).  The residuals need not be
+white (the bias walk, the friction's per-period noise carried through a window's integration, the model's own
+error), which ``s^2 (J^T J)^-1`` assumes (measured, it covers 92 to 99 %: over 0.25 s windows they nearly are).
+The windows are the clusters: within one the residuals may be correlated in any way, between two they are taken
+as independent.  With ``X_j = M_j G_j`` window j's
 Jacobian of the globals with its own state profiled out (``M_j`` the projection off its state's columns),
 ``S = sum X_j^T X_j`` and ``e_j`` its residuals, the covariance of the globals is the sandwich::
 
@@ -45,7 +46,8 @@ Bell-McCaffrey degrees of freedom ``nu = (tr G^T G)^2 / tr (G^T G)^2`` (G's colu
 ``A_j X_j S^-1 c``, c the parameter's unit vector): nu is small when few windows carry the parameter (the
 start's recovery from a tilt: 3 for m_b), and the quantile grows with it.  Measured over 100 seeds of 10 s
 chirps started upright: each 95 % interval of m_b, I_b, l holds the truth in 95 to 96 % of them
-(docs/theory.md 6.9, ``test_identify_raw.py``).
+(docs/theory.md 6.9, ``test_identify_raw.py``); started tilted, where one window dominates, nu is fewer than
+the spread of the standard deviation implies and m_b's interval covers 99 to 100 % (conservative).
 """
 from __future__ import annotations
 
