@@ -401,7 +401,8 @@ def _raw(args, base, values, known, c, notes=()) -> int:
     units = {"m_b": "kg", "I_b": "kg m^2", "l": "m", "D_w": "N m s", "D_b": "N m s", "gyro_bias": "rad/s",
              "imu_offset": "m"}
     for k, unit in units.items():
-        print(f"  {k:<10} = {got[k]:.5g} {unit}  (+-{1.96 * res.std[k]:.2g}, 95 % from the Jacobian: a lower bound)")
+        print(f"  {k:<10} = {got[k]:.5g} {unit}  (95 % CI +-{res.half_width(k):.2g}: cluster-robust, t with "
+              f"{res.dof[k]:.3g} degrees of freedom)")
     g, ax, az, e = res.residual_rms
     print(f"  residual RMS: gyro {g:.3g} rad/s, accel_x {ax:.3g} m/s^2, accel_z {az:.3g} m/s^2, encoder {e:.3g} rad")
     header = (f"# {PROG} --raw: nominal body identified from the raw sensors of {args.log}\n"
