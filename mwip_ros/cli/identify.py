@@ -390,11 +390,11 @@ def _raw(args, base, values, known, c, notes=()) -> int:
         if not got[k] > 0:
             return _fail(f"{args.log}: unphysical: {k} = {got[k]:.4g}; the model does not fit this log")
     for k in ("m_b", "I_b", "l"):
-        rel = 1.96 * res.std[k] / abs(got[k])
+        rel = res.half_width(k) / abs(got[k])
         if not rel <= args.max_relative_ci:
             return _fail(f"{args.log}: not excited enough: {k} = {got[k]:.4g} is unresolved, its 95 % interval is "
-                         f"+-{100 * rel:.3g} % (at most {100 * args.max_relative_ci:g} %; a lower bound from the "
-                         f"Jacobian); add a chirp or PRBS excitation (config/identify.yaml)")
+                         f"+-{100 * rel:.3g} % (at most {100 * args.max_relative_ci:g} %; cluster-robust, "
+                         f"docs/theory.md 6.9); add a chirp or PRBS excitation (config/identify.yaml)")
     said = f" ({'; '.join(notes)})" if notes else ""
     print(f"{args.log}: raw sensors only, {res.windows} windows of 0.25 s, {res.evaluations} evaluations{said}; known "
           f"m_w = {known.m_w:g} kg, I_w = {known.I_w:g} kg m^2, r = {known.r:g} m")
