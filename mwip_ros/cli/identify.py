@@ -389,6 +389,10 @@ def _raw(args, base, values, known, c, notes=()) -> int:
     for k in ("m_b", "I_b", "l"):
         if not got[k] > 0:
             return _fail(f"{args.log}: unphysical: {k} = {got[k]:.4g}; the model does not fit this log")
+    if not res.condition_number <= args.max_condition:
+        return _fail(f"{args.log}: ill-conditioned: the condition number of the body's and sensors' columns is "
+                     f"{res.condition_number:.4g} (at most {args.max_condition:g}, --max-condition); the log does not "
+                     f"tell them apart: add a chirp or PRBS excitation (config/identify.yaml)")
     for k in ("m_b", "I_b", "l"):
         rel = res.half_width(k) / abs(got[k])
         if not rel <= args.max_relative_ci:
@@ -404,7 +408,8 @@ def _raw(args, base, values, known, c, notes=()) -> int:
         print(f"  {k:<10} = {got[k]:.5g} {unit}  (95 % CI +-{res.half_width(k):.2g}: cluster-robust, t with "
               f"{res.dof[k]:.3g} degrees of freedom)")
     g, ax, az, e = res.residual_rms
-    print(f"  residual RMS: gyro {g:.3g} rad/s, accel_x {ax:.3g} m/s^2, accel_z {az:.3g} m/s^2, encoder {e:.3g} rad")
+    print(f"  residual RMS: gyro {g:.3g} rad/s, accel_x {ax:.3g} m/s^2, accel_z {az:.3g} m/s^2, encoder {e:.3g} rad; "
+          f"condition number {res.condition_number:.4g}")
     header = (f"# {PROG} --raw: nominal body identified from the raw sensors of {args.log}\n"
               f"# an overlay: pass it after the base file(s), e.g. mwip_sim --params {' '.join(map(str, base))} "
               f"{args.out}\n")

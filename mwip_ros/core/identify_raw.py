@@ -87,6 +87,7 @@ class RawIdentificationResult:
     dof: Dict[str, float] = field(default_factory=dict)
     quantile: Dict[str, float] = field(default_factory=dict)
     covariance: np.ndarray = field(repr=False, compare=False, default=None)   # of RAW_GLOBALS, 7 x 7 (CR2)
+    condition_number: float = math.nan   # of the globals' profiled Jacobian, its columns scaled to unit norm
 
     def physical(self) -> PhysicalParams:
         return replace(self.known, m_b=self.values["m_b"], I_b=self.values["I_b"], l=self.values["l"])
@@ -216,11 +217,19 @@ def identify_raw(t: Sequence[float], gyro, accel_x, accel_z, encoder, encoder_ra
     except np.linalg.LinAlgError:   # a global the log does not move: no interval
         cov, dof, std = np.full((n_g, n_g), np.inf), np.full(n_g, np.nan), np.full(n_g, np.inf)
     q = np.array([student.ppf(0.975, v) if np.isfinite(v) and v > 0 else math.inf for v in dof])
+    condition = _condition(S)
     rr = r.reshape(J, W, 4)
     rms = tuple(float(np.sqrt(np.mean(rr[:, :, i] ** 2)) * s) for i, s in enumerate((sg, sa, sa, se)))
     named = lambda a: {k: float(v) for k, v in zip(RAW_GLOBALS, a)}   # noqa: E731
     return RawIdentificationResult(named(z[:n_g]), named(std), rms, J, counted[0], known,
-                                   named(dof), named(q), cov)
+                                   named(dof), named(q), cov, condition)
+
+
+def _condition(S) -> float:
+    """The condition number of the profiled Jacobian with its columns scaled to unit norm, from ``S = Xt^T Xt``
+    (the square root of the scaled S's); inf when a column is zero (a global the log does not move)."""
+    d = np.sqrt(np.diag(S))
+    return float(np.sqrt(np.linalg.cond(S / np.outer(d, d)))) if np.all(d > 0) else math.inf
 
 
 def _profiled(G, L):

@@ -236,6 +236,12 @@ def test_raw_identifies_from_the_raw_sensors_alone(tmp_path, capsys):
     got = P.load_param_file(out).sections["/**"]
     for k, truth in (("m_b", 250.0), ("I_b", 50.0), ("l", 0.25)):
         assert got[f"nominal.{k}"] == pytest.approx(truth, rel=0.03), k
+    cond = float(text.split("condition number ")[1].split()[0])
+    assert 1.0 < cond < 100.0, text        # the chirp tells the seven apart (about 7 on these robots)
+    assert main([str(csv), "--params", str(files[0]), "--raw", "--window", "0", "15", "--max-condition", "2",
+                 "--out", str(tmp_path / "strict.yaml"), "--force"]) == 2
+    assert f"ill-conditioned: the condition number of the body's and sensors' columns is {cond:.4g}" in \
+        capsys.readouterr().err and not (tmp_path / "strict.yaml").exists()
 
 
 def test_raw_needs_the_raw_columns(chirp_csv, tmp_path, capsys):

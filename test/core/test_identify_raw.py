@@ -105,7 +105,7 @@ def test_the_cr2_algebra_is_the_dense_formula():
     window's own 4 columns], H = X (X^T X)^-1 X^T, A_j = ((I - H)_jj)^(+1/2), V = the globals' block of
     (X^T X)^-1 (sum X_j^T A_j e_j e_j^T A_j X_j) (X^T X)^-1, nu = (tr G^T G)^2 / tr (G^T G)^2 with G's column j
     (I - H)_{:, j} A_j X_j (X^T X)^-1 c."""
-    from mwip_ros.core.identify_raw import _cr2, _profiled
+    from mwip_ros.core.identify_raw import _condition, _cr2, _profiled
     rng = np.random.default_rng(7)
     J, R, n = 6, 12, 3
     G = rng.normal(size=(J, R, n))
@@ -134,6 +134,8 @@ def test_the_cr2_algebra_is_the_dense_formula():
         dof.append(np.trace(GG) ** 2 / np.sum(GG * GG))
     Xt, S, Q = _profiled(G, L)
     got_cov, got_dof = _cr2(Xt, S, Q, e.reshape(J, R))
+    flat = Xt.reshape(J * R, n)                                         # the condition the tool prints
+    assert _condition(S) == pytest.approx(np.linalg.cond(flat / np.linalg.norm(flat, axis=0)), rel=1e-9)
     np.testing.assert_allclose(got_cov, cov, rtol=1e-8)
     np.testing.assert_allclose(got_dof, dof, rtol=1e-8)
     assert all(1.0 < d < J for d in dof)
