@@ -5,7 +5,8 @@ change), every figure measured in this one invocation (BENCHMARKS.md, "The locks
     python scripts/bench_mujoco.py [--pairs N] [--seconds S] [--before DIR]
 
 ``--before DIR``: a checkout of the code to compare with (e.g. ``mkdir DIR && git archive main | tar -x -C DIR``),
-run at a physics step of 1 ms (``mujoco.timestep: 0.001``, the default before it became 5 ms); its processes
+run at a physics step of 1 ms (``mujoco.timestep: 0.001``, the default before it became 5 ms; ``--before-timestep``
+another, e.g. 0.005 to compare two checkouts at today's default); its processes
 import ``mwip_ros`` from DIR (PYTHONPATH), the others from this checkout.
 
 1. The lockstep graph (plant_sim, disturbance_observer, dscndo_controller, mcap_recorder: four processes, as
@@ -177,7 +178,14 @@ def main() -> int:
     ap.add_argument("--seconds", type=float, default=10.0, help="simulated seconds of each lockstep graph run")
     ap.add_argument("--before", type=Path, default=None,
                     help="a checkout of the code to compare with, run at mujoco.timestep 0.001 (none: left out)")
+    ap.add_argument("--before-timestep", type=float, default=0.001, metavar="S",
+                    help="the --before checkout's mujoco.timestep [s] (default 0.001)")
     args = ap.parse_args()
+    if not 0 < args.before_timestep <= 0.005:
+        ap.error(f"--before-timestep: in (0, 0.005] s, got {args.before_timestep:g}")
+    step = ["-p", f"mujoco.timestep:={args.before_timestep!r}"]
+    VARIANTS["before"] = ("before", ["-p", "backend:=mujoco", *step])
+    LABELS["before"] = f"mujoco, the `--before` checkout, {args.before_timestep * 1e3:g} ms"
     if args.pairs < 1 or args.seconds <= 0:
         ap.error("--pairs must be at least 1 and --seconds positive")
     if args.before is not None and not (args.before / "mwip_ros" / "__init__.py").exists():
