@@ -114,9 +114,8 @@ def _parser() -> argparse.ArgumentParser:
                          "left unresolved (95 %% interval wider than --max-relative-ci)")
     ap.add_argument("--validate", type=Path, default=None, metavar="LOG2",
                     help="check the identified model on another log (CSV or bag, read as the first): re-simulate it "
-                         "open-loop with LOG2's torque over 1 s windows, each from its measured start (a raw-sensor "
-                         "log's: the state estimator's), and print the pitch prediction error (RMS, worst) against "
-                         "the nominal model of the base file(s); with --raw too")
+                         "open-loop with LOG2's torque over 1 s windows, each from its measured start, and print the "
+                         "pitch prediction error (RMS, worst) against the nominal model of the base file(s)")
     ap.add_argument("--retune", action="store_true",
                     help="after identifying, tune the law's gains (--law) on the identified model with mwip_tune's "
                          "search (differential evolution, seeded): the base file's scenario with the identified body "
@@ -149,8 +148,8 @@ def _options_refusal(args):
             return f"--window: T0 < T1 and both finite, got {t0:g} {t1:g}"
     if args.raw and args.drive:
         return "--raw and --drive: one at a time (the body from the raw sensors, or the drive)"
-    if args.validate is not None and args.drive:
-        return "--validate: checks the body's fit; not with --drive"
+    if args.validate is not None and (args.raw or args.drive):
+        return "--validate: checks the state fit's body; not with --raw or --drive, for now"
     if args.retune:
         from mwip_ros.cli.identify_retune import tunable_laws
         if args.drive:
@@ -414,10 +413,6 @@ def _raw(args, base, values, known, c, notes=()) -> int:
     header = (f"# {PROG} --raw: nominal body identified from the raw sensors of {args.log}\n"
               f"# an overlay: pass it after the base file(s), e.g. mwip_sim --params {' '.join(map(str, base))} "
               f"{args.out}\n")
-    if args.validate is not None:
-        why = _validate(args, res.physical(), got["D_w"], got["D_b"], P.physical(values, "nominal"))
-        if why:
-            return _fail(why)
     if args.retune:
         return _retune(args, base, res.physical(), header)
     placed = {("/**", f"nominal.{k}"): float(f"{got[k]:.6g}") for k in ("m_b", "I_b", "l")}
@@ -430,8 +425,7 @@ def _raw(args, base, values, known, c, notes=()) -> int:
 
 def _validate(args, identified, D_w: float, D_b: float, nominal):
     """--validate: print the pitch prediction errors on LOG2 of the identified body (with its D_w, D_b) and the
-    nominal one; the reason it cannot, or None.  LOG2's state is what the robot knew of itself: the state
-    estimator's (a raw-sensor log), else the state; a raw fit's check reads LOG2 the same way."""
+    nominal one; the reason it cannot, or None."""
     from mwip_ros.core.identify_validate import prediction_errors
     try:
         c, torque = _load(args, args.validate)
