@@ -114,8 +114,10 @@ def _parser() -> argparse.ArgumentParser:
                          "left unresolved (95 %% interval wider than --max-relative-ci)")
     ap.add_argument("--validate", type=Path, default=None, metavar="LOG2",
                     help="check the identified model on another log (CSV or bag, read as the first): re-simulate it "
-                         "open-loop with LOG2's torque over 1 s windows, each from its measured start, and print the "
-                         "pitch prediction error (RMS, worst) against the nominal model of the base file(s)")
+                         "open-loop with LOG2's torque over 1 s windows, each from its measured start (--raw: from a "
+                         "start fitted to the window's first 0.2 s of raw samples, against LOG2's estimated pitch), "
+                         "and print the pitch prediction error (RMS, worst) against the nominal model of the base "
+                         "file(s)")
     ap.add_argument("--retune", action="store_true",
                     help="after identifying, tune the law's gains (--law) on the identified model with mwip_tune's "
                          "search (differential evolution, seeded): the base file's scenario with the identified body "
@@ -148,8 +150,8 @@ def _options_refusal(args):
             return f"--window: T0 < T1 and both finite, got {t0:g} {t1:g}"
     if args.raw and args.drive:
         return "--raw and --drive: one at a time (the body from the raw sensors, or the drive)"
-    if args.validate is not None and (args.raw or args.drive):
-        return "--validate: checks the state fit's body; not with --raw or --drive, for now"
+    if args.validate is not None and args.drive:
+        return "--validate: checks the body's fit; not with --drive"
     if args.retune:
         from mwip_ros.cli.identify_retune import tunable_laws
         if args.drive:
@@ -207,13 +209,13 @@ def _load(args, p=None):
     return {c: np.asarray(cols[c], dtype=float)[keep] for c in (*NEEDED, "theta_w", "u", torque) if c in cols}, torque
 
 
-def _load_raw(args):
+def _load_raw(args, p=None):
     """--raw: the columns ``t`` and :data:`RAW` of the log (a bag: :func:`mwip_ros.cli.identify_bag.read_raw_bag`, the
     IMU's and the encoder's messages alone; a CSV: its raw columns, ``t`` on the stamps' grid and a repeated row
     counted once) within --window, and what the reading said (a list of phrases); or raise ValueError (one line)."""
     from mwip_ros.cli.identify_bag import on_stamp_grid, read_raw_bag
     from mwip_ros.runs import read_csv
-    p = args.log
+    p = args.log if p is None else p
     if not p.exists():
         raise ValueError(f"{p}: no such file or directory")
     notes = []
@@ -413,6 +415,10 @@ def _raw(args, base, values, known, c, notes=()) -> int:
     header = (f"# {PROG} --raw: nominal body identified from the raw sensors of {args.log}\n"
               f"# an overlay: pass it after the base file(s), e.g. mwip_sim --params {' '.join(map(str, base))} "
               f"{args.out}\n")
+    if args.validate is not None:
+        why = _validate_raw(args, res, P.physical(values, "nominal"))
+        if why:
+            return _fail(why)
     if args.retune:
         return _retune(args, base, res.physical(), header)
     placed = {("/**", f"nominal.{k}"): float(f"{got[k]:.6g}") for k in ("m_b", "I_b", "l")}
@@ -436,6 +442,34 @@ def _validate(args, identified, D_w: float, D_b: float, nominal):
         return f"--validate {args.validate}: {exc}"
     print(f"validation on {args.validate}: open-loop pitch prediction over {got['identified'].windows} windows of "
           f"1 s from each window's measured start, the log's torque {torque!r}, D_w and D_b as identified")
+    for name, e in got.items():
+        print(f"  {name:<10} pitch error RMS {e.rms:.4g} rad ({np.degrees(e.rms):.3g} deg), worst {e.worst:.4g} rad "
+              f"({np.degrees(e.worst):.3g} deg)")
+    return None
+
+
+def _validate_raw(args, res, nominal):
+    """--raw --validate: the pitch prediction errors on LOG2's raw samples of the identified body and the nominal one
+    (each with the fit's D_w, D_b, gyro bias and IMU offset), each window's start fitted to its first 0.2 s, against
+    LOG2's estimated pitch (core.identify_validate.raw_prediction_errors); the reason it cannot, or None."""
+    from mwip_ros.cli.identify_bag import on_stamp_grid
+    from mwip_ros.core.identify_validate import FIT_S, raw_prediction_errors
+    try:
+        raw, _ = _load_raw(args, args.validate)
+        c, _ = _load(args, args.validate)   # theta_b: the estimator's where the log has it (what a robot knows)
+        at = np.searchsorted(on_stamp_grid(c["t"]), raw["t"])
+        at = np.minimum(at, len(c["t"]) - 1)
+        ref = np.where(np.abs(on_stamp_grid(c["t"])[at] - raw["t"]) < 1e-9, c["theta_b"][at], np.nan)
+        g = res.values
+        got = {name: raw_prediction_errors(raw["t"], *(raw[k] for k in RAW), ref, p, g["D_w"], g["D_b"],
+                                           g["gyro_bias"], g["imu_offset"])
+               for name, p in (("identified", res.physical()), ("nominal", nominal))}
+    except (ValueError, OSError) as exc:
+        return f"--validate {args.validate}: {exc}"
+    print(f"validation on {args.validate}: open-loop pitch prediction over {got['identified'].windows} windows of "
+          f"1 s, each from a start fitted to its first {FIT_S:g} s of raw samples, the reported torque, D_w, D_b, "
+          f"the gyro bias and the IMU offset as identified; against the log's estimated pitch, whose own error is "
+          f"part of the figure")
     for name, e in got.items():
         print(f"  {name:<10} pitch error RMS {e.rms:.4g} rad ({np.degrees(e.rms):.3g} deg), worst {e.worst:.4g} rad "
               f"({np.degrees(e.worst):.3g} deg)")
