@@ -175,20 +175,31 @@ def _options_refusal(args):
     return None
 
 
-def _load(args, p=None):
-    """(columns, torque column name) of the log (``p``, default ``args.log``), or raise ValueError (one line)."""
-    from mwip_ros.runs import load_run, read_bag_run
-    p = args.log if p is None else p
+def _is_csv(args, p) -> bool:
+    """True for a CSV log, False for a bag (a directory or an .mcap file); else raise ValueError (one line): no such
+    file, another kind of file, or --run with a CSV."""
     if not p.exists():
         raise ValueError(f"{p}: no such file or directory")
     if p.is_file() and p.suffix == ".csv":
         if args.run is not None:
             raise ValueError("--run is for a bag of several runs; a CSV holds one")
-        run = load_run(p)
-    elif p.is_dir() or p.suffix == ".mcap":
-        run = read_bag_run(p, segment=None if args.run is None else args.run - 1)
-    else:
-        raise ValueError(f"{p}: not a bag directory, .mcap file or .csv file")
+        return True
+    if p.is_dir() or p.suffix == ".mcap":
+        return False
+    raise ValueError(f"{p}: not a bag directory, .mcap file or .csv file")
+
+
+def _in_window(args, t) -> np.ndarray:
+    """The rows of times ``t`` within --window (all without one)."""
+    t = np.asarray(t, dtype=float)
+    return np.ones(len(t), dtype=bool) if args.window is None else (t >= args.window[0]) & (t <= args.window[1])
+
+
+def _load(args, p=None):
+    """(columns, torque column name) of the log (``p``, default ``args.log``), or raise ValueError (one line)."""
+    from mwip_ros.runs import load_run, read_bag_run
+    p = args.log if p is None else p
+    run = load_run(p) if _is_csv(args, p) else read_bag_run(p, segment=None if args.run is None else args.run - 1)
     cols = dict(run.columns)
     estimated = "theta_b_hat" in cols
     if args.state == "estimate" and not estimated:
@@ -201,9 +212,7 @@ def _load(args, p=None):
     missing = [c for c in (*NEEDED, torque) if c not in cols]
     if missing:
         raise ValueError(f"{p}: no {', '.join(missing)} column(s)")
-    keep = np.ones(len(cols["t"]), dtype=bool)
-    if args.window is not None:
-        keep = (cols["t"] >= args.window[0]) & (cols["t"] <= args.window[1])
+    keep = _in_window(args, cols["t"])
     if args.drive and not ("u" in cols and "u_applied" in cols):
         raise ValueError(f"{p}: --drive needs the columns u and u_applied (a run with motor.enabled: true)")
     return {c: np.asarray(cols[c], dtype=float)[keep] for c in (*NEEDED, "theta_w", "u", torque) if c in cols}, torque
@@ -216,12 +225,8 @@ def _load_raw(args, p=None):
     from mwip_ros.cli.identify_bag import on_stamp_grid, read_raw_bag
     from mwip_ros.runs import read_csv
     p = args.log if p is None else p
-    if not p.exists():
-        raise ValueError(f"{p}: no such file or directory")
     notes = []
-    if p.is_file() and p.suffix == ".csv":
-        if args.run is not None:
-            raise ValueError("--run is for a bag of several runs; a CSV holds one")
+    if _is_csv(args, p):
         cols = dict(read_csv(p).columns)
         missing = [c for c in ("t", *RAW) if c not in cols]
         if "u_applied" in missing and "u" in cols:
@@ -234,7 +239,7 @@ def _load_raw(args, p=None):
         cols["t"] = on_stamp_grid(cols["t"])
         if dropped:
             notes.append(f"{dropped} repeated row(s) counted once")
-    elif p.is_dir() or p.suffix == ".mcap":
+    else:
         log = read_raw_bag(p, segment=None if args.run is None else args.run - 1)
         cols = log.columns
         for n, what in ((log.duplicates, "sample(s) recorded twice counted once"),
@@ -242,11 +247,7 @@ def _load_raw(args, p=None):
                         (log.missing_torque, "period(s) without a reported torque left out of the windows")):
             if n:
                 notes.append(f"{n} {what}")
-    else:
-        raise ValueError(f"{p}: not a bag directory, .mcap file or .csv file")
-    keep = np.ones(len(cols["t"]), dtype=bool)
-    if args.window is not None:
-        keep = (cols["t"] >= args.window[0]) & (cols["t"] <= args.window[1])
+    keep = _in_window(args, cols["t"])
     return {c: np.asarray(cols[c], dtype=float)[keep] for c in ("t", *RAW)}, notes
 
 

@@ -23,6 +23,7 @@ from typing import Sequence
 
 import numpy as np
 
+from .identify_raw import NOISE
 from .model import PhysicalParams, accel
 from .plant import rk4_period
 from .raw_sensors import specific_force
@@ -41,6 +42,15 @@ class PredictionError:
     rms: float
     worst: float
     windows: int
+
+
+def _summary(errs, windows: int, window_s: float) -> PredictionError:
+    """The errors of every predicted row as a :class:`PredictionError`; ValueError when there are none."""
+    if not errs:
+        raise ValueError(f"no window of at least {window_s / 2:g} s with finite values in the log")
+    e = np.asarray(errs)
+    e = np.where(np.isfinite(e), e, np.inf)     # a prediction that diverged is the worst error, not a NaN
+    return PredictionError(float(np.sqrt(np.mean(e ** 2))), float(np.max(np.abs(e))), windows)
 
 
 def prediction_errors(t: Sequence[float], theta_w, theta_b, dtheta_w, dtheta_b, u, p: PhysicalParams, D_w: float,
@@ -67,16 +77,12 @@ def prediction_errors(t: Sequence[float], theta_w, theta_b, dtheta_w, dtheta_b, 
             x = rk4_period(p, D_w, D_b, zeros, zeros, x, u[k], t[k + 1] - t[k], substeps)
             errs.append(x[1] - b[k + 1])
         windows += 1
-    if not errs:
-        raise ValueError(f"no window of at least {window_s / 2:g} s with finite values in the log")
-    e = np.asarray(errs)
-    e = np.where(np.isfinite(e), e, np.inf)     # a prediction that diverged is the worst error, not a NaN
-    return PredictionError(float(np.sqrt(np.mean(e ** 2))), float(np.max(np.abs(e))), windows)
+    return _summary(errs, windows, window_s)
 
 
 def raw_prediction_errors(t: Sequence[float], gyro, accel_x, accel_z, encoder, encoder_rate, u, theta_b_ref,
                           p: PhysicalParams, D_w: float, D_b: float, gyro_bias: float, imu_offset: float,
-                          noise=(0.004, 0.02, 0.00044), window_s: float = WINDOW_S,
+                          noise=NOISE, window_s: float = WINDOW_S,
                           fit_s: float = FIT_S) -> PredictionError:
     """The pitch prediction error of the model ``(p, D_w, D_b)`` with the sensors' ``gyro_bias`` and ``imu_offset``
     over the windows of a raw log (module doc: each start fitted to the window's first ``fit_s``), against
@@ -121,8 +127,4 @@ def raw_prediction_errors(t: Sequence[float], gyro, accel_x, accel_z, encoder, e
         _, x_fit = run(tuple(sol.x), a, a + fit)          # the state at the fit's last row ...
         run(x_fit, a + fit - 1, z, out=errs)                # ... predicted on, against the reference
         windows += 1
-    if not errs:
-        raise ValueError(f"no window of at least {window_s / 2:g} s with finite values in the log")
-    e = np.asarray(errs)
-    e = np.where(np.isfinite(e), e, np.inf)     # a prediction that diverged is the worst error, not a NaN
-    return PredictionError(float(np.sqrt(np.mean(e ** 2))), float(np.max(np.abs(e))), windows)
+    return _summary(errs, windows, window_s)

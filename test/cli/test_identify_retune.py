@@ -12,6 +12,7 @@ from mwip_ros.cli import identify
 from mwip_ros.core import laws, metrics
 from mwip_ros.core.sim import simulate
 from mwip_ros.runs import write_csv
+from test_identify_bag import refused  # noqa: E402  (test/cli is on sys.path under pytest)
 
 pytestmark = pytest.mark.unit
 
@@ -45,14 +46,6 @@ def margin(files, law):
     cls, nominal = laws.get(law), P.physical(v, "nominal")
     return cls.stability_margin(nominal, cls.design(v, nominal, P.period(v)), P.observer_gain(v),
                                 observer=cls.observer)
-
-
-def refused(argv, capsys) -> str:
-    code = identify.main(argv)
-    err = capsys.readouterr().err.strip()
-    assert code == 2, err
-    assert len(err.splitlines()) == 1 and err.startswith("mwip_identify: error: "), err
-    return err
 
 
 def test_retune_writes_gains_that_satisfy_theorem_2_and_beat_the_papers(ident_csv, tmp_path, capsys):
