@@ -90,6 +90,9 @@ def test_parameters_out_of_range_or_unknown_are_refused_by_name():
         _make("complementary", **{"complementary.tau": -1.0})
     with pytest.raises(ValueError, match="kalman.nonsense"):
         _make("kalman", **{"kalman.nonsense": 1.0})
+    for bad in (-1.0, math.nan, math.inf):   # the slip gate: 0 (off) to 1e9, never a NaN
+        with pytest.raises(ValueError, match="kalman.slip_gate"):
+            _make("kalman", **{"kalman.slip_gate": bad})
     _make("kalman", **{"complementary.tau": 3.0})   # another method's key: not this one's business
 
 
