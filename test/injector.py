@@ -78,6 +78,14 @@ def health(inj) -> dict:
     return latest
 
 
+
+def controller_value(diags, key) -> int:
+    """The newest value of ``key`` on the dscndo_controller's /diagnostics status among ``diags`` (the
+    DiagnosticArray messages received; -1: none yet)."""
+    vals = [kv.value for d in diags for s in d.status if "dscndo_controller" in s.name for kv in s.values
+            if kv.key == key]
+    return int(vals[-1]) if vals else -1
+
 def publish_until_rejected(inj, latest: dict, node: str, topic: str, pub, data, timeout: float = 30.0) -> bool:
     """Publish ``data`` (again each 2.5 s: a history of one may drop it) until ``node``'s /diagnostics count
     one more rejection on ``topic``."""

@@ -117,6 +117,7 @@ class Shaper:
 
     def __init__(self, cfg: MotionConfig, h: float):
         self.cfg, self.h = cfg, h
+        self.accepted = 0        # commands taken (clipped ones too)
         self.rejected = 0        # commands refused (not finite, absurd)
         self.clipped = 0         # commands clipped to the limits
         self.timeouts = 0        # stops because no command came for timeout_s
@@ -153,6 +154,7 @@ class Shaper:
         self.cmd = (cv, cw)
         self.cmd_k = -1 if self.k is None else self.k   # it acts from the next period on
         self.stopped = False
+        self.accepted += 1
         return None
 
     def _target(self, k: int) -> Tuple[float, float]:

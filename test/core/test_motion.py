@@ -33,7 +33,7 @@ def test_speed_is_clipped_and_counted():
     assert s.command(9.0, -7.0) is None
     r = s.reference(0)
     assert (r.v, r.dpsi) == (1.5, -0.1)   # max_speed; the yaw rate moves max_yaw_rate * h per period
-    assert s.clipped == 1 and s.rejected == 0
+    assert s.clipped == 1 and s.rejected == 0 and s.accepted == 1   # a clipped command is taken
 
 
 @pytest.mark.parametrize("v, wz", [(math.nan, 0.0), (0.0, math.inf), (-math.inf, 0.0), (1e4, 0.0), (0.0, -2e3),
@@ -43,7 +43,7 @@ def test_bad_commands_rejected_counted_never_integrated(v, wz):
     assert s.command(0.5, 0.0) is None
     s.reference(0)
     assert s.command(v, wz) is not None
-    assert s.rejected == 1
+    assert s.rejected == 1 and s.accepted == 1
     refs = [s.reference(k) for k in range(1, 4)]
     assert all(math.isfinite(x) for r in refs for x in r)
     assert refs[-1].v == pytest.approx(0.2, abs=1e-15)   # still ramping to the good command's 0.5

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from graphproc import PARAMS, Graph, run_lockstep
-from injector import Injector
+from injector import Injector, controller_value
 from mwip_ros import params as P
 from mwip_ros.core import laws
 from mwip_ros.core.sim import simulate
@@ -65,8 +65,8 @@ def test_realtime_cmd_vel_is_followed_then_the_timeout_stops_it_and_hostile_twis
                 def counted(i=i, data=data):
                     pub.publish(data)
                     inj.spin(0.05)
-                    return _diag(diags, "cmd_vel_rejected") >= i
-                assert inj.wait(counted, 20), (i, _diag(diags, "cmd_vel_rejected"))
+                    return controller_value(diags, "cmd_vel_rejected") >= i
+                assert inj.wait(counted, 20), (i, controller_value(diags, "cmd_vel_rejected"))
             # drive: 0.6 m/s, sent at 20 Hz for 4 s (the ramp at 0.5 m/s^2 takes 1.2 s)
             end = time.monotonic() + 4.0
             while time.monotonic() < end:
@@ -76,8 +76,8 @@ def test_realtime_cmd_vel_is_followed_then_the_timeout_stops_it_and_hostile_twis
             n_at_stop = len(speeds)
             inj.wait(lambda: len(speeds) > n_at_stop + 1200, 20)   # 6 s of silence: the stop, then the hold
             stopped = float(np.mean(speeds[-200:]))
-            inj.wait(lambda: _diag(diags, "cmd_vel_timeouts") == 1, 10)
-            timeouts = _diag(diags, "cmd_vel_timeouts")
+            inj.wait(lambda: controller_value(diags, "cmd_vel_timeouts") == 1, 10)
+            timeouts = controller_value(diags, "cmd_vel_timeouts")
         g.close()
         out = ctl.output()
     assert 0.35 < moving < 0.85, moving        # it follows 0.6 m/s (with the paper's disturbances on)
@@ -90,9 +90,3 @@ def test_realtime_cmd_vel_is_followed_then_the_timeout_stops_it_and_hostile_twis
     assert int(out.rsplit("rejected: cmd_vel: ", 1)[1].split()[0]) >= 4
     assert "cmd_vel: 1 timeout stop(s)" in out
 
-
-def _diag(diags, key) -> int:
-    """The newest value of ``key`` on the controller's /diagnostics status (-1: none yet)."""
-    vals = [kv.value for d in diags for s in d.status if "dscndo_controller" in s.name for kv in s.values
-            if kv.key == key]
-    return int(vals[-1]) if vals else -1

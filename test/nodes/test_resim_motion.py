@@ -18,23 +18,36 @@ MOTION = REPO / "config" / "motion.yaml"
 def _record(work, files, twist=None):
     """A lockstep DSCNDO run of ``files`` recorded by mcap_recorder; ``twist``: a cmd_vel (linear.x) the controller
     and the recorder have before the plant starts."""
+    from diagnostic_msgs.msg import DiagnosticArray
     from geometry_msgs.msg import Twist
 
-    from injector import Injector
+    from injector import Injector, controller_value
     work.mkdir(parents=True, exist_ok=True)
     bag = work / "bag"
     with Graph(work) as g, Injector(g.domain_id) as inj:
+        diags = []
+        inj.node.create_subscription(DiagnosticArray, "/diagnostics", diags.append, 10)
         rec = g.start("mcap_recorder", "-p", f"output:={bag}", "-p", "use_sim_time:=true", params=None)
         g.start("disturbance_observer", "-p", "use_sim_time:=true", params=files)
         ctl = g.start("dscndo_controller", "-p", "use_sim_time:=true", params=files)
         assert ctl.wait_for_output("ready", timeout=30), ctl.output()
         if twist is not None:
             pub = inj.publisher("cmd_vel", Twist, qos=10)
-            # the controller's subscription and the recorder's (made once it discovers this publisher) both matched
-            assert inj.wait(lambda: pub.get_subscription_count() >= 2, 30), pub.get_subscription_count()
+            # matched both ways: this publisher counts the controller's subscription and the recorder's (made once
+            # it discovers this publisher), and the controller's best-effort subscription counts this publisher
+            assert inj.wait(lambda: pub.get_subscription_count() >= 2
+                            and controller_value(diags, "cmd_vel_publishers") >= 1, 30), \
+                (pub.get_subscription_count(), controller_value(diags, "cmd_vel_publishers"))
             msg = Twist()
             msg.linear.x = twist
             pub.publish(msg)
+            # the controller has it before the plant starts (its /diagnostics count it; best effort: sent again
+            # if lost, the newest counts and the recorder keeps them all before state 0)
+            for _ in range(10):
+                if inj.wait(lambda: controller_value(diags, "cmd_vel_accepted") >= 1, 3.0):
+                    break
+                pub.publish(msg)
+            assert controller_value(diags, "cmd_vel_accepted") >= 1, ctl.output()
         plant = g.start("plant_sim", "-p", f"duration_s:={DURATION}", "-p", "expected_subscribers:=3", params=files)
         assert plant.wait(180) == 0, plant.output()
         assert rec.stop(signal.SIGINT, timeout=20) == 0, rec.output()

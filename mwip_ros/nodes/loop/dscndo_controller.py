@@ -99,10 +99,12 @@ class DscndoController(Node, GracefulNodeMixin):
         self.motion = Shaper(mc, self.h) if mc is not None else None
         self.yaw = YawLoop(yaw_config(self.v), self.h) if mc is not None else None   # theory 6.13: with a yaw rate
         self.yaw_rates = {}   # stamp -> the gyro's yaw rate of that state (a spatial plant's joint_states)
+        self.cmd_vel_sub = None
         if mc is not None and not (mc.profile or mc.yaw_profile):   # cmd_vel sets the target; the newest counts
             from rclpy.qos import QoSProfile, ReliabilityPolicy
-            self.create_subscription(Twist, "cmd_vel", self._on_cmd_vel,
-                                     QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT), raw=True)
+            self.cmd_vel_sub = self.create_subscription(
+                Twist, "cmd_vel", self._on_cmd_vel, QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT),
+                raw=True)
         self.get_logger().info(self._ready_text())
 
     @property
@@ -274,8 +276,11 @@ class DscndoController(Node, GracefulNodeMixin):
         values = {"commands": self.count, "law": self._name(), "waiting_states": len(self.states)}
         if self.motion is not None:   # docs/theory.md 6.11: the stops and the refused or clipped cmd_vel
             m = self.motion
-            values.update(cmd_vel_timeouts=m.timeouts, cmd_vel_rejected=m.rejected, cmd_vel_clipped=m.clipped,
-                          v_ref=m.ref.v if m.ref is not None else 0.0)
+            values.update(cmd_vel_accepted=m.accepted, cmd_vel_timeouts=m.timeouts, cmd_vel_rejected=m.rejected,
+                          cmd_vel_clipped=m.clipped, v_ref=m.ref.v if m.ref is not None else 0.0)
+            if self.cmd_vel_sub is not None:   # the publishers it matched: a best-effort reader loses what a
+                # publisher sends before the reader matched it, even when the publisher already counts the reader
+                values["cmd_vel_publishers"] = self.cmd_vel_sub.get_publisher_count()
         return OK, f"{self._describe()} answering", values
 
     def on_shutdown(self) -> None:

@@ -251,13 +251,17 @@ class RealtimeRunner(_Runner):
             self.watchdog_deferred = True
         else:
             silence = wd.silence(now)
-            since = [t for t in ticks[-(int(silence / n.h) + 3):] if t >= wd.last] + [now]   # the plant's ticks
-            gap = max((b - a for a, b in zip(since, since[1:])), default=0.0)   # meanwhile: its longest stall
+            # the plant's ticks since the last command (from its receipt: a stall may follow it at once)
+            since = [wd.last] + [t for t in ticks[-(int(silence / n.h) + 3):] if t >= wd.last] + [now]
+            periods = [b - a for a, b in zip(since, since[1:])]
+            gap = max(periods, default=0.0)                       # meanwhile: its longest stall
+            stalled = sum(max(0.0, p - n.h) for p in periods)     # and its time past its periods, all told
             stage, why = n.lockstep.silent_stage(n._watch_stamp, n.stamp0)
             what = ("since the last" if wd.answered else "since the first state: none ever came")
             n._fault("watchdog", f"no wheel_torque_cmd for {silence * 1e3:.1f} ms > watchdog_s = "
                                  f"{wd.timeout * 1e3:g} ms ({what}); the stage that did not answer: {why}",
-                     silence_s=round(silence, 6), max_tick_gap_s=round(gap, 6), silent_stage=stage)
+                     silence_s=round(silence, 6), max_tick_gap_s=round(gap, 6), stalled_s=round(stalled, 6),
+                     silent_stage=stage)
 
     def diagnostic_values(self) -> dict:
         if len(self.tick_times) <= 2:

@@ -448,6 +448,7 @@ class PlantSimNode(Node, GracefulNodeMixin):
             return True
         if self.fallen:
             self._lie()
+            self.table.set_drive(p.u_prev, p.saturation)   # no torque acted over period k: exactly zero
             return False
         try:
             self.side.advance(u, self.extra)

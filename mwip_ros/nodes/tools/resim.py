@@ -27,13 +27,16 @@ given the recorded ``cmd_vel`` where the recording has them: a Twist sets the ta
 the controller last answered (``core.motion.Shaper.command``), so each recorded Twist (the newest of those between
 two states, in the bag's order) is published before the first state recorded after it, and that state is sent
 only once the controller has answered a ``get_parameters`` request sent after the Twist (its executor took the
-Twist first).  A profile is made inside each period from the state's stamp and re-simulates as it is.
+Twist first).  The run starts once the controller's subscription has matched this publisher (its /diagnostics
+``cmd_vel_publishers``): the subscription is best effort, so what comes before it matched is lost, even when
+the publisher already counts it.  A profile is made inside each period from the state's stamp and re-simulates as it is.
 """
 from __future__ import annotations
 
 import time
 from typing import Dict, List, Optional, Tuple
 
+from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import WrenchStamped
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
@@ -99,6 +102,8 @@ class Resim:
         self._param_wait: Optional[Tuple[float, list]] = None   # (since, futures) of changes being applied
         self._motion_asked = None   # the futures of the controller's motion.* (theory 6.11), then True once judged
         self.cmd_vel_pub = None     # set when the running controller tracks cmd_vel: the recorded ones are replayed
+        self._cmd_vel_since = 0.0   # when cmd_vel_pub was made (the controller's match is awaited from then)
+        self._ctl_cmd_vel_publishers = 0   # the controller's /diagnostics: publishers its cmd_vel subscription matched
         self._barrier = None        # (since, future): a replayed cmd_vel's get_parameters round trip under way
         self.replayed_cmd_vel = 0
         self.applied_changes = 0
@@ -371,8 +376,13 @@ class Resim:
         from rcl_interfaces.srv import GetParameters
         from geometry_msgs.msg import Twist
         if self._motion_asked is True:
-            if self.cmd_vel_pub is not None and self.cmd_vel_pub.get_subscription_count() < 1:
-                return None   # the controller's cmd_vel subscription not matched yet
+            if self.cmd_vel_pub is not None and (self.cmd_vel_pub.get_subscription_count() < 1
+                                                 or self._ctl_cmd_vel_publishers < 1):
+                if time.monotonic() - self._cmd_vel_since > self.v["timeout_s"]:   # matched both ways, or fail
+                    self._fail(f"resim timeout: the dscndo_controller's cmd_vel subscription did not match this "
+                               f"node's publisher within timeout_s = {self.v['timeout_s']:g} s (its /diagnostics "
+                               f"cmd_vel_publishers: {self._ctl_cmd_vel_publishers})")
+                return None   # the controller's cmd_vel subscription not matched yet (either way)
             return False
         if self._motion_asked is None:
             client = self._params_client = self.node.create_client(GetParameters, "dscndo_controller/get_parameters")
@@ -389,6 +399,8 @@ class Resim:
         self._motion_asked = True
         if enabled and enabled[0].bool_value and not (profile and len(profile[0].double_array_value)):
             self.cmd_vel_pub = self.node.create_publisher(Twist, "cmd_vel", 10)   # reliable, volatile: as a user
+            self._cmd_vel_since = time.monotonic()
+            self.node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, 10)
             self.log.info(f"resim: the running dscndo_controller tracks cmd_vel: replaying the {len(self.cmd_vels)} "
                           f"recorded cmd_vel (each before the first state recorded after it)")
             return None
@@ -396,6 +408,15 @@ class Resim:
             self.log.info("resim: the bag has cmd_vel, which the running dscndo_controller does not read (motion "
                           "off, or a motion.profile): not replayed")
         return False
+
+    def _on_diagnostics(self, msg) -> None:
+        """The controller's ``cmd_vel_publishers`` (a report each wall second): has its subscription matched?"""
+        name = f"{self.node.get_namespace().rstrip('/')}/dscndo_controller"
+        for st in msg.status:
+            if st.name == name:
+                for kv in st.values:
+                    if kv.key == "cmd_vel_publishers":
+                        self._ctl_cmd_vel_publishers = int(kv.value)
 
     def step(self, executor) -> None:
         if not self.started:
