@@ -1,6 +1,9 @@
 """A gain changed in the middle of a recorded lockstep run: the bag has the change (/parameter_events) and the
 robot (/robot_markers); resim applies the change at the same state and reproduces the run exactly, and without
 it (parameter_events:=false) it does not."""
+import os
+import signal
+
 import pytest
 
 from graphproc import Graph
@@ -29,17 +32,25 @@ def changed_bag(tmp_path_factory):
         markers = g.start("robot_markers")
         with Injector(g.domain_id) as inj:
             states = inj.record("joint_states", JointState)
+            client = inj.node.create_client(SetParameters, "/dscndo_controller/set_parameters")
+            assert client.wait_for_service(timeout_sec=30)   # found before the run, which lasts about 2 s of wall time
             plant = g.start("plant_sim", "-p", "duration_s:=10.0", "-p", "expected_subscribers:=5")
             # a state one period past CHANGE_AFTER_NS: the plant sent it only once the controller had answered the one
             # before, so the controller's clock (the last state it answered) is at CHANGE_AFTER_NS at least
             past = CHANGE_AFTER_NS + 5_000_000
-            assert inj.wait(lambda: any(L.parse_joint_state(d)[0] >= past for d in states[-5:]), 120), \
-                plant.output()[-2000:]
-            client = inj.node.create_client(SetParameters, "/dscndo_controller/set_parameters")
-            assert client.wait_for_service(timeout_sec=30)
-            value = ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=NEW_K1)
-            future = client.call_async(SetParameters.Request(parameters=[Parameter(name="k1", value=value)]))
-            assert inj.wait(future.done, 30) and future.result().results[0].successful, future.result()
+
+            def past_and_held() -> bool:   # the observer stopped at once: the lockstep chain waits for it (well
+                if any(L.parse_joint_state(d)[0] >= past for d in states[-5:]):   # within lockstep_timeout_s), so
+                    os.kill(obs.pid, signal.SIGSTOP)   # the change comes inside the run however slow the machine
+                    return True
+                return False
+            assert inj.wait(past_and_held, 120), plant.output()[-2000:]
+            try:
+                value = ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=NEW_K1)
+                future = client.call_async(SetParameters.Request(parameters=[Parameter(name="k1", value=value)]))
+                assert inj.wait(future.done, 5) and future.result().results[0].successful, future.result()
+            finally:
+                os.kill(obs.pid, signal.SIGCONT)
             assert plant.wait(180) == 0, plant.output()[-2000:]
         for p in (obs, ctl, markers, rec):
             assert p.stop() == 0, p.output()[-2000:]
