@@ -143,10 +143,12 @@ def drive(ros, args, failure, stdin=None, stdout=None) -> int:
         tty.setcbreak(fd)   # keys one at a time, no echo; Ctrl-C still interrupts
         stdout.write(f"drive: arrows up/down vx (max {lim.max_speed:g} m/s), left/right wz (max "
                      f"{lim.max_yaw_rate:g} rad/s), space stop, q quit\r\n")
-        period, nxt = 1.0 / args.rate, time.monotonic()
+        period, nxt, shown = 1.0 / args.rate, time.monotonic(), None
         while True:
-            stdout.write(f"\rvx {vx:+.3f} m/s  wz {wz:+.3f} rad/s   ")
-            stdout.flush()
+            if (vx, wz) != shown:   # the status line is redrawn when it changes, not at every tick
+                stdout.write(f"\rvx {vx:+.3f} m/s  wz {wz:+.3f} rad/s   ")
+                stdout.flush()
+                shown = (vx, wz)
             pub.publish(_twist(vx, wz))
             nxt += period
             ready, _, _ = select.select([fd], [], [], max(0.0, nxt - time.monotonic()))

@@ -9,12 +9,22 @@ from mwip_ros.msgs.topics import SYSTEM_TOPICS
 
 pytestmark = pytest.mark.graph
 
-LOCKSTEP = ("-p", "duration_s:=0.0", "-p", "lockstep_timeout_s:=3.0")
+# lockstep_timeout_s is the wait for the graph at the start as for each command: 8 s, as a loaded machine's
+# discovery has taken more than 3 s to match the readers of state 0 (the default is 10 s)
+LOCKSTEP = ("-p", "duration_s:=0.0", "-p", "lockstep_timeout_s:=8.0")
+
+
+def _ready(*procs) -> None:
+    """Each node has started (its "ready" line): the plant's lockstep_timeout_s then counts discovery only, not a
+    loaded machine's start-up of the peers."""
+    for p in procs:
+        assert p.wait_for_output("ready", 60), p.output()
 
 
 def _lockstep_graph(g, *controllers):
     obs = g.start("disturbance_observer")
     ctls = [g.start("dscndo_controller", *args, label=label) for label, args in controllers]
+    _ready(obs, *ctls)
     return obs, ctls
 
 
@@ -38,8 +48,7 @@ def test_a_killed_state_estimator_is_named(tmp_path):
     raw = (PARAMS, PARAMS.parent / "sensors_raw_realistic.yaml")
     with Graph(tmp_path) as g:
         est = g.start("state_estimator", params=raw)
-        g.start("disturbance_observer", params=raw)
-        g.start("dscndo_controller", params=raw)
+        _ready(est, g.start("disturbance_observer", params=raw), g.start("dscndo_controller", params=raw))
         plant = g.start("plant_sim", *LOCKSTEP, params=raw)
         assert plant.wait_for_output("steps/s", 60), plant.output()  # running (progress every 2 s)
         os.kill(est.pid, signal.SIGKILL)
@@ -71,8 +80,6 @@ def test_lockstep_refuses_two_controllers_and_names_them(tmp_path):
     with Graph(tmp_path) as g:
         obs, ctls = _lockstep_graph(g, ("dscndo_controller", ()),
                                     ("second_controller", ("-r", "__node:=dscndo_controller_b")))
-        for c in ctls:
-            assert c.wait_for_output("ready", 30)
         plant = g.start("plant_sim", "-p", "expected_subscribers:=3", "-p", "duration_s:=20.0")
         code = plant.wait(60)
         out = plant.output()
