@@ -78,7 +78,6 @@ def health(inj) -> dict:
     return latest
 
 
-
 def controller_value(diags, key) -> int:
     """The newest value of ``key`` on the dscndo_controller's /diagnostics status among ``diags`` (the
     DiagnosticArray messages received; -1: none yet)."""
@@ -86,19 +85,26 @@ def controller_value(diags, key) -> int:
             if kv.key == key]
     return int(vals[-1]) if vals else -1
 
+
+def publish_until(inj, pub, data, done: Callable[[], bool], timeout: float = 30.0, every: float = 2.5) -> bool:
+    """Publish ``data``, again each ``every`` s (a best-effort reader or a history of one may drop it), until
+    ``done()`` (what the receiving node reports, e.g. on /diagnostics, a report each second)."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        pub.publish(data)
+        if inj.wait(done, every):
+            return True
+    return False
+
+
 def publish_until_rejected(inj, latest: dict, node: str, topic: str, pub, data, timeout: float = 30.0) -> bool:
-    """Publish ``data`` (again each 2.5 s: a history of one may drop it) until ``node``'s /diagnostics count
-    one more rejection on ``topic``."""
+    """Publish ``data`` (:func:`publish_until`) until ``node``'s /diagnostics count one more rejection on
+    ``topic``."""
     def count():
         return latest.get(node, (0, {}))[1].get(topic, 0)
     assert inj.wait(lambda: node in latest, timeout), f"no /diagnostics from {node}"
     before = count()
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        pub.publish(data)
-        if inj.wait(lambda: count() > before, 2.5):
-            return True
-    return False
+    return publish_until(inj, pub, data, lambda: count() > before, timeout)
 
 
 def rss_mib(pid: int) -> float:

@@ -140,8 +140,8 @@ def test_drive_through_a_pty(reader, tmp_path):
         assert termios.tcgetattr(slave) == before                    # the terminal as it was
         screen = _drained(master)
         assert "max 0.3 m/s" in screen and "max 0.5 rad/s" in screen and "vx +0.060 m/s" in screen
-        # the status line is drawn once per change: the start, 2 + 1 keys, 20 + 30 (clipped: 8 + 20 changes), the
-        # stop, 2 keys; not at every one of the hundreds of ticks
+        # the status line is drawn when it changes: at most the start, then once per key (2 + 1, 20 + 30 of which
+        # the clipped ones change nothing, the stop, 2); not at every one of the hundreds of ticks
         assert screen.count("\rvx ") <= 1 + 3 + 50 + 1 + 2, screen.count("\rvx ")
         # Ctrl-C (SIGINT) while moving: a zero Twist, the terminal restored, exit 130
         p = subprocess.Popen([str(MWIP_CTL), "drive", "--rate", "50"], env=reader.env, stdin=slave, stdout=slave,

@@ -21,7 +21,7 @@ def _record(work, files, twist=None):
     from diagnostic_msgs.msg import DiagnosticArray
     from geometry_msgs.msg import Twist
 
-    from injector import Injector, controller_value
+    from injector import Injector, controller_value, publish_until
     work.mkdir(parents=True, exist_ok=True)
     bag = work / "bag"
     with Graph(work) as g, Injector(g.domain_id) as inj:
@@ -40,14 +40,10 @@ def _record(work, files, twist=None):
                 (pub.get_subscription_count(), controller_value(diags, "cmd_vel_publishers"))
             msg = Twist()
             msg.linear.x = twist
-            pub.publish(msg)
             # the controller has it before the plant starts (its /diagnostics count it; best effort: sent again
             # if lost, the newest counts and the recorder keeps them all before state 0)
-            for _ in range(10):
-                if inj.wait(lambda: controller_value(diags, "cmd_vel_accepted") >= 1, 3.0):
-                    break
-                pub.publish(msg)
-            assert controller_value(diags, "cmd_vel_accepted") >= 1, ctl.output()
+            assert publish_until(inj, pub, msg, lambda: controller_value(diags, "cmd_vel_accepted") >= 1, 30.0,
+                                 every=3.0), ctl.output()
         plant = g.start("plant_sim", "-p", f"duration_s:={DURATION}", "-p", "expected_subscribers:=3", params=files)
         assert plant.wait(180) == 0, plant.output()
         assert rec.stop(signal.SIGINT, timeout=20) == 0, rec.output()
