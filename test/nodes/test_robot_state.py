@@ -28,8 +28,19 @@ def test_odom_matches_the_true_pose_and_the_description_is_latched(tmp_path):
     with Graph(tmp_path) as g:
         node = g.start("robot_state", params=RAW)
         assert node.wait_for_output("robot state ready", 30), node.output()
+        def until_integrated(plant, timeout):
+            """The plant's exit, once robot_state has the run's last state: its input is the state estimator's
+            joint_states, whose writer keeps the run only while the estimator runs (run_lockstep stops it when the
+            plant is done); under load robot_state's reader can match it after the plant has ended."""
+            code = plant.wait(timeout)
+            with Injector(g.domain_id, name="run_reader") as inj:
+                seen = []
+                inj.node.create_subscription(Odometry, "odom", seen.append, LATE)
+                assert inj.wait(lambda: seen and seen[-1].header.stamp.sec == 3, 60), (len(seen), node.output())
+            return code
+
         code, csv_path, logs = run_lockstep(tmp_path, True, "-p", "duration_s:=3.0", params=RAW, law="dsc",
-                                            domain_id=g.domain_id)
+                                            domain_id=g.domain_id, wait=until_integrated)
         assert code == 0, logs["plant_sim"].output()
         with Injector(g.domain_id, name="late_reader") as inj:   # joins after the run: what is latched or kept
             odom, desc, wheels = [], [], []

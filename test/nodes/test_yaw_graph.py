@@ -93,8 +93,10 @@ def test_robot_state_on_the_3d_plant_integrates_the_gyro_s_yaw(tmp_path):
             def last_k():
                 return int(round((odom[-1].header.stamp.sec + odom[-1].header.stamp.nanosec * 1e-9) / 0.005)) \
                     if odom else -1
-            code, _csv, logs = run_lockstep(tmp_path, True, "-p", "duration_s:=3.0", params=files, law="dsc",
-                                            domain_id=g.domain_id)
+            # expected_subscribers 3: the plant starts once robot_state's reader has matched too (observer, controller,
+            # robot_state); else, under load, the run can end before robot_state's participant is discovered
+            code, _csv, logs = run_lockstep(tmp_path, True, "-p", "duration_s:=3.0", "-p", "expected_subscribers:=3",
+                                            params=files, law="dsc", domain_id=g.domain_id)
             assert code == 0, logs["plant_sim"].output()
             # robot_state may still be working through the run's states: wait for the last one's odom
             assert inj.wait(lambda: last_k() == 600, 60), (len(odom), last_k(), node.stop(), node.output()[-800:])
