@@ -132,7 +132,7 @@ def test_reset_restarts_the_mujoco_plant_and_the_run_after_it_equals_mwip_sim(tm
         plant = g.start("plant_sim", "-p", "duration_s:=1.0", "-p", "expected_subscribers:=4", "-p", f"csv:={csv_path}",
                         *MUJOCO)
         with Injector(g.domain_id) as inj:
-            client = _client(inj)
+            client, _ = _client(inj)
             states = inj.record("joint_states", JointState)
             assert inj.wait(lambda: len(states) > 60, 120), plant.output()[-2000:]
             assert _calls(inj, client, 1)[0].message.startswith("reset #1")
