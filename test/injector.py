@@ -55,7 +55,8 @@ class Injector:
 
 def rejected_counts(summary: str) -> dict:
     """{topic: rejected messages} from a node's ``Rejects.summary()`` text ('/clock: 2, joint_states: 5')."""
-    return {t: int(n) for t, n in (item.split(": ") for item in summary.split(", ") if item)}
+    from mwip_ros.nodes.runtime.diagnostics import topic_counts
+    return topic_counts(summary)
 
 
 def plant_rejected(output: str) -> dict:
@@ -64,18 +65,40 @@ def plant_rejected(output: str) -> dict:
 
 
 def health(inj) -> dict:
-    """{node name: (its clock's seconds, {topic: rejected messages})} from the latest /diagnostics of each
-    node (a report every wall second), updated as the injector spins."""
+    """{node name: (its clock's seconds, {topic: rejected messages}, {resolved topic: publishers matched})} from the
+    latest /diagnostics of each node (a report every wall second), updated as the injector spins."""
     from diagnostic_msgs.msg import DiagnosticArray
 
+    from mwip_ros.nodes.runtime.diagnostics import topic_counts
     latest = {}
 
     def take(arr):
         for st in arr.status:
             values = {kv.key: kv.value for kv in st.values}
-            latest[st.name] = (arr.header.stamp.sec, rejected_counts(values.get("rejected_by_topic", "")))
+            latest[st.name] = (arr.header.stamp.sec, rejected_counts(values.get("rejected_by_topic", "")),
+                               topic_counts(values.get("publishers_by_topic", "")))
     inj.node.create_subscription(DiagnosticArray, "/diagnostics", take, 100)
     return latest
+
+
+def wait_matched(inj, latest: dict, node: str, publishers: dict, timeout: float = 30.0) -> bool:
+    """Wait until ``node``'s /diagnostics (``latest``, :func:`health`) say that its subscription on each topic has
+    matched at least as many publishers as ``publishers`` ({resolved topic: n}) gives: a reader loses what a
+    publisher sends before the reader has matched it, even when the publisher already counts the reader (its
+    ``get_subscription_count()``), so a test that sends a message once waits for this first."""
+    def matched():
+        counts = latest.get(node, (0, {}, {}))[2]
+        return all(counts.get(t, 0) >= n for t, n in publishers.items())
+    return inj.wait(matched, timeout)
+
+
+def controller_publishers(diags, topic: str) -> int:
+    """The newest count of publishers the dscndo_controller's subscription on ``topic`` (resolved) has matched, from
+    its /diagnostics' ``publishers_by_topic`` among ``diags`` (-1: no report yet)."""
+    from mwip_ros.nodes.runtime.diagnostics import topic_counts
+    vals = [topic_counts(kv.value).get(topic, 0) for d in diags for s in d.status if "dscndo_controller" in s.name
+            for kv in s.values if kv.key == "publishers_by_topic"]
+    return vals[-1] if vals else -1
 
 
 def controller_value(diags, key) -> int:

@@ -1,9 +1,12 @@
 """Every node reports its health on /diagnostics once a second; ERROR when the robot fell or a peer is missing."""
+from types import SimpleNamespace
+
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray
 
 from graphproc import Graph
 from injector import Injector
+from mwip_ros.nodes.runtime.diagnostics import publishers_by_topic, topic_counts
 
 pytestmark = pytest.mark.graph
 
@@ -46,6 +49,23 @@ def test_a_lockstep_run_reports_every_node_and_a_fall_is_an_error(tmp_path):
         assert level == 0 and {"rate_per_s", "handled", "rejected_messages"} <= set(values), (name, values)
         assert int(values["handled"]) == int(values.get("commands", values.get("estimates")))
     assert "DSCNDO" in reports["/dscndo_controller"][-1][1]
+    # each subscription's matched publishers: the plant's states, the observer's estimate (one publisher each)
+    matched = {name: [topic_counts(v.get("publishers_by_topic", "")) for _, _, v in reports[name]]
+               for name in ("/disturbance_observer", "/dscndo_controller")}
+    assert any(c.get("/joint_states") == 1 for c in matched["/disturbance_observer"]), matched
+    assert any(c.get("/joint_states") == 1 and c.get("/disturbance_estimate") == 1
+               for c in matched["/dscndo_controller"]), matched
+
+
+def test_publishers_by_topic_names_each_subscription_and_its_fewest_matches():
+    subs = [SimpleNamespace(topic_name=t, get_publisher_count=lambda n=n: n)
+            for t, n in (("/joint_states", 2), ("/cmd_vel", 0), ("/joint_states", 1))]
+    text = publishers_by_topic(SimpleNamespace(subscriptions=subs))
+    assert text == "/cmd_vel: 0, /joint_states: 1"
+    assert topic_counts(text) == {"/cmd_vel": 0, "/joint_states": 1}
+    assert publishers_by_topic(SimpleNamespace(subscriptions=[])) == "" and topic_counts("") == {}
+    assert topic_counts("none") == {} and topic_counts("/clock: 2, joint_states: 5") == {"/clock": 2,
+                                                                                        "joint_states": 5}
 
 
 def test_a_plant_without_its_peers_warns_then_reports_the_timeout_as_an_error(tmp_path):

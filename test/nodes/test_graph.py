@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from graphproc import PARAMS, Graph, run_lockstep
-from injector import Injector, health, plant_rejected, publish_until_rejected, rejected_counts
+from injector import Injector, health, plant_rejected, publish_until_rejected, rejected_counts, wait_matched
 from mwip_ros import params as P
 from mwip_ros.core import laws
 from mwip_ros.core.sim import simulate
@@ -377,6 +377,14 @@ def test_bad_messages_are_rejected_and_counted(tmp_path):
             while time.monotonic() < end and (js.get_subscription_count() < 3 or cmd.get_subscription_count() < 2
                                                or est.get_subscription_count() < 3 or wr.get_subscription_count() < 1):
                 ex.spin_once(timeout_sec=0.05)
+            inj = SimpleNamespace(node=node, wait=lambda cond, t: _spin_until(ex, cond, t))
+            latest = health(inj)
+            # each message below is sent once: matched on the receiving side too (the plant's states are the other
+            # joint_states publisher, the observer's estimates the other disturbance_estimate one)
+            for who, topics in (("/disturbance_observer", {"/joint_states": 2}),
+                                ("/dscndo_controller", {"/joint_states": 2, "/disturbance_estimate": 2}),
+                                ("/plant_sim", {"/external_wrench": 1})):
+                assert wait_matched(inj, latest, who, topics), (who, latest.get(who))
             bad_states = []
             m = joint_state(10**12, (0.0, float("nan")), (0.0, 0.0), 0.0)
             bad_states.append(m)
@@ -392,8 +400,6 @@ def test_bad_messages_are_rejected_and_counted(tmp_path):
                 js.publish(m)
             js.publish(b"\x00\x01\x00\x00" + bytes(10))  # bytes that are no JointState (cut off)
             # realtime: the plant keeps the newest command only (msgs.qos): one at a time, each until counted
-            inj = SimpleNamespace(node=node, wait=lambda cond, t: _spin_until(ex, cond, t))
-            latest = health(inj)
             for data in (Float64(data=float("nan")), b"\x00\x01"):   # NaN; no Float64
                 assert publish_until_rejected(inj, latest, "/plant_sim", "wheel_torque_cmd", cmd, data), latest
             est.publish(wrench_stamped(10**12 + 4, float("nan"), 0.0))

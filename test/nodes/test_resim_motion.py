@@ -21,7 +21,7 @@ def _record(work, files, twist=None):
     from diagnostic_msgs.msg import DiagnosticArray
     from geometry_msgs.msg import Twist
 
-    from injector import Injector, controller_value, publish_until
+    from injector import Injector, controller_publishers, controller_value, publish_until
     work.mkdir(parents=True, exist_ok=True)
     bag = work / "bag"
     with Graph(work) as g, Injector(g.domain_id) as inj:
@@ -36,8 +36,8 @@ def _record(work, files, twist=None):
             # matched both ways: this publisher counts the controller's subscription and the recorder's (made once
             # it discovers this publisher), and the controller's best-effort subscription counts this publisher
             assert inj.wait(lambda: pub.get_subscription_count() >= 2
-                            and controller_value(diags, "cmd_vel_publishers") >= 1, 30), \
-                (pub.get_subscription_count(), controller_value(diags, "cmd_vel_publishers"))
+                            and controller_publishers(diags, "/cmd_vel") >= 1, 30), \
+                (pub.get_subscription_count(), controller_publishers(diags, "/cmd_vel"))
             msg = Twist()
             msg.linear.x = twist
             # the controller has it before the plant starts (its /diagnostics count it; best effort: sent again

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from graphproc import PARAMS, Graph
-from injector import Injector, health, rejected_counts
+from injector import Injector, health, rejected_counts, wait_matched
 from mwip_ros.msgs import cdr
 from mwip_ros.msgs import layouts as L
 
@@ -25,6 +25,10 @@ def _estimator(g, *args):
     enc = inj.publisher("wheel_encoder", JointState)
     answers = inj.record("joint_states", JointState)
     assert inj.wait(lambda: imu.get_subscription_count() >= 1 and enc.get_subscription_count() >= 1, 30), est.output()
+    # the tests send each sample once: the estimator's (volatile) readers must have matched these publishers too
+    latest = health(inj)
+    assert wait_matched(inj, latest, "/state_estimator", {"/imu/data_raw": 1, "/wheel_encoder": 1}), \
+        (latest.get("/state_estimator"), est.output())
     return est, inj, imu, enc, answers
 
 
@@ -175,6 +179,8 @@ def test_stray_future_pairs_from_another_publisher_restart_nothing_and_are_never
             r_imu, r_enc = rogue.publisher("imu/data_raw", Imu), rogue.publisher("wheel_encoder", JointState)
             assert rogue.wait(lambda: r_imu.get_subscription_count() >= 1 and r_enc.get_subscription_count() >= 1,
                               30)
+            assert wait_matched(inj, latest, "/state_estimator", {"/imu/data_raw": 2, "/wheel_encoder": 2}), \
+                latest.get("/state_estimator")
             for k in range(3):   # hostile values, stamped 1,000 s ahead, agreeing with each other
                 r_imu.publish(L.encode_imu(10 ** 12 + k * H, 0.5, 3.0, G))
                 r_enc.publish(L.encode_encoder(10 ** 12 + k * H, 0.3, 0.0, 50.0))

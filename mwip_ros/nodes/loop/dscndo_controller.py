@@ -278,9 +278,6 @@ class DscndoController(Node, GracefulNodeMixin):
             m = self.motion
             values.update(cmd_vel_accepted=m.accepted, cmd_vel_timeouts=m.timeouts, cmd_vel_rejected=m.rejected,
                           cmd_vel_clipped=m.clipped, v_ref=m.ref.v if m.ref is not None else 0.0)
-            if self.cmd_vel_sub is not None:   # the publishers it matched: a best-effort reader loses what a
-                # publisher sends before the reader matched it, even when the publisher already counts the reader
-                values["cmd_vel_publishers"] = self.cmd_vel_sub.get_publisher_count()
         return OK, f"{self._describe()} answering", values
 
     def on_shutdown(self) -> None:

@@ -6,7 +6,9 @@ divergence, which the plant's driver faults on).
 is not disturbed, and with ``use_sim_time`` the report still comes every wall second) and
 once more at shutdown.  A node describes itself with ``diagnostic_status()``, which returns
 ``(level, message, {key: value})``; the :class:`Diagnostics` adds the rate of the node's
-work counter (``diagnostic_count()``) and its rejected messages (``node.rejects``).  Levels
+work counter (``diagnostic_count()``), its rejected messages (``node.rejects``) and, for each topic it subscribes
+to, the publishers its subscription has matched (``publishers_by_topic``: a reader that has not yet matched a
+publisher loses what that publisher sends, even when the publisher already counts the reader).  Levels
 are diagnostic_msgs' OK, WARN and ERROR: a node reports ERROR when the robot fell or a
 lockstep peer is missing, WARN when it rejected messages in the last second.
 """
@@ -16,7 +18,7 @@ import time
 from collections import deque
 from typing import Dict, Optional, Tuple
 
-__all__ = ["OK", "WARN", "ERROR", "Diagnostics", "PERIOD_S", "StepRate"]
+__all__ = ["OK", "WARN", "ERROR", "Diagnostics", "PERIOD_S", "StepRate", "publishers_by_topic", "topic_counts"]
 
 OK, WARN, ERROR = 0, 1, 2      # diagnostic_msgs/DiagnosticStatus levels (bytes 0, 1, 2)
 PERIOD_S = 1.0
@@ -70,6 +72,9 @@ class Diagnostics:
         rejects = getattr(self.node, "rejects", None)
         if rejects is not None and rejects.counts:
             values["rejected_by_topic"] = rejects.summary()
+        matched = publishers_by_topic(self.node)
+        if matched:
+            values["publishers_by_topic"] = matched
         st = DiagnosticStatus(level=bytes([level]), name=self.name, message=message, hardware_id="mwip_ros",
                               values=[KeyValue(key=k, value=str(v)) for k, v in values.items()])
         arr = DiagnosticArray(status=[st])
@@ -83,6 +88,25 @@ class Diagnostics:
         if failure:
             return ERROR, failure, values
         return level, message, values
+
+
+def publishers_by_topic(node) -> str:
+    """'/cmd_vel: 1, /joint_states: 2': each topic ``node`` subscribes to (its resolved name) and the publishers its
+    subscription has matched, as this node's DDS reader sees them (the fewest, when it has two readers on a topic);
+    '' with no subscription."""
+    counts: Dict[str, int] = {}
+    for sub in getattr(node, "subscriptions", ()):
+        n = sub.get_publisher_count()
+        counts[sub.topic_name] = min(n, counts.get(sub.topic_name, n))
+    return ", ".join(f"{t}: {n}" for t, n in sorted(counts.items()))
+
+
+def topic_counts(summary: str) -> Dict[str, int]:
+    """{topic: count} of a per-topic summary, :func:`publishers_by_topic`'s or ``Rejects.summary()``'s
+    ('/clock: 2, joint_states: 5'; '' or 'none': {})."""
+    if summary in ("", "none"):
+        return {}
+    return {t: int(n) for t, n in (item.rsplit(": ", 1) for item in summary.split(", "))}
 
 
 class StepRate:

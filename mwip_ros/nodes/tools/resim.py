@@ -28,7 +28,7 @@ the controller last answered (``core.motion.Shaper.command``), so each recorded 
 two states, in the bag's order) is published before the first state recorded after it, and that state is sent
 only once the controller has answered a ``get_parameters`` request sent after the Twist (its executor took the
 Twist first).  The run starts once the controller's subscription has matched this publisher (its /diagnostics
-``cmd_vel_publishers``): the subscription is best effort, so what comes before it matched is lost, even when
+``publishers_by_topic``): the subscription is best effort, so what comes before it matched is lost, even when
 the publisher already counts it.  A profile is made inside each period from the state's stamp and re-simulates as it is.
 """
 from __future__ import annotations
@@ -49,6 +49,7 @@ from mwip_ros.msgs import layouts as L
 from mwip_ros.msgs.qos import GRAPH_QOS, INPUT_QOS
 from mwip_ros.msgs.topics import leaf
 from mwip_ros.nodes.tools.comparison import Stat, compare_stamped, diff
+from mwip_ros.nodes.runtime.diagnostics import topic_counts
 from mwip_ros.nodes.runtime.guards import Rejects
 from mwip_ros.nodes.runtime.lockstep import CHAIN, LockstepDriver
 from mwip_ros.nodes.runtime.process import EXIT_ERROR, EXIT_OK
@@ -381,7 +382,7 @@ class Resim:
                 if time.monotonic() - self._cmd_vel_since > self.v["timeout_s"]:   # matched both ways, or fail
                     self._fail(f"resim timeout: the dscndo_controller's cmd_vel subscription did not match this "
                                f"node's publisher within timeout_s = {self.v['timeout_s']:g} s (its /diagnostics "
-                               f"cmd_vel_publishers: {self._ctl_cmd_vel_publishers})")
+                               f"publishers_by_topic: {self.cmd_vel_pub.topic_name}: {self._ctl_cmd_vel_publishers})")
                 return None   # the controller's cmd_vel subscription not matched yet (either way)
             return False
         if self._motion_asked is None:
@@ -410,13 +411,14 @@ class Resim:
         return False
 
     def _on_diagnostics(self, msg) -> None:
-        """The controller's ``cmd_vel_publishers`` (a report each wall second): has its subscription matched?"""
+        """The publishers the controller's cmd_vel subscription has matched, from its ``publishers_by_topic`` (a
+        report each wall second)."""
         name = f"{self.node.get_namespace().rstrip('/')}/dscndo_controller"
         for st in msg.status:
             if st.name == name:
                 for kv in st.values:
-                    if kv.key == "cmd_vel_publishers":
-                        self._ctl_cmd_vel_publishers = int(kv.value)
+                    if kv.key == "publishers_by_topic":
+                        self._ctl_cmd_vel_publishers = topic_counts(kv.value).get(self.cmd_vel_pub.topic_name, 0)
 
     def step(self, executor) -> None:
         if not self.started:
