@@ -11,7 +11,7 @@ pytestmark = pytest.mark.graph
 
 def test_a_lateral_push_and_a_yaw_torque_reach_the_mujoco_body(tmp_path):
     from geometry_msgs.msg import PoseStamped, Wrench
-    from injector import Injector
+    from injector import Injector, health, wait_matched
     from mwip_ros.msgs import layouts as L
 
     with Graph(tmp_path) as g:
@@ -21,7 +21,10 @@ def test_a_lateral_push_and_a_yaw_torque_reach_the_mujoco_body(tmp_path):
         with Injector(g.domain_id) as inj:
             wr = inj.publisher("external_wrench", Wrench)
             poses = inj.record("true_pose", PoseStamped)
+            latest = health(inj)
             assert inj.wait(lambda: wr.get_subscription_count() >= 1 and len(poses) > 20, 60), plant.output()
+            # each wrench is sent once: the plant's (volatile) reader must have matched this publisher
+            assert wait_matched(inj, latest, "/plant_sim", {"/external_wrench": 1}), latest.get("/plant_sim")
             pose = lambda: L.parse_pose(poses[-1])[1]   # noqa: E731  (x, y, z, yaw, pitch, roll)
             assert abs(pose()[1]) < 1e-6 and abs(pose()[5]) < 1e-6 and abs(pose()[3]) < 1e-6
 

@@ -153,13 +153,14 @@ def test_realtime_cmd_vel_angular_z_turns_the_3d_robot(tmp_path):
     from sensor_msgs.msg import JointState
 
     from graphproc import Graph
-    from injector import Injector
+    from injector import Injector, health, wait_matched
     from mwip_ros.msgs import layouts as L
     cfg = tmp_path / "drive.yaml"
     cfg.write_text("dscndo_controller:\n  ros__parameters:\n    motion: {enabled: true, cmd_vel_timeout_s: 0.5}\n")
     with Graph(tmp_path) as g:
         with Injector(g.domain_id) as inj:
             yaws, pairs = [], []
+            latest = health(inj)
             inj.node.create_subscription(
                 PoseStamped, "true_pose",
                 lambda m: yaws.append(2 * math.atan2(m.pose.orientation.z, m.pose.orientation.w)), 10)
@@ -170,6 +171,8 @@ def test_realtime_cmd_vel_angular_z_turns_the_3d_robot(tmp_path):
                             params=[PARAMS, cfg])
             pub = inj.publisher("cmd_vel", Twist)
             assert inj.wait(lambda: pub.get_subscription_count() >= 1 and len(yaws) > 400, 30), plant.output()
+            # the 3 s of turning begin once the controller's reader has matched (what comes before it is lost)
+            assert wait_matched(inj, latest, "/dscndo_controller", {"/cmd_vel": 1}), latest.get("/dscndo_controller")
             end = time.monotonic() + 3.0
             while time.monotonic() < end:
                 pub.publish(L.encode_twist(0.0, 0.5))
