@@ -120,6 +120,56 @@ def publish_until(inj, pub, data, done: Callable[[], bool], timeout: float = 30.
     return False
 
 
+def call_until_answered(inj, client, make_request: Callable, timeout: float = 60.0, every: float = 5.0,
+                        gone: Callable[[], bool] = lambda: False):
+    """(The first answer, the calls sent): ``make_request()`` sent to ``client`` again each ``every`` s until one is
+    answered (or ``gone()``: the server's process ended; the answer is then None).
+
+    A service found (``wait_for_service``) does not mean that its answer can reach this node yet: the server's
+    reply writer may not have matched this client's reader, and rmw_fastrtps then drops the reply after its
+    writers' ``max_blocking_time`` (100 ms; the server warns "client will not receive response"). Once one answer
+    came, the path works for good. So this is for a first call whose repetition does what one does: a no-op (an
+    empty SetParameters, a reset at the initial state) that makes a client's later, real calls safe."""
+    end = time.monotonic() + timeout
+    futures = []
+    while time.monotonic() < end and not gone():
+        futures.append(client.call_async(make_request()))
+        if inj.wait(lambda: any(f.done() for f in futures) or gone(), min(every, end - time.monotonic())):
+            break
+    answered = [f.result() for f in futures if f.done()]
+    assert answered or gone(), f"none of {len(futures)} calls to {client.srv_name} answered in {timeout:g} s"
+    return (answered[0] if answered else None), len(futures)
+
+
+class ParamSetter:
+    """Parameter changes through ``/<node>/set_parameters`` from ``inj``'s node, one client a node: its path shown to
+    work first by an empty request (:func:`call_until_answered`: a no-op), so every real change is sent once.
+
+        params = ParamSetter(inj)
+        result = params.set("dscndo_controller", "k1", 7.0)   # rcl_interfaces/SetParametersResult
+    """
+
+    def __init__(self, inj, timeout: float = 30.0):
+        self.inj, self.timeout, self.clients = inj, timeout, {}
+
+    def client(self, target: str):
+        from rcl_interfaces.srv import SetParameters
+        if target not in self.clients:
+            client = self.inj.node.create_client(SetParameters, f"/{target}/set_parameters")
+            assert client.wait_for_service(timeout_sec=self.timeout), f"no /{target}/set_parameters"
+            call_until_answered(self.inj, client, SetParameters.Request)   # no parameters: nothing changes
+            self.clients[target] = client
+        return self.clients[target]
+
+    def set(self, target: str, name: str, value):
+        from rcl_interfaces.srv import SetParameters
+        from rclpy.parameter import Parameter
+        future = self.client(target).call_async(
+            SetParameters.Request(parameters=[Parameter(name, value=value).to_parameter_msg()]))
+        assert self.inj.wait(future.done, self.timeout), f"no answer from /{target}/set_parameters ({name})"
+        return future.result().results[0]
+
+
 def publish_until_rejected(inj, latest: dict, node: str, topic: str, pub, data, timeout: float = 30.0) -> bool:
     """Publish ``data`` (:func:`publish_until`) until ``node``'s /diagnostics count one more rejection on
     ``topic``."""

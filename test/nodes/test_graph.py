@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 from graphproc import PARAMS, Graph, run_lockstep
-from injector import Injector, health, plant_rejected, publish_until_rejected, rejected_counts, wait_matched
+from injector import (Injector, ParamSetter, health, plant_rejected, publish_until_rejected, rejected_counts,
+                      wait_matched)
 from mwip_ros import params as P
 from mwip_ros.core import laws
 from mwip_ros.core.sim import simulate
@@ -470,29 +471,15 @@ def test_bad_parameter_file_stops_each_node(tmp_path, node):
 
 
 def test_gains_change_at_runtime_and_bad_updates_are_refused(tmp_path):
-    import rclpy
-    from rcl_interfaces.srv import SetParameters
-    from rclpy.parameter import Parameter
-
     with Graph(tmp_path) as g:
         ctl = g.start("dscndo_controller")
         assert ctl.wait_for_output("ready")
-        ctx = rclpy.Context()
-        rclpy.init(context=ctx, domain_id=g.domain_id)
-        node = rclpy.create_node("test_param_client", context=ctx)
-        try:
-            cli = node.create_client(SetParameters, "/dscndo_controller/set_parameters")
-            assert cli.wait_for_service(timeout_sec=20)
+        with Injector(g.domain_id, name="test_param_client") as inj:
+            params = ParamSetter(inj)
 
             def set_(name, value):
-                req = SetParameters.Request(parameters=[Parameter(name, value=value).to_parameter_msg()])
-                fut = cli.call_async(req)
-                ex.spin_until_future_complete(fut, timeout_sec=20)
-                return fut.result().results[0]
+                return params.set("dscndo_controller", name, value)
 
-            from rclpy.executors import SingleThreadedExecutor
-            ex = SingleThreadedExecutor(context=ctx)
-            ex.add_node(node)
             ok = set_("k1", 7.0)
             bad = set_("k1", -1.0)
             zero = set_("tau4", 0.0)
@@ -503,9 +490,6 @@ def test_gains_change_at_runtime_and_bad_updates_are_refused(tmp_path):
             q_ok = set_("lqr.Q", [50.0, 5.0, 1.0])
             q_bad = set_("lqr.Q", [100.0, 10.0, 0.0])      # the wheel-speed mode left undamped: no design
             law_bad = set_("law", "pid")
-        finally:
-            node.destroy_node()
-            rclpy.shutdown(context=ctx)
         assert ok.successful and flip.successful
         assert not bad.successful and "k1" in bad.reason and "range" in bad.reason  # the descriptor's range
         assert not zero.successful and "tau4" in zero.reason and "> 0" in zero.reason  # our check

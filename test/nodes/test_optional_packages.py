@@ -30,18 +30,15 @@ def test_the_controller_runs_dscndo_without_daqp_and_refuses_mpc_in_one_line(tmp
 
 
 def test_a_switch_to_mpc_at_run_time_without_daqp_is_refused_naming_it(tmp_path):
-    from test_runtime_params import _client, _set
+    from injector import Injector, ParamSetter
     with Graph(tmp_path) as g:
         g.env = env_without(tmp_path, "daqp", base=g.env)
         ctl = g.start("dscndo_controller", "-p", "use_observer:=false")
         assert ctl.wait_for_output("DSC ready", timeout=60), ctl.output()
-        rclpy, ctx, node, ex = _client(g.domain_id)
-        try:
-            mpc = _set(node, ex, "dscndo_controller", "law", "mpc")
-            lqr = _set(node, ex, "dscndo_controller", "law", "lqr")
-        finally:
-            node.destroy_node()
-            rclpy.shutdown(context=ctx)
+        with Injector(g.domain_id, name="test_param_client") as inj:
+            params = ParamSetter(inj)
+            mpc = params.set("dscndo_controller", "law", "mpc")
+            lqr = params.set("dscndo_controller", "law", "lqr")
         assert not mpc.successful and "parameter 'law'" in mpc.reason and "python3-daqp-pip" in mpc.reason, mpc
         assert lqr.successful and ctl.wait_for_output("law now LQR", timeout=30), ctl.output()
         assert ctl.stop() == 0, ctl.output()

@@ -7,7 +7,7 @@ import signal
 import pytest
 
 from graphproc import Graph
-from injector import Injector
+from injector import Injector, call_until_answered
 
 pytestmark = pytest.mark.graph
 
@@ -34,6 +34,7 @@ def changed_bag(tmp_path_factory):
             states = inj.record("joint_states", JointState)
             client = inj.node.create_client(SetParameters, "/dscndo_controller/set_parameters")
             assert client.wait_for_service(timeout_sec=30)   # found before the run, which lasts about 2 s of wall time
+            call_until_answered(inj, client, SetParameters.Request)   # its answers reach us: no parameters, a no-op
             plant = g.start("plant_sim", "-p", "duration_s:=10.0", "-p", "expected_subscribers:=5")
             # a state one period past CHANGE_AFTER_NS: the plant sent it only once the controller had answered the one
             # before, so the controller's clock (the last state it answered) is at CHANGE_AFTER_NS at least

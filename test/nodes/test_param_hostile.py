@@ -16,7 +16,7 @@ import sys
 import pytest
 
 from graphproc import PARAMS, Graph
-from injector import Injector
+from injector import Injector, call_until_answered
 from mwip_ros.nodes.runtime import rclpy_compat as C
 
 MODULE = "mwip_ros.nodes.tools.bag_replay"
@@ -310,12 +310,15 @@ class _Caller:
                 "get_parameters": srv.GetParameters, "describe_parameters": srv.DescribeParameters,
                 "list_parameters": srv.ListParameters, "get_parameter_types": srv.GetParameterTypes}[service]
         key = (target, service)
+        ended = (lambda: self.proc.poll() is not None) if self.proc is not None else (lambda: False)
         if key not in self.clients:
-            self.clients[key] = self.inj.node.create_client(kind, f"{target}/{service}")
+            client = self.clients[key] = self.inj.node.create_client(kind, f"{target}/{service}")
+            assert client.wait_for_service(timeout_sec=TIMEOUT), f"no {target}/{service}"
+            # the default request names no parameter: a no-op (or a read) that shows the answers reach this node
+            call_until_answered(self.inj, client, kind.Request, timeout=TIMEOUT, gone=ended)
         client = self.clients[key]
         assert client.wait_for_service(timeout_sec=TIMEOUT), f"no {target}/{service}"
         future = client.call_async(request)
-        ended = (lambda: self.proc.poll() is not None) if self.proc is not None else (lambda: False)
         self.inj.wait(lambda: future.done() or ended(), TIMEOUT)
         assert future.done(), (f"no answer from {target}/{service}"
                                + (f"; it ended: {self.proc.output()[-3000:]}" if ended() else ""))

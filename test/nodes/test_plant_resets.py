@@ -16,7 +16,7 @@ import pytest
 from sensor_msgs.msg import JointState
 
 from graphproc import PARAMS, Graph, fresh_domain_id, release_domain_id
-from injector import Injector
+from injector import Injector, call_until_answered
 from mwip_ros.msgs import layouts as L
 from mwip_ros.msgs.qos import SERVICE_QOS
 from mwip_ros.nodes.runtime.guards import NEW, REPEAT, RESTART, StampGuard
@@ -36,19 +36,11 @@ def _client(inj):
     from std_srvs.srv import Trigger
     client = inj.node.create_client(Trigger, "/plant_sim/reset", qos_profile=SERVICE_QOS)
     assert client.wait_for_service(timeout_sec=30)
-    # the service found does not mean its answer can reach us yet (the server's reply writer may not have matched this
-    # client's reader: CI lost the one answer once): ask again every 5 s; each call is a no-op at the initial state,
-    # and every one is handled before the run starts (it waits for a subscription made after this returns)
-    futures = []
-    for _ in range(12):
-        futures.append(client.call_async(Trigger.Request()))
-        if inj.wait(lambda: any(f.done() for f in futures), 5.0):
-            break
-    answered = [f.result() for f in futures if f.done()]
-    assert answered, f"none of {len(futures)} calls answered"
-    first = answered[0]
+    # each call is a no-op at the initial state, and every one is handled before the run starts (it waits for a
+    # subscription made after this returns)
+    first, sent = call_until_answered(inj, client, Trigger.Request)
     assert first.success and first.message.startswith("already at the initial state"), first.message
-    return client, len(futures)
+    return client, sent
 
 
 def _calls(inj, client, n: int, timeout: float = 60.0):
