@@ -120,25 +120,19 @@ def publish_until(inj, pub, data, done: Callable[[], bool], timeout: float = 30.
     return False
 
 
-def call_until_answered(inj, client, make_request: Callable, timeout: float = 60.0, every: float = 5.0,
+def call_until_answered(inj, client, make_request: Callable, timeout: float = 60.0,
                         gone: Callable[[], bool] = lambda: False):
-    """(The first answer, the calls sent): ``make_request()`` sent to ``client`` again each ``every`` s until one is
-    answered (or ``gone()``: the server's process ended; the answer is then None).
-
-    A service found (``wait_for_service``) does not mean that its answer can reach this node yet: the server's
-    reply writer may not have matched this client's reader, and rmw_fastrtps then drops the reply after its
-    writers' ``max_blocking_time`` (100 ms; the server warns "client will not receive response"). Once one answer
-    came, the path works for good. So this is for a first call whose repetition does what one does: a no-op (an
-    empty SetParameters, a reset at the initial state) that makes a client's later, real calls safe."""
-    end = time.monotonic() + timeout
-    futures = []
-    while time.monotonic() < end and not gone():
-        futures.append(client.call_async(make_request()))
-        if inj.wait(lambda: any(f.done() for f in futures) or gone(), min(every, end - time.monotonic())):
-            break
-    answered = [f.result() for f in futures if f.done()]
-    assert answered or gone(), f"none of {len(futures)} calls to {client.srv_name} answered in {timeout:g} s"
-    return (answered[0] if answered else None), len(futures)
+    """(The first answer, the calls sent): ``make_request()`` sent to ``client`` again each second until one is
+    answered (:class:`mwip_ros.nodes.runtime.services.Answered`), or ``gone()`` (the server's process ended: the
+    answer is then None). For a first call whose repetition does what one does (a no-op: an empty SetParameters,
+    a reset at the initial state), so that a client's later, real calls are sent once: a new client's first answer
+    can be lost (that module's docstring)."""
+    from mwip_ros.nodes.runtime.services import Answered
+    call = Answered(client, make_request)
+    inj.wait(lambda: call.poll() is not None or gone(), timeout)
+    assert call.answer is not None or gone(), \
+        f"none of {call.sent} calls to {client.srv_name} answered in {timeout:g} s"
+    return call.answer, call.sent
 
 
 class ParamSetter:

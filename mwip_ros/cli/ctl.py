@@ -23,6 +23,10 @@ its current value, from ``/NODE/get_parameters``): ``mwip_ctl param set dscndo_c
 Relative names (NODE, ``external_wrench``) resolve in ``--namespace``; names starting with '/' are
 absolute.  The domain is the environment's ``ROS_DOMAIN_ID``.  Exit codes: 0 done, 1 nothing answered
 within ``--timeout`` or the node refused, 2 a usage error, 130 Ctrl-C.
+
+A new client's first answer can be lost (:mod:`mwip_ros.nodes.runtime.services`): ``param get`` and ``param list``
+ask again each second until answered; ``param set`` first sends an empty request (nothing changes) so, then the
+change once; ``reset``, ``enable`` and ``disable`` go once.
 """
 from __future__ import annotations
 
@@ -107,8 +111,13 @@ class Ros:
             pub.publish(final)
         return sent, time.monotonic() - start
 
-    def call(self, srv_type, node: str, service: str, request):
-        """The response of NODE's ``service``, or Failure naming the node and the domain."""
+    def call(self, srv_type, node: str, service: str, request, read: bool = False, no_op=None):
+        """The response of NODE's ``service``, or Failure naming the node and the domain.
+
+        A new client's first answer can be lost (:mod:`mwip_ros.nodes.runtime.services`): a ``read`` request is
+        sent again each second until answered; otherwise a ``no_op`` request (one that changes nothing), if given,
+        is first sent so until answered, and ``request`` then once (a change is never sent twice)."""
+        from mwip_ros.nodes.runtime.services import call_until_answered
         try:
             name = self.node.resolve_service_name(f"{node}/{service}")
             client = self.node.create_client(srv_type, name)
@@ -117,9 +126,16 @@ class Ros:
         if not self.until(client.service_is_ready, self.timeout):
             raise Failure(f"no service {name} after {self.timeout:g} s: is the node {node!r} running "
                           f"({_domain()})?")
+        silent = f"{name} did not answer within {self.timeout:g} s"
+        if read or no_op is not None:
+            answer = call_until_answered(self.until, client, lambda: request if read else no_op, self.timeout)
+            if answer is None:
+                raise Failure(silent)
+            if read:
+                return answer
         future = client.call_async(request)
         if not self.until(future.done, self.timeout):
-            raise Failure(f"{name} did not answer within {self.timeout:g} s")
+            raise Failure(silent)
         return future.result()
 
     def close(self) -> None:
@@ -157,11 +173,11 @@ def _param(ros: Ros, args) -> int:
 
     node, name = args.node, getattr(args, "name", None)
     if args.action == "list":
-        print("\n".join(sorted(ros.call(ListParameters, node, "list_parameters", ListParameters.Request())
-                               .result.names)))
+        print("\n".join(sorted(ros.call(ListParameters, node, "list_parameters", ListParameters.Request(),
+                                        read=True).result.names)))
         return 0
     if args.action == "get":
-        values = ros.call(GetParameters, node, "get_parameters", GetParameters.Request(names=[name])).values
+        values = ros.call(GetParameters, node, "get_parameters", GetParameters.Request(names=[name]), read=True).values
         if not values or values[0].type == 0:   # PARAMETER_NOT_SET: not declared
             raise Failure(f"{node} has no parameter {name!r} (see: {PROG} param list {node})")
         value = parameter_value_to_python(values[0])
@@ -170,13 +186,14 @@ def _param(ros: Ros, args) -> int:
     # the type of the current value: the declared one (the node validates every value; a descriptor's type can
     # follow a refused value of another type, rclpy's dynamic typing); none for an undeclared name: sent as it
     # is, the node's refusal names it
-    current = ros.call(GetParameters, node, "get_parameters", GetParameters.Request(names=[name])).values
+    current = ros.call(GetParameters, node, "get_parameters", GetParameters.Request(names=[name]), read=True).values
     value = _as_declared(args.value, current[0].type, args.text) if current else args.value
     try:
         msg = Parameter(name, value=value).to_parameter_msg()
     except Exception as exc:   # e.g. a list of mixed types
         raise Failure(f"VALUE {args.text!r}: {_first_line(exc)}", 2) from None
-    result = ros.call(SetParameters, node, "set_parameters", SetParameters.Request(parameters=[msg])).results[0]
+    result = ros.call(SetParameters, node, "set_parameters", SetParameters.Request(parameters=[msg]),
+                      no_op=SetParameters.Request()).results[0]   # no_op: no parameters, nothing changes
     if not result.successful:
         raise Failure(f"{node} refused {name} = {_text(value)}: {result.reason}")
     print(f"{node}: {name} = {_text(value)}")

@@ -53,6 +53,7 @@ from mwip_ros.nodes.runtime.diagnostics import topic_counts
 from mwip_ros.nodes.runtime.guards import Rejects
 from mwip_ros.nodes.runtime.lockstep import CHAIN, LockstepDriver
 from mwip_ros.nodes.runtime.process import EXIT_ERROR, EXIT_OK
+from mwip_ros.nodes.runtime.services import Answered
 from mwip_ros.params import ParamError
 
 __all__ = ["Resim", "EXIT_DIFFERENT"]
@@ -256,6 +257,18 @@ class Resim:
                           f"state{run} after t = {stamp * 1e-9:.3f} s, as recorded")
         return out
 
+    def _param_clients_ready(self) -> list:
+        """Before the run: a set_parameters client for each node whose recorded changes resim applies, each shown to
+        answer by an empty request (no parameter: nothing changes; :class:`Answered`), so that every recorded change
+        is then sent once, when it is due (:meth:`_apply_due`)."""
+        from rcl_interfaces.srv import SetParameters
+        out = []
+        for node in dict.fromkeys(node for _, node, _ in self.param_events):
+            client = self._param_clients[node] = self.node.create_client(SetParameters, f"{node}/set_parameters")
+            if client.wait_for_service(timeout_sec=self.v["timeout_s"]):   # else _apply_due names it, when due
+                out.append(Answered(client, SetParameters.Request))
+        return out
+
     def _apply_due(self, stamp) -> bool:
         """Start applying the recorded changes due before the state of ``stamp`` ((run, stamp)); True if some
         are under way."""
@@ -373,7 +386,8 @@ class Resim:
     def _motion_check(self) -> Optional[bool]:
         """Ask the running controller for motion.enabled and motion.profile once the graph is there: with cmd_vel
         (enabled, no profile) the recorded cmd_vel are replayed (a publisher that must first match the controller's
-        subscription).  None while the answer (or the match) is awaited, else False (go)."""
+        subscription); meanwhile the set_parameters clients of the recorded changes show that they are answered
+        (:meth:`_param_clients_ready`).  None while the answers (or the match) are awaited, else False (go)."""
         from rcl_interfaces.srv import GetParameters
         from geometry_msgs.msg import Twist
         if self._motion_asked is True:
@@ -390,13 +404,20 @@ class Resim:
             if not client.wait_for_service(timeout_sec=self.v["timeout_s"]):
                 self._motion_asked = True   # no such service to ask: the lockstep's own checks name what is missing
                 return False
-            # one name a request: rclpy answers nothing for a request whose parameter is an empty array
-            self._motion_asked = [client.call_async(GetParameters.Request(names=[n]))
+            # one name a request: rclpy answers nothing for a request whose parameter is an empty array; each asked
+            # again until answered (a new client's first answer can be lost: runtime.services)
+            self._motion_asked = [Answered(client, lambda n=n: GetParameters.Request(names=[n]))
                                   for n in ("motion.enabled", "motion.profile")]
+            self._motion_asked += self._param_clients_ready()
             return None
-        if not all(f.done() for f in self._motion_asked):
+        waiting = [a for a in self._motion_asked if a.poll() is None]   # each polled: each sent again when due
+        if waiting:
+            late = waiting[0]
+            if late.waited() > self.v["timeout_s"]:
+                self._fail(f"resim timeout: {late.client.srv_name} did not answer within timeout_s = "
+                           f"{self.v['timeout_s']:g} s ({late.sent} requests sent)")
             return None
-        enabled, profile = (list(f.result().values) for f in self._motion_asked)
+        enabled, profile = (list(a.answer.values) for a in self._motion_asked[:2])
         self._motion_asked = True
         if enabled and enabled[0].bool_value and not (profile and len(profile[0].double_array_value)):
             self.cmd_vel_pub = self.node.create_publisher(Twist, "cmd_vel", 10)   # reliable, volatile: as a user
