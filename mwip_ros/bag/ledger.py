@@ -9,7 +9,9 @@ grid up to the last one recorded, one message of that stamp on each stamped topi
 ``wheel_torque_cmd`` as states; ``external_wrench`` and ``emergency_stop`` are whatever a user sent,
 ``robot_markers`` a view of the states, ``driver_state`` the driver's transitions and ``/rosout``,
 ``/parameter_events``, ``/diagnostics`` ROS's own: those are not compared.  A recorder that joined
-late lacks the first stamps everywhere: the grid from 0 still shows it.  A state the plant resent
+late lacks the first stamps everywhere: the grid from 0 still shows it; one that never matched the
+plant's own writers (``/clock``, ``joint_states``) still has the answers' stamps on that grid, and the plant's
+topics are named as missing (:meth:`Ledger.lockstep`).  A state the plant resent
 before the graph had matched shows as a repeated stamp: it counts once.  :class:`Ledger` keeps each
 topic's stamps as runs of evenly spaced ones (:class:`Runs`: first, step, count; a topic's stamps in a complete
 lockstep recording are one run, and each gap or reset starts another), so its memory does not grow with the length
@@ -107,25 +109,45 @@ class Ledger:
         else:
             self.overflow = True
 
-    def expected(self) -> np.ndarray:
-        """The stamps a complete lockstep recording has (sorted): the grid from 0 to the last stamp seen (or, when
-        the stamps are not on such a grid or it would be mostly empty, every stamp seen on any topic)."""
-        seen = np.unique(np.concatenate([r.array() for r in self.stamps.values()] or [np.zeros(0, np.int64)]))
-        if len(seen) < 2:
-            return seen
+    def _seen(self) -> np.ndarray:
+        """Every stamp seen on any topic, sorted, once."""
+        return np.unique(np.concatenate([r.array() for r in self.stamps.values()] or [np.zeros(0, np.int64)]))
+
+    @staticmethod
+    def _grid(seen: np.ndarray) -> Optional[np.ndarray]:
+        """The grid from 0 to the last of ``seen`` (at least 2 stamps) with their smallest spacing, or None when
+        they are not on such a grid (the first not a multiple of the spacing) or it would be mostly empty."""
         step = int(np.diff(seen).min())
         last = int(seen[-1])
         points = last // step + 1
         if int(seen[0]) % step or points > 2 * len(seen) + 1000:  # not one plant's grid from 0
-            return seen
+            return None
         return np.arange(0, last + 1, step, dtype=np.int64)
+
+    def lockstep(self) -> bool:
+        """Whether this is a recording of a lockstep run: it has /clock (only the lockstep plant publishes it), or
+        the stamps lie on one grid from 0 (a lockstep plant's t_k = k h; a realtime plant's start at its clock's
+        time is off it). A recorder that never matched the plant's own topics still has the answers' stamps, and so
+        its recording is judged, and the plant's topics are named as missing."""
+        if any(leaf(t) == "clock" for t in self.stamps):
+            return True
+        seen = self._seen()
+        return len(seen) >= 2 and self._grid(seen) is not None
+
+    def expected(self) -> np.ndarray:
+        """The stamps a complete lockstep recording has (sorted): the grid from 0 to the last stamp seen (or, when
+        the stamps are not on such a grid or it would be mostly empty, every stamp seen on any topic)."""
+        seen = self._seen()
+        if len(seen) < 2:
+            return seen
+        grid = self._grid(seen)
+        return seen if grid is None else grid
 
     def gaps(self) -> List[Tuple[str, int, int, Optional[int]]]:
         """[(topic, messages it has, messages it should have, first missing stamp or None)] for every topic of
-        the loop that lacks some; empty when the recording is complete (or is not of a lockstep run, or is
-        too long to judge: ``overflow``)."""
-        # only the lockstep plant publishes /clock
-        if self.overflow or not any(leaf(t) == "clock" for t in self.stamps):
+        the loop that lacks some; empty when the recording is complete (or is not of a lockstep run,
+        :meth:`lockstep`, or is too long to judge: ``overflow``)."""
+        if self.overflow or not self.lockstep():
             return []
         states = self.expected()
         out = []

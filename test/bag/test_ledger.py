@@ -51,11 +51,31 @@ def test_a_recorder_that_joined_late_misses_the_start_everywhere_and_says_so():
     assert all(g[1] == 40 and g[2] == 50 for g in gaps) and gaps[0][3] == 0
 
 
-def test_without_clock_it_is_not_a_lockstep_run():
+def test_without_clock_and_off_the_grid_from_0_it_is_not_a_lockstep_run():
+    """A realtime plant's stamps start at its clock's time: no grid from 0, nothing judged (a partial graph there
+    is a user's choice, not a gap)."""
     led = Ledger()
+    led.counts.update({"/wheel_torque_cmd": 0, "/clock": 0})   # subscribed, nothing came
+    start = 1_764_990_000_123_456_789   # a node clock's time [ns]
     for k in range(5):
-        led.add("/joint_states", JS, L.encode_state(k * H, State(0, 0, 0, 0), 0.0))
-    assert led.gaps() == []
+        led.add("/joint_states", JS, L.encode_state(start + k * H, State(0, 0, 0, 0), 0.0))
+    assert not led.lockstep() and led.gaps() == []
+
+
+def test_a_recorder_that_never_heard_the_plant_judges_the_answers_stamps_and_names_the_plants_topics():
+    """The recorder started last missed the plant's whole run (its discovery came too late: CI once), but recorded
+    every answer: the estimates' stamps on the grid from 0 make it a lockstep recording, and /clock and
+    joint_states, subscribed with nothing, are its gaps."""
+    led = Ledger()
+    led.counts.update({"/joint_states": 0, "/clock": 0})   # subscribed, nothing came
+    for k in range(50):
+        led.add("/disturbance_estimate", EST, L.encode_wrench(k * H, 1.0, 2.0))
+        led.add("/wheel_torque_cmd", CMD, L.encode_command(1.0))
+    assert led.lockstep()
+    assert led.gaps() == [("/clock", 0, 50, None), ("/joint_states", 0, 50, None)]
+    complete = Ledger()
+    _run(complete, 50)
+    assert complete.lockstep() and complete.gaps() == []
 
 
 def test_past_its_stamp_limit_a_ledger_judges_nothing(monkeypatch):

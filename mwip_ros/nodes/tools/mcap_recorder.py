@@ -173,7 +173,7 @@ class McapRecorder(Node, GracefulNodeMixin):
         elif gaps:
             self.writer.custom_data[GAPS_KEY] = gaps
             log.warning(f"INCOMPLETE lockstep recording: {gaps}")
-        elif "/clock" in self.ledger.stamps:
+        elif self.ledger.lockstep():
             log.info(f"lockstep recording complete: every topic has all {len(self.ledger.expected())} states"
                      + (f" ({sum(self.ledger.repeats.values())} resent message(s) recorded twice, read once)"
                         if self.ledger.repeats else ""))
