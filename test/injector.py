@@ -123,13 +123,12 @@ def publish_until(inj, pub, data, done: Callable[[], bool], timeout: float = 30.
 def call_until_answered(inj, client, make_request: Callable, timeout: float = 60.0,
                         gone: Callable[[], bool] = lambda: False):
     """(The first answer, the calls sent): ``make_request()`` sent to ``client`` again each second until one is
-    answered (:class:`mwip_ros.nodes.runtime.services.Answered`), or ``gone()`` (the server's process ended: the
-    answer is then None). For a first call whose repetition does what one does (a no-op: an empty SetParameters,
-    a reset at the initial state), so that a client's later, real calls are sent once: a new client's first answer
-    can be lost (that module's docstring)."""
-    from mwip_ros.nodes.runtime.services import Answered
-    call = Answered(client, make_request)
-    inj.wait(lambda: call.poll() is not None or gone(), timeout)
+    answered (:func:`mwip_ros.nodes.runtime.services.call_until_answered`), or ``gone()`` (the server's process
+    ended: the answer is then None). For a first call whose repetition does what one does (a no-op: an empty
+    SetParameters, a reset at the initial state), so that a client's later, real calls are sent once: a new
+    client's first answer can be lost (that module's docstring)."""
+    from mwip_ros.nodes.runtime import services
+    call = services.call_until_answered(inj.wait, client, make_request, timeout, gone=gone)
     assert call.answer is not None or gone(), \
         f"none of {call.sent} calls to {client.srv_name} answered in {timeout:g} s"
     return call.answer, call.sent

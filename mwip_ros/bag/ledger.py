@@ -11,7 +11,7 @@ grid up to the last one recorded, one message of that stamp on each stamped topi
 ``/parameter_events``, ``/diagnostics`` ROS's own: those are not compared.  A recorder that joined
 late lacks the first stamps everywhere: the grid from 0 still shows it; one that never matched the
 plant's own writers (``/clock``, ``joint_states``) still has the answers' stamps on that grid, and the plant's
-topics are named as missing (:meth:`Ledger.lockstep`).  A state the plant resent
+topics are named as missing (:meth:`Ledger.lockstep_states`).  A state the plant resent
 before the graph had matched shows as a repeated stamp: it counts once.  :class:`Ledger` keeps each
 topic's stamps as runs of evenly spaced ones (:class:`Runs`: first, step, count; a topic's stamps in a complete
 lockstep recording are one run, and each gap or reset starts another), so its memory does not grow with the length
@@ -124,32 +124,36 @@ class Ledger:
             return None
         return np.arange(0, last + 1, step, dtype=np.int64)
 
-    def lockstep(self) -> bool:
-        """Whether this is a recording of a lockstep run: it has /clock (only the lockstep plant publishes it), or
-        the stamps lie on one grid from 0 (a lockstep plant's t_k = k h; a realtime plant's start at its clock's
-        time is off it). A recorder that never matched the plant's own topics still has the answers' stamps, and so
-        its recording is judged, and the plant's topics are named as missing."""
-        if any(leaf(t) == "clock" for t in self.stamps):
-            return True
+    def _expected(self) -> Tuple[np.ndarray, bool]:
+        """(:meth:`expected`, whether that is the grid from 0)."""
         seen = self._seen()
-        return len(seen) >= 2 and self._grid(seen) is not None
+        grid = self._grid(seen) if len(seen) >= 2 else None
+        return (seen, False) if grid is None else (grid, True)
 
     def expected(self) -> np.ndarray:
         """The stamps a complete lockstep recording has (sorted): the grid from 0 to the last stamp seen (or, when
         the stamps are not on such a grid or it would be mostly empty, every stamp seen on any topic)."""
-        seen = self._seen()
-        if len(seen) < 2:
-            return seen
-        grid = self._grid(seen)
-        return seen if grid is None else grid
+        return self._expected()[0]
+
+    def lockstep_states(self) -> Optional[np.ndarray]:
+        """:meth:`expected` when this is a recording of a lockstep run, else None. It is one when it has /clock (only
+        the lockstep plant publishes it), or when the stamps lie on one grid from 0 (a lockstep plant's t_k = k h; a
+        realtime plant's start at its clock's time is off it): a recorder that never matched the plant's own topics
+        still has the answers' stamps, so its recording is judged, and the plant's topics are named as missing."""
+        states, on_grid = self._expected()
+        return states if on_grid or any(leaf(t) == "clock" for t in self.stamps) else None
+
+    def lockstep(self) -> bool:
+        """Whether this is a recording of a lockstep run (:meth:`lockstep_states`)."""
+        return self.lockstep_states() is not None
 
     def gaps(self) -> List[Tuple[str, int, int, Optional[int]]]:
         """[(topic, messages it has, messages it should have, first missing stamp or None)] for every topic of
         the loop that lacks some; empty when the recording is complete (or is not of a lockstep run,
-        :meth:`lockstep`, or is too long to judge: ``overflow``)."""
-        if self.overflow or not self.lockstep():
+        :meth:`lockstep_states`, or is too long to judge: ``overflow``)."""
+        states = None if self.overflow else self.lockstep_states()
+        if states is None:
             return []
-        states = self.expected()
         out = []
         for topic, count in sorted(self.counts.items()):
             if leaf(topic) in NOT_COMPARED or (leaf(topic) in OPTIONAL and not count):

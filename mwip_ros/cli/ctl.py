@@ -128,7 +128,7 @@ class Ros:
                           f"({_domain()})?")
         silent = f"{name} did not answer within {self.timeout:g} s"
         if read or no_op is not None:
-            answer = call_until_answered(self.until, client, lambda: request if read else no_op, self.timeout)
+            answer = call_until_answered(self.until, client, lambda: request if read else no_op, self.timeout).answer
             if answer is None:
                 raise Failure(silent)
             if read:

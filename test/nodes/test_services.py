@@ -56,7 +56,11 @@ def test_call_until_answered_spins_until_the_answer_or_gives_none():
             if len(client.futures) == 3:
                 client.futures[2].set_result("third")
         return done()
-    assert call_until_answered(until, client, object, timeout=1.0, every=0.0) == "third"
+    call = call_until_answered(until, client, object, timeout=1.0, every=0.0)
+    assert call.answer == "third" and call.sent == 3
     silent = _Client()
-    assert call_until_answered(lambda done, timeout: done(), silent, object, timeout=1.0, every=3600.0) is None
+    assert call_until_answered(lambda done, timeout: done(), silent, object, timeout=1.0, every=3600.0).answer is None
     assert len(silent.requests) == 1
+    ended = _Client()   # the server gone: no answer awaited, none sent again
+    assert call_until_answered(lambda done, timeout: done(), ended, object, timeout=1.0, every=0.0,
+                               gone=lambda: True).answer is None

@@ -62,9 +62,11 @@ class Answered:
 
 
 def call_until_answered(until: Callable[[Callable[[], bool], float], bool], client, make_request,
-                        timeout: float, every: float = RESEND_S) -> Optional[object]:
-    """The first answer of :class:`Answered` within ``timeout`` s, or None; ``until(done, timeout)`` spins the
-    client's node until ``done()`` or the timeout (e.g. ``mwip_ctl``'s ``Ros.until``, a test's ``Injector.wait``)."""
+                        timeout: float, every: float = RESEND_S,
+                        gone: Callable[[], bool] = lambda: False) -> Answered:
+    """:class:`Answered`, spun until it has its answer (``.answer``, None when none came), ``timeout`` s passed or
+    ``gone()`` (the server's process ended); ``until(done, timeout)`` spins the client's node until ``done()`` or
+    the timeout (e.g. ``mwip_ctl``'s ``Ros.until``, a test's ``Injector.wait``)."""
     call = Answered(client, make_request, every)
-    until(lambda: call.poll() is not None, timeout)
-    return call.answer
+    until(lambda: call.poll() is not None or gone(), timeout)
+    return call

@@ -173,8 +173,8 @@ class McapRecorder(Node, GracefulNodeMixin):
         elif gaps:
             self.writer.custom_data[GAPS_KEY] = gaps
             log.warning(f"INCOMPLETE lockstep recording: {gaps}")
-        elif self.ledger.lockstep():
-            log.info(f"lockstep recording complete: every topic has all {len(self.ledger.expected())} states"
+        elif (states := self.ledger.lockstep_states()) is not None:
+            log.info(f"lockstep recording complete: every topic has all {len(states)} states"
                      + (f" ({sum(self.ledger.repeats.values())} resent message(s) recorded twice, read once)"
                         if self.ledger.repeats else ""))
         try:
