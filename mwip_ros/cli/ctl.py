@@ -26,7 +26,8 @@ within ``--timeout`` or the node refused, 2 a usage error, 130 Ctrl-C.
 
 A new client's first answer can be lost (:mod:`mwip_ros.nodes.runtime.services`): ``param get`` and ``param list``
 ask again each second until answered; ``param set`` first sends an empty request (nothing changes) so, then the
-change once; ``reset``, ``enable`` and ``disable`` go once.
+change once; ``reset``, ``enable`` and ``disable`` (no no-op, never sent twice) go once, after the node has answered
+a ``get_parameters`` client made after theirs (``prove_reply_paths``: that answer shows theirs will arrive).
 """
 from __future__ import annotations
 
@@ -116,8 +117,10 @@ class Ros:
 
         A new client's first answer can be lost (:mod:`mwip_ros.nodes.runtime.services`): a ``read`` request is
         sent again each second until answered; otherwise a ``no_op`` request (one that changes nothing), if given,
-        is first sent so until answered, and ``request`` then once (a change is never sent twice)."""
-        from mwip_ros.nodes.runtime.services import call_until_answered
+        is first sent so until answered, and without one NODE's ``get_parameters`` is, through a client made after
+        this one (``prove_reply_paths``: its answer shows that NODE can answer this client too); ``request`` is
+        then sent once (a change is never sent twice)."""
+        from mwip_ros.nodes.runtime.services import call_until_answered, prove_reply_paths
         try:
             name = self.node.resolve_service_name(f"{node}/{service}")
             client = self.node.create_client(srv_type, name)
@@ -133,6 +136,12 @@ class Ros:
                 raise Failure(silent)
             if read:
                 return answer
+        else:
+            proof = prove_reply_paths(self.until, self.node, node, self.timeout)
+            if proof is None or proof.answer is None:
+                what = "has no get_parameters service" if proof is None else "did not answer get_parameters"
+                raise Failure(f"{node} {what} within {self.timeout:g} s, so {name} was not called (its answer "
+                              f"could not be shown to arrive)")
         future = client.call_async(request)
         if not self.until(future.done, self.timeout):
             raise Failure(silent)

@@ -25,6 +25,7 @@ from graphproc import PARAMS, Graph, fresh_domain_id, release_domain_id, run_loc
 from injector import Injector
 from mwip_ros.msgs import layouts as L
 from mwip_ros.msgs.qos import DRIVER_STATE_READER_QOS, SERVICE_QOS
+from mwip_ros.nodes.runtime.services import prove_reply_paths
 
 pytestmark = pytest.mark.graph
 
@@ -63,6 +64,9 @@ def _clients(inj):
     for name in ("enable", "disable", "reset"):
         out[name] = inj.node.create_client(Trigger, f"/plant_sim/{name}", qos_profile=SERVICE_QOS)
         assert out[name].wait_for_service(timeout_sec=30), name
+    # the first answers cannot be lost: the plant answered a client made after these (runtime.services)
+    proof = prove_reply_paths(inj.wait, inj.node, "/plant_sim", timeout=60.0)
+    assert proof is not None and proof.answer is not None, "the plant did not answer get_parameters"
     return out
 
 

@@ -17,7 +17,7 @@ from __future__ import annotations
 import time
 from typing import Callable, Optional
 
-__all__ = ["Answered", "RESEND_S", "call_until_answered"]
+__all__ = ["Answered", "RESEND_S", "call_until_answered", "prove_reply_paths"]
 
 RESEND_S = 1.0   # [s] between two sends of the same request: ten times rmw_fastrtps' 100 ms
 
@@ -70,3 +70,22 @@ def call_until_answered(until: Callable[[Callable[[], bool], float], bool], clie
     call = Answered(client, make_request, every)
     until(lambda: call.poll() is not None or gone(), timeout)
     return call
+
+
+def prove_reply_paths(until: Callable[[Callable[[], bool], float], bool], node, server: str, timeout: float,
+                      every: float = RESEND_S, gone: Callable[[], bool] = lambda: False) -> Optional[Answered]:
+    """Show that node ``server`` (its name, relative to ``node``'s namespace or absolute) can answer every client
+    ``node`` made before this call: :func:`call_until_answered` with a new ``rcl_interfaces/GetParameters`` client of
+    ``server``'s (a read: an empty request), destroyed after; its :class:`Answered` (``.answer`` None: no answer
+    within ``timeout`` s), or None when ``server`` has no parameter service within ``timeout`` s (the module's
+    docstring says why an answer proves the earlier clients' paths)."""
+    from rcl_interfaces.srv import GetParameters
+    client = node.create_client(GetParameters, node.resolve_service_name(f"{server}/get_parameters"))
+    try:
+        end = time.monotonic() + timeout
+        if not until(lambda: client.service_is_ready() or gone(), timeout) or gone():
+            return None
+        return call_until_answered(until, client, GetParameters.Request, max(0.0, end - time.monotonic()), every,
+                                   gone)
+    finally:
+        node.destroy_client(client)
