@@ -245,3 +245,44 @@ def test_kill_9_then_repair(graph, tmp_path):
     tm = meta["topics_with_message_count"][0]["topic_metadata"]
     assert tm["type_description_hash"] == type_hash("sensor_msgs/msg/JointState")
     assert tm["offered_qos_profiles"][0]["reliability"] == "reliable"
+
+
+def test_a_recording_that_lacks_states_says_so_and_names_the_remedy(tmp_path):
+    """In process, messages handed to the recorder's callback: /clock and joint_states for states 0..9, the
+    estimate for 0..4 only. At shutdown the log's warning names the gap and the remedy (count the recorder in
+    expected_subscribers), and the bag's metadata holds the gap."""
+    import rclpy
+
+    from graphproc import fresh_domain_id, release_domain_id
+    from mwip_ros.bag.ledger import GAPS_KEY
+    from mwip_ros.msgs import layouts as L
+    from mwip_ros.msgs.cdr import encode_clock
+    from mwip_ros.nodes.tools.mcap_recorder import McapRecorder
+    domain, bag = fresh_domain_id(), tmp_path / "bag"
+    ctx = rclpy.Context()
+    argv = ["mcap_recorder", "--ros-args", "-p", f"output:={bag}",
+            "-p", "topics:=[joint_states, disturbance_estimate, /clock]"]
+    rclpy.init(args=argv, context=ctx, domain_id=domain)
+    try:
+        node = McapRecorder(context=ctx, argv=argv)
+        lines = []
+        node.get_logger = lambda: type("Log", (), {level: (lambda self, text, _l=level: lines.append((_l, text)))
+                                                   for level in ("info", "warning", "error")})()
+        h = 5_000_000
+        for k in range(10):
+            node._on_message("/clock", "rosgraph_msgs/msg/Clock", encode_clock(k * h))
+            node._on_message("/joint_states", "sensor_msgs/msg/JointState", L.encode_state(k * h, (0.0,) * 4, 0.0))
+            if k < 5:
+                node._on_message("/disturbance_estimate", "geometry_msgs/msg/WrenchStamped",
+                                 L.encode_wrench(k * h, 0.0, 0.0))
+        node.on_shutdown()
+        node.destroy_node()
+    finally:
+        rclpy.shutdown(context=ctx)
+        release_domain_id(domain)
+    warnings = [text for level, text in lines if level == "warning"]
+    assert len(warnings) == 1 and warnings[0].startswith("INCOMPLETE lockstep recording: /disturbance_estimate: 5 of "
+                                                         "10"), lines
+    assert "count it in plant_sim's expected_subscribers" in warnings[0]
+    meta = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    assert meta["custom_data"][GAPS_KEY] in warnings[0] and "expected_subscribers" not in meta["custom_data"][GAPS_KEY]

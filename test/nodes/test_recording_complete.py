@@ -87,6 +87,7 @@ def test_every_lockstep_run_is_recorded_whole_or_flagged(tmp_path, order):
             assert not flagged and "lockstep recording complete" in rec_log, rec_log[-2000:]
         else:
             assert flagged and "INCOMPLETE lockstep recording" in rec_log, (unique, rec_log[-2000:])
+            assert "count it in plant_sim's expected_subscribers" in rec_log, rec_log[-2000:]   # the remedy named
             assert meta["custom_data"][GAPS_KEY] in rec_log
     print("\n".join(map(str, results)))
     if counted:  # the plant waited for the recorder's reader: nothing may be missing
