@@ -147,11 +147,15 @@ class Ledger:
         """Whether this is a recording of a lockstep run (:meth:`lockstep_states`)."""
         return self.lockstep_states() is not None
 
-    def gaps(self) -> List[Tuple[str, int, int, Optional[int]]]:
+    def gaps(self, states: Optional[np.ndarray] = None) -> List[Tuple[str, int, int, Optional[int]]]:
         """[(topic, messages it has, messages it should have, first missing stamp or None)] for every topic of
         the loop that lacks some; empty when the recording is complete (or is not of a lockstep run,
-        :meth:`lockstep_states`, or is too long to judge: ``overflow``)."""
-        states = None if self.overflow else self.lockstep_states()
+        :meth:`lockstep_states`, or is too long to judge: ``overflow``). ``states``: :meth:`lockstep_states` when the
+        caller has it already."""
+        if self.overflow:
+            return []
+        if states is None:
+            states = self.lockstep_states()
         if states is None:
             return []
         out = []
@@ -167,8 +171,8 @@ class Ledger:
                 out.append((topic, count, len(states), None))
         return out
 
-    def gaps_text(self) -> str:
-        """One line per incomplete topic (empty when complete)."""
+    def gaps_text(self, states: Optional[np.ndarray] = None) -> str:
+        """One line per incomplete topic (empty when complete); ``states`` as for :meth:`gaps`."""
         return "; ".join(
             f"{t}: {have} of {want}" + (f", first missing stamp t = {first * 1e-9:.3f} s" if first is not None else "")
-            for t, have, want, first in self.gaps())
+            for t, have, want, first in self.gaps(states))

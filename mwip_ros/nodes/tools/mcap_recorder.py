@@ -167,14 +167,15 @@ class McapRecorder(Node, GracefulNodeMixin):
     def on_shutdown(self) -> None:
         log = self.get_logger()
         self._drain()
-        gaps = self.ledger.gaps_text()
+        states = None if self.ledger.overflow else self.ledger.lockstep_states()   # the stamps gathered once
+        gaps = self.ledger.gaps_text(states) if states is not None else ""
         if self.ledger.overflow:
             log.info(f"completeness not checked: a topic has more than {MAX_STAMPS:,} stamps")
         elif gaps:
             self.writer.custom_data[GAPS_KEY] = gaps
             log.warning(f"INCOMPLETE lockstep recording: {gaps} (a recorder that the plant does not wait for can miss "
                         f"states: count it in plant_sim's expected_subscribers, docs/recording.md)")
-        elif (states := self.ledger.lockstep_states()) is not None:
+        elif states is not None:
             log.info(f"lockstep recording complete: every topic has all {len(states)} states"
                      + (f" ({sum(self.ledger.repeats.values())} resent message(s) recorded twice, read once)"
                         if self.ledger.repeats else ""))
