@@ -14,7 +14,10 @@ import ``mwip_ros`` from DIR (PYTHONPATH), the others from this checkout.
    physics step and at 1 ms, and the ``--before`` checkout's mujoco at 1 ms, taking turns ``--pairs`` times:
    steps/s each and each mujoco variant's ratio to the rk4 run of its turn (both see the same load).
    Then the rk4 and the mujoco (default step) graphs of this checkout side by side, at the same time, ``--pairs``
-   times: the same load at every moment.
+   times: the same load at every moment.  Each graph run simulates ``--seconds`` (default 60 s, 8-10 s of wall
+   time): a run of the paper's 10 s lasts 1.2-1.6 s, and on 2 shared cores the ratio of two such runs scattered
+   from 0.80x to 1.00x over 7 turns, where 60 s runs in the same turns gave 0.81x-0.87x (BENCHMARKS.md,
+   "Steady-state runs").
 2. ``mwip_sim``'s loop (10 s of DSCNDO, one process per run, the first run of each process not timed), the same
    variants taking turns: periods/s and the ratios per turn.
 3. Where a period's time goes, in process (this checkout): one plant period (``lumped_disturbance`` and ``step``,
@@ -175,7 +178,8 @@ def _spread(r):
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--pairs", type=int, default=3, help="turns of the variants (each runs once a turn)")
-    ap.add_argument("--seconds", type=float, default=10.0, help="simulated seconds of each lockstep graph run")
+    ap.add_argument("--seconds", type=float, default=60.0,
+                    help="simulated seconds of each lockstep graph run (default 60: a steady rate, see above)")
     ap.add_argument("--before", type=Path, default=None,
                     help="a checkout of the code to compare with, run at mujoco.timestep 0.001 (none: left out)")
     ap.add_argument("--before-timestep", type=float, default=0.001, metavar="S",
