@@ -14,7 +14,7 @@ import ``mwip_ros`` from DIR (PYTHONPATH), the others from this checkout.
    physics step and at 1 ms, and the ``--before`` checkout's mujoco at 1 ms, taking turns ``--pairs`` times:
    steps/s each and each mujoco variant's ratio to the rk4 run of its turn (both see the same load).
    Then the rk4 and the mujoco (default step) graphs of this checkout side by side, at the same time, ``--pairs``
-   times: the same load at every moment.  Each graph run simulates ``--seconds`` (default 60 s, 8-10 s of wall
+   times: the same load at every moment.  Each graph run simulates ``--seconds`` (default 60 s, 8-11 s of wall
    time): a run of the paper's 10 s lasts 1.2-1.6 s, and on 2 shared cores the ratio of two such runs scattered
    from 0.80x to 1.00x over 7 turns, where 60 s runs in the same turns gave 0.81x-0.87x (BENCHMARKS.md,
    "Steady-state runs").
