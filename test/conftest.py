@@ -33,7 +33,7 @@ from mwip_ros.optional import headless_gl  # noqa: E402
 
 headless_gl()   # before a test module imports mujoco itself: MuJoCo picks its GL platform then (mwip_sim --render)
 
-TIERS = ("unit", "graph", "e2e", "bench")
+TIERS = ("unit", "node", "graph", "e2e", "bench")
 
 
 @pytest.hookimpl(tryfirst=True)   # before -m deselects: a test outside the tier asked for is checked too

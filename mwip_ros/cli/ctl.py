@@ -74,6 +74,8 @@ class Ros:
         from rclpy.executors import SingleThreadedExecutor
         from rclpy.signals import SignalHandlerOptions
         from rclpy.validate_namespace import validate_namespace
+        from mwip_ros.nodes.runtime import discovery
+        discovery.apply()   # the package's discovery profile, unless the user has a set-up of their own
         self.rclpy, self.timeout, self.ctx = rclpy, timeout, rclpy.Context()
         try:
             rclpy.init(args=[PROG], context=self.ctx, signal_handler_options=SignalHandlerOptions.NO)

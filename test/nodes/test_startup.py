@@ -10,6 +10,7 @@ from pathlib import Path
 import pytest
 
 from graphproc import PARAMS, Graph
+from nodeharness import NodeHarness, node_class, refused
 from mwip_ros import params as P
 from mwip_ros.nodes.runtime.entry import NODES as NODE_MODULES
 
@@ -62,9 +63,22 @@ CASES = [  # (id, node, file maker or None, extra ros args, words the one line m
 ]
 
 
-@pytest.mark.graph
+@pytest.mark.node
 @pytest.mark.parametrize("case", CASES, ids=[c[0] for c in CASES])
-def test_start_up_mistakes_exit_2_with_one_line(tmp_path, case):
+def test_start_up_mistakes_are_refused_in_one_line_naming_the_key(tmp_path, case):
+    """The node's own start-up (the harness runs it in this process): refused, one line, the key or file named."""
+    _id, node, make_file, extra, words = case
+    params = make_file(tmp_path) if make_file else PARAMS
+    line = refused(node_class(node), *extra, params=params)
+    assert "\n" not in line.strip(), line
+    for w in words:
+        assert w in line, (w, line)
+
+
+@pytest.mark.graph
+@pytest.mark.parametrize("case", [c for c in CASES if c[0] in ("yaml syntax", "unparsable -p")], ids=lambda c: c[0])
+def test_a_refused_start_exits_2_with_one_line_and_no_traceback(tmp_path, case):
+    """The process around a refusal (one file mistake, one command-line mistake): exit 2, that one line on stderr."""
     _id, node, make_file, extra, words = case
     params = make_file(tmp_path) if make_file else PARAMS
     with Graph(tmp_path) as g:
@@ -78,50 +92,48 @@ def test_start_up_mistakes_exit_2_with_one_line(tmp_path, case):
 
 
 @pytest.mark.graph
-@pytest.mark.parametrize("plugins, words", [
-    ("no_such_law_module", ("cannot import the law module 'no_such_law_module'", "No module named")),
-    ("broken_plugin", ("the law module 'broken_plugin' raised while importing", "broken_plugin's own import error"))])
-def test_a_law_plugin_that_fails_to_import_stops_each_node_in_one_line(tmp_path, plugins, words):
-    """MWIP_ROS_LAWS naming a module that cannot be imported, or raises while importing: exit 2 at start-up."""
+@pytest.mark.parametrize("node, plugins, words", [
+    ("plant_sim", "no_such_law_module", ("cannot import the law module 'no_such_law_module'", "No module named")),
+    ("dscndo_controller", "broken_plugin",
+     ("the law module 'broken_plugin' raised while importing", "broken_plugin's own import error"))])
+def test_a_law_plugin_that_fails_to_import_stops_the_node_in_one_line(tmp_path, node, plugins, words):
+    """MWIP_ROS_LAWS naming a module that cannot be imported, or raises while importing: exit 2 at start-up (the
+    plug-ins are imported with the package, so this needs a process of its own; every node starts through the same
+    run_node)."""
     test_dir = str(Path(__file__).resolve().parents[1])
     with Graph(tmp_path) as g:
         g.env.update(MWIP_ROS_LAWS=plugins, PYTHONPATH=os.pathsep.join(
             p for p in (test_dir, g.env.get("PYTHONPATH", "")) if p))
-        procs = [g.start(node) for node in ("dscndo_controller", "plant_sim")]
-        codes = [p.wait(60) for p in procs]
-    for p, code in zip(procs, codes):
-        out = p.output()
-        assert code == 2, out
-        assert "Traceback" not in out and len(out.strip().splitlines()) == 1, out
-        assert f"MWIP_ROS_LAWS='{plugins}'" in out and all(w in out for w in words), out
+        p = g.start(node)
+        code = p.wait(60)
+    out = p.output()
+    assert code == 2, out
+    assert "Traceback" not in out and len(out.strip().splitlines()) == 1, out
+    assert f"MWIP_ROS_LAWS='{plugins}'" in out and all(w in out for w in words), out
 
 
-@pytest.mark.graph
+@pytest.mark.node
 @pytest.mark.parametrize("spelling, value", [("1e-1", 0.1), (".5", 0.5), ("5E-1", 0.5), ("+0.25", 0.25)])
 def test_every_yaml_and_ros_double_spelling_is_accepted(tmp_path, spelling, value):
     f = _file(tmp_path, "spell.yaml", "tau4: 0.1", f"tau4: {spelling}")
-    with Graph(tmp_path) as g:
-        from_file = g.start("dscndo_controller", params=f, label="file")
-        from_cli = g.start("dscndo_controller", "-p", f"tau4:={spelling}", "-r", "__node:=ctl_b", label="cli")
-        for p in (from_file, from_cli):
-            assert p.wait_for_output("ready", 30), p.output()
-    for p in (from_file, from_cli):
-        assert f"tau4 = {value}" in p.output(), p.output()
+    controller = node_class("dscndo_controller")
+    with NodeHarness(controller, params=f) as from_file:
+        assert from_file.node.v["tau4"] == value and f"tau4 = {value}" in from_file.logs()
+    with NodeHarness(controller, "-p", f"tau4:={spelling}", "-r", "__node:=ctl_b", name="ctl_b") as from_cli:
+        assert from_cli.node.v["tau4"] == value and f"tau4 = {value}" in from_cli.logs()
 
 
-@pytest.mark.graph
+@pytest.mark.node
 def test_a_namespaced_node_reads_its_plain_section(tmp_path):
     f = _file(tmp_path, "ns.yaml", "k1: 6.0", "k1: 7.5")
-    with Graph(tmp_path) as g:
-        p = g.start("dscndo_controller", "-r", "__ns:=/robot1", params=f)
-        assert p.wait_for_output("ready", 30), p.output()
-        q = g.start("dscndo_controller", "-r", "__ns:=/robot2", "-p", "k1:=8.5", params=f, label="cli_wins")
-        assert q.wait_for_output("ready", 30), q.output()
-    assert "k1 = 7.5" in p.output(), p.output()
-    assert "k1 = 8.5" in q.output(), q.output()  # -p dscndo_controller:k1:=8.5 (node_rules) wins over the file
+    controller = node_class("dscndo_controller")
+    with NodeHarness(controller, "-r", "__ns:=/robot1", params=f) as p:
+        assert p.node.get_namespace() == "/robot1" and p.node.v["k1"] == 7.5 and "k1 = 7.5" in p.logs()
+    with NodeHarness(controller, "-r", "__ns:=/robot2", "-p", "k1:=8.5", params=f) as q:
+        assert q.node.v["k1"] == 8.5   # -p dscndo_controller:k1:=8.5 (node_rules) wins over the file
 
 
-@pytest.mark.graph
+@pytest.mark.node
 def test_precedence_is_ros_2s_own_section_over_wildcard_then_the_later(tmp_path):
     """rclcpp/rclpy: a node's own values (its section, -p NODE:name:=v) win over the wildcard's (/**, -p name:=v),
     whatever the order; within one kind the later wins."""
@@ -134,18 +146,18 @@ def test_precedence_is_ros_2s_own_section_over_wildcard_then_the_later(tmp_path)
         "later_file_wins": (("-p", "dscndo_controller:k1:=8.5", "--params-file", str(later)), 9.0),
         "later_rule_wins": (("--params-file", str(later), "-p", "dscndo_controller:k1:=8.5"), 8.5),
     }
-    with Graph(tmp_path) as g:
-        procs = {label: g.start("dscndo_controller", *args, params=f, label=label, as_given=True)
-                 for label, (args, _) in cases.items()}
-        for label, (_, k1) in cases.items():
-            assert procs[label].wait_for_output(f"ready: k1 = {k1}", 30), (label, procs[label].output())
-    out = procs["wildcard_loses"].output()
+    logs = {}
+    for label, (args, k1) in cases.items():
+        with NodeHarness(node_class("dscndo_controller"), *args, params=f, as_given=True) as h:
+            assert h.node.v["k1"] == k1 and f"ready: k1 = {k1}" in h.logs(), (label, h.logs())
+            logs[label] = h.logs()
+    out = logs["wildcard_loses"]
     assert "-p k1:=8.5 is overridden by k1: 7.5 in this node's own section" in out and \
         "-p dscndo_controller:k1:=..." in out, out
-    assert "overridden" not in procs["own_rule_wins"].output()
+    assert "overridden" not in logs["own_rule_wins"]
 
 
-@pytest.mark.graph
+@pytest.mark.node
 def test_a_shared_file_with_other_nodes_sections_and_a_renamed_nodes_own_section(tmp_path):
     """Sections of nodes that are not ours are left to them; a node renamed with __node:= reads its own section
     (checked: an unknown key in it stops the node, named)."""
@@ -154,36 +166,33 @@ def test_a_shared_file_with_other_nodes_sections_and_a_renamed_nodes_own_section
     good, bad = tmp_path / "shared.yaml", tmp_path / "bad.yaml"
     good.write_text(shared)
     bad.write_text(shared + "    k3: 1.0\n")
-    with Graph(tmp_path) as g:
-        plain = g.start("dscndo_controller", params=good, label="plain")
-        renamed = g.start("dscndo_controller", "-r", "__node:=ctl_b", params=good, label="renamed")
-        wrong = g.start("dscndo_controller", "-r", "__node:=ctl_b", params=bad, label="wrong")
-        assert plain.wait_for_output("ready: k1 = 6.0", timeout=30), plain.output()
-        assert renamed.wait_for_output("ready: k1 = 7.5", timeout=30), renamed.output()
-        assert wrong.wait(60) == 2
-    out = wrong.output()
-    assert "'ctl_b.k3'" in out and "unknown parameter" in out and len(out.strip().splitlines()) == 1, out
+    controller = node_class("dscndo_controller")
+    with NodeHarness(controller, params=good) as plain:
+        assert plain.node.v["k1"] == 6.0
+    with NodeHarness(controller, "-r", "__node:=ctl_b", params=good, name="ctl_b") as renamed:
+        assert renamed.node.get_name() == "ctl_b" and renamed.node.v["k1"] == 7.5
+    line = refused(controller, "-r", "__node:=ctl_b", params=bad, name="ctl_b")
+    assert "'ctl_b.k3'" in line and "unknown parameter" in line and "\n" not in line, line
 
 
 def _words(text):
     return " ".join(text.split())
 
 
-@pytest.mark.graph
+def _help(node, flag, capsys):
+    """``main([node, flag])`` in this process: (exit code, what it printed)."""
+    code = importlib.import_module(NODE_MODULES[node]).main([node, flag])
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+@pytest.mark.unit
 @pytest.mark.parametrize("node", NODES)
-def test_every_node_answers_help_from_the_schema_without_starting(tmp_path, node):
-    """``NODE --help`` (as typed, and as ``ros2 run mwip_ros NODE --help`` passes it): the usage, what the node
-    does, every parameter with its default and description; exit 0 at once, no rclpy log line (no node ran:
-    a started one would wait for its peers, serve or record until stopped, or fail without its parameters)."""
-    env = Graph(tmp_path).env
-    t0 = time.monotonic()
-    r = subprocess.run([sys.executable, "-m", NODE_MODULES[node], "--help"], env=env, capture_output=True,
-                       text=True, timeout=30)
-    took = time.monotonic() - t0
-    assert r.returncode == 0 and r.stderr == "", r.stdout + r.stderr
-    assert "[INFO]" not in r.stdout and "[WARN]" not in r.stdout
-    assert took < 10, took   # an import and a print (a started node runs until its peers come or it is stopped)
-    out = r.stdout
+def test_every_node_answers_help_from_the_schema(node, capsys):
+    """``NODE --help``: the usage, what the node does, every parameter with its default and description, the exit
+    codes (the process that prints it: test_help_as_typed_is_an_import_and_a_print)."""
+    code, out, err = _help(node, "--help", capsys)
+    assert code == 0 and err == "", out + err
     assert out.startswith(f"usage: {node} [--ros-args --params-file FILE -p {node}:NAME:=VALUE ...]"), out
     doc = importlib.import_module(NODE_MODULES[node]).__doc__
     assert _words(doc.split("\n\n")[0].replace("``", "")) in _words(out)
@@ -194,10 +203,24 @@ def test_every_node_answers_help_from_the_schema_without_starting(tmp_path, node
 
 
 @pytest.mark.graph
-def test_help_shows_defaults_ranges_topics_and_exit_codes(tmp_path):
+def test_help_as_typed_is_an_import_and_a_print(tmp_path):
+    """``plant_sim --help`` as typed (and as ``ros2 run mwip_ros plant_sim --help`` passes it): exit 0 at once, no
+    rclpy log line (no node ran: a started one would wait for its peers). Every node prints its help through the
+    same run_node (test_every_node_answers_help_from_the_schema)."""
     env = Graph(tmp_path).env
-    ctl, fox, plant = (subprocess.run([sys.executable, "-m", NODE_MODULES[n], flag], env=env, capture_output=True,
-                                      text=True, timeout=30).stdout
+    t0 = time.monotonic()
+    r = subprocess.run([sys.executable, "-m", NODE_MODULES["plant_sim"], "--help"], env=env, capture_output=True,
+                       text=True, timeout=30)
+    took = time.monotonic() - t0
+    assert r.returncode == 0 and r.stderr == "", r.stdout + r.stderr
+    assert "[INFO]" not in r.stdout and "[WARN]" not in r.stdout
+    assert took < 10, took   # an import and a print (a started node runs until its peers come or it is stopped)
+    assert r.stdout.startswith("usage: plant_sim [--ros-args"), r.stdout
+
+
+@pytest.mark.unit
+def test_help_shows_defaults_ranges_topics_and_exit_codes(capsys):
+    ctl, fox, plant = (_help(n, flag, capsys)[1]
                        for n, flag in (("dscndo_controller", "-h"), ("foxglove_server", "--help"), ("plant_sim", "-h")))
     assert "  tau4  (double, default 0.1, [1e-06, 1e+06], changeable at run time)" in ctl
     assert "  law  (string, default 'dsc', one of 'dsc', 'lqr', 'smc', 'mpc', changeable at run time)" in ctl
@@ -226,13 +249,23 @@ def test_help_in_process_creates_no_ros_context(monkeypatch, capsys):
         assert capsys.readouterr().out.startswith(f"usage: {node} "), node
 
 
-@pytest.mark.graph
-@pytest.mark.parametrize("before, after, word", [
+OUTSIDE = [
     (["--bogus"], [], "'--bogus'"),
     (["--params-file", str(PARAMS)], [], "'--params-file'"),     # a ROS argument outside --ros-args: rcl ignores it
     ([], ["--", "extra"], "'extra'"),                             # after the --ros-args block ended
-])
-def test_an_argument_outside_ros_args_exits_2_naming_it(tmp_path, before, after, word):
+]
+
+
+@pytest.mark.node
+@pytest.mark.parametrize("before, after, word", OUTSIDE)
+def test_an_argument_outside_ros_args_is_refused_naming_it(before, after, word):
+    line = refused(node_class("plant_sim"), argv=["plant_sim", *before, "--ros-args", *after])
+    assert f"unknown argument {word}" in line and "after --ros-args" in line and "plant_sim --help" in line, line
+
+
+@pytest.mark.graph
+def test_an_argument_outside_ros_args_exits_2_naming_it(tmp_path):
+    before, after, word = OUTSIDE[0]
     with Graph(tmp_path) as g:
         p = g.start("plant_sim", *after, cmd=[sys.executable, "-m", "mwip_ros.nodes.loop.plant_sim", *before],
                     as_given=True)

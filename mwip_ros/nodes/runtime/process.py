@@ -28,7 +28,7 @@ from mwip_ros.optional import MissingPackage
 from mwip_ros.params import ParamError
 
 __all__ = ["EXIT_OK", "EXIT_ERROR", "EXIT_BAD_PARAMS", "EXIT_FALLEN", "GracefulNodeMixin", "StopRequested",
-           "node_help", "run_node"]
+           "StartRefused", "build_node", "init_context", "node_help", "node_name", "run_node"]
 
 # Exit codes of every mwip_ros executable.
 EXIT_OK = 0
@@ -175,6 +175,89 @@ def node_help(name: str, module=None) -> str:
     return "\n".join(lines)
 
 
+class StartRefused(Exception):
+    """A node that does not start: ``line`` is its one line (naming the key, the file or the package), ``code``
+    the exit code (:data:`EXIT_BAD_PARAMS`)."""
+
+    def __init__(self, line: str, code: int = EXIT_BAD_PARAMS):
+        super().__init__(line)
+        self.line, self.code = line, code
+
+
+def node_name(factory: Callable[..., object], argv: Sequence[str]) -> str:
+    """The node's name for its messages: its module's ``NAME``, else the command's own name."""
+    module = sys.modules.get(getattr(factory, "__module__", None) or "")
+    return getattr(module, "NAME", None) or (argv[0].rsplit('/', 1)[-1] if argv else "node")
+
+
+def init_context(argv: Sequence[str], name: str, discovery_range: Optional[str] = None):
+    """Everything a node's process does before its node exists: the command line checked (before rcl parses it: its
+    parser would end the process with a traceback), the law plug-ins imported, rclpy's patches
+    (:mod:`.rclpy_compat`), the discovery set-up (:mod:`.discovery`), and an initialised context of its own.
+
+    Parameters
+    ----------
+    argv : sequence of str
+        The node's command line, ``--ros-args`` included.
+    name : str
+        The node's name, for the messages.
+    discovery_range : str, optional
+        ``ROS_AUTOMATIC_DISCOVERY_RANGE`` for this context only (``"OFF"``: a node that finds no other, as a test
+        that feeds it directly wants); None: the environment's.
+
+    Returns
+    -------
+    rclpy.Context
+        The initialised context (no signal handlers: the caller's).
+
+    Raises
+    ------
+    StartRefused
+        A mistake on the command line, a law plug-in that fails to import, ROS arguments rcl cannot parse.
+    """
+    from mwip_ros.nodes.runtime.params import check_command_line
+    try:
+        check_command_line(argv, name)
+    except ParamError as exc:
+        raise StartRefused(str(exc)) from None
+    from mwip_ros.core import laws
+    try:
+        laws.check_plugins()   # a law plug-in ($MWIP_ROS_LAWS) that failed to import: its one line
+    except laws.PluginError as exc:
+        raise StartRefused(str(exc)) from None
+    from mwip_ros.nodes.runtime import rclpy_compat
+    # rclpy's classes, patched before any node binds their callbacks: a parameter request rclpy cannot read is
+    # refused, naming it, and a /clock it cannot use is rejected, neither raised in the executor
+    rclpy_compat.install()
+    from mwip_ros.nodes.runtime import discovery
+    discovery.apply()   # before the participant exists: the package's discovery profile, or the user's set-up
+    context = rclpy.Context()
+    key, before = "ROS_AUTOMATIC_DISCOVERY_RANGE", os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE")
+    if discovery_range is not None:
+        os.environ[key] = discovery_range   # rcl reads it once, in rclpy.init
+    try:
+        rclpy.init(args=list(argv), context=context, signal_handler_options=SignalHandlerOptions.NO)
+    except Exception as exc:  # rcl's own argument errors (RCLError, RCLInvalidROSArgsError): one line, exit 2
+        raise StartRefused(f"the ROS arguments cannot be parsed: {str(exc).splitlines()[0].split(', at ')[0]}") \
+            from None
+    finally:
+        if discovery_range is not None:
+            if before is None:
+                os.environ.pop(key, None)
+            else:
+                os.environ[key] = before
+    return context
+
+
+def build_node(factory: Callable[..., object], context, argv: Sequence[str]):
+    """The node, made by ``factory(context=context, argv=argv)``; a bad parameter or a missing optional package is
+    :class:`StartRefused` (its one line)."""
+    try:
+        return factory(context=context, argv=list(argv))
+    except (ParamError, MissingPackage) as exc:   # a bad parameter; an optional package the node needs
+        raise StartRefused(str(exc)) from None
+
+
 def run_node(factory: Callable[..., object], argv: Optional[Sequence[str]] = None) -> int:
     """Create the node, spin until done/SIGINT/SIGTERM, shut down cleanly, return an exit code.
 
@@ -189,34 +272,20 @@ def run_node(factory: Callable[..., object], argv: Optional[Sequence[str]] = Non
         stop["signal"] = signum
 
     module = sys.modules.get(getattr(factory, "__module__", None) or "")
-    name = getattr(module, "NAME", None) or (argv[0].rsplit('/', 1)[-1] if argv else "node")
+    name = node_name(factory, argv)
 
     def refuse(text: str) -> int:
         print(f"[ERROR] {name}: {text}", file=sys.stderr, flush=True)
         return EXIT_BAD_PARAMS
 
-    from mwip_ros.nodes.runtime.params import check_command_line, wants_help
+    from mwip_ros.nodes.runtime.params import wants_help
     if wants_help(argv):
         print(node_help(name, module), flush=True)
         return EXIT_OK
     try:
-        check_command_line(argv, name)  # before rcl parses them: its parser would end the process with a traceback
-    except ParamError as exc:
-        return refuse(str(exc))
-    from mwip_ros.core import laws
-    try:
-        laws.check_plugins()   # a law plug-in ($MWIP_ROS_LAWS) that failed to import: its one line
-    except laws.PluginError as exc:
-        return refuse(str(exc))
-    from mwip_ros.nodes.runtime import rclpy_compat
-    # rclpy's classes, patched before any node binds their callbacks: a parameter request rclpy cannot read is
-    # refused, naming it, and a /clock it cannot use is rejected, neither raised in the executor
-    rclpy_compat.install()
-    context = rclpy.Context()
-    try:
-        rclpy.init(args=argv, context=context, signal_handler_options=SignalHandlerOptions.NO)
-    except Exception as exc:  # rcl's own argument errors (RCLError, RCLInvalidROSArgsError): one line, exit 2
-        return refuse(f"the ROS arguments cannot be parsed: {str(exc).splitlines()[0].split(', at ')[0]}")
+        context = init_context(argv, name)
+    except StartRefused as exc:
+        return refuse(exc.line)
     old = {s: signal.signal(s, _on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
     node = executor = None
     code = EXIT_OK
@@ -224,9 +293,9 @@ def run_node(factory: Callable[..., object], argv: Optional[Sequence[str]] = Non
     memtrace = from_environment()   # off unless MWIP_MEMTRACE names a file (a debugging aid)
     try:
         try:
-            node = factory(context=context, argv=argv)
-        except (ParamError, MissingPackage) as exc:   # a bad parameter; an optional package the node needs
-            return refuse(str(exc))
+            node = build_node(factory, context, argv)
+        except StartRefused as exc:
+            return refuse(exc.line)
         # Start-up made tens of thousands of long-lived objects (rclpy, numpy, parameters); a full
         # garbage collection over them takes ~9 ms, more than a realtime period.  Freeze them: later
         # collections scan only what the node allocates while it runs.
