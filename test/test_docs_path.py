@@ -10,7 +10,7 @@ from mwip_ros.core.path import path_rows, path_metrics
 from mwip_ros.core.sim import simulate
 from test_docs_numbers import table_after
 
-pytestmark = pytest.mark.unit
+pytestmark = pytest.mark.slow
 
 pytest.importorskip("mujoco")
 

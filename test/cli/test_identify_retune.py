@@ -48,6 +48,7 @@ def margin(files, law):
                                 observer=cls.observer)
 
 
+@pytest.mark.slow
 def test_retune_writes_gains_that_satisfy_theorem_2_and_beat_the_papers(ident_csv, tmp_path, capsys):
     """A short search (3 generations of 3 per gain): the file holds the identified body (to 0.1 %) and DSCNDO's
     k1, k2, tau4, X; Theorem 2 holds with them on the identified model; on the unseen robot in the paper's scenario
@@ -74,6 +75,7 @@ def test_retune_writes_gains_that_satisfy_theorem_2_and_beat_the_papers(ident_cs
     assert "# --retune: dscndo's k1, k2, tau4, X.c1, X.c4 tuned on the identified model" in out.read_text()
 
 
+@pytest.mark.slow
 def test_retune_another_law(ident_csv, tmp_path, capsys):
     """--law lqr_ndo tunes the LQR weights and the observer's X (no Theorem 2 for it: said so)."""
     out = tmp_path / "lqr.yaml"
