@@ -182,6 +182,8 @@ class Servo:
         self.watchdog_trips = 0
         self.frames = 0
         self.t0 = None                             # its clock's start (the millisecond counter)
+        self.commanded_at: Optional[float] = None  # the time of the command in force [s]
+        self.events: List[str] = []                # what happened to it, one line each (the emulator prints them)
 
     # -- the shaft -------------------------------------------------------------------------------------------
 
@@ -230,9 +232,9 @@ class Servo:
             return   # only a stop leaves a fault or the timeout mode; modes it does not emulate are ignored
         self.command = {**COMMAND_DEFAULTS, **{r: v for r, v in writes.items() if r in COMMAND_DEFAULTS}}
         if self.hot:
-            self.mode, self.fault, self.deadline = MODE_FAULT, OVER_TEMPERATURE, None
+            self._overheated()
             return
-        self.mode = mode
+        self.mode, self.commanded_at = mode, now
         timeout = self.command[R.COMMAND_TIMEOUT]
         if timeout == 0.0:
             timeout = self.cfg.default_timeout
@@ -244,10 +246,18 @@ class Servo:
         """The transitions due at ``now``: the watchdog's expiry (mode 11; ``watch`` False: not checked), an
         over-temperature (mode 1)."""
         if watch and self.mode == MODE_POSITION and self.deadline is not None and now >= self.deadline:
+            self.events.append(f"CAN id {self.cfg.can_id}: watchdog timeout (mode 11), {now - self.commanded_at:.4f} s "
+                               f"after its last command (its watchdog_timeout {self.deadline - self.commanded_at:.4f} "
+                               "s)")
             self.mode, self.deadline = MODE_TIMEOUT, None
             self.watchdog_trips += 1
         if self.hot and self.mode in (MODE_POSITION, MODE_ZERO_VELOCITY, MODE_TIMEOUT):
-            self.mode, self.fault, self.deadline = MODE_FAULT, OVER_TEMPERATURE, None
+            self._overheated()
+
+    def _overheated(self) -> None:
+        self.mode, self.fault, self.deadline = MODE_FAULT, OVER_TEMPERATURE, None
+        self.events.append(f"CAN id {self.cfg.can_id}: fault {OVER_TEMPERATURE} (over temperature, "
+                           f"{self.temperature:g} C)")
 
     def update(self, now: float, watch: bool = True) -> float:
         """Its state at ``now`` (the watchdog unless ``watch`` is False, an over-temperature) and the torque it
@@ -447,12 +457,24 @@ class EmulatedRobot:
         self.t_next = 0.0
         self.obs: Observation = backend.observe()
         self.obs_t = 0.0                           # the clock's time of that read [s]
+        self.imu_period: Optional[float] = None
+        self.next_imu: Optional[float] = None      # the time of the next IMU sample [s]
+        self.imu_samples: List[Tuple[float, Observation]] = []   # (its time [s], the read) not yet taken
         self._last_due = 0.0
         self._measure()
 
-    def start(self, now: float) -> None:
-        """Start the clock at ``now`` [s]: the plant's time 0, the injections' times counted from here."""
+    def start(self, now: float, imu_period: Optional[float] = None) -> None:
+        """Start the clock at ``now`` [s]: the plant's time 0, the injections' times counted from here; an IMU
+        sample every ``imu_period`` [s] (None: no IMU) into :attr:`imu_samples`."""
         self.t0 = self.t_next = self.obs_t = now
+        self.imu_period = imu_period
+        self.next_imu = None if imu_period is None else now + imu_period
+
+    def next_sample(self) -> Optional[float]:
+        """When the physics period that holds the next IMU sample ends [s] (None: no IMU)."""
+        if self.next_imu is None:
+            return None
+        return self.t_next + self.h * max(1, math.ceil((self.next_imu - self.t_next) / self.h - 1e-9))
 
     def _measure(self) -> None:
         for servo, wheel in zip(self.servos, (self.obs.left, self.obs.right)):
@@ -492,6 +514,11 @@ class EmulatedRobot:
             self._measure()
             self.t_next = self.obs_t = start + self.h
             n += 1
+            if self.next_imu is not None and self.obs_t >= self.next_imu - 1e-9:
+                # the IMU's own clock: the read of the period its sample time falls in, once per sample time
+                self.imu_samples.append((self.obs_t, self.obs))
+                while self.next_imu <= self.obs_t + 1e-9:
+                    self.next_imu += self.imu_period
         self.counters.steps += n
         return n
 
@@ -562,7 +589,7 @@ class EmulatedRobot:
 
 def serve(robot: EmulatedRobot, fd: int, running: Callable[[], bool], clock: Callable[[], float] = time.monotonic,
           on_imu: Optional[Callable[[int, Observation], None]] = None, imu_period: float = 0.0025,
-          max_line: int = 512, tick: float = 0.005) -> None:
+          max_line: int = 512, tick: float = 0.005, on_event: Optional[Callable[[str], None]] = None) -> None:
     """Run ``robot`` on the master side ``fd`` of a pseudo-terminal (non-blocking) in real time until ``running()``
     is false: one thread, one ``select`` that wakes for the host's bytes, the next IMU sample, the next answer due,
     the next watchdog expiry, and at least every ``tick``.
@@ -572,6 +599,8 @@ def serve(robot: EmulatedRobot, fd: int, running: Callable[[], bool], clock: Cal
     wake-up per frame instead of one per period.  The host's bytes are read after the periods that ended before
     them: those periods' watchdogs are checked only up to the previous wake-up (the bytes may have come any time
     after it: a frame in the pty's buffer while this process was not scheduled is not a driver that went silent).
+    The IMU is sampled on its own clock as the plant passes each sample time (:meth:`EmulatedRobot.advance_to`), so
+    its stamps keep their rate when this process is late, which only delays their publication.
 
     Parameters
     ----------
@@ -584,18 +613,18 @@ def serve(robot: EmulatedRobot, fd: int, running: Callable[[], bool], clock: Cal
     clock : callable
         The monotonic clock [s].
     on_imu : callable or None
-        Called every ``imu_period`` with (the wall-clock time of the newest physics read [ns], that read); None:
-        no IMU.
+        Called with each IMU sample: (its time on the wall clock [ns], the plant's read then); None: no IMU.
     imu_period : float
         The IMU's period [s] (its own rate, not the host's).
     max_line : int
         A host line longer than this is dropped (a garbled stream).
     tick : float
         The longest sleep [s].
+    on_event : callable or None
+        Called with each controller event (a watchdog timeout, a fault), one line.
     """
     now = clock()
-    robot.start(now)
-    next_imu = now + imu_period
+    robot.start(now, imu_period if on_imu is not None else None)
     pending: Deque[Tuple[float, bytes]] = deque()
     buf = b""
     out = b""
@@ -603,14 +632,10 @@ def serve(robot: EmulatedRobot, fd: int, running: Callable[[], bool], clock: Cal
     c = robot.counters
     while running():
         now = clock()
-        wake = now + tick
-        if on_imu is not None:
-            wake = min(wake, next_imu)
-        if pending:
-            wake = min(wake, pending[0][0])
         deadline = robot.deadline()
-        if deadline is not None:
-            wake = min(wake, deadline + robot.h)
+        times = (now + tick, robot.next_sample(), pending[0][0] if pending else None,
+                 None if deadline is None else deadline + robot.h)   # a watchdog is looked at the period after
+        wake = min(t for t in times if t is not None)
         readable, _, _ = select.select([fd], [fd] if out else [], [], max(0.0, wake - now))
         now = clock()
         if not readable and now - wake > 0.005:
@@ -647,9 +672,13 @@ def serve(robot: EmulatedRobot, fd: int, running: Callable[[], bool], clock: Cal
             except OSError as exc:
                 if exc.errno not in (errno.EAGAIN, errno.EIO):
                     raise
-        if on_imu is not None and now >= next_imu:
-            wall_ns = time.time_ns() - int(round((clock() - robot.obs_t) * 1e9))   # the read's time on the wall clock
-            on_imu(wall_ns, robot.obs)
-            next_imu += imu_period
-            if next_imu < now:   # a stall: the IMU keeps its own rate from here, no burst
-                next_imu = now + imu_period
+        for servo in robot.servos:
+            while servo.events:
+                text = servo.events.pop(0)
+                if on_event is not None:
+                    on_event(text)
+        if robot.imu_samples:
+            wall = time.time_ns() - int(round(clock() * 1e9))   # the wall clock's offset from the monotonic one
+            for t, obs in robot.imu_samples:
+                on_imu(wall + int(round(t * 1e9)), obs)
+            robot.imu_samples.clear()
