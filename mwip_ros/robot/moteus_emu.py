@@ -589,7 +589,8 @@ class EmulatedRobot:
 
 def serve(robot: EmulatedRobot, fd: int, running: Callable[[], bool], clock: Callable[[], float] = time.monotonic,
           on_imu: Optional[Callable[[int, Observation], None]] = None, imu_period: float = 0.0025,
-          max_line: int = 512, tick: float = 0.005, on_event: Optional[Callable[[str], None]] = None) -> None:
+          max_line: int = 512, tick: float = 0.005, on_event: Optional[Callable[[str], None]] = None,
+          eager: bool = True) -> None:
     """Run ``robot`` on the master side ``fd`` of a pseudo-terminal (non-blocking) in real time until ``running()``
     is false: one thread, one ``select`` that wakes for the host's bytes, the next IMU sample, the next answer due,
     the next watchdog expiry, and at least every ``tick``.
@@ -622,6 +623,9 @@ def serve(robot: EmulatedRobot, fd: int, running: Callable[[], bool], clock: Cal
         The longest sleep [s].
     on_event : callable or None
         Called with each controller event (a watchdog timeout, a fault), one line.
+    eager : bool
+        Wake up at the end of every period to step it (True), so that a frame finds at most one period to step
+        before its answer; False: only when looked at (fewer wake-ups, the periods since stepped before the answer).
     """
     now = clock()
     robot.start(now, imu_period if on_imu is not None else None)
@@ -633,7 +637,8 @@ def serve(robot: EmulatedRobot, fd: int, running: Callable[[], bool], clock: Cal
     while running():
         now = clock()
         deadline = robot.deadline()
-        times = (now + tick, robot.next_sample(), pending[0][0] if pending else None,
+        times = (now + tick, robot.t_next + robot.h if eager else robot.next_sample(),
+                 pending[0][0] if pending else None,
                  None if deadline is None else deadline + robot.h)   # a watchdog is looked at the period after
         wake = min(t for t in times if t is not None)
         readable, _, _ = select.select([fd], [fd] if out else [], [], max(0.0, wake - now))
