@@ -24,7 +24,9 @@ period is "read, then the newest command" in one exchange: the read is the state
 and the command is the newest one the node has (computed from the previous period's read: its age is one period
 plus the compute).  A separate query cycle before the command would double the bus traffic and the latency per
 period for no fresher command (the command answering this read cannot exist before the read is published);
-:meth:`MoteusBackend.observe` is that query alone (no command: it does not feed the watchdog).
+:meth:`MoteusBackend.observe` is that query alone (no command: it does not feed the watchdog).  An observation's
+``time`` is the middle of its exchange on ``time.monotonic()`` (when the controllers answered, on a link as slow
+both ways).
 
 **Faults** come back in :attr:`Observation.fault` as one line naming the wheel, its CAN id and the fault, and latch
 (every later step sends stops) until :meth:`MoteusBackend.reset`:
@@ -42,8 +44,9 @@ keeps each reply as it arrives (through the command's ``reply_filter``), so a co
 costs ``reply_timeout`` and is named alone.  A reply later than that is missed, and if it arrives during the next
 cycle it is taken as that one's (moteus replies carry no sequence number), so ``reply_timeout`` must exceed the
 transport's latency and jitter.  After a cycle that missed a reply, what arrived late is flushed before the next
-one.  No IMU: on a moteus robot the IMU has its own
-driver (``imu/data_raw``).  :attr:`MoteusBackend.round_trips` keeps the last cycles' durations.  No ROS here.
+one.  :attr:`MoteusBackend.round_trips` keeps the cycles' durations.
+
+No IMU: on a moteus robot the IMU has its own driver (``imu/data_raw``).  No ROS here.
 """
 from __future__ import annotations
 

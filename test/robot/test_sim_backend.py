@@ -1,5 +1,5 @@
-"""SimBackend (mwip_ros.robot.sim): the project's plants behind the robot's interface give the offline loop's numbers.
-"""
+"""SimBackend (mwip_ros.robot.sim): the project's plants behind the robot's interface give the offline loop's
+numbers."""
 from __future__ import annotations
 
 import math
