@@ -460,6 +460,7 @@ class EmulatedRobot:
         self.imu_period: Optional[float] = None
         self.next_imu: Optional[float] = None      # the time of the next IMU sample [s]
         self.imu_samples: List[Tuple[float, Observation]] = []   # (its time [s], the read) not yet taken
+        self.events: List[str] = []                # the plant's own events (its driver refused a torque), one line
         self._last_due = 0.0
         self._measure()
 
@@ -510,7 +511,10 @@ class EmulatedRobot:
             self._injections(start)
             watch = watch_until is None or start <= watch_until
             torques = [s.update(start, watch) * s.cfg.sign for s in self.servos]
+            fault = self.obs.fault
             self.obs = self.backend.step(Command(*torques))
+            if self.obs.fault and not fault:
+                self.events.append(f"the plant: {self.obs.fault} (no torque acts on it from now on)")
             self._measure()
             self.t_next = self.obs_t = start + self.h
             n += 1
@@ -677,9 +681,9 @@ def serve(robot: EmulatedRobot, fd: int, running: Callable[[], bool], clock: Cal
             except OSError as exc:
                 if exc.errno not in (errno.EAGAIN, errno.EIO):
                     raise
-        for servo in robot.servos:
-            while servo.events:
-                text = servo.events.pop(0)
+        for source in (robot, *robot.servos):
+            while source.events:
+                text = source.events.pop(0)
                 if on_event is not None:
                     on_event(text)
         if robot.imu_samples:

@@ -284,3 +284,23 @@ def test_injected_latency_jitter_loss_and_silence():
     assert len(robot.receive(r_line, 0.5)[1]) == 1 and robot.counters.unheard == 1   # unplugged from 0.5 s
     robot.silence(2, False)
     assert len(robot.receive(r_line, 0.6)[1]) == 2
+
+
+def test_the_plant_refusing_a_torque_is_an_event_of_the_emulator():
+    """A controller with no torque limit told 1e7 N m: the plant's own driver refuses it (bad_command), and the
+    emulator says so once instead of going on silently without torque."""
+    from dataclasses import replace
+    from pathlib import Path
+
+    from mwip_ros import params as P
+    from mwip_ros.robot.sim import SimBackend
+    v = P.merged_values(P.load_param_files([Path(__file__).resolve().parents[2] / "config" / "paper.yaml"]))
+    robot = EmulatedRobot(SimBackend(replace(P.plant_config(v), h=0.001)),
+                          [Servo(ServoConfig(can_id=1)), Servo(ServoConfig(can_id=2))], Injection())
+    robot.start(0.0)
+    ctl = moteus.Controller(id=1)
+    robot.servos[0].frame(_torque_cmd(ctl, 1e7, maximum_torque=NAN), 0.0)
+    robot.advance_to(0.0035)
+    assert robot.events == ["the plant: sim: bad_command: |u| = 1e+07 N m > 1e+06 N m, implausible (no torque acts on "
+                            "it from now on)"]
+    assert robot.backend.plant.u_prev == 0.0
