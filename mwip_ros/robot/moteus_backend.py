@@ -44,7 +44,9 @@ keeps each reply as it arrives (through the command's ``reply_filter``), so a co
 costs ``reply_timeout`` and is named alone.  A reply later than that is missed, and if it arrives during the next
 cycle it is taken as that one's (moteus replies carry no sequence number), so ``reply_timeout`` must exceed the
 transport's latency and jitter.  After a cycle that missed a reply, what arrived late is flushed before the next
-one.  :attr:`MoteusBackend.round_trips` keeps the cycles' durations.
+one.  A serial write that the device does not take within ``silence_limit`` (it stopped reading) fails, and is the
+transport's fault: the library itself would wait for it without a bound.  :attr:`MoteusBackend.round_trips` keeps
+the cycles' durations.
 
 No IMU: on a moteus robot the IMU has its own driver (``imu/data_raw``).  No ROS here.
 """
@@ -180,11 +182,20 @@ class MoteusBackend(Backend):
         self._heard = [time.monotonic()] * 2     # a controller that never answers is silent from the start
 
     async def _open(self) -> None:
-        m = self._moteus
-        # the cycle's bound is asyncio.wait_for's (_cycle); the library's own waits (on a serial port that is not an
-        # fdcanusb by its USB ids, a pty) are made longer: its wait for the OK lines raises instead of returning
-        self.transport = m.Fdcanusb(self.cfg.path, command_timeout=1.0, response_timeout=1.0)
-        self.controllers = [m.Controller(id=i, transport=self.transport) for i in self.cfg.ids]
+        m, c = self._moteus, self.cfg
+        # moteus.Fdcanusb(path) is this device in this transport.  The cycle's bound is asyncio.wait_for's (_cycle);
+        # the library's own waits (on a serial port that is not an fdcanusb by its USB ids, a pty) are made longer:
+        # its wait for the OK lines raises instead of returning what came back
+        device = m.FdcanusbDevice(c.path, command_timeout=1.0, response_timeout=1.0)
+        # the library opens pyserial without a write timeout: a device that stops reading would block this process
+        # in a write (pyserial waits for the port to take more), beyond any bound; with one, the write fails and the
+        # transport's fault is latched.  silence_limit, not reply_timeout: a loaded kernel is late to drain a pty
+        # now and then.  (_serial: moteus 1.1.1's AioSerial, pinned; .serial its pyserial port)
+        port = getattr(getattr(device, "_serial", None), "serial", None)
+        if port is not None:
+            port.write_timeout = c.silence_limit
+        self.transport = m.Transport(device)
+        self.controllers = [m.Controller(id=i, transport=self.transport) for i in c.ids]
 
     def _loop_error(self, loop, context) -> None:
         """The event loop's exception handler: a callback's error (the serial reader's) becomes the transport's

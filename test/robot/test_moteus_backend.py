@@ -47,6 +47,12 @@ def emulated():
     running.set()
     server = threading.Thread(target=serve, args=(robot, master, running.is_set), daemon=True)
     server.start()
+
+    def stop_serving():   # the fdcanusb stops reading (its pty stays open)
+        running.clear()
+        server.join(timeout=5)
+
+    robot.stop_serving = stop_serving
     try:
         yield robot, os.ttyname(slave)
     finally:
@@ -154,6 +160,25 @@ def test_a_controller_s_over_temperature_fault_is_named_with_its_code(emulated):
         assert [s.mode for s in robot.servos] == [0, 0]   # stops to both after the fault
         assert b.reset().fault is None   # the stop clears moteus's fault; the next command meets the heat again
         assert "fault 38" in b.step(Command(0.5, 0.5)).fault
+
+
+def test_a_device_that_stops_reading_is_a_fault_not_a_hang(emulated):
+    """pyserial, as the library opens it, would wait without a bound for the port to take a write."""
+    robot, path = emulated
+    with _backend(path) as b:
+        b.reset()
+        robot.stop_serving()
+        t0 = time.monotonic()
+        steps = 0
+        while b.fault is None and time.monotonic() - t0 < 5.0:
+            b.step(Command(0.5, 0.5))
+            steps += 1
+        assert b.fault is not None, "no fault"
+        assert "Write timeout" in b.fault or "no answer for" in b.fault
+        t1 = time.monotonic()
+        for _ in range(5):   # every later step is bounded too (stops that cannot be written)
+            b.step(Command(0.5, 0.5))
+        assert time.monotonic() - t1 < 1.0
 
 
 def test_a_serial_path_that_does_not_open_is_one_line_naming_it():
