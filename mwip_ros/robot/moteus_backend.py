@@ -35,7 +35,9 @@ both ways).
 - a controller in mode 11 (its watchdog expired: it went without a command for ``watchdog_timeout``);
 - a controller that has not answered for ``silence_limit`` seconds (a reply lost now and then is not a fault: the
   wheel reads its last answer, counted in :attr:`MoteusBackend.missed`); one that never answered reads NaN;
-- a transport that fails (the serial device gone, an ``ERR`` line, a reader that died).
+- a transport that fails (the serial device gone, an ``ERR`` line, a reader that died, a write it does not take):
+  then nothing more is sent until :meth:`MoteusBackend.reset` (each step returns the latched read at once), and the
+  controllers stop by their own watchdogs.
 
 **A synchronous face.**  The ``moteus`` library is asyncio; the backend owns one event loop and runs each call to
 completion on it (one thread uses a backend).  One cycle waits at most ``reply_timeout`` for the replies
@@ -207,11 +209,15 @@ class MoteusBackend(Backend):
 
     def observe(self) -> Observation:
         """Query both controllers (no command: the watchdog is not fed)."""
+        self._open_or_refuse()
+        if self._transport_failed():
+            return self._last_obs
         return self._exchange([c.make_query() for c in self.controllers])
 
     def reset(self) -> Observation:
         """Stop both controllers (mode 0, which clears a moteus fault and its timeout mode), clear the latched fault
         and the counters, and read."""
+        self._open_or_refuse()
         self.fault = None
         self._transport_error = None
         self.missed = [0, 0]
@@ -232,8 +238,9 @@ class MoteusBackend(Backend):
         Observation
             The controllers' states at the exchange (module docstring).
         """
-        if self.closed:
-            raise BackendError("moteus: the backend is closed")
+        self._open_or_refuse()
+        if self._transport_failed():
+            return self._last_obs
         if command is not None and self.fault is None:
             bad = [w for w, v in zip(WHEELS, (command.left, command.right)) if not math.isfinite(v)]
             if bad:
@@ -247,6 +254,15 @@ class MoteusBackend(Backend):
                                   watchdog_timeout=c.watchdog_timeout, query=True)
                 for ctl, sign, tau in zip(self.controllers, c.signs, (command.left, command.right))]
         return self._exchange(cmds)
+
+    def _open_or_refuse(self) -> None:
+        if self.closed:
+            raise BackendError("moteus: the backend is closed")
+
+    def _transport_failed(self) -> bool:
+        """The transport failed and its fault is latched: no more traffic until :meth:`reset` (a write to a device
+        that stopped reading would wait ``silence_limit`` each time; its controllers stop by their watchdogs)."""
+        return self._transport_error is not None and self.fault is not None and self._last_obs is not None
 
     def close(self) -> None:
         """Stop both controllers (without waiting for an answer beyond ``reply_timeout``), close the serial device

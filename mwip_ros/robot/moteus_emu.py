@@ -647,9 +647,13 @@ def serve(robot: EmulatedRobot, fd: int, running: Callable[[], bool], clock: Cal
         wake = min(t for t in times if t is not None)
         readable, _, _ = select.select([fd], [fd] if out else [], [], max(0.0, wake - now))
         now = clock()
-        if not readable and now - wake > 0.005:
-            c.stalls += 1
-            c.worst_stall = max(c.worst_stall, now - wake)
+        if not readable:
+            if now - wake > 0.005:
+                c.stalls += 1
+                c.worst_stall = max(c.worst_stall, now - wake)
+            # nothing was waiting when select returned; bytes that came before ``now`` (this thread was not
+            # scheduled in between) are waiting now: the periods up to ``now`` are watched only without them
+            readable = select.select([fd], [], [], 0.0)[0]
         robot.advance_to(now, watch_until=last_wake if readable else None)
         last_wake = now
         if readable:

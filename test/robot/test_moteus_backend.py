@@ -27,7 +27,7 @@ from graphproc import wait_until  # noqa: E402
 pytestmark = pytest.mark.unit
 
 CONFIG = Path(__file__).resolve().parents[2] / "config"
-WATCHDOG = 0.1
+WATCHDOG = 1.0   # a machine loaded 7 times over its cores stalls this process for 300 ms and more
 
 
 @pytest.fixture
@@ -63,7 +63,7 @@ def emulated():
 
 
 def _backend(path, **kw) -> MoteusBackend:
-    args = dict(path=path, maximum_torque=3.0, watchdog_timeout=WATCHDOG, reply_timeout=0.02, silence_limit=0.3)
+    args = dict(path=path, maximum_torque=3.0, watchdog_timeout=WATCHDOG, reply_timeout=0.2, silence_limit=1.0)
     args.update(kw)
     return MoteusBackend(MoteusConfig(**args))
 
@@ -83,6 +83,11 @@ def _run(backend, command, seconds: float, period: float = 0.005):
 SENT = [0.0]
 
 
+def _modes(robot, *want) -> bool:
+    """The controllers reach these modes (a frame the exchange's bound cut short is still on its way)."""
+    return wait_until(lambda: [s.mode for s in robot.servos] == list(want), 2.0, step=0.002)
+
+
 def test_torque_commands_move_the_wheels_forward_with_each_wheel_s_sign_and_a_stop_stops(emulated):
     robot, path = emulated
     with _backend(path) as b:
@@ -92,7 +97,7 @@ def test_torque_commands_move_the_wheels_forward_with_each_wheel_s_sign_and_a_st
         assert (first.left.position, first.right.position) == (0.0, 0.0)
         obs = _run(b, Command(2.0, 2.0), 0.3)
         assert obs.fault is None
-        assert [s.mode for s in robot.servos] == [10, 10]
+        assert _modes(robot, 10, 10)
         assert (robot.servos[0].torque, robot.servos[1].torque) == pytest.approx((2.0, -2.0), abs=1e-3)
         x = robot.obs.truth
         assert x[2] - x[3] > 0.1   # the wheels turn forward relative to the body
@@ -103,10 +108,12 @@ def test_torque_commands_move_the_wheels_forward_with_each_wheel_s_sign_and_a_st
         assert clipped.fault is None   # each within maximum_torque 3, from the next physics period:
         assert wait_until(lambda: [round(s.torque, 3) for s in robot.servos] == [3.0, 3.0], 1.0, step=0.002)
         stopped = b.step(None)
-        assert stopped.fault is None and [s.mode for s in robot.servos] == [0, 0]
+        assert stopped.fault is None and _modes(robot, 0, 0)
         assert b.step(None).torque == 0.0
-    assert b.closed and [s.mode for s in robot.servos] == [0, 0]
+    assert b.closed and _modes(robot, 0, 0)
     b.close()   # idempotent
+    with pytest.raises(BackendError, match="moteus: the backend is closed"):
+        b.observe()
 
 
 def test_the_watchdog_stops_the_controllers_when_the_commands_stop(emulated):
@@ -122,10 +129,10 @@ def test_the_watchdog_stops_the_controllers_when_the_commands_stop(emulated):
         assert "moteus left wheel (CAN id 1): watchdog timeout (mode 11)" in obs.fault
         assert "moteus right wheel (CAN id 2): watchdog timeout" in obs.fault
         b.step(Command(1.0, 1.0))   # latched: stops go out instead, and the stop leaves the timeout mode
-        assert [s.mode for s in robot.servos] == [0, 0]
+        assert _modes(robot, 0, 0)
         fresh = b.reset()
         assert fresh.fault is None
-        assert b.step(Command(1.0, 1.0)).fault is None and [s.mode for s in robot.servos] == [10, 10]
+        assert b.step(Command(1.0, 1.0)).fault is None and _modes(robot, 10, 10)
 
 
 def test_a_controller_that_stops_answering_is_named_alone_and_no_torque_follows(emulated):
@@ -136,17 +143,18 @@ def test_a_controller_that_stops_answering_is_named_alone_and_no_torque_follows(
         robot.silence(2, True)
         t0 = time.monotonic()
         obs = b.step(Command(1.0, 1.0))
-        while obs.fault is None and time.monotonic() - t0 < 2.0:
+        while obs.fault is None and time.monotonic() - t0 < 4.0:
             obs = b.step(Command(1.0, 1.0))
         assert obs.fault is not None and obs.fault.startswith("moteus right wheel (CAN id 2): no answer for ")
-        assert "left" not in obs.fault and time.monotonic() - t0 >= 0.3   # silence_limit
+        assert "left" not in obs.fault and time.monotonic() - t0 >= 1.0   # silence_limit
         assert b.missed[1] >= 1
         assert obs.right == b._last[1] and math.isfinite(obs.right.position)   # its last answer, kept
         b.step(Command(1.0, 1.0))
-        assert robot.servos[0].mode == 0   # the left one is stopped, the right one stops by its watchdog
-        assert wait_until(lambda: robot.servos[1].mode == 11, 1.0, step=0.002)
+        assert wait_until(lambda: robot.servos[0].mode == 0, 2.0, step=0.002)   # stopped; the right one stops
+        # by its own watchdog
+        assert wait_until(lambda: robot.servos[1].mode == 11, 3.0, step=0.002)
         robot.silence(2, False)
-        assert b.reset().fault is None and [s.mode for s in robot.servos] == [0, 0]
+        assert b.reset().fault is None and _modes(robot, 0, 0)
 
 
 def test_a_controller_s_over_temperature_fault_is_named_with_its_code(emulated):
@@ -155,30 +163,51 @@ def test_a_controller_s_over_temperature_fault_is_named_with_its_code(emulated):
         b.reset()
         _run(b, Command(0.5, 0.5), 0.05)
         robot.servos[0].overheat(True)
-        obs = _run(b, Command(0.5, 0.5), 0.05)
-        assert obs.fault == "moteus left wheel (CAN id 1): fault 38 (over temperature)"
-        assert [s.mode for s in robot.servos] == [0, 0]   # stops to both after the fault
+        assert wait_until(lambda: b.step(Command(0.5, 0.5)).fault is not None, 5.0, step=0.005)
+        assert b.fault == "moteus left wheel (CAN id 1): fault 38 (over temperature)"
+        b.step(Command(0.5, 0.5))
+        assert _modes(robot, 0, 0)   # stops to both after the fault
         assert b.reset().fault is None   # the stop clears moteus's fault; the next command meets the heat again
-        assert "fault 38" in b.step(Command(0.5, 0.5)).fault
+        assert wait_until(lambda: b.step(Command(0.5, 0.5)).fault is not None, 5.0, step=0.005)
+        assert "fault 38" in b.fault
+
+
+def _fill(fd: int) -> int:
+    """Write to the non-blocking ``fd`` until it takes not one byte more; the bytes written."""
+    n = 0
+    for size in (4096, 64, 1):
+        try:
+            while True:
+                n += os.write(fd, b"x" * size)
+        except BlockingIOError:
+            pass
+    return n
 
 
 def test_a_device_that_stops_reading_is_a_fault_not_a_hang(emulated):
-    """pyserial, as the library opens it, would wait without a bound for the port to take a write."""
+    """pyserial, as the library opens it, would wait without a bound for the port to take a write: an fdcanusb that
+    stops reading, its buffer full, costs one write of silence_limit, then nothing goes out until reset."""
     robot, path = emulated
-    with _backend(path) as b:
+    with _backend(path, silence_limit=0.5) as b:
         b.reset()
         robot.stop_serving()
+        jam = os.open(path, os.O_WRONLY | os.O_NOCTTY | os.O_NONBLOCK)   # fill what the pty holds, to the byte
+        try:
+            # the kernel moves what was written into the reader's buffer later (a worker thread): fill again until
+            # 0.1 s after the last fill nothing more goes in
+            while _fill(jam):
+                time.sleep(0.1)
+        finally:
+            os.close(jam)
         t0 = time.monotonic()
-        steps = 0
-        while b.fault is None and time.monotonic() - t0 < 5.0:
-            b.step(Command(0.5, 0.5))
-            steps += 1
-        assert b.fault is not None, "no fault"
-        assert "Write timeout" in b.fault or "no answer for" in b.fault
+        obs = b.step(Command(0.5, 0.5))
+        assert time.monotonic() - t0 < 0.5 + 0.2 + 0.5   # the write's bound, the replies' bound, slack
+        assert "failed: SerialTimeoutException: Write timeout" in obs.fault
         t1 = time.monotonic()
-        for _ in range(5):   # every later step is bounded too (stops that cannot be written)
-            b.step(Command(0.5, 0.5))
-        assert time.monotonic() - t1 < 1.0
+        for _ in range(5):
+            assert b.step(Command(0.5, 0.5)).fault == obs.fault
+        assert b.observe().fault == obs.fault
+        assert time.monotonic() - t1 < 0.05   # no traffic: the latched read at once
 
 
 def test_a_serial_path_that_does_not_open_is_one_line_naming_it():
@@ -194,7 +223,7 @@ def test_a_non_finite_command_stops_both_and_latches(emulated):
         b.step(Command(1.0, 1.0))
         obs = b.step(Command(1.0, math.inf))
         assert "the command for the right wheel is not finite" in obs.fault
-        assert [s.mode for s in robot.servos] == [0, 0]
+        assert _modes(robot, 0, 0)
 
 
 @pytest.mark.parametrize("bad, key", [
