@@ -422,7 +422,7 @@ class Counters:
     errors: int = 0
     steps: int = 0
     stalls: int = 0        # wake-ups more than 5 ms after their time (the process was not scheduled)
-    worst_stall: float = 0.0   # the latest wake-up [s]
+    worst_stall: float = 0.0   # how late the latest wake-up was [s]
 
 
 class EmulatedRobot:
@@ -431,14 +431,15 @@ class EmulatedRobot:
     Parameters
     ----------
     backend : SimBackend
-        The plant, its period ``cfg.h`` the physics step.
+        The plant (a simulated :class:`~.backend.Backend` with ``cfg.h``), its period ``cfg.h`` the physics step.
     servos : sequence of Servo
         The left wheel's controller, then the right one's.
-    injection : Injection
-        Faults on demand.
+    injection : Injection or None
+        Faults on demand (None: none).
     """
 
-    def __init__(self, backend, servos: Sequence[Servo], injection: Injection = Injection()):
+    def __init__(self, backend, servos: Sequence[Servo], injection: Optional[Injection] = None):
+        injection = injection if injection is not None else Injection()
         if len(servos) != 2 or servos[0].cfg.can_id == servos[1].cfg.can_id:
             raise ValueError("moteus emulator: two controllers with distinct CAN ids (left, right)")
         self.backend = backend
