@@ -7,7 +7,8 @@
 Starts the emulator (its own process, no IMU: nothing else on the machine's ROS), opens the backend on its pty and
 steps it at ``--rate`` on the wall clock (absolute deadlines, as a driver node keeps its period) with a constant
 torque, then reports each step's round trip (median, p99, max), the replies missed, the periods overrun (a step that
-ended after the next period's start) and the periods run against the wall clock's count.  ``--fifo PRIO`` runs both
+ended after the next period's start) and the periods run against the wall clock's count, up to a fault if the
+backend latches one (the run stops there).  ``--fifo PRIO`` runs both
 processes under SCHED_FIFO at PRIO (root or CAP_SYS_NICE).  Exit 0; 1 when the backend latched a fault.
 """
 from __future__ import annotations
@@ -54,8 +55,11 @@ def main(argv=None) -> int:
         n = int(round(args.duration * args.rate))
         overruns = 0
         t0 = time.monotonic()
+        done = 0
         for k in range(n):
-            b.step(Command(0.5, 0.5))
+            if b.step(Command(0.5, 0.5)).fault is not None:
+                break   # the figures are those of the steps before the fault
+            done = k + 1
             deadline = t0 + (k + 1) * h
             now = time.monotonic()
             if now > deadline:
@@ -64,16 +68,17 @@ def main(argv=None) -> int:
                 time.sleep(deadline - now)
         wall = time.monotonic() - t0
         fault = b.fault
-        rt = sorted(b.round_trips)
+        rt = sorted(list(b.round_trips)[:done])
         missed = list(b.missed)
         b.close()
     finally:
         emu.send_signal(signal.SIGINT)
         _, err = emu.communicate(timeout=20)
     q = lambda p: rt[min(len(rt) - 1, int(math.ceil(p * len(rt))) - 1)] * 1e3   # noqa: E731
-    result = {"rate_hz": args.rate, "steps": n, "latency_s": args.latency, "jitter_s": args.jitter, "loss": args.loss,
+    result = {"rate_hz": args.rate, "steps": done, "steps_asked": n, "fault_after_s": wall if fault else None,
+              "latency_s": args.latency, "jitter_s": args.jitter, "loss": args.loss,
               "rtt_median_ms": statistics.median(rt) * 1e3, "rtt_p99_ms": q(0.99), "rtt_max_ms": rt[-1] * 1e3,
-              "overruns": overruns, "periods_per_wall_clock": n / (wall * args.rate), "missed": missed,
+              "overruns": overruns, "periods_per_wall_clock": done / (wall * args.rate), "missed": missed,
               "fault": fault, "fifo": args.fifo, "load": os.getloadavg()[0], "emulator": err.strip().splitlines()[-1]}
     print(json.dumps(result, indent=1))
     if args.json:

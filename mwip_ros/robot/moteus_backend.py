@@ -314,7 +314,12 @@ class MoteusBackend(Backend):
             by_id = self._loop.run_until_complete(self._cycle(commands))
         except Exception as exc:   # noqa: BLE001 - the transport failed: an ERR line, a dead reader, a closed port
             by_id = {}
-            self._transport_error = self._transport_error or f"{type(exc).__name__}: {exc}"
+            if type(exc).__name__ == "SerialTimeoutException":   # pyserial's, from the write timeout set in _open
+                why = (f"it did not take a write within silence_limit {self.cfg.silence_limit * 1e3:g} ms (it stopped "
+                       "reading, or this system is that late)")
+            else:
+                why = f"{type(exc).__name__}: {exc}"
+            self._transport_error = self._transport_error or why
         t1 = time.monotonic()
         self.round_trips.append(t1 - t0)
         reads, faults = [], []
