@@ -502,16 +502,18 @@ class EmulatedRobot:
 
     # -- the physics -------------------------------------------------------------------------------------------
 
-    def advance_to(self, now: float, watch_until: Optional[float] = None) -> int:
+    def advance_to(self, now: float, watch_until: Optional[float] = None, commanded: Optional[set] = None) -> int:
         """Step the plant through every period that has ended by ``now``, each with the torques the controllers
-        apply at its start; their watchdogs are checked at the starts up to ``watch_until`` (None: all), the time up
-        to which no frame can have come unseen (:func:`serve`).  Returns the number of periods stepped."""
+        apply at its start.  Their watchdogs are checked at each start, but a controller in ``commanded`` (None: all)
+        only at the starts up to ``watch_until`` (None: all), the time up to which no command to it can have come
+        unseen (:func:`serve`).  Returns the number of periods stepped."""
         n = 0
         while self.t_next + self.h <= now:
             start = self.t_next
             self._injections(start)
             watch = watch_until is None or start <= watch_until
-            torques = [s.update(start, watch) * s.cfg.sign for s in self.servos]
+            torques = [s.update(start, watch or (commanded is not None and s.cfg.can_id not in commanded)) * s.cfg.sign
+                       for s in self.servos]
             fault = self.obs.fault
             self.obs = self.backend.step(Command(*torques))
             if self.obs.fault and not fault:
@@ -533,6 +535,24 @@ class EmulatedRobot:
         return min(armed) if armed else None
 
     # -- the fdcanusb ------------------------------------------------------------------------------------------
+
+    def commanded(self, lines: Sequence[bytes]) -> set:
+        """The CAN ids the host's ``lines`` write a command to (a frame with register writes; a query is none), read
+        without checking their checksums: what :func:`serve` may not watch the watchdog of before it takes them."""
+        ids = set()
+        for line in lines:
+            fields = line.split()
+            if len(fields) < 4 or fields[0] != b"can" or fields[1] != b"send":
+                continue
+            try:
+                arb, data = int(fields[2], 16), _dehexify(fields[3])
+                writes, _ = decode(data)
+            except (ValueError, RuntimeError, IndexError):
+                continue
+            if writes:
+                dest = arb & 0x7f
+                ids |= set(self.by_id) if dest == BROADCAST else {dest}
+        return ids
 
     def receive(self, line: bytes, now: float) -> Tuple[float, List[bytes]]:
         """One line from the host at ``now``: (when its answers are due [s], the answer lines)."""
@@ -600,11 +620,12 @@ def serve(robot: EmulatedRobot, fd: int, running: Callable[[], bool], clock: Cal
     is false: one thread, one ``select`` that wakes for the host's bytes, the next IMU sample, the next answer due,
     the next watchdog expiry, and at least every ``tick``.
 
-    The plant is stepped when it is looked at (a frame, an IMU sample, a watchdog) through every period that has
-    ended since: the same periods, each with the torques applied at its start, as stepping each on time, and a
-    wake-up per frame instead of one per period.  The host's bytes are read after the periods that ended before
-    them: those periods' watchdogs are checked only up to the previous wake-up (the bytes may have come any time
-    after it: a frame in the pty's buffer while this process was not scheduled is not a driver that went silent).
+    The plant is stepped through every period that has ended at each look (the end of a period with ``eager``, a
+    frame, an IMU sample, a watchdog), each period with the torques applied at its start, as stepping each on time.
+    The host's lines are taken after the periods that ended before them, and a controller they command has its
+    watchdog checked over those periods only up to the previous look (the command may have come any time after it:
+    a frame in the pty's buffer while this process was not scheduled is not a driver that went silent; a query
+    feeds no watchdog and delays none).
     The IMU is sampled on its own clock as the plant passes each sample time (:meth:`EmulatedRobot.advance_to`), so
     its stamps keep their rate when this process is late, which only delays their publication.
 
@@ -655,8 +676,7 @@ def serve(robot: EmulatedRobot, fd: int, running: Callable[[], bool], clock: Cal
             # nothing was waiting when select returned; bytes that came before ``now`` (this thread was not
             # scheduled in between) are waiting now: the periods up to ``now`` are watched only without them
             readable = select.select([fd], [], [], 0.0)[0]
-        robot.advance_to(now, watch_until=last_wake if readable else None)
-        last_wake = now
+        lines: List[bytes] = []
         if readable:
             try:
                 chunk = os.read(fd, 65536)
@@ -675,8 +695,15 @@ def serve(robot: EmulatedRobot, fd: int, running: Callable[[], bool], clock: Cal
                     break
                 line, buf = buf[:cut], buf[cut + 1:]
                 if line.strip():
-                    due, answers = robot.receive(line, now)
-                    pending.extend((due, a) for a in answers)
+                    lines.append(line)
+        # the periods that ended before the host's lines are taken; a controller they command (or any, while a line
+        # is still coming) is watched only up to the previous look: its command may have come any time after it
+        commanded = robot.commanded(lines) | (set(robot.by_id) if buf else set())
+        robot.advance_to(now, watch_until=last_wake, commanded=commanded)
+        last_wake = now
+        for line in lines:
+            due, answers = robot.receive(line, now)
+            pending.extend((due, a) for a in answers)
         while pending and pending[0][0] <= now:
             out += pending.popleft()[1]
         if out:

@@ -304,3 +304,23 @@ def test_the_plant_refusing_a_torque_is_an_event_of_the_emulator():
     assert robot.events == ["the plant: sim: bad_command: |u| = 1e+07 N m > 1e+06 N m, implausible (no torque acts on "
                             "it from now on)"]
     assert robot.backend.plant.u_prev == 0.0
+
+
+def test_only_a_command_waiting_in_the_line_holds_back_a_watchdog():
+    """serve() takes the host's lines after the periods that ended before them: a controller those lines command is
+    watched only up to the previous look, one they only query (or do not address) is watched throughout."""
+    robot = _robot()
+    c1, c2, everyone = moteus.Controller(id=1), moteus.Controller(id=2), moteus.Controller(id=0x7f)
+    query = _host_line(_frame_of(c1, c1.make_query()), True)
+    command = _host_line(_frame_of(c2, c2.make_position(position=NAN, feedforward_torque=0.1)), False)
+    broadcast = _host_line(_frame_of(everyone, everyone.make_stop()), False)
+    assert robot.commanded([query]) == set()
+    assert robot.commanded([query, command]) == {2}
+    assert robot.commanded([broadcast]) == {1, 2}
+    for servo, ctl in zip(robot.servos, (c1, c2)):
+        servo.frame(_torque_cmd(ctl, 1.0, watchdog_timeout=0.01), 0.0)
+    robot.advance_to(0.02, watch_until=0.005, commanded={2})
+    assert [s.mode for s in robot.servos] == [11, MODE_POSITION]   # 1 tripped at 0.010 s, 2 held back
+    assert robot.servos[0].events[0].startswith("CAN id 1: watchdog timeout (mode 11), 0.0100 s after its last")
+    robot.advance_to(0.03)
+    assert robot.servos[1].mode == 11   # at the next look it is watched again
