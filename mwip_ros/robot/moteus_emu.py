@@ -188,7 +188,13 @@ class Servo:
     # -- the shaft -------------------------------------------------------------------------------------------
 
     def measure(self, phi: float, phi_rate: float) -> None:
-        """Its shaft's reading from the wheel's angle relative to the body ``phi`` [rad] and its rate [rad/s]."""
+        """Its shaft's reading from its wheel's.
+
+        Parameters
+        ----------
+        phi, phi_rate : float
+            The wheel's angle relative to the body [rad] and its rate [rad/s], in the robot's forward sense.
+        """
         s = self.cfg.sign
         self.position, self.velocity = s * phi / TWO_PI, s * phi_rate / TWO_PI
 
@@ -204,8 +210,20 @@ class Servo:
     # -- a frame ---------------------------------------------------------------------------------------------
 
     def frame(self, data: bytes, now: float) -> Optional[bytes]:
-        """Take one frame's multiplex payload at ``now``: its writes (a new command when the mode is written), then
-        its reads.  Returns the reply's payload, or None when the frame reads nothing."""
+        """Take one frame: its writes (a new command when the mode is written), then its reads.
+
+        Parameters
+        ----------
+        data : bytes
+            The frame's multiplex payload (padding included).
+        now : float
+            The time it arrives [s].
+
+        Returns
+        -------
+        bytes or None
+            The reply's payload, None when the frame reads nothing.
+        """
         self.frames += 1
         if self.t0 is None:
             self.t0 = now
@@ -260,8 +278,20 @@ class Servo:
                            f"{self.temperature:g} C)")
 
     def update(self, now: float, watch: bool = True) -> float:
-        """Its state at ``now`` (the watchdog unless ``watch`` is False, an over-temperature) and the torque it
-        applies from then on [N m, shaft sense], kept in :attr:`torque`."""
+        """Its state at ``now`` and the torque it applies from then on, kept in :attr:`torque`.
+
+        Parameters
+        ----------
+        now : float
+            The time [s].
+        watch : bool
+            Whether its watchdog is checked (an over-temperature always is).
+
+        Returns
+        -------
+        float
+            The torque [N m] on its shaft (its own sense).
+        """
         c = self.cfg
         self._check(now, watch)
         if self.mode == MODE_POSITION:
@@ -555,7 +585,20 @@ class EmulatedRobot:
         return ids
 
     def receive(self, line: bytes, now: float) -> Tuple[float, List[bytes]]:
-        """One line from the host at ``now``: (when its answers are due [s], the answer lines)."""
+        """One line from the host, as the fdcanusb and its controllers take it.
+
+        Parameters
+        ----------
+        line : bytes
+            The line without its end.
+        now : float
+            When it came [s].
+
+        Returns
+        -------
+        tuple
+            (when its answers are due [s], the answer lines, each with its end).
+        """
         c = self.counters
         c.lines += 1
         self._injections(now)
