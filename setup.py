@@ -50,6 +50,7 @@ setup(
             'foxglove_server = mwip_ros.nodes.runtime.entry:foxglove_server',
             'mwip_ctl = mwip_ros.cli.ctl:main',
             'state_estimator = mwip_ros.nodes.runtime.entry:state_estimator',
+            'mwip_moteus_emulator = mwip_ros.cli.moteus_emulator:main',
         ],
     },
 )
