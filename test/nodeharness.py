@@ -117,6 +117,8 @@ class NodeHarness:
         finally:
             Node.create_publisher = original
         self._executor = None
+        self._services: Dict[str, Any] = {}   # service name as asked -> the node's service
+        self._names: Dict[str, str] = {}      # topic as asked -> resolved
         self._feeders: Dict[tuple, Any] = {}
         self._feeder_nodes: Dict[str, Any] = {}   # the peers (publisher's feeders too), by name
 
@@ -142,7 +144,10 @@ class NodeHarness:
         pub.publish = record
 
     def _resolve(self, topic: str) -> str:
-        return self.node.resolve_topic_name(topic)
+        name = self._names.get(topic)
+        if name is None:
+            name = self._names[topic] = self.node.resolve_topic_name(topic)
+        return name
 
     # ------------------------------------------------------------------------------------------------- input
     def subscriptions(self, topic: str) -> list:
@@ -204,13 +209,15 @@ class NodeHarness:
     def call(self, service: str, request=None):
         """Call the node's service ``service`` (``~/enable``, ``/plant_sim/set_parameters``, ...) with ``request``
         (default: an empty request of its type) and return the response its callback gives."""
-        resolve = self.node.resolve_service_name
-        name = resolve(service)
-        found = [s for s in self.node.services if resolve(s.srv_name) == name]   # as created: '~/reset', 'n/get_..'
-        if not found:
-            have = sorted(resolve(s.srv_name) for s in self.node.services)
-            raise KeyError(f"{self.name} has no service {name} (it has {have})")
-        srv = found[0]
+        srv = self._services.get(service)
+        if srv is None:
+            resolve = self.node.resolve_service_name
+            name = resolve(service)
+            found = [s for s in self.node.services if resolve(s.srv_name) == name]   # as made: '~/reset', 'n/get_..'
+            if not found:
+                have = sorted(resolve(s.srv_name) for s in self.node.services)
+                raise KeyError(f"{self.name} has no service {name} (it has {have})")
+            srv = self._services[service] = found[0]
         return srv.callback(request if request is not None else srv.srv_type.Request(), srv.srv_type.Response())
 
     def set(self, **values) -> list:
