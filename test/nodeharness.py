@@ -282,7 +282,7 @@ class NodeHarness:
         if self.node is None:
             return
         try:
-            self.node.on_shutdown()
+            getattr(self.node, "on_shutdown", lambda: None)()   # a plain rclpy node has none
         finally:
             self._taps.clear()
             if self._executor is not None:
