@@ -202,12 +202,21 @@ libc.fflush(out)
 """
 
 
-def _malloc_heaps(*args, env=None) -> int:
+def _malloc_heaps(*runs) -> list:
+    """The glibc heaps (arenas) of each run ``(argument, environment)`` of :data:`ARENAS`, the runs side by side."""
     import subprocess
     import sys
-    r = subprocess.run([sys.executable, "-c", ARENAS, *args], capture_output=True, text=True, timeout=60, env=env)
-    assert r.returncode == 0, r.stderr
-    return r.stdout.count("<heap nr=")
+    procs = [subprocess.Popen([sys.executable, "-c", ARENAS, arg], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                              text=True, env=env) for arg, env in runs]
+    try:
+        outs = [p.communicate(timeout=60) for p in procs]
+    finally:
+        for p in procs:
+            if p.poll() is None:
+                p.kill()
+                p.wait()
+    assert all(p.returncode == 0 for p in procs), [err for _, err in outs]
+    return [out.count("<heap nr=") for out, _ in outs]
 
 
 @pytest.mark.unit
@@ -215,12 +224,13 @@ def test_a_node_process_allocates_from_one_malloc_arena():
     """What keeps a flood's RSS flat (scripts/soak.py): threads that allocate share one glibc arena."""
     import os
     env = {k: v for k, v in os.environ.items() if k != "MALLOC_ARENA_MAX"}
-    assert _malloc_heaps("plain", env=env) > 1    # glibc's default: an arena per allocating thread
-    assert _malloc_heaps("import", env=env) > 1   # importing the nodes sets no limit (no import side effect)
-    assert _malloc_heaps("entry", env=env) == 1   # mwip_ros.nodes.runtime.entry limits it before rclpy's threads start
-    # run_node's own call comes after rclpy's import started threads with arenas of their own: too late
-    assert _malloc_heaps("run_node", env=env) > 1
-    assert _malloc_heaps("entry", env=dict(env, MALLOC_ARENA_MAX="3")) > 1   # the user's setting wins
+    plain, imported, entry, run_node, users = _malloc_heaps(
+        ("plain", env), ("import", env), ("entry", env), ("run_node", env), ("entry", dict(env, MALLOC_ARENA_MAX="3")))
+    assert plain > 1      # glibc's default: an arena per allocating thread
+    assert imported > 1   # importing the nodes sets no limit (no import side effect)
+    assert entry == 1     # mwip_ros.nodes.runtime.entry limits it before rclpy's threads start
+    assert run_node > 1   # run_node's own call comes after rclpy's import started threads with arenas of their own
+    assert users > 1      # the user's setting wins
 
 
 @pytest.mark.node
