@@ -24,15 +24,17 @@ process-level test (test/graphproc.py).
 """
 from __future__ import annotations
 
+import itertools
 from collections import deque
 from typing import Any, Callable, Dict, List, Optional
 
 from graphproc import PARAMS, loop_chain, node_rules, param_files
 
-__all__ = ["Loop", "NodeHarness", "Wire", "node_class", "refused"]
+__all__ = ["Loop", "NodeHarness", "Wire", "node_class", "refused", "run_ctl"]
 
 _LOGS: Dict[str, List[tuple]] = {}   # logger name -> [(severity name, message)], while a harness records it
 _PATCHED = False
+_CTL_NAMES = itertools.count()   # run_ctl's nodes, each a name of its own
 
 
 def _record_logs() -> None:
@@ -395,6 +397,39 @@ class Loop:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+def run_ctl(h: NodeHarness, *argv: str) -> tuple:
+    """``mwip_ctl argv`` in this process (its ``main``) with its ROS node a :meth:`NodeHarness.peer`-like node in
+    ``h``'s context, spun with the node under test by ``h``'s executor: its service calls and messages reach that
+    node through the middleware within the one participant. Returns (exit code, stdout, stderr)."""
+    import contextlib
+    import io
+
+    import rclpy
+
+    from mwip_ros.cli import ctl
+
+    class PeerRos(ctl.Ros):
+        def __init__(self, namespace: str, timeout: float):   # no context, no discovery of its own
+            self.rclpy, self.timeout, self.ctx = rclpy, timeout, h.context
+            self.node = rclpy.create_node(f"mwip_ctl_{next(_CTL_NAMES)}", namespace=namespace or None,
+                                          context=h.context, start_parameter_services=False)
+            self.ex = h.executor
+            self.ex.add_node(self.node)
+
+        def close(self) -> None:   # the harness's executor and context go on
+            self.ex.remove_node(self.node)
+            self.node.destroy_node()
+
+    out, err, ros = io.StringIO(), io.StringIO(), ctl.Ros
+    ctl.Ros = PeerRos
+    try:
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+            code = ctl.main(list(argv))
+    finally:
+        ctl.Ros = ros
+    return code, out.getvalue(), err.getvalue()
 
 
 def refused(factory: Callable[..., Any], *ros_args, params=PARAMS, name: Optional[str] = None,

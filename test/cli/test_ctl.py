@@ -9,7 +9,6 @@
   set and read back by two processes, a reset that the observer and the controller follow, a push the plant takes,
   and Ctrl-C ending a push with a zero wrench and exit 130.
 """
-import itertools
 import signal
 import subprocess
 import sys
@@ -18,43 +17,21 @@ from pathlib import Path
 
 import pytest
 
+import nodeharness
 from graphproc import Graph
 from nodeharness import NodeHarness, node_class
 from mwip_ros.cli import ctl as CTL
 from mwip_ros.msgs import layouts as L
 
 MWIP_CTL = Path(sys.executable).with_name("mwip_ctl")   # the console script setup.py installs
-_names = itertools.count()
 
 
 # --- in this process ------------------------------------------------------------------------------------------
-class _PeerRos(CTL.Ros):
-    """mwip_ctl's ROS side with its node in the harness's context: a peer of the node under test, spun with it by
-    the harness's executor (no context, no discovery of its own)."""
-
-    def __init__(self, h, namespace: str, timeout: float):
-        import rclpy
-        self.rclpy, self.timeout, self.ctx = rclpy, timeout, h.context
-        self.node = rclpy.create_node(f"mwip_ctl_{next(_names)}", namespace=namespace or None, context=h.context,
-                                      start_parameter_services=False)
-        self.ex = h.executor
-        self.ex.add_node(self.node)
-
-    def close(self) -> None:   # the harness's executor and context go on
-        self.ex.remove_node(self.node)
-        self.node.destroy_node()
-
-
 @pytest.fixture
-def run_ctl(monkeypatch, capsys):
-    """``run_ctl(h, *argv)``: ``mwip_ctl argv`` in this process against harness ``h``: (exit code, stdout, stderr)."""
-    def run(h, *argv):
-        monkeypatch.setattr(CTL, "Ros", lambda namespace, timeout: _PeerRos(h, namespace, timeout))
-        capsys.readouterr()
-        code = CTL.main([*argv])
-        out = capsys.readouterr()
-        return code, out.out, out.err
-    return run
+def run_ctl():
+    """``run_ctl(h, *argv)``: ``mwip_ctl argv`` in this process against harness ``h`` (nodeharness.run_ctl): (exit
+    code, stdout, stderr)."""
+    return nodeharness.run_ctl
 
 
 def _plant(*rules):
