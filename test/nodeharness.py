@@ -324,6 +324,12 @@ class Wire:
             if h is not source and h.node is not None and h.subscriptions(topic):
                 self.queue.append((h, topic, msg))
 
+    def cut(self, h: NodeHarness) -> None:
+        """``h`` hears nothing more, and what was queued for it is dropped: a node killed (its publishers may stay in
+        the others' graphs, as a killed process's do for a while)."""
+        self.harnesses.remove(h)
+        self.queue = deque(item for item in self.queue if item[0] is not h)
+
     def pump(self, until: Optional[Callable[[], bool]] = None, limit: int = 10_000_000) -> bool:
         """Deliver what is queued, and what those deliveries publish, until the queue is empty, ``until()`` holds
         (looked at after each delivery) or ``limit`` messages were delivered; whether ``until()`` holds (without
