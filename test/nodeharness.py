@@ -11,9 +11,11 @@
         wire = Wire(plant, ctl)                            # what one publishes is fed to the other
         plant.node._start("test"); wire.pump()             # a lockstep loop, in this process
 
-A :meth:`NodeHarness.peer` is a plain node in the harness's own context: what it publishes, serves or calls reaches
-the node under test through the middleware inside that one participant (no discovery), as :meth:`NodeHarness.spin`
-spins them together (a late joiner of a latched topic, a command-line tool's node).
+:class:`Loop` wires the plant and the answering stages its parameters configure (the lockstep loop in this
+process, a state nobody answered resent at once). A :meth:`NodeHarness.peer` is a plain node in the harness's own
+context: what it publishes, serves or calls reaches the node under test through the middleware inside that one
+participant (no discovery), as :meth:`NodeHarness.spin` spins them together (a late joiner of a latched topic, a
+best-effort publisher; :func:`run_ctl`: ``mwip_ctl`` with its node there).
 
 The node goes through the start-up a process makes (:func:`mwip_ros.nodes.runtime.process.init_context` and
 :func:`~mwip_ros.nodes.runtime.process.build_node`: the command line, the law plug-ins, rclpy's patches, a private
