@@ -162,6 +162,8 @@ def test_the_realtime_runner_finishes_every_period_due_and_stamps_each_state_wit
     assert all((s - t0) % H_NS == 0 for s in node.published)  # on one grid
     rt = runner.summary()["realtime"]
     assert rt["periods_due"] == node.k + 1 and rt["missed_deadlines"] == node.k + 1 - len(node.published)
+    diag = runner.diagnostic_values()   # /diagnostics: the latency of the last 400 wakes past the grid
+    assert 0.0 < float(diag["loop_latency_p99_ms"]) < 5.0 and diag["missed_deadlines"] == rt["missed_deadlines"]
 
 
 def test_a_command_is_stale_at_the_deadline_of_the_period_it_would_act_over():
