@@ -1,4 +1,5 @@
 """mwip_ctl, the live actions of docs/graph.md without a ros2 CLI, against a realtime graph as a user runs them."""
+import json
 import signal
 import subprocess
 import sys
@@ -7,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from graphproc import Graph
+from graphproc import REPO, Graph
 
 MWIP_CTL = Path(sys.executable).with_name("mwip_ctl")   # the console script setup.py installs
 
@@ -123,6 +124,42 @@ def test_estop_holds_the_level_reset_is_refused_until_release_then_disable_and_e
                                   "lockstep_timeout_s:=0.5", "-p", "watchdog_s:=1000.0", "-p", "exit_on_fall:=false")
         assert graph.plant.wait_for_output("starting realtime run", 60), graph.plant.output()[-2000:]
         _estop_sequence(graph)
+
+
+@pytest.mark.graph
+def test_the_estop_sequence_on_the_drive_graph_the_robot_falls_then_reset_picks_it_up(tmp_path):
+    """docs/real-robot.md's sequence on the drive graph (config/drive.yaml: MuJoCo, motion from cmd_vel,
+    exit_on_fall: false): the e-stop cuts the torque and the balancing robot falls, the plant stays up (before,
+    exit_on_fall ended the run and every later call found no node); reset is refused while the e-stop is asserted;
+    released, reset clears the fault and puts the robot back at its initial state, and the loop balances it."""
+    pytest.importorskip("mujoco")
+    files = [REPO / "config" / "paper.yaml", REPO / "config" / "drive.yaml"]
+    with Graph(tmp_path) as graph:
+        obs = graph.start("disturbance_observer", "-p", "mode:=realtime", params=files)
+        ctl_node = graph.start("dscndo_controller", "-p", "mode:=realtime", params=files)
+        graph.plant = plant = graph.start("plant_sim", "-p", "mode:=realtime", "-p", "duration_s:=0.0", "-p",
+                                          f"summary_json:={tmp_path / 'summary.json'}", params=files)
+        for p, text in ((obs, "ready"), (ctl_node, "ready"), (plant, "starting realtime run")):
+            assert p.wait_for_output(text, 60), p.output()[-2000:]
+        r = ctl(graph, "estop")
+        assert r.returncode == 0, (r.stdout, r.stderr)
+        assert plant.wait_for_output("-> fault (emergency_stop", 10), plant.output()[-2000:]
+        assert plant.wait_for_output("FALLEN at t = ", 20), plant.output()[-2000:]   # no torque: it falls
+        assert "the robot lies where it fell" in plant.output() and plant.poll() is None
+        r = ctl(graph, "reset")
+        assert r.returncode == 1 and "emergency stop is still asserted" in r.stderr, (r.stdout, r.stderr)
+        r = ctl(graph, "estop", "--release")
+        assert r.returncode == 0, (r.stdout, r.stderr)
+        assert plant.wait_for_output("emergency stop released", 10), plant.output()[-2000:]
+        r = ctl(graph, "reset")
+        assert r.returncode == 0 and "fault cleared (emergency_stop" in r.stdout, (r.stdout, r.stderr)
+        assert plant.wait_for_output("reset #2", 10), plant.output()[-2000:]   # (#1: the refused call's, no torque)
+        time.sleep(3.0)   # the loop catches the robot from its initial tilt (it recovers within 2 s)
+        assert plant.poll() is None, plant.output()[-2000:]
+        plant.stop(signal.SIGINT, timeout=30)
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["resets"] == 2 and not summary["fallen"] and summary["driver_state"] == "enabled", summary
+    assert summary["metrics"]["theta_b_max_abs"] < 0.2, summary["metrics"]   # upright again after the reset
 
 
 def _estop_sequence(graph):
