@@ -52,6 +52,19 @@ def test_param_set_converts_a_whole_number_for_a_double_get_reads_it_back_and_th
 
 
 @pytest.mark.graph
+def test_param_set_prints_the_nodes_warning_where_the_user_looks(graph):
+    """k1 = 7 breaks Theorem 2 (a3 = -0.7167): the warning was only in the controller's log; mwip_ctl prints it
+    (stderr, exit 0: the change is made), and nothing for gains that keep it."""
+    r = ctl(graph, "param", "set", "dscndo_controller", "k1", "7")
+    assert r.returncode == 0 and r.stdout.strip() == "dscndo_controller: k1 = 7.0", (r.stdout, r.stderr)
+    line, = r.stderr.strip().splitlines()
+    assert line.startswith("dscndo_controller: warning: gains break Theorem 2") and "a3 = -0.7167" in line, line
+    assert graph.ctl.wait_for_output("a3 = -0.7167", 10)   # the node's own log says the same
+    r = ctl(graph, "param", "set", "dscndo_controller", "k1", "6")   # the paper's: a3 = 0.7833 > 0
+    assert r.returncode == 0 and r.stderr == "", (r.stdout, r.stderr)
+
+
+@pytest.mark.graph
 def test_a_value_the_schema_refuses_exits_1_with_the_nodes_reason_and_changes_nothing(graph):
     before = ctl(graph, "param", "get", "dscndo_controller", "k1").stdout
     # k1 must be > 0 (ParamSpec _positive): 0 is sent as the double 0.0, so the refusal is the range, not the type
