@@ -4,9 +4,10 @@ Period k is due at ``t_0 + k h`` (docs/graph.md, "Modes": a realtime plant stamp
 wakes when its timer fires; :meth:`Schedule.wake` says which period is due at that instant, ``k = floor((t - t_0) /
 h)``, and how many periods became due since the last wake.  A wake that comes late does not move the grid: the next
 period is still due at ``t_0 + (k + 1) h`` (no sliding), and the periods whose deadline passed while the loop was
-away are *missed*: their states were never published on time; the loop that keeps the wall clock's schedule still
-runs them (a plant catches up, integrating them with the command it holds), so after T seconds of wall time it has
-run ``floor(T / h)`` periods and its newest stamp is within one period of the clock, however it was scheduled.
+away are *missed*: their states were never published on time.  A simulated plant still runs them (it catches up,
+integrating them with the command it holds, as the robot's physics goes on), so after T seconds of wall time it has
+run ``floor(T / h)`` periods and its newest stamp is within one period of the clock, however it was scheduled; a
+robot's driver, which can read its devices only now, runs the newest period (:attr:`Wake.k`) and counts the missed.
 
 What one wake measures (:class:`Wake`): its latency, ``t - (t_0 + k h)``, the time from the deadline to the start of
 the period's work (the loop's jitter; in ``[0, h)`` by construction), and the periods it missed.  :class:`Schedule`
