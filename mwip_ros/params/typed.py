@@ -141,9 +141,16 @@ def design_warnings(node: str, v: Mapping[str, Any], changed: Optional[Iterable[
         nominal, h = physical(v, "nominal"), period(v)
         plain = [law for law in (laws.lookup(f, False) for f in laws.families()) if law is not None]
         in_use = touched is not None and bool(touched & {"law", "use_observer"})   # the law switched to
-        return [w for law in plain if laws.unavailable(law) is None
-                and (touched is None or touched & set(law.param_keys) or (in_use and law.family == v.get("law")))
-                for w in law.from_params(v, nominal, h).warnings()]
+        out = []
+        for law in plain:
+            if laws.unavailable(law) is not None or not (touched is None or touched & set(law.param_keys)
+                                                         or (in_use and law.family == v.get("law"))):
+                continue
+            try:
+                out += law.from_params(v, nominal, h).warnings()
+            except (KeyError, ArithmeticError, ValueError):   # no design from these values: the node refuses them
+                continue
+        return out
     if node == "disturbance_observer" and (touched is None or any(k == "X" or k.startswith("nominal.")
                                                                    for k in touched)):
         return observer_warnings(v)
