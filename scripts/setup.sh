@@ -83,5 +83,11 @@ if [ "${#missing[@]}" -gt 0 ]; then
     exit 1
 fi
 
+# numba compiles each law's batch loop the first time a sweep runs it (15 to 40 s a loop on 2 cores): compile them
+# now, while set-up is waited for anyway, so the first sweep of a fresh clone runs at the speed of the next
+# (mwip_ros/sweep/warm.py; cached under mwip_ros/ until the code changes). A failure only warns: a sweep compiles
+# what is missing at its start, and says so.
+"$VENV/bin/python" -m mwip_ros.sweep.warm || echo "setup: warning: the batch loop was not compiled ahead" >&2
+
 echo "$WANT" > "$STAMP"
 echo "setup: done"

@@ -239,27 +239,42 @@ class Period:
             raise LawError.of(self.law.name, k * self.side.cfg.h, exc) from exc
         return u_law, tau_hat, internals, x_m
 
+    def sense_decide(self):
+        """Stages ``sensors`` (with a yaw stage, the gyro's yaw rate too), ``estimator``, ``observer`` and ``law`` of
+        period k: (the measurement, the measured yaw rate or None, u_k, tau_hat_k, the law's internals, the state the
+        loop believes).  The env (:class:`mwip_ros.envs.MwipEnv`) adds its action to u_k before :meth:`actuate`."""
+        side = self.side
+        measured, u_m = side.sense()
+        dpsi = side.sense_yaw_rate() if self.yaw is not None else None   # the yaw stage's input (theory 6.13)
+        u_law, tau_hat, internals, x_m = self.decide(measured, u_m, side.plant.k)
+        return measured, dpsi, u_law, tau_hat, internals, x_m
+
+    def actuate(self, u_law: float, dpsi: Optional[float], internals: dict):
+        """Stages ``yaw`` (a spatial plant with motion: u_psi from psi'* and the measured yaw rate ``dpsi``, the
+        wheels' torques, :func:`.yaw.wheel_torques`) and ``drive`` for the command ``u_law``: (the torque that acts
+        over [t_k, t_k+1), the true tau_d at t_k, the internals with the yaw stage's signals)."""
+        wheels = None
+        if self.yaw is not None:   # stage yaw (after the law): u_psi from psi'* and the gyro's yaw rate
+            dpsi_ref = self.motion.ref.dpsi
+            u_psi = self.yaw.step(dpsi_ref, dpsi, u_law)
+            internals = {**internals, "dpsi_ref": dpsi_ref, "u_psi": u_psi, "gyro_z": dpsi}
+            wheels = wheel_torques(u_law, u_psi, 0.0)   # clipped per wheel in the drive stage
+        u, tau_d = self.side.act(u_law, wheels=wheels)
+        return u, tau_d, internals
+
     def run(self, table) -> bool:
-        """Period k up to the integration: sense, decide, act, and row k into ``table`` (true state, the torque
-        that acts, tau_hat, the true tau_d, internals; raw: the sample and the estimate).  True when the run fails
-        (:attr:`failure` says when and why; the period ends there): the state is not a number (diverged: no row),
-        the robot has fallen, or the law's command was refused; else :meth:`advance` integrates it."""
+        """Period k up to the integration: sense, decide, act (:meth:`sense_decide`, :meth:`actuate`), and row k
+        into ``table`` (true state, the torque that acts, tau_hat, the true tau_d, internals; raw: the sample and the
+        estimate).  True when the run fails (:attr:`failure` says when and why; the period ends there): the state is
+        not a number (diverged: no row), the robot has fallen, or the law's command was refused; else
+        :meth:`advance` integrates it."""
         side = self.side
         p = side.plant
         if not finite_state(p.x):   # diverged: the state is not a number (no row: nothing to sense or record)
             self.failure = (p.t, fall_text(p.t, p.x, p.cfg.fall_angle), FAILURES[DIVERGED])
             return True
-        measured, u_m = side.sense()
-        wheels = None
-        if self.yaw is not None:   # stage yaw (after the law): u_psi from psi'* and the gyro's yaw rate
-            dpsi = side.sense_yaw_rate()
-        u_law, tau_hat, internals, x_m = self.decide(measured, u_m, p.k)
-        if self.yaw is not None:
-            dpsi_ref = self.motion.ref.dpsi
-            u_psi = self.yaw.step(dpsi_ref, dpsi, u_law)
-            internals = {**internals, "dpsi_ref": dpsi_ref, "u_psi": u_psi, "gyro_z": dpsi}
-            wheels = wheel_torques(u_law, u_psi, 0.0)   # clipped per wheel in the drive stage
-        u, tau_d = side.act(u_law, wheels=wheels)
+        measured, dpsi, u_law, tau_hat, internals, x_m = self.sense_decide()
+        u, tau_d, internals = self.actuate(u_law, dpsi, internals)
         table.append(p.t, p.x, u, tau_hat, tau_d, internals, (*measured, *x_m) if self.estimator else (), p.pose)
         self.u = u
         if p.fallen:

@@ -501,9 +501,14 @@ def defaults_for(node: str) -> Dict[str, Any]:
 
 
 def spelling_hint(name: str, names: Iterable[str]) -> str:
-    """' (did you mean 'x'?)' for the closest of ``names``, else ''."""
+    """' (did you mean 'x'?)' for the closest of ``names``, else ''; when ``names`` maps each name to the section
+    it goes under (a string), ' (did you mean 'x' under section:?)'."""
     close = difflib.get_close_matches(name, list(names), n=1)
-    return f" (did you mean '{close[0]}'?)" if close else ""
+    if not close:
+        return ""
+    where = names.get(close[0]) if isinstance(names, Mapping) else None
+    return (f" (did you mean '{close[0]}' under {where}:?)" if isinstance(where, str)
+            else f" (did you mean '{close[0]}'?)")
 
 
 def _check_designs(values: Mapping[str, Any], nominal, source: Optional[str]) -> None:

@@ -9,6 +9,7 @@
   set and read back by two processes, a reset that the observer and the controller follow, a push the plant takes,
   and Ctrl-C ending a push with a zero wrench and exit 130.
 """
+import json
 import signal
 import subprocess
 import sys
@@ -18,7 +19,7 @@ from pathlib import Path
 import pytest
 
 import nodeharness
-from graphproc import Graph
+from graphproc import REPO, Graph
 from nodeharness import NodeHarness, node_class
 from mwip_ros.cli import ctl as CTL
 from mwip_ros.msgs import layouts as L
@@ -50,6 +51,20 @@ def test_param_set_converts_a_whole_number_for_a_double_get_reads_it_back_and_th
         assert code == 0 and {"k1", "law", "use_observer", "lqr.Q"} <= set(out.split()), out
         code, out, err = run_ctl(h, "param", "get", "dscndo_controller", "k7")
         assert code == 1 and "dscndo_controller has no parameter 'k7'" in err and len(err.splitlines()) == 1, err
+
+
+@pytest.mark.node
+def test_param_set_prints_the_nodes_warning_where_the_user_looks(run_ctl):
+    """k1 = 7 breaks Theorem 2 (a3 = -0.7167): the warning was only in the controller's log; mwip_ctl prints it
+    (stderr, exit 0: the change is made), and nothing for gains that keep it."""
+    with NodeHarness(node_class("dscndo_controller")) as h:
+        code, out, err = run_ctl(h, "param", "set", "dscndo_controller", "k1", "7")
+        assert code == 0 and out.strip() == "dscndo_controller: k1 = 7.0", (out, err)
+        line, = err.strip().splitlines()
+        assert line.startswith("dscndo_controller: warning: gains break Theorem 2") and "a3 = -0.7167" in line, line
+        assert "a3 = -0.7167" in h.logs()   # the node's own log says the same
+        code, out, err = run_ctl(h, "param", "set", "dscndo_controller", "k1", "6")   # the paper's: a3 = 0.7833 > 0
+        assert code == 0 and err == "", (out, err)
 
 
 @pytest.mark.node
@@ -251,3 +266,39 @@ def test_ctrl_c_ends_a_push_with_a_zero_wrench_and_exits_130_quietly(graph):
     while graph.plant.output().count("external wrench cleared") == cleared and time.monotonic() < end:
         time.sleep(0.05)
     assert graph.plant.output().count("external wrench cleared") > cleared
+
+
+@pytest.mark.graph
+def test_the_estop_sequence_on_the_drive_graph_the_robot_falls_then_reset_picks_it_up(tmp_path):
+    """docs/real-robot.md's sequence on the drive graph (config/drive.yaml: MuJoCo, motion from cmd_vel,
+    exit_on_fall: false): the e-stop cuts the torque and the balancing robot falls, the plant stays up (before,
+    exit_on_fall ended the run and every later call found no node); reset is refused while the e-stop is asserted;
+    released, reset clears the fault and puts the robot back at its initial state, and the loop balances it."""
+    pytest.importorskip("mujoco")
+    files = [REPO / "config" / "paper.yaml", REPO / "config" / "drive.yaml"]
+    with Graph(tmp_path) as graph:
+        obs = graph.start("disturbance_observer", "-p", "mode:=realtime", params=files)
+        ctl_node = graph.start("dscndo_controller", "-p", "mode:=realtime", params=files)
+        plant = graph.start("plant_sim", "-p", "mode:=realtime", "-p", "duration_s:=0.0", "-p",
+                            f"summary_json:={tmp_path / 'summary.json'}", params=files)
+        for p, text in ((obs, "ready"), (ctl_node, "ready"), (plant, "starting realtime run")):
+            assert p.wait_for_output(text, 60), p.output()[-2000:]
+        r = ctl(graph, "estop")
+        assert r.returncode == 0, (r.stdout, r.stderr)
+        assert plant.wait_for_output("-> fault (emergency_stop", 10), plant.output()[-2000:]
+        assert plant.wait_for_output("FALLEN at t = ", 20), plant.output()[-2000:]   # no torque: it falls
+        assert "the robot lies where it fell" in plant.output() and plant.poll() is None
+        r = ctl(graph, "reset")
+        assert r.returncode == 1 and "emergency stop is still asserted" in r.stderr, (r.stdout, r.stderr)
+        r = ctl(graph, "estop", "--release")
+        assert r.returncode == 0, (r.stdout, r.stderr)
+        assert plant.wait_for_output("emergency stop released", 10), plant.output()[-2000:]
+        r = ctl(graph, "reset")
+        assert r.returncode == 0 and "fault cleared (emergency_stop" in r.stdout, (r.stdout, r.stderr)
+        assert plant.wait_for_output("reset #2", 10), plant.output()[-2000:]   # (#1: the refused call's, no torque)
+        time.sleep(3.0)   # 3 s of the loop after the reset: what is observed is that nothing ends it (it recovers in 2)
+        assert plant.poll() is None, plant.output()[-2000:]
+        plant.stop(signal.SIGINT, timeout=30)
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["resets"] == 2 and not summary["fallen"] and summary["driver_state"] == "enabled", summary
+    assert summary["metrics"]["theta_b_max_abs"] < 0.2, summary["metrics"]   # upright again after the reset

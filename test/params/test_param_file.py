@@ -155,3 +155,20 @@ def test_every_spec_default_passes_its_own_check():
     for node in P.NODE_SPECS:
         for name, spec in P.specs_for(node).items():
             spec.validate(spec.default)
+
+
+@pytest.mark.parametrize("doc, said", [
+    ({"/**": {"ros__parameters": {"control_rate_hertz": 100.0}}},
+     "unknown parameter in the shared /** section (did you mean 'control_rate_hz'?)"),
+    ({"/**": {"ros__parameters": {"k_1": 7.0}}},   # a node's key misspelt in the shared section: its node named
+     "unknown parameter in the shared /** section (did you mean 'k1' under dscndo_controller:?)"),
+    ({"dscndo_controller": {"ros__parameter": {"k1": 7.0}}},
+     "exactly 'ros__parameters:': got 'ros__parameter' (did you mean 'ros__parameters'?)"),
+    ({"dscndo_controller": {"ros__parameters": {"k_1": 7.0}}},
+     "unknown parameter for dscndo_controller (did you mean 'k1'?)"),
+])
+def test_a_misspelt_key_anywhere_in_a_file_gets_a_did_you_mean(doc, said):
+    """The same "did you mean" as a sweep spec's (params.schema.spelling_hint); the shared section had none."""
+    with pytest.raises(P.ParamError) as err:
+        P.parse_param_dict(doc, "typo.yaml")
+    assert said in str(err.value), err.value
