@@ -234,7 +234,7 @@ class Period:
         x_m = measured if self.estimator is None else self.estimator.step(measured)
         tau_hat = self.observer.update(x_m, u_m)
         try:
-            u_law, internals = command(self.law, x_m, tau_hat, self.excitation, k, self.motion)
+            u_law, internals = command(self.law, x_m, tau_hat, self.excitation, k, self.motion, u_m)
         except Exception as exc:   # noqa: BLE001 - a law's own error (a plug-in's bug), named as the law's
             raise LawError.of(self.law.name, k * self.side.cfg.h, exc) from exc
         return u_law, tau_hat, internals, x_m
@@ -295,16 +295,28 @@ def fall_text(t: float, x, fall_angle: float) -> str:
     return f"FELL at t = {t:.3f} s: |theta_b| = {abs(x[1]):.4f} > fall_angle {fall_angle:g}"
 
 
-def command(law, x, tau_hat, excitation, k: int, motion=None):
+def command(law, x, tau_hat, excitation, k: int, motion=None, u_m: float = 0.0):
     """Stage ``law``: the references of period ``k`` handed to the law (``motion``, a :class:`.motion.Shaper`;
     None: none, the law regulates as in the paper), the law's command for the state ``x`` and ``tau_hat``, plus the
     excitation of period ``k`` (:mod:`.excitation`; None: none) — the command sent, what the trajectory's ``u``
-    records; the excitation and the references (v_ref, theta_w_ref) are in the internals.  The controller node
-    calls this too, so the offline loop and the graph take the references in the same place of the period."""
+    records; the excitation and the references (v_ref, theta_w_ref) are in the internals.  ``u_m``: the torque that
+    acted over the period before x (the hold's estimate, theory 6.14).  While the references hold (v* = 0, the
+    shaper's :attr:`~.motion.Shaper.hold`) the law regulates about the hold's equilibrium: it sees theta_b - theta_eq
+    and tau_hat - tau_bar, and -tau_bar_1 is added to its command (docs/theory.md 6.14).  The controller node calls
+    this too, so the offline loop and the graph take the references in the same place of the period."""
+    hold = None
     if motion is not None:
-        ref = motion.reference(k, x[0])   # docs/theory.md 6.11: theta_w*(0) is the first state's wheel angle
+        ref = motion.reference(k, x=x, u_m=u_m)   # docs/theory.md 6.11: theta_w*(0) is the first state's wheel angle
         law.track(ref)
-    u, internals = law.step(x, tau_hat)
+        hold = motion.hold
+    if hold is None:
+        u, internals = law.step(x, tau_hat)
+    else:   # the hold's equilibrium (docs/theory.md 6.14)
+        shifted = type(x)(x[0], x[1] - hold.lean, x[2], x[3])
+        u, internals = law.step(shifted, None if tau_hat is None else (tau_hat[0] - hold.tau1, tau_hat[1] - hold.tau2))
+        u = u + hold.torque
+        if isinstance(internals, dict) and "u" in internals:
+            internals = {**internals, "u": u}
     if motion is not None and isinstance(internals, dict):
         internals = {**internals, "v_ref": ref.v, "theta_w_ref": ref.theta_w}
     if excitation is not None:
