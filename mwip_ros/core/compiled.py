@@ -412,7 +412,8 @@ def _loop(k0, k1, n_steps, h, substeps, first_w, n_window, counts, delay, act_de
                 if lanes_law:   # the law (its pure_step; tracking: core.compiled_motion), the observer term (ndo)
                     if motion:   # with the observer term and the hold (core.loop.command, docs/theory.md 6.14)
                         ul, uol, sl = law_track_lanes(params_lanes(Pg), pn_lanes, h, xm_lanes, sg, xmg, live, width,
-                                                      i0, k, MO, PT, PV, NP, MS, rg, umg, ng, tl)
+                                                      i0, k, MO, PT, PV, NP, MS, rg, ng, thg, tl, observer_law,
+                                                      use_obs)
                         store(ug, 0, ul)
                         store(sg, 0, sl)
                         if observer_law:
@@ -455,8 +456,8 @@ def _loop(k0, k1, n_steps, h, substeps, first_w, n_window, counts, delay, act_de
                     s[i] = sg[lane]
                 else:
                     if NP[i] >= 0:   # period k's references and the law tracking them, the observer term with them
-                        u, s[i] = law_track(P[i], pn, h, xm, s[i], k, MO[i], PT[i], PV[i], NP[i], MS[i], umg[lane],
-                                            th, observer_law and use_obs[i])   # (core.compiled_motion)
+                        u, s[i] = law_track(P[i], pn, h, xm, s[i], k, MO[i], PT[i], PV[i], NP[i], MS[i], th,
+                                            observer_law and use_obs[i])   # (core.compiled_motion)
                     else:
                         u, s[i], _ = law_step(P[i], pn, h, xm, s[i], k == 0)
                         if observer_law and use_obs[i]:   # core.laws.ndo.WithObserver.step

@@ -234,7 +234,7 @@ class Period:
         x_m = measured if self.estimator is None else self.estimator.step(measured)
         tau_hat = self.observer.update(x_m, u_m)
         try:
-            u_law, internals = command(self.law, x_m, tau_hat, self.excitation, k, self.motion, u_m)
+            u_law, internals = command(self.law, x_m, tau_hat, self.excitation, k, self.motion)
         except Exception as exc:   # noqa: BLE001 - a law's own error (a plug-in's bug), named as the law's
             raise LawError.of(self.law.name, k * self.side.cfg.h, exc) from exc
         return u_law, tau_hat, internals, x_m
@@ -295,18 +295,18 @@ def fall_text(t: float, x, fall_angle: float) -> str:
     return f"FELL at t = {t:.3f} s: |theta_b| = {abs(x[1]):.4f} > fall_angle {fall_angle:g}"
 
 
-def command(law, x, tau_hat, excitation, k: int, motion=None, u_m: float = 0.0):
+def command(law, x, tau_hat, excitation, k: int, motion=None):
     """Stage ``law``: the references of period ``k`` handed to the law (``motion``, a :class:`.motion.Shaper`;
     None: none, the law regulates as in the paper), the law's command for the state ``x`` and ``tau_hat``, plus the
     excitation of period ``k`` (:mod:`.excitation`; None: none) — the command sent, what the trajectory's ``u``
-    records; the excitation and the references (v_ref, theta_w_ref) are in the internals.  ``u_m``: the torque that
-    acted over the period before x (the hold's estimate, theory 6.14).  While the references hold (v* = 0, the
-    shaper's :attr:`~.motion.Shaper.hold`) the law regulates about the hold's equilibrium: it sees theta_b - theta_eq
-    and tau_hat - tau_bar, and -tau_bar_1 is added to its command (docs/theory.md 6.14).  The controller node calls
-    this too, so the offline loop and the graph take the references in the same place of the period."""
+    records; the excitation and the references (v_ref, theta_w_ref) are in the internals.  While a law with the
+    observer term holds (the shaper's :attr:`~.motion.Shaper.hold`, docs/theory.md 6.14) it regulates about the
+    hold's equilibrium: it sees theta_b - theta_eq and tau_hat - tau_bar, and -tau_bar_1 is added to its command.
+    The controller node calls this too, so the offline loop and the graph take the references in the same place of
+    the period."""
     hold = None
-    if motion is not None:
-        ref = motion.reference(k, x=x, u_m=u_m)   # docs/theory.md 6.11: theta_w*(0) is the first state's wheel angle
+    if motion is not None:   # docs/theory.md 6.11: theta_w*(0) is the first state's wheel angle
+        ref = motion.reference(k, x=x, tau_hat=tau_hat if law.observer else None)
         law.track(ref)
         hold = motion.hold
     if hold is None:

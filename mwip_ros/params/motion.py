@@ -65,7 +65,7 @@ def specs() -> List[Any]:
                   "long after v* reaches 0 (and from the start) the wheel's reference angle moves to the wheel's "
                   "angle whenever its rate reaches zero, then stays (docs/theory.md 6.14); 0 = it stays where the "
                   "references stopped", lo=0.0, hi=3600.0, unit="s"),
-        ParamSpec("motion.hold_filter_s", "double", 0.3, "motion: the hold's equilibrium: the time constant of "
+        ParamSpec("motion.hold_filter_s", "double", 1.0, "motion: the hold's equilibrium: the time constant of "
                   "the filter of the constant disturbance the law regulates about while v* = 0 (the lean and "
                   "torque that hold the robot on a slope; docs/theory.md 6.14); 0 = none, the law's own",
                   lo=0.0, hi=3600.0, unit="s"),
@@ -103,7 +103,7 @@ def motion(v: Mapping[str, Any]):
                         profile=tuple(zip(prof[0::2], prof[1::2])), r=v["nominal.r"],
                         yaw_profile=_pairs(v.get("motion.yaw_profile", ())),
                         hold_settle_s=v.get("motion.hold_settle_s", 5.0),
-                        hold_filter_s=v.get("motion.hold_filter_s", 0.3))
+                        hold_filter_s=v.get("motion.hold_filter_s", 1.0))
 
 
 def _pairs(flat):

@@ -81,7 +81,7 @@ class DscndoController(Node, GracefulNodeMixin):
         exc = P.typed.excitation(self.v)   # identification's known torque (core.excitation), added to the command
         self.excitation = Excitation(exc, self.h) if exc is not None else None
         self.stamp0 = None    # the stamp of the run's first state: period k of the excitation counts from it
-        self.states = {}      # stamp -> (State, the torque of the period before it) waiting for an estimate
+        self.states = {}      # stamp -> State waiting for an estimate
         self.estimates = {}   # stamp -> (tau_hat1, tau_hat2) waiting for a state
         self.last_answered = None
         self.count = 0
@@ -167,7 +167,7 @@ class DscndoController(Node, GracefulNodeMixin):
         taken = self.input.take(data)
         if taken is None:
             return
-        verdict, stamp, x, u_prev, _last = taken
+        verdict, stamp, x, _u_prev, _last = taken
         if verdict == REPEAT:
             return  # a resent state: one command per state
         if verdict == RESTART:
@@ -191,7 +191,7 @@ class DscndoController(Node, GracefulNodeMixin):
                 return
             if w is not None:
                 self.yaw_rates[stamp] = w
-        self.states[stamp] = (x, u_prev)
+        self.states[stamp] = x
         self._try(stamp)
 
     def _on_estimate(self, data: bytes) -> None:
@@ -219,12 +219,12 @@ class DscndoController(Node, GracefulNodeMixin):
         if ctrl.observer and tau_hat is None:
             self._trim()
             return  # wait for the estimate of this very state
-        x, u_m = self.states.pop(stamp)   # u_m: the torque that acted over the period before x (the hold's)
+        x = self.states.pop(stamp)
         self.estimates.pop(stamp, None)
         before = ctrl.snapshot()
         k = round((stamp - self.stamp0) / (self.h * 1e9)) if self.stamp0 is not None else 0
         try:
-            u, internals = command(ctrl, x, tau_hat, self.excitation, k, self.motion, u_m)   # core.loop: the law stage
+            u, internals = command(ctrl, x, tau_hat, self.excitation, k, self.motion)   # core.loop: the law stage
             ok = math.isfinite(u) and ctrl.finite()
         except (ArithmeticError, ValueError):
             ok = False
