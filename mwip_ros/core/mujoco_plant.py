@@ -66,8 +66,8 @@ class MujocoConfig:
 
 
 _D0, _DMAX = 0.99, 0.999   # the contact's impedance (solimp) at rest and deep in
-FRICTION_TIMECONST = 1.0   # s: the friction rows' reference (solreffriction) in MuJoCo's main solve (theory 6.10)
-NOSLIP_ITERATIONS = 3      # MuJoCo's NoSlip pass: Coulomb's friction without the soft solve's slip ...
+FRICTION_TIMECONST = 0.2   # s: the friction rows' reference (solreffriction) in MuJoCo's main solve (theory 6.10)
+NOSLIP_ITERATIONS = 3      # MuJoCo's NoSlip pass: Coulomb's cone on the friction forces ...
 NOSLIP_TOLERANCE = 1e-12   # ... all of its sweeps (the two wheels, solved one after the other, agree to 6e-9 rad)
 
 

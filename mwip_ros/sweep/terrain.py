@@ -120,8 +120,7 @@ def slope_run(values, law: str, deg: float, hold: bool) -> Outcome:
         return Outcome(True, float((c["x"][-1] - c["x"][0]) / math.cos(a)))
     omega = v["tau_ext1.omega"]
     period = 2.0 * math.pi / omega if omega > 0.0 else 1.0
-    drift, band = hold_drift(c["t"], (c["x"] - c["x"][0]) / math.cos(a), min(period, 0.5 * (HOLD_WINDOW[1] -
-                                                                                         HOLD_WINDOW[0])))
+    drift, band = hold_drift(c["t"], (c["x"] - c["x"][0]) / math.cos(a), min(period, HOLD_WINDOW[1] - HOLD_WINDOW[0]))
     return Outcome(bool(abs(drift) < HOLD_DRIFT), drift, band)
 
 
