@@ -29,7 +29,8 @@ The hold (docs/theory.md 6.14), from the measured state x_k and the observer's e
 
 No ROS here: the controller node and the offline loop (:class:`.loop.Period`) call the same :class:`Shaper`; the
 compiled batch (:mod:`.compiled_motion`) runs its speed step (:func:`profile_at`, :func:`speed_start`,
-:func:`speed_step`), compiled from this code.
+:func:`speed_step`) and the hold (:func:`anchor_step`, :func:`hold_estimate`, :func:`hold_weight`,
+:func:`hold_lean`), compiled from this code.
 """
 from __future__ import annotations
 

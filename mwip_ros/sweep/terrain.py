@@ -220,6 +220,11 @@ def _fmt(v, unit=""):
     return "-" if v is None else f"{v:g}{unit}"
 
 
+def _num(v: float, spec: str) -> str:
+    """``v`` formatted, or "falls" for the NaN of a run that fell (no number is shown from it)."""
+    return "falls" if math.isnan(v) else format(v, spec)
+
+
 def tables(laws: Sequence[str] = LAWS, realistic: bool = False, which: Sequence[str] = ("slope", "step",
            "friction", "push"), progress=None) -> Dict[str, Dict[str, object]]:
     """Per table and law, the scans' answers (module docstring)."""
@@ -250,7 +255,7 @@ def markdown(res: Dict[str, Dict[str, object]]) -> str:
     if res.get("slope"):
         lines += ["| law | balances up to [deg] | holds up to [deg] | drift over [5, 10] s on flat ground, holding [m] "
                   "| band over [5, 10] s [m] |", "|---|---|---|---|---|"]
-        lines += [f"| {law} | {_fmt(b)} | {_fmt(h)} | {d:.4f} | {w:.3f} |"
+        lines += [f"| {law} | {_fmt(b)} | {_fmt(h)} | {_num(d, '.4f')} | {_num(w, '.3f')} |"
                   for law, (b, h, d, w) in res["slope"].items()]
         lines.append("")
     if res.get("step"):

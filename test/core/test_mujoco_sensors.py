@@ -104,7 +104,7 @@ def test_the_yaw_gyro_is_mujocos_gyro_z_over_a_turn():
         files = [default_params_file(), Path(__file__).resolve().parents[2] / "config" / "motion.yaml"]
         values = dict(P.merged_values(P.load_param_files(files)), backend="mujoco", **{"sensors.model": "raw"},
                       **{"motion.profile": [0.0, 0.0], "motion.yaw_profile": [0.0, 0.0, 3.0, 0.0, 3.5, 0.5],
-                         "method": "kalman", "kalman.accel_noise_std": 1.0})   # config/square.yaml's, turning
+                         "method": "kalman"})
         run = simulate(P.closed_loop(values, controller="dscndo", duration=6.0))
     finally:
         mp.undo()

@@ -141,9 +141,9 @@ def test_with_raw_sensors_the_yaw_stage_runs_on_the_imus_z_gyro():
     from mwip_ros.core.sim import simulate
     files = [default_params_file(), default_params_file().parent / "sensors_raw_realistic.yaml",
              default_params_file().parent / "motion.yaml"]
-    v = dict(P.merged_values(P.load_param_files(files)), backend="mujoco", **{"kalman.accel_noise_std": 1.0},
+    v = dict(P.merged_values(P.load_param_files(files)), backend="mujoco",
              **{"motion.profile": [0.0, 0.0], "motion.yaw_profile": [0.0, 0.0, 3.0, 0.0, 3.5, 0.5]},
-             **{"mujoco.timestep": 0.001})   # at the default 5 ms this turn with raw sensors falls (4.8 s): theory 6.13
+             **{"mujoco.timestep": 0.005})   # the default step (until issue 47's contact this turn fell at it)
     run = simulate(P.closed_loop(v, controller="dscndo", duration=6.0))
     assert not run.fallen and "u_psi" in run.columns
     assert abs(run["gyro_z"][0] - 0.01) < 0.02   # the turn-on bias, within the noise (0.004) and the first rate
