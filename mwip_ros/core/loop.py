@@ -314,12 +314,24 @@ def command(law, x, tau_hat, excitation, k: int, motion=None):
     """Stage ``law``: the references of period ``k`` handed to the law (``motion``, a :class:`.motion.Shaper`;
     None: none, the law regulates as in the paper), the law's command for the state ``x`` and ``tau_hat``, plus the
     excitation of period ``k`` (:mod:`.excitation`; None: none) — the command sent, what the trajectory's ``u``
-    records; the excitation and the references (v_ref, theta_w_ref) are in the internals.  The controller node
-    calls this too, so the offline loop and the graph take the references in the same place of the period."""
-    if motion is not None:
-        ref = motion.reference(k, x[0])   # docs/theory.md 6.11: theta_w*(0) is the first state's wheel angle
+    records; the excitation and the references (v_ref, theta_w_ref) are in the internals.  While a law with the
+    observer term holds (the shaper's :attr:`~.motion.Shaper.hold`, docs/theory.md 6.14) it regulates about the
+    hold's equilibrium: it sees theta_b - theta_eq and tau_hat - tau_bar, and -tau_bar_1 is added to its command.
+    The controller node calls this too, so the offline loop and the graph take the references in the same place of
+    the period."""
+    hold = None
+    if motion is not None:   # docs/theory.md 6.11: theta_w*(0) is the first state's wheel angle
+        ref = motion.reference(k, x=x, tau_hat=tau_hat if law.observer else None)
         law.track(ref)
-    u, internals = law.step(x, tau_hat)
+        hold = motion.hold
+    if hold is None:
+        u, internals = law.step(x, tau_hat)
+    else:   # the hold's equilibrium (docs/theory.md 6.14)
+        shifted = type(x)(x[0], x[1] - hold.lean, x[2], x[3])
+        u, internals = law.step(shifted, None if tau_hat is None else (tau_hat[0] - hold.tau1, tau_hat[1] - hold.tau2))
+        u = u + hold.torque
+        if isinstance(internals, dict) and "u" in internals:
+            internals = {**internals, "u": u}
     if motion is not None and isinstance(internals, dict):
         internals = {**internals, "v_ref": ref.v, "theta_w_ref": ref.theta_w}
     if excitation is not None:

@@ -106,7 +106,7 @@ def make_period(loop: ClosedLoop, plant: Optional[PlantConfig] = None, law=None)
     h = pc.h
     estimator = loop.estimator.make(h, pc.nominal.r, pc.nominal.g) if pc.raw is not None else None
     excitation = Excitation(loop.excitation, h) if loop.excitation is not None else None
-    motion = Shaper(loop.motion, h) if loop.motion is not None else None
+    motion = Shaper(loop.motion, h, pc.nominal) if loop.motion is not None else None
     side = PlantSide(pc)
     # the yaw stage (theory 6.13): a spatial plant, its gyro's yaw rate (raw sensors: the IMU's z axis, 6.4)
     yaw = YawLoop(loop.yaw, h) if loop.yaw is not None and motion is not None and side.plant.spatial else None

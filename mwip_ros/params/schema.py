@@ -541,7 +541,8 @@ def _check_mujoco(values: Mapping[str, Any], source: Optional[str]) -> None:
         if v > rest:
             raise ParamError(key, f"{v:g} kg m^2 is more than the other two principal moments of the body together "
                                   f"({rest:g}); no rigid body has it", source)
-    width = values["actual.r"] / 5.0   # each wheel's cylinder is r / 5 wide (core.mujoco_plant.mjcf)
+    from mwip_ros.core.mujoco_plant import wheel_width
+    width = wheel_width(values["actual.r"])   # each wheel's cylinder is r / 5 wide (core.mujoco_plant.mjcf)
     if values["actual.track_width"] <= width:
         raise ParamError("actual.track_width", f"{values['actual.track_width']:g} m: the wheels (each "
                                                f"actual.r / 5 = {width:g} m wide) would overlap", source)

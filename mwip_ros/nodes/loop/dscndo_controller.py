@@ -96,7 +96,7 @@ class DscndoController(Node, GracefulNodeMixin):
                                 "controller")
         self.watch = PublisherWatch(self, ["joint_states", "disturbance_estimate"])
         mc = motion_config(self.v)   # docs/theory.md 6.11: None while motion.enabled is false (nothing changes)
-        self.motion = Shaper(mc, self.h) if mc is not None else None
+        self.motion = Shaper(mc, self.h, self.nominal) if mc is not None else None
         self.yaw = YawLoop(yaw_config(self.v), self.h) if mc is not None else None   # theory 6.13: with a yaw rate
         self.yaw_rates = {}   # stamp -> the gyro's yaw rate of that state (a spatial plant's joint_states)
         self.cmd_vel_sub = None
