@@ -63,8 +63,8 @@ def _parser() -> argparse.ArgumentParser:
                     help="a forward push of FORCE newtons on the body from T for DURATION seconds (PyBullet)")
     ap.add_argument("--realtime", action="store_true", help="pace the periods to the wall clock (and report the "
                                                             "timing); without it a simulation runs in lockstep")
-    ap.add_argument("--window", type=float, nargs=2, default=(5.0, math.inf), metavar=("T0", "T1"),
-                    help="the metrics window [s] (default: 5 s to the end)")
+    ap.add_argument("--window", type=float, nargs=2, default=None, metavar=("T0", "T1"),
+                    help="the metrics window [s] (default: 5 s to the end; the second half of a run shorter than 10 s)")
     ap.add_argument("--csv", type=Path, default=None, metavar="FILE", help="write the trajectory (mwip_sim's columns)")
     ap.add_argument("--json", type=Path, default=None, metavar="FILE", help="write the numbers as JSON")
     ap.add_argument("--force", action="store_true", help="overwrite --csv / --json files that exist")
@@ -94,6 +94,12 @@ def main(argv=None) -> int:
     if not (math.isfinite(duration) and duration > 0.0):
         return _fail(f"--duration {duration:g}: give a positive number of seconds (plant_sim.duration_s 0, 'until "
                      f"stopped', is for the graph)")
+    if args.window is None:
+        window = (5.0, duration) if duration >= 10.0 else (duration / 2.0, duration)
+    else:
+        window = tuple(args.window)
+        if not (0.0 <= window[0] < window[1] <= duration):
+            return _fail(f"--window {window[0]:g} {window[1]:g}: give 0 <= T0 < T1 <= the run's {duration:g} s")
     if args.measure == "raw" and values.get("sensors.model") != "raw":
         return _fail("--measure raw needs sensors.model: raw and a state_estimator method in the parameter files "
                      "(config/upkie.yaml sets them)")
@@ -113,7 +119,6 @@ def main(argv=None) -> int:
         return _fail(str(exc))
     with backend:
         traj = run(backend, loop, duration, measure=args.measure, push=push, realtime=args.realtime)
-    window = (args.window[0], min(args.window[1], duration))
     s = summary(traj, window)
     s.update(robot=args.robot, controller=loop.controller, measure=args.measure, window=list(window),
              duration=duration, push=list(args.push) if args.push else None, timing=traj.record.get("timing"))
@@ -144,8 +149,9 @@ def _print(s: dict) -> None:
              f"  axle drift: largest {_num(s['max_drift'], '.4f')} m, final {_num(s['final_drift'], '.4f')} m"]
     if s.get("timing"):
         t = s["timing"]
-        lines.append(f"  realtime: {t['periods']} periods, {t['late']} late (> 1 period), lateness p99 "
-                     f"{t['lateness_p99_ms']:.3f} ms, worst {t['lateness_max_ms']:.3f} ms")
+        lines.append(f"  realtime: {t['periods']} periods in {t['wall_s']:.1f} s, {t['late']} late (> 1 period), "
+                     f"lateness p99 {t['lateness_p99_ms']:.3f} ms, worst {t['lateness_max_ms']:.3f} ms; a period's "
+                     f"work p99 {t['work_p99_ms']:.3f} ms, worst {t['work_max_ms']:.3f} ms")
     print("\n".join(lines))
 
 

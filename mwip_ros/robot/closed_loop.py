@@ -24,7 +24,8 @@ A run ends early when the robot falls (|theta_b| beyond ``fall_angle``: the true
 estimate), when a command is refused, or when the backend reports a fault; ``record`` says when and why, as
 :func:`mwip_ros.core.sim.simulate`'s does. ``realtime`` paces the periods to the wall clock (a simulated backend is
 stepped on demand otherwise: lockstep) and records the timing: the periods, the late ones (a write more than one
-period behind its slot), the lateness's 99th percentile and the worst.
+period behind its slot), the lateness's 99th percentile and the worst, and each period's own work (its stages, the
+write and the next read: a simulator's physics included) at the 99th percentile and the worst.
 """
 from __future__ import annotations
 
@@ -136,11 +137,12 @@ def run(backend: Backend, loop: ClosedLoop, duration: float, measure: str = "raw
     n_steps = int(round(duration / h))
     failure = None
     nan4 = (math.nan,) * 4
-    late, lateness = 0, []
+    late, lateness, work = 0, [], []
     obs = backend.reset()
     t0 = time.monotonic()
     pushing = False
     for k in range(n_steps + 1):
+        started = time.monotonic()
         if on_period is not None:
             on_period(k, obs)
         t = k * h
@@ -172,6 +174,7 @@ def run(backend: Backend, loop: ClosedLoop, duration: float, measure: str = "raw
             break
         if k == n_steps:
             break
+        decided = time.monotonic()
         if push is not None:
             on = push.t - 1e-9 <= t < push.t + push.duration - 1e-9
             if on != pushing:
@@ -186,7 +189,10 @@ def run(backend: Backend, loop: ClosedLoop, duration: float, measure: str = "raw
             lateness.append(behind)
             if behind > h:
                 late += 1
+        before = time.monotonic()
         obs = backend.step(Command.lumped(u))
+        if realtime:   # the period's own work: its stages, and the write and the next read
+            work.append(decided - started + time.monotonic() - before)
         table.set_drive(obs.torque, 0)
     table.flush()
     traj = table.trajectory(backend.name, failure is not None, h)
@@ -194,8 +200,10 @@ def run(backend: Backend, loop: ClosedLoop, duration: float, measure: str = "raw
         traj.record.update(t_fall=failure[0], fall_text=failure[1], failure=failure[2])
     if realtime:
         lat = np.asarray(lateness) if lateness else np.zeros(1)
+        busy = np.asarray(work) if work else np.zeros(1)
         traj.record["timing"] = {"periods": len(lateness), "late": late, "lateness_p99_ms": float(
             np.percentile(lat, 99) * 1e3), "lateness_max_ms": float(lat.max() * 1e3),
+            "work_p99_ms": float(np.percentile(busy, 99) * 1e3), "work_max_ms": float(busy.max() * 1e3),
             "wall_s": time.monotonic() - t0}
     return traj
 
@@ -222,7 +230,7 @@ def summary(traj: Trajectory, window=(5.0, 60.0)) -> dict:
     c = traj.columns
     t = c["t"]
     sel = (t >= window[0] - 1e-9) & (t <= window[1] + 1e-9)
-    covers = (not traj.fallen) and len(t) > 0 and t[-1] >= window[1] - 1e-9
+    covers = (not traj.fallen) and bool(sel.any()) and t[-1] >= window[1] - 1e-9
 
     def rms(x):
         x = np.asarray(x, dtype=float)[sel]

@@ -37,6 +37,8 @@ def test_existing_outputs_and_bad_durations_are_refused_before_any_run(tmp_path,
     assert "--csv" in capsys.readouterr().err and out.read_text() == "keep me\n"
     assert main(["--robot", "upkie-pybullet", "--params", *UPKIE, "--duration", "0"]) == 2
     assert "--duration 0" in capsys.readouterr().err
+    assert main(["--robot", "upkie-pybullet", "--params", *UPKIE, "--duration", "3", "--window", "5", "10"]) == 2
+    assert "--window 5 10: give 0 <= T0 < T1 <= the run's 3 s" in capsys.readouterr().err
 
 
 def test_a_bad_upkie_parameter_names_its_key(tmp_path, capsys):
