@@ -151,7 +151,8 @@ def _print(s: dict) -> None:
         t = s["timing"]
         lines.append(f"  realtime: {t['periods']} periods in {t['wall_s']:.1f} s, {t['late']} late (> 1 period), "
                      f"lateness p99 {t['lateness_p99_ms']:.3f} ms, worst {t['lateness_max_ms']:.3f} ms; a period's "
-                     f"work p99 {t['work_p99_ms']:.3f} ms, worst {t['work_max_ms']:.3f} ms")
+                     f"work median {t['work_p50_ms']:.3f} ms, p99 {t['work_p99_ms']:.3f} ms, worst "
+                     f"{t['work_max_ms']:.3f} ms")
     print("\n".join(lines))
 
 

@@ -87,8 +87,10 @@ class UpkieConfig:
     leg_kp_scale, leg_kd_scale : float
         ``kp_scale`` and ``kd_scale`` of the hips and knees (their PD holds them at 0; PyBullet's kp is 20 N m/rad and
         kd 1 N m s/rad per joint, scaled by these). SPEC 16 found the legs' compliance inside the balance loop's
-        bandwidth; docs/hardware-upkie.md has this stack's scan and why the defaults are what they are. On the robot
-        the scales multiply its moteus configuration's gains.
+        bandwidth; 12.6 and 4.0 were chosen with the law and the estimator in PyBullet (docs/hardware-upkie.md, "The
+        legs", has the scan: kd too low or too high for the kp and the robot falls; the legs' static bend, and the
+        lean the robot stands with, fall as kp grows). On the robot the scales multiply its moteus configuration's
+        gains.
     leg_maximum_torque : float
         The legs' ``maximum_torque`` [N m]: 16, the qdd100's limit in the URDF.
     wheel_maximum_torque : float
@@ -104,8 +106,8 @@ class UpkieConfig:
     """
 
     dt: float = 0.005
-    leg_kp_scale: float = 3.0
-    leg_kd_scale: float = 3.0
+    leg_kp_scale: float = 12.6
+    leg_kd_scale: float = 4.0
     leg_maximum_torque: float = 16.0
     wheel_maximum_torque: float = 1.7
     initial_pitch: float = 0.0
