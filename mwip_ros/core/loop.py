@@ -47,7 +47,7 @@ from .trajectory import BAD_COMMAND, DIVERGED, FAILURES, FALL
 from .sensing import Actuator, Sensors
 
 __all__ = ["Stage", "STAGES", "STAGE_NAMES", "PLANT_NODE", "Answer", "answering", "loop_nodes", "PlantSide",
-           "Period", "command", "fall_text"]
+           "Period", "decide", "command", "fall_text"]
 
 PLANT_NODE = "plant_sim"
 
@@ -231,13 +231,8 @@ class Period:
         """Stages ``estimator`` (the identity when the measurement is a state), ``observer`` and ``law`` (with the
         excitation of period ``k`` added, :func:`command`): (u_k, tau_hat_k, the law's internals, the state the
         loop believes).  A law that raises is a :class:`~.laws.LawError` (the law, t_k, its error)."""
-        x_m = measured if self.estimator is None else self.estimator.step(measured)
-        tau_hat = self.observer.update(x_m, u_m)
-        try:
-            u_law, internals = command(self.law, x_m, tau_hat, self.excitation, k, self.motion)
-        except Exception as exc:   # noqa: BLE001 - a law's own error (a plug-in's bug), named as the law's
-            raise LawError.of(self.law.name, k * self.side.cfg.h, exc) from exc
-        return u_law, tau_hat, internals, x_m
+        return decide(self.estimator, self.observer, self.law, measured, u_m, k, self.side.cfg.h, self.excitation,
+                      self.motion)
 
     def sense_decide(self):
         """Stages ``sensors`` (with a yaw stage, the gyro's yaw rate too), ``estimator``, ``observer`` and ``law`` of
@@ -300,6 +295,40 @@ class Period:
         if table is not None:
             table.set_drive(p.u_prev, p.saturation)
         return False
+
+
+def decide(estimator, observer, law, measured, u_m: float, k: int, h: float, excitation=None, motion=None):
+    """Stages ``estimator``, ``observer`` and ``law`` of period ``k`` (:meth:`Period.decide`; a robot's own loop, which
+    has no :class:`PlantSide`, calls it too: :mod:`mwip_ros.robot.closed_loop`).
+
+    Parameters
+    ----------
+    estimator : Estimator or None
+        The state estimator (:mod:`.estimators`) when ``measured`` is a raw sample, None when it is a state.
+    observer, law
+        The observer (eq. 12-13) and the law (:mod:`.laws`).
+    measured
+        The period's measurement: a state, or a :class:`~.raw_sensors.RawSample`.
+    u_m : float
+        The torque that acted over period k - 1, as reported [N m].
+    k : int
+        The period; ``h`` its length [s] (for a law's error's time).
+    excitation, motion : optional
+        The excitation (:mod:`.excitation`) and the references' shaper (:class:`.motion.Shaper`) of :func:`command`.
+
+    Returns
+    -------
+    tuple
+        (u_k, tau_hat_k, the law's internals, the state the loop believes); a law that raises is a
+        :class:`~.laws.LawError` (the law, t_k, its error).
+    """
+    x_m = measured if estimator is None else estimator.step(measured)
+    tau_hat = observer.update(x_m, u_m)
+    try:
+        u_law, internals = command(law, x_m, tau_hat, excitation, k, motion)
+    except Exception as exc:   # noqa: BLE001 - a law's own error (a plug-in's bug), named as the law's
+        raise LawError.of(law.name, k * h, exc) from exc
+    return u_law, tau_hat, internals, x_m
 
 
 def fall_text(t: float, x, fall_angle: float) -> str:

@@ -287,6 +287,7 @@ NODE_SPECS: Dict[str, List[ParamSpec]] = {
                     **_positive_from(1e-6, 1e6, "a body inertia below 1e-6 kg m^2"), unit="kg m^2")
           for ax, v in (("roll", 65.0), ("yaw", 20.0))],
         *_specs_of("ground"),   # ground.*: friction, slope, bumps (params.ground)
+        *_specs_of("upkie"),   # upkie.*: how the robot side drives Upkie (params.upkie, mwip_ros.robot.upkie)
         ParamSpec("seed", "integer", 0, "seed of the D_w friction noise", **_at_least_zero),
         *_body("actual", PAPER_ACTUAL, "true"),
         ParamSpec("actual.D_b", "double", 0.1, "true drive viscous friction D_b [N m s/rad]", **_non_negative()),
