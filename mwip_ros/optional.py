@@ -50,6 +50,10 @@ OPTIONAL: Dict[str, OptionalPackage] = {
     "mujoco": OptionalPackage("mujoco", "python3-mujoco-pip", "the plant backend mujoco"),
     "gymnasium": OptionalPackage("gymnasium", "python3-gymnasium-pip", "mwip_ros.envs (the Gymnasium environments)"),
     "moteus": OptionalPackage("moteus", "python3-moteus-pip", "the moteus backend and its emulator"),
+    "upkie": OptionalPackage("upkie", "python3-upkie-pip", "the Upkie backend"),
+    "upkie_description": OptionalPackage("upkie-description", "python3-upkie-description-pip",
+                                         "the Upkie backend (Upkie's URDF)"),
+    "pybullet": OptionalPackage("pybullet", "python3-pybullet-pip", "the Upkie backend's simulation (PyBullet)"),
 }
 
 

@@ -20,7 +20,11 @@ Variants (``--variants``; each is run in turns with the others, so a machine's l
 ``--busy N`` runs N busy-loop processes beside the trials (the issue's load: two). Prints one table: per variant
 the median, 90th percentile and largest time of each measure, and how many newcomers took over 1 s.
 
+``--ctl N`` measures instead what a user waits for: a realtime graph (observer, controller, plant) runs under each
+variant, and ``mwip_ctl param get dscndo_controller k1`` is timed N times, whole (its Python start included).
+
     python scripts/bench_discovery.py --trials 20 --busy 2
+    python scripts/bench_discovery.py --ctl 6 --busy 2 --variants default,product
 """
 from __future__ import annotations
 
@@ -164,6 +168,29 @@ def one_trial(env: Dict[str, str], newcomers: int, settle: float, limit: float) 
             idle.wait()
 
 
+def ctl_calls(env: Dict[str, str], calls: int) -> List[float]:
+    """Seconds each of ``calls`` runs of ``mwip_ctl param get dscndo_controller k1`` takes against a realtime graph
+    started in ``env`` (the graph ended by PID after)."""
+    sys.path.insert(0, str(REPO / "test"))
+    from graphproc import Graph
+    with tempfile.TemporaryDirectory() as tmp, Graph(Path(tmp)) as g:
+        g.env = dict(env)
+        for node in ("disturbance_observer", "dscndo_controller"):
+            g.start(node, "-p", "mode:=realtime")
+        plant = g.start("plant_sim", "-p", "mode:=realtime", "-p", "duration_s:=0.0")
+        if not plant.wait_for_output("starting realtime run", 60):
+            raise SystemExit(f"bench_discovery: the graph did not start:\n{plant.output()[-2000:]}")
+        took = []
+        for _ in range(calls):
+            t0 = time.monotonic()
+            r = subprocess.run([sys.executable, "-m", "mwip_ros.cli.ctl", "param", "get", "dscndo_controller", "k1"],
+                               env=env, capture_output=True, text=True, timeout=60)
+            took.append(time.monotonic() - t0)
+            if r.returncode != 0:
+                raise SystemExit(f"bench_discovery: mwip_ctl failed: {r.stderr.strip()}")
+        return took
+
+
 def summary(values: List[float], limit: float) -> str:
     lost = sum(1 for v in values if v < 0)
     seen = sorted(v for v in values if v >= 0)
@@ -185,6 +212,8 @@ def main(argv: Optional[List[str]] = None) -> int:
     ap.add_argument("--settle", type=float, default=1.5,
                     help="the idle node runs this long before the newcomers start [s] (default 1.5)")
     ap.add_argument("--busy", type=int, default=0, help="busy-loop processes beside the trials (default 0)")
+    ap.add_argument("--ctl", type=int, default=0, metavar="N",
+                    help="time N mwip_ctl param get calls against a running graph per variant instead")
     ap.add_argument("--variants", default="default,product,server",
                     help="comma-separated: default, product, lease=S, server (default: default,product,server)")
     args = ap.parse_args(argv)
@@ -211,6 +240,12 @@ def main(argv: Optional[List[str]] = None) -> int:
                                           env=base, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
                                           start_new_session=True)   # the fastdds wrapper's server child too
                 time.sleep(1.0)
+            if args.ctl:
+                for v in variants:
+                    took = ctl_calls(envs[v], args.ctl)
+                    print(f"| {v} | mwip_ctl param get, {args.ctl} calls: median {statistics.median(took):.2f} s "
+                          f"({', '.join(f'{t:.2f}' for t in took)}) |", flush=True)
+                return 0
             for trial in range(args.trials):
                 for v in variants:
                     for got in one_trial(envs[v], args.newcomers, args.settle, args.limit):

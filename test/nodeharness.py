@@ -407,6 +407,18 @@ class Loop:
         self.close()
 
 
+def realtime_tick(node, periods: int = 1) -> None:
+    """One wake of a realtime plant's timer ``periods`` periods after the last: its runner's clock is the test's
+    (set here, from the node's clock, the first time), so each call finishes exactly ``periods`` periods however
+    fast the test calls it (plant_runners.RealtimeRunner runs the periods its clock has passed)."""
+    runner = node.runner
+    if not hasattr(runner, "_test_now"):   # from the last deadline the runner finished (start(): state 0's)
+        runner._test_now = runner.schedule.due(runner.schedule.k) + 1000
+        runner._now = lambda: runner._test_now
+    runner._test_now += periods * node.period_ns
+    runner._tick()
+
+
 def run_ctl(h: NodeHarness, *argv: str) -> tuple:
     """``mwip_ctl argv`` in this process (its ``main``) with its ROS node a :meth:`NodeHarness.peer`-like node in
     ``h``'s context, spun with the node under test by ``h``'s executor: its service calls and messages reach that

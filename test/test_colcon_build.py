@@ -153,7 +153,8 @@ KEY_TO_PIP = {
     'python3-mcap-ros2-support-pip': 'mcap-ros2-support', 'python3-zstandard-pip': 'zstandard',
     'python3-lz4-pip': 'lz4', 'python3-foxglove-sdk-pip': 'foxglove-sdk', 'python3-dask-pip': 'dask[distributed]',
     'python3-distributed-pip': 'distributed', 'python3-mujoco-pip': 'mujoco', 'python3-gymnasium-pip': 'gymnasium',
-    'python3-moteus-pip': 'moteus',
+    'python3-moteus-pip': 'moteus', 'python3-upkie-pip': 'upkie', 'python3-upkie-description-pip': 'upkie-description',
+    'python3-pybullet-pip': 'pybullet', 'urdfdom_py': 'urdf_parser_py',
     'nav_msgs': 'ros-jazzy-common-interfaces',
     'tf2_msgs': None,   # no PyPI wheel: robot_state's /tf only where a full ROS install has it (optional)
 }

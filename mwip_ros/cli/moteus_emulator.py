@@ -160,6 +160,8 @@ class _ImuPublisher:
         from sensor_msgs.msg import Imu
 
         from mwip_ros.msgs.qos import qos_for
+        from mwip_ros.nodes.runtime import discovery
+        discovery.apply()   # the package's discovery profile, unless the user has a set-up of their own
         self.rclpy, self.ctx = rclpy, rclpy.Context()
         rclpy.init(args=[PROG, *ros_args], context=self.ctx, signal_handler_options=SignalHandlerOptions.NO)
         self.node = rclpy.create_node("moteus_emulator", context=self.ctx)

@@ -48,9 +48,8 @@ import numpy as np
 
 from .budget import window_samples
 from . import laws
-from .compiled_motion import MOTION_METRICS
 from .metrics import compute as metrics_compute
-from .metrics import motion_metrics, window_metrics
+from .metrics import MOTION_METRICS, motion_metrics, window_metrics
 from .model import PhysicalParams, Sinusoid, State, accel, lumped_disturbance
 from .observer import DiscreteObserver
 from .trajectory import BAD_COMMAND, DIVERGED, FAILURES, FALL

@@ -32,7 +32,7 @@ from typing import NamedTuple
 
 from . import simd
 from .controller import u_taud_of
-from .metrics import HOLD_SETTLE_S
+from .metrics import HOLD_SETTLE_S, MOTION_METRICS
 from .motion import (ANCHOR_BLEND_S, HOLD_NEAR, REST_MOVE, Reference, _clip, anchor_step, error_state,
                      hold_estimate, hold_lean, hold_weight, profile_at, speed_start, speed_step)
 
@@ -54,7 +54,6 @@ class Nominal(NamedTuple):
     m22: float
     G_b: float
 
-MOTION_METRICS = ("speed_rms", "hold_drift", "hold_rate", "max_lean")   # core.metrics.motion_metrics' numbers
 
 # the names law_track calls that core.compiled.kernel_for binds per law (here: never called)
 law_step = None

@@ -16,7 +16,7 @@ import numpy as np
 
 __all__ = ["WINDOW", "Metrics", "compute", "window_metrics", "fall_time", "fit_window", "WindowError",
            "layout", "markdown_table", "text_table", "json_safe", "motion_metrics", "motion_rows", "motion_table",
-           "HOLD_SETTLE_S"]
+           "HOLD_SETTLE_S", "MOTION_METRICS"]
 
 WINDOW = (5.0, 10.0)
 
@@ -209,6 +209,7 @@ def text_table(named: Sequence[tuple]) -> str:
 
 
 HOLD_SETTLE_S = 2.0   # the hold's first seconds after v* reached 0 are the stop, not the hold
+MOTION_METRICS = ("speed_rms", "hold_drift", "hold_rate", "max_lean")   # motion_metrics' numbers, in order
 
 
 def motion_metrics(cols: Mapping[str, np.ndarray], r: float, fall_angle: float, t_fall: Optional[float] = None,

@@ -64,24 +64,26 @@ def test_a_profile_file_in_the_working_directory_is_the_users(tmp_path):
 
 @pytest.mark.unit
 def test_every_process_that_makes_a_participant_applies_it_before_rclpy_init():
-    """The two places the package makes a ROS context (every node's start-up, mwip_ctl) call discovery.apply, and
-    before rclpy.init in the same function: Fast DDS reads the profile when the first participant is made."""
-    import inspect
-
-    from mwip_ros.cli import ctl
-    from mwip_ros.nodes.runtime import process
-    for fn in (process.init_context, ctl.Ros.__init__):
-        src = inspect.getsource(fn)
-        assert "discovery.apply()" in src and src.index("discovery.apply()") < src.index("rclpy.init("), fn
+    """Every place the package makes a ROS context (every node's start-up, mwip_ctl, the moteus emulator's IMU)
+    calls discovery.apply before rclpy.init, in the same function: Fast DDS reads the profile when the first
+    participant is made. A new rclpy.init without it fails here."""
     import ast
     inits = []
     for path in (REPO / "mwip_ros").rglob("*.py"):
         tree = ast.parse(path.read_text())
-        inits += [f"{path.relative_to(REPO)}:{c.lineno}" for c in ast.walk(tree) if isinstance(c, ast.Call)
-                  and isinstance(c.func, ast.Attribute) and c.func.attr == "init"
-                  and isinstance(c.func.value, ast.Name) and c.func.value.id == "rclpy"]
-    assert sorted(i.split(":")[0] for i in inits) == ["mwip_ros/cli/ctl.py", "mwip_ros/nodes/runtime/process.py"], \
-        inits
+        for fn in ast.walk(tree):
+            if not isinstance(fn, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                continue
+            calls = [c for c in ast.walk(fn) if isinstance(c, ast.Call) and isinstance(c.func, ast.Attribute)]
+            init = [c.lineno for c in calls if c.func.attr == "init" and isinstance(c.func.value, ast.Name)
+                    and c.func.value.id == "rclpy"]
+            apply = [c.lineno for c in calls if c.func.attr == "apply" and isinstance(c.func.value, ast.Name)
+                     and c.func.value.id == "discovery"]
+            for line in init:
+                inits.append(path.relative_to(REPO).as_posix())
+                assert any(a < line for a in apply), f"{path.relative_to(REPO)}:{line}: rclpy.init without " \
+                    "discovery.apply() before it in the same function"
+    assert {"mwip_ros/cli/ctl.py", "mwip_ros/nodes/runtime/process.py"} <= set(inits), inits
 
 
 @pytest.mark.graph

@@ -25,7 +25,7 @@ from std_msgs.msg import Bool, Float64, String
 
 from graphproc import PARAMS, Graph
 from injector import Injector
-from nodeharness import Loop, NodeHarness, node_class
+from nodeharness import Loop, NodeHarness, node_class, realtime_tick
 from mwip_ros.msgs import layouts as L
 from mwip_ros.msgs.qos import DRIVER_STATE_READER_QOS, SERVICE_QOS
 from mwip_ros.nodes.runtime.services import prove_reply_paths
@@ -246,14 +246,14 @@ def test_exit_on_fall_false_keeps_the_realtime_plant_up_at_zero_torque_until_res
             for _ in range(n):
                 if cond():
                     return True
-                node.runner._tick()
+                realtime_tick(node)
             return cond()
         assert tick_until(lambda: node.safety.faulted)
         fall = _records(h)[-1]
         assert fall["reason"] == "fall" and "fall_angle" in fall["detail"], fall
         n = len(h.sent("joint_states"))
         for _ in range(60):
-            node.runner._tick()
+            realtime_tick(node)
         assert not node.done
         lying = [(x, u) for stamp, x, u in _states(h.sent("joint_states")[n:]) if stamp > fall["stamp_ns"] + 1e7]
         assert len(lying) > 40
@@ -265,7 +265,7 @@ def test_exit_on_fall_false_keeps_the_realtime_plant_up_at_zero_torque_until_res
         ok, text = _trigger(h, "reset")
         assert ok and text.startswith("reset #1") and "fault cleared (fall" in text, text
         assert (_records(h)[-1]["state"], _records(h)[-1]["reason"]) == ("enabled", "reset")
-        node.runner._tick()   # the next tick: the reset, its state 0 published
+        realtime_tick(node)   # the next tick: the reset, its state 0 published
         assert [x for _, x, _ in _states(h.sent("joint_states")[n:])] == [(0.0, -0.1745, 0.0, 0.0)]
         assert tick_until(lambda: node.safety.faulted)                  # and down again
         assert (_records(h)[-1]["state"], _records(h)[-1]["reason"]) == ("fault", "fall")
