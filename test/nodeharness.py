@@ -117,6 +117,7 @@ class NodeHarness:
         finally:
             Node.create_publisher = original
         self._executor = None
+        self._loop_executor = None   # turn()'s: run_node's kind
         self._feeders: Dict[tuple, Any] = {}
         self._feeder_nodes: Dict[str, Any] = {}   # the peers (publisher's feeders too), by name
 
@@ -241,6 +242,24 @@ class NodeHarness:
             self.executor.spin_once(timeout_sec=0.01)
         return until()
 
+    def turn(self, timeout: float, until: Optional[Callable[[], bool]] = None) -> bool:
+        """Turn the node's own loop as ``run_node`` turns it (``node.spin_step``: a plant's graph wait and its
+        runner's watch too) with the executor ``run_node`` makes (:func:`~mwip_ros.nodes.runtime.process.
+        _make_executor`, events by default: a realtime plant's ticks keep time as in its process), until the node
+        is done (or ``until()``), at most ``timeout`` s of wall time; whether it is. (Not with :meth:`spin` on the
+        same harness: a node is spun by one executor.)"""
+        import time
+
+        from mwip_ros.nodes.runtime import process
+        if self._loop_executor is None:
+            self._loop_executor = process._make_executor(self.context)
+            self._loop_executor.add_node(self.node)
+        done = until if until is not None else (lambda: self.node.done)
+        end = time.monotonic() + timeout
+        while not done() and time.monotonic() < end:
+            self.node.spin_step(self._loop_executor)
+        return done()
+
     def diagnostics(self):
         """The node's ``/diagnostics`` reporter as ``run_node`` attaches it (made once: ``node.diagnostics``); its
         reports, once :meth:`~mwip_ros.nodes.runtime.diagnostics.Diagnostics.tick` sends them, are
@@ -278,8 +297,9 @@ class NodeHarness:
             self.node.on_shutdown()
         finally:
             self._taps.clear()
-            if self._executor is not None:
-                self._executor.shutdown(timeout_sec=1.0)
+            for executor in (self._executor, self._loop_executor):
+                if executor is not None:
+                    executor.shutdown(timeout_sec=1.0)
             for feeder in self._feeder_nodes.values():
                 feeder.destroy_node()
             self.node.destroy_node()
