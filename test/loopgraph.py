@@ -44,6 +44,7 @@ class LoopGraph:
                  env: Optional[Dict[str, str]] = None):
         from mwip_ros import params as P
         self.workdir = Path(workdir)
+        self.workdir.mkdir(parents=True, exist_ok=True)
         self.params = params
         self.graph = Graph(self.workdir)
         self.graph.env.update(env or {})
