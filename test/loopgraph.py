@@ -59,6 +59,7 @@ class LoopGraph:
         self._args = own
         self._inj = None
         self._setter = None
+        self._restarts = 0
 
     @property
     def domain_id(self) -> int:
@@ -100,6 +101,18 @@ class LoopGraph:
         run = Run(label, code, csv, plant, estimated)
         self.runs.append(run)
         return run
+
+    def restart(self, *nodes: str, args: tuple = (), params=None) -> None:
+        """Stop the answering nodes ``nodes`` and start each afresh (``args`` added to its own; ``params``: default
+        the graph's), as ``bag_replay`` resim asks of the observer and the controller before every re-simulation (a
+        restarted observer writes its csv afresh)."""
+        params = self.params if params is None else params
+        for node in nodes:
+            old = self.nodes[node]
+            assert old.stop(timeout=20) == 0, old.output()
+            self._restarts += 1
+            self.nodes[node] = self.graph.start(node, "-p", "use_sim_time:=true", *self._args.get(node, ()), *args,
+                                                params=params, label=f"{node}_{self._restarts}")
 
     def stop(self, node: str, sig=signal.SIGINT, timeout: float = 20.0) -> Optional[int]:
         """Stop the answering node ``node`` (by PID); its exit code."""

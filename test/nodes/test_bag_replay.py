@@ -1,5 +1,5 @@
-"""bag_replay: resim of a recorded lockstep DSCNDO run (one graph: the recording, then resims against its observer and
-controller, as ``ros2 param set`` and a restart change them), timed replay, what it refuses, resends and QoS."""
+"""bag_replay: resim of a recorded lockstep DSCNDO run (one graph: the recording, then resims, the observer and the
+controller restarted before each as bag_replay asks), timed replay, what it refuses, resends and QoS."""
 import importlib
 import signal
 
@@ -35,8 +35,11 @@ def parse_table(text):
     return rows
 
 
-def resim(loop, label, bag, timeout: float = 180.0):
-    """bag_replay resim of ``bag`` against ``loop``'s running observer and controller: (exit code, output)."""
+def resim(loop, label, bag, timeout: float = 180.0, args: tuple = ()):
+    """bag_replay resim of ``bag`` against ``loop``'s observer and controller, restarted first as bag_replay asks
+    (``args``: the controller's own, e.g. a changed gain): (exit code, output)."""
+    loop.restart("disturbance_observer")
+    loop.restart("dscndo_controller", args=args)
     br = loop.graph.start("bag_replay", "-p", f"bag:={bag}", "-p", "mode:=resim", params=None, module=MODULE,
                           label=label)
     return br.wait(timeout), br.output()
@@ -45,8 +48,8 @@ def resim(loop, label, bag, timeout: float = 180.0):
 @pytest.fixture(scope="module")
 def replayed(tmp_path_factory):
     """One graph: a short lockstep DSCNDO run recorded by mcap_recorder (the plant waits for the recorder); then
-    resims of its bag against the same observer and controller (each resim is a new stream: they re-initialise):
-    as recorded, with k1 changed to 7.0 (``ros2 param set``), and with a controller restarted with motion on."""
+    resims of its bag, the observer and the controller restarted before each: as recorded, with k1 = 7.0, and with
+    motion on."""
     from sensor_msgs.msg import JointState
     from std_msgs.msg import Float64
 
@@ -73,12 +76,8 @@ def replayed(tmp_path_factory):
         assert distinct_stamps(bag, ["/joint_states", "/disturbance_estimate"]) == \
             {"/joint_states": STATES, "/disturbance_estimate": STATES}, (counts, rec.output())   # resends read once
         out["same"] = resim(loop, "resim_same", bag)
-        loop.set("dscndo_controller", k1=7.0)
-        out["k1"] = resim(loop, "resim_k1", bag)
-        assert loop.stop("dscndo_controller") == 0
-        loop.nodes["dscndo_controller"] = loop.graph.start("dscndo_controller", "-p", "use_sim_time:=true",
-                                                           "-p", "motion.enabled:=true", label="ctl_motion")
-        out["motion"] = resim(loop, "resim_motion", bag)
+        out["k1"] = resim(loop, "resim_k1", bag, args=("-p", "k1:=7.0"))
+        out["motion"] = resim(loop, "resim_motion", bag, args=("-p", "motion.enabled:=true"))
     return out
 
 

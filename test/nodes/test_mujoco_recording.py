@@ -1,7 +1,7 @@
 """A lockstep recording with the MuJoCo plant (``backend: mujoco``, issue 32 item 4): the bag carries each wheel's
 angle (``true_wheel_states``) equal to mwip_sim's csv columns, the recorder's ledger counts the topic, ``bag_replay``
-resim reproduces the recorded outputs exactly, and ``mwip_report`` on the bag states the 3D pose. Each recording's
-resim runs against the observer and the controller that made it (one graph; a resim is a new stream for them)."""
+resim reproduces the recorded outputs exactly, and ``mwip_report`` on the bag states the 3D pose. One graph a
+recording: the recording, then its resim (the observer and the controller restarted first, as bag_replay asks)."""
 import numpy as np
 import pytest
 
@@ -19,7 +19,7 @@ STATES = 301   # 1.5 s at 200 Hz: states k = 0 .. 300
 
 def _recorded(work, files, plant_args=()):
     """(bag, resim's exit code and output): a lockstep DSCNDO run of ``files`` recorded (the plant waits for the
-    recorder), then bag_replay resim of the bag against the same observer and controller."""
+    recorder), then bag_replay resim of the bag in the same graph."""
     bag = work / "bag"
     with LoopGraph(work, params=files) as loop:
         rec = loop.graph.start("mcap_recorder", "-p", f"output:={bag}", "-p", "use_sim_time:=true", params=None)

@@ -1,7 +1,7 @@
 """bag_replay resim of lockstep recordings in which the controller tracked motion (docs/theory.md 6.11): a
 ``motion.profile`` (config/motion.yaml) and ``cmd_vel`` (the recorded Twists replayed before the states recorded
-after them) are both reproduced exactly, each by the observer and the controller that made the recording (one
-graph a recording: a resim is a new stream for them, which they re-initialise for)."""
+after them) are both reproduced exactly. One graph a recording: the recording, then its resim (the observer and the
+controller restarted first, as bag_replay asks: a restart of the stream would forget a Twist sent before it)."""
 import signal
 
 import pytest
@@ -19,8 +19,8 @@ MOTION = REPO / "config" / "motion.yaml"
 
 def _record_and_resim(work, files, twist=None):
     """(bag, resim's exit code and output): a lockstep DSCNDO run of ``files`` recorded by mcap_recorder, then
-    bag_replay resim of the bag against the same observer and controller (a new stream: they re-initialise);
-    ``twist``: a cmd_vel (linear.x) the controller and the recorder have before the plant starts."""
+    bag_replay resim of the bag in the same graph; ``twist``: a cmd_vel (linear.x) the controller and the recorder
+    have before the plant starts."""
     from diagnostic_msgs.msg import DiagnosticArray
     from geometry_msgs.msg import Twist
 
