@@ -17,11 +17,11 @@ from __future__ import annotations
 
 import signal
 from pathlib import Path
-from typing import Dict, List, Optional
+from typing import Any, Callable, Dict, List, Optional
 
 from graphproc import PARAMS, Graph, Proc, loop_chain
 
-__all__ = ["LoopGraph", "Run"]
+__all__ = ["LoopGraph", "Run", "concurrently"]
 
 
 class Run:
@@ -59,7 +59,6 @@ class LoopGraph:
         self._args = own
         self._inj = None
         self._setter = None
-        self._restarts = 0
 
     @property
     def domain_id(self) -> int:
@@ -102,18 +101,6 @@ class LoopGraph:
         self.runs.append(run)
         return run
 
-    def restart(self, *nodes: str, args: tuple = (), params=None) -> None:
-        """Stop the answering nodes ``nodes`` and start each afresh (``args`` added to its own; ``params``: default
-        the graph's), as ``bag_replay`` resim asks of the observer and the controller before every re-simulation (a
-        restarted observer writes its csv afresh)."""
-        params = self.params if params is None else params
-        for node in nodes:
-            old = self.nodes[node]
-            assert old.stop(timeout=20) == 0, old.output()
-            self._restarts += 1
-            self.nodes[node] = self.graph.start(node, "-p", "use_sim_time:=true", *self._args.get(node, ()), *args,
-                                                params=params, label=f"{node}_{self._restarts}")
-
     def stop(self, node: str, sig=signal.SIGINT, timeout: float = 20.0) -> Optional[int]:
         """Stop the answering node ``node`` (by PID); its exit code."""
         return self.nodes[node].stop(sig, timeout=timeout)
@@ -148,3 +135,13 @@ class LoopGraph:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+def concurrently(*jobs: Callable[[], Any]) -> list:
+    """Each job (a sequence of runs on a :class:`LoopGraph` of its own: its own domain) in a thread of its own; their
+    results, in order (a job's exception raised again once every job has ended). A lockstep loop waits on its
+    processes' answers most of the time, so two loops take the two cores' turns between them."""
+    from concurrent.futures import ThreadPoolExecutor
+    with ThreadPoolExecutor(len(jobs)) as pool:
+        futures = [pool.submit(job) for job in jobs]
+        return [f.result() for f in futures]

@@ -1,12 +1,12 @@
-"""bag_replay: resim of a recorded lockstep DSCNDO run (one graph: the recording, then resims, the observer and the
-controller restarted before each as bag_replay asks), timed replay, what it refuses, resends and QoS."""
+"""bag_replay: resim of a recorded lockstep DSCNDO run (three resims at once, each with a freshly started observer
+and controller as bag_replay asks), timed replay, what it refuses, resends and QoS."""
 import importlib
 import signal
 
 import pytest
 
-from graphproc import Graph
-from loopgraph import LoopGraph
+from graphproc import PARAMS, Graph
+from loopgraph import LoopGraph, concurrently
 from nodeharness import NodeHarness, refused
 
 MODULE = "mwip_ros.nodes.tools.bag_replay"
@@ -35,21 +35,21 @@ def parse_table(text):
     return rows
 
 
-def resim(loop, label, bag, timeout: float = 180.0, args: tuple = ()):
-    """bag_replay resim of ``bag`` against ``loop``'s observer and controller, restarted first as bag_replay asks
-    (``args``: the controller's own, e.g. a changed gain): (exit code, output)."""
-    loop.restart("disturbance_observer")
-    loop.restart("dscndo_controller", args=args)
-    br = loop.graph.start("bag_replay", "-p", f"bag:={bag}", "-p", "mode:=resim", params=None, module=MODULE,
-                          label=label)
-    return br.wait(timeout), br.output()
+def resim(work, bag, *controller_args, params=PARAMS, timeout: float = 180.0):
+    """bag_replay resim of ``bag`` in a graph of its own (``work``): a freshly started observer and controller, as
+    bag_replay asks (``controller_args``: the controller's own, e.g. a changed gain): (exit code, output)."""
+    work.mkdir(parents=True, exist_ok=True)
+    with Graph(work) as g:
+        g.start("disturbance_observer", "-p", "use_sim_time:=true", params=params)
+        g.start("dscndo_controller", "-p", "use_sim_time:=true", *controller_args, params=params)
+        br = g.start("bag_replay", "-p", f"bag:={bag}", "-p", "mode:=resim", params=None, module=MODULE)
+        return br.wait(timeout), br.output()
 
 
 @pytest.fixture(scope="module")
 def replayed(tmp_path_factory):
-    """One graph: a short lockstep DSCNDO run recorded by mcap_recorder (the plant waits for the recorder); then
-    resims of its bag, the observer and the controller restarted before each: as recorded, with k1 = 7.0, and with
-    motion on."""
+    """A short lockstep DSCNDO run recorded by mcap_recorder (the plant waits for the recorder); then three resims of
+    its bag at once, each in a graph of its own: as recorded, with k1 = 7.0, and with motion on."""
     from sensor_msgs.msg import JointState
     from std_msgs.msg import Float64
 
@@ -70,14 +70,14 @@ def replayed(tmp_path_factory):
         # the controller has answered the last state (what the recorder received is drained when it stops)
         assert inj.wait(lambda: len(cmds) >= STATES and len(internals) >= STATES, 30), (len(cmds), len(internals))
         assert rec.stop(signal.SIGINT, timeout=20) == 0, rec.output()
-        counts = topic_counts(bag)
-        for topic in ("/wheel_torque_cmd", "/controller_internals"):   # answered once per state
-            assert counts.get(topic) == STATES, (counts, rec.output())
-        assert distinct_stamps(bag, ["/joint_states", "/disturbance_estimate"]) == \
-            {"/joint_states": STATES, "/disturbance_estimate": STATES}, (counts, rec.output())   # resends read once
-        out["same"] = resim(loop, "resim_same", bag)
-        out["k1"] = resim(loop, "resim_k1", bag, args=("-p", "k1:=7.0"))
-        out["motion"] = resim(loop, "resim_motion", bag, args=("-p", "motion.enabled:=true"))
+    counts = topic_counts(bag)
+    for topic in ("/wheel_torque_cmd", "/controller_internals"):   # answered once per state
+        assert counts.get(topic) == STATES, (counts, rec.output())
+    assert distinct_stamps(bag, ["/joint_states", "/disturbance_estimate"]) == \
+        {"/joint_states": STATES, "/disturbance_estimate": STATES}, (counts, rec.output())   # resends read once
+    cases = {"same": (), "k1": ("-p", "k1:=7.0"), "motion": ("-p", "motion.enabled:=true")}
+    results = concurrently(*(lambda c=c, a=a: resim(work / f"resim_{c}", bag, *a) for c, a in cases.items()))
+    out.update(zip(cases, results))
     return out
 
 

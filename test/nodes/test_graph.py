@@ -1,10 +1,11 @@
 """The ROS graph: the loop's node processes in lockstep and realtime, and what the nodes refuse.
 
-Lockstep (one graph, :func:`lockstep`): the observer and the controller started once, and plants run against them one
-after another (test/loopgraph.py): every law of the package and one a test registers, a run past the metrics window,
-noisy delayed sensing with a recorder, raw sensors through the state estimator; each run equals mwip_sim; and the
-graph's waits naming the node that is missing. Realtime (one graph, :func:`realtime`): raw sensors, then the paper's
-plant, balance; the nodes exit promptly on SIGINT and SIGTERM, a plant cut short says so in its exit code.
+Lockstep (two graphs at once, :func:`lockstep`): in each, the observer and the controller started once, and plants run
+against them one after another (test/loopgraph.py): every law of the package and one a test registers, a run past
+the metrics window, noisy delayed sensing with a recorder, raw sensors through the state estimator; each run equals
+mwip_sim; and the graph's waits naming the node that is missing. Realtime (one graph, :func:`realtime`): raw
+sensors, then the paper's plant, balance; the nodes exit promptly on SIGINT and SIGTERM, a plant cut short says so
+in its exit code.
 In this process (tier node, test/nodeharness.py): bad messages, bad parameters, run-time parameter changes, a
 realtime plant without a controller.
 """
@@ -20,7 +21,7 @@ import numpy as np
 import pytest
 
 from graphproc import PARAMS, Graph
-from loopgraph import LoopGraph
+from loopgraph import LoopGraph, concurrently
 from nodeharness import NodeHarness, node_class, refused
 from mwip_ros import params as P
 from mwip_ros.core import laws
@@ -34,8 +35,10 @@ TRIVIAL = ("trivial", "trivial_ndo")   # test/trivial_law.py, registered in the 
 RAW = (PARAMS, PARAMS.parent / "sensors_raw_realistic.yaml")   # theory.md 6.4: the IMU and the encoder, an estimator
 SENSING = {"sensors.noise_std.theta_b": 0.002, "sensors.noise_std.dtheta_w": 0.3, "sensors.noise_std.dtheta_b": 0.02,
            "sensors.encoder_counts_per_rev": 1024, "sensors.delay_periods": 1, "actuator.delay_periods": 1}
-STATES = {"trivial": 401, "trivial_ndo": 401, **{n: 2001 for n in PACKAGE_LAWS}, "window": 2401, "sensing": 601,
-          "raw": 2001}   # the states of each run the observer and the controller answered, in the order run
+GRAPH_A_LAWS = [n for n in PACKAGE_LAWS if laws.get(n).family in ("dsc", "lqr")]   # graph a's; graph b the rest
+GRAPH_B_LAWS = [n for n in PACKAGE_LAWS if n not in GRAPH_A_LAWS]
+STATES = {"a": {"trivial": 401, "trivial_ndo": 401, **{n: 2001 for n in GRAPH_A_LAWS}, "window": 2401},
+          "b": {**{n: 2001 for n in GRAPH_B_LAWS}, "sensing": 601, "raw": 2001}}   # what each graph's loop answered
 
 
 def _estimates_by_stamp(messages) -> dict:
@@ -79,30 +82,41 @@ def _raw_run(loop):
     return run, published
 
 
-@pytest.fixture(scope="module")
-def lockstep(tmp_path_factory):
-    """One lockstep graph, the observer and the controller kept up, and a plant process per run, in order: a plant
-    alone; each law (test/trivial_law.py's first: the controller starts with it; then the package's, a switch of
-    ``law`` and ``use_observer`` each); 12 s of DSCNDO with a summary; noisy delayed sensing with a recorder; a raw
-    plant without, then with the state estimator; the observer stopped, a plant. Then the controller is stopped."""
-    import trivial_law  # noqa: F401  (the test/trivial_law.py laws in this process too: their offline runs)
-    work = tmp_path_factory.mktemp("lockstep")
-    test_dir = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-    env = {"MWIP_ROS_LAWS": "trivial_law",
-           "PYTHONPATH": os.pathsep.join(p for p in (test_dir, os.environ.get("PYTHONPATH", "")) if p)}
-    out = {"work": work, "bag": work / "bag", "summary": work / "summary.json"}
+def _laws_and_window(work, env):
+    """Graph a: a plant alone; test/trivial_law.py's laws (the controller starts with it), DSC and LQR with and
+    without the observer (a switch of ``law`` and ``use_observer`` each); 12 s of DSCNDO with a summary."""
+    out = {"summary": work / "summary.json"}
     with LoopGraph(work, args={"dscndo_controller": ("-p", "law:=trivial", "-p", "use_observer:=false")},
                    env=env) as loop:
         runs = out["runs"] = {}
         runs["alone"] = loop.run("alone", "-p", "lockstep_timeout_s:=2.0", "-p", "expected_subscribers:=0",
                                  timeout=60)
         loop.start()
-        for name in (*TRIVIAL, *PACKAGE_LAWS):
+        for name in (*TRIVIAL, *GRAPH_A_LAWS):
             law = laws.get(name)
             loop.set("dscndo_controller", law=law.family, use_observer=law.observer)
             runs[name] = loop.run(name, *(("-p", "duration_s:=2.0") if name in TRIVIAL else ()))
         loop.set("dscndo_controller", law="dsc", use_observer=True)
         runs["window"] = loop.run("window", "-p", "duration_s:=12.0", "-p", f"summary_json:={out['summary']}")
+        for node in ("observer", "controller"):
+            name = f"{'disturbance_observer' if node == 'observer' else 'dscndo_controller'}"
+            out[node] = (loop.stop(name), loop.nodes[name].output())
+        out["estimates"] = loop.estimates()
+    return out
+
+
+def _laws_sensing_and_raw(work, env):
+    """Graph b: the other laws of the package; noisy delayed sensing with a recorder; a raw plant without, then
+    with the state estimator; the observer stopped, a plant."""
+    out = {"bag": work / "bag"}
+    with LoopGraph(work, env=env) as loop:
+        runs = out["runs"] = {}
+        loop.start()
+        for name in GRAPH_B_LAWS:
+            law = laws.get(name)
+            loop.set("dscndo_controller", law=law.family, use_observer=law.observer)
+            runs[name] = loop.run(name)
+        loop.set("dscndo_controller", law="dsc", use_observer=True)
         rec = loop.graph.start("mcap_recorder", "-p", f"output:={out['bag']}", "-p", "use_sim_time:=true")
         runs["sensing"] = loop.run("sensing", "-p", "duration_s:=3.0", "-p", "expected_subscribers:=3",
                                    *[a for k, v in SENSING.items() for a in ("-p", f"{k}:={v}")])
@@ -121,6 +135,22 @@ def lockstep(tmp_path_factory):
     return out
 
 
+@pytest.fixture(scope="module")
+def lockstep(tmp_path_factory):
+    """Two lockstep graphs at once (test/loopgraph.py: each a domain of its own, the observer and the controller
+    kept up, a plant process per run): graph a (:func:`_laws_and_window`) and graph b (:func:`_laws_sensing_and_raw`).
+    {"a": ..., "b": ..., "runs": every run by name, "graph": the graph of each run}."""
+    import trivial_law  # noqa: F401  (the test/trivial_law.py laws in this process too: their offline runs)
+    work = tmp_path_factory.mktemp("lockstep")
+    test_dir = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    env = {"MWIP_ROS_LAWS": "trivial_law",
+           "PYTHONPATH": os.pathsep.join(p for p in (test_dir, os.environ.get("PYTHONPATH", "")) if p)}
+    a, b = concurrently(lambda: _laws_and_window(work / "a", env), lambda: _laws_sensing_and_raw(work / "b", env))
+    out = {"a": a, "b": b, "work": work, "runs": {**a["runs"], **b["runs"]},
+           "graph": {**{n: a for n in a["runs"]}, **{n: b for n in b["runs"]}}}
+    return out
+
+
 def _ran(lockstep, name):
     run = lockstep["runs"][name]
     assert run.code == 0, run.output()
@@ -132,7 +162,7 @@ def _ran(lockstep, name):
 def test_lockstep_graph_equals_offline_simulator(lockstep, controller):
     law, use_obs = LAWS[controller]
     run = _ran(lockstep, controller)
-    graph = load_run(run.csv, estimates=lockstep["estimates"][controller])   # the observer's estimates, by stamp
+    graph = load_run(run.csv, estimates=lockstep["graph"][controller]["estimates"][controller])   # by stamp
     offline = simulate(P.closed_loop(P.merged_values(P.load_param_file(PARAMS)), use_observer=use_obs, law=law))
     assert len(graph) == len(offline) == 2001
     for c in COLUMNS:
@@ -145,8 +175,8 @@ def test_lockstep_graph_equals_offline_simulator(lockstep, controller):
         np.testing.assert_allclose(g, o, rtol=0, atol=1e-9, err_msg=c)
     if law == "lqr":   # the start-up line lists every law's design, the ones not in use too
         K = P.typed.lqr_gain(P.merged_values(P.load_param_file(PARAMS)))
-        assert f"LQR gain K = [{K[0]:.6g}, {K[1]:.6g}, {K[2]:.6g}]" in lockstep["controller"][1]
-    assert f"law now {laws.get(controller).title}" in lockstep["controller"][1]
+        assert f"LQR gain K = [{K[0]:.6g}, {K[1]:.6g}, {K[2]:.6g}]" in lockstep["graph"][controller]["controller"][1]
+    assert f"law now {laws.get(controller).title}" in lockstep["graph"][controller]["controller"][1]
     assert "steps/s" in run.output()
 
 
@@ -154,13 +184,14 @@ def test_lockstep_graph_equals_offline_simulator(lockstep, controller):
 def test_the_loop_nodes_answered_every_state_once_and_exited_cleanly(lockstep):
     """Every node exited cleanly on SIGINT and reported what it did: each run's states estimated and answered once
     (a resent state, or a new plant's first states before the stream restarted, are not answered twice)."""
-    total = sum(STATES.values())
-    for node in ("observer", "controller", "estimator"):
-        code, out = lockstep[node]
-        assert code == 0, out
-    assert f"estimated {total} states" in lockstep["observer"][1]
-    assert f"answered {total} states" in lockstep["controller"][1]
-    assert lockstep["controller"][1].count("joint_states restarted at t = 0.000 s") >= len(STATES) - 1
+    for key in ("a", "b"):
+        graph, total = lockstep[key], sum(STATES[key].values())
+        for node in ("observer", "controller", *(("estimator",) if key == "b" else ())):
+            code, out = graph[node]
+            assert code == 0, out
+        assert f"estimated {total} states" in graph["observer"][1], key
+        assert f"answered {total} states" in graph["controller"][1], key
+        assert graph["controller"][1].count("joint_states restarted at t = 0.000 s") >= len(STATES[key]) - 1, key
 
 
 @pytest.mark.graph
@@ -176,7 +207,7 @@ def test_a_run_past_the_metrics_window_streams_its_csv_whole_and_reports_the_off
     for c in COLUMNS[:6] + ["tau_d1", "tau_d2"]:
         np.testing.assert_allclose(graph[c], offline[c], rtol=0, atol=1e-9, err_msg=c)
     want = metrics.compute(offline.columns, metrics.WINDOW, loop.plant.fall_angle).as_dict()
-    got = json.loads(lockstep["summary"].read_text())["metrics"]
+    got = json.loads(lockstep["a"]["summary"].read_text())["metrics"]
     for key in ("theta_b_p2p", "theta_b_rms", "theta_b_max_abs", "u_rms", "upright", "t_end", "samples"):
         assert got[key] == pytest.approx(want[key], abs=1e-12), key
 
@@ -192,8 +223,8 @@ def test_lockstep_graph_runs_a_law_registered_by_a_test_equal_to_offline(lockste
     k = trivial_law.TrivialLaw.parameters[0].default
     run = _ran(lockstep, controller)
     said = f"{law.title} ready: k = {k}" if controller == "trivial" else f"law now {law.title} (k = {k})"
-    assert said in lockstep["controller"][1]
-    graph = load_run(run.csv, estimates=lockstep["estimates"][controller])
+    assert said in lockstep["a"]["controller"][1]
+    graph = load_run(run.csv, estimates=lockstep["a"]["estimates"][controller])
     offline = simulate(P.closed_loop(dict(P.merged_values(P.load_param_file(PARAMS)), **{"trivial.k": k}),
                                      controller=controller, duration=2.0))
     assert len(graph) == len(offline) == 401 and not offline.fallen
@@ -216,18 +247,18 @@ def test_lockstep_graph_with_raw_sensors_and_the_estimator_equals_mwip_sim(locks
     run = _ran(lockstep, "raw")
     out = run.output()
     assert "publishing imu/data_raw and wheel_encoder" in out
-    graph = load_run(run.csv, estimates=lockstep["estimates"]["raw"])
+    graph = load_run(run.csv, estimates=lockstep["b"]["estimates"]["raw"])
     assert len(graph) == 2001
     for c in COLUMNS:   # the true state, the torque that acted, tau_hat (joined by stamp), the true tau_d
         np.testing.assert_allclose(graph[c], offline[c], rtol=0, atol=1e-9, err_msg=c)
     # every estimate the estimator made (its own csv: all 2001) equals mwip_sim's
-    mine = read_csv(lockstep["work"] / "estimator.csv")
+    mine = read_csv(lockstep["work"] / "b" / "estimator.csv")
     assert len(mine) == 2001
     for c in ("gyro", "accel_x", "accel_z", "encoder", "encoder_rate", "theta_b_hat", "dtheta_b_hat"):
         np.testing.assert_allclose(mine[c], offline[c], rtol=0, atol=1e-9, err_msg=c)
     # and what the loop heard of them on joint_states (this test's reader, which under load may fall more than its
     # history behind the lockstep rate and lose the oldest: every one it heard), with the encoder's torque as effort
-    est = _estimates_by_stamp(lockstep["heard"])
+    est = _estimates_by_stamp(lockstep["b"]["heard"])
     assert len(est) >= 500, len(est)
     index = {round(t * 1e9): k for k, t in enumerate(offline.t)}
     ks = [index[s] for s in sorted(est)]
@@ -236,7 +267,7 @@ def test_lockstep_graph_with_raw_sensors_and_the_estimator_equals_mwip_sim(locks
     # effort: the torque that acted over the previous period, as the encoder's driver reported it (0 at k = 0)
     np.testing.assert_allclose([est[s][1] for s in sorted(est)], np.r_[0.0, offline["u"][:-1]][ks], rtol=0,
                                atol=1e-9)
-    code, e_out = lockstep["estimator"]
+    code, e_out = lockstep["b"]["estimator"]
     assert code == 0, e_out
     assert "estimated 2001 samples" in e_out and "unpaired dropped: 0" in e_out and "rejected: none" in e_out
     # the estimator in the loop costs lockstep rate: the plant's steps/s (reported, not asserted)
@@ -263,14 +294,14 @@ def test_with_noisy_delayed_sensing_the_graph_equals_mwip_sim_and_the_bag_holds_
     from bagcheck import decoded_messages
     from mwip_ros.runs import read_bag_run
     run = _ran(lockstep, "sensing")
-    assert lockstep["recorder"][0] == 0, lockstep["recorder"][1]
+    assert lockstep["b"]["recorder"][0] == 0, lockstep["b"]["recorder"][1]
     assert "the true state is on true_joint_states" in run.output()
     offline = simulate(P.closed_loop(dict(P.merged_values(P.load_param_file(PARAMS)), **SENSING), duration=3.0))
     graph = load_run(run.csv)
     assert len(graph) == len(offline) == 601
     for c in ("theta_w", "theta_b", "dtheta_w", "dtheta_b", "u", "tau_d1", "tau_d2"):
         np.testing.assert_allclose(graph[c], offline[c], rtol=0, atol=1e-9, err_msg=c)
-    bag = lockstep["bag"]
+    bag = lockstep["b"]["bag"]
     from_bag = read_bag_run(bag)   # the true states: what mwip_report judges
     for c in ("theta_b", "dtheta_b"):
         np.testing.assert_allclose(from_bag[c], offline[c], rtol=0, atol=1e-9, err_msg=c)

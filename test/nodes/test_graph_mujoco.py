@@ -3,9 +3,9 @@
 driver's ``diverged`` fault (exit 1, nothing that is not finite recorded); raw sensors through the estimator; a fall
 in a state no stage answers; realtime balances.
 
-Two lockstep graphs of the observer and the controller (test/loopgraph.py), a plant process per run: a run that ends
-after its first state (diverged, or a fall no stage answers) leaves the loop's stream at stamp 0, where the next
-plant's first state would be a resend, so each such run is its graph's last."""
+Two lockstep graphs of the observer and the controller at once (test/loopgraph.py), a plant process per run: a run
+that ends after its first state (diverged, or a fall no stage answers) leaves the loop's stream at stamp 0, where the
+next plant's first state would be a resend, so each such run is its graph's last."""
 import json
 import math
 
@@ -15,7 +15,7 @@ import pytest
 pytest.importorskip("mujoco")
 
 from graphproc import PARAMS, Graph  # noqa: E402
-from loopgraph import LoopGraph  # noqa: E402
+from loopgraph import LoopGraph, concurrently  # noqa: E402
 from mwip_ros import params as P  # noqa: E402
 from mwip_ros.core.sim import simulate  # noqa: E402
 from mwip_ros.core.trajectory import POSE_COLUMNS  # noqa: E402
@@ -66,13 +66,10 @@ def _reset_midway(out):
     return wait
 
 
-@pytest.fixture(scope="module")
-def mujoco(tmp_path_factory):
-    """Graph 1: the pose run (1.5 s, recorded), a run reset after 60 states (recorded), a diverging run (recorded).
-    Graph 2: raw sensors through the estimator (1 s), then (the estimator stopped) a fall no stage answers."""
-    work = tmp_path_factory.mktemp("mujoco")
-    out = {"runs": {}, "recorders": {}, "work": work}
-    with LoopGraph(work / "one") as loop:
+def _pose_reset_diverged(work, out):
+    """Graph 1: the pose run (1.5 s, recorded), a run reset after 60 states (recorded), a diverging run
+    (recorded)."""
+    with LoopGraph(work) as loop:
         out["domain"] = loop.domain_id
         loop.start()
         _recorded(loop, out, "pose", "-p", "duration_s:=1.5", "-p", "expected_subscribers:=3", *MUJOCO)
@@ -82,19 +79,31 @@ def mujoco(tmp_path_factory):
                                         wait=_reset_midway(out))
         out["recorders"]["reset"] = (rec.stop(), rec.output(), bag)
         _recorded(loop, out, "diverged", "-p", "duration_s:=1.0", "-p", "expected_subscribers:=3",
-                  "-p", f"summary_json:={work / 'diverged.json'}", *MUJOCO, *DIVERGING)
-    from test_graph import RAW
-    over = work / "mujoco.yaml"
-    over.write_text("plant_sim:\n  ros__parameters:\n    backend: mujoco\n    duration_s: 1.0\n")
-    out["raw_params"] = raw = [*RAW, over]
-    with LoopGraph(work / "two") as loop:
+                  "-p", f"summary_json:={out['work'] / 'diverged.json'}", *MUJOCO, *DIVERGING)
+
+
+def _raw_and_fall(work, out):
+    """Graph 2: raw sensors through the estimator (1 s), then (the estimator stopped) a fall no stage answers."""
+    with LoopGraph(work) as loop:
         loop.start()
-        loop.start("state_estimator", params=raw)
-        out["runs"]["raw"] = loop.run("raw", params=raw)
+        loop.start("state_estimator", params=out["raw_params"])
+        out["runs"]["raw"] = loop.run("raw", params=out["raw_params"])
         out["estimator"] = loop.stop("state_estimator")
         out["runs"]["fall"] = loop.run("fall", "-p", "duration_s:=1.0", "-p", "expected_subscribers:=2",
-                                       "-p", f"summary_json:={work / 'fall.json'}", *MUJOCO, *DIVERGING[:4],
+                                       "-p", f"summary_json:={out['work'] / 'fall.json'}", *MUJOCO, *DIVERGING[:4],
                                        "-p", "lockstep_timeout_s:=3.0", timeout=120)
+
+
+@pytest.fixture(scope="module")
+def mujoco(tmp_path_factory):
+    """Graphs 1 and 2 (test/loopgraph.py), at once."""
+    from test_graph import RAW
+    work = tmp_path_factory.mktemp("mujoco")
+    out = {"runs": {}, "recorders": {}, "work": work}
+    over = work / "mujoco.yaml"
+    over.write_text("plant_sim:\n  ros__parameters:\n    backend: mujoco\n    duration_s: 1.0\n")
+    out["raw_params"] = [*RAW, over]
+    concurrently(lambda: _pose_reset_diverged(work / "one", out), lambda: _raw_and_fall(work / "two", out))
     return out
 
 

@@ -1,14 +1,14 @@
 """cmd_vel and the motion references in the graph (theory 6.11): lockstep with config/motion.yaml's profile equals
-mwip_sim for every law (one graph, the law switched between plant runs); the loop in this process follows cmd_vel,
-stops when it ends (the timeout, logged once, counted on /diagnostics), and hostile Twists are rejected and counted
-(a published cmd_vel across processes: test_yaw_graph.py, test_motion_flood.py)."""
+mwip_sim for every law (two graphs at once, the law switched between plant runs); the loop in this process follows
+cmd_vel, stops when it ends (the timeout, logged once, counted on /diagnostics), and hostile Twists are rejected and
+counted (a published cmd_vel across processes: test_yaw_graph.py, test_motion_flood.py)."""
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from graphproc import PARAMS
-from loopgraph import LoopGraph
+from loopgraph import LoopGraph, concurrently
 from mwip_ros import params as P
 from mwip_ros.core import laws
 from mwip_ros.core.sim import simulate
@@ -19,25 +19,34 @@ COLUMNS = ["t", "theta_w", "theta_b", "dtheta_w", "dtheta_b", "u", "tau_d1", "ta
 CONTROLLERS = ["dsc", "dscndo", "lqr", "lqr_ndo", "smc", "smc_ndo", "mpc", "mpc_ndo"]
 
 
-@pytest.fixture(scope="module")
-def motion_runs(tmp_path_factory):
+def _motion_runs(work, names):
     """One lockstep graph of [paper.yaml, motion.yaml]: the observer and the controller up, a plant of 12 s per law
-    whose packages are installed (``law`` and ``use_observer`` switched through the parameter service)."""
-    work = tmp_path_factory.mktemp("motion")
-    files = [PARAMS, MOTION]
+    of ``names`` whose packages are installed (``law`` and ``use_observer`` switched through the parameter service);
+    (the runs, the controller's exit code and output)."""
     runs = {}
-    with LoopGraph(work, params=files) as loop:
+    with LoopGraph(work, params=[PARAMS, MOTION]) as loop:
         loop.start()
-        for name in CONTROLLERS:
+        for name in names:
             cls = laws.get(name)
             if laws.unavailable(cls):
                 continue
             loop.set("dscndo_controller", law=cls.family, use_observer=cls.observer)
             runs[name] = loop.run(name, "-p", "duration_s:=12.0")
         code = loop.stop("dscndo_controller")
-        out = loop.nodes["dscndo_controller"].output()
-    assert code == 0, out
-    return runs, out
+        return runs, code, loop.nodes["dscndo_controller"].output()
+
+
+@pytest.fixture(scope="module")
+def motion_runs(tmp_path_factory):
+    """Two such graphs at once (test/loopgraph.py), half the laws each: {law: (its run, its controller's output)}."""
+    work = tmp_path_factory.mktemp("motion")
+    halves = (CONTROLLERS[:4], CONTROLLERS[4:])
+    out = {}
+    for i, (runs, code, ctl_out) in enumerate(concurrently(*(lambda i=i, h=h: _motion_runs(work / str(i), h)
+                                                              for i, h in enumerate(halves)))):
+        assert code == 0, ctl_out
+        out.update({name: (run, ctl_out) for name, run in runs.items()})
+    return out
 
 
 @pytest.mark.graph
@@ -46,8 +55,7 @@ def test_lockstep_graph_with_the_motion_profile_equals_mwip_sim(motion_runs, con
     cls = laws.get(controller)
     if laws.unavailable(cls):
         pytest.skip(laws.unavailable(cls))
-    runs, ctl_out = motion_runs
-    run = runs[controller]
+    run, ctl_out = motion_runs[controller]
     assert run.code == 0, run.output()
     assert "tracking motion.profile" in ctl_out
     files = [PARAMS, MOTION]

@@ -1,14 +1,14 @@
 """A lockstep recording with the MuJoCo plant (``backend: mujoco``, issue 32 item 4): the bag carries each wheel's
 angle (``true_wheel_states``) equal to mwip_sim's csv columns, the recorder's ledger counts the topic, ``bag_replay``
-resim reproduces the recorded outputs exactly, and ``mwip_report`` on the bag states the 3D pose. One graph a
-recording: the recording, then its resim (the observer and the controller restarted first, as bag_replay asks)."""
+resim reproduces the recorded outputs exactly, and ``mwip_report`` on the bag states the 3D pose. The two recordings
+(the paper's run, and one with the yaw stage), each with its resim, run at once."""
 import numpy as np
 import pytest
 
 pytest.importorskip("mujoco")
 
 from graphproc import PARAMS, REPO  # noqa: E402
-from loopgraph import LoopGraph  # noqa: E402
+from loopgraph import LoopGraph, concurrently  # noqa: E402
 from test_bag_replay import parse_table, resim  # noqa: E402
 
 pytestmark = pytest.mark.graph
@@ -17,30 +17,43 @@ DURATION = 1.5
 STATES = 301   # 1.5 s at 200 Hz: states k = 0 .. 300
 
 
-def _recorded(work, files, plant_args=()):
+def _recorded(work, files):
     """(bag, resim's exit code and output): a lockstep DSCNDO run of ``files`` recorded (the plant waits for the
-    recorder), then bag_replay resim of the bag in the same graph."""
+    recorder), then bag_replay resim of the bag (a freshly started observer and controller, as it asks)."""
     bag = work / "bag"
     with LoopGraph(work, params=files) as loop:
         rec = loop.graph.start("mcap_recorder", "-p", f"output:={bag}", "-p", "use_sim_time:=true", params=None)
         loop.start()
-        run = loop.run("plant", "-p", f"duration_s:={DURATION}", "-p", "expected_subscribers:=3", *plant_args)
+        run = loop.run("plant", "-p", f"duration_s:={DURATION}", "-p", "expected_subscribers:=3")
         assert run.code == 0, run.output()
         assert rec.stop() == 0, rec.output()
-        return bag, resim(loop, "resim", bag)
+    return bag, resim(work / "resim", bag, params=files)
 
 
 @pytest.fixture(scope="module")
-def recording(tmp_path_factory):
-    """(bag, mwip_sim's csv, resim's exit code and output) of the same lockstep DSCNDO run on MuJoCo."""
-    from mwip_ros.cli import sim
+def recordings(tmp_path_factory):
+    """Two recordings at once (each a graph of its own, then its resim): {"paper": the DSCNDO run on MuJoCo, "turn":
+    with the yaw stage (motion: a speed and a yaw-rate profile)}, each (bag, resim's exit code and output)."""
     work = tmp_path_factory.mktemp("mujoco_rec")
     over = work / "mujoco.yaml"
     over.write_text("plant_sim:\n  ros__parameters:\n    backend: mujoco\n")
-    bag, replayed = _recorded(work, [PARAMS, over])
-    sim_csv = work / "sim.csv"
-    assert sim.main(["--params", str(PARAMS), str(over), "--controller", "dscndo", "--duration", str(DURATION),
-                     "--csv", str(sim_csv), "-q"]) == 0
+    turn = work / "turn.yaml"
+    turn.write_text("plant_sim:\n  ros__parameters:\n    backend: mujoco\n"
+                    "dscndo_controller:\n  ros__parameters:\n"
+                    "    motion: {profile: [0.0, 0.0, 0.5, 0.3], yaw_profile: [0.0, 0.0, 0.25, 0.5]}\n")
+    paper, turning = concurrently(lambda: _recorded(work / "paper", [PARAMS, over]),
+                                  lambda: _recorded(work / "turn", [PARAMS, REPO / "config" / "motion.yaml", turn]))
+    return {"paper": paper, "turn": turning, "over": over}
+
+
+@pytest.fixture(scope="module")
+def recording(recordings, tmp_path_factory):
+    """(bag, mwip_sim's csv, resim's exit code and output) of the same lockstep DSCNDO run on MuJoCo."""
+    from mwip_ros.cli import sim
+    bag, replayed = recordings["paper"]
+    sim_csv = tmp_path_factory.mktemp("mujoco_sim") / "sim.csv"
+    assert sim.main(["--params", str(PARAMS), str(recordings["over"]), "--controller", "dscndo", "--duration",
+                     str(DURATION), "--csv", str(sim_csv), "-q"]) == 0
     return bag, sim_csv, replayed
 
 
@@ -99,17 +112,12 @@ def test_the_report_of_the_mujoco_bag_states_the_3d_pose(tmp_path, recording, ca
     assert "3D pose" in (out / "metrics.md").read_text()
 
 
-def test_resim_of_a_mujoco_recording_with_the_yaw_stage_reproduces_its_wheel_torques(tmp_path):
+def test_resim_of_a_mujoco_recording_with_the_yaw_stage_reproduces_its_wheel_torques(recordings):
     """Motion on the MuJoCo plant (a speed and a yaw-rate profile): the controller answers each state with the yaw
     stage's two wheel torques (wheel_torques_cmd, docs/theory.md 6.13) instead of wheel_torque_cmd; resim waits for
     those answers and reproduces them exactly."""
     from mwip_ros.bag import topic_counts
-    turn = tmp_path / "turn.yaml"
-    turn.write_text("plant_sim:\n  ros__parameters:\n    backend: mujoco\n"
-                    "dscndo_controller:\n  ros__parameters:\n"
-                    "    motion: {profile: [0.0, 0.0, 0.5, 0.3], yaw_profile: [0.0, 0.0, 0.25, 0.5]}\n")
-    files = [PARAMS, REPO / "config" / "motion.yaml", turn]
-    bag, (code, out) = _recorded(tmp_path / "run", files)
+    bag, (code, out) = recordings["turn"]
     counts = topic_counts(bag)
     assert counts.get("/wheel_torques_cmd") == STATES and not counts.get("/wheel_torque_cmd"), counts
     assert code == 0, out

@@ -1,13 +1,12 @@
 """bag_replay resim of lockstep recordings in which the controller tracked motion (docs/theory.md 6.11): a
 ``motion.profile`` (config/motion.yaml) and ``cmd_vel`` (the recorded Twists replayed before the states recorded
-after them) are both reproduced exactly. One graph a recording: the recording, then its resim (the observer and the
-controller restarted first, as bag_replay asks: a restart of the stream would forget a Twist sent before it)."""
+after them) are both reproduced exactly. The two recordings, each with its resim, run at once."""
 import signal
 
 import pytest
 
 from graphproc import PARAMS, REPO
-from loopgraph import LoopGraph
+from loopgraph import LoopGraph, concurrently
 from test_bag_replay import parse_table, resim
 
 pytestmark = pytest.mark.graph
@@ -19,8 +18,8 @@ MOTION = REPO / "config" / "motion.yaml"
 
 def _record_and_resim(work, files, twist=None):
     """(bag, resim's exit code and output): a lockstep DSCNDO run of ``files`` recorded by mcap_recorder, then
-    bag_replay resim of the bag in the same graph; ``twist``: a cmd_vel (linear.x) the controller and the recorder
-    have before the plant starts."""
+    bag_replay resim of the bag (a freshly started observer and controller, as it asks); ``twist``: a cmd_vel
+    (linear.x) the controller and the recorder have before the plant starts."""
     from diagnostic_msgs.msg import DiagnosticArray
     from geometry_msgs.msg import Twist
 
@@ -49,7 +48,7 @@ def _record_and_resim(work, files, twist=None):
             run = loop.run("plant", "-p", f"duration_s:={DURATION}", "-p", "expected_subscribers:=3")
             assert run.code == 0, run.output()
             assert rec.stop(signal.SIGINT, timeout=20) == 0, rec.output()
-        return bag, resim(loop, "resim", bag)
+    return bag, resim(work / "resim", bag, params=files)
 
 
 def _reproduced(code, out):
@@ -61,28 +60,39 @@ def _reproduced(code, out):
     assert "RESULT: REPRODUCED" in out
 
 
-def test_resim_of_a_recording_with_a_motion_profile_reproduces_it(tmp_path):
-    files = [PARAMS, MOTION]   # at rest, then 1 m/s from t = 2 s
-    _bag, replayed = _record_and_resim(tmp_path, files)
+GAINS = "      max_accel: 0.5\n      position_gain: 0.2\n      lean_gain: 0.03\n"   # config/motion.yaml's
+
+
+@pytest.fixture(scope="module")
+def recordings(tmp_path_factory):
+    """The two recordings at once, each a graph of its own then its resim: {"profile": config/motion.yaml's
+    profile, "cmd_vel": a controller tracking cmd_vel (no profile, no timeout within the run) given 0.5 m/s before
+    the plant starts}, each (bag, resim's exit code and output)."""
+    work = tmp_path_factory.mktemp("resim_motion")
+    over = work / "cmd_vel.yaml"
+    over.write_text("dscndo_controller:\n  ros__parameters:\n    motion:\n      enabled: true\n" + GAINS
+                    + "      cmd_vel_timeout_s: 10.0\n")
+    profile, cmd_vel = concurrently(lambda: _record_and_resim(work / "profile", [PARAMS, MOTION]),
+                                    lambda: _record_and_resim(work / "cmd_vel", [PARAMS, over], twist=0.5))
+    return {"profile": profile, "cmd_vel": cmd_vel}
+
+
+def test_resim_of_a_recording_with_a_motion_profile_reproduces_it(recordings):
+    _bag, replayed = recordings["profile"]   # at rest, then 1 m/s from t = 2 s
     _reproduced(*replayed)
 
 
-def test_resim_replays_the_recorded_cmd_vel_and_reproduces_the_run(tmp_path):
+def test_resim_replays_the_recorded_cmd_vel_and_reproduces_the_run(tmp_path, recordings):
     import numpy as np
 
     from mwip_ros import params as P
     from mwip_ros.core.sim import simulate
     from mwip_ros.runs import read_bag_run
-    gains = "      max_accel: 0.5\n      position_gain: 0.2\n      lean_gain: 0.03\n"   # config/motion.yaml's
-    over = tmp_path / "cmd_vel.yaml"   # no profile: the controller tracks cmd_vel (no timeout within the run)
-    over.write_text("dscndo_controller:\n  ros__parameters:\n    motion:\n      enabled: true\n" + gains
-                    + "      cmd_vel_timeout_s: 10.0\n")
-    files = [PARAMS, over]
-    bag, (code, out) = _record_and_resim(tmp_path / "run", files, twist=0.5)
+    bag, (code, out) = recordings["cmd_vel"]
     # the recording is the run with v* = 0.5 m/s from state 0 (mwip_sim with that profile): the controller had the
     # Twist before the first state
     prof = tmp_path / "profile.yaml"
-    prof.write_text("dscndo_controller:\n  ros__parameters:\n    motion:\n      enabled: true\n" + gains
+    prof.write_text("dscndo_controller:\n  ros__parameters:\n    motion:\n      enabled: true\n" + GAINS
                     + "      profile: [0.0, 0.5]\n")
     offline = simulate(P.closed_loop(P.merged_values(P.load_param_files([PARAMS, prof])), duration=DURATION,
                                      controller="dscndo"))

@@ -11,7 +11,7 @@ import pytest
 pytest.importorskip("mujoco")
 
 from graphproc import PARAMS, run_lockstep  # noqa: E402
-from loopgraph import LoopGraph  # noqa: E402
+from loopgraph import LoopGraph, concurrently  # noqa: E402
 from mwip_ros import params as P  # noqa: E402
 from mwip_ros.core.sim import simulate  # noqa: E402
 from mwip_ros.core.trajectory import POSE_COLUMNS  # noqa: E402
@@ -25,8 +25,7 @@ TURN = ("plant_sim:\n  ros__parameters:\n    backend: mujoco\n"
 ODOM_RUN_S = 3.0
 
 
-@pytest.fixture(scope="module")
-def turning(tmp_path_factory):
+def _turning(work):
     """One lockstep graph of [paper.yaml, motion.yaml, the turn on MuJoCo]: robot_state, the observer and the
     controller up; a plant of 2 s with DSCNDO, one with LQR, then one of 3 s with DSCNDO while this test's reader
     (subscribed before the run: nothing to join late) takes robot_state's odom."""
@@ -35,7 +34,7 @@ def turning(tmp_path_factory):
 
     from injector import Injector
     from mwip_ros.core import laws
-    work = tmp_path_factory.mktemp("turning")
+    work.mkdir(parents=True)
     turn = work / "turn.yaml"
     turn.write_text(TURN)
     files = [PARAMS, MOTION, turn]
@@ -64,6 +63,33 @@ def turning(tmp_path_factory):
             out["last_k"] = inj.wait(lambda: last_k() == 600, 60) and last_k()
         out["robot_state"] = (robot_state.stop(), robot_state.output())
     return out
+
+
+def _raw_turning(work):
+    """Raw sensors (config/sensors_raw_realistic.yaml) on the MuJoCo plant, turning from 1 s (graphproc.run_lockstep):
+    (the parameter files, the plant's exit code, its csv, the logs)."""
+    from test_graph import RAW
+    work.mkdir(parents=True)
+    turn = work / "turn.yaml"
+    turn.write_text("plant_sim:\n  ros__parameters:\n    backend: mujoco\n"
+                    "state_estimator:\n  ros__parameters:\n    kalman: {accel_noise_std: 1.0, slip_gate: 150.0}\n"
+                    "dscndo_controller:\n  ros__parameters:\n"
+                    "    motion: {profile: [0.0, 0.0, 0.5, 0.3], yaw_profile: [0.0, 0.0, 1.0, 0.0, 1.25, 0.5]}\n")
+    files = [*RAW, MOTION, turn]
+    return (files, *run_lockstep(work, True, "-p", "duration_s:=3.0", params=files, law="dsc"))
+
+
+@pytest.fixture(scope="module")
+def graphs(tmp_path_factory):
+    """The turning graph and the raw one at once (each a domain of its own)."""
+    work = tmp_path_factory.mktemp("yaw")
+    turning, raw = concurrently(lambda: _turning(work / "turning"), lambda: _raw_turning(work / "raw"))
+    return {"turning": turning, "raw": raw}
+
+
+@pytest.fixture(scope="module")
+def turning(graphs):
+    return graphs["turning"]
 
 
 @pytest.mark.graph
@@ -111,20 +137,13 @@ def test_robot_state_on_the_3d_plant_integrates_the_gyro_s_yaw(turning):
 
 
 @pytest.mark.graph
-def test_lockstep_graph_with_raw_sensors_and_the_yaw_stage_equals_mwip_sim(tmp_path):
+def test_lockstep_graph_with_raw_sensors_and_the_yaw_stage_equals_mwip_sim(graphs):
     """Raw sensors (config/sensors_raw_realistic.yaml) on the MuJoCo plant, turning from 1 s: the plant's IMU carries
     its z gyro (angular_velocity.z, core.raw_sensors.YawGyro), the state estimator passes it on as the yaw joint
     (its files say backend mujoco), the controller answers with the wheels' pair; the graph equals mwip_sim to 1e-9,
     the turn and the yaw gyro's bias and noise included.  The turn in place slips at the 5 ms physics step: the
     filter leaves the slipping samples out (kalman.slip_gate, theory.md 6.4; without it it diverges at 2.04 s)."""
-    from test_graph import RAW
-    turn = tmp_path / "turn.yaml"
-    turn.write_text("plant_sim:\n  ros__parameters:\n    backend: mujoco\n"
-                    "state_estimator:\n  ros__parameters:\n    kalman: {accel_noise_std: 1.0, slip_gate: 150.0}\n"
-                    "dscndo_controller:\n  ros__parameters:\n"
-                    "    motion: {profile: [0.0, 0.0, 0.5, 0.3], yaw_profile: [0.0, 0.0, 1.0, 0.0, 1.25, 0.5]}\n")
-    files = [*RAW, MOTION, turn]
-    code, csv_path, logs = run_lockstep(tmp_path, True, "-p", "duration_s:=3.0", params=files, law="dsc")
+    files, code, csv_path, logs = graphs["raw"]
     assert code == 0, logs["plant_sim"].output() + logs["state_estimator"].output()
     offline = simulate(P.closed_loop(P.merged_values(P.load_param_files(files)), controller="dscndo",
                                      duration=3.0))
