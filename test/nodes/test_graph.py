@@ -3,11 +3,10 @@
 Lockstep (two graphs at once, :func:`lockstep`): in each, the observer and the controller started once, and plants run
 against them one after another (test/loopgraph.py): every law of the package and one a test registers, a run past
 the metrics window, noisy delayed sensing with a recorder, raw sensors through the state estimator; each run equals
-mwip_sim; and the graph's waits naming the node that is missing. Realtime (one graph, :func:`realtime`): raw
-sensors, then the paper's plant, balance; the nodes exit promptly on SIGINT and SIGTERM, a plant cut short says so
-in its exit code.
-In this process (tier node, test/nodeharness.py): bad messages, bad parameters, run-time parameter changes, a
-realtime plant without a controller.
+mwip_sim; and the graph's waits naming the node that is missing. Realtime (one graph, :func:`realtime`): a plant
+alone (zero torque, its jitter); raw sensors, then the paper's plant, balance; the nodes exit promptly on SIGINT and
+SIGTERM, a plant cut short says so in its exit code.
+In this process (tier node, test/nodeharness.py): bad messages, bad parameters, run-time parameter changes.
 """
 import json
 import math
@@ -339,8 +338,9 @@ UPRIGHT = ("-p", "initial.theta_b:=0.0", "-p", "tau_ext1.amplitude:=0.0", "-p", 
 
 @pytest.fixture(scope="module")
 def realtime(tmp_path_factory):
-    """One realtime graph (the observer writing its estimates, the controller): a raw plant through the state
-    estimator for 2 s, then (the estimator stopped) the paper's plant for 3 s; then a plant upright at rest with
+    """One realtime graph: first a plant alone for 1 s; then the observer (writing its estimates) and the
+    controller: a raw plant through the state estimator for 2 s, then (the estimator stopped) the paper's plant for
+    3 s; then a plant upright at rest with
     no end (duration_s 0), and beside it two plants of 60 s alone in namespaces of their own. Once these run, each
     node is signalled: the observer SIGINT, the controller SIGTERM, the endless plant SIGINT, the two cut short
     SIGINT and SIGTERM; each stop timed."""
@@ -349,6 +349,9 @@ def realtime(tmp_path_factory):
     out = {"work": work, "wall0": wall0}
     with Graph(work) as g:
         rt = ("-p", "mode:=realtime")
+        alone = g.start("plant_sim", *rt, "-p", "duration_s:=1.0", "-p", "initial.theta_b:=0.0",
+                        "-p", "lockstep_timeout_s:=1.0", "-p", f"summary_json:={work / 'alone.json'}", label="alone")
+        out["alone"] = (alone.wait(60), alone.output())
         obs = g.start("disturbance_observer", *rt, "-p", f"csv:={work / 'est.csv'}")
         ctl = g.start("dscndo_controller", *rt)
         est = g.start("state_estimator", *rt, params=RAW)
@@ -432,20 +435,14 @@ def test_plant_stopped_before_its_duration_says_so_in_its_exit_code(realtime, si
     assert len(read_csv(work / f"cut{int(sig)}.csv")) == summary["periods"]  # what ran is still written
 
 
-@pytest.mark.node
-def test_realtime_without_controller_substitutes_zero_torque_and_reports_jitter(tmp_path):
-    """The plant's own loop in this process (its graph wait, its runner's ticks on the wall clock): no controller
-    after lockstep_timeout_s, it runs anyway, zero torque in every period, the jitter in its summary."""
-    summary = tmp_path / "summary.json"
-    with NodeHarness(node_class("plant_sim"), "-p", "mode:=realtime", "-p", "duration_s:=1.0",
-                     "-p", "initial.theta_b:=0.0", "-p", "lockstep_timeout_s:=1.0",
-                     "-p", f"summary_json:={summary}") as h:
-        assert h.turn(timeout=4.0), h.logs()
-        code = h.node.exit_code
-    out = h.logs()
+@pytest.mark.graph
+def test_realtime_without_controller_substitutes_zero_torque_and_reports_jitter(realtime):
+    """A realtime plant alone (its own process: the period's jitter is its process's): no controller after
+    lockstep_timeout_s, it runs anyway, zero torque in every period, the jitter in its summary."""
+    code, out = realtime["alone"]
     assert code in (0, 3), out
     assert "graph not ready after 1 s" in out and "starting the realtime run anyway" in out
-    rt = json.loads(summary.read_text())["realtime"]   # the jitter report, as the summary has it
+    rt = json.loads((realtime["work"] / "alone.json").read_text())["realtime"]   # the jitter report, as the summary
     assert rt["ticks"] >= 150 and rt["stale_command_substitutions"] >= rt["ticks"] - 2
     assert rt["stale_command_substitutions"] >= 150  # zero torque in every period of the 1 s run (200 periods)
     assert 4.0 < rt["period_ms_p50"] < 6.0 and rt["period_ms_max"] >= rt["period_ms_p99"] >= rt["period_ms_p50"]
