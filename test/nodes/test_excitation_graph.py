@@ -1,4 +1,5 @@
-"""The controller's excitation (identification) in the graph: the lockstep graph equals mwip_sim with it on."""
+"""The controller's excitation (identification) in the graph: the lockstep graph equals mwip_sim with it on (and with
+the drive's model on); the two graphs run at once."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -8,6 +9,7 @@ import pytest
 import yaml
 
 from graphproc import PARAMS, run_lockstep
+from loopgraph import concurrently
 from mwip_ros import params as P
 from mwip_ros.core.sim import simulate
 from mwip_ros.runs import load_run
@@ -33,9 +35,25 @@ def _overlaid_for_2_s(tmp_path, overlay: Path) -> Path:
     return params
 
 
-def test_lockstep_graph_with_a_chirp_equals_offline(tmp_path):
-    params = _overlaid_for_2_s(tmp_path, IDENTIFY)
-    code, csv_path, logs = run_lockstep(tmp_path, True, params=params)
+MOTOR = Path(__file__).resolve().parents[2] / "config" / "motor_realistic.yaml"
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory):
+    """{overlay: (its parameter file, the plant's exit code, its csv, the logs)}: the chirp's and the drive's lockstep
+    graphs at once (graphproc.run_lockstep, each a domain of its own)."""
+    work = tmp_path_factory.mktemp("excitation")
+
+    def run(overlay):
+        d = work / overlay.stem
+        d.mkdir()
+        params = _overlaid_for_2_s(d, overlay)
+        return (params, *run_lockstep(d, True, params=params))
+    return dict(zip((IDENTIFY, MOTOR), concurrently(lambda: run(IDENTIFY), lambda: run(MOTOR))))
+
+
+def test_lockstep_graph_with_a_chirp_equals_offline(runs):
+    params, code, csv_path, logs = runs[IDENTIFY]
     assert code == 0, logs["plant_sim"].output()
     graph = load_run(csv_path)
     loop = P.closed_loop(P.merged_values(P.load_param_file(params)), controller="dscndo")
@@ -47,14 +65,10 @@ def test_lockstep_graph_with_a_chirp_equals_offline(tmp_path):
         np.testing.assert_allclose(graph[c], offline[c], rtol=0, atol=1e-9, err_msg=c)
 
 
-MOTOR = Path(__file__).resolve().parents[2] / "config" / "motor_realistic.yaml"
-
-
-def test_lockstep_graph_with_the_drive_equals_offline_and_records_the_torque_that_acted(tmp_path):
+def test_lockstep_graph_with_the_drive_equals_offline_and_records_the_torque_that_acted(runs):
     """The motor model on (config/motor_realistic.yaml): the plant's csv equals mwip_sim's to 1e-9, u_applied (the
     torque that acted) beside the command u, and the drive saturates in the first periods, so the two differ."""
-    params = _overlaid_for_2_s(tmp_path, MOTOR)
-    code, csv_path, logs = run_lockstep(tmp_path, True, params=params)
+    params, code, csv_path, logs = runs[MOTOR]
     assert code == 0, logs["plant_sim"].output()
     assert "motor: K_t = 2 N m/A" in logs["plant_sim"].output()
     graph = load_run(csv_path)

@@ -33,7 +33,6 @@ from mwip_ros.bag import message_definition
 from mwip_ros.msgs import layouts as L
 from mwip_ros.msgs.topics import GRAPH_TOPICS, SYSTEM_TOPICS, topic_type
 
-pytestmark = pytest.mark.graph
 
 SUBPROTOCOL = "foxglove.sdk.v1"
 CLASSIC = "foxglove.websocket.v1"   # the subprotocol before the SDK's: the same frames
@@ -146,6 +145,7 @@ def _run_of(sub: List[bytes], full: List[bytes]) -> bool:
     return any(full[i:i + len(sub)] == sub for i in starts)
 
 
+@pytest.mark.graph
 def test_the_client_gets_every_message_as_published_with_the_recorders_schemas(tmp_path):
     port = free_port()
     url = f"ws://127.0.0.1:{port}"
@@ -272,16 +272,16 @@ def test_the_client_gets_every_message_as_published_with_the_recorders_schemas(t
     assert all(w.torque.y == 0.0 and w.torque.x >= 0.0 for w in wrenches)
 
 
-def test_a_bad_or_busy_port_stops_the_node_at_start_naming_the_parameter(tmp_path):
+@pytest.mark.node
+def test_a_bad_or_busy_port_stops_the_node_at_start_naming_the_parameter():
+    """(The process around a refusal, exit 2 and the one line: test_startup.py.)"""
+    from nodeharness import node_class, refused
+    server = node_class("foxglove_server")
     with socket.socket() as busy:
         busy.bind(("127.0.0.1", 0))
         busy.listen()
-        port = busy.getsockname()[1]
-        with Graph(tmp_path) as g:
-            taken = g.start("foxglove_server", "-p", f"port:={port}", label="taken")
-            zero = g.start("foxglove_server", "-p", "port:=0", label="zero")
-            high = g.start("foxglove_server", "-p", "port:=65536", label="high")
-            codes = {p.name: p.wait(60) for p in (taken, zero, high)}
-    assert codes == {"taken": 2, "zero": 2, "high": 2}, {p.name: p.output() for p in (taken, zero, high)}
-    assert "parameter 'port'" in taken.output() and "Address already in use" in taken.output()
-    assert "parameter 'port'" in zero.output() and "parameter 'port'" in high.output()
+        taken = refused(server, "-p", f"port:={busy.getsockname()[1]}")
+    assert "parameter 'port'" in taken and "Address already in use" in taken, taken
+    for port in (0, 65536):
+        line = refused(server, "-p", f"port:={port}")
+        assert "parameter 'port'" in line, line

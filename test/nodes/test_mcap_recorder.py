@@ -1,4 +1,6 @@
-"""The mcap_recorder node as a separate process, fed from this test over an isolated ROS domain."""
+"""The mcap_recorder node: as separate processes fed from this test over an isolated ROS domain (what it records,
+stopped by SIGINT or SIGTERM; killed by SIGKILL, then repaired), and in this process (its subscriptions, what it
+refuses, the topics it selects, the completeness it judges)."""
 import os
 import signal
 import subprocess
@@ -11,8 +13,6 @@ from rosbags.typesys import Stores, get_typestore
 
 from graphproc import Graph, wait_until
 from mwip_ros.bag import type_hash
-
-pytestmark = pytest.mark.graph
 
 TS = get_typestore(Stores.ROS2_JAZZY)
 MODULE = "mwip_ros.nodes.tools.mcap_recorder"
@@ -38,11 +38,11 @@ def graph(tmp_path, monkeypatch):
         rclpy.shutdown(context=ctx)
 
 
-def start_recorder(g, *params):
-    args = []
+def start_recorder(g, *params, name: str = "mcap_recorder"):
+    args = ["-r", f"__node:={name}"] if name != "mcap_recorder" else []
     for p in params:
         args += ["-p", p]
-    proc = g.start("mcap_recorder", *args, params=None, module=MODULE)
+    proc = g.start("mcap_recorder", *args, params=None, module=MODULE, label=name)
     assert proc.wait_for_output("recording ", timeout=30), proc.output()
     return proc
 
@@ -55,14 +55,14 @@ def publishers(g, topics):
     return {name: g.node.create_publisher(msg_class(t), name, qos) for name, t in topics.items()}
 
 
-def wait_matched(g, pubs, timeout=20.0):
-    if wait_until(lambda: all(p.get_subscription_count() >= 1 for p in pubs.values()), timeout):
+def wait_matched(g, pubs, timeout=20.0, n=1):
+    if wait_until(lambda: all(p.get_subscription_count() >= n for p in pubs.values()), timeout):
         return
     raise AssertionError("the recorder's subscriptions did not match: "
                          + str({n: p.get_subscription_count() for n, p in pubs.items()}))
 
 
-def wait_written(g, n: int, timeout: float = 30.0) -> dict:
+def wait_written(g, n: int, timeout: float = 30.0, name: str = "mcap_recorder") -> dict:
     """Until the recorder's /diagnostics (a report every wall second) says it has written ``n`` messages or more:
     the event to wait for before stopping or killing it, not a sleep. Returns that report's values."""
     from diagnostic_msgs.msg import DiagnosticArray
@@ -71,7 +71,7 @@ def wait_written(g, n: int, timeout: float = 30.0) -> dict:
 
     def take(arr):
         for st in arr.status:
-            if st.name.endswith("/mcap_recorder"):
+            if st.name.endswith(f"/{name}"):
                 reports.append({kv.key: kv.value for kv in st.values})
                 written.append(int(reports[-1]["messages_written"]))
     sub = g.node.create_subscription(DiagnosticArray, "/diagnostics", take, 10)
@@ -115,18 +115,21 @@ def read_bag(bag):
     return msgs, counts
 
 
-@pytest.mark.parametrize("stop_signal", [signal.SIGINT, signal.SIGTERM])
-def test_records_exactly_what_was_published(graph, tmp_path, stop_signal):
+@pytest.mark.graph
+def test_records_exactly_what_was_published_and_finishes_the_bag_on_sigint_and_sigterm(graph, tmp_path):
+    """Two recorders of the same publishers, one stopped by SIGINT, the other by SIGTERM: each bag holds every
+    message as published, its metadata finished."""
     from geometry_msgs.msg import WrenchStamped
     from rosgraph_msgs.msg import Clock
     from std_msgs.msg import Float64
 
-    bag = tmp_path / "bags" / "run1"
-    rec = start_recorder(graph, f"output:={bag}", "chunk_size:=4096", "compression:=zstd")
+    bags = {sig: tmp_path / "bags" / f"run{int(sig)}" for sig in (signal.SIGINT, signal.SIGTERM)}
+    recs = {sig: start_recorder(graph, f"output:={bag}", "chunk_size:=4096", "compression:=zstd",
+                                name=f"mcap_recorder_{int(sig)}") for sig, bag in bags.items()}
     topics = {"joint_states": "sensor_msgs/msg/JointState", "wheel_torque_cmd": "std_msgs/msg/Float64",
               "disturbance_estimate": "geometry_msgs/msg/WrenchStamped", "/clock": "rosgraph_msgs/msg/Clock"}
     pubs = publishers(graph, topics)
-    wait_matched(graph, pubs)
+    wait_matched(graph, pubs, n=2)
     for i in range(N):
         pubs["joint_states"].publish(joint_state(i, empty_effort=(i % 3 == 0)))
         pubs["wheel_torque_cmd"].publish(Float64(data=0.125 * i))
@@ -138,15 +141,20 @@ def test_records_exactly_what_was_published(graph, tmp_path, stop_signal):
         c.clock.sec, c.clock.nanosec = i, 5
         pubs["/clock"].publish(c)
     wait_acked(pubs)
-    wait_written(graph, 4 * N)   # its /diagnostics count (system topics included); the rest is drained at stop
-    assert rec.stop(stop_signal, timeout=20) == 0, rec.output()
-    out = rec.output()
-    assert (bag / "metadata.yaml").exists(), out   # the bag was finished; its counts are read from it below
+    for sig in recs:   # its /diagnostics count (system topics included); the rest is drained at stop
+        wait_written(graph, 4 * N, name=f"mcap_recorder_{int(sig)}")
+    for sig, rec in recs.items():
+        assert rec.stop(sig, timeout=20) == 0, rec.output()
+    for sig, rec in recs.items():
+        _check_recorded(bags[sig], rec.output(), topics, f"mcap_recorder_{int(sig)}")
 
+
+def _check_recorded(bag, out, topics, name):
+    assert (bag / "metadata.yaml").exists(), out   # the bag was finished; its counts are read from it below
     msgs, counts = read_bag(bag)
     system = {t: counts.pop(t) for t in ("/rosout", "/parameter_events", "/diagnostics") if t in counts}
     assert system.get("/rosout", 0) >= 1, system   # ROS's own topics too (/parameter_events: test_param_events)
-    assert any(m.name == "mcap_recorder" and "recording" in m.msg for _, m in msgs["/rosout"])
+    assert any(m.name == name and "recording" in m.msg for _, m in msgs["/rosout"])
     for topic in topics:   # volatile publishers cannot match the graph's QoS: each topic was subscribed again
         assert f"a publisher on /{topic.lstrip('/')} cannot match the graph's QoS" in out, out
     assert counts == {"/joint_states": N, "/wheel_torque_cmd": N, "/disturbance_estimate": N, "/clock": N}
@@ -173,49 +181,60 @@ def test_records_exactly_what_was_published(graph, tmp_path, stop_signal):
         assert [q["reliability"] for q in tm["offered_qos_profiles"]] == ["reliable"]
 
 
-def test_the_loop_topics_are_subscribed_before_any_publisher(graph, tmp_path):
+@pytest.mark.node
+def test_the_loop_topics_are_subscribed_before_any_publisher(tmp_path):
     """So a plant that waits for the recorder (expected_subscribers) starts only once it listens, and the
-    graph's transient-local writers (GRAPH_QOS) match it with no graph query in between."""
+    graph's transient-local writers (GRAPH_QOS) match it with no graph query in between; a volatile publisher
+    (here on /clock) cannot match that QoS: its topic is subscribed again, said in the log."""
     from mwip_ros.msgs.qos import GRAPH_QOS
     from mwip_ros.msgs.topics import GRAPH_TOPICS, USER_TOPICS, msg_class
-    rec = start_recorder(graph, f"output:={tmp_path / 'early'}")
+    from mwip_ros.nodes.tools.mcap_recorder import McapRecorder
+    from nodeharness import NodeHarness
     loop = {"/" + t.lstrip("/") for t in GRAPH_TOPICS} - {"/" + t for t in USER_TOPICS}
-    wait_until(lambda: all(graph.node.count_subscribers(t) == 1 for t in loop), 20)
-    assert {t: graph.node.count_subscribers(t) for t in loop} == {t: 1 for t in loop}
-    assert graph.node.count_subscribers("/external_wrench") == 0   # subscribed once a publisher shows
-    pub = graph.node.create_publisher(msg_class(GRAPH_TOPICS["wheel_torque_cmd"]), "wheel_torque_cmd", GRAPH_QOS)
-    wait_matched(graph, {"wheel_torque_cmd": pub})
-    assert rec.stop(signal.SIGINT, timeout=20) == 0, rec.output()
-    assert "cannot match" not in rec.output() and "subscribed /wheel_torque_cmd" not in rec.output(), rec.output()
+    with NodeHarness(McapRecorder, "-p", f"output:={tmp_path / 'early'}", params=None) as rec:
+        assert {t: len(rec.subscriptions(t)) for t in loop} == {t: 1 for t in loop}
+        assert not rec.subscriptions("/external_wrench")   # subscribed once a publisher shows
+        pub = rec.peer("publisher").create_publisher(msg_class(GRAPH_TOPICS["wheel_torque_cmd"]), "wheel_torque_cmd",
+                                                     GRAPH_QOS)
+        rec.peer("publisher").create_publisher(msg_class(GRAPH_TOPICS["/clock"]), "/clock", 10)   # volatile
+        assert rec.turn(10.0, until=lambda: pub.get_subscription_count() == 1
+                        and "a publisher on /clock cannot match" in rec.logs()), rec.logs()
+        assert rec.turn(10.0, until=lambda: "subscribed /clock" in rec.logs()), rec.logs()
+    out = rec.logs()
+    assert "a publisher on /wheel_torque_cmd cannot match" not in out and "subscribed /wheel_torque_cmd" not in out, \
+        out
 
 
-def test_refuses_existing_output(graph, tmp_path):
+@pytest.mark.node
+def test_refuses_existing_output(tmp_path):
+    from mwip_ros.nodes.tools.mcap_recorder import McapRecorder
+    from nodeharness import refused
     out = tmp_path / "exists"
     out.mkdir()
-    cmd = [sys.executable, "-m", MODULE, "--ros-args", "-p", f"output:={out}"]
-    r = subprocess.run(cmd, env=graph.env, capture_output=True, text=True, timeout=60)
-    assert r.returncode == 2, r.stdout + r.stderr
-    assert "output" in r.stderr and str(out) in r.stderr and "exists" in r.stderr
+    line = refused(McapRecorder, "-p", f"output:={out}", params=None)
+    assert "output" in line and str(out) in line and "exists" in line, line
     assert os.listdir(out) == []
-    r = subprocess.run(cmd[:-2], env=graph.env, capture_output=True, text=True, timeout=60)
-    assert r.returncode == 2 and "output" in r.stderr, r.stdout + r.stderr
+    assert "'output'" in refused(McapRecorder, params=None)
 
 
-def test_topics_parameter_selects_topics(graph, tmp_path):
+@pytest.mark.node
+def test_topics_parameter_selects_topics(tmp_path):
     from std_msgs.msg import Float64
+
+    from mwip_ros.nodes.tools.mcap_recorder import McapRecorder
+    from nodeharness import NodeHarness
     bag = tmp_path / "sel"
-    rec = start_recorder(graph, f"output:={bag}", "topics:=[wheel_torque_cmd]")
-    pubs = publishers(graph, {"wheel_torque_cmd": "std_msgs/msg/Float64"})
-    wait_matched(graph, pubs)
-    for i in range(5):
-        pubs["wheel_torque_cmd"].publish(Float64(data=float(i)))
-    wait_acked(pubs)
-    report = wait_written(graph, 5)   # only the selected topic is recorded
-    assert rec.stop(signal.SIGINT, timeout=20) == 0, rec.output()
-    assert report["topics_subscribed"] == "1", report
+    with NodeHarness(McapRecorder, "-p", f"output:={bag}", "-p", "topics:=[wheel_torque_cmd]", params=None) as rec:
+        assert rec.node.tap.subs.keys() == {"/wheel_torque_cmd"} and not rec.node.tap.pending
+        for i in range(5):
+            assert rec.feed("wheel_torque_cmd", Float64(data=float(i))) == 1
+        assert not rec.subscriptions("joint_states") and not rec.subscriptions("/rosout")
+        report = rec.node.diagnostic_status()[2]
+    assert report["topics_subscribed"] == 1 and report["messages_written"] == 5, report
     assert read_bag(bag)[1] == {"/wheel_torque_cmd": 5}
 
 
+@pytest.mark.graph
 def test_kill_9_then_repair(graph, tmp_path):
     bag = tmp_path / "killed"
     rec = start_recorder(graph, f"output:={bag}", "chunk_size:=2048", "topics:=[joint_states]")
@@ -247,42 +266,28 @@ def test_kill_9_then_repair(graph, tmp_path):
     assert tm["offered_qos_profiles"][0]["reliability"] == "reliable"
 
 
+@pytest.mark.node
 def test_a_recording_that_lacks_states_says_so_and_names_the_remedy(tmp_path):
     """In process, messages handed to the recorder's callback: /clock and joint_states for states 0..9, the
     estimate for 0..4 only. At shutdown the log's warning names the gap and the remedy (count the recorder in
     expected_subscribers), and the bag's metadata holds the gap."""
-    import rclpy
-
-    from graphproc import fresh_domain_id, release_domain_id
     from mwip_ros.bag.ledger import GAPS_KEY
     from mwip_ros.msgs import layouts as L
     from mwip_ros.msgs.cdr import encode_clock
     from mwip_ros.nodes.tools.mcap_recorder import McapRecorder
-    domain, bag = fresh_domain_id(), tmp_path / "bag"
-    ctx = rclpy.Context()
-    argv = ["mcap_recorder", "--ros-args", "-p", f"output:={bag}",
-            "-p", "topics:=[joint_states, disturbance_estimate, /clock]"]
-    rclpy.init(args=argv, context=ctx, domain_id=domain)
-    try:
-        node = McapRecorder(context=ctx, argv=argv)
-        lines = []
-        node.get_logger = lambda: type("Log", (), {level: (lambda self, text, _l=level: lines.append((_l, text)))
-                                                   for level in ("info", "warning", "error")})()
+    from nodeharness import NodeHarness
+    bag = tmp_path / "bag"
+    with NodeHarness(McapRecorder, "-p", f"output:={bag}", "-p", "topics:=[joint_states, disturbance_estimate, /clock]",
+                     params=None) as rec:
         h = 5_000_000
         for k in range(10):
-            node._on_message("/clock", "rosgraph_msgs/msg/Clock", encode_clock(k * h))
-            node._on_message("/joint_states", "sensor_msgs/msg/JointState", L.encode_state(k * h, (0.0,) * 4, 0.0))
+            rec.feed("/clock", encode_clock(k * h))
+            rec.feed("joint_states", L.encode_state(k * h, (0.0,) * 4, 0.0))
             if k < 5:
-                node._on_message("/disturbance_estimate", "geometry_msgs/msg/WrenchStamped",
-                                 L.encode_wrench(k * h, 0.0, 0.0))
-        node.on_shutdown()
-        node.destroy_node()
-    finally:
-        rclpy.shutdown(context=ctx)
-        release_domain_id(domain)
-    warnings = [text for level, text in lines if level == "warning"]
+                rec.feed("disturbance_estimate", L.encode_wrench(k * h, 0.0, 0.0))
+    warnings = rec.logs("WARN").splitlines()
     assert len(warnings) == 1 and warnings[0].startswith("INCOMPLETE lockstep recording: /disturbance_estimate: 5 of "
-                                                         "10"), lines
+                                                         "10"), rec.logs()
     assert "count it in plant_sim's expected_subscribers" in warnings[0]
     meta = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
     assert meta["custom_data"][GAPS_KEY] in warnings[0] and "expected_subscribers" not in meta["custom_data"][GAPS_KEY]

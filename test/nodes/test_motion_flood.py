@@ -32,7 +32,10 @@ def _run(tmp_path, rate):
         ctl = g.start("dscndo_controller", "-p", "mode:=realtime", params=files)
         flood = g.start("cmd_vel_flooder", cmd=[sys.executable, str(FLOODER), str(rate), str(FLOOD_S), "100"],
                         params=None, as_given=True) if rate else None
-        plant = g.start("plant_sim", "-p", "mode:=realtime", "-p", f"duration_s:={RUN_S}", params=files)
+        # the flooder's joint_states reader counted beside the observer's and the controller's: the run starts once
+        # it listens (else, its process slow to start, it could hear fewer than its 100 states before the run ends)
+        plant = g.start("plant_sim", "-p", "mode:=realtime", "-p", f"duration_s:={RUN_S}",
+                        "-p", f"expected_subscribers:={3 if rate else 2}", params=files)
         code = plant.wait(120 + RUN_S)
         if flood is not None:
             assert flood.wait(60) == 0, flood.output()

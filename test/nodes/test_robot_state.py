@@ -1,7 +1,9 @@
-"""robot_state with the lockstep graph and the realistic raw sensors: odom follows the true wheel within the
+"""robot_state with the lockstep loop and the realistic raw sensors: odom follows the true wheel within the
 drift measured offline (test/core/test_odometry.py: at most 1.3 mm over the paper's 10 s, 0.67 mm at the end),
 robot_description is latched for a late subscriber and parses, the wheel joint states carry phi, and a bad state
-is rejected, never integrated."""
+is rejected, never integrated. In this process: the loop's nodes and robot_state wired by their topics
+(test/nodeharness.py's Loop), a late reader a peer in robot_state's own participant (robot_state across processes:
+test_yaw_graph.py, test_foxglove_frames_graph.py)."""
 from __future__ import annotations
 
 import math
@@ -12,11 +14,11 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
-from graphproc import PARAMS, Graph, run_lockstep
-from injector import Injector
+from graphproc import PARAMS
 from mwip_ros.runs import load_run
+from nodeharness import Loop, NodeHarness, node_class
 
-pytestmark = pytest.mark.graph
+pytestmark = pytest.mark.node
 
 RAW = (PARAMS, PARAMS.parent / "sensors_raw_realistic.yaml")
 LATE = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.RELIABLE,
@@ -25,38 +27,23 @@ LATE = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10, reliability=Reliabi
 
 def test_odom_matches_the_true_pose_and_the_description_is_latched(tmp_path):
     urdf_parser = pytest.importorskip("urdf_parser_py.urdf")
-    with Graph(tmp_path) as g:
-        node = g.start("robot_state", params=RAW)
-        assert node.wait_for_output("robot state ready", 30), node.output()
-
-        def until_integrated(plant, timeout):
-            """The plant's exit, once robot_state has the run's last state: its input is the state estimator's
-            joint_states, whose writer keeps the run only while the estimator runs (run_lockstep stops it when the
-            plant is done); under load robot_state's reader can match it after the plant has ended."""
-            code = plant.wait(timeout)
-            if code != 0:   # the caller's assertion names the plant's failure, not a wait for states never sent
-                return code
-            with Injector(g.domain_id, name="run_reader") as inj:
-                seen = []
-                inj.node.create_subscription(Odometry, "odom", seen.append, LATE)
-                assert inj.wait(lambda: seen and seen[-1].header.stamp.sec == 3, 60), (len(seen), node.output())
-            return code
-
-        code, csv_path, logs = run_lockstep(tmp_path, True, "-p", "duration_s:=3.0", params=RAW, law="dsc",
-                                            domain_id=g.domain_id, wait=until_integrated)
-        assert code == 0, logs["plant_sim"].output()
-        with Injector(g.domain_id, name="late_reader") as inj:   # joins after the run: what is latched or kept
-            odom, desc, wheels = [], [], []
-            inj.node.create_subscription(Odometry, "odom", odom.append, LATE)
-            inj.node.create_subscription(String, "robot_description", desc.append, LATE)
-            inj.node.create_subscription(JointState, "wheel_joint_states", wheels.append, LATE)
-            # the run's last state (3 s) reaches the late reader too: the publisher keeps the run's history
-            assert inj.wait(lambda: odom and odom[-1].header.stamp.sec == 3 and desc and wheels, 60), (
-                len(odom), len(desc), len(wheels))
-        assert node.stop() == 0
-    out = node.output()
+    csv_path = tmp_path / "graph.csv"
+    with NodeHarness(node_class("robot_state"), params=RAW) as rs:
+        with Loop("-p", "duration_s:=3.0", "-p", f"csv:={csv_path}", params=RAW) as loop:
+            loop.wire.harnesses.append(rs)   # robot_state hears what the loop publishes (the estimator's states)
+            loop.start()
+            assert loop.run(), loop.plant.logs()[-3000:]
+            assert loop.plant.node.exit_code == 0, loop.plant.logs()[-3000:]
+        # a reader that joins after the run: what is latched or kept
+        odom = rs.listen("odom", Odometry, qos=LATE, name="late_reader")
+        desc = rs.listen("robot_description", String, qos=LATE, name="late_reader")
+        wheels = rs.listen("wheel_joint_states", JointState, qos=LATE, name="late_reader")
+        # the run's last state (3 s) reaches the late reader too: the publisher keeps the run's history
+        assert rs.spin(lambda: odom and odom[-1].header.stamp.sec == 3 and desc and wheels, 10), (
+            len(odom), len(desc), len(wheels))
+    out = rs.logs()
     assert "rectangle rule" in out   # raw sensors (plant_sim's sensors.model in the same files): the period's rates
-    assert "tf2_msgs is not installed" in out or "/tf" not in out   # one line when tf2_msgs is missing
+    assert "tf2_msgs is not installed" in out or rs.sent("/tf")   # one line when tf2_msgs is missing
     assert out.count("tf2_msgs is not installed") <= 1
     run = load_run(csv_path)
     assert len(run) == 601
@@ -81,25 +68,18 @@ def test_odom_matches_the_true_pose_and_the_description_is_latched(tmp_path):
     assert js.position[0] == js.position[1]
 
 
-def test_a_bad_state_is_rejected_and_a_reset_restarts_the_odometry(tmp_path):
+def test_a_bad_state_is_rejected_and_a_reset_restarts_the_odometry():
     from mwip_ros.core.model import State
     from mwip_ros.msgs import layouts as L
-    with Graph(tmp_path) as g:
-        node = g.start("robot_state")
-        with Injector(g.domain_id) as inj:
-            js = inj.publisher("joint_states", JointState)
-            got = []
-            sub = inj.node.create_subscription(Odometry, "odom", got.append, LATE)
-            assert inj.wait(lambda: js.get_subscription_count() >= 1 and sub.get_publisher_count() >= 1, 30)
-            js.publish(L.encode_state(0, State(0.0, 0.0, 4.0, 0.0), 0.0))
-            js.publish(b"\x00\x01\x00\x00garbage")
-            js.publish(L.encode_state(500_000_000, State(2.0, 0.0, 4.0, 0.0), 0.0))   # 0.5 s at 4 rad/s
-            assert inj.wait(lambda: len(got) >= 2, 30), node.output()
-            js.publish(L.encode_state(0, State(0.0, 0.0, 0.0, 0.0), 0.0))   # stamps back: a reset
-            assert inj.wait(lambda: len(got) >= 3, 30), node.output()
-        assert node.stop() == 0
+    with NodeHarness(node_class("robot_state")) as rs:
+        rs.feed("joint_states", L.encode_state(0, State(0.0, 0.0, 4.0, 0.0), 0.0))
+        rs.feed("joint_states", b"\x00\x01\x00\x00garbage")
+        rs.feed("joint_states", L.encode_state(500_000_000, State(2.0, 0.0, 4.0, 0.0), 0.0))   # 0.5 s at 4 rad/s
+        rs.feed("joint_states", L.encode_state(0, State(0.0, 0.0, 0.0, 0.0), 0.0))   # stamps back: a reset
+        got = rs.messages("odom", Odometry)
+    assert len(got) == 3
     assert got[1].pose.pose.position.x == pytest.approx(0.254 * 4.0 * 0.5, abs=1e-12)
     assert got[2].pose.pose.position.x == 0.0
-    out = node.output()
+    out = rs.logs()
     assert "rejected message #1 on joint_states" in out and "restarts at the origin" in out
     assert "trapezoid rule" in out   # the plant's state (the default): instantaneous rates
