@@ -45,7 +45,7 @@ def _run(tmp_path, rate):
     sent = int(flood.output().split("flooded ")[1].split()[0]) if flood is not None else 0
     tail = c_out.rsplit("rejected: ", 1)[1].splitlines()[0]
     rejected = rejected_counts(tail).get("cmd_vel", 0) if tail != "none" else 0
-    missed = int(out.split("missed deadlines = ")[1].split(";")[0])
+    missed = int(out.split(" periods due, ")[1].split(" missed")[0])   # the realtime report (runtime.schedule)
     stale = int(out.split("stale-command substitutions = ")[1].split()[0])
     answered = int(c_out.split("answered ")[1].split()[0])
     print(f"cmd_vel flood {rate:g}/s: sent {sent}, rejected {rejected}, missed deadlines {missed}, stale-command "
