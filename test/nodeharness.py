@@ -134,9 +134,12 @@ class NodeHarness:
 
     # ------------------------------------------------------------------------------------------------- input
     def subscriptions(self, topic: str) -> list:
-        """The node's subscriptions on ``topic`` (relative names resolve in the node's namespace)."""
+        """The node's subscriptions on ``topic`` (relative names resolve in the node's namespace), its polled inputs
+        (:class:`~mwip_ros.nodes.runtime.rclpy_compat.PolledInput`) among them: :meth:`feed` hands them a message as
+        their node's ``poll`` would."""
         name = self._resolve(topic)
-        return [s for s in self.node.subscriptions if s.topic_name == name]
+        polled = getattr(self.node, "polled_inputs", ())   # rclpy_compat.PolledInput: fed as the node's poll would
+        return [s for s in (*self.node.subscriptions, *polled) if s.topic_name == name]
 
     def publisher(self, topic: str, msg_type=None, name: str = "feeder"):
         """A publisher on ``topic`` of a node ``name`` in the harness's context (made once per name and topic): the
@@ -237,6 +240,8 @@ class NodeHarness:
                 self._executor.shutdown(timeout_sec=1.0)
             for feeder in self._feeder_nodes.values():
                 feeder.destroy_node()
+            from mwip_ros.nodes.runtime.rclpy_compat import destroy_polled_inputs
+            destroy_polled_inputs(self.node)
             self.node.destroy_node()
             self.node = None
             rclpy.try_shutdown(context=self.context)

@@ -234,7 +234,8 @@ class Period:
         x_m = measured if self.estimator is None else self.estimator.step(measured)
         tau_hat = self.observer.update(x_m, u_m)
         try:
-            u_law, internals = command(self.law, x_m, tau_hat, self.excitation, k, self.motion)
+            u_law, internals = command(self.law, x_m, tau_hat, self.excitation, k, self.motion,
+                                       self.side.safety.enabled)
         except Exception as exc:   # noqa: BLE001 - a law's own error (a plug-in's bug), named as the law's
             raise LawError.of(self.law.name, k * self.side.cfg.h, exc) from exc
         return u_law, tau_hat, internals, x_m
@@ -256,7 +257,7 @@ class Period:
         u_law, tau_hat, internals, x_m = self.decide(measured, u_m, p.k)
         if self.yaw is not None:
             dpsi_ref = self.motion.ref.dpsi
-            u_psi = self.yaw.step(dpsi_ref, dpsi, u_law)
+            u_psi = self.yaw.step(dpsi_ref, dpsi, u_law) if side.safety.enabled else self.yaw.hold(dpsi)
             internals = {**internals, "dpsi_ref": dpsi_ref, "u_psi": u_psi, "gyro_z": dpsi}
             wheels = wheel_torques(u_law, u_psi, 0.0)   # clipped per wheel in the drive stage
         u, tau_d = side.act(u_law, wheels=wheels)
@@ -295,13 +296,17 @@ def fall_text(t: float, x, fall_angle: float) -> str:
     return f"FELL at t = {t:.3f} s: |theta_b| = {abs(x[1]):.4f} > fall_angle {fall_angle:g}"
 
 
-def command(law, x, tau_hat, excitation, k: int, motion=None):
+def command(law, x, tau_hat, excitation, k: int, motion=None, driving: bool = True):
     """Stage ``law``: the references of period ``k`` handed to the law (``motion``, a :class:`.motion.Shaper`;
     None: none, the law regulates as in the paper), the law's command for the state ``x`` and ``tau_hat``, plus the
     excitation of period ``k`` (:mod:`.excitation`; None: none) — the command sent, what the trajectory's ``u``
     records; the excitation and the references (v_ref, theta_w_ref) are in the internals.  The controller node
-    calls this too, so the offline loop and the graph take the references in the same place of the period."""
+    calls this too, so the offline loop and the graph take the references in the same place of the period.
+    ``driving`` False: no torque acts (the driver is not enabled, docs/theory.md 6.8): the references hold
+    (:meth:`.motion.Shaper.hold`) at the measured state, at rest, and start from it when the torque is back."""
     if motion is not None:
+        if not driving:
+            motion.hold()
         ref = motion.reference(k, x[0])   # docs/theory.md 6.11: theta_w*(0) is the first state's wheel angle
         law.track(ref)
     u, internals = law.step(x, tau_hat)

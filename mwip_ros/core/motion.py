@@ -132,6 +132,21 @@ class Shaper:
         self.stopped = True      # no command in force (none yet, or timed out)
         self.stopped_now = False   # True for the period the timeout stopped the robot (log it once)
 
+    def hold(self) -> None:
+        """No torque acts (the driver disabled, in fault, the emergency stop held: docs/theory.md 6.8): the run and
+        the command are forgotten (:meth:`reset`), so the position target, v* and psi'* do not advance, and the next
+        :meth:`reference` starts from the state it is given, at rest; a command must come again, after the torque
+        is back, to move the robot."""
+        self.reset()
+
+    def snapshot(self) -> tuple:
+        """What :meth:`reference` changes, for :meth:`restore` (a period whose command was refused)."""
+        return self.k, self.ref, self.cmd, self.cmd_k, self.stopped, self.stopped_now, self.timeouts
+
+    def restore(self, snap: tuple) -> None:
+        """Back to a :meth:`snapshot`: the period that took it did not happen."""
+        self.k, self.ref, self.cmd, self.cmd_k, self.stopped, self.stopped_now, self.timeouts = snap
+
     def command(self, v, wz) -> Optional[str]:
         """Take a command (``v`` m/s, ``wz`` rad/s) for the coming periods; None when taken, else why it is rejected
         (counted).  Over-limit values are clipped (counted)."""

@@ -59,6 +59,18 @@ class YawLoop:
         self.u_psi = 0.0
         self.samples, self.total, self.bias = 0, 0.0, 0.0   # the calibration's count, sum and mean
 
+    def hold(self, dpsi: float) -> float:
+        """A period with no torque acting (the driver not enabled, docs/theory.md 6.8): u_psi = 0 and the integral
+        stays 0, so it cannot wind up while the wheels cannot turn the robot; the gyro's calibration goes on (the
+        robot held still is what it needs).  Returns 0."""
+        self.integral = 0.0
+        self.u_psi = 0.0
+        if self.samples < self.calibration and math.isfinite(dpsi):
+            self.samples += 1
+            self.total += dpsi
+            self.bias = self.total / self.samples
+        return 0.0
+
     def step(self, dpsi_ref: float, dpsi: float, u: float = 0.0) -> float:
         """u_psi of one period for the reference ``dpsi_ref`` and the measured yaw rate ``dpsi`` [rad/s], the law's
         command ``u`` [N m] of the same period taking its share of each wheel first (``wheel_limit``).  A measurement
