@@ -7,15 +7,17 @@
 """
 import json
 import math
+from pathlib import Path
 
 import pytest
 
 from mwip_ros.msgs import cdr
 from mwip_ros.msgs import layouts as L
-from nodeharness import NodeHarness, node_class
+from nodeharness import NodeHarness, node_class, refused
 
 pytestmark = pytest.mark.node
 
+CONFIG = Path(__file__).resolve().parents[2] / "config"
 H_NS = 5_000_000   # the control period of config/paper.yaml [ns]
 REST = (0.0, 0.0, 0.0, 0.0)
 MOTION = ("-p", "motion.enabled:=true", "-p", "use_observer:=false")
@@ -122,3 +124,19 @@ def test_a_refused_command_leaves_the_motion_references_as_they_were():
         del law.step
         h.feed("joint_states", L.encode_state(22 * H_NS, REST, 0.0))   # the next state takes up the same period
         assert h.node.motion.k == before[0] + 2
+
+
+
+def test_the_yaw_stage_takes_the_drives_wheel_limit_from_plant_sims_section(tmp_path):
+    """Item 9: the controller reads plant_sim's drive from the same files (torque_limit, the motor): 0 = the drive's
+    own wheel limit, more than it is refused at start-up naming the key."""
+    drive = tmp_path / "drive.yaml"
+    drive.write_text("plant_sim:\n  ros__parameters:\n    motor: {enabled: true}\n")   # 120 N m: 60 a wheel
+    with NodeHarness(node_class("dscndo_controller"), *MOTION, params=[CONFIG / "paper.yaml", drive]) as h:
+        assert h.node.yaw.cfg.wheel_limit == pytest.approx(60.0)
+    with NodeHarness(node_class("dscndo_controller"), *MOTION, params=[CONFIG / "paper.yaml", CONFIG / "drive.yaml"],
+                     as_given=False) as h:
+        assert h.node.yaw.cfg.wheel_limit == pytest.approx(150.0)   # config/drive.yaml: torque_limit 300
+    line = refused(node_class("dscndo_controller"), *MOTION, "-p", "motion.yaw_wheel_limit:=61.0",
+                   params=[CONFIG / "paper.yaml", drive])
+    assert "'motion.yaw_wheel_limit'" in line and "more than the drive gives a wheel" in line, line

@@ -57,7 +57,7 @@ from mwip_ros.params.motion import motion as motion_config, yaw as yaw_config
 from mwip_ros.nodes.runtime.diagnostics import OK
 from mwip_ros.nodes.runtime.guards import REPEAT, RESTART, STAMP_WINDOW_PERIODS, PublisherWatch, Rejects
 from mwip_ros.nodes.runtime.state_input import StateInput
-from mwip_ros.nodes.runtime.params import declare
+from mwip_ros.nodes.runtime.params import declare, plant_file_values
 from mwip_ros.nodes.runtime.rclpy_compat import PolledInput
 from mwip_ros.nodes.runtime.process import GracefulNodeMixin, run_node
 
@@ -72,6 +72,13 @@ def _installed(values) -> None:
     text = laws.unavailable(law) if law is not None else None
     if text:
         raise P.ParamError("law", text)
+
+
+def _drive_values(argv) -> dict:
+    """plant_sim's drive (``params.motion.DRIVE_KEYS``) from the plant_sim sections of the command line's parameter
+    files, the later file winning (the yaw stage's wheel limit is derived from it)."""
+    from mwip_ros.params.motion import DRIVE_KEYS
+    return plant_file_values(argv, DRIVE_KEYS)
 
 
 class DscndoController(Node, GracefulNodeMixin):
@@ -104,7 +111,9 @@ class DscndoController(Node, GracefulNodeMixin):
         self.watch = PublisherWatch(self, ["joint_states", "disturbance_estimate"])
         mc = motion_config(self.v)   # docs/theory.md 6.11: None while motion.enabled is false (nothing changes)
         self.motion = Shaper(mc, self.h) if mc is not None else None
-        self.yaw = YawLoop(yaw_config(self.v), self.h) if mc is not None else None   # theory 6.13: with a yaw rate
+        # theory 6.13, with a yaw rate: the wheel limit is the drive's (plant_sim's sections of the same files) unless
+        # motion.yaw_wheel_limit says less; more is refused (exit 2, naming the key)
+        self.yaw = YawLoop(yaw_config({**self.v, **_drive_values(argv)}), self.h) if mc is not None else None
         self.yaw_rates = {}   # stamp -> the gyro's yaw rate of that state (a spatial plant's joint_states)
         # the plant's driver (docs/theory.md 6.8): None until a driver_state came (the torque is taken to act)
         self.driver = None
