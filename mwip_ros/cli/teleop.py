@@ -17,6 +17,8 @@ import time
 from dataclasses import dataclass
 from typing import Optional, Sequence, Tuple
 
+from mwip_ros.core.plant import saturate
+
 __all__ = ["DEFAULT_MAX_SPEED", "DEFAULT_MAX_YAW_RATE", "Limits", "limits", "apply_key", "read_keys", "cmd", "drive"]
 
 DEFAULT_MAX_SPEED = 1.0      # [m/s] when neither the schema nor a file gives motion.max_speed
@@ -70,10 +72,6 @@ def limits(files: Sequence[str] = ()) -> Limits:
     return Limits(out["motion.max_speed"], out["motion.max_yaw_rate"])
 
 
-def _clip(v: float, lim: float) -> float:
-    return max(-lim, min(lim, v))
-
-
 def apply_key(key: str, vx: float, wz: float, lim: Limits, step_v: float,
               step_w: float) -> Optional[Tuple[float, float]]:
     """The command after ``key`` (an arrow's escape sequence, space or q): None to quit; other keys change nothing."""
@@ -82,7 +80,7 @@ def apply_key(key: str, vx: float, wz: float, lim: Limits, step_v: float,
     if key == " ":
         return 0.0, 0.0
     dv, dw = {UP: (step_v, 0.0), DOWN: (-step_v, 0.0), LEFT: (0.0, step_w), RIGHT: (0.0, -step_w)}.get(key, (0, 0))
-    return _clip(round(vx + dv, 9), lim.max_speed), _clip(round(wz + dw, 9), lim.max_yaw_rate)
+    return saturate(round(vx + dv, 9), lim.max_speed), saturate(round(wz + dw, 9), lim.max_yaw_rate)
 
 
 def read_keys(text: str):

@@ -213,11 +213,16 @@ class PlantSide:
 class Period:
     """A whole period in one process (the offline loop): the plant's stages around the estimator (when the
     plant measures raw: :mod:`.estimators`), the observer and the law (with ``motion``, a :class:`.motion.Shaper`,
-    the law tracks its references: :func:`command`)."""
+    the law tracks its references: :func:`command`); ``wrench``, a function of t_k, the external wrench held over
+    each period (what ``plant_sim``'s ``external_wrench`` holds: (tau_ext1, tau_ext2[, force.y, torque.z]))."""
 
     def __init__(self, side: PlantSide, observer, law, estimator=None, excitation=None, motion=None,
-                 yaw: Optional[YawLoop] = None):
+                 yaw: Optional[YawLoop] = None, wrench=None):
         self.side, self.observer, self.law, self.estimator = side, observer, law, estimator
+        # the external wrench held over period k, ``wrench(t_k)`` (the node's external_wrench offline: tau_ext1 and
+        # tau_ext2 added, a spatial plant's force.y and torque.z); None: none
+        self.wrench = wrench
+        self.extra = (0.0, 0.0)
         self.excitation = excitation
         self.motion = motion   # the references' shaper (core.motion.Shaper, theory 6.11), None: none (the paper)
         self.yaw = yaw   # the yaw stage (core.yaw, theory 6.13): a spatial plant with motion; None: none
@@ -260,7 +265,8 @@ class Period:
             u_psi = self.yaw.step(dpsi_ref, dpsi, u_law) if side.safety.enabled else self.yaw.hold(dpsi)
             internals = {**internals, "dpsi_ref": dpsi_ref, "u_psi": u_psi, "gyro_z": dpsi}
             wheels = wheel_torques(u_law, u_psi, 0.0)   # clipped per wheel in the drive stage
-        u, tau_d = side.act(u_law, wheels=wheels)
+        self.extra = self.wrench(p.t) if self.wrench is not None else (0.0, 0.0)
+        u, tau_d = side.act(u_law, self.extra, wheels=wheels)
         table.append(p.t, p.x, u, tau_hat, tau_d, internals, (*measured, *x_m) if self.estimator else (), p.pose)
         self.u = u
         if p.fallen:
@@ -277,7 +283,7 @@ class Period:
         not a number is the next :meth:`run`'s failure."""
         p = self.side.plant
         try:
-            self.side.advance(self.u)
+            self.side.advance(self.u, self.extra)
         except (ArithmeticError, ValueError) as exc:   # e.g. sin of an infinite angle in eq. (1): t_k+1 not reached
             t = p.t + p.cfg.h
             self.failure = (t, f"FAILED at t = {t:.3f} s: the state diverged (the model's arithmetic failed: {exc})",

@@ -25,6 +25,8 @@ import math
 from dataclasses import dataclass
 from typing import NamedTuple, Optional, Tuple
 
+from .plant import saturate as _clip   # |v| <= lim (every limit here is > 0); numba compiles it (compiled_motion)
+
 __all__ = ["MotionConfig", "Reference", "Shaper", "rate_reference", "error_state", "profile_at", "speed_start",
            "speed_step", "ABSURD_SPEED", "ABSURD_YAW_RATE"]
 
@@ -70,10 +72,6 @@ def error_state(x, ref: Optional[Reference]):
     if ref is None:
         return x
     return (x[0] - ref.theta_w, x[1], x[2] - rate_reference(ref, x[0]), x[3])
-
-
-def _clip(v: float, lim: float) -> float:
-    return lim if v > lim else (-lim if v < -lim else v)
 
 
 def profile_at(times, values, t: float) -> float:

@@ -84,14 +84,16 @@ class ClosedLoop:
 
 
 def simulate(loop: ClosedLoop, label: str = "", progress: Optional[Callable[[float], None]] = None,
-             diverged_fails: bool = False, on_period: Optional[Callable[[object], None]] = None) -> Trajectory:
+             diverged_fails: bool = False, on_period: Optional[Callable[[object], None]] = None,
+             wrench: Optional[Callable[[float], tuple]] = None) -> Trajectory:
     """Run the closed loop; stops early (``fallen``) when it fails: |theta_b| passes the fall angle, the state is not
     a finite number (diverged), or the law's command is (a ``bad_command``: NaN, infinite, beyond
     :data:`.safety.PLAUSIBLE_TORQUE`).  The trajectory's ``record`` then holds ``t_fall``, ``fall_text`` (the
     line saying when and why) and ``failure`` (the cause, a :data:`.trajectory.FAILURES` name).  A plant whose
     simulation diverges (:class:`~.plant.PlantDiverged`, backend mujoco) raises it, or with ``diverged_fails``
     (a sweep's scenario) ends the run as a ``diverged`` failure at the period it happened in.  ``on_period`` sees
-    the plant at t_k each period, once its row is taken (``mwip_sim --render`` draws it); it must not change it."""
+    the plant at t_k each period, once its row is taken (``mwip_sim --render`` draws it); it must not change it.
+    ``wrench(t_k)``: the external wrench held over period k (:class:`.loop.Period`; a terrain scan's push)."""
     pc = loop.plant
     h = pc.h
     n_steps = int(round(loop.duration_s / h))
@@ -102,7 +104,8 @@ def simulate(loop: ClosedLoop, label: str = "", progress: Optional[Callable[[flo
     # the yaw stage (theory 6.13): a spatial plant, its gyro's yaw rate (raw sensors: the IMU's z axis, 6.4)
     yaw = YawLoop(loop.yaw, h) if loop.yaw is not None and motion is not None and side.plant.spatial else None
     period = Period(side, DiscreteObserver(pc.nominal, gain_matrix(loop.X), h),
-                    loop.law_class(loop.params, pc.nominal, h), estimator, excitation, motion, yaw)   # the stages
+                    loop.law_class(loop.params, pc.nominal, h), estimator, excitation, motion, yaw,
+                    wrench)   # the stages
     # the true state: the metrics judge it
     table = TrajectoryTable(internals=True, raw=pc.raw is not None, drive=pc.motor.enabled or pc.raw is not None,
                             excitation=excitation is not None, motion=motion is not None,

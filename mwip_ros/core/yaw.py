@@ -32,6 +32,8 @@ import math
 from dataclasses import dataclass
 from typing import Tuple
 
+from .plant import saturate
+
 __all__ = ["YawConfig", "YawLoop", "wheel_torques"]
 
 
@@ -98,13 +100,7 @@ class YawLoop:
         return u_psi
 
 
-def _clip(v: float, lim: float) -> float:
-    if lim > 0.0:
-        return -lim if v < -lim else (lim if v > lim else v)
-    return v
-
-
 def wheel_torques(u: float, u_psi: float, torque_limit: float) -> Tuple[float, float]:
     """(u_L, u_R) = (u / 2 - u_psi / 2, u / 2 + u_psi / 2), each clipped to +-``torque_limit`` / 2 (0: no limit)."""
     lim = 0.5 * torque_limit
-    return _clip(0.5 * u - 0.5 * u_psi, lim), _clip(0.5 * u + 0.5 * u_psi, lim)
+    return saturate(0.5 * u - 0.5 * u_psi, lim), saturate(0.5 * u + 0.5 * u_psi, lim)

@@ -23,11 +23,10 @@ from mwip_ros.core.observer import DiscreteObserver, gain_matrix
 from mwip_ros.core.plant import finite_state
 from mwip_ros.core.trajectory import BAD_COMMAND, DIVERGED, FAILURES, FALL
 
-from .common import ParamsArg, setup
+from .common import SEED_RANGE, ParamsArg, setup
 
 __all__ = ["MwipEnv", "NoLaw"]
 
-SEED_RANGE = 2 ** 31   # an episode's plant seed, when reset is given none, is drawn from [0, 2^31)
 
 
 class NoLaw:

@@ -18,14 +18,13 @@ from gymnasium.vector.utils import batch_space
 
 from mwip_ros.optional import required
 
-from .common import ParamsArg, setup
+from .common import SEED_RANGE, ParamsArg, setup
 
 with required("numba", "MwipVectorEnv (its compiled RK4)"):
     from .lanes import Lanes
 
 __all__ = ["MwipVectorEnv"]
 
-SEED_RANGE = 2 ** 31
 
 
 class MwipVectorEnv(VectorEnv):

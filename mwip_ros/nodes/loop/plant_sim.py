@@ -477,11 +477,7 @@ class PlantSimNode(Node, GracefulNodeMixin):
     def _lie(self) -> None:
         """A fallen robot (``exit_on_fall: false``) lies where it fell, at rest: the model has no ground (its body
         would swing through the floor), so the period passes without integrating, no torque acting."""
-        p = self.plant
-        p.x = type(p.x)(p.x[0], p.x[1], 0.0, 0.0)
-        p.k += 1
-        p.u_prev = p.u_cmd_prev = 0.0
-        p.saturation, p.enabled_prev = 0, False
+        self.plant.lie()   # MuJoCo's velocities too (core.mujoco_plant.MujocoPlant.lie)
 
     def _start(self, why: str) -> None:
         self.started = True
