@@ -445,7 +445,8 @@ NODE_SPECS: Dict[str, List[ParamSpec]] = {
                   "them is closed at once and logged (and refused at start-up if the descriptor limit leaves no "
                   "room for it)", **_count_range(1, 100000)),
         ParamSpec("idle_timeout_s", "double", 60.0, "a connection that subscribes to nothing and sends nothing for "
-                  "this long is closed (also one that never completes the WebSocket handshake)",
+                  "this long is closed (also one that never completes the WebSocket handshake, and a subscribed one "
+                  "that reads nothing that long while data waits for it)",
                   **_positive_from(0.5, 86400.0, "a client needs a moment to subscribe once it connected"), unit="s"),
     ],
     "robot_markers": [],   # the shared section only (the nominal model sizes the robot)
