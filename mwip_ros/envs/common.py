@@ -93,8 +93,10 @@ class EnvSetup:
         return 1.0 if self.normalize else self.scale
 
     def torque(self, a):
-        """The torque [N m] of the action ``a`` (clipped to the action space): a S, or a itself."""
-        a = np.clip(a, -self.bound, self.bound)
+        """The torque [N m] of the action ``a`` (clipped to the action space): a S, or a itself.  An action that is
+        not finite stays so, NaN and infinite alike: the drive refuses it (``bad_command``), it is never a torque at
+        the bound."""
+        a = np.where(np.isfinite(a), np.clip(a, -self.bound, self.bound), a)
         return a * self.scale if self.normalize else a
 
 
