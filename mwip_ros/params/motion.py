@@ -11,7 +11,7 @@ from typing import Any, List, Mapping, Optional
 from mwip_ros.core.motion import ABSURD_SPEED
 
 __all__ = ["specs", "motion", "yaw", "profile_rule", "yaw_profile_rule", "PROFILE_MAX_POINTS", "ABSURD_SPEED",
-           "DRIVE_KEYS", "drive_wheel_limit", "wheel_limit"]
+           "DRIVE_KEYS", "drive_wheel_limit", "wheel_limit", "wheel_limit_warning"]
 
 PROFILE_MAX_POINTS = 10000
 # plant_sim's drive (docs/theory.md 6.7): what the yaw stage's wheel limit is derived from (:func:`drive_wheel_limit`)
@@ -85,7 +85,7 @@ def specs() -> List[Any]:
         ParamSpec("motion.yaw_wheel_limit", "double", 0.0, "motion, a spatial plant: the torque one wheel's drive "
                   "gives [N m]; balance first: the yaw pair uses only what the law's u leaves of it, |u_psi| <= "
                   "2 limit - |u| (docs/theory.md 6.13); 0 = the drive's own (plant_sim's torque_limit / 2 and the "
-                  "motor's peak / 2, the smaller; none without either); more than the drive's is refused",
+                  "motor's peak / 2, the smaller; none without either); never more than the drive's",
                   lo=0.0, hi=1e6, unit="N m"),
     ]
 
@@ -122,18 +122,24 @@ def drive_wheel_limit(v: Mapping[str, Any]) -> float:
     return min(limits) if limits else 0.0
 
 
-def wheel_limit(v: Mapping[str, Any], source: Optional[str] = None) -> float:
-    """The yaw stage's wheel limit L (balance first, docs/theory.md 6.13): ``motion.yaw_wheel_limit``, or with 0 the
-    drive's own (:func:`drive_wheel_limit`).  ParamError naming ``motion.yaw_wheel_limit`` when it is more than the
-    drive gives a wheel: the yaw pair would count on torque the wheels do not have, and the balance would lose it."""
-    from .errors import ParamError
+def wheel_limit(v: Mapping[str, Any]) -> float:
+    """The yaw stage's wheel limit L (balance first, docs/theory.md 6.13): the drive's own (:func:`drive_wheel_limit`),
+    or ``motion.yaw_wheel_limit`` when it is less: the yaw pair never counts on torque the wheels do not have (a
+    larger one is taken down to the drive's, :func:`wheel_limit_warning` says so)."""
     given, drive = float(v.get("motion.yaw_wheel_limit", 0.0)), drive_wheel_limit(v)
-    if given > 0.0 and drive > 0.0 and given > drive * (1.0 + 1e-12):
-        raise ParamError("motion.yaw_wheel_limit", f"{given:g} N m is more than the drive gives a wheel ({drive:g} "
-                                                   f"N m: plant_sim's torque_limit / 2 and the motor's peak / 2, the "
-                                                   f"smaller); the yaw pair would take torque the balance needs "
-                                                   f"(leave it 0: the drive's own)", source)
+    if given > 0.0 and drive > 0.0:
+        return min(given, drive)
     return given if given > 0.0 else drive
+
+
+def wheel_limit_warning(v: Mapping[str, Any]) -> Optional[str]:
+    """The line that says ``motion.yaw_wheel_limit`` is more than the drive gives a wheel (and the drive's is used),
+    None otherwise."""
+    given, drive = float(v.get("motion.yaw_wheel_limit", 0.0)), drive_wheel_limit(v)
+    if given > 0.0 and drive > 0.0 and given > drive:
+        return (f"motion.yaw_wheel_limit: {given:g} N m is more than the drive gives a wheel ({drive:.6g} N m: "
+                f"plant_sim's torque_limit / 2 and the motor's peak / 2, the smaller); the yaw stage uses the drive's")
+    return None
 
 
 def yaw(v: Mapping[str, Any]):

@@ -570,8 +570,6 @@ def check_derived(values: Mapping[str, Any], source: Optional[str] = None) -> No
             raise ParamError(f"{prefix}.m_b", f"the {prefix} model's inertia terms are not usable (m11 = {m11:g}, "
                                               f"m12 = {m12:g}, m22 = {m22:g}, A_bar = {a_bar:g}); check "
                                               f"{prefix}.{{m_b, m_w, I_b, I_w, l, r, g}}", source)
-    if values.get("motion.yaw_wheel_limit") and "torque_limit" in values:   # the controller's against the drive's
-        importlib.import_module(".motion", __package__).wheel_limit(values, source)
     if values.get("backend") == "mujoco":
         _check_mujoco(values, source)
         importlib.import_module(".ground", __package__).check(values, source)

@@ -13,7 +13,7 @@ import pytest
 
 from mwip_ros.msgs import cdr
 from mwip_ros.msgs import layouts as L
-from nodeharness import NodeHarness, node_class, refused
+from nodeharness import NodeHarness, node_class
 
 pytestmark = pytest.mark.node
 
@@ -129,7 +129,7 @@ def test_a_refused_command_leaves_the_motion_references_as_they_were():
 
 def test_the_yaw_stage_takes_the_drives_wheel_limit_from_plant_sims_section(tmp_path):
     """Item 9: the controller reads plant_sim's drive from the same files (torque_limit, the motor): 0 = the drive's
-    own wheel limit, more than it is refused at start-up naming the key."""
+    own wheel limit, more than it is taken down to it (a warning)."""
     drive = tmp_path / "drive.yaml"
     drive.write_text("plant_sim:\n  ros__parameters:\n    motor: {enabled: true}\n")   # 120 N m: 60 a wheel
     with NodeHarness(node_class("dscndo_controller"), *MOTION, params=[CONFIG / "paper.yaml", drive]) as h:
@@ -137,6 +137,7 @@ def test_the_yaw_stage_takes_the_drives_wheel_limit_from_plant_sims_section(tmp_
     with NodeHarness(node_class("dscndo_controller"), *MOTION, params=[CONFIG / "paper.yaml", CONFIG / "drive.yaml"],
                      as_given=False) as h:
         assert h.node.yaw.cfg.wheel_limit == pytest.approx(150.0)   # config/drive.yaml: torque_limit 300
-    line = refused(node_class("dscndo_controller"), *MOTION, "-p", "motion.yaw_wheel_limit:=61.0",
-                   params=[CONFIG / "paper.yaml", drive])
-    assert "'motion.yaw_wheel_limit'" in line and "more than the drive gives a wheel" in line, line
+    with NodeHarness(node_class("dscndo_controller"), *MOTION, "-p", "motion.yaw_wheel_limit:=61.0",
+                     params=[CONFIG / "paper.yaml", drive]) as h:   # more than the drive's: the drive's, said
+        assert h.node.yaw.cfg.wheel_limit == pytest.approx(60.0)
+        assert "more than the drive gives a wheel" in h.logs("WARN")

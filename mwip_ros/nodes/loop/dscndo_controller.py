@@ -53,7 +53,7 @@ from mwip_ros.core.yaw import YawLoop, wheel_torques
 from mwip_ros.msgs import BadMessage
 from mwip_ros.msgs import layouts as L
 from mwip_ros.msgs.qos import DRIVER_STATE_QOS, qos_for
-from mwip_ros.params.motion import motion as motion_config, yaw as yaw_config
+from mwip_ros.params.motion import motion as motion_config, wheel_limit_warning, yaw as yaw_config
 from mwip_ros.nodes.runtime.diagnostics import OK
 from mwip_ros.nodes.runtime.guards import REPEAT, RESTART, STAMP_WINDOW_PERIODS, PublisherWatch, Rejects
 from mwip_ros.nodes.runtime.state_input import StateInput
@@ -112,8 +112,11 @@ class DscndoController(Node, GracefulNodeMixin):
         mc = motion_config(self.v)   # docs/theory.md 6.11: None while motion.enabled is false (nothing changes)
         self.motion = Shaper(mc, self.h) if mc is not None else None
         # theory 6.13, with a yaw rate: the wheel limit is the drive's (plant_sim's sections of the same files) unless
-        # motion.yaw_wheel_limit says less; more is refused (exit 2, naming the key)
-        self.yaw = YawLoop(yaw_config({**self.v, **_drive_values(argv)}), self.h) if mc is not None else None
+        # motion.yaw_wheel_limit says less (more: the drive's, and a warning)
+        with_drive = {**self.v, **_drive_values(argv)}
+        self.yaw = YawLoop(yaw_config(with_drive), self.h) if mc is not None else None
+        if mc is not None and wheel_limit_warning(with_drive):
+            self.get_logger().warning(wheel_limit_warning(with_drive))
         self.yaw_rates = {}   # stamp -> the gyro's yaw rate of that state (a spatial plant's joint_states)
         # the plant's driver (docs/theory.md 6.8): None until a driver_state came (the torque is taken to act)
         self.driver = None
