@@ -96,3 +96,14 @@ def test_one_implementation_of_each_limit_and_clip():
     assert not hasattr(yaw, "_clip") and not hasattr(teleop, "_clip")
     assert scalar.SEED_RANGE is common.SEED_RANGE
     assert yaw.wheel_torques(10.0, 4.0, 8.0) == (3.0, 4.0)   # each wheel within torque_limit / 2 (saturate's)
+
+
+@pytest.mark.parametrize("args, words", [(["--laws", "bogus", "dsc"], "--laws: bogus is not a registered law"),
+                                         (["--only", "push", "--figure", "f.png"], "--figure draws the slope and step")])
+def test_the_terrain_cli_refuses_before_any_scan(tmp_path, args, words):
+    import subprocess
+    import sys
+    r = subprocess.run([sys.executable, "-m", "mwip_ros.sweep.terrain", *args], capture_output=True, text=True,
+                       timeout=60, cwd=tmp_path)   # was: a KeyError traceback, or a failure after every scan
+    assert r.returncode == 2 and words in r.stderr and "Traceback" not in r.stderr, r.stderr
+    assert not (tmp_path / "f.png").exists()
