@@ -98,8 +98,9 @@ def test_one_implementation_of_each_limit_and_clip():
     assert yaw.wheel_torques(10.0, 4.0, 8.0) == (3.0, 4.0)   # each wheel within torque_limit / 2 (saturate's)
 
 
-@pytest.mark.parametrize("args, words", [(["--laws", "bogus", "dsc"], "--laws: bogus is not a registered law"),
-                                         (["--only", "push", "--figure", "f.png"], "--figure draws the slope and step")])
+@pytest.mark.parametrize("args, words", [
+    (["--laws", "bogus", "dsc"], "--laws: bogus is not a registered law"),
+    (["--only", "push", "--figure", "f.png"], "--figure draws the slope and step")])
 def test_the_terrain_cli_refuses_before_any_scan(tmp_path, args, words):
     import subprocess
     import sys

@@ -1,7 +1,7 @@
 """Balance first, by default (issue 46 item 9): the yaw stage's wheel limit is the drive's own unless a file says
 less (``motion.yaw_wheel_limit`` 0: plant_sim's torque_limit / 2 and the motor's peak / 2, the smaller), and a limit
-above the drive's is taken down to it, with a warning.  Before, 0 meant no limit: the realistic drive and the square, without
-the overlay's 60 N m, fell at 8.83 s."""
+above the drive's is taken down to it, with a warning.  Before, 0 meant no limit: the realistic drive and the square,
+without the overlay's 60 N m, fell at 8.83 s."""
 import subprocess
 import sys
 from pathlib import Path
