@@ -26,9 +26,9 @@ absurd is rejected and counted; one over the limits is clipped and counted; no c
 While no torque acts (``driver_state``, the plant's driver: disabled, in fault, the emergency stop held; docs/theory.md
 6.8) the references hold at the measured state (the position target, v* and psi'* do not advance), the yaw integral
 stays zero and a cmd_vel is not taken (counted): on enable the robot starts from where it is, at rest.  Until a
-``driver_state`` comes the torque is taken to act.  ``cmd_vel`` and ``driver_state`` are read with each state, the
-newest one (:class:`~mwip_ros.nodes.runtime.rclpy_compat.PolledInput`), not as they arrive: a flood of them costs the
-controller one message a period.
+``driver_state`` comes the torque is taken to act.  ``cmd_vel`` and ``driver_state`` are read with each state and
+between the executor's callbacks, the newest one (:class:`~mwip_ros.nodes.runtime.rclpy_compat.PolledInput`), not as
+they arrive: a flood of them costs the controller one message per look.
 With motion on and a state that carries the gyro's yaw rate (a spatial plant's ``joint_states``: the joint ``yaw``),
 the yaw stage runs after the law (docs/theory.md 6.13, ``core.yaw``) and the answer is the two wheels' torques on
 ``wheel_torques_cmd`` (sensor_msgs/JointState, names wheel_left_joint, wheel_right_joint, effort [u_L, u_R]) instead
@@ -202,10 +202,19 @@ class DscndoController(Node, GracefulNodeMixin):
                 "no torque acts; the references hold at the measured state and cmd_vel is not taken"))
         self.driver = state
 
-    def _on_state(self, data: bytes) -> None:
-        self.driver_in.poll()   # the side inputs, the newest of each, before the state is answered
+    def _poll_side_inputs(self) -> None:
+        """driver_state and cmd_vel: what came since the last look (the newest of each: depth 1)."""
+        self.driver_in.poll()
         if self.cmd_vel_sub is not None:
             self.cmd_vel_sub.poll()
+
+    def spin_step(self, executor) -> None:
+        """Between the executor's callbacks too (a command before the first state is taken then, within 0.1 s)."""
+        self._poll_side_inputs()
+        GracefulNodeMixin.spin_step(self, executor)
+
+    def _on_state(self, data: bytes) -> None:
+        self._poll_side_inputs()   # before the state is answered: what came before it counts for it
         taken = self.input.take(data)
         if taken is None:
             return
