@@ -45,11 +45,13 @@ setup(
             'mwip_sweep = mwip_ros.cli.sweep:main',
             'mwip_tune = mwip_ros.cli.tune:main',
             'mwip_identify = mwip_ros.cli.identify:main',
+            'mwip_robot = mwip_ros.cli.robot:main',
             'robot_markers = mwip_ros.nodes.runtime.entry:robot_markers',
             'robot_state = mwip_ros.nodes.runtime.entry:robot_state',
             'foxglove_server = mwip_ros.nodes.runtime.entry:foxglove_server',
             'mwip_ctl = mwip_ros.cli.ctl:main',
             'state_estimator = mwip_ros.nodes.runtime.entry:state_estimator',
+            'mwip_moteus_emulator = mwip_ros.cli.moteus_emulator:main',
         ],
     },
 )

@@ -17,6 +17,8 @@ mujoco      mujoco               python3-mujoco-pip           the plant backend 
                                                               asked for it; the rk4 backend runs)
 gymnasium   gymnasium            python3-gymnasium-pip        mwip_ros.envs, the Gymnasium environments (an
                                                               import of mwip_ros.envs raises the one line)
+moteus      moteus               python3-moteus-pip           the moteus backend and mwip_moteus_emulator (exit
+                                                              2; the other backends run)
 ==========  ===================  ===========================  ===============================================
 
 Every one is declared in package.xml (a ROS user's ``rosdep install`` installs them); the keys ending in ``-pip``
@@ -47,6 +49,7 @@ OPTIONAL: Dict[str, OptionalPackage] = {
     "lz4": OptionalPackage("lz4", "python3-lz4-pip", "reading lz4-compressed bag chunks"),
     "mujoco": OptionalPackage("mujoco", "python3-mujoco-pip", "the plant backend mujoco"),
     "gymnasium": OptionalPackage("gymnasium", "python3-gymnasium-pip", "mwip_ros.envs (the Gymnasium environments)"),
+    "moteus": OptionalPackage("moteus", "python3-moteus-pip", "the moteus backend and its emulator"),
 }
 
 

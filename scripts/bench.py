@@ -13,7 +13,7 @@
    every channel it advertises (what a live view costs the loop).
 3. Real time: the same four processes, plant_sim in realtime mode, 30 s at 200 Hz and
    at 1 kHz, with normal scheduling and with realtime_priority 50 (SCHED_FIFO; needs root
-   or CAP_SYS_NICE): loop period p50/p99/max, missed deadlines (a period longer than 1.5 h),
+   or CAP_SYS_NICE): loop period p50/p99/max, missed deadlines (periods whose state was never published on time),
    stale-command substitutions; beside them, the wake-up latency of two bare Python sleep
    loops (no ROS), the machine's own limit without SCHED_FIFO.
 4. Offline simulator: control steps/s of mwip_sim's closed loop, 10 s scenario; the batch

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import signal
 import statistics
 import subprocess
 import sys
@@ -207,7 +208,8 @@ def main(argv: Optional[List[str]] = None) -> int:
             envs = {v: variant_env(v, base, Path(tmp)) for v in variants}
             if "server" in variants:
                 server = subprocess.Popen(["fastdds", "discovery", "-i", "0", "-l", "127.0.0.1", "-p", "11888"],
-                                          env=base, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                                          env=base, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                                          start_new_session=True)   # the fastdds wrapper's server child too
                 time.sleep(1.0)
             for trial in range(args.trials):
                 for v in variants:
@@ -216,9 +218,12 @@ def main(argv: Optional[List[str]] = None) -> int:
                             results[v][key].append(got.get(key, -1.0))
                 print(f"bench_discovery: trial {trial + 1}/{args.trials} done", file=sys.stderr, flush=True)
     finally:
-        for p in busy + ([server] if server else []):
+        for p in busy:
             p.kill()
             p.wait()
+        if server is not None:   # the wrapper and the server it started: its whole session
+            os.killpg(server.pid, signal.SIGKILL)
+            server.wait()
     print(f"\n{args.trials} trials x {args.newcomers} newcomers, {args.busy} busy process(es) beside; "
           "median / 90th percentile / largest")
     print("| variant | match (found the node) | first service reply |")

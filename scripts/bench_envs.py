@@ -98,7 +98,7 @@ def main(argv=None) -> int:
     print(f"N = {args.n}, {args.steps} steps, best of {args.repeat}")
     print("| | rate | / batch |\n|---|---|---|")
     for name, v in best.items():
-        print(f"| {name} | {v / 1e6:.3f} M | {v / ref:.2f} |")
+        print(f"| {name} | {v / 1e6:.3g} M | {v / ref:.3g} |")   # significant digits: a slow row is not 0.00
     if args.json:
         with open(args.json, "w") as f:
             json.dump({"n": args.n, "steps": args.steps, "rates": best}, f, indent=1)

@@ -32,11 +32,21 @@
 # with localhost-only discovery, on your ROS_DOMAIN_ID if set, else on a free domain in 1..101
 # (printed first); two experiments never share one. Every process started here is stopped by PID when the run ends, fails, or is interrupted.
 #
+# Ctrl-C (or SIGTERM) during a run ends that run (every node stops as on its own end: the plant writes its summary,
+# the recorder closes its bag), skips the laws not yet run, writes the report of the runs so far (the interrupted
+# one up to where it stopped) and exits 130; a second Ctrl-C stops at once. Paths are printed relative to the
+# directory you ran the command from (absolute when they are not under it).
+#
 # Exit codes: 0 every robot stayed up, 3 a robot fell (every run and the report are still done),
-# 2 a usage or parameter mistake (nothing started), 1 a node failed, 130 interrupted (Ctrl-C).
+# 2 a usage or parameter mistake (nothing started), 1 a node failed, 130 interrupted (Ctrl-C; the report of the
+# runs so far is written).
 set -euo pipefail
 
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+CALLER="$(pwd -P)"   # where the user ran the command: paths are printed relative to it
+shown() {   # a path as the user can use it from where they ran the command
+    case "$1" in "$CALLER"/*) printf '%s' "${1#"$CALLER"/}" ;; *) printf '%s' "$1" ;; esac
+}
 PARAMS=()   # --params FILE [FILE ...]: a base file, then overlays (merged in order, as ROS merges repeated --params-file)
 MODE=lockstep
 DURATION=""
@@ -75,6 +85,7 @@ while [ $# -gt 0 ]; do
         *) echo "run_experiment: unknown argument '$1'" >&2; usage >&2; exit 2 ;;
     esac
 done
+case "$OUT" in /*) ;; *) OUT="$CALLER/$OUT" ;; esac   # a relative --out is where the user is, not the repository
 case "$MODE" in lockstep|realtime) ;; *) die "--mode must be lockstep or realtime, got '$MODE'" ;; esac
 case "$SENSORS" in state|raw) ;; *) die "--sensors must be state or raw, got '$SENSORS'" ;; esac
 [ ${#PARAMS[@]} -gt 0 ] || PARAMS=("$ROOT/config/paper.yaml")
@@ -150,6 +161,17 @@ stop_all() {
 }
 trap 'stop_all' EXIT
 trap 'echo; echo "run_experiment: interrupted, stopping every node" >&2; exit 130' INT TERM
+INTERRUPTED=0
+interrupted() {   # Ctrl-C or SIGTERM during the runs: end this run, then the report of the runs so far
+    if [ "$INTERRUPTED" = 1 ]; then
+        echo "run_experiment: interrupted again; stopping now, without the report" >&2
+        exit 130
+    fi
+    INTERRUPTED=1
+    echo
+    echo "run_experiment: interrupted: ending this run (every node stops as at its end), then the report of the runs so far (Ctrl-C again: stop now)" >&2
+    stop_all
+}
 
 # Lockstep: the recorder logs in sim time (the plant publishes /clock). The observer and the
 # controller never read a clock (each output carries the stamp of the state it answers), so
@@ -162,11 +184,14 @@ PLANT_EXTRA=(-p "plant_sim:mode:=$MODE")
 [ -n "$DURATION" ] && PLANT_EXTRA+=(-p "plant_sim:duration_s:=$DURATION")
 
 RUNS=()
+RAN=()         # the laws whose run ended (or was interrupted): the report's
 FELL=()        # the laws whose robot fell: the script then ends with exit 3, as plant_sim does
 ESTIMATES=()   # the observer's estimates (CSV), for a report from the plant's CSVs (--no-record)
+trap 'interrupted' INT TERM
 for i in "${!LAW_LIST[@]}"; do
+    [ "$INTERRUPTED" = 0 ] || break
     CTRL="${LAW_LIST[$i]}"; LAW="${FAMILY_OF[$i]}"; USE_OBS="${OBSERVER_OF[$i]}"
-    echo "=== $CTRL: $MODE run, ROS_DOMAIN_ID=$ROS_DOMAIN_ID, logs in ${LOGS#$ROOT/}/ ==="
+    echo "=== $CTRL: $MODE run, ROS_DOMAIN_ID=$ROS_DOMAIN_ID, logs in $(shown "$LOGS")/ ==="
     SUBS=2   # expected_subscribers as without an estimator; with one, the plant counts it instead (docs/real-robot.md)
     if [ "$RECORD" = 1 ]; then
         BAG="$OUT/${STAMP}_${CTRL}"
@@ -208,32 +233,61 @@ for i in "${!LAW_LIST[@]}"; do
     wait "$TAIL" 2>/dev/null || true   # tail --pid ends by itself within a second of the plant
     TAIL=""
     stop_all
+    [ "$INTERRUPTED" = 0 ] || code=130   # (the wait returned at the signal; the plant has stopped since)
     case "$code" in
         0) ;;
-        3) echo "run_experiment: the robot FELL in the $CTRL run (the report is still written; exit 3)" >&2
-           FELL+=("$CTRL") ;;
-        130|143) echo "run_experiment: interrupted, stopping every node" >&2; exit 130 ;;
-        *) echo "run_experiment: plant_sim failed in the $CTRL run (exit $code); see ${LOGS#$ROOT/}/" >&2
+        3) FELL+=("$CTRL")
+           if [ "$i" -lt $(( ${#LAW_LIST[@]} - 1 )) ]; then   # said at the end too: here only when runs follow
+               echo "run_experiment: the robot FELL in the $CTRL run; the next run and the report go on" >&2
+           fi ;;
+        130|143) INTERRUPTED=1 ;;
+        *) echo "run_experiment: plant_sim failed in the $CTRL run (exit $code); see $(shown "$LOGS")/" >&2
            exit 1 ;;
     esac
+    RAN+=("$CTRL")
     if [ "$RECORD" = 1 ]; then
         tail -n 1 "$LOGS/${CTRL}_mcap_recorder.log"
     fi
 done
+trap 'echo; echo "run_experiment: interrupted, stopping" >&2; exit 130' INT TERM
 
 REPORT="$OUT/${STAMP}_report"
-echo "=== report ==="
-if [ "$RECORD" = 1 ]; then
-    mwip_report "${RUNS[@]}" --labels "${LAW_LIST[@]}" --out "$REPORT"
+N=${#RAN[@]}
+if [ "$INTERRUPTED" = 1 ]; then
+    echo "=== report of the runs so far (${RAN[*]:-none}; interrupted) ==="
 else
-    mwip_report "${RUNS[@]}" --estimates "${ESTIMATES[@]}" --labels "${LAW_LIST[@]}" --out "$REPORT"
+    echo "=== report ==="
 fi
+reported=0
+if [ "$N" -gt 0 ]; then
+    if [ "$RECORD" = 1 ]; then
+        mwip_report "${RUNS[@]:0:$N}" --labels "${RAN[@]}" --out "$REPORT" && reported=1
+    else
+        mwip_report "${RUNS[@]:0:$N}" --estimates "${ESTIMATES[@]:0:$N}" --labels "${RAN[@]}" --out "$REPORT" \
+            && reported=1
+    fi
+fi
+[ "$reported" = 1 ] || [ "$INTERRUPTED" = 1 ] || exit 1
 echo
-if [ "$RECORD" = 1 ]; then
-    echo "bags:  " "${RUNS[@]#$ROOT/}"
+if [ "$RECORD" = 1 ] && [ "$N" -gt 0 ]; then
+    bags=()
+    for b in "${RUNS[@]:0:$N}"; do bags+=("$(shown "$b")"); done
+    echo "bags:  " "${bags[@]}"
 fi
-echo "report: ${REPORT#$ROOT/}/metrics.md (figures fig3.png, observer.png; animation.gif)"
-echo "logs:   ${LOGS#$ROOT/}/"
+if [ "$reported" = 1 ]; then
+    figures=""   # what mwip_report wrote (pitch_estimate.png with raw sensors, animation.gif unless it could not)
+    for f in fig3.png observer.png pitch_estimate.png animation.gif; do
+        if [ -f "$REPORT/$f" ]; then figures="${figures:+$figures, }$f"; fi
+    done
+    echo "report: $(shown "$REPORT")/metrics.md (figures $figures)"
+else
+    echo "report: none (no run recorded anything to report before the interruption)"
+fi
+echo "logs:   $(shown "$LOGS")/"
+if [ "$INTERRUPTED" = 1 ]; then
+    echo "run_experiment: interrupted${FELL[*]:+ (the robot fell in: ${FELL[*]})}; the report covers ${RAN[*]:-no run} (exit 130)" >&2
+    exit 130
+fi
 if [ ${#FELL[@]} -gt 0 ]; then
     echo "run_experiment: the robot fell in: ${FELL[*]} (exit 3)" >&2
     exit 3

@@ -12,7 +12,8 @@ STAMP="$VENV/.mwip_setup_stamp"
 PIP_VERSION="26.3"
 CONSOLE_SCRIPTS=(plant_sim disturbance_observer dscndo_controller mcap_recorder
                  bag_replay mwip_sim mwip_theorem mwip_report mwip_bag_repair mwip_sweep mwip_tune
-                 robot_markers foxglove_server mwip_ctl state_estimator mwip_identify)
+                 robot_markers foxglove_server mwip_ctl state_estimator mwip_identify mwip_moteus_emulator
+                 mwip_robot)
 
 cd "$ROOT"
 
@@ -82,6 +83,12 @@ if [ "${#missing[@]}" -gt 0 ]; then
     echo "setup: console scripts missing from .venv/bin: ${missing[*]}" >&2
     exit 1
 fi
+
+# numba compiles each law's batch loop the first time a sweep runs it (15 to 40 s a loop on 2 cores): compile them
+# now, while set-up is waited for anyway, so the first sweep of a fresh clone runs at the speed of the next
+# (mwip_ros/sweep/warm.py; cached under mwip_ros/ until the code changes). A failure only warns: a sweep compiles
+# what is missing at its start, and says so.
+"$VENV/bin/python" -m mwip_ros.sweep.warm || echo "setup: warning: the batch loop was not compiled ahead" >&2
 
 echo "$WANT" > "$STAMP"
 echo "setup: done"

@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Set up .venv (if needed) and run the test suite: every tier (CI). Extra args go to pytest, e.g.
-# `scripts/test.sh -m unit -n 2` (the fast loop, two workers), `-m "unit or graph"`, `-m e2e`; the tiers: test/conftest.py.
+# `scripts/test.sh -m unit` (the fast loop), `-m "unit or node" -n 2`, `-m graph`, `test/core/test_sim.py`;
+# the tiers: test/conftest.py.
 set -euo pipefail
 
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -33,12 +34,37 @@ else
     exit 1
 fi
 
-# One line per test file with its share of the suite done, so a long run shows where it is.
-echo "test: python -m pytest ${targets[*]} $*"
-rc=0
-python -m pytest "${targets[@]}" "$@" || rc=$?
-if [ "$rc" -eq 5 ]; then
-    echo "test: pytest collected no tests; treating as failure" >&2
-    exit 1
+# Without -m, -n or test paths of the caller's: two runs, so that every core works and nothing timed shares it.
+# First the tiers that run in this process (unit, node, slow, montecarlo: test/conftest.py) on every core
+# (pytest-xdist), then the tiers that start processes and keep real-time deadlines (graph, e2e, bench), one test
+# at a time. With -m, -n or paths of yours: one pytest run, as you asked.
+split=1
+[ "${#targets[@]}" -eq 0 ] && split=0
+for a in "$@"; do
+    case "$a" in
+        -m|-m?*|-n|-n?*|--numprocesses|--numprocesses=*) split=0 ;;
+    esac
+done
+
+run_pytest() {   # pytest's exit code; 5 (nothing collected) is a failure of the whole run
+    local rc=0
+    echo "test: python -m pytest $*"
+    python -m pytest "$@" || rc=$?
+    if [ "$rc" -eq 5 ]; then
+        echo "test: pytest collected no tests; treating as failure" >&2
+        rc=1
+    fi
+    return "$rc"
+}
+
+if [ "$split" -eq 0 ]; then
+    run_pytest "${targets[@]}" "$@"
+    exit $?
 fi
+start=$SECONDS
+rc=0
+run_pytest "${targets[@]}" -m "unit or node or slow or montecarlo" -n auto --dist worksteal "$@" || rc=$?
+in_process=$((SECONDS - start))
+run_pytest "${targets[@]}" -m "graph or e2e or bench" "$@" || rc=$?
+echo "test: in-process tiers ${in_process} s, process tiers $((SECONDS - start - in_process)) s, in all $((SECONDS - start)) s"
 exit "$rc"

@@ -1,26 +1,29 @@
-"""test/ holds shared helpers (graphproc, bagcheck, mathfixtures); the tests in its subfolders import them.
+"""test/ holds shared helpers (graphproc, nodeharness, bagcheck, mathfixtures, printed); the tests in its subfolders
+import them.
 
 Every test is in exactly one tier (pytest.ini registers the markers; a module says its tier with
-``pytestmark = pytest.mark.<tier>`` after its imports, a module that mixes tiers marks each test instead):
+``pytestmark = pytest.mark.<tier>`` after its imports; a test's own tier mark replaces its module's, so a module of
+unit tests may hold one slow test marked ``@pytest.mark.slow``):
 
-- ``unit``: no ROS middleware and no project script. In this process (no ``rclpy.init``, no ``Graph``),
-  or a short-lived child process that starts no ROS node: a project CLI (``python -m mwip_ros.cli...``,
-  a small local worker pool of mwip_sweep's or mwip_tune's included), ``python -c`` that imports the
-  package, ``colcon list``. Each finishes in a few seconds (``--durations``: at most about 4 s here,
-  but about 14 s for the one that compiles the batch loop twice into an empty cache); the tier is the
-  developer's fast loop (``scripts/test.sh -m unit -n 2``: about 75 s on two workers, under 2 minutes on one).
-- ``graph``: brings up ROS: starts a node process (``Graph``, ``run_lockstep``, ``python -m
-  mwip_ros.nodes.X``, even one that is expected to refuse its start-up or to answer ``--help``), runs
-  ``mwip_ctl`` against a graph, or calls ``rclpy.init`` in the test process (a node in-process).
+- ``unit``: no ROS middleware and no project script. In this process (no ``rclpy.init``, no ``Graph``), or a
+  short-lived child process that starts no ROS node (a project CLI, ``python -c`` that imports the package,
+  ``colcon list``). At most 5 s each (``--durations``; a run lists the unit and node tests that took longer).
+- ``node``: a node built in the test's own process by test/nodeharness.py (rclpy with discovery off: no other
+  process, no DDS traffic), fed messages, service calls and parameter requests directly. At most 5 s each.
+- ``slow``: like ``unit``, but longer than 5 s: a kernel compiled into an empty cache, a documentation table
+  recomputed whole, a search run to its end.
+- ``montecarlo``: statistical coverage over many seeds or fits (a confidence interval's coverage over 100 runs).
+- ``graph``: brings up ROS across processes: starts a node process (``Graph``, ``run_lockstep``, ``python -m
+  mwip_ros.nodes.X``), runs ``mwip_ctl`` against a graph, or an rclpy participant of the test's that discovers
+  them. For what needs processes: exit codes, signals, lockstep across processes, the recorder's file, timing.
 - ``e2e``: the project's scripts and whole jobs (``scripts/run_experiment.sh``, ``colcon build``), external
-  servers beyond ROS nodes (a real ``dask scheduler`` and ``dask worker``: a cluster as deployed, its own
-  ports and processes, not the project's code), and CLI jobs run whole as a user runs them where that is
-  not fast: signalled with their worker processes and their session checked for leftovers
-  (test/cli/test_sigterm.py), or several whole sweeps in one test.
+  servers beyond ROS nodes (a real ``dask scheduler`` and ``dask worker``), and CLI jobs run whole as a user runs
+  them where that is not fast (signalled with their worker processes, several whole sweeps in one test).
 - ``bench``: ``scripts/bench.sh``.
 
-``scripts/test.sh`` runs every tier (CI); ``scripts/test.sh -m unit -n 2`` is the fast loop,
-``-m "unit or graph"`` adds the ROS graphs. A test with no tier or more than one fails collection.
+``scripts/test.sh`` runs every tier (CI): the in-process tiers (unit, node, slow, montecarlo) on every core
+(pytest-xdist), then the tiers that start processes (graph, e2e, bench) one test at a time.
+``scripts/test.sh -m unit`` is the fast loop. A test with no tier or more than one fails collection.
 """
 import os
 import sys
@@ -33,11 +36,39 @@ from mwip_ros.optional import headless_gl  # noqa: E402
 
 headless_gl()   # before a test module imports mujoco itself: MuJoCo picks its GL platform then (mwip_sim --render)
 
-TIERS = ("unit", "node", "graph", "e2e", "bench")
+TIERS = ("unit", "node", "slow", "montecarlo", "graph", "e2e", "bench")
+IN_PROCESS = ("unit", "node", "slow", "montecarlo")   # scripts/test.sh runs these on every core (pytest-xdist)
+FAST = ("unit", "node")                               # at most 5 s a test here
+FAST_LIMIT_S = 5.0
+
+
+def _own_tiers(node) -> set:
+    return {m.name for m in getattr(node, "own_markers", ()) if m.name in TIERS}
+
+
+def _lift_overridden_module_tiers(items) -> None:
+    """A test's own tier mark (on it or its class) replaces its module's: the module's mark moves onto each of its
+    other tests, so ``-m`` sees one tier per test."""
+    by_module = {}
+    for item in items:
+        module = item.getparent(pytest.Module)
+        if module is not None and _own_tiers(module):
+            by_module.setdefault(module, []).append(item)
+    for module, its in by_module.items():
+        overriding = [i for i in its if _own_tiers(i) or _own_tiers(i.getparent(pytest.Class) or i)]
+        if not overriding:
+            continue
+        marks = [m for m in module.own_markers if m.name in TIERS]
+        module.own_markers[:] = [m for m in module.own_markers if m.name not in TIERS]
+        for item in its:
+            if item not in overriding:
+                for m in marks:
+                    item.add_marker(m.name)
 
 
 @pytest.hookimpl(tryfirst=True)   # before -m deselects: a test outside the tier asked for is checked too
 def pytest_collection_modifyitems(config, items):
+    _lift_overridden_module_tiers(items)
     bad = []
     for item in items:
         tiers = sorted({m.name for m in item.iter_markers() if m.name in TIERS})
@@ -48,3 +79,18 @@ def pytest_collection_modifyitems(config, items):
             f"{len(bad)} test(s) not in exactly one tier of {', '.join(TIERS)} (test/conftest.py says which; "
             "add `pytestmark = pytest.mark.<tier>` to the module, or a mark to each test of a mixed module):\n"
             + "\n".join(bad))
+
+
+def pytest_terminal_summary(terminalreporter, exitstatus, config):
+    """The unit and node tests that took longer than their tier allows (a warning: the tier's promise drifted)."""
+    slow = []
+    for reports in terminalreporter.stats.values():
+        for r in reports:
+            if getattr(r, "when", None) == "call" and getattr(r, "duration", 0.0) > FAST_LIMIT_S and \
+                    any(k in FAST for k in getattr(r, "keywords", {})):
+                slow.append((r.duration, r.nodeid))
+    if slow:
+        terminalreporter.write_line(f"tier: {len(slow)} unit/node test(s) over {FAST_LIMIT_S:g} s (move them to "
+                                    "slow, or make them faster):", yellow=True)
+        for d, nodeid in sorted(slow, reverse=True):
+            terminalreporter.write_line(f"  {d:6.1f} s  {nodeid}", yellow=True)

@@ -7,6 +7,16 @@
         results = h.set(k1=7.0)                            # a parameter change through the node's own callbacks
         assert "ready" in h.logs()                         # what its logger said
 
+    with NodeHarness(PlantSimNode) as plant, NodeHarness(DscndoController) as ctl:
+        wire = Wire(plant, ctl)                            # what one publishes is fed to the other
+        plant.node._start("test"); wire.pump()             # a lockstep loop, in this process
+
+:class:`Loop` wires the plant and the answering stages its parameters configure (the lockstep loop in this
+process, a state nobody answered resent at once). A :meth:`NodeHarness.peer` is a plain node in the harness's own
+context: what it publishes, serves or calls reaches the node under test through the middleware inside that one
+participant (no discovery), as :meth:`NodeHarness.spin` spins them together (a late joiner of a latched topic, a
+best-effort publisher; :func:`run_ctl`: ``mwip_ctl`` with its node there).
+
 The node goes through the start-up a process makes (:func:`mwip_ros.nodes.runtime.process.init_context` and
 :func:`~mwip_ros.nodes.runtime.process.build_node`: the command line, the law plug-ins, rclpy's patches, a private
 context), with ``ROS_AUTOMATIC_DISCOVERY_RANGE=OFF`` for that context only: its participant finds no other, so
@@ -16,14 +26,17 @@ process-level test (test/graphproc.py).
 """
 from __future__ import annotations
 
+import itertools
+from collections import deque
 from typing import Any, Callable, Dict, List, Optional
 
-from graphproc import PARAMS, node_rules, param_files
+from graphproc import PARAMS, loop_chain, node_rules, param_files
 
-__all__ = ["NodeHarness", "node_class", "refused"]
+__all__ = ["Loop", "NodeHarness", "Wire", "node_class", "refused", "run_ctl"]
 
 _LOGS: Dict[str, List[tuple]] = {}   # logger name -> [(severity name, message)], while a harness records it
 _PATCHED = False
+_CTL_NAMES = itertools.count()   # run_ctl's nodes, each a name of its own
 
 
 def _record_logs() -> None:
@@ -87,6 +100,7 @@ class NodeHarness:
         self.name = name or process.node_name(factory, [getattr(factory, "__name__", "node")])
         self.argv = list(argv) if argv is not None else _argv(self.name, ros_args, params, as_given)
         self._published: Dict[str, List[Any]] = {}
+        self._taps: List[Callable[[str, Any], None]] = []   # told of every publication (Wire)
         self.context = process.init_context(self.argv, self.name, discovery_range="OFF")
         original = Node.create_publisher
         harness = self
@@ -107,8 +121,10 @@ class NodeHarness:
         finally:
             Node.create_publisher = original
         self._executor = None
+        self._services: Dict[str, Any] = {}   # service name as asked -> the node's service
+        self._names: Dict[str, str] = {}      # topic as asked -> resolved
         self._feeders: Dict[tuple, Any] = {}
-        self._feeder_nodes: Dict[str, Any] = {}
+        self._feeder_nodes: Dict[str, Any] = {}   # the peers (publisher's feeders too), by name
 
     # -------------------------------------------------------------------------------------------- plumbing
     def _logger_name(self, ros_args) -> str:
@@ -126,11 +142,16 @@ class NodeHarness:
 
         def record(msg):
             sent.append(msg)
+            for tap in self._taps:
+                tap(pub.topic_name, msg)
             return publish(msg)
         pub.publish = record
 
     def _resolve(self, topic: str) -> str:
-        return self.node.resolve_topic_name(topic)
+        name = self._names.get(topic)
+        if name is None:
+            name = self._names[topic] = self.node.resolve_topic_name(topic)
+        return name
 
     # ------------------------------------------------------------------------------------------------- input
     def subscriptions(self, topic: str) -> list:
@@ -147,18 +168,34 @@ class NodeHarness:
         publishes). Nothing it publishes reaches the node: :meth:`feed` hands data over."""
         key = (name, self._resolve(topic))
         if key not in self._feeders:
-            import rclpy
-            if name not in self._feeder_nodes:
-                self._feeder_nodes[name] = rclpy.create_node(name, context=self.context,
-                                                             start_parameter_services=False)
             if msg_type is None:
                 subs = self.subscriptions(topic)
                 if not subs:
                     raise KeyError(f"{self.name} does not subscribe to {key[1]}: give the message type")
                 msg_type = subs[0].msg_type
             from mwip_ros.msgs.qos import GRAPH_QOS
-            self._feeders[key] = self._feeder_nodes[name].create_publisher(msg_type, key[1], GRAPH_QOS)
+            self._feeders[key] = self.peer(name).create_publisher(msg_type, key[1], GRAPH_QOS)
         return self._feeders[key]
+
+    def peer(self, name: str):
+        """A plain rclpy node ``name`` in the harness's context (made once; no parameter services): what it
+        publishes, serves or calls reaches the node under test through the middleware within this one participant,
+        as :meth:`spin` (or :attr:`executor`) spins them together."""
+        if name not in self._feeder_nodes:
+            import rclpy
+            self._feeder_nodes[name] = rclpy.create_node(name, context=self.context, start_parameter_services=False)
+            if self._executor is not None:
+                self._executor.add_node(self._feeder_nodes[name])
+        return self._feeder_nodes[name]
+
+    def listen(self, topic: str, msg_type, qos=None, name: str = "listener") -> list:
+        """A subscription of :meth:`peer` ``name`` on ``topic`` (``qos`` default GRAPH_QOS): the list of the
+        messages it receives (in order, as the harness spins), which the caller reads."""
+        from mwip_ros.msgs.qos import GRAPH_QOS
+        got: list = []
+        self.peer(name).create_subscription(msg_type, self._resolve(topic), got.append,
+                                            GRAPH_QOS if qos is None else qos)
+        return got
 
     def feed(self, topic: str, data, feeder: Optional[str] = "feeder") -> int:
         """Hand ``data`` (serialized bytes or a message) to every subscription of the node on ``topic``, as the
@@ -179,12 +216,15 @@ class NodeHarness:
     def call(self, service: str, request=None):
         """Call the node's service ``service`` (``~/enable``, ``/plant_sim/set_parameters``, ...) with ``request``
         (default: an empty request of its type) and return the response its callback gives."""
-        name = self.node.resolve_service_name(service)
-        found = [s for s in self.node.services if s.srv_name == name]
-        if not found:
-            have = sorted(s.srv_name for s in self.node.services)
-            raise KeyError(f"{self.name} has no service {name} (it has {have})")
-        srv = found[0]
+        srv = self._services.get(service)
+        if srv is None:
+            resolve = self.node.resolve_service_name
+            name = resolve(service)
+            found = [s for s in self.node.services if resolve(s.srv_name) == name]   # as made: '~/reset', 'n/get_..'
+            if not found:
+                have = sorted(resolve(s.srv_name) for s in self.node.services)
+                raise KeyError(f"{self.name} has no service {name} (it has {have})")
+            srv = self._services[service] = found[0]
         return srv.callback(request if request is not None else srv.srv_type.Request(), srv.srv_type.Response())
 
     def set(self, **values) -> list:
@@ -197,18 +237,33 @@ class NodeHarness:
         """Run the callback of the node's timer ``index`` once (in creation order)."""
         list(self.node.timers)[index].callback()
 
+    @property
+    def executor(self):
+        """The harness's executor (made at first use): the node and its peers, spun by :meth:`spin`."""
+        if self._executor is None:
+            from rclpy.executors import SingleThreadedExecutor
+            self._executor = SingleThreadedExecutor(context=self.context)
+            for node in (self.node, *self._feeder_nodes.values()):
+                self._executor.add_node(node)
+        return self._executor
+
     def spin(self, until: Callable[[], bool], timeout: float) -> bool:
         """Spin the node's own executor (its timers run on the wall clock) until ``until()`` or ``timeout`` s."""
         import time
-
-        from rclpy.executors import SingleThreadedExecutor
-        if self._executor is None:
-            self._executor = SingleThreadedExecutor(context=self.context)
-            self._executor.add_node(self.node)
         end = time.monotonic() + timeout
         while not until() and time.monotonic() < end:
-            self._executor.spin_once(timeout_sec=0.01)
+            self.executor.spin_once(timeout_sec=0.01)
         return until()
+
+    def diagnostics(self):
+        """The node's ``/diagnostics`` reporter as ``run_node`` attaches it (made once: ``node.diagnostics``); its
+        reports, once :meth:`~mwip_ros.nodes.runtime.diagnostics.Diagnostics.tick` sends them, are
+        ``messages("/diagnostics", DiagnosticArray)``."""
+        if self.node.diagnostics is None:
+            from mwip_ros.nodes.runtime.diagnostics import Diagnostics
+            self.node.diagnostics = Diagnostics(self.node)
+            self._capture(self.node.diagnostics.pub)
+        return self.node.diagnostics
 
     # ------------------------------------------------------------------------------------------------ output
     def sent(self, topic: str) -> List[bytes]:
@@ -234,8 +289,9 @@ class NodeHarness:
         if self.node is None:
             return
         try:
-            self.node.on_shutdown()
+            getattr(self.node, "on_shutdown", lambda: None)()   # a plain rclpy node has none
         finally:
+            self._taps.clear()
             if self._executor is not None:
                 self._executor.shutdown(timeout_sec=1.0)
             for feeder in self._feeder_nodes.values():
@@ -251,6 +307,142 @@ class NodeHarness:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+class Wire:
+    """Harnesses joined by their topics: what one node publishes is handed (:meth:`NodeHarness.feed`) to each other
+    harness whose node subscribes to the topic, in the order published, through one queue (no callback runs inside
+    another's): a graph's flow of data in this process, without the middleware and without a clock of its own.
+
+        wire = Wire(plant, observer, controller)
+        plant.node._start("test")          # state 0 out: queued for the observer and the controller
+        wire.pump()                        # delivered, their answers too, until nothing is left (or until())
+    """
+
+    def __init__(self, *harnesses: NodeHarness):
+        self.harnesses = list(harnesses)
+        self.queue: deque = deque()
+        self.delivered = 0
+        for h in self.harnesses:
+            h._taps.append(lambda topic, msg, src=h: self._route(src, topic, msg))
+
+    def _route(self, source: NodeHarness, topic: str, msg) -> None:
+        for h in self.harnesses:
+            if h is not source and h.node is not None and h.subscriptions(topic):
+                self.queue.append((h, topic, msg))
+
+    def cut(self, h: NodeHarness) -> None:
+        """``h`` hears nothing more, and what was queued for it is dropped: a node killed (its publishers may stay in
+        the others' graphs, as a killed process's do for a while)."""
+        self.harnesses.remove(h)
+        self.queue = deque(item for item in self.queue if item[0] is not h)
+
+    def pump(self, until: Optional[Callable[[], bool]] = None, limit: int = 10_000_000) -> bool:
+        """Deliver what is queued, and what those deliveries publish, until the queue is empty, ``until()`` holds
+        (looked at after each delivery) or ``limit`` messages were delivered; whether ``until()`` holds (without
+        ``until``: whether the queue is empty)."""
+        n = 0
+        while self.queue and n < limit:
+            if until is not None and until():
+                return True
+            h, topic, msg = self.queue.popleft()
+            h.feed(topic, msg)
+            n += 1
+            self.delivered += 1
+        return until() if until is not None else not self.queue
+
+
+class Loop:
+    """The lockstep loop in this process: ``plant_sim`` and the answering stages its parameters configure (the
+    observer and the controller; a raw plant's state estimator first: :func:`graphproc.loop_chain`), each a
+    :class:`NodeHarness` with ``params``, joined by a :class:`Wire`. ``plant_args`` are the plant's ROS arguments,
+    ``args`` a node's own (``args={"dscndo_controller": ("-p", "law:=lqr")}``). Leaving the ``with`` block closes
+    them, the plant last (its csv and summary are then written).
+
+        with Loop("-p", "duration_s:=2.0") as loop:
+            loop.start()                                   # the plant's first state
+            loop.run(lambda: loop.plant.node.plant.k >= 100)   # stepped until then (None: to the run's end)
+    """
+
+    def __init__(self, *plant_args, params=PARAMS, args: Optional[Dict[str, tuple]] = None):
+        args = args or {}
+        self.nodes: Dict[str, NodeHarness] = {}
+        try:
+            for a in loop_chain(params, *plant_args):
+                self.nodes[a.node] = NodeHarness(node_class(a.node), *args.get(a.node, ()), params=params)
+            self.plant = self.nodes["plant_sim"] = NodeHarness(node_class("plant_sim"), *plant_args, params=params)
+        except BaseException:
+            self.close()
+            raise
+        self.wire = Wire(*self.nodes.values())
+
+    def __getitem__(self, node: str) -> NodeHarness:
+        return self.nodes[node]
+
+    def start(self) -> None:
+        """The plant's run starts (what its graph wait does once the graph is there): state 0 is queued."""
+        self.plant.node._start("the loop's harnesses are wired")
+
+    def run(self, until: Optional[Callable[[], bool]] = None, limit: int = 10_000_000, resends: int = 10) -> bool:
+        """Step the loop (:meth:`Wire.pump`) until ``until()`` holds (True), or the run ends (without ``until``:
+        True) or stalls (False). A state that nothing answered is sent again at once, as the plant's spin loop does
+        after ``RESEND_S`` of wall time (``runner.watch``: the lockstep driver's check), at most ``resends`` times
+        in a row: the observer and the controller follow a stream that went back to its start (a reset) once
+        ``RESYNC`` copies of its first state came."""
+        node, stalled, last = self.plant.node, 0, None
+        while True:
+            if self.wire.pump(until, limit) and until is not None:
+                return True
+            d = node.lockstep
+            if node.done or d.awaiting is None or (d.awaiting == last and stalled >= resends):
+                return until() if until is not None else node.done
+            stalled, last = (stalled + 1 if d.awaiting == last else 1), d.awaiting
+            d.resent_at = float("-inf")   # due now
+            node.runner.watch({})
+
+    def close(self) -> None:
+        """Every node's shutdown work, the plant's last."""
+        for h in sorted(self.nodes.values(), key=lambda h: h is getattr(self, "plant", None)):
+            h.close()
+
+    def __enter__(self) -> "Loop":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def run_ctl(h: NodeHarness, *argv: str) -> tuple:
+    """``mwip_ctl argv`` in this process (its ``main``) with its ROS node a :meth:`NodeHarness.peer`-like node in
+    ``h``'s context, spun with the node under test by ``h``'s executor: its service calls and messages reach that
+    node through the middleware within the one participant. Returns (exit code, stdout, stderr)."""
+    import contextlib
+    import io
+
+    import rclpy
+
+    from mwip_ros.cli import ctl
+
+    class PeerRos(ctl.Ros):
+        def __init__(self, namespace: str, timeout: float):   # no context, no discovery of its own
+            self.rclpy, self.timeout, self.ctx = rclpy, timeout, h.context
+            self.node = rclpy.create_node(f"mwip_ctl_{next(_CTL_NAMES)}", namespace=namespace or None,
+                                          context=h.context, start_parameter_services=False)
+            self.ex = h.executor
+            self.ex.add_node(self.node)
+
+        def close(self) -> None:   # the harness's executor and context go on
+            self.ex.remove_node(self.node)
+            self.node.destroy_node()
+
+    out, err, ros = io.StringIO(), io.StringIO(), ctl.Ros
+    ctl.Ros = PeerRos
+    try:
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+            code = ctl.main(list(argv))
+    finally:
+        ctl.Ros = ros
+    return code, out.getvalue(), err.getvalue()
 
 
 def refused(factory: Callable[..., Any], *ros_args, params=PARAMS, name: Optional[str] = None,

@@ -36,6 +36,7 @@ CONSOLE_SCRIPTS = [
     'mwip_sweep',
     'mwip_tune',
     'mwip_identify',
+    'mwip_moteus_emulator',
     'robot_markers',
     'foxglove_server',
     'mwip_ctl',
@@ -152,6 +153,7 @@ KEY_TO_PIP = {
     'python3-mcap-ros2-support-pip': 'mcap-ros2-support', 'python3-zstandard-pip': 'zstandard',
     'python3-lz4-pip': 'lz4', 'python3-foxglove-sdk-pip': 'foxglove-sdk', 'python3-dask-pip': 'dask[distributed]',
     'python3-distributed-pip': 'distributed', 'python3-mujoco-pip': 'mujoco', 'python3-gymnasium-pip': 'gymnasium',
+    'python3-moteus-pip': 'moteus',
     'nav_msgs': 'ros-jazzy-common-interfaces',
     'tf2_msgs': None,   # no PyPI wheel: robot_state's /tf only where a full ROS install has it (optional)
 }

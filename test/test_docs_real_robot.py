@@ -168,6 +168,7 @@ def test_the_raw_bag_table(tmp_path):
            lambda label, col: got[col.split(" [")[0]])
 
 
+@pytest.mark.slow
 def test_the_retune_table(tmp_path):
     """mwip_identify --retune (the default search) on the shipped experiment's log of the unseen robot, the same
     search on the true model, and the paper's scenario on that robot with each row's nominal model and gains."""

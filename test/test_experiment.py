@@ -75,7 +75,7 @@ def test_main_job_records_two_bags_and_writes_the_report(tmp_path):
 
 
 @pytest.mark.e2e
-def test_ctrl_c_stops_every_process(tmp_path):
+def test_ctrl_c_stops_every_process_and_writes_the_report_of_the_runs_so_far(tmp_path):
     p = subprocess.Popen(["bash", str(REPO / "scripts" / "run_experiment.sh"), "--out", str(tmp_path),
                           "--duration", "60"], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                          start_new_session=True, env=script_env())
@@ -97,12 +97,19 @@ def test_ctrl_c_stops_every_process(tmp_path):
         # bash, tail, plant, observer, controller, recorder
         assert wait_until(lambda: len(_session_pids(p.pid)) >= 5, 30), _session_pids(p.pid)
         os.killpg(p.pid, signal.SIGINT)  # what a terminal does on Ctrl-C
-        rest, _ = p.communicate(timeout=60)
-        assert p.returncode != 0 and "interrupted" in rest
+        rest, _ = p.communicate(timeout=120)
+        assert p.returncode == 130 and "interrupted" in rest, rest[-3000:]
         assert wait_until(lambda: _session_pids(p.pid) == [], 5), _session_pids(p.pid)
         # the recorder closed its bag properly on SIGINT: readable without repair
         bag = next(b for b in tmp_path.iterdir() if b.name.endswith("_dsc"))
         assert (bag / "metadata.yaml").exists() and _anyreader_counts(bag)["/joint_states"] > 0
+        # the report of the runs so far is written (docs/getting-started.md): the interrupted dsc run, up to where
+        # it stopped; the dscndo run was never started
+        assert not any(b.name.endswith("_dscndo") for b in tmp_path.iterdir())
+        report = next(p for p in tmp_path.iterdir() if p.name.endswith("_report"))
+        runs = json.loads((report / "metrics.json").read_text())["runs"]
+        assert list(runs) == ["dsc"] and (report / "fig3.png").stat().st_size > 0
+        assert "report: " in rest and "metrics.md" in rest and "the report covers dsc (exit 130)" in rest
     finally:
         if p.poll() is None:
             os.killpg(p.pid, signal.SIGKILL)
@@ -263,13 +270,19 @@ def test_a_fall_ends_the_job_with_exit_3_after_every_run_and_the_report(tmp_path
     weak = tmp_path / "weak_drive.yaml"
     weak.write_text("plant_sim:\n  ros__parameters:\n    torque_limit: 1.0\n")
     r = subprocess.run([*RUN_EXPERIMENT, "--params", str(REPO / "config" / "paper.yaml"), str(weak),
-                        "--out", str(tmp_path / "out"), "--duration", "2", "--laws", "dsc,dscndo", "--no-record"],
-                       capture_output=True, text=True, timeout=300, env=script_env())
+                        "--out", "out", "--duration", "2", "--laws", "dsc,dscndo", "--no-record"],
+                       capture_output=True, text=True, timeout=300, env=script_env(), cwd=tmp_path)
     assert r.returncode == 3, r.stdout[-3000:] + r.stderr[-3000:]
     assert r.stdout.count("FALLEN at t = ") == 2   # both runs ran, and each fall was shown live
     assert "the robot fell in: dsc dscndo (exit 3)" in r.stderr
-    report = next((tmp_path / "out").glob("*_report"))
+    # said once per fall: the first run's line says the job goes on; the last run's fall is in the closing line only
+    assert "FELL in the dsc run; the next run and the report go on" in r.stderr and "dscndo run" not in r.stderr
+    report = next((tmp_path / "out").glob("*_report"))   # --out relative to where the command ran
     assert (report / "metrics.md").is_file()
+    # the paths printed are the user's, relative to where the command ran (not to the repository); the figures named
+    # are those written
+    assert f"report: out/{report.name}/metrics.md (figures fig3.png, observer.png, animation.gif)" in r.stdout
+    assert "logs:   out/" in r.stdout
 
 
 @pytest.mark.e2e
@@ -291,6 +304,7 @@ def test_raw_sensors_run_the_state_estimator_in_the_loop_and_record_its_topics(t
     # the report judges the estimator from the bag: its joint_states against true_joint_states
     assert 0 < m["dscndo"]["theta_b_est_err_rms"] < 0.01 and 0 < m["dscndo"]["dtheta_b_est_err_rms"] < 0.05
     assert (tmp_path / "raw_report" / "pitch_estimate.png").stat().st_size > 10_000
+    assert "(figures fig3.png, observer.png, pitch_estimate.png, animation.gif)" in r.stdout   # named where one looks
 
 
 def _controller_ready(logs: Path, ctrl: str) -> str:

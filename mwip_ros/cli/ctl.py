@@ -36,6 +36,7 @@ import math
 import os
 import sys
 import time
+from typing import List
 
 from mwip_ros import params as P
 from mwip_ros.cli import interrupts
@@ -208,7 +209,35 @@ def _param(ros: Ros, args) -> int:
     if not result.successful:
         raise Failure(f"{node} refused {name} = {_text(value)}: {result.reason}")
     print(f"{node}: {name} = {_text(value)}")
+    for text in _warnings(ros, node, name):   # what the node logs about the new values, where the user looks
+        print(f"{node}: warning: {text}", file=sys.stderr)
     return 0
+
+
+def _warnings(ros: Ros, node: str, changed: str) -> List[str]:
+    """The node's own warnings about its values after ``changed`` changed (:func:`mwip_ros.params.typed.
+    design_warnings`: the controller's laws against Theorem 2, the observer's gain), from every value it reports;
+    none for another node, or when its values cannot be read back or designed from."""
+    from rcl_interfaces.srv import GetParameters, ListParameters
+    from rclpy.parameter import parameter_value_to_python
+
+    from mwip_ros.params.typed import design_warnings
+    base = node.rstrip("/").rsplit("/", 1)[-1]
+    if base not in ("dscndo_controller", "disturbance_observer"):
+        return []
+    try:
+        specs = P.specs_for(base)
+        listed = ros.call(ListParameters, node, "list_parameters", ListParameters.Request(), read=True).result.names
+        # the schema's, but an array left empty (motion.profile): rclpy answers no value at all for a request with one
+        names = [n for n in listed if n in specs and not (isinstance(specs[n].default, list) and not specs[n].default)]
+        got = ros.call(GetParameters, node, "get_parameters", GetParameters.Request(names=names), read=True).values
+        values = dict(P.defaults_for(base))
+        for n, v in zip(names, got):
+            x = parameter_value_to_python(v)
+            values[n] = x if isinstance(x, (str, bool, int, float)) or x is None else list(x)
+        return design_warnings(node, values, [changed])
+    except Exception:  # noqa: BLE001 - the change is made; its advice is a courtesy (the node logs it anyway)
+        return []
 
 
 def _trigger(ros: Ros, args) -> int:

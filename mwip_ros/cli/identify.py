@@ -133,6 +133,9 @@ def _parser() -> argparse.ArgumentParser:
                     help="--retune: generations of the search (default: %(default)s, as mwip_tune)")
     ap.add_argument("--popsize", type=int, default=8, metavar="N",
                     help="--retune: population per tuned number (default: %(default)s, as mwip_tune)")
+    ap.add_argument("--bounds", nargs="*", default=[], metavar="NAME=LO:HI",
+                    help="--retune: search bounds, as mwip_tune's --bounds (e.g. X.c1=0.02:1.3 X.c4=0.6:20: a small "
+                         "robot's observer gains stay below 2 / (h max eig(M_hat^-1)))")
     ap.add_argument("--min-samples", type=int, default=ID.MIN_SAMPLES, metavar="N",
                     help=f"refuse a log of fewer than N periods (default: {ID.MIN_SAMPLES})")
     return ap
@@ -160,6 +163,15 @@ def _options_refusal(args):
             return f"--law: one of {', '.join(tunable_laws())} (a law with gains to tune), got {args.law!r}"
         if args.maxiter < 1 or args.popsize < 1:
             return f"--maxiter and --popsize: 1 or more, got {args.maxiter} and {args.popsize}"
+        from mwip_ros.cli.identify_retune import knob_names
+        from mwip_ros.sweep.spec import SpecError
+        from mwip_ros.sweep.tune import knobs_for, parse_bounds
+        try:   # before the fit: a mistake in the bounds loses no work
+            parse_bounds(knobs_for(knob_names(args.law), args.law), args.bounds)
+        except SpecError as exc:
+            return str(exc)
+    elif args.bounds:
+        return "--bounds: the search bounds of --retune; give --retune too"
     if args.run is not None and args.run < 1:
         return f"--run: 1 or more, got {args.run}"
     if not (math.isfinite(args.cutoff) and args.cutoff >= 0):
@@ -336,7 +348,7 @@ def _retune(args, base, physical, header: str) -> int:
     print(f"retuning {args.law} on the identified model (m_b = {physical.m_b:.6g} kg, I_b = {physical.I_b:.6g} kg m^2, "
           f"l = {physical.l:.6g} m): {args.maxiter} generation(s), population {args.popsize} per gain", flush=True)
     try:
-        r = retune(base, physical, args.law, args.maxiter, args.popsize,
+        r = retune(base, physical, args.law, args.maxiter, args.popsize, bounds=args.bounds,
                    log=lambda text: print(f"{PROG}: {text}", file=sys.stderr, flush=True))
     except (SpecError, P.ParamError) as exc:
         return _fail(f"--retune: {exc}")

@@ -74,10 +74,12 @@ def _write_yaml(path: Path, doc) -> None:
 
 
 def retune(base: Sequence[Path], physical, law: str, maxiter: int, popsize: int, seed: int = 0,
-           samples: int = SAMPLES, spread: float = SPREAD, weight: float = WEIGHT, log=None) -> Retuned:
+           samples: int = SAMPLES, spread: float = SPREAD, weight: float = WEIGHT, log=None,
+           bounds: Sequence[str] = ()) -> Retuned:
     """Tune ``law``'s gains (:func:`knob_names`) for the robot ``physical`` (its m_b, I_b, l) on the base files'
-    scenario (module doc).  Raises ``mwip_ros.sweep.spec.SpecError`` or ``mwip_ros.params.ParamError`` for a base
-    that cannot make the spec."""
+    scenario (module doc), within ``bounds`` (``name=lo:hi`` items, as ``mwip_tune --bounds``; the rest at their
+    defaults).  Raises ``mwip_ros.sweep.spec.SpecError`` or ``mwip_ros.params.ParamError`` for a base that cannot make
+    the spec, or for bounds that name no tuned knob or leave its range."""
     from mwip_ros import params as P
     from mwip_ros.cli.tune import _base_values
     from mwip_ros.core import laws
@@ -88,7 +90,7 @@ def retune(base: Sequence[Path], physical, law: str, maxiter: int, popsize: int,
 
     cls = laws.get(law)
     knobs = knobs_for(knob_names(law), law)
-    bounds = parse_bounds(knobs, [])
+    bounds = parse_bounds(knobs, list(bounds))
     with tempfile.TemporaryDirectory(prefix="mwip_retune_") as tmp:
         tmp = Path(tmp)
         body = {k: float(getattr(physical, k)) for k in ("m_b", "I_b", "l")}

@@ -83,20 +83,73 @@ def _window_label(window) -> str:
 
 
 def _legend_outside(fig, axes) -> float:
-    """One legend for the figure, between the title and the axes (it covers no curve).  Returns the top of
-    the axes' area (figure fraction) for ``tight_layout(rect=...)``."""
+    """One legend for the figure, between the title and the axes (it covers no curve), in as many columns (at most
+    4) as fit the figure's width (a narrow figure's long labels are not cut at its edges).  Returns the top of the
+    axes' area (figure fraction) for ``tight_layout(rect=...)``."""
     handles, labels = [], []
     for ax in axes:
         for h, lab in zip(*ax.get_legend_handles_labels()):
             if lab not in labels:
                 handles.append(h)
                 labels.append(lab)
-    ncol = min(len(labels), 4) or 1
-    rows = -(-len(labels) // ncol)
     height = fig.get_figheight()
-    fig.legend(handles, labels, loc="upper center", bbox_to_anchor=(0.5, 1 - 0.45 / height), ncol=ncol,
-               fontsize=9, frameon=False)
+    renderer = fig.canvas.get_renderer()
+    width = fig.bbox.width
+    for ncol in range(min(len(labels), 4) or 1, 0, -1):
+        legend = fig.legend(handles, labels, loc="upper center", bbox_to_anchor=(0.5, 1 - 0.45 / height), ncol=ncol,
+                            fontsize=9, frameon=False)
+        if ncol == 1 or legend.get_window_extent(renderer).width <= 0.98 * width:
+            break
+        legend.remove()
+    rows = -(-len(labels) // ncol)
     return 1 - (0.42 + 0.2 * rows) / height
+
+
+def _failed_label(label: str, t: float) -> str:
+    return f"{label} failed at t = {t:.3f} s"
+
+
+def _scale_to_upright(ax, runs: Sequence, cols: Sequence[str], failed: dict, scale=None) -> None:
+    """Set ``ax``'s y range to what the runs that did not fail (``failed``: {label: t}) drew of ``cols`` (times
+    ``scale``), with a margin: a run that failed (its command past 10^6 N m, its wheels at thousands of rad/s) would
+    flatten the others into lines.  Nothing failed: matplotlib's own range.  Everything failed: the runs up to half a
+    second before they failed."""
+    if not failed:
+        return
+    parts = []
+    for run in runs:
+        t = np.asarray(run["t"], dtype=float)
+        keep = np.ones(len(t), bool) if run.label not in failed else t < failed[run.label] - 0.5
+        if run.label in failed and len(failed) < len(runs):
+            continue
+        for col in cols:
+            y = np.asarray(run[col], dtype=float)[keep] * (1.0 if scale is None else scale)
+            parts.append(y[np.isfinite(y)])
+    y = np.concatenate(parts) if parts else np.zeros(0)
+    if not len(y):
+        return
+    lo, hi = float(y.min()), float(y.max())
+    pad = 0.08 * (hi - lo) or 0.1 * max(abs(lo), abs(hi)) or 1.0
+    ax.set_ylim(lo - pad, hi + pad)
+
+
+def _mark_failures(ax, runs: Sequence, failed: dict, colours: dict, col: Optional[str] = None, scale=None) -> None:
+    """A dotted line at each failed run's failure time (its colour), labelled; with ``col``, an X at the run's value
+    there, held at the axis' edge when it is off the scale (:func:`_scale_to_upright`)."""
+    lo, hi = ax.get_ylim()
+    for run in runs:
+        if run.label not in failed:
+            continue
+        tf = failed[run.label]
+        colour = colours.get(run.label)
+        ax.axvline(tf, color=colour, ls=":", lw=1.2, label=_failed_label(run.label, tf))
+        if col is not None:
+            t = np.asarray(run["t"])
+            k = min(int(np.searchsorted(t, tf - 1e-9)), len(t) - 1)
+            y = float(run[col][k]) * (1.0 if scale is None else scale)
+            if np.isfinite(y):   # (the dotted line's label names it)
+                ax.plot([t[k]], [min(max(y, lo), hi)], "X", ms=9, color=colour, label="_nolegend_")
+    ax.set_ylim(lo, hi)
 
 
 def fig3(runs: Sequence, path, title: Optional[str] = None, window=None, falls: Optional[dict] = None) -> None:
@@ -104,23 +157,36 @@ def fig3(runs: Sequence, path, title: Optional[str] = None, window=None, falls: 
 
     ``runs`` are objects with ``label`` and ``__getitem__(column)`` (SimResult or a bag run); ``u`` is the
     torque the plant applied.  ``title`` defaults to the labels that ran; ``window`` (t0, t1) is shaded
-    (the metrics window); ``falls`` {label: t} marks each fall with a cross on theta_b.
+    (the metrics window); ``falls`` {label: t} are the runs that failed (fell, diverged, a command refused): each
+    panel's y range is that of the runs that did not (:func:`_scale_to_upright`), and each failure is marked, a
+    dotted line at its time and an X on theta_b.
     """
     plt = _plt()
     fig, axes = plt.subplots(len(FIG3_PANELS), 1, sharex=True, figsize=(8.5, 9.5))
     falls = falls or {}
+    colours = {}
+    notes: dict = {}   # (a run, the run it is drawn over): the panels where a figure cannot tell them apart
     for ax, (col, ylabel) in zip(axes, FIG3_PANELS):
         if window is not None:
             ax.axvspan(window[0], window[1], **WINDOW_SHADE, label=_window_label(window))
+        same = _same_curves(runs, [col], falls)   # a figure cannot tell them from an earlier run's: dashed over it
         for run in runs:
-            line, = ax.plot(*decimate(run["t"], run[col]), label=run.label, lw=1.0)
-            if col == "theta_b" and run.label in falls:
-                t = np.asarray(run["t"])
-                k = min(int(np.searchsorted(t, falls[run.label] - 1e-9)), len(t) - 1)
-                ax.plot([t[k]], [run[col][k]], "X", ms=9, color=line.get_color(),
-                        label=f"{run.label} FELL at t = {falls[run.label]:.3f} s")
+            line, = ax.plot(*decimate(run["t"], run[col]), label=run.label, lw=1.0,
+                            ls=(0, (4, 3)) if run.label in same else "-")
+            colours[run.label] = line.get_color()
+        for a, (b, d) in same.items():
+            notes.setdefault((a, b), []).append(f"{ylabel.split(' [')[0]} to {d:.1%}")
+        _scale_to_upright(ax, runs, [col], falls)
+        _mark_failures(ax, runs, falls, colours, col if col == "theta_b" else None)
         ax.set_ylabel(ylabel)
         ax.grid(True, alpha=0.3)
+    footnote = [f"{a} is dashed over {b}: the same curve ({', '.join(where)} of the range)"
+                for (a, b), where in notes.items()]
+    if falls and len(falls) < len(runs):
+        footnote.append("y ranges: the runs that did not fail; a failed run leaves the scale at its dotted line")
+    if footnote:
+        axes[-1].text(0.0, -0.3, "\n".join(footnote), transform=axes[-1].transAxes, fontsize=8, color="0.3",
+                      va="top")
     top = _legend_outside(fig, axes)
     axes[-1].set_xlabel("t [s]")
     fig.suptitle(title or title_of(runs))
@@ -129,9 +195,12 @@ def fig3(runs: Sequence, path, title: Optional[str] = None, window=None, falls: 
     plt.close(fig)
 
 
-def speed_plot(runs: Sequence, path, r: float) -> None:
-    """v = r theta_w' and the reference v* (column ``v_ref``, docs/theory.md 6.11) against time, one panel per run."""
+def speed_plot(runs: Sequence, path, r: float, source: str = "", falls: Optional[dict] = None) -> None:
+    """v = r theta_w' and the reference v* (column ``v_ref``, docs/theory.md 6.11) against time, one panel per run,
+    titled after ``source`` (the parameter files that set the references); the panels share the y range of the runs
+    that did not fail (``falls`` {label: t}: each failure is marked, :func:`_mark_failures`)."""
     plt = _plt()
+    falls = falls or {}
     fig, axes = plt.subplots(len(runs), 1, sharex=True, sharey=True, figsize=(8.5, 1.6 + 1.35 * len(runs)),
                              squeeze=False)
     for ax, run in zip(axes[:, 0], runs):
@@ -139,35 +208,102 @@ def speed_plot(runs: Sequence, path, r: float) -> None:
         ax.plot(*decimate(run["t"], run["v_ref"]), lw=1.2, ls="--", color="k", label="v*")
         ax.set_ylabel(f"{run.label}\n[m/s]")
         ax.grid(True, alpha=0.3)
-    axes[0, 0].legend(loc="upper right", fontsize=8)
+    _scale_to_upright(axes[0, 0], runs, ["dtheta_w"], falls, scale=r)
+    lo, hi = axes[0, 0].get_ylim()
+    refs = np.concatenate([np.asarray(run["v_ref"], dtype=float) for run in runs])
+    refs = refs[np.isfinite(refs)]
+    if len(refs):   # the reference always in view
+        axes[0, 0].set_ylim(min(lo, refs.min() - 0.1), max(hi, refs.max() + 0.1))
+    for ax, run in zip(axes[:, 0], runs):
+        _mark_failures(ax, [run], falls, {run.label: "C3"}, "dtheta_w", scale=r)
+        if run.label in falls:
+            ax.legend(loc="center right", fontsize=8, handles=ax.get_legend_handles_labels()[0][2:])
+    axes[0, 0].legend(loc="upper right", fontsize=8, handles=axes[0, 0].get_legend_handles_labels()[0][:2])
     axes[-1, 0].set_xlabel("t [s]")
-    fig.suptitle("speed and its reference (config/motion.yaml)")
+    fig.suptitle("speed and its reference" + (f" ({source})" if source else ""))
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)
 
 
-def path_plot(runs: Sequence, path, h: float, title: str = "") -> None:
+def path_plot(runs: Sequence, path, h: float, title: str = "", falls: Optional[dict] = None) -> None:
     """The axle's centre (x, y) of each run against the ideal path of its references (``core.path.ideal_path``),
-    equal axes; a run that failed ends where it failed."""
+    equal axes; a run that failed ends where it failed, an X there (``falls`` {label: t}: the legend says when); a run
+    whose path a figure cannot tell from an earlier one's is dashed over it and its legend says so
+    (:func:`_same_path`).  The legend sits below the axes (it covers no path)."""
     from mwip_ros.core.path import ideal_path
     plt = _plt()
-    fig, ax = plt.subplots(figsize=(7.5, 6.5))
+    falls = falls or {}
+    fig, ax = plt.subplots(figsize=(7.5, 7.0 + 0.18 * len(runs)))
     first = runs[0]
     ix, iy, _ = ideal_path(first["v_ref"], first["dpsi_ref"], h, (first["x"][0], first["y"][0],
                                                                  float(first["yaw"][0])))
     ax.plot(ix, iy, lw=2.0, ls="--", color="k", label="ideal (the references)")
+    drawn = []
     for run in runs:
-        ax.plot(run["x"], run["y"], lw=1.0, label=run.label + (" (failed)" if run.fallen else ""))
+        x, y = np.asarray(run["x"], dtype=float), np.asarray(run["y"], dtype=float)
+        failed = run.label in falls or run.fallen
+        label = run.label + ((f" (failed at t = {falls[run.label]:.3f} s: X)" if run.label in falls else " (failed: X)")
+                             if failed else "")
+        same = _same_path(x, y, drawn)
+        if same is not None:   # drawn over an earlier run: say so, and dash it so both show
+            label += f" (the path of {same[0]}, within {same[1]:.3f} m: drawn over it, dashed)"
+        line, = ax.plot(x, y, lw=1.0, ls=(0, (4, 3)) if same else "-", label=label)
+        if failed and len(x):
+            ax.plot([x[-1]], [y[-1]], "X", ms=8, color=line.get_color())
+        drawn.append((run.label, x, y))
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
     ax.grid(True, alpha=0.3)
-    ax.legend(loc="best", fontsize=8)
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.09), ncol=2, fontsize=8, frameon=False)
     ax.set_title(title or "path on the ground (axle's centre) against the ideal")
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)
+
+
+def _same_path(x: np.ndarray, y: np.ndarray, drawn: list, share: float = 0.01):
+    """(the label of an earlier run whose path this one's stays within ``share`` of the larger side of both paths'
+    extent of, at every period, that largest distance [m]) or None: two lines a figure cannot tell apart."""
+    for label, x2, y2 in drawn:
+        n = min(len(x), len(x2))
+        if n == 0 or len(x) != len(x2):
+            continue
+        d = np.hypot(x[:n] - x2[:n], y[:n] - y2[:n])
+        extent = max(np.ptp(np.r_[x, x2]), np.ptp(np.r_[y, y2]), 1e-9)
+        if np.all(np.isfinite(d)) and d.max() <= share * extent:
+            return label, float(d.max())
+    return None
+
+
+def _same_curves(runs: Sequence, cols: Sequence[str], failed: dict, share: float = 0.01) -> dict:
+    """{label: (an earlier run's label, the largest difference as a share of the panel's span)} for each run that did
+    not fail whose every column of ``cols`` stays within ``share`` of that column's span (over the runs that did not
+    fail) of an earlier run's, at every sample: curves a figure cannot tell apart (e.g. MPC and LQR on a path, its
+    constraints never active)."""
+    ok = [r for r in runs if r.label not in failed]
+    span = {}
+    for col in cols:
+        y = np.concatenate([np.asarray(r[col], dtype=float) for r in ok]) if ok else np.zeros(0)
+        y = y[np.isfinite(y)]
+        span[col] = float(np.ptp(y)) if len(y) else 0.0
+    out = {}
+    for i, run in enumerate(ok):
+        for other in ok[:i]:
+            if other.label in out or len(other["t"]) != len(run["t"]):
+                continue
+            worst = 0.0
+            for col in cols:
+                d = np.abs(np.asarray(run[col], dtype=float) - np.asarray(other[col], dtype=float))
+                if not np.all(np.isfinite(d)) or span[col] <= 0:
+                    worst = np.inf
+                    break
+                worst = max(worst, float(d.max()) / span[col])
+            if worst <= share:
+                out[run.label] = (other.label, worst)
+                break
+    return out
 
 
 def _finite(x) -> bool:

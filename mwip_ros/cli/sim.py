@@ -249,11 +249,12 @@ def _finish(args, values, runs) -> int:
         print(f"wrote {args.plot}")
         if moving:   # v and v* per law, beside it
             speed = args.plot.with_name(f"{args.plot.stem}_speed{args.plot.suffix}")
-            plotting.speed_plot([r for r in runs if "v_ref" in r.columns], speed, values["nominal.r"])
+            source = " ".join(str(p) for p in (args.params or [default_params_file().name]))   # the references'
+            plotting.speed_plot([r for r in runs if "v_ref" in r.columns], speed, values["nominal.r"], source, falls)
             print(f"wrote {speed}")
         if driven:
             where = args.plot.with_name(f"{args.plot.stem}_path{args.plot.suffix}")
-            plotting.path_plot(driven, where, driven[0].h)
+            plotting.path_plot(driven, where, driven[0].h, falls=falls)
             print(f"wrote {where}")
     return EXIT_FELL if any(not m.upright for _, m in named) else EXIT_OK
 

@@ -15,7 +15,7 @@ from pathlib import Path
 from mwip_ros import params as P
 from mwip_ros.cli import interrupts, outputs
 from mwip_ros.cli.exits import epilog
-from mwip_ros.sweep import engine, results
+from mwip_ros.sweep import engine, results, warm
 from mwip_ros.sweep import progress as sweep_progress
 from mwip_ros.sweep.scenarios import expand, parameter_file
 from mwip_ros.core import batch
@@ -196,14 +196,17 @@ def _main(argv=None) -> int:
         print(f"{PROG}: warning: {slow}; the scalar loop runs instead, scenario by scenario (slower, the same "
               f"numbers)", file=sys.stderr)
     writer = results.ResultsWriter(args.out / "results.csv", [a.key for a in spec.axes], extra=_has_stages(spec))
-    progress = _Progress(chunks, args.quiet, workers=lambda: runner.started or 1)
+    progress = None
     try:
+        # numba's first compilation of a law's loop (tens of seconds), said and done before the chunks, once a loop
+        warm.compile_first(runner, chunks, (lambda text: None) if args.quiet else _say, PROG)
+        progress = _Progress(chunks, args.quiet, workers=lambda: runner.started or 1)
         for chunk, res in runner(chunks):
             writer.add(chunk, res, scenarios)
             progress.update(chunk, res)
     except KeyboardInterrupt:
         runner.close(stop=True)   # before the message: no worker is left when the line is read
-        progress.close()
+        _close(progress)
         writer.close()
         sig = signal.Signals(interrupts.received()).name if interrupts.received() else "SIGINT"
         print(f"\n{PROG}: interrupted ({sig}): {writer.rows:,} of {total:,} rows are in {args.out / 'results.csv'}",
@@ -211,13 +214,13 @@ def _main(argv=None) -> int:
         return EXIT_INTERRUPTED
     except registry.LawError as exc:   # a law's step raised: the law, the scenario, when, its own error
         runner.close(stop=True)
-        progress.close()
+        _close(progress)
         writer.close()
         print(f"{PROG}: error: {exc}; {writer.rows:,} finished rows are in {args.out / 'results.csv'}",
               file=sys.stderr)
         return EXIT_BAD_INPUT
     except Exception as exc:   # a worker's failure (or a lost Dask connection): keep what finished
-        progress.close()
+        _close(progress)
         writer.close()
         print(f"{PROG}: error: a chunk failed: {type(exc).__name__}: {exc}; {writer.rows:,} finished rows are in "
               f"{args.out / 'results.csv'}", file=sys.stderr)
@@ -282,44 +285,88 @@ def _figures(cols, spec, doc, out: Path) -> list:
     return written
 
 
+def _say(text: str) -> None:
+    print(text, file=sys.stderr, flush=True)
+
+
+def _close(progress) -> None:
+    if progress is not None:
+        progress.close()
+
+
 class _Progress:
-    """tqdm on a terminal (runs done, scenario-steps/s, time left); a plain line every 5 s otherwise.
+    """tqdm on a terminal (runs done, scenario-steps/s, time left); a plain line at least every 5 s otherwise,
+    whether a chunk finished or not (:class:`progress.Heartbeat`: chunks of a slow configuration take tens of
+    seconds each).
 
     The time left is each law's scenarios left at its own measured cost (:class:`progress.Eta`), not the runs
-    left at the average rate: MPC's chunks cost ~100 times a compiled law's.  ``workers()`` is how many chunks
-    run at once."""
+    left at the average rate: MPC's chunks cost ~100 times a compiled law's; between two finished chunks it counts
+    down.  ``workers()`` is how many chunks run at once."""
 
-    EVERY_S = 5.0   # a plain line at most this often
+    EVERY_S = 5.0   # a plain line at least this often
 
     def __init__(self, chunks, quiet: bool, workers=lambda: 1):
         self.total, self.done, self.steps = sum(len(c) for c in chunks), 0, 0
         self.eta = sweep_progress.Eta(chunks)
         self.workers = workers
-        self.t0 = self._last = time.monotonic()
+        self.t0 = self._at = time.monotonic()
         self.quiet = quiet
         self.bar = None
+        self._left = None   # (seconds left, the untimed laws) at the last finished chunk
         if not quiet and sys.stderr.isatty():
             from tqdm import tqdm   # its own remaining time assumes every run costs the same: ours instead
             self.bar = tqdm(total=self.total, unit="run", file=sys.stderr, dynamic_ncols=True, smoothing=0.1,
                             bar_format="{l_bar}{bar}| {n_fmt}/{total_fmt} [{elapsed}{postfix}]")
+        self.beat = None
+        if not quiet:   # a line (or the bar redrawn) at least every EVERY_S, between chunks too
+            self.beat = sweep_progress.Heartbeat(self.EVERY_S, self._heartbeat, _say).__enter__()
 
     def left(self) -> str:
-        return sweep_progress.describe_left(*self.eta.estimate(self.workers()))
+        if self._left is None:
+            return sweep_progress.describe_left(*self.eta.estimate(self.workers()))
+        seconds, untimed = self._left
+        return sweep_progress.describe_left(max(0.0, seconds - (time.monotonic() - self._at)), untimed)
+
+    def _line(self) -> str:
+        wall = time.monotonic() - self.t0
+        rate = f", {self.steps / max(1e-9, wall):,.0f} scenario-steps/s" if self.done else ""
+        return (f"{PROG}: {self.done:,}/{self.total:,} runs ({100 * self.done / self.total:.0f} %){rate}, "
+                f"{wall:.0f} s in, {self.left()}")
+
+    def _heartbeat(self):
+        if self.bar is not None:
+            self.bar.set_postfix_str(self._postfix(), refresh=False)
+            self.bar.refresh()   # its elapsed time and our time left, between chunks
+            return None
+        return self._line()
+
+    def _postfix(self) -> str:
+        rate = self.steps / max(1e-9, time.monotonic() - self.t0)
+        return f"{rate / 1e6:.2f} M scenario-steps/s, {self.left()}"
 
     def update(self, chunk, result) -> None:
-        self.done += len(chunk)
-        self.steps += result.steps
-        self.eta.done(chunk.controller, len(chunk), result.seconds)
-        rate = self.steps / max(1e-9, time.monotonic() - self.t0)
-        if self.bar is not None:
-            self.bar.set_postfix_str(f"{rate / 1e6:.2f} M scenario-steps/s, {self.left()}", refresh=False)
-            self.bar.update(len(chunk))
-        elif not self.quiet and (time.monotonic() - self._last >= self.EVERY_S or self.done == self.total):
-            self._last = time.monotonic()
-            print(f"{PROG}: {self.done:,}/{self.total:,} runs ({100 * self.done / self.total:.0f} %), "
-                  f"{rate:,.0f} scenario-steps/s, {self.left()}", file=sys.stderr, flush=True)
+        lock = self.beat.lock if self.beat is not None else _NoLock()
+        with lock:
+            self.done += len(chunk)
+            self.steps += result.steps
+            self.eta.done(chunk.controller, len(chunk), result.seconds)
+            self._left, self._at = self.eta.estimate(self.workers()), time.monotonic()
+            if self.bar is not None:
+                self.bar.set_postfix_str(self._postfix(), refresh=False)
+                self.bar.update(len(chunk))
+            elif not self.quiet and (self.beat is None or time.monotonic() - self.beat._last >= self.EVERY_S
+                                     or self.done == self.total):
+                _say(self._line())
+                if self.beat is not None:
+                    self.beat.said()
+        if self.done >= self.total and self.beat is not None:   # nothing more to wait for: silent from here
+            self.beat.__exit__(None, None, None)
+            self.beat = None
 
     def close(self) -> None:
+        if self.beat is not None:
+            self.beat.__exit__(None, None, None)
+            self.beat = None
         if self.bar is not None:
             self.bar.close()
             self.bar = None
@@ -327,6 +374,14 @@ class _Progress:
             wall = time.monotonic() - self.t0
             print(f"{PROG}: {self.done:,} runs, {self.steps:,} scenario-steps in {wall:.1f} s "
                   f"({self.steps / max(wall, 1e-9):,.0f} scenario-steps/s)", file=sys.stderr)
+
+
+class _NoLock:
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        return False
 
 
 def _plot_rms(args) -> int:

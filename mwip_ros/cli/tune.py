@@ -17,6 +17,7 @@ from mwip_ros.cli import interrupts
 from mwip_ros.cli.exits import epilog
 from mwip_ros.cli.outputs import refuse_existing
 from mwip_ros.cli.sweep import add_runner_arguments, runner_from
+from mwip_ros.sweep import engine, warm
 from mwip_ros.sweep.scenarios import parameter_overlay
 from mwip_ros.sweep.spec import SWEEP_BACKENDS, SpecError, load_spec
 from mwip_ros.sweep.tune import KNOBS, Objective, check_memory, Tuner, knobs_for, overlay, parse_bounds
@@ -120,6 +121,11 @@ def _tune(args, spec, holdout, knobs, bounds, base_x, runner) -> int:
         f"{spec.duration_s:g} s on {runner.describe()}; {args.maxiter} generations of "
         f"{args.popsize * len(knobs)} candidates at most; bounds "
         + ", ".join(f"{n} [{lo:g}, {hi:g}]" for n, (lo, hi) in zip(names, bounds)))
+    # numba's first compilation of the law's loop (tens of seconds), said and done before the search
+    warm.compile_first(runner, engine.chunks_of(args.controller, spec.base_values,
+                                                [search.scenarios.overrides(0)], spec.duration_s, spec.window),
+                       (lambda text: None) if args.quiet else (lambda text: print(text, file=sys.stderr, flush=True)),
+                       PROG)
     t0 = time.monotonic()
     bar = None
     if not args.quiet and sys.stderr.isatty():

@@ -60,8 +60,8 @@ from .sensing import NOISE_BLOCK, Actuator, Sensors, sensor_rng
 from .sim import ClosedLoop
 from .trajectory import COLUMNS, INTERNAL_COLUMNS, Trajectory
 
-__all__ = ["BatchResult", "simulate_batch", "COMPILED_ENV", "compiled_default", "FAILURES", "FALL", "BAD_COMMAND",
-           "DIVERGED"]
+__all__ = ["BatchResult", "simulate_batch", "compiled_form", "COMPILED_ENV", "compiled_default", "FAILURES", "FALL",
+           "BAD_COMMAND", "DIVERGED"]
 
 COMPILED_ENV = "MWIP_BATCH_COMPILED"   # "0": the numpy loop even for a law with a compiled form
 
@@ -240,25 +240,40 @@ def simulate_batch(loops: Sequence[ClosedLoop], window: Sequence[float], record:
     driver nobody enables: its bridge open, no torque) run the scalar loop, which has it; so do scenarios with
     another plant backend (``mujoco``: a simulation that diverges is the scenario's ``diverged`` failure).  Motion
     references (``motion``, theory 6.11) run compiled (:mod:`.compiled_motion`), else the scalar loop."""
-    if numba_missing() or any(lp.plant.require_enable or lp.plant.backend != "rk4"
-                              for lp in loops):   # both array forms need numba, a driver and eq. (1)
+    if _scalar_only(loops):   # both array forms need numba, a driver and eq. (1)
         return _simulate_each(loops, window, record)
     beyond = any(_beyond_arrays(lp) for lp in loops)
-    if compiled is None:
-        compiled = compiled_default()
-    if compiled and not record:
-        from .compiled import kernel_for
-        family = _same((lp.law for lp in loops), "the law")
-        use_obs = [lp.use_observer for lp in loops]
-        law = laws.lookup(family, any(use_obs)) or laws.lookup(family, not any(use_obs))
-        stage = _raw_stage(loops) if beyond else (False, None)
-        if law is not None and (not any(use_obs) or law.observer) and stage is not None:
-            kernel = kernel_for(law, stage[1])
-            if kernel is not None:
-                return _simulate_compiled(loops, window, law, kernel, *stage)   # raw, the estimator
+    form = compiled_form(loops, record, compiled)
+    if form is not None:
+        kernel, law, stage = form
+        return _simulate_compiled(loops, window, law, kernel, *stage)   # raw, the estimator
     if beyond:
         return _simulate_each(loops, window, record)
     return _simulate_numpy(loops, window, record)
+
+
+def _scalar_only(loops: Sequence[ClosedLoop]) -> bool:
+    """Whether only the scalar loop runs ``loops``: no numba, a driver nobody enables, another plant backend."""
+    return bool(numba_missing()) or any(lp.plant.require_enable or lp.plant.backend != "rk4" for lp in loops)
+
+
+def compiled_form(loops: Sequence[ClosedLoop], record: bool = False, compiled: Optional[bool] = None):
+    """(the compiled loop, the law class, (raw, the estimator class)) that :func:`simulate_batch` runs ``loops``
+    with, or None when it runs another form (see there).  Getting it compiles nothing: numba compiles (or loads
+    from its cache) at the first call."""
+    if compiled is None:
+        compiled = compiled_default()
+    if not compiled or record or _scalar_only(loops):
+        return None
+    from .compiled import kernel_for
+    family = _same((lp.law for lp in loops), "the law")
+    use_obs = [lp.use_observer for lp in loops]
+    law = laws.lookup(family, any(use_obs)) or laws.lookup(family, not any(use_obs))
+    stage = _raw_stage(loops) if any(_beyond_arrays(lp) for lp in loops) else (False, None)
+    if law is None or (any(use_obs) and not law.observer) or stage is None:
+        return None
+    kernel = kernel_for(law, stage[1])
+    return None if kernel is None else (kernel, law, stage)
 
 
 def _raw_stage(loops: Sequence[ClosedLoop]):

@@ -286,7 +286,7 @@ def _loop(k0, k1, n_steps, h, substeps, first_w, n_window, counts, delay, act_de
     ug = np.zeros(L)           # its torque
     uog = np.zeros(L)          # and with the observer term
     live = np.zeros(L, dtype=np.bool_)
-    rg = np.zeros((5, L))      # the lanes' references (core.compiled_motion.law_track_lanes)
+    rg = np.zeros((9, L))      # the lanes' references and hold (core.compiled_motion.law_track_lanes)
     every = True   # every scenario tracks motion references: the law runs on lanes with them
     for i in range(n):
         every = every and NP[i] >= 0
@@ -410,15 +410,20 @@ def _loop(k0, k1, n_steps, h, substeps, first_w, n_window, counts, delay, act_de
                 store(thg[0], 0, tl[0])
                 store(thg[1], 0, tl[1])
                 if lanes_law:   # the law (its pure_step; tracking: core.compiled_motion), the observer term (ndo)
-                    if motion:
-                        ul, sl = law_track_lanes(params_lanes(Pg), pn_lanes, h, xm_lanes, sg, xmg, live, width, i0, k,
-                                                 MO, PT, PV, NP, MS, rg)
+                    if motion:   # with the observer term and the hold (core.loop.command, docs/theory.md 6.14)
+                        ul, uol, sl = law_track_lanes(params_lanes(Pg), pn_lanes, h, xm_lanes, sg, xmg, live, width,
+                                                      i0, k, MO, PT, PV, NP, MS, rg, ng, thg, tl, observer_law,
+                                                      use_obs)
+                        store(ug, 0, ul)
+                        store(sg, 0, sl)
+                        if observer_law:
+                            store(uog, 0, uol)
                     else:
                         ul, sl, _ = law_lanes(params_lanes(Pg), pn_lanes, h, xm_lanes, load(sg, 0), k == 0)
-                    store(ug, 0, ul)
-                    store(sg, 0, sl)
-                    if observer_law:
-                        store(uog, 0, ul - u_taud_of(pn_lanes, pn_lanes.m12 * simd.cos(xm_lanes[1]), tl))
+                        store(ug, 0, ul)
+                        store(sg, 0, sl)
+                        if observer_law:
+                            store(uog, 0, ul - u_taud_of(pn_lanes, pn_lanes.m12 * simd.cos(xm_lanes[1]), tl))
             else:
                 for lane in range(width):
                     if live[lane]:
@@ -450,12 +455,13 @@ def _loop(k0, k1, n_steps, h, substeps, first_w, n_window, counts, delay, act_de
                     u = uog[lane] if observer_law and use_obs[i] else ug[lane]
                     s[i] = sg[lane]
                 else:
-                    if NP[i] >= 0:   # period k's references and the law tracking them (core.compiled_motion)
-                        u, s[i] = law_track(P[i], pn, h, xm, s[i], k, MO[i], PT[i], PV[i], NP[i], MS[i])
+                    if NP[i] >= 0:   # period k's references and the law tracking them, the observer term with them
+                        u, s[i] = law_track(P[i], pn, h, xm, s[i], k, MO[i], PT[i], PV[i], NP[i], MS[i], th,
+                                            observer_law and use_obs[i])   # (core.compiled_motion)
                     else:
                         u, s[i], _ = law_step(P[i], pn, h, xm, s[i], k == 0)
-                    if observer_law and use_obs[i]:   # core.laws.ndo.WithObserver.step
-                        u = u - u_taud_of(pn, pn.m12 * math.cos(xm[1]), th)
+                        if observer_law and use_obs[i]:   # core.laws.ndo.WithObserver.step
+                            u = u - u_taud_of(pn, pn.m12 * math.cos(xm[1]), th)
                 if NP[i] >= 0:
                     motion_row(MA[i], t, xt, MS[i, 2], MO[i])   # row k of core.metrics.motion_metrics
                 if exi[i] >= 0:   # the excitation (core.loop.command)

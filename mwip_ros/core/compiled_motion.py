@@ -9,6 +9,12 @@ from the measured wheel angle, then :func:`.motion.speed_step`), and the law's p
 (:func:`.motion.error_state`, :func:`tracked_step`), as ``Law.step`` does with :meth:`.laws.Law.tracked`.  These
 are the functions the Shaper and the laws call, compiled from their own code (``compiled._deep``), no copy.
 
+The hold (docs/theory.md 6.14) as :meth:`.motion.Shaper.reference` runs it with the measured state: theta_w* moved
+to where the robot comes to rest (:func:`.motion.anchor_step`) and, with the observer term, tau_bar
+(:func:`.motion.hold_estimate`) and from the first rest the law regulating about its equilibrium
+(:func:`.motion.hold_lean`, and the torque and observer term of :func:`.loop.command`), which :func:`law_track`
+applies with the observer term (:func:`.controller.u_taud_of`).
+
 The batch has only the time profile (``motion.profile``; no ``cmd_vel``), so the Shaper's command timeout does not
 arise.  The yaw reference psi'* is not formed: the batch runs the planar plant only, which has no yaw stage.
 
@@ -22,11 +28,31 @@ import math
 
 import numpy as np
 
+from typing import NamedTuple
+
+from . import simd
+from .controller import u_taud_of
 from .metrics import HOLD_SETTLE_S
-from .motion import Reference, _clip, error_state, profile_at, speed_start, speed_step
+from .motion import (ANCHOR_BLEND_S, HOLD_NEAR, REST_MOVE, Reference, _clip, anchor_step, error_state,
+                     hold_estimate, hold_lean, hold_weight, profile_at, speed_start, speed_step)
 
 __all__ = ["law_track", "law_track_lanes", "no_track_lanes", "motion_reference", "tracked_step", "motion_row",
-           "motion_arrays", "motion_sums_metrics", "MOTION_METRICS"]
+           "motion_arrays", "motion_sums_metrics", "MOTION_METRICS", "Nominal", "MO_COLUMNS", "MS_COLUMNS"]
+
+# the per-scenario numbers (MO) and state (MS) of the references (motion_arrays): their columns in order
+MO_COLUMNS = ("max_speed", "max_accel", "position_gain", "lean_gain", "r", "settle", "hold_settle_s", "hold_gain",
+              "rest_move", "blend")
+MS_COLUMNS = ("theta_w_ref", "dtheta_w_ref", "v_ref", "s2", "offset", "k_stop", "prev_rate", "tau_bar1",
+              "tau_bar2", "lean", "torque", "rested", "pending", "weight", "hold_tau1", "hold_tau2")
+
+
+class Nominal(NamedTuple):
+    """The nominal model's eq. (2) terms that :func:`.model.lumped_disturbance` and :func:`.motion.hold_lean` read."""
+
+    m11: float
+    m12: float
+    m22: float
+    G_b: float
 
 MOTION_METRICS = ("speed_rms", "hold_drift", "hold_rate", "max_lean")   # core.metrics.motion_metrics' numbers
 
@@ -45,52 +71,102 @@ track_step = track_lanes = tracked_step   # the law's pure_track (and on lanes):
 load = store = None   # core.simd's: bound by core.compiled.kernel_for
 
 
-def motion_reference(MO, PT, PV, n_points, MS, k, h, theta_w):   # pragma: no cover - compiled
-    """Period k's (theta_w*, theta_w'*, v*) as :meth:`.motion.Shaper.reference` with a profile makes them, into ``MS``
-    (theta_w*, theta_w'*, v*, the law's second state) from the previous period's; ``theta_w`` the measured wheel
-    angle (theta_w*(0)).  ``MO`` = max_speed, max_accel, position_gain, lean_gain, r, settle; the profile
-    ``PT[:n_points]``, ``PV[:n_points]`` (:func:`motion_arrays`)."""
+def motion_reference(MO, PT, PV, n_points, MS, k, h, x, th, observed, p):   # pragma: no cover - compiled
+    """Period k's (theta_w*, theta_w'*, v*) as :meth:`.motion.Shaper.reference` with a profile, the measured state
+    ``x`` and (``observed``: a law with the observer term) the estimate ``th`` makes them, into ``MS``
+    (:data:`MS_COLUMNS`) from the previous period's, with the hold (docs/theory.md 6.14): theta_w* where the
+    robot came to rest, and into ``MS[9]``, ``MS[10]`` the equilibrium's lean and torque, ``MS[14]``, ``MS[15]``
+    the weighted tau_bar (0 without it), tau_bar in ``MS[7]``, ``MS[8]``, its weight in ``MS[13]``. ``p`` the
+    nominal model; ``MO`` (:data:`MO_COLUMNS`), the profile ``PT[:n_points]``, ``PV[:n_points]``
+    (:func:`motion_arrays`). Returns (theta_w*, theta_w'*, v*, whether the equilibrium holds)."""
     vt = _clip(profile_at(PT[:n_points], PV[:n_points], k * h), MO[0])
     if k == 0:
-        tw, dtw, v = speed_start(vt, theta_w, MO[1], h, MO[4])
+        tw, dtw, v = speed_start(vt, x[0], MO[1], h, MO[4])
+        MS[5] = 0.0   # the start is a stop
     else:
+        v_was = MS[2]
         tw, dtw, v = speed_step(MS[0], MS[1], MS[2], vt, MO[1], h, MO[4])
+        if v == 0.0 and v_was != 0.0:
+            MS[5] = k   # a stop: v* reached 0
     MS[0], MS[1], MS[2] = tw, dtw, v
-    return tw, dtw, v
+    equilibrium = observed and MO[7] > 0.0
+    near = abs(x[1] - MS[9]) <= HOLD_NEAR   # MS[9]: the previous period's lean (0 without the equilibrium)
+    if equilibrium and near:   # tau_bar (motion.hold_estimate)
+        MS[7], MS[8] = hold_estimate(th[0], th[1], MS[7], MS[8], MO[7])
+    still = v == 0.0
+    held = still and (k - MS[5]) * h < MO[6] - 1e-9   # the anchor (motion.anchor_step)
+    tw, MS[4], MS[12], rest = anchor_step(x[0], x[2], MS[6], tw, MS[4], MS[12], held, MS[11] > 0.0, MO[8], MO[9])
+    MS[6] = x[2] if still else math.nan
+    MS[11] = 1.0 if still and (MS[11] > 0.0 or rest) else 0.0
+    MS[13] = hold_weight(MS[13], MS[11] > 0.0 and equilibrium, near, MO[9])
+    on = MS[13] > 0.0
+    if on:   # the hold's equilibrium, from the first rest (motion.Shaper._held)
+        t1, t2 = MS[13] * MS[7], MS[13] * MS[8]
+        MS[9], MS[10], MS[14], MS[15] = hold_lean(p, t2), -t1, t1, t2
+    else:
+        MS[9], MS[10], MS[14], MS[15] = 0.0, 0.0, 0.0, 0.0
+    return tw, dtw, v, on
 
 
-def law_track(P, p, h, x, s, k, MO, PT, PV, n_points, MS):   # pragma: no cover - compiled
+def law_track(P, p, h, x, s, k, MO, PT, PV, n_points, MS, th, observed):   # pragma: no cover - compiled
     """Period k's references (:func:`motion_reference`) and the law's (u, next state) tracking them for the measured
-    state ``x`` (its second state in ``MS[3]``)."""
-    tw, dtw, v = motion_reference(MO, PT, PV, n_points, MS, k, h, x[0])
-    u, s_next, s2, _ = track_step(P, p, h, x, s, MS[3], k == 0, Reference(tw, dtw, v, 0.0, MO[2], MO[3]))
+    state ``x`` (its second state in ``MS[3]``), with the observer term of ``th`` when ``observed``
+    (:meth:`.laws.ndo.WithObserver.step`); while the references hold, about the hold's equilibrium as
+    :func:`.loop.command` does it (docs/theory.md 6.14)."""
+    tw, dtw, v, on = motion_reference(MO, PT, PV, n_points, MS, k, h, x, th, observed, p)
+    ref = Reference(tw, dtw, v, 0.0, MO[2], MO[3])
+    if on:   # the hold's equilibrium
+        xs = (x[0], x[1] - MS[9], x[2], x[3])
+        u, s_next, s2, _ = track_step(P, p, h, xs, s, MS[3], k == 0, ref)
+        if observed:
+            u = u - u_taud_of(p, p.m12 * math.cos(xs[1]), (th[0] - MS[14], th[1] - MS[15]))
+        u = u + MS[10]
+    else:
+        u, s_next, s2, _ = track_step(P, p, h, x, s, MS[3], k == 0, ref)
+        if observed:
+            u = u - u_taud_of(p, p.m12 * math.cos(x[1]), th)
     MS[3] = s2
     return u, s_next
 
 
-def law_track_lanes(Pl, pl, h, xl, sg, xmg, live, width, i0, k, MO, PT, PV, NP, MS, R):   # pragma: no cover
+def law_track_lanes(Pl, pl, h, xl, sg, xmg, live, width, i0, k, MO, PT, PV, NP, MS, R, ng, thg, tl,
+                    observed, use_obs):   # pragma: no cover
     """:func:`law_track` for the lanes of scenarios ``i0`` .. ``i0 + width - 1`` (every one with motion): the
-    references scenario by scenario (:func:`motion_reference`, the measured wheel angles ``xmg[0]``), gathered in
-    ``R`` (theta_w*, theta_w'*, lambda, k_x, the law's second state: a row each, a column per lane), then the law's
+    references scenario by scenario (:func:`motion_reference`, the measured states ``xmg``, the estimates
+    ``thg`` (the scenarios ``use_obs`` of a law with the observer term, ``observed``), the nominal models
+    ``ng``), gathered in ``R`` (theta_w*, theta_w'*, lambda, k_x, the law's second state, the hold's lean,
+    torque, tau_bar_1 and tau_bar_2: a row each, a column per lane; 0 where the hold is off), then the law's
     tracking for all lanes at once (``track_lanes``: its ``pure_track``, or ``pure_step`` on the error state, on
-    :data:`.simd.lanes`).  Returns the lanes' (u, next state)."""
+    :data:`.simd.lanes`) at theta_b - lean. Returns the lanes' (u, u with the observer term of ``tl`` - tau_bar,
+    next state), the hold's torque added to both."""
     for lane in range(width):
         if live[lane]:
             i = i0 + lane
-            R[0, lane], R[1, lane], _ = motion_reference(MO[i], PT[i], PV[i], NP[i], MS[i], k, h, xmg[0, lane])
+            x = (xmg[0, lane], xmg[1, lane], xmg[2, lane], xmg[3, lane])
+            p = Nominal(ng[0, lane], ng[1, lane], ng[2, lane], ng[3, lane])
+            R[0, lane], R[1, lane], _, on = motion_reference(MO[i], PT[i], PV[i], NP[i], MS[i], k, h, x,
+                                                             (thg[0, lane], thg[1, lane]), observed and use_obs[i], p)
             R[2, lane], R[3, lane], R[4, lane] = MO[i, 2], MO[i, 3], MS[i, 3]
+            R[5, lane] = MS[i, 9] if on else 0.0
+            R[6, lane] = MS[i, 10] if on else 0.0
+            R[7, lane] = MS[i, 14] if on else 0.0
+            R[8, lane] = MS[i, 15] if on else 0.0
     ref = Reference(load(R[0], 0), load(R[1], 0), 0.0, 0.0, load(R[2], 0), load(R[3], 0))
-    u, s_next, s2, _ = track_lanes(Pl, pl, h, xl, load(sg, 0), load(R[4], 0), k == 0, ref)
+    xs = (xl[0], xl[1] - load(R[5], 0), xl[2], xl[3])
+    u, s_next, s2, _ = track_lanes(Pl, pl, h, xs, load(sg, 0), load(R[4], 0), k == 0, ref)
     store(R[4], 0, s2)
     for lane in range(width):
         if live[lane]:
             MS[i0 + lane, 3] = R[4, lane]
-    return u, s_next
+    torque = load(R[6], 0)
+    observed = u - u_taud_of(pl, pl.m12 * simd.cos(xs[1]), (tl[0] - load(R[7], 0), tl[1] - load(R[8], 0)))
+    return u + torque, observed + torque, s_next
 
 
-def no_track_lanes(Pl, pl, h, xl, sg, xmg, live, width, i0, k, MO, PT, PV, NP, MS, R):   # pragma: no cover
+def no_track_lanes(Pl, pl, h, xl, sg, xmg, live, width, i0, k, MO, PT, PV, NP, MS, R, ng, thg, tl,
+                   observed, use_obs):   # pragma: no cover
     """:func:`law_track_lanes` of a kernel whose law does not run on lanes: never called."""
-    return xl[0], xl[0]
+    return xl[0], xl[0], xl[0]
 
 
 def motion_row(MA, t, x, v_ref, MO):   # pragma: no cover - compiled
@@ -119,24 +195,31 @@ def motion_row(MA, t, x, v_ref, MO):   # pragma: no cover - compiled
 
 def motion_arrays(loops, settle: float = HOLD_SETTLE_S):
     """The compiled loop's motion arguments of ``loops`` (each one's ``motion``, a :class:`.motion.MotionConfig`, or
-    None): (any has motion, MO, PT, PV, NP, MS, MA): per scenario its numbers (max_speed, max_accel, position_gain,
-    lean_gain, r, ``settle``), its profile's times and values (NP points; -1: no motion), the references' state and
-    the metrics' sums (:func:`motion_row`)."""
+    None): (any has motion, MO, PT, PV, NP, MS, MA): per scenario its numbers (:data:`MO_COLUMNS`: max_speed,
+    max_accel, position_gain, lean_gain, r, ``settle``, hold_settle_s, the hold filter's gain 1 - exp(-h /
+    hold_filter_s) as :class:`.motion.Shaper` computes it, 0: none, :data:`.motion.REST_MOVE` / r, the anchor's
+    blend 1 - exp(-h / :data:`.motion.ANCHOR_BLEND_S`)), its profile's
+    times and values (NP points; -1: no motion), the references' state (:data:`MS_COLUMNS`) and the metrics' sums
+    (:func:`motion_row`)."""
     n = len(loops)
     cfgs = [lp.motion for lp in loops]
     width = max([1] + [len(c.profile) for c in cfgs if c is not None])
-    MO, PT, PV = np.zeros((n, 6)), np.zeros((n, width)), np.zeros((n, width))
+    MO, PT, PV = np.zeros((n, len(MO_COLUMNS))), np.zeros((n, width)), np.zeros((n, width))
     NP = np.full(n, -1, dtype=np.int64)
-    for i, c in enumerate(cfgs):
+    for i, (lp, c) in enumerate(zip(loops, cfgs)):
         if c is not None:
-            MO[i] = (c.max_speed, c.max_accel, c.position_gain, c.lean_gain, c.r, settle)
+            gain = (1.0 - math.exp(-lp.plant.h / c.hold_filter_s)) if c.hold_filter_s > 0.0 else 0.0
+            MO[i] = (c.max_speed, c.max_accel, c.position_gain, c.lean_gain, c.r, settle, c.hold_settle_s, gain,
+                     REST_MOVE / c.r, 1.0 - math.exp(-lp.plant.h / ANCHOR_BLEND_S))
             NP[i] = len(c.profile)
             for j, (tp, vp) in enumerate(c.profile):
                 PT[i, j], PV[i, j] = tp, vp
     MA = np.zeros((n, 9))
     MA[:, 2] = -np.inf
     MA[:, 4:6] = MA[:, 7:9] = np.nan
-    return bool((NP >= 0).any()), MO, PT, PV, NP, np.zeros((n, 4)), MA
+    MS = np.zeros((n, len(MS_COLUMNS)))
+    MS[:, 6] = np.nan   # no previous rate
+    return bool((NP >= 0).any()), MO, PT, PV, NP, MS, MA
 
 
 def motion_sums_metrics(MA: np.ndarray, MO: np.ndarray, NP: np.ndarray) -> dict:

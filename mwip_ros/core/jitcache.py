@@ -14,13 +14,14 @@ import hashlib
 import sys
 import types
 from pathlib import Path
+from typing import Optional
 
 import numba
 import numpy as np
 from numba.core.caching import (CompileResultCacheImpl, FunctionCache, InTreeCacheLocator, UserProvidedCacheLocator,
                                 UserWideCacheLocator)
 
-__all__ = ["jit", "made_of", "stamp_of", "cache_for", "stamped_cache", "load_cached"]
+__all__ = ["jit", "made_of", "stamp_of", "cache_for", "stamped_cache", "load_cached", "cached"]
 
 
 def _digest(path: str) -> str:
@@ -205,3 +206,19 @@ def load_cached(kernel, args) -> None:
                 kernel.add_overload(cres)
     except Exception:  # noqa: BLE001 - the first call loads it the usual way
         pass
+
+
+def cached(kernel) -> Optional[bool]:
+    """Whether numba's cache holds machine code of ``kernel`` (a :func:`jit` dispatcher) for this machine under its
+    current stamp: True (a call loads it), False (the first call compiles it: tens of seconds for the batch loop),
+    None when it cannot tell (no cache directory, numba's internals other than these)."""
+    try:
+        if kernel.overloads:
+            return True
+        cache = kernel._cache
+        if not hasattr(cache, "_cache_file"):
+            return None
+        target = kernel.targetctx.codegen().magic_tuple()
+        return any(key[1] == target for key in cache._cache_file._load_index())
+    except Exception:  # noqa: BLE001 - numba's internals changed: not known
+        return None

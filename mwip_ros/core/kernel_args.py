@@ -81,9 +81,10 @@ class LoopArgs(NamedTuple):
     failure: np.ndarray      # (n,) int64 why each scenario failed: 0 it did not, 1 fall, 2 bad_command, 3 diverged
     # --- the motion references (core.compiled_motion.motion_arrays, docs/theory.md 6.11)
     motion: bool             # some scenario tracks a motion profile
-    MO: np.ndarray           # (n, 6) max_speed, max_accel, position_gain, lean_gain, r, the hold's settle time
+    MO: np.ndarray           # (n, 10) core.compiled_motion.MO_COLUMNS: max_speed, ..., the hold's settle and filter
     PT: np.ndarray           # (n, points) the profile's times
     PV: np.ndarray           # (n, points) and its speeds
     NP: np.ndarray           # (n,) int64 its points (< 0: no motion)
-    MS: np.ndarray           # (n, 4) theta_w*, theta_w'*, v*, the law's second state (DSC's x_d)
+    MS: np.ndarray           # (n, 16) core.compiled_motion.MS_COLUMNS: theta_w*, theta_w'*, v*, the law's second
+                             # state (DSC's x_d), the hold's anchor and equilibrium (docs/theory.md 6.14)
     MA: np.ndarray           # (n, 9) the sums of core.metrics.motion_metrics (core.compiled_motion.motion_row)

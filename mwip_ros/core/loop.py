@@ -47,7 +47,7 @@ from .trajectory import BAD_COMMAND, DIVERGED, FAILURES, FALL
 from .sensing import Actuator, Sensors
 
 __all__ = ["Stage", "STAGES", "STAGE_NAMES", "PLANT_NODE", "Answer", "answering", "loop_nodes", "PlantSide",
-           "Period", "command", "fall_text"]
+           "Period", "decide", "command", "fall_text"]
 
 PLANT_NODE = "plant_sim"
 
@@ -219,9 +219,7 @@ class Period:
     def __init__(self, side: PlantSide, observer, law, estimator=None, excitation=None, motion=None,
                  yaw: Optional[YawLoop] = None, wrench=None):
         self.side, self.observer, self.law, self.estimator = side, observer, law, estimator
-        # the external wrench held over period k, ``wrench(t_k)`` (the node's external_wrench offline: tau_ext1 and
-        # tau_ext2 added, a spatial plant's force.y and torque.z); None: none
-        self.wrench = wrench
+        self.wrench = wrench   # t_k -> the external wrench held over period k (a terrain scan's push); None: none
         self.extra = (0.0, 0.0)
         self.excitation = excitation
         self.motion = motion   # the references' shaper (core.motion.Shaper, theory 6.11), None: none (the paper)
@@ -236,37 +234,48 @@ class Period:
         """Stages ``estimator`` (the identity when the measurement is a state), ``observer`` and ``law`` (with the
         excitation of period ``k`` added, :func:`command`): (u_k, tau_hat_k, the law's internals, the state the
         loop believes).  A law that raises is a :class:`~.laws.LawError` (the law, t_k, its error)."""
-        x_m = measured if self.estimator is None else self.estimator.step(measured)
-        tau_hat = self.observer.update(x_m, u_m)
-        try:
-            u_law, internals = command(self.law, x_m, tau_hat, self.excitation, k, self.motion,
-                                       self.side.safety.enabled)
-        except Exception as exc:   # noqa: BLE001 - a law's own error (a plug-in's bug), named as the law's
-            raise LawError.of(self.law.name, k * self.side.cfg.h, exc) from exc
-        return u_law, tau_hat, internals, x_m
+        return decide(self.estimator, self.observer, self.law, measured, u_m, k, self.side.cfg.h, self.excitation,
+                      self.motion, self.side.safety.enabled)
+
+    def sense_decide(self):
+        """Stages ``sensors`` (with a yaw stage, the gyro's yaw rate too), ``estimator``, ``observer`` and ``law`` of
+        period k: (the measurement, the measured yaw rate or None, u_k, tau_hat_k, the law's internals, the state the
+        loop believes).  The env (:class:`mwip_ros.envs.MwipEnv`) adds its action to u_k before :meth:`actuate`."""
+        side = self.side
+        measured, u_m = side.sense()
+        dpsi = side.sense_yaw_rate() if self.yaw is not None else None   # the yaw stage's input (theory 6.13)
+        u_law, tau_hat, internals, x_m = self.decide(measured, u_m, side.plant.k)
+        return measured, dpsi, u_law, tau_hat, internals, x_m
+
+    def actuate(self, u_law: float, dpsi: Optional[float], internals: dict):
+        """Stages ``yaw`` (a spatial plant with motion: u_psi from psi'* and the measured yaw rate ``dpsi``, the
+        wheels' torques, :func:`.yaw.wheel_torques`) and ``drive`` for the command ``u_law``: (the torque that acts
+        over [t_k, t_k+1), the true tau_d at t_k, the internals with the yaw stage's signals).  While no torque acts
+        (the driver not enabled) the yaw integral stays zero (:meth:`.yaw.YawLoop.idle`)."""
+        wheels = None
+        side = self.side
+        if self.yaw is not None:   # stage yaw (after the law): u_psi from psi'* and the gyro's yaw rate
+            dpsi_ref = self.motion.ref.dpsi
+            u_psi = self.yaw.step(dpsi_ref, dpsi, u_law) if side.safety.enabled else self.yaw.idle(dpsi)
+            internals = {**internals, "dpsi_ref": dpsi_ref, "u_psi": u_psi, "gyro_z": dpsi}
+            wheels = wheel_torques(u_law, u_psi, 0.0)   # clipped per wheel in the drive stage
+        self.extra = self.wrench(side.plant.t) if self.wrench is not None else (0.0, 0.0)
+        u, tau_d = side.act(u_law, self.extra, wheels=wheels)
+        return u, tau_d, internals
 
     def run(self, table) -> bool:
-        """Period k up to the integration: sense, decide, act, and row k into ``table`` (true state, the torque
-        that acts, tau_hat, the true tau_d, internals; raw: the sample and the estimate).  True when the run fails
-        (:attr:`failure` says when and why; the period ends there): the state is not a number (diverged: no row),
-        the robot has fallen, or the law's command was refused; else :meth:`advance` integrates it."""
+        """Period k up to the integration: sense, decide, act (:meth:`sense_decide`, :meth:`actuate`), and row k
+        into ``table`` (true state, the torque that acts, tau_hat, the true tau_d, internals; raw: the sample and the
+        estimate).  True when the run fails (:attr:`failure` says when and why; the period ends there): the state is
+        not a number (diverged: no row), the robot has fallen, or the law's command was refused; else
+        :meth:`advance` integrates it."""
         side = self.side
         p = side.plant
         if not finite_state(p.x):   # diverged: the state is not a number (no row: nothing to sense or record)
             self.failure = (p.t, fall_text(p.t, p.x, p.cfg.fall_angle), FAILURES[DIVERGED])
             return True
-        measured, u_m = side.sense()
-        wheels = None
-        if self.yaw is not None:   # stage yaw (after the law): u_psi from psi'* and the gyro's yaw rate
-            dpsi = side.sense_yaw_rate()
-        u_law, tau_hat, internals, x_m = self.decide(measured, u_m, p.k)
-        if self.yaw is not None:
-            dpsi_ref = self.motion.ref.dpsi
-            u_psi = self.yaw.step(dpsi_ref, dpsi, u_law) if side.safety.enabled else self.yaw.hold(dpsi)
-            internals = {**internals, "dpsi_ref": dpsi_ref, "u_psi": u_psi, "gyro_z": dpsi}
-            wheels = wheel_torques(u_law, u_psi, 0.0)   # clipped per wheel in the drive stage
-        self.extra = self.wrench(p.t) if self.wrench is not None else (0.0, 0.0)
-        u, tau_d = side.act(u_law, self.extra, wheels=wheels)
+        measured, dpsi, u_law, tau_hat, internals, x_m = self.sense_decide()
+        u, tau_d, internals = self.actuate(u_law, dpsi, internals)
         table.append(p.t, p.x, u, tau_hat, tau_d, internals, (*measured, *x_m) if self.estimator else (), p.pose)
         self.u = u
         if p.fallen:
@@ -294,6 +303,43 @@ class Period:
         return False
 
 
+def decide(estimator, observer, law, measured, u_m: float, k: int, h: float, excitation=None, motion=None,
+           driving: bool = True):
+    """Stages ``estimator``, ``observer`` and ``law`` of period ``k`` (:meth:`Period.decide`; a robot's own loop, which
+    has no :class:`PlantSide`, calls it too: :mod:`mwip_ros.robot.closed_loop`).
+
+    Parameters
+    ----------
+    estimator : Estimator or None
+        The state estimator (:mod:`.estimators`) when ``measured`` is a raw sample, None when it is a state.
+    observer, law
+        The observer (eq. 12-13) and the law (:mod:`.laws`).
+    measured
+        The period's measurement: a state, or a :class:`~.raw_sensors.RawSample`.
+    u_m : float
+        The torque that acted over period k - 1, as reported [N m].
+    k : int
+        The period; ``h`` its length [s] (for a law's error's time).
+    excitation, motion : optional
+        The excitation (:mod:`.excitation`) and the references' shaper (:class:`.motion.Shaper`) of :func:`command`.
+    driving : bool
+        Whether the torque acts (the driver enabled) over the period: :func:`command`'s.
+
+    Returns
+    -------
+    tuple
+        (u_k, tau_hat_k, the law's internals, the state the loop believes); a law that raises is a
+        :class:`~.laws.LawError` (the law, t_k, its error).
+    """
+    x_m = measured if estimator is None else estimator.step(measured)
+    tau_hat = observer.update(x_m, u_m)
+    try:
+        u_law, internals = command(law, x_m, tau_hat, excitation, k, motion, driving)
+    except Exception as exc:   # noqa: BLE001 - a law's own error (a plug-in's bug), named as the law's
+        raise LawError.of(law.name, k * h, exc) from exc
+    return u_law, tau_hat, internals, x_m
+
+
 def fall_text(t: float, x, fall_angle: float) -> str:
     """The line of a failed state ``x`` at ``t``: a fall, 'FELL at t = ...: |theta_b| = ... > fall_angle ...', or a
     state that diverged (a component not a finite number)."""
@@ -306,16 +352,27 @@ def command(law, x, tau_hat, excitation, k: int, motion=None, driving: bool = Tr
     """Stage ``law``: the references of period ``k`` handed to the law (``motion``, a :class:`.motion.Shaper`;
     None: none, the law regulates as in the paper), the law's command for the state ``x`` and ``tau_hat``, plus the
     excitation of period ``k`` (:mod:`.excitation`; None: none) — the command sent, what the trajectory's ``u``
-    records; the excitation and the references (v_ref, theta_w_ref) are in the internals.  The controller node
-    calls this too, so the offline loop and the graph take the references in the same place of the period.
-    ``driving`` False: no torque acts (the driver is not enabled, docs/theory.md 6.8): the references hold
-    (:meth:`.motion.Shaper.hold`) at the measured state, at rest, and start from it when the torque is back."""
-    if motion is not None:
+    records; the excitation and the references (v_ref, theta_w_ref) are in the internals.  While a law with the
+    observer term holds (the shaper's :attr:`~.motion.Shaper.hold`, docs/theory.md 6.14) it regulates about the
+    hold's equilibrium: it sees theta_b - theta_eq and tau_hat - tau_bar, and -tau_bar_1 is added to its command.
+    The controller node calls this too, so the offline loop and the graph take the references in the same place of
+    the period.  ``driving`` False: no torque acts (the driver is not enabled, docs/theory.md 6.8): the references
+    stay at the measured state, at rest (:meth:`.motion.Shaper.idle`), and start from it when the torque is back."""
+    hold = None
+    if motion is not None:   # docs/theory.md 6.11: theta_w*(0) is the first state's wheel angle
         if not driving:
-            motion.hold()
-        ref = motion.reference(k, x[0])   # docs/theory.md 6.11: theta_w*(0) is the first state's wheel angle
+            motion.idle()
+        ref = motion.reference(k, x=x, tau_hat=tau_hat if law.observer else None)
         law.track(ref)
-    u, internals = law.step(x, tau_hat)
+        hold = motion.hold
+    if hold is None:
+        u, internals = law.step(x, tau_hat)
+    else:   # the hold's equilibrium (docs/theory.md 6.14)
+        shifted = type(x)(x[0], x[1] - hold.lean, x[2], x[3])
+        u, internals = law.step(shifted, None if tau_hat is None else (tau_hat[0] - hold.tau1, tau_hat[1] - hold.tau2))
+        u = u + hold.torque
+        if isinstance(internals, dict) and "u" in internals:
+            internals = {**internals, "u": u}
     if motion is not None and isinstance(internals, dict):
         internals = {**internals, "v_ref": ref.v, "theta_w_ref": ref.theta_w}
     if excitation is not None:

@@ -27,7 +27,7 @@ import numpy as np
 from .controller import ControlOutput, u_taud_of
 from .model import PhysicalParams
 
-__all__ = ["LqrDesignError", "linearization", "weights", "lqr_gain", "lqr_law", "lqr_u", "LqrController"]
+__all__ = ["NO_DESIGN", "LqrDesignError", "linearization", "weights", "lqr_gain", "lqr_law", "lqr_u", "LqrController"]
 
 
 class LqrDesignError(ValueError):
@@ -83,6 +83,11 @@ def lqr_gain(nominal: PhysicalParams, h: float, Q: Sequence[float], R: float) ->
     return _gain(nominal, float(h), tuple(float(q) for q in Q), R)
 
 
+# The refusal's words on every path: which of the two a degenerate weight takes (the Riccati solver failing, or a gain
+# that leaves a mode on the unit circle) depends on the CPU's LAPACK path; what the user reads first does not.
+NO_DESIGN = "no stabilizing design for the nominal model with these weights"
+
+
 @functools.lru_cache(maxsize=256)
 def _gain(nominal: PhysicalParams, h: float, Q: Tuple[float, ...], R: float) -> Tuple[float, float, float]:
     from scipy.linalg import expm, solve_discrete_are   # not scipy.signal: it would add ~45 MiB to every node
@@ -95,14 +100,13 @@ def _gain(nominal: PhysicalParams, h: float, Q: Tuple[float, ...], R: float) -> 
     try:
         P = solve_discrete_are(Ad, Bd, Qm, Rm)
     except (np.linalg.LinAlgError, ValueError) as exc:
-        raise LqrDesignError("lqr.Q", f"the Riccati equation has no stabilizing solution for this model and "
-                                      f"these weights ({exc}); the pair (A, B) or (A, Q) may not be "
-                                      f"stabilizable/detectable") from None
+        raise LqrDesignError("lqr.Q", f"{NO_DESIGN}: the Riccati equation has no stabilizing solution ({exc}); the "
+                                      f"pair (A, B) or (A, Q) may not be stabilizable/detectable") from None
     K = np.linalg.solve(Rm + Bd.T @ P @ Bd, Bd.T @ P @ Ad)[0]
     closed = np.abs(np.linalg.eigvals(Ad - Bd @ K[None, :])).max()
     if not np.all(np.isfinite(K)) or not closed < 1.0:
-        raise LqrDesignError("lqr.Q", f"the design does not stabilize the linearized model (spectral radius "
-                                      f"{closed:g} of A_d - B_d K)")
+        raise LqrDesignError("lqr.Q", f"{NO_DESIGN}: the gain leaves the linearized model unstable (spectral "
+                                      f"radius {closed:g} of A_d - B_d K)")
     return float(K[0]), float(K[1]), float(K[2])
 
 

@@ -3,9 +3,11 @@
 The robot is a 3D model generated from the :class:`~.plant.PlantConfig` (``actual.*`` and :class:`MujocoConfig`;
 :func:`mjcf`): a body on a free joint with its mass ``m_b`` at (0, 0, l) and the inertia (I_b_roll, I_b, I_b_yaw),
 two wheels hinged to it about its y axis at y = +-track_width / 2, each with half of ``m_w``, ``I_w`` and ``D_b``
-(the hinge's damping) and a cylinder of radius ``r`` that rolls on a ground plane.  Each wheel's motor is an
-actuator on its hinge: u_i on the wheel, -u_i on the body, u_L = u_R = u / 2 (no yaw command).  The rest of
-eq. (1) acts as generalized forces (theory 6.10):
+(the hinge's damping), drawn as a cylinder of radius ``r`` and width w = r / 5.  Each wheel touches the ground at
+one point, the lowest of its mid-plane (a sphere of radius r: the rim's circle), with the sliding friction mu and
+the torsional friction mu w / 4 of its contact line (docs/theory.md 6.10, "Contact", eq. C1), Coulomb's cone
+enforced by MuJoCo's NoSlip pass.  Each wheel's motor is an actuator on its hinge: u_i on the wheel, -u_i on the
+body, u_L = u_R = u / 2 (no yaw command).  The rest of eq. (1) acts as generalized forces (theory 6.10):
 
     Q_phi_i = -D_w / 2 theta_w_i' + tau_ext1 / 2           on wheel i's hinge
     Q_pitch = Q_phi_L + Q_phi_R + tau_ext2 - tau_ext1       on the body's pitch axis (body y)
@@ -14,11 +16,12 @@ A free joint's angular velocity and generalized force are in the body's own fram
 The ground (``ground.slope``, ``ground.bumps``; :func:`mjcf`) is a plane tilted about y and steps across the path as
 boxes; ``external_wrench``'s force.y and torque.z act on the body at its centre of gravity (:meth:`MujocoPlant._push`).
 The laws see the planar :class:`~.model.State`: theta_b the body's pitch, theta_w the mean of the two wheels'
-absolute angles; :attr:`MujocoPlant.pose` is the 3D pose.  ``D_w`` is drawn per period from the same seeded
-generator as :class:`~.plant.PlantSim`'s, so both backends see the same friction sequence.  A simulation that
-diverges (a MuJoCo warning, a state that is not finite) raises :class:`PlantDiverged` naming the time and the
-cause: it never hands a NaN state or MuJoCo's silent reset to the loop.  ``mujoco`` is imported when the backend
-is built, not before (:func:`mujoco_module`).
+absolute angles; :attr:`MujocoPlant.pose` is the 3D pose. The true tau_d is eq. (6-7) on those coordinates with
+MuJoCo's accelerations and u = u_L + u_R, defined while both wheels touch the ground (NaN otherwise: theory 6.10).
+``D_w`` is drawn per period from the same seeded generator as :class:`~.plant.PlantSim`'s, so both backends see the
+same friction sequence. A simulation that diverges (a MuJoCo warning, a state that is not finite) raises
+:class:`PlantDiverged` naming the time and the cause: it never hands a NaN state or MuJoCo's silent reset to the
+loop. ``mujoco`` is imported when the backend is built, not before (:func:`mujoco_module`).
 """
 from __future__ import annotations
 
@@ -63,6 +66,28 @@ class MujocoConfig:
 
 
 _D0, _DMAX = 0.99, 0.999   # the contact's impedance (solimp) at rest and deep in
+FRICTION_TIMECONST = 0.2   # s: the friction rows' reference (solreffriction) in MuJoCo's main solve (theory 6.10)
+NOSLIP_ITERATIONS = 3      # MuJoCo's NoSlip pass: Coulomb's cone on the friction forces ...
+NOSLIP_TOLERANCE = 1e-12   # ... all of its sweeps (the two wheels, solved one after the other, agree to 6e-9 rad)
+
+
+def wheel_width(r: float) -> float:
+    """A wheel's width w [m] for its radius ``r``: r / 5 (the drawn cylinder, the URDF's, the torsional friction's
+    line; docs/theory.md 6.10)."""
+    return r / 5.0
+
+
+def torsional_friction(mu: float, r: float) -> float:
+    """The torsional friction coefficient [m] of a wheel's contact (docs/theory.md 6.10, eq. C1): mu w / 4, the
+    Coulomb torque per newton of normal force of a contact line of width w = :func:`wheel_width` under uniform
+    pressure pivoting about its middle, the integral of mu (N / w) |y| over y in [-w/2, w/2]."""
+    return mu * wheel_width(r) / 4.0
+
+
+def scrub_torque(mu: float, r: float, weight: float) -> float:
+    """The yaw torque [N m] both wheels' contacts resist a turn in place with on flat ground (theory 6.10, eq. C2):
+    each wheel's normal force times :func:`torsional_friction`, summed (``weight`` = (m_b + m_w) g [N])."""
+    return torsional_friction(mu, r) * weight
 
 
 def mjcf(cfg) -> str:
@@ -75,6 +100,10 @@ def mjcf(cfg) -> str:
     # rolls on its radius r as eq. (1) has it (MuJoCo's defaults sink it 0.4 mm); the elliptic cone is Coulomb's
     tc = 4.0 * cfg.h / n
     contact = f'friction="{mc.friction!r} 0 0" solref="{tc!r} 1" solimp="{_D0} {_DMAX} 0.001"'
+    # each wheel touches the ground at one point (theory 6.10, "Contact"): the pairs below, wheel with each ground geom
+    mu, mu_t = mc.friction, torsional_friction(mc.friction, p.r)
+    pair = (f'condim="4" friction="{mu!r} {mu!r} {mu_t!r} 0 0" solref="{tc!r} 1" solimp="{_D0} {_DMAX} 0.001" '
+            f'solreffriction="{FRICTION_TIMECONST!r} 1"')
     # the wheels start where the contact holds them at rest: MuJoCo's soft contact at rest sinks by
     # (1 - d0) g / (d0 k), k = 1 / (dmax tc)^2 (its reference acceleration, damping ratio 1): no transient at t = 0
     z0 = p.r - (1.0 - _D0) * p.g * (_DMAX * tc) ** 2 / _D0
@@ -86,8 +115,11 @@ def mjcf(cfg) -> str:
         f'<body name="wheel_{side}" pos="0 {y!r} 0">'
         f'<joint name="wheel_{side}" type="hinge" axis="0 1 0" damping="{cfg.D_b / 2.0!r}" ref="0"/>'
         f'<inertial pos="0 0 0" mass="{p.m_w / 2.0!r}" diaginertia="{p.I_w / 4.0!r} {p.I_w / 2.0!r} {p.I_w / 4.0!r}"/>'
-        f'<geom type="cylinder" size="{p.r!r} {p.r / 10.0!r}" zaxis="0 1 0" {contact}/>'
+        f'<geom type="cylinder" size="{p.r!r} {wheel_width(p.r) / 2.0!r}" zaxis="0 1 0" contype="0" conaffinity="0"/>'
+        f'<geom name="contact_{side}" type="sphere" size="{p.r!r}" contype="0" conaffinity="0" group="3"/>'
         f'</body>' for side, y in (("left", half), ("right", -half)))
+    grounds = _ground_names(mc)
+    pairs = "".join(f'<pair geom1="contact_{side}" geom2="{g}" {pair}/>' for side in ("left", "right") for g in grounds)
     # raw sensors (theory 6.4): MuJoCo's own gyro and accelerometer at the IMU, (0, 0, offset) on the body, to
     # cross-check core.raw_sensors' model (read after Plant.sample_accel, which computes the instant t_k^-)
     imu_site = imu_sensors = ""
@@ -96,15 +128,23 @@ def mjcf(cfg) -> str:
         imu_sensors = '<sensor><gyro name="gyro" site="imu"/><accelerometer name="accel" site="imu"/></sensor>'
     return (
         '<mujoco model="mwip"><compiler angle="radian" autolimits="true"/>'
-        f'<option timestep="{cfg.h / n!r}" integrator="RK4" cone="elliptic" gravity="0 0 {-p.g!r}"/>'
+        f'<option timestep="{cfg.h / n!r}" integrator="RK4" cone="elliptic" noslip_iterations="{NOSLIP_ITERATIONS}" '
+        f'noslip_tolerance="{NOSLIP_TOLERANCE!r}" gravity="0 0 {-p.g!r}"/>'
         '<worldbody>'
         f'{_ground(mc, contact)}'
         f'<body name="body" pos="{cx!r} 0 {cz!r}" quat="{math.cos(th_b / 2)!r} 0 {math.sin(th_b / 2)!r} 0">'
         '<freejoint name="base"/>'
         f'<inertial pos="0 0 {p.l!r}" mass="{p.m_b!r}" diaginertia="{mc.I_b_roll!r} {p.I_b!r} {mc.I_b_yaw!r}"/>'
         f'{wheels}{imu_site}</body></worldbody>'
+        f'<contact>{pairs}</contact>'
         '<actuator><motor name="wheel_left" joint="wheel_left"/><motor name="wheel_right" joint="wheel_right"/>'
         f'</actuator>{imu_sensors}</mujoco>')
+
+
+def _ground_names(mc: MujocoConfig) -> Tuple[str, ...]:
+    """The names of the ground's geoms :func:`_ground` makes: the plane and each step of height > 0."""
+    xs, hs = mc.bumps[0::2], mc.bumps[1::2]
+    return ("ground",) + tuple(f"step_{i}" for i, h in enumerate(hs) if h > 0.0 and i < len(xs))
 
 
 def _ground(mc: MujocoConfig, contact: str) -> str:
@@ -149,6 +189,7 @@ class MujocoPlant(PlantSim):
         self._qacc = d.qacc
         self._step, self._forward = mj.mj_step, mj.mj_forward   # looked up once: a period calls each once or more
         self._warnings = d.warning.number                                    # MuJoCo's warning counts, live
+        self._wheel_geoms = {self.model.geom(f"contact_{side}").id for side in ("left", "right")}
         x0 = self.x
         d.qpos[7] = d.qpos[8] = x0[0] - x0[1]                                 # phi_i = theta_w - theta_b
         slope = (c.mujoco or MujocoConfig()).slope
@@ -232,7 +273,21 @@ class MujocoPlant(PlantSim):
         return a4 + 0.5 * (a6 + a7), a4
 
     def lumped_disturbance(self, u: float, extra=(0.0, 0.0), wheels=None) -> Tuple[float, float]:
-        return lumped_disturbance(self.cfg.nominal, self.x, self._accel(u, self.D_w, extra, wheels), u)
+        """The true tau_d of eq. (6-7) at t_k on the planar coordinates (theta_w the wheels' mean, theta_b the pitch)
+        with MuJoCo's accelerations and the torque ``u`` = u_L + u_R: (NaN, NaN) while a wheel is off the ground,
+        where eq. (1)'s rolling x = r theta_w does not hold and there is no planar disturbance to estimate
+        (docs/theory.md 6.10, "The true disturbance on the 3D plant")."""
+        ddq = self._accel(u, self.D_w, extra, wheels)
+        if not self.on_ground():
+            return math.nan, math.nan
+        return lumped_disturbance(self.cfg.nominal, self.x, ddq, u)
+
+    def on_ground(self) -> bool:
+        """Both wheels touch the ground (a contact of each with the plane or a step) as of the last ``mj_forward``."""
+        d = self.data
+        if d.ncon < 2:
+            return False
+        return self._wheel_geoms <= set(d.contact.geom[:d.ncon].ravel().tolist())
 
     def sample_accel(self) -> Tuple[float, float]:
         c = self.cfg

@@ -24,7 +24,7 @@ from .plant import PlantConfig, PlantDiverged
 from .trajectory import DIVERGED, FAILURES, Trajectory, TrajectoryTable
 from .yaw import YawConfig, YawLoop
 
-__all__ = ["ClosedLoop", "simulate", "LAWS", "law_name"]
+__all__ = ["ClosedLoop", "make_period", "simulate", "LAWS", "law_name"]
 
 
 class _LawsView(Mapping):
@@ -83,6 +83,37 @@ class ClosedLoop:
         return self.law_class.observer
 
 
+def make_period(loop: ClosedLoop, plant: Optional[PlantConfig] = None, law=None) -> Period:
+    """The stages of one period of ``loop`` (:class:`.loop.Period`), built once per run: the plant with its sensors
+    and drive, the estimator (a raw plant), the observer, the law, the excitation, the motion references' shaper and,
+    on a spatial plant with motion, the yaw stage (theory 6.11, 6.13).
+
+    Parameters
+    ----------
+    loop : ClosedLoop
+        The scenario.
+    plant : PlantConfig, optional
+        The plant instead of ``loop.plant`` (the env's: its seed, its initial state).
+    law : optional
+        The law's object instead of ``loop``'s law (the env without a base law: :class:`mwip_ros.envs.NoLaw`).
+
+    Returns
+    -------
+    Period
+        A whole period's stages, at t = 0.
+    """
+    pc = loop.plant if plant is None else plant
+    h = pc.h
+    estimator = loop.estimator.make(h, pc.nominal.r, pc.nominal.g) if pc.raw is not None else None
+    excitation = Excitation(loop.excitation, h) if loop.excitation is not None else None
+    motion = Shaper(loop.motion, h, pc.nominal) if loop.motion is not None else None
+    side = PlantSide(pc)
+    # the yaw stage (theory 6.13): a spatial plant, its gyro's yaw rate (raw sensors: the IMU's z axis, 6.4)
+    yaw = YawLoop(loop.yaw, h) if loop.yaw is not None and motion is not None and side.plant.spatial else None
+    law = loop.law_class(loop.params, pc.nominal, h) if law is None else law
+    return Period(side, DiscreteObserver(pc.nominal, gain_matrix(loop.X), h), law, estimator, excitation, motion, yaw)
+
+
 def simulate(loop: ClosedLoop, label: str = "", progress: Optional[Callable[[float], None]] = None,
              diverged_fails: bool = False, on_period: Optional[Callable[[object], None]] = None,
              wrench: Optional[Callable[[float], tuple]] = None) -> Trajectory:
@@ -97,19 +128,12 @@ def simulate(loop: ClosedLoop, label: str = "", progress: Optional[Callable[[flo
     pc = loop.plant
     h = pc.h
     n_steps = int(round(loop.duration_s / h))
-    estimator = loop.estimator.make(h, pc.nominal.r, pc.nominal.g) if pc.raw is not None else None
-    excitation = Excitation(loop.excitation, h) if loop.excitation is not None else None
-    motion = Shaper(loop.motion, h) if loop.motion is not None else None
-    side = PlantSide(pc)
-    # the yaw stage (theory 6.13): a spatial plant, its gyro's yaw rate (raw sensors: the IMU's z axis, 6.4)
-    yaw = YawLoop(loop.yaw, h) if loop.yaw is not None and motion is not None and side.plant.spatial else None
-    period = Period(side, DiscreteObserver(pc.nominal, gain_matrix(loop.X), h),
-                    loop.law_class(loop.params, pc.nominal, h), estimator, excitation, motion, yaw,
-                    wrench)   # the stages
+    period = make_period(loop)   # the stages
+    period.wrench = wrench
     # the true state: the metrics judge it
     table = TrajectoryTable(internals=True, raw=pc.raw is not None, drive=pc.motor.enabled or pc.raw is not None,
-                            excitation=excitation is not None, motion=motion is not None,
-                            pose=period.side.plant.spatial, yaw=yaw is not None)
+                            excitation=period.excitation is not None, motion=period.motion is not None,
+                            pose=period.side.plant.spatial, yaw=period.yaw is not None)
     every = max(1, n_steps // 10)
     try:
         for k in range(n_steps + 1):

@@ -63,8 +63,9 @@ class RobotModel:
 
     @property
     def wheel_width(self) -> float:
-        """A wheel's drawn width [m]: r / 5, as the MuJoCo model's cylinder."""
-        return self.r / 5.0
+        """A wheel's drawn width [m]: the MuJoCo model's (:func:`~mwip_ros.core.mujoco_plant.wheel_width`, r / 5)."""
+        from .mujoco_plant import wheel_width
+        return wheel_width(self.r)
 
 
 def robot_model(values: Mapping[str, Any]) -> RobotModel:

@@ -61,7 +61,7 @@ class YawLoop:
         self.u_psi = 0.0
         self.samples, self.total, self.bias = 0, 0.0, 0.0   # the calibration's count, sum and mean
 
-    def hold(self, dpsi: float) -> float:
+    def idle(self, dpsi: float) -> float:
         """A period with no torque acting (the driver not enabled, docs/theory.md 6.8): u_psi = 0 and the integral
         stays 0, so it cannot wind up while the wheels cannot turn the robot; the gyro's calibration goes on (the
         robot held still is what it needs).  Returns 0."""

@@ -27,8 +27,9 @@ over arrays (the functions the compiled loop compiles), in :data:`mwip_ros.core.
 
 With ``require_enable: true`` the driver starts disabled and nobody enables it (as in ``mwip_sim``): its bridge is
 open in every period, no torque acts and the motor carries no current (:func:`~mwip_ros.core.plant.gated_drive`);
-a command that is not plausible still faults it.  Another plant backend is refused, naming the key
-(``plant_sim.backend``; the scalar env, :class:`~mwip_ros.envs.scalar.MwipEnv`, runs it).
+a command that is not plausible still faults it.  Another plant backend and the motion references are refused,
+naming the key (``plant_sim.backend``, ``motion.enabled``; the scalar env, :class:`~mwip_ros.envs.scalar.MwipEnv`,
+runs both).
 A restarted robot keeps its noise streams (its next draws), so no generator is built again.
 """
 from __future__ import annotations
@@ -61,6 +62,8 @@ def refusal(s: EnvSetup) -> Optional[str]:
     pc = loop.plant
     if pc.backend != "rk4":
         return f"plant_sim.backend: the vector env runs the rk4 plant only, got {pc.backend!r} (MwipEnv runs it)"
+    if loop.motion is not None:
+        return "motion.enabled: the vector env tracks no motion references (MwipEnv runs them); set it false"
     return None
 
 

@@ -1,12 +1,14 @@
 """``MwipEnv``: one robot as a Gymnasium environment, a period of the offline loop per step.
 
-An adapter over :class:`mwip_ros.core.loop.Period` (the stages of :data:`mwip_ros.core.loop.STAGES`, as
-:func:`mwip_ros.core.sim.simulate` runs them): ``reset`` builds the plant with its sensors and drive
-(:class:`~mwip_ros.core.loop.PlantSide`), the observer, the estimator (raw sensors) and the base law, and runs the
-stages ``sensors`` to ``observer`` of period 0 (the observation is what the law sees); ``step(a)`` is the stage
-``law`` (the action, plus the base law's command when there is one), ``drive`` and ``plant`` of period k, then the
-stages up to the observer of period k + 1.  Actions equal to the law's own command give ``mwip_sim``'s trajectory
-of that law bit for bit (``test/envs``).
+An adapter over :class:`mwip_ros.core.loop.Period` (the stages of :data:`mwip_ros.core.loop.STAGES`, built by
+:func:`mwip_ros.core.sim.make_period` as :func:`mwip_ros.core.sim.simulate` builds them): ``reset`` builds the plant
+with its sensors and drive (:class:`~mwip_ros.core.loop.PlantSide`), the observer, the estimator (raw sensors), the
+base law, the motion references (``motion.enabled``) and the yaw stage (a spatial plant with motion), and runs the
+stages ``sensors`` to ``law`` of period 0 (:meth:`~mwip_ros.core.loop.Period.sense_decide`; the observation is what
+the law sees); ``step(a)`` adds the action to the base law's command (the stage ``law``), runs ``yaw`` and
+``drive`` (:meth:`~mwip_ros.core.loop.Period.actuate`) and ``plant`` of period k, then the stages up to the law of
+period k + 1.  Actions equal to the law's own command give ``mwip_sim``'s trajectory of that law bit for bit
+(``test/envs``, with motion references and the yaw stage too).
 """
 from __future__ import annotations
 
@@ -17,10 +19,9 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from mwip_ros.core.loop import Period, PlantSide
-from mwip_ros.core.excitation import Excitation
-from mwip_ros.core.observer import DiscreteObserver, gain_matrix
+from mwip_ros.core.loop import Period
 from mwip_ros.core.plant import finite_state
+from mwip_ros.core.sim import make_period
 from mwip_ros.core.trajectory import BAD_COMMAND, DIVERGED, FAILURES, FALL
 
 from . import checks
@@ -28,12 +29,17 @@ from .common import SEED_RANGE, ParamsArg, setup
 
 __all__ = ["MwipEnv", "NoLaw"]
 
+# with motion.enabled, what ``info`` adds of the period's references and the yaw stage (the trajectory's columns)
+REFERENCES = ("v_ref", "theta_w_ref", "dpsi_ref", "u_psi")
 
 
 class NoLaw:
     """The law stage without a law (the action is the whole command): u = 0, to which the action is added."""
 
     name = "none"
+
+    def track(self, ref) -> None:
+        """The motion references (core.loop.command hands them to every law): nothing to track."""
 
     def step(self, x, tau_hat=None):
         return 0.0, {}
@@ -118,22 +124,16 @@ class MwipEnv(gym.Env):
         pc = dataclasses.replace(loop.plant, seed=int(seed))
         if initial is not None:
             pc = dataclasses.replace(pc, initial=type(pc.initial)(*(float(v) for v in initial)))
-        h = pc.h
-        estimator = loop.estimator.make(h, pc.nominal.r, pc.nominal.g) if pc.raw is not None else None
-        excitation = Excitation(loop.excitation, h) if loop.excitation is not None else None
-        law = loop.law_class(loop.params, pc.nominal, h) if self.setup.base_law else NoLaw()
-        return Period(PlantSide(pc), DiscreteObserver(pc.nominal, gain_matrix(loop.X), h), law, estimator,
-                      excitation)
+        return make_period(loop, pc, None if self.setup.base_law else NoLaw())   # mwip_sim's stages, motion and yaw
 
     def _observe(self) -> np.ndarray:
         """Stages ``sensors``, ``estimator``, ``observer`` and ``law`` (the base law's command) of period k."""
         period = self._period
         p = period.side.plant
         if not finite_state(p.x):   # diverged (the episode has ended): nothing to sense, zeros
-            self._u_base, self._tau_hat = 0.0, (0.0, 0.0)
+            self._u_base, self._tau_hat, self._dpsi, self._internals = 0.0, (0.0, 0.0), None, {}
             return np.zeros(self.observation_space.shape)
-        measured, u_m = period.side.sense()
-        self._u_base, self._tau_hat, _, x_m = period.decide(measured, u_m, p.k)
+        measured, self._dpsi, self._u_base, self._tau_hat, self._internals, x_m = period.sense_decide()
         return np.array(measured if self.setup.observation == "raw" else x_m, dtype=np.float64)
 
     # --- gymnasium ------------------------------------------------------------------------------------------------
@@ -160,7 +160,7 @@ class MwipEnv(gym.Env):
         t, x = p.t, p.x
         a = checks.action(action)   # one number (beyond the bound: clipped; not finite: the drive refuses it)
         u_cmd = self._u_base + float(s.torque(a))           # stage law: the base law's command plus the action
-        u, tau_d = side.act(u_cmd)                           # stage drive
+        u, tau_d, internals = period.actuate(u_cmd, self._dpsi, self._internals)   # stages yaw and drive
         failure = None
         if side.safety.faulted and side.safety.fault_reason == "bad_command":
             failure = FAILURES[BAD_COMMAND]
@@ -175,5 +175,6 @@ class MwipEnv(gym.Env):
         reward = float(s.reward(x, u, p.x, terminated))
         info: dict[str, Any] = {"t": t, "state": np.array(x, dtype=float), "u": u, "tau_hat": self._tau_hat,
                                 "tau_d": tau_d, "failure": failure}
+        info.update({k: internals[k] for k in REFERENCES if k in internals})   # motion on: the references, yaw
         obs = self._observe()
         return obs, reward, terminated, truncated, info

@@ -90,7 +90,8 @@ def _check_entry(section: str, name: str, value: Any, source: str, shown: Option
         if name in shared:
             return shared[name].validate(value, key, source)
         owners = [n for n, specs in NODE_SPECS.items() if any(s.name == name for s in specs)]
-        hint = f" (it belongs under {owners[0]}:)" if owners else ""
+        hint = f" (it belongs under {owners[0]}:)" if owners else (spelling_hint(name, shared) or spelling_hint(
+            name, {s.name: n for n, specs in NODE_SPECS.items() for s in specs}))
         raise ParamError(key, f"unknown parameter in the shared /** section{hint}", source)
     specs = specs_for(section)
     if name not in specs:
@@ -114,7 +115,10 @@ def parse_param_dict(doc: Any, source: str = "<params>") -> ParamFile:
                 raise ParamError(str(section_raw), f"unknown node name (did you mean '{close[0]}'?); mwip_ros's "
                                                    f"nodes: /**, {', '.join(NODE_SPECS)}", source)
         if not isinstance(body, Mapping) or set(body) != {"ros__parameters"}:
-            raise ParamError(f"{section_raw}", "each node section must contain exactly 'ros__parameters:'", source)
+            odd = [str(k) for k in body if k != "ros__parameters"] if isinstance(body, Mapping) else []
+            hint = f": got '{odd[0]}'{spelling_hint(odd[0], ['ros__parameters'])}" if odd else ""
+            raise ParamError(f"{section_raw}", f"each node section must contain exactly 'ros__parameters:'{hint}",
+                             source)
         params = body["ros__parameters"] or {}
         if not isinstance(params, Mapping):
             raise ParamError(f"{section_raw}.ros__parameters", "must be a mapping", source)

@@ -66,6 +66,14 @@ def specs() -> List[Any]:
         ParamSpec("motion.lean_gain", "double", 0.03, "motion, DSC/DSCNDO: k_x of the outer loop's lean reference "
                   "x_d = -k_x e, tracked by the surfaces (eq. 22) [rad per rad/s]", lo=0.0, hi=10.0,
                   unit="rad s/rad"),
+        ParamSpec("motion.hold_settle_s", "double", 5.0, "motion: the hold, where the robot comes to rest: for this "
+                  "long after v* reaches 0 (and from the start) the wheel's reference angle moves to the wheel's "
+                  "angle whenever its rate reaches zero, then stays (docs/theory.md 6.14); 0 = it stays where the "
+                  "references stopped", lo=0.0, hi=3600.0, unit="s"),
+        ParamSpec("motion.hold_filter_s", "double", 1.0, "motion: the hold's equilibrium: the time constant of "
+                  "the filter of the constant disturbance the law regulates about while v* = 0 (the lean and "
+                  "torque that hold the robot on a slope; docs/theory.md 6.14); 0 = none, the law's own",
+                  lo=0.0, hi=3600.0, unit="s"),
         ParamSpec("motion.profile", "double_array", [], "motion: a speed profile for offline and lockstep runs, "
                   "[t0, v0, t1, v1, ...] (time [s], v* [m/s] from then on); empty = follow cmd_vel",
                   rule=profile_rule, words="pairs [t0, v0, t1, v1, ...], times from 0 increasing"),
@@ -100,7 +108,9 @@ def motion(v: Mapping[str, Any]):
                         max_yaw_rate=v["motion.max_yaw_rate"], timeout_s=v["motion.cmd_vel_timeout_s"],
                         position_gain=v["motion.position_gain"], lean_gain=v["motion.lean_gain"],
                         profile=tuple(zip(prof[0::2], prof[1::2])), r=v["nominal.r"],
-                        yaw_profile=_pairs(v.get("motion.yaw_profile", ())))
+                        yaw_profile=_pairs(v.get("motion.yaw_profile", ())),
+                        hold_settle_s=v.get("motion.hold_settle_s", 5.0),
+                        hold_filter_s=v.get("motion.hold_filter_s", 1.0))
 
 
 def _pairs(flat):

@@ -287,6 +287,7 @@ NODE_SPECS: Dict[str, List[ParamSpec]] = {
                     **_positive_from(1e-6, 1e6, "a body inertia below 1e-6 kg m^2"), unit="kg m^2")
           for ax, v in (("roll", 65.0), ("yaw", 20.0))],
         *_specs_of("ground"),   # ground.*: friction, slope, bumps (params.ground)
+        *_specs_of("upkie"),   # upkie.*: how the robot side drives Upkie (params.upkie, mwip_ros.robot.upkie)
         ParamSpec("seed", "integer", 0, "seed of the D_w friction noise", **_at_least_zero),
         *_body("actual", PAPER_ACTUAL, "true"),
         ParamSpec("actual.D_b", "double", 0.1, "true drive viscous friction D_b [N m s/rad]", **_non_negative()),
@@ -502,9 +503,14 @@ def defaults_for(node: str) -> Dict[str, Any]:
 
 
 def spelling_hint(name: str, names: Iterable[str]) -> str:
-    """' (did you mean 'x'?)' for the closest of ``names``, else ''."""
+    """' (did you mean 'x'?)' for the closest of ``names``, else ''; when ``names`` maps each name to the section
+    it goes under (a string), ' (did you mean 'x' under section:?)'."""
     close = difflib.get_close_matches(name, list(names), n=1)
-    return f" (did you mean '{close[0]}'?)" if close else ""
+    if not close:
+        return ""
+    where = names.get(close[0]) if isinstance(names, Mapping) else None
+    return (f" (did you mean '{close[0]}' under {where}:?)" if isinstance(where, str)
+            else f" (did you mean '{close[0]}'?)")
 
 
 def _check_designs(values: Mapping[str, Any], nominal, source: Optional[str]) -> None:
@@ -538,7 +544,8 @@ def check_geometry(values: Mapping[str, Any], source: Optional[str] = None) -> N
         if v > rest:
             raise ParamError(key, f"{v:g} kg m^2 is more than the other two principal moments of the body together "
                                   f"({rest:g}); no rigid body has it", source)
-    width = values["actual.r"] / 5.0   # each wheel's cylinder is r / 5 wide (core.mujoco_plant.mjcf)
+    from mwip_ros.core.mujoco_plant import wheel_width
+    width = wheel_width(values["actual.r"])   # each wheel's cylinder is r / 5 wide (core.mujoco_plant.mjcf)
     if values["actual.track_width"] <= width:
         raise ParamError("actual.track_width", f"{values['actual.track_width']:g} m: the wheels (each "
                                                f"actual.r / 5 = {width:g} m wide) would overlap", source)

@@ -19,7 +19,8 @@ from .motion import motion as motion_config, yaw as yaw_config
 from .schema import PAPER_NOMINAL
 
 __all__ = ["physical", "sinusoid", "gains", "period", "observer_gain", "plant_config", "sensing", "raw_sensors",
-           "estimator", "motor", "excitation", "lqr_gain", "closed_loop", "limit_warnings"]
+           "estimator", "motor", "excitation", "lqr_gain", "closed_loop", "limit_warnings", "observer_warnings",
+           "design_warnings"]
 
 
 def physical(values: Mapping[str, Any], prefix: str) -> PhysicalParams:
@@ -105,6 +106,59 @@ def limit_warnings(v: Mapping[str, Any], law_names: Iterable[str] = ()) -> List[
         from .motion import wheel_limit_warning
         out.append(wheel_limit_warning(v))
     return [w for w in out if w]
+
+
+def observer_warnings(v: Mapping[str, Any]) -> List[str]:
+    """The observer gain X against Theorem 2 (eq. 35: a4, a5 > 0, :func:`mwip_ros.core.theorem.observer_conditions`)
+    on the nominal model: one line when it breaks it, else none."""
+    from mwip_ros.core.theorem import observer_conditions
+    th = observer_conditions(physical(v, "nominal"), observer_gain(v))
+    if th.satisfied:
+        return []
+    return [f"observer gains break Theorem 2 (eq. 35): a4 = {th.a4:.4f}, a5 = {th.a5:.4f} (must be > 0); run "
+            "mwip_theorem for the full table"]
+
+
+def design_warnings(node: str, v: Mapping[str, Any], changed: Optional[Iterable[str]] = None) -> List[str]:
+    """What the node ``node`` warns about its parameter values ``v`` (what it logs at start-up and after a change):
+    ``dscndo_controller``: each law's own warnings (``Law.warnings``: DSC's gains against Theorem 2, ...) of the laws
+    whose parameters include one of ``changed`` (None: every law); ``disturbance_observer``: the observer's
+    (:func:`observer_warnings`) when ``X`` or the nominal model changed.  Other nodes: none.
+
+    Parameters
+    ----------
+    node : str
+        The node's name (its last component: a namespace is left out).
+    v : mapping
+        Every parameter value of the node.
+    changed : iterable of str, optional
+        The parameters just changed (None: all of them, at start-up).
+
+    Returns
+    -------
+    list of str
+        One line per warning.
+    """
+    node = node.rstrip("/").rsplit("/", 1)[-1]
+    touched = None if changed is None else set(changed)
+    if node == "dscndo_controller":
+        nominal, h = physical(v, "nominal"), period(v)
+        plain = [law for law in (laws.lookup(f, False) for f in laws.families()) if law is not None]
+        in_use = touched is not None and bool(touched & {"law", "use_observer"})   # the law switched to
+        out = []
+        for law in plain:
+            if laws.unavailable(law) is not None or not (touched is None or touched & set(law.param_keys)
+                                                         or (in_use and law.family == v.get("law"))):
+                continue
+            try:
+                out += law.from_params(v, nominal, h).warnings()
+            except (KeyError, ArithmeticError, ValueError):   # no design from these values: the node refuses them
+                continue
+        return out
+    if node == "disturbance_observer" and (touched is None or any(k == "X" or k.startswith("nominal.")
+                                                                   for k in touched)):
+        return observer_warnings(v)
+    return []
 
 
 def raw_sensors(v: Mapping[str, Any]) -> Optional[RawSensorConfig]:

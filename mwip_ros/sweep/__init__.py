@@ -6,6 +6,8 @@
 :mod:`.engine`       chunks, and the runners: this process, worker processes, Dask
 :mod:`.results`      results.csv (streamed), summary.json / summary.md, region of attraction
 :mod:`.tune`         gain tuning: differential evolution over a spec's scenarios
+:mod:`.progress`     the time left, each law at its own cost; a line at least every few seconds
+:mod:`.warm`         the batch loop compiled before a sweep needs it (and at set-up), said
 ===================  ===============================================================
 
 The command lines are :mod:`mwip_ros.cli.sweep` (``mwip_sweep``) and :mod:`mwip_ros.cli.tune`

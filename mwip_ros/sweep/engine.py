@@ -31,8 +31,8 @@ from mwip_ros.core import budget, laws
 from mwip_ros.core.budget import window_samples
 from mwip_ros.sweep.workers import signals_held, stop_resource_tracker, worker_init
 
-__all__ = ["Chunk", "ChunkResult", "make_chunks", "chunks_of", "chunk_size_for", "run_chunk", "Runner", "run_local",
-           "run_dask", "DEFAULT_CHUNK", "SLOW_CHUNK"]
+__all__ = ["Chunk", "ChunkResult", "make_chunks", "chunks_of", "chunk_size_for", "run_chunk", "batch_groups", "Runner",
+           "run_local", "run_dask", "DEFAULT_CHUNK", "SLOW_CHUNK"]
 
 DEFAULT_CHUNK = 5000   # scenarios per chunk: numpy's per-call cost is small against 5,000 elements, and a
                        # 10 s run's window (4 x 1,001 samples per scenario) takes 160 MB (BENCHMARKS.md)
@@ -134,6 +134,22 @@ class _gc_held:
             gc.enable()
 
 
+def batch_groups(chunk: Chunk) -> Dict[tuple, List[int]]:
+    """The chunk's scenarios (indices) by what makes them separate batches: the control period, the RK4 sub-steps,
+    the encoder and the delays (PlantConfig's), the stages (sensors' model, motor, excitation, the estimator,
+    motion)."""
+    groups: Dict[tuple, List[int]] = {}
+    for i, ov in enumerate(chunk.overrides):
+        v = dict(chunk.base)
+        v.update(ov)
+        key = (1.0 / v["control_rate_hz"], int(v["substeps"]), v["sensors.encoder_counts_per_rev"],
+               v["sensors.delay_periods"], v["actuator.delay_periods"],   # PlantConfig's h, substeps, sensing
+               v.get("sensors.model"), v.get("motor.enabled"), v.get("excitation.type"), v.get("method"),
+               v.get("motion.enabled"))   # stages
+        groups.setdefault(key, []).append(i)
+    return groups
+
+
 def _run_chunk(chunk: Chunk, batch_bytes: Optional[int]) -> ChunkResult:
     from mwip_ros import params as P
     from mwip_ros.core.batch import simulate_batch
@@ -145,14 +161,7 @@ def _run_chunk(chunk: Chunk, batch_bytes: Optional[int]) -> ChunkResult:
         return v
 
     n = len(chunk.overrides)
-    groups: Dict[tuple, List[int]] = {}
-    for i, ov in enumerate(chunk.overrides):
-        v = values(ov)
-        key = (1.0 / v["control_rate_hz"], int(v["substeps"]), v["sensors.encoder_counts_per_rev"],
-               v["sensors.delay_periods"], v["actuator.delay_periods"],   # PlantConfig's h, substeps, sensing
-               v.get("sensors.model"), v.get("motor.enabled"), v.get("excitation.type"), v.get("method"),
-               v.get("motion.enabled"))   # stages
-        groups.setdefault(key, []).append(i)
+    groups = batch_groups(chunk)
     upright, t_fall, failure = np.zeros(n, dtype=bool), np.full(n, np.nan), np.zeros(n, dtype=np.int64)
     metrics: Dict[str, np.ndarray] = {}
     steps = 0

@@ -11,9 +11,11 @@ the timed laws only, a lower bound, and says which laws it leaves out.
 """
 from __future__ import annotations
 
-from typing import Dict, Iterable, List, Tuple
+import threading
+import time
+from typing import Callable, Dict, Iterable, List, Optional, Tuple
 
-__all__ = ["Eta", "describe_left"]
+__all__ = ["Eta", "describe_left", "Heartbeat"]
 
 
 class Eta:
@@ -61,3 +63,48 @@ def describe_left(seconds: float, untimed: List[str]) -> str:
     if seconds < 0.5:
         return f"time left not known yet ({', '.join(untimed)} not timed yet)"
     return f"more than {seconds:.0f} s left ({', '.join(untimed)} not timed yet)"
+
+
+class Heartbeat:
+    """A line at least every ``every_s`` seconds while work goes on, whatever runs it (this process, workers, Dask):
+    a daemon thread calls ``line()`` (a text to print, or None) when nothing was said for ``every_s``; ``said()``
+    marks a line said otherwise (a chunk that finished).  A context manager: the thread stops on leaving.
+
+    Parameters
+    ----------
+    every_s : float
+        The longest silence [s].
+    line : callable
+        ``line() -> str or None``: what to say (None: nothing, e.g. a progress bar redrawn instead).
+    say : callable
+        ``say(text)``: prints it.
+    """
+
+    def __init__(self, every_s: float, line: Callable[[], Optional[str]], say: Callable[[str], None]):
+        self.every_s, self.line, self.say = float(every_s), line, say
+        self.lock = threading.Lock()   # a line at a time, the thread's and the caller's
+        self._last = time.monotonic()
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="heartbeat", daemon=True)
+
+    def said(self) -> None:
+        """A line was just said: the next heartbeat waits ``every_s`` from now."""
+        self._last = time.monotonic()
+
+    def _run(self) -> None:
+        while not self._stop.wait(max(0.05, self.every_s - (time.monotonic() - self._last))):
+            if time.monotonic() - self._last >= self.every_s:
+                with self.lock:
+                    text = self.line()
+                    if text:
+                        self.say(text)
+                    self._last = time.monotonic()
+
+    def __enter__(self):
+        self._last = time.monotonic()
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc):
+        self._stop.set()
+        self._thread.join(2.0)

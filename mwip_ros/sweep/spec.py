@@ -25,7 +25,6 @@ naming the key.
 """
 from __future__ import annotations
 
-import difflib
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -151,9 +150,7 @@ def load_spec(path, base_override: Optional[Path] = None, backends=("rk4",)) -> 
     return parse_spec(doc, str(p), p.parent, base_override, backends)
 
 
-def _did_you_mean(word: str, options) -> str:
-    close = difflib.get_close_matches(word, list(options), n=1)
-    return f" (did you mean '{close[0]}'?)" if close else ""
+_did_you_mean = P.spelling_hint   # the one "did you mean" of a key, a law or a word (params.schema)
 
 
 def _number(v, key: str, source: str, what: str = "a number") -> float:

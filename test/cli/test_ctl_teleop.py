@@ -1,5 +1,6 @@
-"""mwip_ctl cmd and drive: cmd_vel (geometry_msgs/Twist) as a test subscriber receives it; drive through a
-pseudo-terminal with key sequences, the limits clipped, a zero Twist and the terminal restored at the end."""
+"""mwip_ctl cmd and drive: cmd_vel (geometry_msgs/Twist) as a test subscriber receives it (cmd in this process, its
+node a peer of the controller's: test/nodeharness.py); drive, a process on a pseudo-terminal, with key sequences,
+the limits clipped, a zero Twist and the terminal restored at the end (also on Ctrl-C)."""
 from __future__ import annotations
 
 import os
@@ -18,6 +19,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from graphproc import fresh_domain_id, release_domain_id, ros_env
 from injector import Injector
 from mwip_ros.cli.teleop import DOWN, LEFT, RIGHT, UP, Limits, apply_key, limits, read_keys
+from nodeharness import NodeHarness, node_class, run_ctl
 
 MWIP_CTL = Path(sys.executable).with_name("mwip_ctl")
 QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000, reliability=ReliabilityPolicy.RELIABLE,
@@ -73,19 +75,22 @@ def reader():
         release_domain_id(domain)
 
 
-@pytest.mark.graph
-def test_cmd_publishes_the_twist_for_the_duration_then_zero(reader):
-    p = subprocess.Popen([str(MWIP_CTL), "cmd", "--vx", "0.5", "--wz", "-0.2", "--duration", "1.0", "--rate", "10"],
-                         env=reader.env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    assert reader.wait(lambda: p.poll() is not None, 60)
-    reader.spin(0.3)
-    out, err = p.communicate()
-    assert p.returncode == 0, err
-    moving = [(t, m) for t, m in reader.got if m.linear.x != 0.0]
+@pytest.mark.node
+def test_cmd_publishes_the_twist_for_the_duration_then_zero():
+    """In this process, beside a controller that follows cmd_vel (motion on): the reader a peer of both."""
+    with NodeHarness(node_class("dscndo_controller"), "-p", "motion.enabled:=true") as h:
+        got = []
+        h.peer("reader").create_subscription(Twist, "/cmd_vel", lambda m: got.append((time.monotonic(), m)), QOS)
+        code, out, err = run_ctl(h, "cmd", "--vx", "0.5", "--wz", "-0.2", "--duration", "1.0", "--rate", "10")
+        assert code == 0, err
+        assert h.spin(lambda: got and (got[-1][1].linear.x, got[-1][1].angular.z) == (0.0, 0.0), 5)
+        # the controller took them too (its subscription keeps the newest: at least the moving one and the zero)
+        assert h.node.motion.accepted >= 2 and not h.node.rejects.counts.get("cmd_vel"), h.logs()[-2000:]
+    moving = [(t, m) for t, m in got if m.linear.x != 0.0]
     assert all((m.linear.x, m.angular.z) == (0.5, -0.2) for _, m in moving)
     assert 9 <= len(moving) <= 12                                   # 10 Hz for 1 s
     assert 0.8 <= moving[-1][0] - moving[0][0] <= 1.5
-    last = reader.got[-1][1]
+    last = got[-1][1]
     assert (last.linear.x, last.angular.z) == (0.0, 0.0)             # then a zero Twist
     assert "vx 0.5 m/s, wz -0.2 rad/s" in out
 

@@ -48,6 +48,7 @@ def margin(files, law):
                                 observer=cls.observer)
 
 
+@pytest.mark.slow
 def test_retune_writes_gains_that_satisfy_theorem_2_and_beat_the_papers(ident_csv, tmp_path, capsys):
     """A short search (3 generations of 3 per gain): the file holds the identified body (to 0.1 %) and DSCNDO's
     k1, k2, tau4, X; Theorem 2 holds with them on the identified model; on the unseen robot in the paper's scenario
@@ -74,6 +75,7 @@ def test_retune_writes_gains_that_satisfy_theorem_2_and_beat_the_papers(ident_cs
     assert "# --retune: dscndo's k1, k2, tau4, X.c1, X.c4 tuned on the identified model" in out.read_text()
 
 
+@pytest.mark.slow
 def test_retune_another_law(ident_csv, tmp_path, capsys):
     """--law lqr_ndo tunes the LQR weights and the observer's X (no Theorem 2 for it: said so)."""
     out = tmp_path / "lqr.yaml"
@@ -96,6 +98,8 @@ def test_an_existing_out_is_refused_before_the_log_is_read(tmp_path, capsys):
     (["--law", "mpc"], "--law: one of dsc, dscndo, lqr, lqr_ndo, smc, smc_ndo"),
     (["--drive"], "not with --drive"),
     (["--maxiter", "0"], "--maxiter and --popsize: 1 or more"),
+    (["--bounds", "Xc1=0.02:1.3"], "--bounds: 'Xc1' is not tuned here; tuned: k1, k2, tau4, X.c1, X.c4"),
+    (["--bounds", "X.c1=20:10"], "--bounds: X.c1: the range [20, 10] is empty"),
 ])
 def test_retune_mistakes_are_one_line(ident_csv, tmp_path, capsys, argv, words):
     out = tmp_path / "o.yaml"
@@ -103,12 +107,30 @@ def test_retune_mistakes_are_one_line(ident_csv, tmp_path, capsys, argv, words):
     assert not out.exists()
 
 
+def test_bounds_need_retune(ident_csv, tmp_path, capsys):
+    out = tmp_path / "o.yaml"
+    assert "--bounds: the search bounds of --retune; give --retune too" in refused(
+        [str(ident_csv), "--bounds", "k1=1:2", "--out", str(out)], capsys)
+    assert not out.exists()
+
+
+def test_retune_searches_within_the_bounds_given(ident_csv, tmp_path, capsys):
+    """A small robot's observer must stay below 2 / (h max eig(M_hat^-1)) (Upkie: X.c1 < 1.3, docs/hardware-upkie.md):
+    --bounds narrows the search as mwip_tune's does; here a band no default search would keep."""
+    out = tmp_path / "gains.yaml"
+    assert identify.main([str(ident_csv), "--params", str(PAPER), "--retune", "--maxiter", "1", "--popsize", "2",
+                          "--bounds", "X.c1=150:160", "k1=7:7.5", "--out", str(out)]) == 0
+    capsys.readouterr()
+    v = P.merged_values(P.load_param_files([PAPER, out]))
+    assert 150.0 <= v["X"][0] <= 160.0 and 7.0 <= v["k1"] <= 7.5
+
+
 def test_help_names_the_retune_options(capsys):
     with pytest.raises(SystemExit) as done:
         identify.main(["--help"])
     assert done.value.code == 0
     text = " ".join(capsys.readouterr().out.split())
-    for word in ("--retune", "--law LAW", "--maxiter N", "--popsize N", "Theorem 2", "held-out set",
+    for word in ("--retune", "--law LAW", "--maxiter N", "--popsize N", "--bounds", "Theorem 2", "held-out set",
                  "ROS 2 parameter file"):
         assert word in text, word
 

@@ -285,6 +285,7 @@ print(repr(m.tau_err1_rms), repr(float(r.metrics["tau_err1_rms"][0])))
 """
 
 
+@pytest.mark.slow
 def test_an_edit_to_the_observer_is_compiled_afresh_in_the_batch_loop(tmp_path):
     """The compiled loop is cached under the stamp of every file it is made of: an edit to observer.py (not the
     loop's own file) reaches the next process's compiled loop."""
@@ -330,6 +331,7 @@ print(repr(m.u_rms), repr(float(r.metrics["u_rms"][0])))
 """
 
 
+@pytest.mark.slow
 def test_an_edit_to_a_callee_or_a_frozen_constant_of_another_module_is_compiled_afresh(tmp_path):
     """The loop links in the law's callees (core/lqr.py's lqr_u, not the law's own file) and freezes the values of
     the globals it reads, wherever they were assigned: an edit to either reaches the next process's compiled loop,

@@ -145,6 +145,7 @@ def test_mixed_estimators_or_raw_and_state_fall_back_to_the_scalar_loop():
         assert r.metrics["u_rms"][i] == m.u_rms
 
 
+@pytest.mark.slow
 def test_without_simd_lanes_too():
     """Every case again with ``MWIP_BATCH_SIMD=0`` (one scenario after another), in a process of its own."""
     code = ("import importlib.util, sys\n"

@@ -161,29 +161,6 @@ def test_a_repeated_time_with_other_values_is_refused(chirp_log):
     assert err.value.cause == "bad_data" and "rows 10 and 11" in str(err.value) and "t = 0.025 s" in str(err.value)
 
 
-SEEDS = range(2000, 2100)   # of D_w's noise: 100 runs of the chirp scenario (50 would leave the coverage +-3 %)
-
-
-@pytest.fixture(scope="module")
-def coverage_fits():
-    return [identify(*record(CHIRP, seed=s), known=BASE.actual) for s in SEEDS]
-
-
-@pytest.mark.parametrize("name, truth", [("m_b", 250.0), ("I_b", 12.0), ("l", 0.15)])
-def test_the_95_percent_intervals_cover_the_truth_in_90_to_99_percent_of_runs(coverage_fits, name, truth):
-    """Monte Carlo over 100 seeds of D_w's per-period noise (everything else the same run): each interval holds the
-    truth in 90 to 99 % of them, and the printed standard deviation is the spread of the estimates over the seeds
-    to 25 % (the first version's AR(1) inflation printed 1.5 to 3.3 times the spread, covering 84 to 100 %; a
-    Newey-West sandwich 0.5 to 0.7 times, covering 36 to 86 %)."""
-    est = [getattr(r, name) for r in coverage_fits]
-    covered = np.mean([e.low <= truth <= e.high for e in est])
-    assert 0.90 <= covered <= 0.99, (name, covered)
-    spread = np.std([e.value for e in est], ddof=1)
-    assert np.mean([e.std for e in est]) == pytest.approx(spread, rel=0.25), name
-    assert all(e.quantile == pytest.approx(2.093, abs=1e-3) for e in est)   # Student's t, 19 degrees of freedom
-    assert {r.blocks for r in coverage_fits} == {20}
-
-
 def test_prediction_with_the_true_model_is_the_log():
     """core.identify_validate: with the plant's own model and a constant D_w the open-loop prediction is the log to
     rounding (the torque of row k acts over [t_k, t_k+1)); shifted by one period it is not."""

@@ -35,7 +35,8 @@ def test_the_batch_runners_hold_every_stage_in_its_order(runner):
 
 
 def test_the_offline_loop_and_the_plant_node_run_the_plant_s_stages_through_one_object():
-    sim_src = inspect.getsource(loop.Period.run) + inspect.getsource(loop.Period.advance)
+    sim_src = "".join(inspect.getsource(f) for f in (loop.Period.run, loop.Period.sense_decide, loop.Period.actuate,
+                                                       loop.Period.advance))
     assert "side.sense()" in sim_src and "side.act(" in sim_src and ".advance(" in sim_src
     node_src = inspect.getsource(plant_sim.PlantSimNode)
     assert "self.side.sense()" in node_src and "self.side.act(" in node_src and "self.side.advance(" in node_src

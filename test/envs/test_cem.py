@@ -12,7 +12,7 @@ from mwip_ros.envs import MwipEnv  # noqa: E402
 from mwip_ros.envs.examples import cem  # noqa: E402
 from test_docs_numbers import page_with, table_after  # noqa: E402
 
-pytestmark = pytest.mark.unit
+pytestmark = pytest.mark.slow
 
 HEADER = "| controller | theta_b RMS, mean [mrad] |"
 

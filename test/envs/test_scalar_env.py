@@ -86,6 +86,37 @@ def test_a_zero_residual_on_a_base_law_is_mwip_sims_run_of_that_law_bit_for_bit(
     assert_same_rows(xs, us, reference(files, law, 2.0, seed))
 
 
+def test_a_zero_residual_with_motion_references_is_mwip_sims_run_bit_for_bit():
+    """config/motion.yaml (the references every law tracks, theory 6.11): 1 m/s from 2 s. The env before it ran the
+    motion stage regulated to rest instead (theta_w at 12 s: -10.71 rad against mwip_sim's +32.69 rad)."""
+    files = PAPER + [CONFIG / "motion.yaml"]
+    env = MwipEnv(files, duration=12.0, base_law="dscndo")
+    xs, us, rs, terminated, truncated, _ = episode(env, lambda o, i: np.zeros(1), 5)
+    assert truncated and not terminated
+    ref = reference(files, "dscndo", 12.0, 5)
+    assert_same_rows(xs, us, ref)
+    assert xs[-1, 0] > 30.0   # it drove: 1 m/s from 2 s on wheels of r = 0.25 m (not regulated to rest)
+
+
+def test_the_yaw_stage_of_a_spatial_plant_is_mwip_sims_bit_for_bit():
+    """The MuJoCo plant with motion and the yaw stage (theory 6.13: u_psi, the wheels' pair), a turn in place of
+    0.5 rad/s from 0.5 s: the env runs the period's yaw stage as mwip_sim does (the residual adds to the law's
+    command, the yaw stage splits it)."""
+    pytest.importorskip("mujoco")
+    values = {**load_values(PAPER + [CONFIG / "square.yaml"]), "mujoco.timestep": 0.005,
+              "motion.profile": [0.0, 0.0], "motion.yaw_profile": [0.0, 0.0, 0.5, 0.5]}
+    env = MwipEnv(values, duration=1.5, base_law="dscndo")
+    xs, us, rs, terminated, truncated, _ = episode(env, lambda o, i: np.zeros(1), 2)
+    assert truncated and not terminated
+    loop = P.closed_loop(values, duration=1.5, controller="dscndo")
+    ref = simulate(dataclasses.replace(loop, plant=dataclasses.replace(loop.plant, seed=2))).columns
+    assert_same_rows(xs, us, ref)
+    obs, info = env.reset(seed=2)
+    for _ in range(250):
+        obs, r, terminated, truncated, info = env.step(np.zeros(1))
+    assert info["dpsi_ref"] == pytest.approx(0.5) and info["u_psi"] == ref["u_psi"][249] != 0.0   # it turns
+
+
 def test_the_torque_in_newton_metres_passes_exactly_through_a_torque_limit():
     """normalize_action False: the action is the torque; the law's command beyond the limit is clipped to it as
     mwip_sim's drive clips it."""

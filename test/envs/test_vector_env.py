@@ -246,6 +246,7 @@ def test_require_enable_a_driver_nobody_enables_equals_the_batch_simulator(files
 
 @pytest.mark.parametrize("files, key", [
     ({**load_values(PAPER), "backend": "mujoco"}, "plant_sim.backend"),
+    (PAPER + [CONFIG / "motion.yaml"], "motion.enabled"),   # it would ignore the references without a word
 ])
 def test_what_the_vector_env_does_not_run_is_refused_naming_the_key(files, key):
     with pytest.raises(ValueError) as err:

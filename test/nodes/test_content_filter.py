@@ -1,19 +1,20 @@
 """The raw topics' DDS content filters (layouts.RAW_FILTERS, nodes.runtime.content_filter) drop exactly what the
 parsers reject for its bytes, frame, names or values, and pass what they accept (the limits' boundaries too): each
 message is followed by a genuine one with a stamp of its own, and the reliable in-order delivery tells whether the
-message before it came through."""
+message before it came through. The publisher and the filtered subscription are peers in one private context
+(test/nodeharness.py: no discovery, no other process): the middleware filters within the participant as between
+processes."""
 import math
 
 import pytest
 
-from graphproc import fresh_domain_id, release_domain_id
-from injector import Injector
+from nodeharness import NodeHarness
 from mwip_ros.msgs import BadMessage, cdr
 from mwip_ros.msgs import layouts as L
 from mwip_ros.msgs.qos import REALTIME_INPUT_QOS, REALTIME_QOS
 from mwip_ros.nodes.runtime.content_filter import set_content_filter
 
-pytestmark = pytest.mark.graph
+pytestmark = pytest.mark.node
 
 H, G = 5_000_000, 9.81
 A, R = L.RAW_LIMITS["accel"], L.RAW_LIMITS["rate"]
@@ -55,25 +56,27 @@ def _accepted(parse, data) -> bool:
 ])
 def test_the_content_filter_passes_what_the_parser_accepts_and_drops_the_rest(topic, msg_type, parse, cases, genuine):
     import sensor_msgs.msg
-    domain = fresh_domain_id()
-    try:
-        with Injector(domain) as inj:
-            kind = getattr(sensor_msgs.msg, msg_type)
-            got = []
-            sub = inj.node.create_subscription(kind, topic, lambda data: got.append(bytes(data)), REALTIME_INPUT_QOS,
-                                               raw=True)
-            assert set_content_filter(sub, L.RAW_FILTERS[topic]) is None
-            pub = inj.publisher(topic, kind, REALTIME_QOS)
-            assert inj.wait(lambda: pub.get_subscription_count() >= 1, 30)
-            passed, expected = [], []
-            for k, data in enumerate(cases(), start=100):
-                expected.append(_accepted(parse, data))
-                n = len(got)
-                pub.publish(data)
-                pub.publish(genuine(k))   # comes after it, in order
-                assert inj.wait(lambda: genuine(k) in got[n:], 30), (k, len(got) - n)
-                passed.append(len(got) - n == 2)
-            assert expected.count(True) >= 2 and expected.count(False) >= 5   # both kinds are tried
-            assert passed == expected
-    finally:
-        release_domain_id(domain)
+    from rclpy.node import Node
+
+    class Reader(Node):
+        def __init__(self, context=None, argv=()):
+            super().__init__("filtered_reader", context=context)
+
+    with NodeHarness(Reader, params=None, name="filtered_reader") as h:
+        kind = getattr(sensor_msgs.msg, msg_type)
+        got = []
+        sub = h.node.create_subscription(kind, topic, lambda data: got.append(bytes(data)), REALTIME_INPUT_QOS,
+                                         raw=True)
+        assert set_content_filter(sub, L.RAW_FILTERS[topic]) is None
+        pub = h.peer("writer").create_publisher(kind, topic, REALTIME_QOS)
+        assert h.spin(lambda: pub.get_subscription_count() >= 1, 5)
+        passed, expected = [], []
+        for k, data in enumerate(cases(), start=100):
+            expected.append(_accepted(parse, data))
+            n = len(got)
+            pub.publish(data)
+            pub.publish(genuine(k))   # comes after it, in order
+            assert h.spin(lambda: genuine(k) in got[n:], 5), (k, len(got) - n)
+            passed.append(len(got) - n == 2)
+        assert expected.count(True) >= 2 and expected.count(False) >= 5   # both kinds are tried
+        assert passed == expected

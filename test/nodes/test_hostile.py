@@ -1,8 +1,10 @@
 """Fault injection: hostile messages, stamps and neighbours never crash, poison, stall or hijack a node.
 
-The observer and the controller are driven state by state from the test (as the lockstep
-plant would), with hostile messages between the good ones; what they answer must equal
-the core's observer and controller run on the good states alone, to the last bit.
+The observer and the controller, in this process (test/nodeharness.py, the observer's estimates handed to the
+controller), are driven state by state from the test (as the lockstep plant would), with hostile messages
+between the good ones; what they answer must equal the core's observer and controller run on the good states
+alone, to the last bit. A /clock that rclpy's time source would raise on kills neither a node with use_sim_time
+nor the recorder. A flood's memory is a process's (its resident size): a process-level test.
 """
 import math
 import time
@@ -10,16 +12,16 @@ import time
 import pytest
 from geometry_msgs.msg import WrenchStamped
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64
 
-from graphproc import Graph
-from injector import Injector, flood, health, rss_mib
+from graphproc import PARAMS, Graph
+from injector import Injector, flood, rejected_counts, rss_mib
 from mwip_ros import params as P
 from mwip_ros.core.controller import DscController
 from mwip_ros.core.model import State
 from mwip_ros.core.observer import DiscreteObserver
-from mwip_ros.msgs import BadMessage, cdr
+from mwip_ros.msgs import cdr
 from mwip_ros.msgs import layouts as L
+from nodeharness import NodeHarness, Wire, node_class
 
 PERIOD_NS = 5_000_000
 DEFAULTS = {**P.defaults_for("dscndo_controller"), **P.defaults_for("disturbance_observer")}
@@ -67,84 +69,70 @@ def _offline(fed):
     return est_seq, cmd_seq
 
 
-@pytest.mark.graph
-def test_hostile_states_and_estimates_change_nothing(tmp_path):
-    with Graph(tmp_path) as g:
-        obs = g.start("disturbance_observer")
-        ctl = g.start("dscndo_controller")
-        with Injector(g.domain_id) as inj:
-            js = inj.publisher("joint_states", JointState)
-            bad_est = inj.publisher("disturbance_estimate", WrenchStamped)
-            est_raw = inj.record("disturbance_estimate", WrenchStamped)
-            int_raw = inj.record("controller_internals", JointState)
-            cmd_raw = inj.record("wheel_torque_cmd", Float64)
-            assert inj.wait(lambda: js.get_subscription_count() >= 2 and bad_est.get_subscription_count() >= 1
-                            and len(inj.node.get_publishers_info_by_topic("/wheel_torque_cmd")) >= 1, 30)
+@pytest.mark.node
+def test_hostile_states_and_estimates_change_nothing():
+    with NodeHarness(node_class("disturbance_observer")) as obs, \
+            NodeHarness(node_class("dscndo_controller")) as ctl:
+        wire = Wire(obs, ctl)   # the observer's estimates to the controller
 
-            def answered(stamp):
-                return any(L.parse_internals(d)[0] == stamp for d in int_raw[-3:])
+        def publish(data):
+            """A message on joint_states, as the one publisher of states delivers it to both nodes."""
+            obs.feed("joint_states", data)
+            ctl.feed("joint_states", data)
+            wire.pump()
 
-            def send(data, stamp):
-                """Publish a state and wait for its command, resending as the lockstep plant does (a state sent
-                before the observer's writer matched the controller would otherwise wait for ever)."""
-                for _ in range(40):
-                    js.publish(data)
-                    if inj.wait(lambda: answered(stamp), 0.5):
-                        return True
-                return False
+        def send(data, stamp):
+            """Publish a state and see its command."""
+            publish(data)
+            return any(L.parse_internals(d)[0] == stamp for d in ctl.sent("controller_internals")[-3:])
 
-            fed = []
-            for k in range(120):
-                stamp, x, u_prev = _good_state(k)
+        def intrude(data):
+            """An estimate from a second publisher on disturbance_estimate (the observer is the first)."""
+            ctl.feed("disturbance_estimate", data, feeder="intruder")
+
+        fed = []
+        for k in range(120):
+            stamp, x, u_prev = _good_state(k)
+            fed.append((stamp, x, u_prev))
+            assert send(L.encode_state(stamp, x, u_prev), stamp), (k, ctl.logs()[-2000:])
+            if k % 10 == 5:
+                for data in _hostile_states(stamp):
+                    publish(data)
+                for t1 in (math.nan, 1e300):  # estimates for the next state that must not be used
+                    intrude(L.encode_wrench(stamp + PERIOD_NS, t1, 0.0))
+                intrude(L.encode_wrench(stamp + 10 ** 12, 1.0, 1.0))   # far ahead of the states
+                intrude(b"\x00\x01\x00\x00\x01\x02")
+                publish(L.encode_state(stamp, x, u_prev))                # a resend: answered once
+        # the stream restarts at t = 0 (a new plant): two stamps are rejected, the third restarts it
+        fed.append((None, None, None))
+        for k in range(40):
+            stamp, x, u_prev = _good_state(1000 + k, stamp=k * PERIOD_NS)
+            if k < 2:
+                publish(L.encode_state(stamp, x, u_prev))
+            else:
                 fed.append((stamp, x, u_prev))
-                assert send(L.encode_state(stamp, x, u_prev), stamp), (k, ctl.output()[-2000:])
-                if k % 10 == 5:
-                    for data in _hostile_states(stamp):
-                        js.publish(data)
-                    for t1 in (math.nan, 1e300):  # estimates for the next state that must not be used
-                        bad_est.publish(L.encode_wrench(stamp + PERIOD_NS, t1, 0.0))
-                    bad_est.publish(L.encode_wrench(stamp + 10 ** 12, 1.0, 1.0))   # far ahead of the states
-                    bad_est.publish(b"\x00\x01\x00\x00\x01\x02")
-                    js.publish(L.encode_state(stamp, x, u_prev))                     # a resend: answered once
-            # the stream restarts at t = 0 (a new plant): two stamps are rejected, the third restarts it
-            fed.append((None, None, None))
-            for k in range(40):
-                stamp, x, u_prev = _good_state(1000 + k, stamp=k * PERIOD_NS)
-                if k < 2:
-                    js.publish(L.encode_state(stamp, x, u_prev))
-                else:
-                    fed.append((stamp, x, u_prev))
-                    assert send(L.encode_state(stamp, x, u_prev), stamp), (k, ctl.output()[-2000:])
-            inj.spin(0.3)
-        obs.stop()
-        ctl.stop()
+                assert send(L.encode_state(stamp, x, u_prev), stamp), (k, ctl.logs()[-2000:])
+        assert not obs.node.done and not ctl.node.done
+        est_raw, int_raw, cmd_raw = (obs.sent("disturbance_estimate"), ctl.sent("controller_internals"),
+                                     ctl.sent("wheel_torque_cmd"))
     est_seq, cmd_seq = _offline(fed)
     assert len(cmd_seq) == 120 + 38
     # one command per good state and nothing for a hostile one, each equal to the core on the good states
     internals = [L.parse_internals(d) for d in int_raw]
     assert [s for s, _ in internals] == [s for s, _, _ in fed if s is not None]
     got_u = [v["u"] for _, v in internals]
-    assert got_u == cmd_seq, (next(i for i, (a, b) in enumerate(zip(got_u, cmd_seq)) if a != b), ctl.output()[-3000:])
+    assert got_u == cmd_seq, (next(i for i, (a, b) in enumerate(zip(got_u, cmd_seq)) if a != b), ctl.logs()[-3000:])
     assert [L.parse_command(d) for d in cmd_raw] == cmd_seq
-    # the observer's answers (the test hears its own bad estimates too: they do not parse, or are far ahead)
-    answers = []
-    for d in est_raw:
-        try:
-            s, a, b = L.parse_wrench(d)
-        except BadMessage:
-            continue
-        if s < 10 ** 12:
-            answers.append((s, (a, b)))
+    # the observer's answers (a resent state answered again with the same estimate)
+    answers = [(s, (a, b)) for s, a, b in map(L.parse_wrench, est_raw)]
     assert [a for _, a in _dedup(answers)] == est_seq
-    o, c = obs.output(), ctl.output()
+    o, c = obs.logs(), ctl.logs()
     assert "joint_states restarted at t = 0.010 s" in o and "re-initialising" in c
     for words in ("non-finite joint state", "implausible theta_w'", "implausible theta_b", "implausible effort",
                   "jumps ahead of the stream", "is older than the stream", "message ends at byte",
                   "is not CDR_LE"):
         assert words in o, words
     assert "non-finite torque" in c and "implausible torque" in c and "ahead of the states" in c
-    assert obs.popen.returncode == 0 and ctl.popen.returncode == 0
-    assert "Traceback" not in o + c
 
 
 def _dedup(answers):
@@ -168,7 +156,6 @@ def test_a_flood_of_hostile_messages_leaves_memory_bounded(tmp_path):
             est = inj.record("disturbance_estimate", WrenchStamped)
             assert inj.wait(lambda: js.get_subscription_count() >= 1, 30)
             assert obs.wait_for_output("ready", 30)
-            inj.spin(0.5)
             before = rss_mib(obs.pid)
             sent = flood(inj, js, 20000)
             # still answering, with the right numbers: a good state after the flood is estimated from scratch
@@ -215,12 +202,21 @@ libc.fflush(out)
 """
 
 
-def _malloc_heaps(*args, env=None) -> int:
+def _malloc_heaps(*runs) -> list:
+    """The glibc heaps (arenas) of each run ``(argument, environment)`` of :data:`ARENAS`, the runs side by side."""
     import subprocess
     import sys
-    r = subprocess.run([sys.executable, "-c", ARENAS, *args], capture_output=True, text=True, timeout=60, env=env)
-    assert r.returncode == 0, r.stderr
-    return r.stdout.count("<heap nr=")
+    procs = [subprocess.Popen([sys.executable, "-c", ARENAS, arg], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                              text=True, env=env) for arg, env in runs]
+    try:
+        outs = [p.communicate(timeout=60) for p in procs]
+    finally:
+        for p in procs:
+            if p.poll() is None:
+                p.kill()
+                p.wait()
+    assert all(p.returncode == 0 for p in procs), [err for _, err in outs]
+    return [out.count("<heap nr=") for out, _ in outs]
 
 
 @pytest.mark.unit
@@ -228,53 +224,46 @@ def test_a_node_process_allocates_from_one_malloc_arena():
     """What keeps a flood's RSS flat (scripts/soak.py): threads that allocate share one glibc arena."""
     import os
     env = {k: v for k, v in os.environ.items() if k != "MALLOC_ARENA_MAX"}
-    assert _malloc_heaps("plain", env=env) > 1    # glibc's default: an arena per allocating thread
-    assert _malloc_heaps("import", env=env) > 1   # importing the nodes sets no limit (no import side effect)
-    assert _malloc_heaps("entry", env=env) == 1   # mwip_ros.nodes.runtime.entry limits it before rclpy's threads start
-    # run_node's own call comes after rclpy's import started threads with arenas of their own: too late
-    assert _malloc_heaps("run_node", env=env) > 1
-    assert _malloc_heaps("entry", env=dict(env, MALLOC_ARENA_MAX="3")) > 1   # the user's setting wins
+    plain, imported, entry, run_node, users = _malloc_heaps(
+        ("plain", env), ("import", env), ("entry", env), ("run_node", env), ("entry", dict(env, MALLOC_ARENA_MAX="3")))
+    assert plain > 1      # glibc's default: an arena per allocating thread
+    assert imported > 1   # importing the nodes sets no limit (no import side effect)
+    assert entry == 1     # mwip_ros.nodes.runtime.entry limits it before rclpy's threads start
+    assert run_node > 1   # run_node's own call comes after rclpy's import started threads with arenas of their own
+    assert users > 1      # the user's setting wins
 
 
-@pytest.mark.graph
-def test_a_negative_or_wild_clock_kills_no_node(tmp_path):
-    """rclpy's time source raises on a negative /clock; every node with use_sim_time survives it and says so.
-
-    /clock is best effort with a history of one (rclpy's time source), so each value is sent
-    again until every node's /diagnostics shows it taken (its clock) or rejected (a count)."""
+@pytest.mark.node
+@pytest.mark.parametrize("node", ["disturbance_observer", "mcap_recorder"])
+def test_a_negative_or_wild_clock_kills_no_node(tmp_path, node):
+    """rclpy's time source raises on a negative /clock; a node with use_sim_time (the observer, the recorder, in this
+    process) survives it and says so: each /clock handed to its subscriptions (rclpy's time source's, and the
+    recorder's own) is taken (its clock, on /diagnostics) or rejected (counted there)."""
     from rosgraph_msgs.msg import Clock
 
-    bag = tmp_path / "bag"
-    with Graph(tmp_path) as g:
-        obs = g.start("disturbance_observer", "-p", "use_sim_time:=true")
-        rec = g.start("mcap_recorder", "-p", f"output:={bag}", "-p", "use_sim_time:=true", params=None)
-        names = ("/disturbance_observer", "/mcap_recorder")
-        with Injector(g.domain_id) as inj:
-            clock = inj.publisher("/clock", Clock)
-            js = inj.publisher("joint_states", JointState)
-            est = inj.record("disturbance_estimate", WrenchStamped)
-            latest = health(inj)
-            assert inj.wait(lambda: clock.get_subscription_count() >= 3 and js.get_subscription_count() >= 2
-                            and all(n in latest for n in names), 30), (clock.get_subscription_count(), latest)
-            for sec, taken in ((1, True), (-5, False), (10 ** 6, False), (2, True), (-(2 ** 31), False)):
-                before = {n: latest[n][1].get("/clock", 0) for n in names}
+    args = ("-p", f"output:={tmp_path / 'bag'}") if node == "mcap_recorder" else ()
+    with NodeHarness(node_class(node), "-p", "use_sim_time:=true", *args,
+                     params=None if node == "mcap_recorder" else PARAMS) as h:
+        diagnostics = h.diagnostics()
 
-                def done():
-                    return all(latest[n][0] == sec if taken else latest[n][1].get("/clock", 0) > before[n]
-                               for n in names)
-                c = Clock()
-                c.clock.sec, c.clock.nanosec = sec, 0
-                end = time.monotonic() + 30
-                while not done() and time.monotonic() < end:
-                    clock.publish(c)   # again if lost: a report comes every wall second
-                    inj.wait(done, 2.5)
-                assert done(), (sec, before, latest, obs.output()[-1500:], rec.output()[-1500:])
+        def report():
+            """(the node's clock [s], {topic: rejected}) of a /diagnostics report made now."""
+            arr = diagnostics.report(time.monotonic())
+            values = {kv.key: kv.value for st in arr.status for kv in st.values}
+            return arr.header.stamp.sec, rejected_counts(values.get("rejected_by_topic", ""))
+        assert h.subscriptions("/clock"), "use_sim_time: rclpy's time source listens to /clock"
+        for sec, taken in ((1, True), (-5, False), (10 ** 6, False), (2, True), (-(2 ** 31), False)):
+            before = report()[1].get("/clock", 0)
+            c = Clock()
+            c.clock.sec, c.clock.nanosec = sec, 0
+            h.feed("/clock", c)
+            now, rejected = report()
+            assert (now == sec) if taken else (rejected.get("/clock", 0) > before), (sec, now, rejected)
+        if node == "disturbance_observer":
             stamp, x, u_prev = _good_state(0, stamp=0)
-            js.publish(L.encode_state(stamp, x, u_prev))
-            assert inj.wait(lambda: bool(est), 30), obs.output()[-2000:]
-        assert obs.stop() == 0 and rec.stop() == 0, obs.output() + rec.output()
-    for p in (obs, rec):
-        out = p.output()
-        assert "Traceback" not in out, out[-2000:]
-        assert "rejected message #1 on /clock: /clock -5000000000 ns is negative" in out, out[-2000:]
-        assert "/clock 1000000.000000 s jumps ahead of the stream's 1.000000 s" in out, out[-2000:]
+            h.feed("joint_states", L.encode_state(stamp, x, u_prev))
+            assert h.sent("disturbance_estimate"), h.logs()[-2000:]
+        assert not h.node.done
+    out = h.logs()
+    assert "rejected message #1 on /clock: /clock -5000000000 ns is negative" in out, out[-2000:]
+    assert "/clock 1000000.000000 s jumps ahead of the stream's 1.000000 s" in out, out[-2000:]

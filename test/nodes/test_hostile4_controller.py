@@ -123,7 +123,7 @@ def test_a_refused_command_leaves_the_motion_references_as_they_were():
         assert h.node.motion.snapshot() == before
         del law.step
         h.feed("joint_states", L.encode_state(22 * H_NS, REST, 0.0))   # the next state takes up the same period
-        assert h.node.motion.k == before[0] + 2
+        assert h.node.motion.k == before["k"] + 2
 
 
 

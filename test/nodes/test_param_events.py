@@ -13,7 +13,9 @@ pytestmark = pytest.mark.graph
 
 MODULE = "mwip_ros.nodes.tools.bag_replay"
 NEW_K1 = 8.0
-CHANGE_AFTER_NS = 300_000_000     # set k1 once the run passed t = 0.3 s (of 10 s: about 2 s of wall time left)
+DURATION_S = 10.0                 # the recorded run: 2001 states (a 2 s run ended before a loaded test process, behind
+STATES = 2001                     # the plant's stream, saw t = 0.3 s: the change came at its last state)
+CHANGE_AFTER_NS = 300_000_000     # set k1 once the run passed t = 0.3 s (the observer held meanwhile: inside the run)
 
 
 @pytest.fixture(scope="module")
@@ -35,7 +37,8 @@ def changed_bag(tmp_path_factory):
             client = inj.node.create_client(SetParameters, "/dscndo_controller/set_parameters")
             assert client.wait_for_service(timeout_sec=30)   # found before the run, which lasts about 2 s of wall time
             call_until_answered(inj, client, SetParameters.Request)   # its answers reach us: no parameters, a no-op
-            plant = g.start("plant_sim", "-p", "duration_s:=10.0", "-p", "expected_subscribers:=5")
+            # expected_subscribers: the observer, the controller, the markers and the recorder (the user's count)
+            plant = g.start("plant_sim", "-p", f"duration_s:={DURATION_S}", "-p", "expected_subscribers:=4")
             # a state one period past CHANGE_AFTER_NS: the plant sent it only once the controller had answered the one
             # before, so the controller's clock (the last state it answered) is at CHANGE_AFTER_NS at least
             past = CHANGE_AFTER_NS + 5_000_000
@@ -63,8 +66,8 @@ def test_the_bag_has_the_robot_and_the_gain_change(changed_bag):
     from bagcheck import decoded_messages, distinct_stamps
     from mwip_ros.bag import topic_counts
     counts = topic_counts(changed_bag)
-    assert counts.get("/robot_markers", 0) > 1000 and distinct_stamps(changed_bag, ["/joint_states"]) == \
-        {"/joint_states": 2001}, counts
+    assert counts.get("/robot_markers", 0) > STATES // 2 and distinct_stamps(changed_bag, ["/joint_states"]) == \
+        {"/joint_states": STATES}, counts
     markers = [m for topic, _, _, m in decoded_messages(changed_bag, ["/robot_markers"])]
     assert all(mk.header.frame_id == "world" for mk in markers[0].markers)
     changes = [(m.node, m.stamp.sec * 10 ** 9 + m.stamp.nanosec, p.name, p.value.double_value)
@@ -72,7 +75,7 @@ def test_the_bag_has_the_robot_and_the_gain_change(changed_bag):
     [(node, stamp, name, value)] = [c for c in changes if c[2] == "k1"]
     assert (node, name, value) == ("/dscndo_controller", "k1", NEW_K1)
     # stamped with the state the controller had answered last: on the plant's grid, inside the run
-    assert stamp % 5_000_000 == 0 and CHANGE_AFTER_NS <= stamp < 10 * 10 ** 9, stamp
+    assert stamp % 5_000_000 == 0 and CHANGE_AFTER_NS <= stamp < DURATION_S * 10 ** 9, stamp
 
 
 @pytest.mark.parametrize("apply, code, result", [(True, 0, "RESULT: REPRODUCED"), (False, 4, "RESULT: DIFFERENT")])

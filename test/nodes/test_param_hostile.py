@@ -3,8 +3,9 @@
 rclpy's ParameterService reads each request parameter with ``Parameter.from_parameter_msg`` outside
 any try: one SetParameters request with a ParameterValue of type code 99 used to end a node with a
 traceback (and stop the recorder and the live view).  Now each such parameter is refused with a
-reason that names it, the rest of the request is answered, and the node goes on; a bag whose
-/parameter_events carries such a value re-simulates, the value skipped and reported.
+reason that names it, the rest of the request is answered, and the node goes on (every node kind, in this
+process: test/nodeharness.py); a bag whose /parameter_events carries such a value re-simulates, the value
+skipped and reported (a graph of processes: the re-simulation drives a running controller).
 """
 from __future__ import annotations
 
@@ -16,8 +17,8 @@ import sys
 import pytest
 
 from graphproc import PARAMS, Graph
-from injector import Injector, call_until_answered
 from mwip_ros.nodes.runtime import rclpy_compat as C
+from nodeharness import NodeHarness, node_class
 
 MODULE = "mwip_ros.nodes.tools.bag_replay"
 TIMEOUT = 60.0
@@ -198,28 +199,16 @@ def test_importing_installs_nothing_and_install_is_idempotent():
     assert "[WARN]" not in r.stderr, r.stderr   # the installed rclpy is the one it was written for
 
 
-@pytest.mark.graph
+@pytest.mark.node
 def test_a_real_node_refuses_each_hostile_update_by_name_and_keeps_its_values():
-    """In this process: a node that declares the controller's parameters, its service callbacks called directly."""
-    import rclpy
+    """The controller in this process (test/nodeharness.py), its parameter services' callbacks called directly."""
     from rcl_interfaces.srv import DescribeParameters, GetParameters, ListParameters, SetParameters
-    from rclpy.node import Node
-    from rclpy.parameter_service import ParameterService
 
-    from graphproc import fresh_domain_id, release_domain_id
-    from mwip_ros.nodes.runtime.params import declare
-
-    C.install()
-    domain = fresh_domain_id()
-    ctx = rclpy.Context()
-    rclpy.init(context=ctx, domain_id=domain)
-    try:
-        node = Node("dscndo_controller", context=ctx)
-        declare(node, "dscndo_controller", [])
-        svc = node._parameter_service
+    with NodeHarness(node_class("dscndo_controller")) as h:
+        node = h.node
         cases = _hostile("k1") + _hostile("nominal.m_b")
         request = SetParameters.Request(parameters=[c[1] for c in cases])
-        results = ParameterService._set_parameters_callback(svc, request, SetParameters.Response()).results
+        results = h.call("/dscndo_controller/set_parameters", request).results
         assert len(results) == len(cases)
         for (label, _msg, text), result in zip(cases, results):
             assert not result.successful and text in result.reason, (label, result.reason)
@@ -227,23 +216,16 @@ def test_a_real_node_refuses_each_hostile_update_by_name_and_keeps_its_values():
         assert node._descriptors["k1"].type == 3 and node._descriptors["nominal.m_b"].type == 3
         assert node.get_parameter("k1").value == 6.0 and node.get_parameter("nominal.m_b").value > 0
         ok = SetParameters.Request(parameters=[_pm("k1", type=3, double_value=7.0)])
-        assert ParameterService._set_parameters_callback(svc, ok, SetParameters.Response()).results[0].successful
+        assert h.call("/dscndo_controller/set_parameters", ok).results[0].successful
         assert node.get_parameter("k1").value == 7.0
         names = ["", "odd name/\t\x01", "n" * 2_000, "k1"] * 500
-        assert len(ParameterService._describe_parameters_callback(
-            svc, DescribeParameters.Request(names=["k1"] * 3000), DescribeParameters.Response()).descriptors) == 3000
-        ParameterService._describe_parameters_callback(svc, DescribeParameters.Request(names=names),
-                                                       DescribeParameters.Response())
-        ParameterService._get_parameters_callback(svc, GetParameters.Request(names=names), GetParameters.Response())
-        ParameterService._list_parameters_callback(svc, ListParameters.Request(prefixes=names[:8], depth=2 ** 64 - 1),
-                                                   ListParameters.Response())
-        got = ParameterService._get_parameters_callback(svc, GetParameters.Request(names=["k1"]),
-                                                        GetParameters.Response())
+        assert len(h.call("/dscndo_controller/describe_parameters",
+                          DescribeParameters.Request(names=["k1"] * 3000)).descriptors) == 3000
+        h.call("/dscndo_controller/describe_parameters", DescribeParameters.Request(names=names))
+        h.call("/dscndo_controller/get_parameters", GetParameters.Request(names=names))
+        h.call("/dscndo_controller/list_parameters", ListParameters.Request(prefixes=names[:8], depth=2 ** 64 - 1))
+        got = h.call("/dscndo_controller/get_parameters", GetParameters.Request(names=["k1"]))
         assert [v.double_value for v in got.values] == [7.0]
-        node.destroy_node()
-    finally:
-        rclpy.shutdown(context=ctx)
-        release_domain_id(domain)
 
 
 @pytest.mark.unit
@@ -288,7 +270,7 @@ def test_the_recorders_and_live_views_loop_goes_on_after_a_callback_raised(monke
     assert len(failed) == 1 and "raised on every turn" in failed[0]
 
 
-# --- every node kind, as a process ------------------------------------------------------------------
+# --- every node kind, in this process ----------------------------------------------------------------
 
 def _free_port() -> int:
     with socket.socket() as s:
@@ -296,38 +278,8 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
-class _Caller:
-    """Parameter-service calls from the test's own node; each waits for its answer (no sleeps)."""
-
-    def __init__(self, inj):
-        self.inj = inj
-        self.clients = {}
-        self.proc = None   # the process answering: a call gives up at once when it has ended
-
-    def call(self, target: str, service: str, request):
-        from rcl_interfaces import srv
-        kind = {"set_parameters": srv.SetParameters, "set_parameters_atomically": srv.SetParametersAtomically,
-                "get_parameters": srv.GetParameters, "describe_parameters": srv.DescribeParameters,
-                "list_parameters": srv.ListParameters, "get_parameter_types": srv.GetParameterTypes}[service]
-        key = (target, service)
-        ended = (lambda: self.proc.poll() is not None) if self.proc is not None else (lambda: False)
-        if key not in self.clients:
-            client = self.clients[key] = self.inj.node.create_client(kind, f"{target}/{service}")
-            assert client.wait_for_service(timeout_sec=TIMEOUT), f"no {target}/{service}"
-            # the default request names no parameter: a no-op (or a read) that shows the answers reach this node
-            call_until_answered(self.inj, client, kind.Request, timeout=TIMEOUT, gone=ended)
-        client = self.clients[key]
-        assert client.wait_for_service(timeout_sec=TIMEOUT), f"no {target}/{service}"
-        future = client.call_async(request)
-        self.inj.wait(lambda: future.done() or ended(), TIMEOUT)
-        assert future.done(), (f"no answer from {target}/{service}"
-                               + (f"; it ended: {self.proc.output()[-3000:]}" if ended() else ""))
-        return future.result()
-
-
 NODES = {   # label: (node, its fully qualified name, extra ROS arguments, the parameters to attack)
-    "plant_sim": ("plant_sim", "/lone/plant_sim",   # its own namespace: it waits for a controller that never comes
-                  ("-r", "__ns:=/lone", "-p", "lockstep_timeout_s:=600.0"), ("nominal.m_b",)),
+    "plant_sim": ("plant_sim", "/lone/plant_sim", ("-r", "__ns:=/lone"), ("nominal.m_b",)),
     "disturbance_observer": ("disturbance_observer", "/disturbance_observer", (), ("nominal.m_b", "X")),
     "dscndo_controller": ("dscndo_controller", "/dscndo_controller", (), ("k1", "nominal.m_b")),
     "mcap_recorder": ("mcap_recorder", "/mcap_recorder", (), ("chunk_size",)),
@@ -336,86 +288,69 @@ NODES = {   # label: (node, its fully qualified name, extra ROS arguments, the p
 }
 
 
-def _attack(caller, target: str, names) -> list:
-    """Every hostile request at ``target``; the problems found (empty: each refused, naming the parameter)."""
+def _attack(h, target: str, names) -> list:
+    """Every hostile request at ``target`` (its parameter services' callbacks, ``h.call``); the problems found
+    (empty: each refused, naming the parameter)."""
     from rcl_interfaces.srv import (DescribeParameters, GetParameters, GetParameterTypes, ListParameters,
                                     SetParameters, SetParametersAtomically)
     problems = []
     for name in names:
         cases = _hostile(name, scalar=name != "X")
-        results = caller.call(target, "set_parameters",
-                              SetParameters.Request(parameters=[c[1] for c in cases])).results
+        results = h.call(f"{target}/set_parameters", SetParameters.Request(parameters=[c[1] for c in cases])).results
         if len(results) != len(cases):
             problems.append(f"{target}: {len(results)} results for {len(cases)} parameters")
         for (label, _msg, text), result in zip(cases, results):
             if result.successful or text not in result.reason:
                 problems.append(f"{target} {name} {label}: {result.successful} {result.reason[:200]!r}")
-    many = caller.call(target, "set_parameters", SetParameters.Request(
+    many = h.call(f"{target}/set_parameters", SetParameters.Request(
         parameters=[_type99(f"{names[0]}_{i}") for i in range(3000)])).results
     if len(many) != 3000 or any(r.successful for r in many) or "type code 99" not in many[0].reason:
         problems.append(f"{target}: 3000 type-99 parameters: {len(many)} results, {many[0].reason if many else ''!r}")
-    atomic = caller.call(target, "set_parameters_atomically", SetParametersAtomically.Request(
+    atomic = h.call(f"{target}/set_parameters_atomically", SetParametersAtomically.Request(
         parameters=[_pm(names[0], type=3, double_value=1.0), _type99(names[0])])).result
     if atomic.successful or f"parameter '{names[0]}': type code 99" not in atomic.reason:
         problems.append(f"{target}: set_parameters_atomically: {atomic.reason!r}")
     odd = ["", "odd name/\t\x01\u2603", "n" * 2_000, "~/x", "..", names[0]] * 200
-    caller.call(target, "get_parameters", GetParameters.Request(names=odd))
-    caller.call(target, "describe_parameters", DescribeParameters.Request(names=odd))
-    caller.call(target, "get_parameter_types", GetParameterTypes.Request(names=odd))
-    caller.call(target, "list_parameters", ListParameters.Request(prefixes=odd[:12], depth=2 ** 64 - 1))
+    h.call(f"{target}/get_parameters", GetParameters.Request(names=odd))
+    h.call(f"{target}/describe_parameters", DescribeParameters.Request(names=odd))
+    h.call(f"{target}/get_parameter_types", GetParameterTypes.Request(names=odd))
+    h.call(f"{target}/list_parameters", ListParameters.Request(prefixes=odd[:12], depth=2 ** 64 - 1))
     return problems
 
 
-def _matched(inj, pub, topic: str, node: str) -> bool:
-    """``pub`` matched every subscription on ``topic``, and ``node`` has one."""
-    infos = inj.node.get_subscriptions_info_by_topic(topic)
-    return any(i.node_name == node for i in infos) and pub.get_subscription_count() >= len(infos)
-
-
-@pytest.mark.graph
-def test_every_node_refuses_hostile_parameter_requests_naming_the_parameter_and_goes_on(tmp_path):
+@pytest.mark.node
+@pytest.mark.parametrize("label", list(NODES))
+def test_every_node_refuses_hostile_parameter_requests_naming_the_parameter_and_goes_on(tmp_path, label):
+    """Each node kind in this process, attacked through its own parameter services (the callbacks rclpy's executor
+    would run): every hostile parameter refused, naming it; a valid read answered after; nothing raised, nothing
+    logged as a broken callback; the recorder still records what comes after the attack."""
     from rcl_interfaces.msg import ParameterType
     from rcl_interfaces.srv import GetParameters
-    from rclpy.duration import Duration
-    from sensor_msgs.msg import JointState
 
     from mwip_ros.bag import topic_counts
     from mwip_ros.core.model import State
     from mwip_ros.msgs import layouts as L
 
+    node, fqn, args, names = NODES[label]
     bag = tmp_path / "bag"
     extra = {"mcap_recorder": ("-p", f"output:={bag}"), "foxglove_server": ("-p", f"port:={_free_port()}")}
-    problems = []
-    with Graph(tmp_path) as g, Injector(g.domain_id, "test_param_hostile") as inj:
-        procs = {label: g.start(node, *args, *extra.get(label, ()), params=None if label == "mcap_recorder" else PARAMS,
-                                 label=label)
-                 for label, (node, _fqn, args, _names) in NODES.items()}
-        caller = _Caller(inj)
-        for label, (_node, fqn, _args, names) in NODES.items():
-            caller.proc = procs[label]
-            problems += _attack(caller, fqn, names)
-            got = caller.call(fqn, "get_parameters", GetParameters.Request(names=["use_sim_time", names[0]])).values
-            if [v.type for v in got][:1] != [ParameterType.PARAMETER_BOOL] or len(got) != 2:
-                problems.append(f"{fqn}: a valid get after the attack answered {got}")
-        # the recorder still records: what is published now is in the bag it closes at SIGINT
-        states = inj.publisher("joint_states", JointState)
-        assert inj.wait(lambda: _matched(inj, states, "/joint_states", "mcap_recorder"), TIMEOUT)
-        for k in range(20):
-            states.publish(L.encode_state(k * 5_000_000, State(0.0, 0.01, 0.0, 0.0), 0.0))
-        assert states.wait_for_all_acked(Duration(seconds=TIMEOUT))
-        alive = {label: p.poll() is None for label, p in procs.items()}
-        codes = {label: procs[label].stop() for label in reversed(list(NODES))}
-    logs = {label: p.output() for label, p in procs.items()}
+    with NodeHarness(node_class(node), *args, *extra.get(label, ()),
+                     params=None if label == "mcap_recorder" else PARAMS) as h:
+        problems = _attack(h, fqn, names)
+        got = h.call(f"{fqn}/get_parameters", GetParameters.Request(names=["use_sim_time", names[0]])).values
+        if [v.type for v in got][:1] != [ParameterType.PARAMETER_BOOL] or len(got) != 2:
+            problems.append(f"{fqn}: a valid get after the attack answered {got}")
+        if label == "mcap_recorder":   # it still records: what comes now is in the bag it closes
+            for k in range(20):
+                assert h.feed("joint_states", L.encode_state(k * 5_000_000, State(0.0, 0.01, 0.0, 0.0), 0.0)) == 1
+        assert not h.node.done, h.logs()[-3000:]
+    logs = h.logs()
     assert not problems, "\n".join(problems)
-    assert all(alive.values()), {k: logs[k][-3000:] for k, v in alive.items() if not v}
-    for label, code in codes.items():
-        assert code in ((0, 130) if label == "plant_sim" else (0,)), (label, code, logs[label][-3000:])
-        assert "Traceback" not in logs[label] and "is not a valid Parameter.Type" not in logs[label], \
-            logs[label][-3000:]
-    assert "rejected message #1 on /dscndo_controller/set_parameters: parameter 'k1': type code 99" in \
-        logs["dscndo_controller"]
-    assert "recorder error" not in logs["mcap_recorder"] and "foxglove_server error" not in logs["foxglove_server"]
-    assert topic_counts(bag).get("/joint_states") == 20, (topic_counts(bag), logs["mcap_recorder"][-3000:])
+    assert "is not a valid Parameter.Type" not in logs and "Traceback" not in logs, logs[-3000:]
+    assert f"rejected message #1 on {fqn}/set_parameters: parameter '{names[0]}': type code 99" in logs, logs[-3000:]
+    assert "recorder error" not in logs and "foxglove_server error" not in logs
+    if label == "mcap_recorder":
+        assert topic_counts(bag).get("/joint_states") == 20, (topic_counts(bag), logs[-3000:])
 
 
 # --- re-simulation of a bag whose /parameter_events carries a value of type code 99 ------------------

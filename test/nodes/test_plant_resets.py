@@ -1,12 +1,13 @@
 """Resets in any number and rhythm (the hostile-input issue, items 2 and 4).
 
-* in-process: plant_sim's lockstep under random interleavings of resets and answers, with the loop
-  modelled by the observer's and controller's own stamp guard: a new state never repeats the stamp the
-  loop answered last (it would be taken for a resend and never answered), each reset goes back below it;
-* graphs: two resets back to back, then bursts of 20 concurrent calls at random moments, in lockstep:
-  every call answered, the plant never times out, the run completes balanced; realtime: 1,000
-  concurrent calls answered and the loop balances after them; a recorded run with a reset splits into
-  two segments (mwip_ros.bag.segments) with the plant's sample counts.
+* in this process (test/nodeharness.py): plant_sim's lockstep under random interleavings of resets and answers,
+  with the loop modelled by the observer's and controller's own stamp guard: a new state never repeats the stamp
+  the loop answered last (it would be taken for a resend and never answered), each reset goes back below it; the
+  loop itself (plant, observer, controller wired): two resets back to back, then bursts of 20 calls at random
+  moments: every call answered, the plant never times out, the run completes balanced;
+* graphs of processes: realtime, 1,000 concurrent calls through the middleware answered and the loop balances
+  after them; a recorded run with a reset splits into two segments (mwip_ros.bag.segments) with the plant's
+  sample counts.
 """
 import json
 import random
@@ -15,32 +16,27 @@ import numpy as np
 import pytest
 from sensor_msgs.msg import JointState
 
-from graphproc import PARAMS, Graph, fresh_domain_id, release_domain_id
-from injector import Injector, call_until_answered
+from graphproc import Graph
+from injector import Injector
 from mwip_ros.msgs import layouts as L
 from mwip_ros.msgs.qos import SERVICE_QOS
 from mwip_ros.nodes.runtime.guards import NEW, REPEAT, RESTART, StampGuard
-
-pytestmark = pytest.mark.graph
+from mwip_ros.nodes.runtime.services import prove_reply_paths
+from nodeharness import Loop, NodeHarness, node_class
 
 BALANCED = 0.05            # |theta_b| [rad] over the last second of a run: recovered from -10 deg
 ANSWER_KINDS = ("reset #", "a reset is already pending", "already at the initial state")
 
 
 def _client(inj):
-    """(A reset client, the calls it made before the run): the client's answers are kept too (keep all, as the
-    service's requests), its path to the plant shown to work by one call answered before the run starts: the plant
-    waits for the injector's joint_states subscription (``expected_subscribers``), made after this, so no call of a
-    test misses the run (discovery here can take seconds: a plant that does not wait may end its run before the
-    injector sees it)."""
+    """A reset client of the plant's, its answers shown to arrive (the product's barrier, runtime.services: the
+    plant answered a get_parameters client made after it) before the test's real calls, each sent once."""
     from std_srvs.srv import Trigger
     client = inj.node.create_client(Trigger, "/plant_sim/reset", qos_profile=SERVICE_QOS)
     assert client.wait_for_service(timeout_sec=30)
-    # each call is a no-op at the initial state, and every one is handled before the run starts (it waits for a
-    # subscription made after this returns)
-    first, sent = call_until_answered(inj, client, Trigger.Request)
-    assert first.success and first.message.startswith("already at the initial state"), first.message
-    return client, sent
+    proof = prove_reply_paths(inj.wait, inj.node, "/plant_sim", timeout=30.0)
+    assert proof is not None and proof.answer is not None, "the plant did not answer get_parameters"
+    return client
 
 
 def _calls(inj, client, n: int, timeout: float = 60.0):
@@ -52,112 +48,97 @@ def _calls(inj, client, n: int, timeout: float = 60.0):
     return [f.result() for f in futures]
 
 
-# --- in-process: the stamps a reset leads to ------------------------------------------------------------
-@pytest.fixture
-def lockstep_plant():
-    import rclpy
-
-    from mwip_ros.nodes.loop.plant_sim import PlantSimNode
-    domain = fresh_domain_id()
-    ctx = rclpy.Context()
-    argv = ["plant_sim", "--ros-args", "--params-file", str(PARAMS), "-p", "plant_sim:duration_s:=0.0"]
-    rclpy.init(args=argv, context=ctx, domain_id=domain)
-    node = PlantSimNode(context=ctx, argv=argv)
-    try:
-        yield node
-    finally:
-        node.destroy_node()
-        rclpy.shutdown(context=ctx)
-        release_domain_id(domain)
-
-
-def test_no_rhythm_of_resets_makes_the_plant_repeat_the_answered_stamp(lockstep_plant):
-    from std_srvs.srv import Trigger
-    node = lockstep_plant
-    sent = []   # (k, stamp) of every new state (not the driver's resends)
-    send = node.lockstep.send
-    node.lockstep.send = lambda k, stamp, data: (sent.append((k, stamp)), send(k, stamp, data))
-    guard = StampGuard(window_ns=20 * node.period_ns)    # the observer's and the controller's rule
-    rng = random.Random(7)
-    node._start("test")
-    answered, answers, resets_seen = None, [], 0
-    for step in range(3000):
-        for _ in range(rng.choice((0, 0, 0, 1, 2, 5)) if step % 50 else 20):
-            answers.append(node._on_reset(Trigger.Request(), Trigger.Response()))
-        k, stamp = sent[-1]
-        verdict = guard.check(stamp)
-        while verdict not in (NEW, RESTART):      # the driver resends until the guard follows the restart
-            assert verdict != REPEAT, f"state k = {k} repeats the answered stamp {answered}: never answered"
+# --- in this process --------------------------------------------------------------------------------------
+@pytest.mark.node
+def test_no_rhythm_of_resets_makes_the_plant_repeat_the_answered_stamp():
+    with NodeHarness(node_class("plant_sim"), "-p", "duration_s:=0.0") as h:
+        node = h.node
+        sent = []   # (k, stamp) of every new state (not the driver's resends)
+        send = node.lockstep.send
+        node.lockstep.send = lambda k, stamp, data: (sent.append((k, stamp)), send(k, stamp, data))
+        guard = StampGuard(window_ns=20 * node.period_ns)    # the observer's and the controller's rule
+        rng = random.Random(7)
+        node._start("test")
+        answered, answers, resets_seen = None, [], 0
+        for step in range(1500):   # about 500 resets among the answers
+            for _ in range(rng.choice((0, 0, 0, 1, 2, 5)) if step % 50 else 20):
+                answers.append(h.call("~/reset"))
+            k, stamp = sent[-1]
             verdict = guard.check(stamp)
-        if answered is not None and stamp < answered:
-            resets_seen += 1
-            assert k == 0 and verdict == RESTART
-        answered = stamp
-        node._on_cmd(L.encode_command(0.0))   # no torque: the frequent resets keep the robot from falling
-        assert not node.done
-    assert len(answers) == node.reset_calls and all(a.success for a in answers)
-    assert all(a.message.startswith(ANSWER_KINDS) for a in answers), {a.message for a in answers}
-    assert resets_seen == node.resets > 50
-    assert sum(a.message.startswith("already at the initial state") for a in answers) > 0
+            while verdict not in (NEW, RESTART):      # the driver resends until the guard follows the restart
+                assert verdict != REPEAT, f"state k = {k} repeats the answered stamp {answered}: never answered"
+                verdict = guard.check(stamp)
+            if answered is not None and stamp < answered:
+                resets_seen += 1
+                assert k == 0 and verdict == RESTART
+            answered = stamp
+            h.feed("wheel_torque_cmd", L.encode_command(0.0))   # no torque: the frequent resets keep the robot up
+            assert not node.done
+        assert len(answers) == node.reset_calls and all(a.success for a in answers)
+        assert all(a.message.startswith(ANSWER_KINDS) for a in answers), {a.message for a in answers}
+        assert resets_seen == node.resets > 50
+        assert sum(a.message.startswith("already at the initial state") for a in answers) > 0
 
 
-# --- graphs -----------------------------------------------------------------------------------------------
+@pytest.mark.node
 def test_resets_back_to_back_and_in_bursts_in_lockstep_keep_the_run_going_and_balanced(tmp_path):
+    """The loop in this process (plant, observer and controller wired; the plant resends a state nobody answered,
+    so the loop follows each reset): two resets back to back (the second joins the first), one while the new state
+    0 waits for its answer, then four bursts of 20 calls at random moments; the run after the last reset whole."""
     rng = random.Random()
     seed = rng.randrange(1 << 30)
     rng.seed(seed)
     csv_path, summary = tmp_path / "plant.csv", tmp_path / "summary.json"
-    with Graph(tmp_path) as g:
-        obs = g.start("disturbance_observer")
-        ctl = g.start("dscndo_controller")
-        plant = g.start("plant_sim", "-p", "duration_s:=10.0", "-p", f"csv:={csv_path}",   # waits for the injector
-                        "-p", f"summary_json:={summary}", "-p", "expected_subscribers:=3")
-        with Injector(g.domain_id) as inj:
-            client, before = _client(inj)
-            states = inj.record("joint_states", JointState)
-            assert inj.wait(lambda: len(states) > 50, 120), plant.output()[-2000:]
-            n0 = len(states)
-            answers = _calls(inj, client, 2)          # back to back: the second joins the first
-            assert answers[0].message.startswith("reset #1"), answers[0].message
-            assert answers[1].message.startswith(ANSWER_KINDS[1:]), answers[1].message
-            # the issue's moment: the new state 0 is out, not answered yet (the loop follows after two resends)
-            assert inj.wait(lambda: any(L.parse_joint_state(d)[0] == 0 for d in states[n0:]), 30)
-            answers += _calls(inj, client, 1)
-            assert answers[-1].message.startswith(ANSWER_KINDS), answers[-1].message
-            for _ in range(4):                        # bursts at random moments (each within the run)
-                n0, later = len(states), rng.randrange(1, 300)   # <= 1,200 states: in the 2,000 of the run
-                assert inj.wait(lambda: len(states) >= n0 + later or plant.poll() is not None, 120)
-                assert plant.poll() is None, (seed, plant.output()[-3000:])
-                answers += _calls(inj, client, 20)
-            assert inj.wait(lambda: plant.poll() is not None, 180), (seed, plant.output()[-3000:])
-        code = plant.wait(10)
-        out = plant.output()
-        assert code == 0, (seed, out[-3000:])
-        assert obs.stop() == 0 and ctl.stop() == 0
+    with Loop("-p", "duration_s:=2.0", "-p", f"csv:={csv_path}", "-p", f"summary_json:={summary}") as loop:
+        plant = loop.plant
+        node = plant.node
+
+        def reset_calls(n):
+            return [plant.call("~/reset") for _ in range(n)]
+        loop.start()
+        assert loop.run(lambda: len(plant.sent("joint_states")) > 50)
+        n0 = len(plant.sent("joint_states"))
+        answers = reset_calls(2)                  # back to back: the second joins the first
+        assert answers[0].message.startswith("reset #1"), answers[0].message
+        assert answers[1].message.startswith(ANSWER_KINDS[1:]), answers[1].message
+        # the issue's moment: the new state 0 is out, not answered yet (the loop follows after two resends)
+        assert loop.run(lambda: any(L.parse_joint_state(d)[0] == 0 for d in plant.sent("joint_states")[n0:]))
+        answers += reset_calls(1)
+        assert answers[-1].message.startswith(ANSWER_KINDS), answers[-1].message
+        for _ in range(4):                        # bursts at random moments (each within the run of 400 states)
+            n0, later = len(plant.sent("joint_states")), rng.randrange(1, 150)
+            assert loop.run(lambda: len(plant.sent("joint_states")) >= n0 + later), seed
+            assert not node.done, (seed, plant.logs()[-3000:])
+            answers += reset_calls(20)
+        assert loop.run(), (seed, plant.logs()[-3000:])   # to the run's end
+        assert node.exit_code == 0, (seed, plant.logs()[-3000:])
+        logs = {name: h.logs() for name, h in loop.nodes.items()}
     assert len(answers) == 83 and all(a.success for a in answers), (seed, [a.message for a in answers])
     assert all(a.message.startswith(ANSWER_KINDS) for a in answers), (seed, [a.message for a in answers])
     s = json.loads(summary.read_text())
-    assert s["reset_calls"] == before + 83 and 1 <= s["resets"] <= 6 and s["exit_code"] == 0 and not s["fallen"], s
-    assert "lockstep timeout" not in out
-    for p in (obs, ctl):   # each reset seen by the loop as a restart, none taken for a resend
-        assert p.output().count("joint_states restarted at t = 0.000 s") == s["resets"], (seed, p.output()[-2000:])
+    assert s["reset_calls"] == 83 and 1 <= s["resets"] <= 6 and s["exit_code"] == 0 and not s["fallen"], s
+    assert "lockstep timeout" not in logs["plant_sim"]
+    for name in ("disturbance_observer", "dscndo_controller"):   # each reset seen by the loop as a restart
+        assert logs[name].count("joint_states restarted at t = 0.000 s") == s["resets"], (seed, logs[name][-2000:])
     run = np.genfromtxt(csv_path, delimiter=",", names=True)
-    assert len(run) == 2001 and run["t"][-1] == pytest.approx(10.0)   # the run after the last reset, whole
+    assert len(run) == 401 and run["t"][-1] == pytest.approx(2.0)   # the run after the last reset, whole
     assert np.abs(run["theta_b"][-200:]).max() < BALANCED, seed
 
 
+# --- graphs of processes ------------------------------------------------------------------------------
 N_REALTIME_CALLS = 1000
 
 
+@pytest.mark.graph
 def test_a_thousand_concurrent_resets_in_realtime_are_all_answered_and_the_loop_balances(tmp_path):
     csv_path, summary = tmp_path / "plant.csv", tmp_path / "summary.json"
     with Graph(tmp_path) as g:
         g.start("disturbance_observer", "-p", "mode:=realtime")
         g.start("dscndo_controller", "-p", "mode:=realtime")
         plant = g.start("plant_sim", "-p", "mode:=realtime", "-p", "duration_s:=3.0", "-p", f"csv:={csv_path}",
-                        "-p", f"summary_json:={summary}", "-p", "expected_subscribers:=3")
+                        "-p", f"summary_json:={summary}")
         with Injector(g.domain_id) as inj:
-            client, before = _client(inj)
+            client = _client(inj)
             states = inj.record("joint_states", JointState)
             assert inj.wait(lambda: len(states) > 40, 60), plant.output()[-2000:]
             answers = _calls(inj, client, N_REALTIME_CALLS)
@@ -168,12 +149,13 @@ def test_a_thousand_concurrent_resets_in_realtime_are_all_answered_and_the_loop_
     assert len(answers) == N_REALTIME_CALLS and all(a.success for a in answers), {a.message for a in answers}
     assert all(a.message.startswith(ANSWER_KINDS) for a in answers), {a.message for a in answers}
     s = json.loads(summary.read_text())
-    assert s["reset_calls"] == before + N_REALTIME_CALLS and s["resets"] >= 1 and not s["fallen"], s
+    assert s["reset_calls"] == N_REALTIME_CALLS and s["resets"] >= 1 and not s["fallen"], s
     run = np.genfromtxt(csv_path, delimiter=",", names=True)
     assert run["t"][-1] == pytest.approx(3.0) and run["t"][0] == 0.0, (run["t"][:3], run["t"][-3:])
     assert np.abs(run["theta_b"][-200:]).max() < BALANCED, (np.abs(run["theta_b"][-200:]).max(), s, out[-3000:])
 
 
+@pytest.mark.graph
 def test_a_recorded_run_with_a_reset_splits_into_two_segments_with_the_plants_counts(tmp_path):
     import re
 
@@ -183,12 +165,13 @@ def test_a_recorded_run_with_a_reset_splits_into_two_segments_with_the_plants_co
         rec = g.start("mcap_recorder", "-p", f"output:={bag}", "-p", "use_sim_time:=true")
         g.start("disturbance_observer", "-p", "use_sim_time:=true")
         g.start("dscndo_controller", "-p", "use_sim_time:=true")
-        plant = g.start("plant_sim", "-p", "duration_s:=2.0", "-p", "expected_subscribers:=4", "-p", f"csv:={csv_path}")
+        # expected_subscribers 3: the observer, the controller and the recorder (the user's count)
+        plant = g.start("plant_sim", "-p", "duration_s:=2.0", "-p", "expected_subscribers:=3", "-p", f"csv:={csv_path}")
         with Injector(g.domain_id) as inj:
-            client, _ = _client(inj)
+            client = _client(inj)
             states = inj.record("joint_states", JointState)
-            at = 50 + random.randrange(100)           # a random moment, well before the end (400 states)
-            assert inj.wait(lambda: len(states) > at, 120), plant.output()[-2000:]
+            at = (50 + random.randrange(100)) * 5_000_000   # a random moment, well before the end (400 states)
+            assert inj.wait(lambda: states and L.parse_joint_state(states[-1])[0] >= at, 120), plant.output()[-2000:]
             assert _calls(inj, client, 1)[0].message.startswith("reset #1")
             assert inj.wait(lambda: plant.poll() is not None, 120), plant.output()[-3000:]
         assert plant.wait(10) == 0, plant.output()[-3000:]

@@ -1,8 +1,9 @@
-"""The realtime runner's tick log: bounded memory on a run of days, the statistics of the list it replaces."""
+"""The realtime loop's tick log (nodes.runtime.schedule): bounded memory on a run of days, the statistics of the list
+it replaces."""
 import numpy as np
 import pytest
 
-from mwip_ros.nodes.loop.plant_runners import TickLog
+from mwip_ros.nodes.runtime.schedule import TickLog
 
 pytestmark = pytest.mark.unit
 
@@ -38,7 +39,7 @@ def test_a_long_run_keeps_the_same_memory_and_a_fair_sample():
     for i, x in enumerate(t):
         log.append(float(x))
         if i in (TickLog.RESERVOIR, len(t) - 1):
-            sizes.append((log.recent.nbytes, log.sample.nbytes))
+            sizes.append((log.recent.nbytes, log.intervals.sample.nbytes))
     assert sizes[0] == sizes[1] and len(log.late) == TickLog.MISSED   # 80 late ticks: the first 50 kept
     per = np.diff(t) * 1e3
     assert log.max_period * 1e3 == per.max() and len(log) == len(t)

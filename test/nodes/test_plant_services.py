@@ -1,14 +1,13 @@
-"""plant_sim's ~/reset service, called with an rclpy client: the robot and its time go back to the start, and
-the observer and the controller follow the stamps back (re-initialised, logged) so the loop goes on."""
+"""plant_sim's ~/reset service: the robot and its time go back to the start, and the observer and the controller
+follow the stamps back (re-initialised, logged) so the loop goes on (the stamp guard's rules, and the loop in this
+process; the service through the middleware: test_plant_resets.py's realtime calls, test/cli/test_ctl.py)."""
 import json
 
 import pytest
-from sensor_msgs.msg import JointState
 
-from graphproc import Graph
-from injector import Injector, call_until_answered
 from mwip_ros.msgs import layouts as L
 from mwip_ros.nodes.runtime.guards import NEW, REPEAT, RESTART, RESYNC, StampGuard
+from nodeharness import Loop
 
 INITIAL_THETA_B = -0.1745   # config/paper.yaml
 
@@ -79,38 +78,30 @@ def test_a_realtime_stream_reset_again_and_again_is_followed_each_time_and_only_
     assert RESTART not in late and asked == [False] and "no restart" in late[-1]
 
 
-@pytest.mark.graph
+@pytest.mark.node
 def test_reset_in_lockstep_goes_back_to_the_initial_state_and_the_loop_goes_on(tmp_path):
-    from std_srvs.srv import Trigger
+    """The loop in this process (plant, observer and controller wired, test/nodeharness.py): a reset before the
+    run is a no-op; one during it sends the plant back to its initial state at t = 0, and the observer and the
+    controller follow the stamps back (once the plant's resends agree) so the loop goes on."""
+    summary = tmp_path / "summary.json"
+    with Loop("-p", "duration_s:=0.0", "-p", f"summary_json:={summary}") as loop:
+        plant = loop.plant
+        first = plant.call("~/reset")
+        assert first.success and first.message.startswith("already at the initial state"), first.message
+        loop.start()
+        assert loop.run(lambda: len(plant.sent("joint_states")) > 400)
+        n_before = len(plant.sent("joint_states"))
+        answer = plant.call("~/reset")
+        assert answer.success and answer.message.startswith("reset #1"), answer.message
 
-    with Graph(tmp_path) as g:
-        obs = g.start("disturbance_observer")
-        ctl = g.start("dscndo_controller")
-        # the run waits for this test's joint_states reader (the third subscriber): the reset client is shown to
-        # work first by calls that are no-ops at the initial state (its one real call is then sent once)
-        plant = g.start("plant_sim", "-p", "duration_s:=0.0", "-p", f"summary_json:={tmp_path / 'summary.json'}",
-                        "-p", "expected_subscribers:=3")
-        with Injector(g.domain_id) as inj:
-            client = inj.node.create_client(Trigger, "/plant_sim/reset")
-            assert client.wait_for_service(timeout_sec=30)
-            first, warm_up = call_until_answered(inj, client, Trigger.Request)
-            assert first.message.startswith("already at the initial state"), first.message
-            states = inj.record("joint_states", JointState)
-            assert inj.wait(lambda: len(states) > 400, 120), plant.output()[-2000:]
-            n_before = len(states)   # before the call: the reset may be done before its answer arrives
-            future = client.call_async(Trigger.Request())
-            assert inj.wait(future.done, 30)
-            assert future.result().success and "reset" in future.result().message, future.result()
-
-            def went_back_and_on():
-                later = [L.parse_joint_state(d)[0] for d in states[n_before:]]
-                return 0 in later and max(later[later.index(0):]) >= 500_000_000   # 0.5 s after the reset
-            assert inj.wait(went_back_and_on, 120), (plant.output()[-2000:], ctl.output()[-2000:])
-            after = [L.parse_joint_state(d) for d in states[n_before:]]
-            first = next(x for stamp, x, _ in after if stamp == 0)
-            assert first.theta_b == INITIAL_THETA_B and first.theta_w == 0.0 and first.dtheta_b == 0.0
-        for p in (obs, ctl):
-            assert "restarted at t = 0.000 s" in p.output(), p.output()[-2000:]
-        assert plant.stop() == 0 and obs.stop() == 0 and ctl.stop() == 0
-    summary = json.loads((tmp_path / "summary.json").read_text())
-    assert (summary["resets"], summary["reset_calls"]) == (1, warm_up + 1), summary   # one reset done
+        def went_back_and_on():
+            later = [L.parse_joint_state(d)[0] for d in plant.sent("joint_states")[n_before:]]
+            return 0 in later and max(later[later.index(0):]) >= 500_000_000   # 0.5 s after the reset
+        assert loop.run(went_back_and_on), plant.logs()[-2000:]
+        after = [L.parse_joint_state(d) for d in plant.sent("joint_states")[n_before:]]
+        first = next(x for stamp, x, _ in after if stamp == 0)
+        assert first.theta_b == INITIAL_THETA_B and first.theta_w == 0.0 and first.dtheta_b == 0.0
+        for name in ("disturbance_observer", "dscndo_controller"):
+            assert "restarted at t = 0.000 s" in loop[name].logs(), loop[name].logs()[-2000:]
+    summary = json.loads(summary.read_text())
+    assert (summary["resets"], summary["reset_calls"]) == (1, 2), summary   # one reset done of two calls

@@ -13,24 +13,22 @@ import pytest
 from mwip_ros.nodes.runtime import rclpy_compat as C
 
 
+class _PlainNode:
+    """A plain rclpy node (no use_sim_time) for the harness: made in its private context, no discovery."""
+
+    def __new__(cls, context=None, argv=()):
+        from rclpy.node import Node
+        return Node("compat_test", context=context)
+
+
 @pytest.fixture
 def node():
-    """A real rclpy node (no use_sim_time) on a private domain, destroyed afterwards."""
-    import rclpy
-    from rclpy.node import Node
-
-    from graphproc import fresh_domain_id, release_domain_id
-
-    domain = fresh_domain_id()
-    ctx = rclpy.Context()
-    rclpy.init(args=["test", "--ros-args", "-p", "k1:=7.5", "-p", "other:=1"], context=ctx, domain_id=domain)
-    n = Node("compat_test", context=ctx)
-    try:
-        yield n
-    finally:
-        n.destroy_node()
-        rclpy.shutdown(context=ctx)
-        release_domain_id(domain)
+    """A real rclpy node (no use_sim_time, two -p rules) in a private context (test/nodeharness.py), destroyed
+    afterwards."""
+    from nodeharness import NodeHarness
+    with NodeHarness(_PlainNode, "-p", "k1:=7.5", "-p", "other:=1", params=None, as_given=True,
+                     name="compat_test") as h:
+        yield h.node
 
 
 @pytest.mark.unit
@@ -38,7 +36,7 @@ def test_the_rclpy_is_the_one_written_for():
     assert C.rclpy_version() in C.WRITTEN_FOR
 
 
-@pytest.mark.graph
+@pytest.mark.node
 def test_parameter_overrides_are_rclpys_start_up_values_and_what_declare_takes(node):
     from rclpy.parameter import Parameter
 
@@ -53,7 +51,7 @@ def test_parameter_overrides_are_rclpys_start_up_values_and_what_declare_takes(n
         C.parameter_overrides(object())
 
 
-@pytest.mark.graph
+@pytest.mark.node
 def test_undeclared_names_are_named_where_rclpy_names_none(node):
     from rclpy.exceptions import ParameterNotDeclaredException
     from rclpy.node import Node
@@ -79,7 +77,7 @@ def test_undeclared_names_are_named_where_rclpy_names_none(node):
         C.name_undeclared_parameters(object())
 
 
-@pytest.mark.graph
+@pytest.mark.node
 def test_a_clock_without_sim_time_reads_what_the_node_sets(node):
     from rclpy.clock import ROSClock
     from rclpy.time import Time
@@ -107,7 +105,7 @@ def _clock_msg(ns):
     return msg
 
 
-@pytest.mark.graph
+@pytest.mark.node
 def test_the_clock_guard_rejects_what_rclpys_time_source_raises_on(node):
     from rclpy.clock import ClockType, ROSClock
     from rclpy.time_source import TimeSource

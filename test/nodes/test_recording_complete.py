@@ -1,10 +1,12 @@
-"""A lockstep recording is complete, or says loudly that it is not, however the user starts the nodes.
+"""A lockstep recording started by hand is complete, in any start order, without counting the recorder.
 
-The four nodes are started as a user would (``ros2 run`` each, no ``expected_subscribers``),
-recorder first and in the reverse order, beside a process that keeps a core busy, several
-times.  Every run must end with one message per state on every topic of the loop (a resend
-counted once), or with the recorder's warning, in its log and in the bag's metadata; and with the
-recorder counted in the plant's ``expected_subscribers``, with every message.
+The four nodes are started as a user would (``ros2 run`` each, no ``expected_subscribers``), recorder first and in
+the reverse order, beside a process that keeps a core busy, several times. Every run must end with one message per
+state on every topic of the loop (a resend counted once), and the recorder saying so. Before the package's
+discovery profile (mwip_ros.nodes.runtime.discovery) a recorder started first missed the plant's topics in some runs:
+its one answer to the plant's first announcement was lost and the plant found it only 3 s later, after its short run
+(docs/recording.md). A recording that does lack messages still says so, in its log and in the bag's metadata
+(test/nodes/test_mcap_recorder.py and test/bag/test_ledger.py, in-process).
 """
 import re
 import sys
@@ -38,16 +40,13 @@ def _start_cost_s(plant_log: str) -> float:
     return next(float(t) for t, text in times if "starting lockstep run" in text) - t0
 
 
-@pytest.mark.parametrize("order", ["user", "reverse", "user, split", "user, counted"])
-def test_every_lockstep_run_is_recorded_whole_or_flagged(tmp_path, order):
+@pytest.mark.parametrize("order", ["user", "reverse", "user, split"])
+def test_every_lockstep_run_is_recorded_whole(tmp_path, order):
     """``split``: the recorder splits its bag every simulated second (max_bagfile_duration, log time from /clock):
-    the ledger judges the whole recording, and the files read as one run.  ``counted``: the plant's
-    expected_subscribers counts the recorder (as scripts/run_experiment.sh does), and then every run is complete.
-    Without it a recorder started first is complete in nearly every run, but not in all: one that had not matched
-    the plant before its short run ended lacked the plant's topics (docs/recording.md), and said so."""
+    the ledger judges the whole recording, and the files read as one run. No run counts the recorder in the plant's
+    expected_subscribers (scripts/run_experiment.sh still does, as a belt to these braces)."""
     results = []
     split = ("-p", "max_bagfile_duration:=1") if order.endswith("split") else ()
-    counted = ("-p", "expected_subscribers:=3") if order.endswith("counted") else ()
     for run in range(RUNS if not split else 1):
         bag = tmp_path / f"bag{run}"
         with Graph(tmp_path) as g:
@@ -55,7 +54,7 @@ def test_every_lockstep_run_is_recorded_whole_or_flagged(tmp_path, order):
                     cmd=[sys.executable, "-c", "import time\nend = time.time() + 120\nwhile time.time() < end: pass"])
             starts = [("mcap_recorder", ("-p", f"output:={bag}", "-p", "use_sim_time:=true", *split)),
                       ("disturbance_observer", ()), ("dscndo_controller", ()),
-                      ("plant_sim", ("-p", "duration_s:=5.0", *counted))]
+                      ("plant_sim", ("-p", "duration_s:=5.0"))]
             if order == "reverse":
                 starts.reverse()
             procs = {name: g.start(name, *args, label=f"{name}{run}") for name, args in starts}
@@ -83,12 +82,5 @@ def test_every_lockstep_run_is_recorded_whole_or_flagged(tmp_path, order):
         flagged = GAPS_KEY in (meta.get("custom_data") or {})
         complete = all(n == states for n in unique.values())
         results.append((order, run, states, unique, counts, flagged, round(_start_cost_s(plant_log), 2)))
-        if complete:
-            assert not flagged and "lockstep recording complete" in rec_log, rec_log[-2000:]
-        else:
-            assert flagged and "INCOMPLETE lockstep recording" in rec_log, (unique, rec_log[-2000:])
-            assert "count it in plant_sim's expected_subscribers" in rec_log, rec_log[-2000:]   # the remedy named
-            assert meta["custom_data"][GAPS_KEY] in rec_log
+        assert complete and not flagged and "lockstep recording complete" in rec_log, (unique, states, rec_log[-2000:])
     print("\n".join(map(str, results)))
-    if counted:  # the plant waited for the recorder's reader: nothing may be missing
-        assert all(all(n == r[2] for n in r[3].values()) for r in results), results

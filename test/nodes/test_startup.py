@@ -13,6 +13,7 @@ from graphproc import PARAMS, Graph
 from nodeharness import NodeHarness, node_class, refused
 from mwip_ros import params as P
 from mwip_ros.nodes.runtime.entry import NODES as NODE_MODULES
+from mwip_ros.core.lqr import NO_DESIGN
 
 NODES = ("plant_sim", "disturbance_observer", "dscndo_controller", "mcap_recorder", "bag_replay", "robot_markers",
          "foxglove_server", "state_estimator", "robot_state")
@@ -50,7 +51,7 @@ CASES = [  # (id, node, file maker or None, extra ros args, words the one line m
     ("not a rule", "dscndo_controller", None, ("-p", "k1"), ("'k1'", "not a 'name:=value' rule")),
     # every law's design at start-up, whatever the law in use (old code: exit 1, an LqrDesignError traceback)
     ("mpc.Q negative", "dscndo_controller", None, ("-p", "mpc.Q:=[-1.0, 10.0, 1.0]"), ("'mpc.Q'", ">= 0")),
-    ("mpc.Q zero", "dscndo_controller", None, ("-p", "mpc.Q:=[0.0, 0.0, 0.0]"), ("'mpc.Q'", "stabilize")),
+    ("mpc.Q zero", "dscndo_controller", None, ("-p", "mpc.Q:=[0.0, 0.0, 0.0]"), ("'mpc.Q'", NO_DESIGN)),
     ("mpc.Q huge", "dscndo_controller", None, ("-p", "mpc.Q:=[1.0e300, 10.0, 1.0]"), ("'mpc.Q'", "<= 1e+12")),
     # QoS overrides would be ignored (the nodes set their QoS): refused, not silently dropped
     ("qos override by -p", "dscndo_controller", None, ("-p", "qos_overrides./joint_states.subscription.depth:=10"),

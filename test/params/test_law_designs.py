@@ -4,6 +4,7 @@ import pytest
 
 from mwip_ros import params as P
 from mwip_ros.params.paths import default_params_file
+from mwip_ros.core.lqr import NO_DESIGN
 
 pytestmark = pytest.mark.unit
 
@@ -11,9 +12,9 @@ BASE = P.merged_values(P.load_param_file(default_params_file()))
 
 
 @pytest.mark.parametrize("key, value, words", [
-    ("mpc.Q", [-1.0, 10.0, 1.0], ">= 0"), ("mpc.Q", [0.0, 0.0, 0.0], "stabilize"),
+    ("mpc.Q", [-1.0, 10.0, 1.0], ">= 0"), ("mpc.Q", [0.0, 0.0, 0.0], NO_DESIGN),
     ("mpc.Q", [1e300, 10.0, 1.0], "<= 1e+12"), ("mpc.Q", [1.0, 1.0], "3 entries"),
-    ("lqr.Q", [100.0, 10.0, 0.0], "stabilize")])
+    ("lqr.Q", [100.0, 10.0, 0.0], NO_DESIGN)])
 def test_a_weight_with_no_design_is_refused_naming_its_key(key, value, words):
     for law in ("dsc", "mpc", "lqr"):
         with pytest.raises(P.ParamError) as ei:

@@ -6,6 +6,7 @@ import yaml
 
 from mwip_ros import params as P
 from mwip_ros.params.paths import default_params_file
+from mwip_ros.core.lqr import NO_DESIGN
 
 pytestmark = pytest.mark.unit
 
@@ -74,7 +75,7 @@ def test_bad_values_are_refused_naming_the_key(tmp_path, path, value, key, words
     assert "p.yaml" in str(ei.value)
 
 
-@pytest.mark.parametrize("Q, words", [([100.0, 10.0, 0.0], "does not stabilize"), ([-1.0, 1.0, 1.0], "semidefinite")])
+@pytest.mark.parametrize("Q, words", [([100.0, 10.0, 0.0], NO_DESIGN), ([-1.0, 1.0, 1.0], "semidefinite")])
 def test_lqr_weights_without_a_design_are_refused_naming_lqr_q(tmp_path, Q, words):
     """Checked whatever the law: a switch to lqr at run time must not be the first to fail."""
     pf = _load(tmp_path, _mutate(("dscndo_controller", "ros__parameters", "lqr"), {"Q": Q, "R": 0.01}))
@@ -154,3 +155,20 @@ def test_every_spec_default_passes_its_own_check():
     for node in P.NODE_SPECS:
         for name, spec in P.specs_for(node).items():
             spec.validate(spec.default)
+
+
+@pytest.mark.parametrize("doc, said", [
+    ({"/**": {"ros__parameters": {"control_rate_hertz": 100.0}}},
+     "unknown parameter in the shared /** section (did you mean 'control_rate_hz'?)"),
+    ({"/**": {"ros__parameters": {"k_1": 7.0}}},   # a node's key misspelt in the shared section: its node named
+     "unknown parameter in the shared /** section (did you mean 'k1' under dscndo_controller:?)"),
+    ({"dscndo_controller": {"ros__parameter": {"k1": 7.0}}},
+     "exactly 'ros__parameters:': got 'ros__parameter' (did you mean 'ros__parameters'?)"),
+    ({"dscndo_controller": {"ros__parameters": {"k_1": 7.0}}},
+     "unknown parameter for dscndo_controller (did you mean 'k1'?)"),
+])
+def test_a_misspelt_key_anywhere_in_a_file_gets_a_did_you_mean(doc, said):
+    """The same "did you mean" as a sweep spec's (params.schema.spelling_hint); the shared section had none."""
+    with pytest.raises(P.ParamError) as err:
+        P.parse_param_dict(doc, "typo.yaml")
+    assert said in str(err.value), err.value

@@ -2,6 +2,7 @@
 the slow law's rate (the naive estimate, elapsed x runs left / runs done, said seconds where minutes were left);
 slow laws come in small chunks and every law's first chunk comes early, so progress keeps moving."""
 import io
+import time
 from types import SimpleNamespace
 
 import pytest
@@ -65,7 +66,36 @@ def test_the_plain_progress_line_says_the_weighted_time_left(monkeypatch):
         clock[0] += c.seconds
         p.update(c, SimpleNamespace(steps=len(c) * 2000, seconds=c.seconds))
     line = err.getvalue().strip().splitlines()[-1]
+    p.close()
     assert "2,010/2,100 runs (96 %)" in line and line.endswith("45 s left"), line
+
+
+def test_a_plain_progress_line_comes_every_5_s_while_no_chunk_finishes(monkeypatch):
+    """sweeps.md's promise: a line every 5 s, also while a chunk of a slow configuration runs for tens of seconds
+    (laws_mass_mismatch_realistic.yaml said nothing for 27 s, then a line every 30 s). Here every 0.05 s."""
+    err = io.StringIO()
+    monkeypatch.setattr(S.sys, "stderr", err)
+    monkeypatch.setattr(S._Progress, "EVERY_S", 0.05)
+    chunks = fake_chunks()
+    p = S._Progress(chunks, quiet=False)
+    try:
+        deadline = time.monotonic() + 3.0
+        while err.getvalue().count("\n") < 3 and time.monotonic() < deadline:
+            time.sleep(0.01)   # no chunk finishes meanwhile
+        first = err.getvalue().splitlines()
+        p.update(chunks[0], SimpleNamespace(steps=500 * 2000, seconds=0.5))
+        while err.getvalue().count("500/2,100 runs") < 3 and time.monotonic() < deadline:
+            time.sleep(0.01)
+    finally:
+        p.close()
+    lines = err.getvalue().splitlines()
+    assert len(first) >= 3 and all("0/2,100 runs (0 %)" in line and "time left not known yet" in line
+                                   for line in first[:3]), first
+    after = lines[lines.index(next(ln for ln in lines if "500/2,100" in ln)):]
+    assert sum("500/2,100 runs (24 %)" in line for line in after) >= 3 and "0/2,100 runs (0 %)" not in after, lines
+    n = len(lines)
+    time.sleep(0.2)
+    assert len(err.getvalue().splitlines()) == n   # closed: silent
 
 
 def test_a_law_the_batch_cannot_compile_comes_in_small_chunks_and_the_laws_take_turns():

@@ -20,7 +20,6 @@ from sensor_msgs.msg import JointState
 
 from mwip_ros import params as P
 from mwip_ros.core.observer import DiscreteObserver
-from mwip_ros.core.theorem import observer_conditions
 from mwip_ros.msgs import layouts as L
 from mwip_ros.msgs.qos import qos_for
 from mwip_ros.nodes.runtime.diagnostics import OK
@@ -54,10 +53,8 @@ class DisturbanceObserver(Node, GracefulNodeMixin):
         self.get_logger().info(f"NDO ready: X = {self.v['X']}, h = {self.h * 1e3:.3f} ms")
 
     def _warn_theorem(self):
-        th = observer_conditions(self.obs.nominal, self.obs.X)
-        if not th.satisfied:
-            self.get_logger().warning(f"observer gains break Theorem 2 (eq. 35): a4 = {th.a4:.4f}, a5 = {th.a5:.4f} "
-                                      "(must be > 0); run mwip_theorem for the full table")
+        for text in P.typed.observer_warnings(self.v):   # what mwip_ctl param set prints too
+            self.get_logger().warning(text)
 
     def _on_change(self, changed):
         if "X" in changed:

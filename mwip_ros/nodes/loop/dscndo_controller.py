@@ -110,7 +110,7 @@ class DscndoController(Node, GracefulNodeMixin):
                                 "controller")
         self.watch = PublisherWatch(self, ["joint_states", "disturbance_estimate"])
         mc = motion_config(self.v)   # docs/theory.md 6.11: None while motion.enabled is false (nothing changes)
-        self.motion = Shaper(mc, self.h) if mc is not None else None
+        self.motion = Shaper(mc, self.h, self.nominal) if mc is not None else None
         # theory 6.13, with a yaw rate: the wheel limit is the drive's (plant_sim's sections of the same files) unless
         # motion.yaw_wheel_limit says less (more: the drive's, and a warning)
         with_drive = {**self.v, **_drive_values(argv)}
@@ -293,7 +293,7 @@ class DscndoController(Node, GracefulNodeMixin):
                                       f"and the robot holds its position (stop #{self.motion.timeouts})")
         w = self.yaw_rates.pop(stamp, None)
         if w is not None:   # stage yaw (docs/theory.md 6.13): the two wheels' torques answer the state
-            u_psi = self.yaw.step(self.motion.ref.dpsi, w, u) if driving else self.yaw.hold(w)
+            u_psi = self.yaw.step(self.motion.ref.dpsi, w, u) if driving else self.yaw.idle(w)
             self.cmds_pub.publish(L.encode_wheel_torques(stamp, *wheel_torques(u, u_psi, 0.0)))
         else:
             self.cmd_pub.publish(L.encode_command(u))

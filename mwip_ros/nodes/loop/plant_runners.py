@@ -7,9 +7,13 @@ does and what ends a period:
 * :class:`LockstepRunner`: publish ``/clock`` and state k, wait for the command that answers it
   (the lockstep driver, :mod:`.lockstep`, told the answering stages of ``core.loop``), finish the
   period, send the next state.  The graph then reproduces ``mwip_sim`` sample by sample.
-* :class:`RealtimeRunner`: a timer at ``control_rate_hz`` on the node's clock finishes the period
-  of the state published at the last tick with the newest command (zero torque once it is older
-  than ``stale_command_periods``) and publishes the next state.
+* :class:`RealtimeRunner`: period k is due at t_0 + k h on the node's clock (:mod:`..runtime.schedule`: absolute
+  deadlines); at each wake of a timer at ``control_rate_hz`` it finishes the period of the state published at the
+  last wake with the newest command (zero torque once it is older than ``stale_command_periods`` at the period's
+  deadline) and publishes the next state.  A late wake finishes every period that became due meanwhile (they are
+  counted as missed deadlines; the plant integrates them with the command it holds, as a robot's physics would), so
+  the grid never slides: after T s the plant has run floor(T / h) periods and its newest stamp is within a period of
+  the clock.
 
 Both feed the driver's state machine (docs/theory.md 6.8, the node's ``safety``) what only the mode knows: the
 lockstep timeout is the lockstep watchdog (a ``watchdog`` fault recorded, then exit 1 as before); the
@@ -24,13 +28,13 @@ torque (the driver is in fault), so the run goes on; in realtime it is dropped, 
 """
 from __future__ import annotations
 
-import random
 import time
 from typing import Dict, Optional
 
 import numpy as np
 
 from mwip_ros.nodes.runtime.process import EXIT_ERROR
+from mwip_ros.nodes.runtime.schedule import Schedule, TickLog
 
 __all__ = ["LockstepRunner", "RealtimeRunner", "RUNNERS"]
 
@@ -120,65 +124,6 @@ class LockstepRunner(_Runner):
         return None
 
 
-class TickLog:
-    """The realtime loop's tick times in bounded memory, whatever the run's length.
-
-    Keeps the newest :attr:`RECENT` tick times (a ring: the watchdog looks back over them, the diagnostics over the
-    last 400 periods), the count of ticks, the longest period and when it ended, the first :attr:`MISSED` periods
-    longer than ``late_after`` and, for the percentiles, every period up to :attr:`RESERVOIR` of them, then a uniform
-    sample of that many of all (reservoir sampling, Vitter's algorithm R, a fixed seed): a run of up to
-    ``RESERVOIR`` periods (41 s at 200 Hz) gets its percentiles exactly, a longer one from that sample.
-    ``log[-1]``, ``log[-n:]`` (n at most ``RECENT``), ``len(log)`` and ``bool(log)`` read as on the list of every
-    tick time it replaces."""
-
-    RECENT = 4096
-    RESERVOIR = 8192
-    MISSED = 50
-
-    def __init__(self, late_after: float):
-        self.late_after = late_after
-        self.recent = np.zeros(self.RECENT)
-        self.ticks = 0
-        self.sample = np.zeros(self.RESERVOIR)
-        self.periods = 0
-        self.max_period, self.max_index = 0.0, 0
-        self.late = []          # indices (from 0) of the first MISSED late periods
-        self._rng = random.Random(0)
-
-    def append(self, t: float) -> None:
-        if self.ticks:
-            p, i = t - self.recent[(self.ticks - 1) % self.RECENT], self.periods
-            self.periods += 1
-            j = i if i < self.RESERVOIR else self._rng.randrange(i + 1)
-            if j < self.RESERVOIR:
-                self.sample[j] = p
-            if p > self.max_period:
-                self.max_period, self.max_index = p, i
-            if p > self.late_after and len(self.late) < self.MISSED:
-                self.late.append(i)
-        self.recent[self.ticks % self.RECENT] = t
-        self.ticks += 1
-
-    def __len__(self) -> int:
-        return self.ticks
-
-    def __getitem__(self, key):
-        """``[-k]``: the k-th newest tick time; ``[-n:]``: the newest n (at most RECENT) in order, a list."""
-        kept = min(self.ticks, self.RECENT)
-        if isinstance(key, slice):
-            if key.stop is not None or key.step is not None or key.start is None or key.start >= 0:
-                raise IndexError("a TickLog gives its newest ticks only: log[-n:]")
-            n = min(-key.start, kept)
-            return [float(self.recent[k % self.RECENT]) for k in range(self.ticks - n, self.ticks)]
-        if not -kept <= key < 0:
-            raise IndexError(f"a TickLog keeps its newest {kept} ticks: log[-1] .. log[-{kept}]")
-        return float(self.recent[(self.ticks + key) % self.RECENT])
-
-    def periods_ms(self) -> np.ndarray:
-        """Every period [ms] (the sample of them past RESERVOIR)."""
-        return self.sample[:min(self.periods, self.RESERVOIR)] * 1e3
-
-
 class RealtimeRunner(_Runner):
     mode = "realtime"
     reset_when = "at the next tick"
@@ -186,21 +131,30 @@ class RealtimeRunner(_Runner):
     def __init__(self, node):
         super().__init__(node)
         self.cmd: Optional[float] = None
-        self.cmd_at = 0.0
-        self.tick_times = TickLog(1.5 * node.h)   # bounded: a run of days keeps the same few arrays
+        self.cmd_at = 0          # when the newest command came [ns, the node's clock]
+        self.schedule: Optional[Schedule] = None   # the deadlines, on the node's clock (from start())
+        self.tick_times = TickLog(1.5 * node.h)    # the wakes on the steady clock (the watchdog's), bounded
         self.stale = 0
-        self.missed = 0
         self.watchdog_deferred = False   # a late tick deferred the watchdog's verdict to the next (_check_watchdog)
+
+    def _now(self) -> int:
+        """The node's clock [ns]: the schedule's and the stamps' (wall time, or simulated under use_sim_time)."""
+        return self.node.get_clock().now().nanoseconds
 
     def start(self) -> None:
         from mwip_ros.msgs.qos import REALTIME_INPUT_QOS
         n = self.node
-        n.stamp0 = n.get_clock().now().nanoseconds
         n.lockstep.listen(REALTIME_INPUT_QOS)   # the chain's intermediate answers: a watchdog fault names who is silent
-        n.create_timer(n.h, self._tick)
+        timer = n.create_timer(n.h, self._tick)
+        now = self._now()
+        # the deadlines on the timer's own grid (its first call one period after its creation, read before now
+        # is): period k due at stamp0 + k h, state k's stamp; the wake latency is then the timer's, not an offset
+        n.stamp0 = min(now, now + (timer.time_until_next_call() or n.period_ns) - n.period_ns)
+        self.schedule = Schedule(n.period_ns, n.stamp0)
+        self._tick()   # state 0, at its deadline
 
     def on_command(self, u: float) -> None:
-        self.cmd, self.cmd_at = u, time.monotonic()
+        self.cmd, self.cmd_at = u, self._now()
 
     def graph_timed_out(self) -> None:
         n = self.node
@@ -208,31 +162,39 @@ class RealtimeRunner(_Runner):
                                f"starting the realtime run anyway")
         n._start("realtime without the whole graph")
 
-    def _tick(self) -> None:
+    def _command(self, due: int):
+        """The command that acts over the period ending at ``due`` [ns]: the newest, or zero torque when it is older
+        than ``stale_command_periods`` periods at that deadline (counted, warned)."""
         n = self.node
+        if self.cmd is not None and due - self.cmd_at <= n.v["stale_command_periods"] * n.period_ns:
+            return self.cmd
+        self.stale += 1
+        if self.stale <= 3 or self.stale % 200 == 0:
+            n.get_logger().warning(f"no fresh wheel_torque_cmd (#{self.stale}); applying zero torque")
+        return 0.0
+
+    def _tick(self) -> None:
+        """A wake of the timer: finish every period that became due since the last wake (the schedule keeps the
+        clock's grid: a late wake catches up, its missed periods counted), then publish the newest state."""
+        n = self.node
+        wake = self.schedule.wake(self._now())
+        if not wake.periods:   # before the next deadline: nothing is due
+            return
         now = time.monotonic()
-        late = bool(self.tick_times) and now - self.tick_times[-1] > 1.5 * n.h
-        if self.tick_times:
-            if late:
-                self.missed += 1
-        else:   # state 0 goes out at this tick: the watchdog counts from it, a controller that never answers faults
+        first = not self.tick_times
+        self.tick_times.append(now)
+        if first:   # state 0 goes out at this tick: the watchdog counts from it, a controller that never answers faults
             n.t_wall0 = now
             n._arm_watchdog()
-        self.tick_times.append(now)
         if n.done:
             return
         if n._reset_pending:   # a period boundary: the new run's state 0 instead of the next state
             n._reset()
-        elif len(self.tick_times) > 1:  # finish the period of the state published at the last tick
-            self._check_watchdog(now, late)
-            u = self.cmd
-            if u is None or now - self.cmd_at > n.v["stale_command_periods"] * n.h:
-                self.stale += 1
-                if self.stale <= 3 or self.stale % 200 == 0:
-                    n.get_logger().warning(f"no fresh wheel_torque_cmd (#{self.stale}); applying zero torque")
-                u = 0.0
-            if n._finish_period(u):
-                return
+        elif not first:  # finish the period of the state published at the last wake, and any missed since
+            self._check_watchdog(now, wake.late)
+            for k in range(wake.k - wake.periods + 1, wake.k + 1):   # the periods ending at these deadlines
+                if n._finish_period(self._command(self.schedule.due(k))):
+                    return
         for pub, data in n._sample_messages():
             pub.publish(data)
         n.truth.flush()
@@ -264,27 +226,31 @@ class RealtimeRunner(_Runner):
                      silent_stage=stage)
 
     def diagnostic_values(self) -> dict:
-        if len(self.tick_times) <= 2:
+        if self.schedule is None or self.schedule.wakes <= 2:
             return {}
-        per = np.diff(self.tick_times[-400:]) * 1e3   # the last 400 periods
-        return {"loop_period_p99_ms": f"{np.percentile(per, 99):.3f}", "missed_deadlines": self.missed,
+        s = self.schedule
+        wakes = np.array(s.log[-400:])   # the last 400 wakes [s]; a wake's latency is its time past the grid
+        late = np.mod(wakes - s.t0_ns * 1e-9, s.period_ns * 1e-9) * 1e3
+        return {"loop_period_p99_ms": f"{np.percentile(np.diff(wakes) * 1e3, 99):.3f}",
+                "loop_latency_p99_ms": f"{np.percentile(late, 99):.3f}", "missed_deadlines": s.missed,
                 "stale_commands": self.stale}
 
     def summary(self) -> dict:
-        if len(self.tick_times) <= 2:
+        s = self.schedule
+        if s is None or s.wakes <= 2:
             return {}
         h = self.node.h
-        log = self.tick_times
-        per = log.periods_ms()   # every period, or a uniform sample of them on a long run (TickLog)
-        rt = {"period_ms_p50": float(np.percentile(per, 50)), "period_ms_p99": float(np.percentile(per, 99)),
-              "period_ms_max": log.max_period * 1e3, "ticks": len(log),
-              "period_max_at_s": float(log.max_index + 1) * h,  # sim time of the tick that ended it
-              "missed_deadlines": self.missed, "stale_command_substitutions": self.stale,
-              "missed_at_s": [round(float(i + 1) * h, 6) for i in log.late]}  # the ticks that came late (first 50)
+        rt = s.report()
+        rt.update({"ticks": s.wakes,
+                   "period_max_at_s": float(s.log.max_index + 1) * h,  # about the time of the wake that ended it
+                   "stale_command_substitutions": self.stale,
+                   "missed_at_s": [round(k * h, 6) for k in s.missed_k]})   # the first 50 periods missed
         self.node.get_logger().info(
-            f"realtime: loop period p50 = {rt['period_ms_p50']:.3f} ms, p99 = {rt['period_ms_p99']:.3f} ms, "
-            f"max = {rt['period_ms_max']:.3f} ms (nominal {h * 1e3:g} ms); missed deadlines = "
-            f"{self.missed}; stale-command substitutions = {self.stale}")
+            f"realtime: {rt['periods_due']} periods due, {s.missed} missed (deadline passed with no wake; run late, on "
+            f"schedule); wake latency after the deadline p50 = {rt['latency_ms_p50']:.3f} ms, p99 = "
+            f"{rt['latency_ms_p99']:.3f} ms, max = {rt['latency_ms_max']:.3f} ms; period between wakes p50 = "
+            f"{rt['period_ms_p50']:.3f} ms, p99 = {rt['period_ms_p99']:.3f} ms, max = {rt['period_ms_max']:.3f} ms "
+            f"(nominal {h * 1e3:g} ms); stale-command substitutions = {self.stale}")
         return {"realtime": rt}
 
 

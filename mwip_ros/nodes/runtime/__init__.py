@@ -7,6 +7,7 @@
 :mod:`.guards`              checks of incoming messages: stamps, publishers, rejects (plain Python)
 :mod:`.state_input`         a node's state subscription with its guards
 :mod:`.lockstep`            the one lockstep driver (plant_sim and resim)
+:mod:`.schedule`            the realtime loop's absolute deadlines and timing (plain Python)
 :mod:`.diagnostics`         ``/diagnostics`` for every node
 :mod:`.rclpy_compat`        everything that reaches into rclpy's internals, for the rclpy it was written for
 :mod:`.memtrace`            a debugging aid (``MWIP_MEMTRACE``): RSS, Python heap and glibc heap over a long run

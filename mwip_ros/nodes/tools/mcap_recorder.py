@@ -173,8 +173,9 @@ class McapRecorder(Node, GracefulNodeMixin):
             log.info(f"completeness not checked: a topic has more than {MAX_STAMPS:,} stamps")
         elif gaps:
             self.writer.custom_data[GAPS_KEY] = gaps
-            log.warning(f"INCOMPLETE lockstep recording: {gaps} (a recorder that the plant does not wait for can miss "
-                        f"states: count it in plant_sim's expected_subscribers, docs/recording.md)")
+            log.warning(f"INCOMPLETE lockstep recording: {gaps} (a recorder that joins after the plant's run began, "
+                        f"or one under a discovery set-up of your own, can miss states: count it in plant_sim's "
+                        f"expected_subscribers, docs/recording.md)")
         elif states is not None:
             log.info(f"lockstep recording complete: every topic has all {len(states)} states"
                      + (f" ({sum(self.ledger.repeats.values())} resent message(s) recorded twice, read once)"

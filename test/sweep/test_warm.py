@@ -1,0 +1,93 @@
+"""The batch loop compiled before a sweep needs it, said where the user looks (mwip_ros.sweep.warm): the loops a
+sweep's chunks run that numba's cache lacks, each once; compiled first with a line and a line every 5 s; the
+shipped loops set-up compiles; the cache's answer. Nothing here compiles a batch loop (a test compiles one trivial
+function)."""
+import importlib
+import sys
+import time
+from types import SimpleNamespace
+
+import pytest
+
+from mwip_ros import params as P
+from mwip_ros.core import jitcache
+from mwip_ros.params.paths import default_params_file
+from mwip_ros.sweep import warm
+from mwip_ros.sweep.engine import Chunk
+
+pytestmark = pytest.mark.unit
+
+CONFIG = default_params_file().parent
+
+
+def _values(*files):
+    return P.merged_values(P.load_param_files([CONFIG / f for f in files], option="params"))
+
+
+def test_the_loops_a_sweep_lacks_are_found_once_each_with_a_chunk_that_compiles_them(monkeypatch):
+    monkeypatch.setattr(jitcache, "cached", lambda kernel: False)   # a fresh clone: nothing cached
+    state, raw = _values("paper.yaml"), _values("paper.yaml", "sensors_raw_realistic.yaml")
+    ov = ({"seed": 1, "plant_sim.actual.m_b": 250.0}, {"seed": 2})
+    chunks = [Chunk(0, law, state, ov, 10.0, (5.0, 10.0)) for law in ("dsc", "dscndo", "lqr", "lqr_ndo", "mpc")]
+    chunks.append(Chunk(0, "dscndo", raw, ov, 10.0, (5.0, 10.0)))
+    cold = warm.cold_kernels(chunks)
+    assert [label for label, _ in cold] == ["dsc", "lqr", "dsc with raw sensors (kalman)"]   # dscndo: dsc's loop
+    for _, c in cold:   # one scenario of the sweep's, a few periods
+        assert len(c) == 1 and c.overrides[0] == ov[0] and c.duration_s == pytest.approx(warm.WARM_S)
+    monkeypatch.setattr(jitcache, "cached", lambda kernel: True)
+    assert warm.cold_kernels(chunks) == []
+
+
+def test_compiling_first_says_so_and_says_it_again_every_few_seconds(monkeypatch):
+    """mwip_sweep's first run in a fresh clone said nothing for 90 s while numba compiled."""
+    monkeypatch.setattr(warm, "EVERY_S", 0.05)
+    base = _values("paper.yaml")
+    monkeypatch.setattr(warm, "cold_kernels", lambda chunks: [
+        ("dsc", Chunk(0, "dsc", base, ({"seed": 1},), 0.1, (0.0, 0.1))),
+        ("lqr", Chunk(0, "lqr", base, ({"seed": 1},), 0.1, (0.0, 0.1)))])
+    ran = []
+
+    def runner(chunks):   # compiling: 0.3 s, the loops one after the other
+        for c in chunks:
+            time.sleep(0.15)
+            ran.append(c.controller)
+            yield c, None
+    lines = []
+    spent = warm.compile_first(runner, [], lines.append, "mwip_sweep")
+    assert ran == ["dsc", "lqr"] and spent >= 0.3
+    assert lines[0].startswith("mwip_sweep: compiling the batch loop for dsc, lqr (numba")
+    beats = [line for line in lines if "still compiling" in line]
+    assert len(beats) >= 3 and "(dsc, lqr)" in beats[0] and "(lqr)" in beats[-1]
+    assert lines[-1].startswith("mwip_sweep: compiled in ")
+
+
+def test_nothing_is_said_when_every_loop_is_cached(monkeypatch):
+    monkeypatch.setattr(warm, "cold_kernels", lambda chunks: [])
+    lines = []
+    assert warm.compile_first(lambda c: iter(()), [], lines.append, "mwip_sweep") == 0.0 and lines == []
+
+
+def test_set_up_compiles_each_built_in_loop_with_state_and_raw_sensors():
+    chunks = warm.shipped_chunks()
+    laws = {c.controller for c in chunks}   # (and a test's plug-in law with a pure step, registered by another test)
+    assert {"dsc", "lqr", "smc"} <= laws   # one per pure step: dscndo's is dsc's; mpc has none
+    assert not {"dscndo", "lqr_ndo", "smc_ndo", "mpc", "mpc_ndo"} & laws
+    models = {(c.base.get("sensors.model"), c.base.get("method")) for c in chunks}
+    assert models == {("state", "kalman"), ("raw", "kalman"), ("raw", "complementary")}
+    assert len(chunks) == 3 * len(laws)
+
+
+def test_the_cache_says_whether_a_functions_machine_code_is_there(tmp_path, monkeypatch):
+    (tmp_path / "warm_probe.py").write_text("def twice(x):\n    return 2.0 * x\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    mod = importlib.import_module("warm_probe")
+    try:
+        f = jitcache.jit(mod.twice)
+        assert jitcache.cached(f) is False        # never compiled
+        assert f(1.5) == 3.0
+        assert jitcache.cached(f) is True
+        g = jitcache.jit(mod.twice)               # another process's view: from the cache on disk
+        assert jitcache.cached(g) is True
+        assert jitcache.cached(SimpleNamespace()) is None   # not a dispatcher: not known
+    finally:
+        sys.modules.pop("warm_probe", None)
