@@ -19,6 +19,9 @@ the robot, publish ``external_wrench`` (``geometry_msgs/Wrench``: ``torque.x`` a
 tau_ext1, ``torque.y`` to tau_ext2, until the next one; a zero wrench clears it; with
 ``backend: mujoco`` ``force.y`` pushes the body sideways at its centre of gravity and
 ``torque.z`` turns it about the vertical, both in the robot's heading frame; rk4 ignores them).
+``external_wrench``, ``emergency_stop`` and a raw plant's ``/diagnostics`` are read between the node's callbacks, the
+newest :data:`SIDE_DEPTH` of each (:class:`~mwip_ros.nodes.runtime.rclpy_compat.PolledInput`): within a period while
+the loop runs, and a flood of them queues nothing in front of the period.
 
 The driver's state machine (docs/theory.md 6.8; the pure machine, its states, faults, levels and answers:
 :mod:`mwip_ros.core.safety`; one machine for the node's life) stands between the command and the plant: not
