@@ -110,3 +110,12 @@ def test_a_limit_the_controller_refuses_is_refused(tmp_path):
             limits([f])
     f.write_text("dscndo_controller:\n  ros__parameters:\n    motion:\n      max_speed: 0.4\n")
     assert limits([f]).max_speed == 0.4
+
+
+@pytest.mark.parametrize("command", [["drive"], ["cmd", "--vx", "0.1"], ["push", "--wheel", "1"]])
+def test_a_rate_that_would_flood_the_robot_is_a_usage_error(command):
+    import subprocess
+    import sys
+    r = subprocess.run([sys.executable, "-m", "mwip_ros.cli.ctl", *command, "--rate", "1e9"], capture_output=True,
+                       text=True, timeout=60, stdin=subprocess.DEVNULL)
+    assert r.returncode == 2 and "--rate must be at most 1000 Hz" in r.stderr, r.stderr   # was: as fast as it could
