@@ -248,12 +248,22 @@ class NodeHarness:
         return self._executor
 
     def spin(self, until: Callable[[], bool], timeout: float) -> bool:
-        """Spin the node's own executor (its timers run on the wall clock) until ``until()`` or ``timeout`` s."""
+        """Spin the node's own executor (its timers run on the wall clock) until ``until()`` or ``timeout`` s; the
+        node's polled inputs (:class:`~mwip_ros.nodes.runtime.rclpy_compat.PolledInput`) are read between its
+        callbacks, as its process's loop reads them."""
         import time
         end = time.monotonic() + timeout
         while not until() and time.monotonic() < end:
-            self.executor.spin_once(timeout_sec=0.01)
+            self.spin_once(0.01)
         return until()
+
+    def spin_once(self, timeout_sec: float) -> None:
+        """One turn of the node's loop: the executor's next callback (up to ``timeout_sec``), then its polled inputs
+        (:class:`~mwip_ros.nodes.runtime.rclpy_compat.PolledInput`) read, as its process's loop reads them between
+        callbacks."""
+        self.executor.spin_once(timeout_sec=timeout_sec)
+        for p in getattr(self.node, "polled_inputs", ()):
+            p.poll()
 
     def diagnostics(self):
         """The node's ``/diagnostics`` reporter as ``run_node`` attaches it (made once: ``node.diagnostics``); its
@@ -412,6 +422,16 @@ class Loop:
         self.close()
 
 
+class _Turns:
+    """What mwip_ctl's Ros spins (``spin_once``): a turn of the harness node's loop (:meth:`NodeHarness.spin_once`)."""
+
+    def __init__(self, h: NodeHarness):
+        self.h = h
+
+    def spin_once(self, timeout_sec: float = 0.0) -> None:
+        self.h.spin_once(timeout_sec)
+
+
 def run_ctl(h: NodeHarness, *argv: str) -> tuple:
     """``mwip_ctl argv`` in this process (its ``main``) with its ROS node a :meth:`NodeHarness.peer`-like node in
     ``h``'s context, spun with the node under test by ``h``'s executor: its service calls and messages reach that
@@ -428,11 +448,11 @@ def run_ctl(h: NodeHarness, *argv: str) -> tuple:
             self.rclpy, self.timeout, self.ctx = rclpy, timeout, h.context
             self.node = rclpy.create_node(f"mwip_ctl_{next(_CTL_NAMES)}", namespace=namespace or None,
                                           context=h.context, start_parameter_services=False)
-            self.ex = h.executor
-            self.ex.add_node(self.node)
+            h.executor.add_node(self.node)
+            self.ex = _Turns(h)   # its spin_once is a turn of the node's loop (the polled inputs read too)
 
         def close(self) -> None:   # the harness's executor and context go on
-            self.ex.remove_node(self.node)
+            h.executor.remove_node(self.node)
             self.node.destroy_node()
 
     out, err, ros = io.StringIO(), io.StringIO(), ctl.Ros
