@@ -57,10 +57,17 @@ def run(work: Path, topic: str, files, flood_s: float) -> dict:
     fault = re.search(r"driver: t = ([\d.]+) s: \w+ -> fault \((\w+)", out)
     row["outcome"] = (f"fell at {fell.group(1)} s" if fell else "upright") + \
         (f" ({fault.group(2)} fault at {fault.group(1)} s)" if fault else "")
-    rt = re.search(r"p99 = ([\d.]+) ms, max = ([\d.]+) ms.*missed deadlines = (\d+); stale-command substitutions = "
-                   r"(\d+)", out)
+    rt = re.search(r"period between wakes p50 = [\d.]+ ms, p99 = ([\d.]+) ms, max = ([\d.]+) ms.*stale-command "
+                   r"substitutions = (\d+)", out)
     if rt:
-        row.update(p99=float(rt.group(1)), longest=float(rt.group(2)), missed=int(rt.group(3)), stale=int(rt.group(4)))
+        row.update(p99=float(rt.group(1)), longest=float(rt.group(2)), stale=int(rt.group(3)))
+    missed = re.search(r"(\d+) missed \(deadline", out) or re.search(r"missed deadlines = (\d+)", out)
+    if missed:
+        row["missed"] = int(missed.group(1))
+    if not rt:   # the line before issue 47's schedule: "p99 = .., max = .. (nominal ..); missed deadlines = .."
+        old = re.search(r"p99 = ([\d.]+) ms, max = ([\d.]+) ms.*stale-command substitutions = (\d+)", out)
+        if old:
+            row.update(p99=float(old.group(1)), longest=float(old.group(2)), stale=int(old.group(3)))
     sim = re.search(r"([\d.]+) s simulated in ([\d.]+) s wall", out)
     if sim:
         row["sim"], row["wall"] = float(sim.group(1)), float(sim.group(2))
