@@ -47,7 +47,7 @@ class PolicyLaw(Law):
         path = values.get("policy.file", "")
         if not path:
             return PolicyParams(0.0, 0.0, 0.0, 0.0)
-        p = LinearPolicy.load(path)
+        p = LinearPolicy.load(path)   # a regular file, bounded, read once while it is unchanged
         return PolicyParams(*p.w, p.scale)
 
     def step(self, x, tau_hat=None):
@@ -63,7 +63,10 @@ class PolicyLaw(Law):
         return f"w = ({g.w1:.4g}, {g.w2:.4g}, {g.w3:.4g}), S = {g.scale:g} N m"
 
     def warnings(self) -> List[str]:
-        return [] if self.params.scale > 0 else ["policy.file is empty: the law policy commands 0"]
+        g = self.params
+        if not g.scale > 0:
+            return ["policy.file is empty: the law policy commands 0"]
+        return LinearPolicy((g.w1, g.w2, g.w3), g.scale).warnings()
 
 
 register(PolicyLaw, with_observer="policy_ndo")

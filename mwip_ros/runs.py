@@ -106,13 +106,17 @@ def _limit_text() -> str:
 
 def check_size(path, limit: int, what: str) -> int:
     """The size of ``path`` in bytes (a bag directory: its MCAP files'), checked before anything is read:
-    ValueError, one line, above ``limit``."""
+    ValueError, one line, above ``limit`` or for a file that is not a regular one (a FIFO, a device)."""
+    from mwip_ros.yamlio import NotRegularFile, regular_size
     p = Path(path)
-    if p.is_dir():
-        from mwip_ros.bag import mcap_files
-        size = sum(f.stat().st_size for f in mcap_files(p))
-    else:
-        size = p.stat().st_size
+    try:   # a FIFO or a device is refused unread
+        if p.is_dir():
+            from mwip_ros.bag import mcap_files
+            size = sum(regular_size(f, "MCAP file") for f in mcap_files(p))
+        else:
+            size = regular_size(p, what)
+    except NotRegularFile as exc:
+        raise ValueError(str(exc)) from None
     if size > limit:
         raise ValueError(f"{_mib(size)}, more than a {what} of a run of at most {MAX_ROWS:,} rows "
                          f"({_limit_text()}) takes ({_mib(limit)}); not read")
@@ -134,7 +138,16 @@ def read_csv(path, label: Optional[str] = None, max_rows: Optional[int] = None, 
         size = check_size(path, MAX_CSV_BYTES, "CSV")
     except ValueError as exc:
         raise ValueError(f"{path}: {exc}") from None
-    with open(path, newline="") as f:
+    except OSError as exc:   # missing, or not a regular file (a FIFO, a device): nothing is read
+        raise ValueError(f"{path}: cannot read it ({exc.strerror or exc})") from None
+    import io
+
+    from mwip_ros.yamlio import open_regular
+    try:
+        raw = open_regular(path, "CSV")
+    except OSError as exc:
+        raise ValueError(f"{path}: cannot read it ({exc.strerror or exc})") from None
+    with io.TextIOWrapper(raw, encoding="utf-8", newline="") as f:
         try:
             first = f.readline(_HEADER_MAX)
         except UnicodeDecodeError as exc:

@@ -1,5 +1,10 @@
 """The one YAML reader of mwip_ros: every YAML the project reads (parameter files, ``-p`` values, sweep and
-tune specs, a bag's ``metadata.yaml`` and its channels' QoS strings) goes through :func:`load_yaml`.
+tune specs, a bag's ``metadata.yaml`` and its channels' QoS strings) goes through :func:`load_yaml`; and the one way a
+file is opened for reading (:func:`open_regular`, :func:`read_bytes`): YAML, a policy file, a CSV, a bag.
+
+Every file is opened without blocking (``O_NONBLOCK``: a FIFO with no writer does not hold the caller) and read only
+when it is a regular file: a FIFO, a device (``/dev/zero``, ``/dev/urandom``), a socket or a directory is refused
+(:class:`NotRegularFile`, an ``OSError``: one line naming the file and what it is) before a byte is read.
 
 It reads ROS 2's numbers (``1e-1`` is a double, as rcl reads it) and bounds what a document may cost:
 
@@ -21,14 +26,15 @@ from __future__ import annotations
 import os
 import re
 import reprlib
+import stat
 from pathlib import Path
-from typing import Any, Optional, Union
+from typing import Any, BinaryIO, Optional, Union
 
 import yaml
 from yaml.events import AliasEvent, CollectionEndEvent, CollectionStartEvent, NodeEvent
 
-__all__ = ["MAX_BYTES", "MAX_NODES", "MAX_DEPTH", "MAX_SHOWN", "RosYamlLoader", "YamlRefused", "load_yaml",
-           "read_text", "shown"]
+__all__ = ["MAX_BYTES", "MAX_NODES", "MAX_DEPTH", "MAX_SHOWN", "RosYamlLoader", "YamlRefused", "NotRegularFile",
+           "FileTooLarge", "load_yaml", "read_text", "read_bytes", "open_regular", "regular_size", "shown"]
 
 MAX_BYTES = 4 * 1024 * 1024   # a YAML file or text: 4 MiB (the project's own files are a few KB)
 MAX_NODES = 200_000           # nodes of one document: PyYAML builds ~0.8 KB of objects per node while loading
@@ -46,6 +52,63 @@ class YamlRefused(yaml.YAMLError):
 
     def __str__(self) -> str:
         return self.problem
+
+
+class NotRegularFile(OSError):
+    """A file that is not a regular file (a FIFO, a device, a socket, a directory): never read.  Its text says
+    what the file is and not its name: the caller names it ("cannot read PATH: ...")."""
+
+
+class FileTooLarge(OSError):
+    """A regular file larger than what its reader takes: never read past the bound."""
+
+
+def _kind(mode: int) -> str:
+    for test, name in ((stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a FIFO (named pipe)"),
+                       (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"),
+                       (stat.S_ISSOCK, "a socket")):
+        if test(mode):
+            return name
+    return "not a regular file"
+
+
+def regular_size(path: Union[str, Path], what: str = "file") -> int:
+    """The size of the regular file ``path`` (``stat``: nothing is opened); :class:`NotRegularFile` for anything
+    else, ``OSError`` as ``stat`` raises it (a missing file)."""
+    st = os.stat(path)
+    if not stat.S_ISREG(st.st_mode):
+        raise NotRegularFile(f"the {what} is {_kind(st.st_mode)}, not a regular file: not read")
+    return st.st_size
+
+
+def open_regular(path: Union[str, Path], what: str = "file") -> BinaryIO:
+    """``path`` opened for reading in binary if it is a regular file (opened with ``O_NONBLOCK``, so that opening a
+    FIFO does not wait for a writer, then checked with ``fstat``: the file that was opened is the one judged);
+    :class:`NotRegularFile` for anything else, ``OSError`` as ``open`` raises it."""
+    fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
+    try:
+        mode = os.fstat(fd).st_mode
+        if not stat.S_ISREG(mode):
+            raise NotRegularFile(f"the {what} is {_kind(mode)}, not a regular file: not read")
+        os.set_blocking(fd, True)
+        return os.fdopen(fd, "rb")
+    except BaseException:
+        os.close(fd)
+        raise
+
+
+def read_bytes(path: Union[str, Path], limit: int, what: str = "file") -> bytes:
+    """The bytes of the regular file ``path`` (:func:`open_regular`), at most ``limit``: :class:`FileTooLarge`
+    (naming the file, its size and the bound) above it, checked before it is read and again by reading at most
+    ``limit + 1`` bytes (a file that grows meanwhile)."""
+    with open_regular(path, what) as f:
+        size = os.fstat(f.fileno()).st_size
+        if size > limit:
+            raise FileTooLarge(f"the {what} is {_mib(size)}; at most {_mib(limit)} is read")
+        data = f.read(limit + 1)
+    if len(data) > limit:
+        raise FileTooLarge(f"the {what} is more than {_mib(limit)}; at most {_mib(limit)} is read")
+    return data
 
 
 def _mib(n: int) -> str:
@@ -105,14 +168,13 @@ yaml.add_implicit_resolver("tag:yaml.org,2002:float",
 
 
 def read_text(path: Union[str, Path], what: str = "YAML file") -> str:
-    """The text of ``path``, refused (:class:`YamlRefused`) above :data:`MAX_BYTES` before it is read; reads
-    at most ``MAX_BYTES + 1`` bytes.  ``OSError`` / ``UnicodeDecodeError`` as ``open`` and ``decode`` raise
-    them."""
-    p = Path(path)
-    size = os.stat(p).st_size
-    if size > MAX_BYTES:
-        raise YamlRefused(f"the {what} is {_mib(size)}; at most {_mib(MAX_BYTES)} is read")
-    with open(p, "rb") as f:
+    """The text of ``path`` (a regular file: :func:`open_regular`), refused (:class:`YamlRefused`) above
+    :data:`MAX_BYTES` before it is read; reads at most ``MAX_BYTES + 1`` bytes.  ``OSError``
+    (:class:`NotRegularFile` among them) / ``UnicodeDecodeError`` as ``open`` and ``decode`` raise them."""
+    with open_regular(path, what) as f:
+        size = os.fstat(f.fileno()).st_size
+        if size > MAX_BYTES:
+            raise YamlRefused(f"the {what} is {_mib(size)}; at most {_mib(MAX_BYTES)} is read")
         data = f.read(MAX_BYTES + 1)
     if len(data) > MAX_BYTES:   # it grew since the stat (or is a device that streams)
         raise YamlRefused(f"the {what} is more than {_mib(MAX_BYTES)}; at most {_mib(MAX_BYTES)} is read")

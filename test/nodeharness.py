@@ -180,9 +180,12 @@ class NodeHarness:
 
     # ------------------------------------------------------------------------------------------------- input
     def subscriptions(self, topic: str) -> list:
-        """The node's subscriptions on ``topic`` (relative names resolve in the node's namespace)."""
+        """The node's subscriptions on ``topic`` (relative names resolve in the node's namespace), its polled inputs
+        (:class:`~mwip_ros.nodes.runtime.rclpy_compat.PolledInput`) among them: :meth:`feed` hands them a message as
+        their node's ``poll`` would."""
         name = self._resolve(topic)
-        return [s for s in self.node.subscriptions if s.topic_name == name]
+        polled = getattr(self.node, "polled_inputs", ())   # rclpy_compat.PolledInput: fed as the node's poll would
+        return [s for s in (*self.node.subscriptions, *polled) if s.topic_name == name]
 
     def publisher(self, topic: str, msg_type=None, name: str = "feeder"):
         """A publisher on ``topic`` of a node ``name`` in the harness's context (made once per name and topic): the
@@ -270,11 +273,13 @@ class NodeHarness:
         return self._executor
 
     def spin(self, until: Callable[[], bool], timeout: float) -> bool:
-        """Spin the node's own executor (its timers run on the wall clock) until ``until()`` or ``timeout`` s."""
+        """Spin the node's own executor (its timers run on the wall clock) until ``until()`` or ``timeout`` s; the
+        node's polled inputs (:class:`~mwip_ros.nodes.runtime.rclpy_compat.PolledInput`) are read between its
+        callbacks, as its process's loop reads them."""
         import time
         end = time.monotonic() + timeout
         while not until() and time.monotonic() < end:
-            self.executor.spin_once(timeout_sec=0.01)
+            self.spin_once(0.01)
         return until()
 
     def turn(self, timeout: float, until: Optional[Callable[[], bool]] = None) -> bool:
@@ -294,6 +299,14 @@ class NodeHarness:
         while not done() and time.monotonic() < end:
             self.node.spin_step(self._loop_executor)
         return done()
+
+    def spin_once(self, timeout_sec: float) -> None:
+        """One turn of the node's loop: the executor's next callback (up to ``timeout_sec``), then its polled inputs
+        (:class:`~mwip_ros.nodes.runtime.rclpy_compat.PolledInput`) read, as its process's loop reads them between
+        callbacks."""
+        self.executor.spin_once(timeout_sec=timeout_sec)
+        for p in getattr(self.node, "polled_inputs", ()):
+            p.poll()
 
     def diagnostics(self):
         """The node's ``/diagnostics`` reporter as ``run_node`` attaches it (made once: ``node.diagnostics``); its
@@ -337,6 +350,8 @@ class NodeHarness:
                     executor.shutdown(timeout_sec=1.0)
             for feeder in self._feeder_nodes.values():
                 feeder.destroy_node()
+            from mwip_ros.nodes.runtime.rclpy_compat import destroy_polled_inputs
+            destroy_polled_inputs(self.node)
             self.node.destroy_node()
             self.node = None
             rclpy.try_shutdown(context=self.context)
@@ -462,6 +477,15 @@ def realtime_tick(node, periods: int = 1) -> None:
     runner._test_now += periods * node.period_ns
     runner._tick()
 
+class _Turns:
+    """What mwip_ctl's Ros spins (``spin_once``): a turn of the harness node's loop (:meth:`NodeHarness.spin_once`)."""
+
+    def __init__(self, h: NodeHarness):
+        self.h = h
+
+    def spin_once(self, timeout_sec: float = 0.0) -> None:
+        self.h.spin_once(timeout_sec)
+
 
 def run_ctl(h: NodeHarness, *argv: str) -> tuple:
     """``mwip_ctl argv`` in this process (its ``main``) with its ROS node a :meth:`NodeHarness.peer`-like node in
@@ -479,11 +503,11 @@ def run_ctl(h: NodeHarness, *argv: str) -> tuple:
             self.rclpy, self.timeout, self.ctx = rclpy, timeout, h.context
             self.node = rclpy.create_node(f"mwip_ctl_{next(_CTL_NAMES)}", namespace=namespace or None,
                                           context=h.context, start_parameter_services=False)
-            self.ex = h.executor
-            self.ex.add_node(self.node)
+            h.executor.add_node(self.node)
+            self.ex = _Turns(h)   # its spin_once is a turn of the node's loop (the polled inputs read too)
 
         def close(self) -> None:   # the harness's executor and context go on
-            self.ex.remove_node(self.node)
+            h.executor.remove_node(self.node)
             self.node.destroy_node()
 
     out, err, ros = io.StringIO(), io.StringIO(), ctl.Ros

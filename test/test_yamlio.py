@@ -6,8 +6,8 @@ with little memory (the heavy cases run in a subprocess that reports its own pea
 from __future__ import annotations
 
 import os
+import stat
 import time
-from pathlib import Path
 
 import pytest
 import yaml
@@ -85,25 +85,33 @@ def test_a_file_that_grows_after_the_stat_is_read_only_up_to_the_bound(tmp_path,
     f = tmp_path / "grows.yaml"
     with open(f, "wb") as fh:
         fh.truncate(1 << 30)
-    real_stat, reads = os.stat, []
+    real_fdopen, reads = os.fdopen, []
 
-    class Small:   # what stat said a moment before the file grew
+    class Small:   # what fstat said a moment before the file grew (a regular file of 10 bytes)
         st_size = 10
+        st_mode = stat.S_IFREG | 0o644
 
-    monkeypatch.setattr(yamlio.os, "stat", lambda p, *a, **k: Small if Path(p) == f else real_stat(p, *a, **k))
-    real_open = open
+    monkeypatch.setattr(yamlio.os, "fstat", lambda fd: Small)
 
-    def counting_open(p, mode="r", *a, **k):
-        fh = real_open(p, mode, *a, **k)
-        read = fh.read
-        fh_read = lambda n=-1: (reads.append(n), read(n))[1]   # noqa: E731
-        try:
-            fh.read = fh_read
-        except AttributeError:
-            pass
-        return fh
+    def counting_fdopen(fd, mode="r", *a, **k):
+        fh = real_fdopen(fd, mode, *a, **k)
 
-    monkeypatch.setattr("builtins.open", counting_open)
+        class Counting:   # the file object, its reads counted
+            def __init__(self):
+                self.fileno, self.close = fh.fileno, fh.close
+
+            def read(self, n=-1):
+                reads.append(n)
+                return fh.read(n)
+
+            def __enter__(self):
+                return self
+
+            def __exit__(self, *exc):
+                fh.close()
+        return Counting()
+
+    monkeypatch.setattr(yamlio.os, "fdopen", counting_fdopen)
     with pytest.raises(yamlio.YamlRefused, match="more than 4.0 MiB"):
         yamlio.read_text(f, "parameter file")
     assert reads and all(0 < n <= yamlio.MAX_BYTES + 1 for n in reads)

@@ -30,7 +30,7 @@ from mcap.records import Chunk
 from mcap.stream_reader import breakup_chunk
 
 from mwip_ros.params.errors import bounded
-from mwip_ros.yamlio import YamlRefused, load_yaml
+from mwip_ros.yamlio import YamlRefused, load_yaml, open_regular
 
 from .errors import BagError
 
@@ -97,7 +97,7 @@ def damaged_chunks(path: Path) -> List[int]:
     if summary is None:
         raise _cut_short(path, "no summary")
     bad = []
-    with open(path, "rb") as fh:
+    with _open(path) as fh:
         for index in summary.chunk_indexes:
             try:
                 fh.seek(index.chunk_start_offset + 9)  # opcode (1) and record length (8)
@@ -125,7 +125,7 @@ def _file_messages(path: Path, topics: Optional[List[str]],
                    log_time_order: bool = True) -> Iterator[Tuple[int, str, bytes]]:
     """One file's ``(log_time_ns, topic, cdr_bytes)``, chunk CRCs checked, in log-time order or (False) in
     the order they were written; a damaged or cut file raises BagError naming it."""
-    with open(path, "rb") as fh:
+    with _open(path) as fh:
         try:
             reader = make_reader(fh, validate_crcs=True)
             for _schema, channel, message in reader.iter_messages(topics=topics, log_time_order=log_time_order):
@@ -147,9 +147,17 @@ def raw_messages(bag: PathLike, topics: Optional[Iterable[str]] = None) -> Itera
     yield from streams[0] if len(streams) == 1 else heapq.merge(*streams, key=lambda m: m[0])
 
 
+def _open(path: Path):
+    """An MCAP file opened for reading: a regular file (mwip_ros.yamlio.open_regular), else BagError naming it."""
+    try:
+        return open_regular(path, "MCAP file")
+    except OSError as exc:
+        raise BagError(f"cannot read {path}: {exc.strerror or exc}") from None
+
+
 def _summary(path: Path):
     """The file's MCAP summary, or None when it has none (or it cannot be read)."""
-    with open(path, "rb") as fh:
+    with _open(path) as fh:
         try:
             return make_reader(fh).get_summary()
         except _UNREADABLE:
@@ -166,7 +174,7 @@ def topic_counts(bag: PathLike) -> Dict[str, int]:
                 counts[channel.topic] = counts.get(channel.topic, 0) + \
                     summary.statistics.channel_message_counts.get(cid, 0)
             continue
-        with open(path, "rb") as fh:  # no summary: count by scanning
+        with _open(path) as fh:  # no summary: count by scanning
             try:
                 for _schema, channel, _message in make_reader(fh).iter_messages(log_time_order=False):
                     counts[channel.topic] = counts.get(channel.topic, 0) + 1

@@ -44,6 +44,8 @@ from mcap.opcode import Opcode
 from mcap.records import Attachment, Channel, Chunk, DataEnd, Footer, Header, Message, Metadata, Schema
 from mcap.stream_reader import MAGIC_SIZE, StreamReader, breakup_chunk, read_magic
 
+from mwip_ros.yamlio import open_regular
+
 from .metadata import FileInfo
 
 try:
@@ -303,7 +305,7 @@ class Scan:
         return (0 if self.complete else self.size - self.good_end) + self.skipped_bytes
 
     def records(self) -> Iterator[Any]:
-        with open(self.path, "rb") as fh:
+        with open_regular(self.path, "MCAP file") as fh:   # a FIFO or a device is never read
             try:
                 read_magic(ReadDataStream(_Source(fh, self.size, 0)))
             except Exception:

@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Optional, Sequence
 
 from mwip_ros.bag import BagError, repair
+from mwip_ros.yamlio import NotRegularFile
 
 __all__ = ["EXIT_NOTHING", "EXIT_OK", "EXIT_USAGE", "main"]
 
@@ -47,6 +48,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         return _usage_error(f"{target} is not an .mcap file (give a bag directory or an .mcap file)")
     try:
         result = repair(target, dry_run=args.dry_run)
+    except NotRegularFile as exc:   # a FIFO or a device among the files: never read (mwip_ros.yamlio)
+        return _usage_error(f"{target}: {exc}")
     except (BagError, OSError) as exc:
         print(f"mwip_bag_repair: error: {exc}", file=sys.stderr)
         return EXIT_NOTHING

@@ -330,11 +330,16 @@ def _number(text: str) -> float:
     return v
 
 
+MAX_RATE_HZ = 1000.0   # --rate of push, cmd and drive: the control rate of the fastest loop here, not a flood
+
+
 def _checked(ap: argparse.ArgumentParser, args) -> argparse.Namespace:
     """What the nodes would refuse anyway, refused here as a usage error, before any ROS."""
     for key in ("timeout", "duration", "rate"):
         if getattr(args, key, 0.0) < 0:
             ap.error(f"--{key} must be >= 0, got {getattr(args, key):g}")
+    if getattr(args, "rate", 0.0) > MAX_RATE_HZ:   # a tool that drives the robot is no flood of its inputs
+        ap.error(f"--rate must be at most {MAX_RATE_HZ:g} Hz (a command a control period or slower), got {args.rate:g}")
     if args.command == "param" and args.action == "set":
         args.text = args.value
         try:   # as ROS 2 reads a -p name:=value rule (its numbers: 1e-1 is a double)

@@ -207,6 +207,31 @@ def _in_window(args, t) -> np.ndarray:
     return np.ones(len(t), dtype=bool) if args.window is None else (t >= args.window[0]) & (t <= args.window[1])
 
 
+# what a column of a log may read (msgs.layouts.LIMITS, RAW_LIMITS: what the nodes accept); a value beyond it is
+# no robot's, refused naming the column (not read as data: it would make the fit "not excited" or overflow)
+_PLAUSIBLE = {"theta_w": ("theta_w", "rad"), "theta_b": ("theta_b", "rad"), "dtheta_w": ("rate", "rad/s"),
+              "dtheta_b": ("rate", "rad/s"), "u": ("torque", "N m"), "u_applied": ("torque", "N m"),
+              "gyro": ("gyro", "rad/s"), "accel_x": ("accel", "m/s^2"), "accel_z": ("accel", "m/s^2"),
+              "encoder": ("phi", "rad"), "encoder_rate": ("rate", "rad/s")}
+
+
+def _plausible(p, cols) -> None:
+    """ValueError naming the column, the row and the time of the first value beyond what a robot of this kind reads
+    (:data:`_PLAUSIBLE`); NaN is left to the fit (a period with one is dropped)."""
+    from mwip_ros.msgs.layouts import LIMITS, RAW_LIMITS
+    limits = {**LIMITS, **RAW_LIMITS}
+    for c, (kind, unit) in _PLAUSIBLE.items():
+        if c not in cols:
+            continue
+        v = np.asarray(cols[c], dtype=float)
+        with np.errstate(invalid="ignore"):
+            bad = np.flatnonzero(np.abs(v) > limits[kind])
+        if len(bad):
+            k = int(bad[0])
+            raise ValueError(f"{p}: column {c}: {v[k]:g} at t = {cols['t'][k]:g} s (data row {k + 1}) is beyond any "
+                             f"robot of this kind (|{c}| <= {limits[kind]:g} {unit}); {len(bad)} such value(s)")
+
+
 def _load(args, p=None):
     """(columns, torque column name) of the log (``p``, default ``args.log``), or raise ValueError (one line)."""
     from mwip_ros.runs import load_run, read_bag_run
@@ -227,6 +252,7 @@ def _load(args, p=None):
     keep = _in_window(args, cols["t"])
     if args.drive and not ("u" in cols and "u_applied" in cols):
         raise ValueError(f"{p}: --drive needs the columns u and u_applied (a run with motor.enabled: true)")
+    _plausible(p, cols)
     return {c: np.asarray(cols[c], dtype=float)[keep] for c in (*NEEDED, "theta_w", "u", torque) if c in cols}, torque
 
 
@@ -260,6 +286,7 @@ def _load_raw(args, p=None):
             if n:
                 notes.append(f"{n} {what}")
     keep = _in_window(args, cols["t"])
+    _plausible(p, cols)
     return {c: np.asarray(cols[c], dtype=float)[keep] for c in ("t", *RAW)}, notes
 
 

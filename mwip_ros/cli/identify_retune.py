@@ -85,8 +85,8 @@ def retune(base: Sequence[Path], physical, law: str, maxiter: int, popsize: int,
     from mwip_ros.core import laws
     from mwip_ros.core.metrics import fit_window, WINDOW
     from mwip_ros.sweep import engine
-    from mwip_ros.sweep.spec import load_spec
-    from mwip_ros.sweep.tune import Objective, Tuner, knobs_for, overlay, parse_bounds
+    from mwip_ros.sweep.spec import SpecError, load_spec
+    from mwip_ros.sweep.tune import Objective, Tuner, check_memory, knobs_for, overlay, parse_bounds
 
     cls = laws.get(law)
     knobs = knobs_for(knob_names(law), law)
@@ -109,6 +109,11 @@ def retune(base: Sequence[Path], physical, law: str, maxiter: int, popsize: int,
         held_doc = dict(spec_doc, seed=int(seed) + 1)
         _write_yaml(tmp / "held.yaml", held_doc)
         holdout = load_spec(tmp / "held.yaml")
+        for sp in (spec, holdout):   # as mwip_tune: the tables checked against the memory budget before any is built
+            try:
+                check_memory(sp, knobs, popsize)
+            except SpecError as exc:
+                raise SpecError("--popsize", exc.reason) from None
         search = Objective(spec, law, knobs, weight, engine.run_local)
         held = Objective(holdout, law, knobs, weight, engine.run_local)
         base_x = _base_values(knobs, spec.base_values)

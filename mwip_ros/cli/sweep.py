@@ -405,12 +405,14 @@ def _plot_rms(args) -> int:
 
 def _read_sweep_json(d: Path) -> dict:
     """A sweep's sweep.json, checked for what --write-params uses; ValueError (one line) when it lacks it."""
+    from mwip_ros.yamlio import FileTooLarge, read_bytes
     path = d / "sweep.json"
-    size = path.stat().st_size
-    if size > SWEEP_JSON_MAX_BYTES:
-        raise ValueError(f"{path} is {size:,} bytes, more than a sweep writes ({SWEEP_JSON_MAX_BYTES:,} at most)")
+    try:   # a regular file (a FIFO or a device is refused unread), bounded
+        data = read_bytes(path, SWEEP_JSON_MAX_BYTES, "sweep.json")
+    except FileTooLarge as exc:
+        raise ValueError(f"{path}: {exc} (more than a sweep writes)") from None
     try:
-        info = json.loads(path.read_text())
+        info = json.loads(data.decode("utf-8"))
     except UnicodeDecodeError as exc:
         raise ValueError(f"{path} is not text ({exc.reason})") from None
     except RecursionError:

@@ -3,9 +3,11 @@
 ``cmd --vx V --wz W --duration S [--rate HZ]`` publishes the Twist (linear.x = V m/s, angular.z = W rad/s) at HZ
 for S seconds, then a zero Twist (also on Ctrl-C).  ``drive`` is a keyboard teleop: the arrows change vx (up,
 down) and wz (left turns left: +wz, REP-103) by a step, space stops, q quits; it shows the command and the limits
-``motion.max_speed`` and ``motion.max_yaw_rate`` (from ``--params`` files, else the defaults) and keeps the
-command within them, publishes at a fixed rate, and a zero Twist on exit; the terminal is restored even on
-Ctrl-C.  Without a terminal on stdin it refuses in one line (exit 2).
+``motion.max_speed`` and ``motion.max_yaw_rate`` (from ``--params`` files, checked as the controller checks them,
+else the defaults) and keeps the command within them, publishes at a fixed rate whatever the keys do (a burst of
+keys neither delays nor adds a publication), and a zero Twist on exit; the terminal is restored even on Ctrl-C, and
+its flow control is off meanwhile (Ctrl-S would stop the output, and with it the loop).  Without a terminal on stdin
+it refuses in one line (exit 2).
 """
 from __future__ import annotations
 
@@ -16,6 +18,8 @@ import sys
 import time
 from dataclasses import dataclass
 from typing import Optional, Sequence, Tuple
+
+from mwip_ros.core.plant import saturate
 
 __all__ = ["DEFAULT_MAX_SPEED", "DEFAULT_MAX_YAW_RATE", "Limits", "limits", "apply_key", "read_keys", "cmd", "drive"]
 
@@ -30,13 +34,15 @@ class Limits:
     max_yaw_rate: float
 
 
-def _schema_default(name: str, fallback: float) -> float:
+def _spec(name: str):
+    """The controller's ParamSpec of ``name`` (the schema: what the controller checks), or None."""
     from mwip_ros.params.schema import NODE_SPECS
-    for specs in NODE_SPECS.values():
-        for s in specs:
-            if s.name == name:
-                return float(s.default)
-    return fallback
+    return next((s for specs in NODE_SPECS.values() for s in specs if s.name == name), None)
+
+
+def _schema_default(name: str, fallback: float) -> float:
+    spec = _spec(name)
+    return float(spec.default) if spec is not None else fallback
 
 
 def _lookup(tree, dotted: str):
@@ -50,7 +56,7 @@ def _lookup(tree, dotted: str):
 def limits(files: Sequence[str] = ()) -> Limits:
     """``motion.max_speed`` and ``motion.max_yaw_rate``: the last of the ``files`` (any section) that gives them,
     else the schema's defaults (:data:`DEFAULT_MAX_SPEED`, :data:`DEFAULT_MAX_YAW_RATE` without one).  Raises
-    ValueError naming the key for a value that is not a positive number."""
+    ValueError naming the key for a value the controller refuses (the schema's check: its type, finite, its range)."""
     from pathlib import Path
 
     from mwip_ros.yamlio import load_yaml
@@ -64,14 +70,17 @@ def limits(files: Sequence[str] = ()) -> Limits:
                 v = params.get(key, _lookup(params, key))
                 if v is None:
                     continue
+                spec = _spec(key)
+                if spec is not None:   # the controller's own check: a file it refuses is refused here too
+                    from mwip_ros.params import ParamError
+                    try:
+                        spec.validate(v, key)
+                    except ParamError as exc:
+                        raise ValueError(f"{exc} (in {f})") from None
                 if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
                     raise ValueError(f"{key}: {v!r} in {f} is not a positive number")
                 out[key] = float(v)
     return Limits(out["motion.max_speed"], out["motion.max_yaw_rate"])
-
-
-def _clip(v: float, lim: float) -> float:
-    return max(-lim, min(lim, v))
 
 
 def apply_key(key: str, vx: float, wz: float, lim: Limits, step_v: float,
@@ -82,7 +91,7 @@ def apply_key(key: str, vx: float, wz: float, lim: Limits, step_v: float,
     if key == " ":
         return 0.0, 0.0
     dv, dw = {UP: (step_v, 0.0), DOWN: (-step_v, 0.0), LEFT: (0.0, step_w), RIGHT: (0.0, -step_w)}.get(key, (0, 0))
-    return _clip(round(vx + dv, 9), lim.max_speed), _clip(round(wz + dw, 9), lim.max_yaw_rate)
+    return saturate(round(vx + dv, 9), lim.max_speed), saturate(round(wz + dw, 9), lim.max_yaw_rate)
 
 
 def read_keys(text: str):
@@ -141,6 +150,9 @@ def drive(ros, args, failure, stdin=None, stdout=None) -> int:
     vx = wz = 0.0
     try:
         tty.setcbreak(fd)   # keys one at a time, no echo; Ctrl-C still interrupts
+        raw = termios.tcgetattr(fd)
+        raw[0] &= ~(termios.IXON | termios.IXOFF)   # no flow control: Ctrl-S is a key, not a stop of the output
+        termios.tcsetattr(fd, termios.TCSANOW, raw)
         stdout.write(f"drive: arrows up/down vx (max {lim.max_speed:g} m/s), left/right wz (max "
                      f"{lim.max_yaw_rate:g} rad/s), space stop, q quit\r\n")
         period, nxt, shown = 1.0 / args.rate, time.monotonic(), None
@@ -149,8 +161,12 @@ def drive(ros, args, failure, stdin=None, stdout=None) -> int:
                 stdout.write(f"\rvx {vx:+.3f} m/s  wz {wz:+.3f} rad/s   ")
                 stdout.flush()
                 shown = (vx, wz)
-            pub.publish(_twist(vx, wz))
-            nxt += period
+            now = time.monotonic()
+            if now >= nxt:   # the publication's own schedule: keys neither delay it nor add to it
+                pub.publish(_twist(vx, wz))
+                nxt += period
+                if nxt <= now:   # late (a stalled terminal, a loaded machine): the next a period on, not a burst
+                    nxt = now + period
             ready, _, _ = select.select([fd], [], [], max(0.0, nxt - time.monotonic()))
             if ready:
                 data = os.read(fd, 64).decode("utf-8", "replace")

@@ -11,7 +11,8 @@ or with a K, M, G suffix: ``MWIP_MEMORY_BUDGET=8G``).
   per scenario its metrics window and its delay queues: at most :func:`batch_budget` (a quarter of the
   budget, 512 MiB by default); a chunk larger than that runs as several batches, each within it
   (:func:`batch_bytes`), and a single scenario beyond it is refused;
-* ``mwip_sim`` keeps each law's whole trajectory: at most the budget (:func:`offline_bytes`).
+* ``mwip_sim`` keeps each law's whole trajectory: at most the budget (:func:`offline_bytes`);
+* the Gymnasium vector env's N robots: at most the budget (:func:`vector_env_bytes`).
 
 The per-item costs below were measured (peak RSS, CPython 3.11, numpy 2) with a margin; they are
 estimates, not accounting, and only decide what is refused.
@@ -23,7 +24,7 @@ import re
 
 __all__ = ["DEFAULT_BUDGET", "BUDGET_ENV", "memory_budget", "batch_budget", "fmt_bytes", "window_samples",
            "scenario_batch_bytes", "batch_fixed_bytes", "sweep_table_bytes", "tune_table_bytes", "offline_bytes",
-           "max_workers"]
+           "max_workers", "vector_env_bytes"]
 
 GIB = 1 << 30
 DEFAULT_BUDGET = 2 * GIB
@@ -44,6 +45,8 @@ TUNE_PARAM = 48                # ... per varied or tuned parameter
 OFFLINE_STEP = 400             # mwip_sim: a trajectory row (16 doubles, growth, the copy, metrics, CSV)
 OFFLINE_DELAY_PERIOD = 256     # mwip_sim: a queued measurement or command of one plant
 WORKER_PROCESS = 256 << 20     # a worker process: Python, numpy, numba and the compiled RK4
+ENV_ROBOT = 6 << 10            # a vector env's robot, state sensors: its lanes and noise blocks (3.3-5.0 KB measured)
+ENV_ROBOT_RAW = 16 << 10       # ... with raw sensors and the estimator (12.8-13.0 KB measured)
 
 
 def fmt_bytes(n: float) -> str:
@@ -129,3 +132,11 @@ def max_workers() -> int:
     """The most worker processes a sweep or a tuner starts: twice the CPUs (at least 4).  More run no faster
     (the work is CPU-bound) and each costs :data:`WORKER_PROCESS` plus up to a batch's budget."""
     return max(4, 2 * (os.cpu_count() or 1))
+
+
+def vector_env_bytes(n: int, raw: bool, delay_periods: int = 0, actuator_delay_periods: int = 0) -> int:
+    """What ``MwipVectorEnv`` of ``n`` robots holds: each robot's lanes and noise streams (``raw``: with raw
+    sensors and the estimator) and its delay queues."""
+    per = (ENV_ROBOT_RAW if raw else ENV_ROBOT) + delay_periods * BATCH_DELAY_PERIOD \
+        + actuator_delay_periods * BATCH_ACTUATOR_PERIOD
+    return int(n) * per

@@ -53,14 +53,34 @@ def _summary(errs, windows: int, window_s: float) -> PredictionError:
     return PredictionError(float(np.sqrt(np.mean(e ** 2))), float(np.max(np.abs(e))), windows)
 
 
+MIN_PITCH_SPAN = 1e-3   # rad: a log whose pitch moves less than this validates nothing (the robot at rest predicts
+                        # itself at rest, whatever the model: an error of 0)
+
+
+def _checked(t: np.ndarray, pitch: np.ndarray) -> float:
+    """The log's period h; ValueError (one line) when its times do not advance, or its pitch does not move (at least
+    :data:`MIN_PITCH_SPAN`): there is then nothing to predict, and no error to judge a model by."""
+    finite = np.isfinite(t)
+    steps = np.diff(t[finite])
+    if len(steps) == 0 or not np.all(steps > 0):
+        raise ValueError("the log's times do not advance (each row's t after the one before)")
+    b = pitch[np.isfinite(pitch)]
+    span = float(np.ptp(b)) if len(b) else 0.0
+    if not span >= MIN_PITCH_SPAN:
+        raise ValueError(f"the log's pitch does not move (it spans {span:.3g} rad, less than {MIN_PITCH_SPAN:g}): a "
+                         f"robot at rest validates no model; give a log with excitation")
+    return float(np.median(steps))
+
+
 def prediction_errors(t: Sequence[float], theta_w, theta_b, dtheta_w, dtheta_b, u, p: PhysicalParams, D_w: float,
                       D_b: float, window_s: float = WINDOW_S, substeps: int = 4) -> PredictionError:
     """The pitch prediction error of the model ``(p, D_w, D_b)`` over the windows of a log (module doc).
 
     ``u[k]`` is the torque that acted over [t_k, t_k+1).  Rows with a value that is not finite end a window; a
-    window shorter than half of ``window_s`` is not used.  ValueError when no window is left."""
+    window shorter than half of ``window_s`` is not used.  ValueError when no window is left, or when the log's times
+    do not advance or its pitch does not move (:func:`_checked`)."""
     t, w, b, dw, db, u = (np.asarray(a, dtype=float) for a in (t, theta_w, theta_b, dtheta_w, dtheta_b, u))
-    h = float(np.median(np.diff(t)))
+    h = _checked(t, b)
     per = max(1, int(round(window_s / h)))
     ok = np.isfinite(t) & np.isfinite(w) & np.isfinite(b) & np.isfinite(dw) & np.isfinite(db) & np.isfinite(u)
     zeros = [0.0] * (2 * substeps + 1)
@@ -92,7 +112,7 @@ def raw_prediction_errors(t: Sequence[float], gyro, accel_x, accel_z, encoder, e
     from scipy.optimize import least_squares   # here, not at import: the nodes never identify
     t, gy, ax, az, enc, er, u, ref = (np.asarray(a, dtype=float) for a in (t, gyro, accel_x, accel_z, encoder,
                                                                            encoder_rate, u, theta_b_ref))
-    h = float(np.median(np.diff(t)))
+    h = _checked(t, ref)
     per, fit = max(2, int(round(window_s / h))), max(2, int(round(fit_s / h)))
     ok = np.isfinite(t) & np.isfinite(gy) & np.isfinite(ax) & np.isfinite(az) & np.isfinite(enc) & np.isfinite(u) \
         & np.isfinite(ref)

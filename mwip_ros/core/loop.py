@@ -213,11 +213,14 @@ class PlantSide:
 class Period:
     """A whole period in one process (the offline loop): the plant's stages around the estimator (when the
     plant measures raw: :mod:`.estimators`), the observer and the law (with ``motion``, a :class:`.motion.Shaper`,
-    the law tracks its references: :func:`command`)."""
+    the law tracks its references: :func:`command`); ``wrench``, a function of t_k, the external wrench held over
+    each period (what ``plant_sim``'s ``external_wrench`` holds: (tau_ext1, tau_ext2[, force.y, torque.z]))."""
 
     def __init__(self, side: PlantSide, observer, law, estimator=None, excitation=None, motion=None,
-                 yaw: Optional[YawLoop] = None):
+                 yaw: Optional[YawLoop] = None, wrench=None):
         self.side, self.observer, self.law, self.estimator = side, observer, law, estimator
+        self.wrench = wrench   # t_k -> the external wrench held over period k (a terrain scan's push); None: none
+        self.extra = (0.0, 0.0)
         self.excitation = excitation
         self.motion = motion   # the references' shaper (core.motion.Shaper, theory 6.11), None: none (the paper)
         self.yaw = yaw   # the yaw stage (core.yaw, theory 6.13): a spatial plant with motion; None: none
@@ -232,7 +235,7 @@ class Period:
         excitation of period ``k`` added, :func:`command`): (u_k, tau_hat_k, the law's internals, the state the
         loop believes).  A law that raises is a :class:`~.laws.LawError` (the law, t_k, its error)."""
         return decide(self.estimator, self.observer, self.law, measured, u_m, k, self.side.cfg.h, self.excitation,
-                      self.motion)
+                      self.motion, self.side.safety.enabled)
 
     def sense_decide(self):
         """Stages ``sensors`` (with a yaw stage, the gyro's yaw rate too), ``estimator``, ``observer`` and ``law`` of
@@ -247,14 +250,17 @@ class Period:
     def actuate(self, u_law: float, dpsi: Optional[float], internals: dict):
         """Stages ``yaw`` (a spatial plant with motion: u_psi from psi'* and the measured yaw rate ``dpsi``, the
         wheels' torques, :func:`.yaw.wheel_torques`) and ``drive`` for the command ``u_law``: (the torque that acts
-        over [t_k, t_k+1), the true tau_d at t_k, the internals with the yaw stage's signals)."""
+        over [t_k, t_k+1), the true tau_d at t_k, the internals with the yaw stage's signals).  While no torque acts
+        (the driver not enabled) the yaw integral stays zero (:meth:`.yaw.YawLoop.idle`)."""
         wheels = None
+        side = self.side
         if self.yaw is not None:   # stage yaw (after the law): u_psi from psi'* and the gyro's yaw rate
             dpsi_ref = self.motion.ref.dpsi
-            u_psi = self.yaw.step(dpsi_ref, dpsi, u_law)
+            u_psi = self.yaw.step(dpsi_ref, dpsi, u_law) if side.safety.enabled else self.yaw.idle(dpsi)
             internals = {**internals, "dpsi_ref": dpsi_ref, "u_psi": u_psi, "gyro_z": dpsi}
             wheels = wheel_torques(u_law, u_psi, 0.0)   # clipped per wheel in the drive stage
-        u, tau_d = self.side.act(u_law, wheels=wheels)
+        self.extra = self.wrench(side.plant.t) if self.wrench is not None else (0.0, 0.0)
+        u, tau_d = side.act(u_law, self.extra, wheels=wheels)
         return u, tau_d, internals
 
     def run(self, table) -> bool:
@@ -286,7 +292,7 @@ class Period:
         not a number is the next :meth:`run`'s failure."""
         p = self.side.plant
         try:
-            self.side.advance(self.u)
+            self.side.advance(self.u, self.extra)
         except (ArithmeticError, ValueError) as exc:   # e.g. sin of an infinite angle in eq. (1): t_k+1 not reached
             t = p.t + p.cfg.h
             self.failure = (t, f"FAILED at t = {t:.3f} s: the state diverged (the model's arithmetic failed: {exc})",
@@ -297,7 +303,8 @@ class Period:
         return False
 
 
-def decide(estimator, observer, law, measured, u_m: float, k: int, h: float, excitation=None, motion=None):
+def decide(estimator, observer, law, measured, u_m: float, k: int, h: float, excitation=None, motion=None,
+           driving: bool = True):
     """Stages ``estimator``, ``observer`` and ``law`` of period ``k`` (:meth:`Period.decide`; a robot's own loop, which
     has no :class:`PlantSide`, calls it too: :mod:`mwip_ros.robot.closed_loop`).
 
@@ -315,6 +322,8 @@ def decide(estimator, observer, law, measured, u_m: float, k: int, h: float, exc
         The period; ``h`` its length [s] (for a law's error's time).
     excitation, motion : optional
         The excitation (:mod:`.excitation`) and the references' shaper (:class:`.motion.Shaper`) of :func:`command`.
+    driving : bool
+        Whether the torque acts (the driver enabled) over the period: :func:`command`'s.
 
     Returns
     -------
@@ -325,7 +334,7 @@ def decide(estimator, observer, law, measured, u_m: float, k: int, h: float, exc
     x_m = measured if estimator is None else estimator.step(measured)
     tau_hat = observer.update(x_m, u_m)
     try:
-        u_law, internals = command(law, x_m, tau_hat, excitation, k, motion)
+        u_law, internals = command(law, x_m, tau_hat, excitation, k, motion, driving)
     except Exception as exc:   # noqa: BLE001 - a law's own error (a plug-in's bug), named as the law's
         raise LawError.of(law.name, k * h, exc) from exc
     return u_law, tau_hat, internals, x_m
@@ -339,7 +348,7 @@ def fall_text(t: float, x, fall_angle: float) -> str:
     return f"FELL at t = {t:.3f} s: |theta_b| = {abs(x[1]):.4f} > fall_angle {fall_angle:g}"
 
 
-def command(law, x, tau_hat, excitation, k: int, motion=None):
+def command(law, x, tau_hat, excitation, k: int, motion=None, driving: bool = True):
     """Stage ``law``: the references of period ``k`` handed to the law (``motion``, a :class:`.motion.Shaper`;
     None: none, the law regulates as in the paper), the law's command for the state ``x`` and ``tau_hat``, plus the
     excitation of period ``k`` (:mod:`.excitation`; None: none) — the command sent, what the trajectory's ``u``
@@ -347,9 +356,12 @@ def command(law, x, tau_hat, excitation, k: int, motion=None):
     observer term holds (the shaper's :attr:`~.motion.Shaper.hold`, docs/theory.md 6.14) it regulates about the
     hold's equilibrium: it sees theta_b - theta_eq and tau_hat - tau_bar, and -tau_bar_1 is added to its command.
     The controller node calls this too, so the offline loop and the graph take the references in the same place of
-    the period."""
+    the period.  ``driving`` False: no torque acts (the driver is not enabled, docs/theory.md 6.8): the references
+    stay at the measured state, at rest (:meth:`.motion.Shaper.idle`), and start from it when the torque is back."""
     hold = None
     if motion is not None:   # docs/theory.md 6.11: theta_w*(0) is the first state's wheel angle
+        if not driving:
+            motion.idle()
         ref = motion.reference(k, x=x, tau_hat=tau_hat if law.observer else None)
         law.track(ref)
         hold = motion.hold

@@ -38,6 +38,7 @@ import math
 from dataclasses import dataclass
 from typing import NamedTuple, Optional, Tuple
 
+from .plant import saturate as _clip   # |v| <= lim (every limit here is > 0); numba compiles it (compiled_motion)
 
 __all__ = ["MotionConfig", "Reference", "Hold", "Shaper", "rate_reference", "error_state", "profile_at",
            "speed_start", "speed_step", "anchor_step", "hold_estimate", "hold_weight", "hold_lean", "ABSURD_SPEED",
@@ -146,10 +147,6 @@ def error_state(x, ref: Optional[Reference]):
     return (x[0] - ref.theta_w, x[1], x[2] - rate_reference(ref, x[0]), x[3])
 
 
-def _clip(v: float, lim: float) -> float:
-    return lim if v > lim else (-lim if v < -lim else v)
-
-
 def profile_at(times, values, t: float) -> float:
     """A profile's value at ``t``: the newest point (``times[j]``, ``values[j]``) at or before it (0 before the
     first).  Plain arithmetic on two sequences: the compiled batch (:mod:`.compiled_motion`) runs this code too."""
@@ -217,6 +214,25 @@ class Shaper:
         self.rested = False      # the robot came to rest since v* reached 0 (the hold's equilibrium applies)
         self.weight = 0.0        # how much of the equilibrium applies: to 1 from the rest, to 0 on the move
         self.tau_bar = (0.0, 0.0)
+
+    def idle(self) -> None:
+        """No torque acts (the driver disabled, in fault, the emergency stop held: docs/theory.md 6.8): the run and
+        the command are forgotten (:meth:`reset`), so the position target, v*, psi'* and the hold do not advance,
+        and the next :meth:`reference` starts from the state it is given, at rest; a command must come again, after
+        the torque is back, to move the robot."""
+        self.reset()
+
+    _COMMANDS = ("cfg", "h", "nominal", "hold_gain", "blend", "accepted", "rejected", "clipped")
+
+    def snapshot(self) -> dict:
+        """What :meth:`reference` changes (all but the configuration and the commands' counters), for
+        :meth:`restore` (a period whose command was refused)."""
+        return {k: v for k, v in self.__dict__.items() if k not in self._COMMANDS}
+
+    def restore(self, snap: dict) -> None:
+        """Back to a :meth:`snapshot`: the period that took it did not happen."""
+        self.__dict__.update(snap)
+
     def command(self, v, wz) -> Optional[str]:
         """Take a command (``v`` m/s, ``wz`` rad/s) for the coming periods; None when taken, else why it is rejected
         (counted).  Over-limit values are clipped (counted)."""

@@ -356,6 +356,22 @@ class MujocoPlant(PlantSim):
         self.D_w_prev, self.extra_prev = D_w, tuple(map(float, extra))
         self.D_w = self._draw_D_w()
 
+    def lie(self) -> None:
+        """A period of a fallen robot lying where it fell (:meth:`.plant.PlantSim.lie`): MuJoCo's velocities zeroed
+        too (its wheels' and body's: the state, ``true_wheel_states`` and the IMU read them), no torque, no wrench."""
+        self._qvel[:] = 0.0
+        self._ctrl[:] = 0.0
+        self._qfrc[:] = 0.0
+        if self._pushed:
+            self._push(0.0, 0.0)
+        self._read()
+        self.k += 1
+        self.u_prev = self.u_cmd_prev = 0.0
+        self.saturation, self.enabled_prev = 0, False
+        self.extra_prev = (0.0,) * len(self.extra_prev)
+        if self.wheels_prev is not None:
+            self.wheels_prev = self.wheels_cmd_prev = (0.0, 0.0)
+
     def _diverged(self) -> None:
         """After the period [t_k, t_k+1], on a MuJoCo warning (on a diverged state MuJoCo warns and resets it to the
         model's initial one, silently) or a state that is not finite (a sum of qpos and qvel that is not: NaN and

@@ -227,15 +227,20 @@ def odometry_drift(cols, r: float, track_width: float, sensors_model: str = "sta
     rule of ``sensors_model``, :func:`rule_for`, as ``robot_state`` integrates them) against its true pose (x, y,
     yaw, relative to the first): ``final_pos`` and ``max_pos`` [m], the distance of odom's (x, y) to the true
     displacement at the end and at worst; ``final_yaw`` [rad], odom's yaw minus the true one at the end.  Rows after
-    the first non-finite one are left out."""
+    the first non-finite one are left out; ValueError (one line) when that leaves none (the first row's state or
+    pose is not finite): no drift is computed from nothing."""
     t, dw, tb, gz = (np.asarray(cols[c], float) for c in ("t", "dtheta_w", "theta_b", "gyro_z"))
     x, y, yaw = (np.asarray(cols[c], float) for c in ("x", "y", "yaw"))
     yaw = np.unwrap(yaw)
     odom = Odometry(r, track_width, rule=rule_for(sensors_model))
     err = []
     for k in range(len(t)):
-        if not state_update(odom, float(t[k]), float(dw[k]), float(tb[k]), float(gz[k])):
+        if not (state_update(odom, float(t[k]), float(dw[k]), float(tb[k]), float(gz[k]))
+                and math.isfinite(x[k] + y[k] + yaw[k])):
             break
         err.append((math.hypot(odom.x - (x[k] - x[0]), odom.y - (y[k] - y[0])), odom.yaw - (yaw[k] - yaw[0])))
+    if not err:
+        raise ValueError("odometry drift: the run's first row is not finite (its state or its pose): nothing to "
+                         "integrate")
     e = np.asarray(err)
     return {"final_pos": float(e[-1, 0]), "max_pos": float(e[:, 0].max()), "final_yaw": float(e[-1, 1])}

@@ -128,6 +128,8 @@ class Plant(Protocol):
 
     def lumped_disturbance(self, u: float, extra=(0.0, 0.0)) -> Tuple[float, float]: ...
 
+    def lie(self) -> None: ...
+
 
 @dataclass
 class PlantSim:
@@ -218,6 +220,17 @@ class PlantSim:
         self.u_prev, self.u_cmd_prev, self.enabled_prev = acted, u, bool(enabled)
         self.D_w_prev, self.extra_prev = self.D_w, (float(extra[0]), float(extra[1]))
         self.D_w = self._draw_D_w()
+
+
+    def lie(self) -> None:
+        """A period of a fallen robot lying where it fell (``plant_sim``, ``exit_on_fall: false``: the model has no
+        ground, its body would swing through the floor): t_k -> t_{k+1} at rest, nothing integrated, no rate and
+        no torque, no wrench acting (what a sample at t_{k+1}^- sees: :meth:`sample_accel`)."""
+        self.x = State(self.x[0], self.x[1], 0.0, 0.0)
+        self.k += 1
+        self.u_prev = self.u_cmd_prev = 0.0
+        self.saturation, self.enabled_prev = 0, False
+        self.extra_prev = (0.0, 0.0)
 
 
 def stage_torques(f1: Sinusoid, f2: Sinusoid, extra, t0: float, h: float, n: int, m=math):

@@ -115,18 +115,21 @@ def make_period(loop: ClosedLoop, plant: Optional[PlantConfig] = None, law=None)
 
 
 def simulate(loop: ClosedLoop, label: str = "", progress: Optional[Callable[[float], None]] = None,
-             diverged_fails: bool = False, on_period: Optional[Callable[[object], None]] = None) -> Trajectory:
+             diverged_fails: bool = False, on_period: Optional[Callable[[object], None]] = None,
+             wrench: Optional[Callable[[float], tuple]] = None) -> Trajectory:
     """Run the closed loop; stops early (``fallen``) when it fails: |theta_b| passes the fall angle, the state is not
     a finite number (diverged), or the law's command is (a ``bad_command``: NaN, infinite, beyond
     :data:`.safety.PLAUSIBLE_TORQUE`).  The trajectory's ``record`` then holds ``t_fall``, ``fall_text`` (the
     line saying when and why) and ``failure`` (the cause, a :data:`.trajectory.FAILURES` name).  A plant whose
     simulation diverges (:class:`~.plant.PlantDiverged`, backend mujoco) raises it, or with ``diverged_fails``
     (a sweep's scenario) ends the run as a ``diverged`` failure at the period it happened in.  ``on_period`` sees
-    the plant at t_k each period, once its row is taken (``mwip_sim --render`` draws it); it must not change it."""
+    the plant at t_k each period, once its row is taken (``mwip_sim --render`` draws it); it must not change it.
+    ``wrench(t_k)``: the external wrench held over period k (:class:`.loop.Period`; a terrain scan's push)."""
     pc = loop.plant
     h = pc.h
     n_steps = int(round(loop.duration_s / h))
     period = make_period(loop)   # the stages
+    period.wrench = wrench
     # the true state: the metrics judge it
     table = TrajectoryTable(internals=True, raw=pc.raw is not None, drive=pc.motor.enabled or pc.raw is not None,
                             excitation=period.excitation is not None, motion=period.motion is not None,

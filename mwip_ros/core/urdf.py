@@ -158,14 +158,29 @@ class Joint(NamedTuple):
     axis: Tuple[float, float, float]
 
 
-def _floats(text, default):
-    return tuple(float(a) for a in text.split()) if text else default
+MAX_URDF_CHARS = 1 << 20   # a URDF read (a robot_description from any publisher): this robot's is about 3 kB
+
+
+def _floats(text, default, joint, what: str):
+    """Three finite numbers of an attribute (``xyz``, ``rpy``), ``default`` without it; ValueError naming the joint."""
+    if not text:
+        return default
+    try:
+        out = tuple(float(a) for a in text.split())
+    except ValueError:
+        out = ()
+    if len(out) != 3 or not all(math.isfinite(a) for a in out):
+        raise ValueError(f"joint {joint.get('name')!r}: {what}={text[:60]!r} is not three finite numbers")
+    return out
 
 
 def urdf_joints(text: str) -> List[Joint]:
     """The joints of the URDF ``text`` (any robot's, not only :func:`urdf`'s).  Raises ValueError for text that
-    is no URDF."""
+    is no URDF: not XML, longer than :data:`MAX_URDF_CHARS`, a joint without parent or child, an origin or axis
+    that is not three finite numbers."""
     import xml.etree.ElementTree as ET
+    if len(text) > MAX_URDF_CHARS:
+        raise ValueError(f"{len(text):,} characters, larger than a URDF is read ({MAX_URDF_CHARS:,})")
     try:
         root = ET.fromstring(text)
     except ET.ParseError as exc:
@@ -179,9 +194,9 @@ def urdf_joints(text: str) -> List[Joint]:
         if parent is None or child is None:
             raise ValueError(f"joint {j.get('name')!r} has no parent or child")
         out.append(Joint(j.get("name", ""), j.get("type", "fixed"), parent.get("link", ""), child.get("link", ""),
-                         _floats(origin.get("xyz") if origin is not None else None, (0.0, 0.0, 0.0)),
-                         _floats(origin.get("rpy") if origin is not None else None, (0.0, 0.0, 0.0)),
-                         _floats(axis.get("xyz") if axis is not None else None, (1.0, 0.0, 0.0))))
+                         _floats(origin.get("xyz") if origin is not None else None, (0.0, 0.0, 0.0), j, "xyz"),
+                         _floats(origin.get("rpy") if origin is not None else None, (0.0, 0.0, 0.0), j, "rpy"),
+                         _floats(axis.get("xyz") if axis is not None else None, (1.0, 0.0, 0.0), j, "axis xyz")))
     return out
 
 

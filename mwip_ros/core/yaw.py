@@ -32,6 +32,8 @@ import math
 from dataclasses import dataclass
 from typing import Tuple
 
+from .plant import saturate
+
 __all__ = ["YawConfig", "YawLoop", "wheel_torques"]
 
 
@@ -58,6 +60,18 @@ class YawLoop:
         self.integral = 0.0
         self.u_psi = 0.0
         self.samples, self.total, self.bias = 0, 0.0, 0.0   # the calibration's count, sum and mean
+
+    def idle(self, dpsi: float) -> float:
+        """A period with no torque acting (the driver not enabled, docs/theory.md 6.8): u_psi = 0 and the integral
+        stays 0, so it cannot wind up while the wheels cannot turn the robot; the gyro's calibration goes on (the
+        robot held still is what it needs).  Returns 0."""
+        self.integral = 0.0
+        self.u_psi = 0.0
+        if self.samples < self.calibration and math.isfinite(dpsi):
+            self.samples += 1
+            self.total += dpsi
+            self.bias = self.total / self.samples
+        return 0.0
 
     def step(self, dpsi_ref: float, dpsi: float, u: float = 0.0) -> float:
         """u_psi of one period for the reference ``dpsi_ref`` and the measured yaw rate ``dpsi`` [rad/s], the law's
@@ -86,13 +100,7 @@ class YawLoop:
         return u_psi
 
 
-def _clip(v: float, lim: float) -> float:
-    if lim > 0.0:
-        return -lim if v < -lim else (lim if v > lim else v)
-    return v
-
-
 def wheel_torques(u: float, u_psi: float, torque_limit: float) -> Tuple[float, float]:
     """(u_L, u_R) = (u / 2 - u_psi / 2, u / 2 + u_psi / 2), each clipped to +-``torque_limit`` / 2 (0: no limit)."""
     lim = 0.5 * torque_limit
-    return _clip(0.5 * u - 0.5 * u_psi, lim), _clip(0.5 * u + 0.5 * u_psi, lim)
+    return saturate(0.5 * u - 0.5 * u_psi, lim), saturate(0.5 * u + 0.5 * u_psi, lim)

@@ -19,7 +19,9 @@ from mwip_ros.core import laws
 from mwip_ros.core.sim import ClosedLoop
 from mwip_ros.params.paths import default_params_file
 
-__all__ = ["DEFAULT_TORQUE_SCALE", "OBSERVATIONS", "Reward", "EnvSetup", "load_values", "setup"]
+__all__ = ["DEFAULT_TORQUE_SCALE", "OBSERVATIONS", "SEED_RANGE", "Reward", "EnvSetup", "load_values", "setup"]
+
+SEED_RANGE = 2 ** 31   # a robot's plant seed, when reset is given none, is drawn from [0, 2^31)
 
 # the action's scale [N m] when the files set neither a torque limit nor the motor (the paper's robot): a power of
 # two (a * 256 and u / 256 are exact), above the paper's largest DSCNDO command (212 N m at t = 0)
@@ -91,8 +93,10 @@ class EnvSetup:
         return 1.0 if self.normalize else self.scale
 
     def torque(self, a):
-        """The torque [N m] of the action ``a`` (clipped to the action space): a S, or a itself."""
-        a = np.clip(a, -self.bound, self.bound)
+        """The torque [N m] of the action ``a`` (clipped to the action space): a S, or a itself.  An action that is
+        not finite stays so, NaN and infinite alike: the drive refuses it (``bad_command``), it is never a torque at
+        the bound."""
+        a = np.where(np.isfinite(a), np.clip(a, -self.bound, self.bound), a)
         return a * self.scale if self.normalize else a
 
 

@@ -24,11 +24,11 @@ from mwip_ros.core.plant import finite_state
 from mwip_ros.core.sim import make_period
 from mwip_ros.core.trajectory import BAD_COMMAND, DIVERGED, FAILURES, FALL
 
-from .common import ParamsArg, setup
+from . import checks
+from .common import SEED_RANGE, ParamsArg, setup
 
 __all__ = ["MwipEnv", "NoLaw"]
 
-SEED_RANGE = 2 ** 31   # an episode's plant seed, when reset is given none, is drawn from [0, 2^31)
 # with motion.enabled, what ``info`` adds of the period's references and the yaw stage (the trajectory's columns)
 REFERENCES = ("v_ref", "theta_w_ref", "dpsi_ref", "u_psi")
 
@@ -89,7 +89,9 @@ class MwipEnv(gym.Env):
 
     def __init__(self, params: ParamsArg = None, duration: Optional[float] = None, base_law: Optional[str] = None,
                  observation: str = "state", reward: Optional[Callable] = None, torque_scale: Optional[float] = None,
-                 normalize_action: bool = True, sweep=None):
+                 normalize_action: bool = True, sweep=None, render_mode: Optional[str] = None):
+        checks.render_mode(render_mode)   # gymnasium.make passes it: None, or one line (the env renders nothing)
+        self.render_mode = None
         self._spec = None
         if sweep is not None:
             if params is not None:
@@ -137,10 +139,11 @@ class MwipEnv(gym.Env):
     # --- gymnasium ------------------------------------------------------------------------------------------------
 
     def reset(self, *, seed: Optional[int] = None, options: Optional[dict] = None):
+        seed, initial = checks.seed(seed), checks.options(options)   # one line each for a wrong one
         super().reset(seed=seed)
         plant_seed = seed if seed is not None else int(self.np_random.integers(SEED_RANGE))
         loop, drawn = self._robot(plant_seed)
-        self._period = self._build(loop, plant_seed, (options or {}).get("initial"))
+        self._period = self._build(loop, plant_seed, initial)
         p = self._period.side.plant
         obs = self._observe()
         info = {"t": p.t, "state": np.array(p.x, dtype=float), "seed": plant_seed}
@@ -155,7 +158,7 @@ class MwipEnv(gym.Env):
         side = period.side
         p = side.plant
         t, x = p.t, p.x
-        a = float(np.asarray(action, dtype=float).reshape(-1)[0])
+        a = checks.action(action)   # one number (beyond the bound: clipped; not finite: the drive refuses it)
         u_cmd = self._u_base + float(s.torque(a))           # stage law: the base law's command plus the action
         u, tau_d, internals = period.actuate(u_cmd, self._dpsi, self._internals)   # stages yaw and drive
         failure = None

@@ -18,14 +18,14 @@ from gymnasium.vector.utils import batch_space
 
 from mwip_ros.optional import required
 
-from .common import ParamsArg, setup
+from . import checks
+from .common import SEED_RANGE, ParamsArg, setup
 
 with required("numba", "MwipVectorEnv (its compiled RK4)"):
     from .lanes import Lanes
 
 __all__ = ["MwipVectorEnv"]
 
-SEED_RANGE = 2 ** 31
 
 
 class MwipVectorEnv(VectorEnv):
@@ -44,10 +44,11 @@ class MwipVectorEnv(VectorEnv):
 
     def __init__(self, num_envs: int = 1, params: ParamsArg = None, duration: Optional[float] = None,
                  base_law: Optional[str] = None, observation: str = "state", reward: Optional[Callable] = None,
-                 torque_scale: Optional[float] = None, normalize_action: bool = True, sweep=None):
-        if int(num_envs) < 1:
-            raise ValueError(f"num_envs: must be >= 1, got {num_envs!r}")
-        self.num_envs = n = int(num_envs)
+                 torque_scale: Optional[float] = None, normalize_action: bool = True, sweep=None,
+                 render_mode: Optional[str] = None):
+        checks.render_mode(render_mode)
+        self.render_mode = None
+        self.num_envs = n = checks.num_envs(num_envs)
         self.robots = None
         if sweep is not None:
             if params is not None:
@@ -59,6 +60,7 @@ class MwipVectorEnv(VectorEnv):
             params = spec.base_values
             duration = spec.duration_s if duration is None else duration
         self.setup = s = setup(params, duration, base_law, observation, reward, torque_scale, normalize_action)
+        checks.num_envs(n, s)   # the robots' memory, estimated before any is allocated: within the budget
         self.lanes = Lanes(s, n)
         self.single_action_space = spaces.Box(-s.bound, s.bound, (1,), np.float64)
         width = 5 if observation == "raw" else 4
@@ -67,6 +69,7 @@ class MwipVectorEnv(VectorEnv):
         self.observation_space = batch_space(self.single_observation_space, n)
         self._restart = np.zeros(n, dtype=bool)
         self._obs = np.zeros((n, width))
+        self._ready = False   # reset() first
 
     def _observation(self) -> np.ndarray:
         xm = self.lanes.observe()
@@ -79,8 +82,12 @@ class MwipVectorEnv(VectorEnv):
     def reset(self, *, seed=None, options: Optional[dict] = None):
         """Every robot at t = 0; ``seed``: an int s (robot i: s + i), a list of one per robot, or None (drawn).
         With a sweep spec, an int or None: the spec's seed (robot i: its scenario i, its noise seed too)."""
-        super().reset(seed=seed if isinstance(seed, (int, np.integer)) else None)
         n = self.num_envs
+        if options is not None:
+            raise ValueError("options: MwipVectorEnv takes none (every robot starts in the files' initial state)")
+        if seed is None or checks.whole(seed):
+            seed = checks.seed(seed, 1 if self.robots is not None else n)
+        super().reset(seed=seed if isinstance(seed, int) else None)
         if self.robots is not None:
             if not (seed is None or isinstance(seed, (int, np.integer))):
                 raise ValueError("seed: with a sweep spec, one seed (the spec's) or None")
@@ -94,16 +101,17 @@ class MwipVectorEnv(VectorEnv):
         elif isinstance(seed, (int, np.integer)):
             seeds = int(seed) + np.arange(n)
         else:
-            seeds = np.asarray(seed, dtype=np.int64)
-            if seeds.shape != (n,):
-                raise ValueError(f"seed: a list of {n} seeds (one per robot), got {len(seeds)}")
+            seeds = checks.seeds(seed, n)
         self.lanes.restart(np.ones(n, dtype=bool), seeds)
         self._restart[:] = False
+        self._ready = True
         return self._observation(), {"seed": np.asarray(seeds)}
 
     def step(self, actions):
+        if not self._ready:
+            raise RuntimeError("MwipVectorEnv.step before reset")
         s, lanes = self.setup, self.lanes
-        a = np.asarray(actions, dtype=float).reshape(self.num_envs)
+        a = checks.actions(actions, self.num_envs)   # one per robot (beyond the bound: clipped)
         go = ~self._restart
         x_k = lanes.x
         u, code = lanes.advance(lanes.u_base + s.torque(a), go)

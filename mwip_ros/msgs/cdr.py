@@ -41,7 +41,8 @@ from .stamps import NS_PER_S as _NS, join_ns, split_ns
 
 __all__ = ["CDR_LE", "CdrError", "JointStateEncoder", "WrenchStampedEncoder", "ImuEncoder", "IMU_DOUBLES",
            "decode_clock", "decode_float64", "decode_joint_state", "decode_wrench", "decode_wrench_stamped",
-           "decode_imu", "decode_odometry", "peek_stamp", "encode_clock", "encode_float64", "encode_wrench", "split_ns"]
+           "decode_imu", "decode_odometry", "decode_string", "peek_stamp", "encode_clock", "encode_float64",
+           "encode_wrench", "encode_string", "split_ns"]
 
 IMU_DOUBLES = 4 + 9 + 3 + 9 + 3 + 9   # sensor_msgs/Imu after its Header: every field a float64, no sequence
 
@@ -252,6 +253,17 @@ def decode_clock(data) -> int:
     r = _Reader(data, "Clock")
     t = r.time_ns()
     return t
+
+def decode_string(data) -> str:
+    """std_msgs/String -> its text."""
+    return _Reader(data, "String").string()
+
+
+def encode_string(text: str) -> bytes:
+    """std_msgs/String of ``text`` (CDR_LE)."""
+    b = text.encode("utf-8") + b"\0"
+    return CDR_LE + struct.pack("<I", len(b)) + b
+
 
 def decode_pose_stamped(data) -> Tuple[int, str, Tuple[float, float, float], Tuple[float, float, float, float]]:
     """geometry_msgs/PoseStamped -> (stamp_ns, frame_id, position xyz, orientation xyzw)."""

@@ -37,12 +37,13 @@ values, and values no robot of this kind can have (:data:`LIMITS`; the raw senso
 """
 from __future__ import annotations
 
+import json
 import math
 from typing import Dict, Optional, Sequence, Tuple
 
 from mwip_ros.core.markers import pose_angles, pose_quaternion
 from mwip_ros.core.model import State
-from mwip_ros.core.safety import PLAUSIBLE_TORQUE
+from mwip_ros.core.safety import PLAUSIBLE_TORQUE, STATES
 
 from . import cdr
 from .errors import BadMessage, CdrError
@@ -54,7 +55,7 @@ __all__ = ["JOINT_NAMES", "INTERNAL_NAMES", "LIMITS", "RAW_LIMITS", "IMU_FRAME",
            "encode_encoder", "parse_encoder", "parse_odometry", "check_state", "RAW_FILTERS", "encode_twist",
            "parse_twist", "POSE_FRAME", "encode_pose", "parse_pose", "parse_bool", "YAW_JOINT", "parse_yaw_rate",
            "WHEEL_TORQUE_JOINTS", "encode_wheel_torques", "parse_wheel_torques", "encode_wheel_states",
-           "parse_wheel_states"]
+           "parse_wheel_states", "parse_driver_state", "MAX_DRIVER_STATE_BYTES"]
 
 JOINT_NAMES = ("wheel", "body_pitch")
 YAW_JOINT = "yaw"   # joint_states' third joint from a spatial plant: velocity = the gyro's yaw rate (theory 6.13)
@@ -389,6 +390,25 @@ def parse_bool(data) -> bool:
     if b[4] > 1:
         raise BadMessage(f"not a std_msgs/Bool: data byte {b[4]} is neither 0 nor 1")
     return b[4] == 1
+
+
+MAX_DRIVER_STATE_BYTES = 4096   # a driver_state record is a few hundred bytes; a longer one is not read
+
+
+def parse_driver_state(data) -> str:
+    """The driver's state (``disabled``, ``enabled`` or ``fault``, :data:`mwip_ros.core.safety.STATES`) of one
+    ``driver_state`` message (std_msgs/String, the JSON record ``plant_sim`` publishes at each transition), or
+    BadMessage: not a String, longer than :data:`MAX_DRIVER_STATE_BYTES`, not JSON, no known ``state``."""
+    if len(data) > MAX_DRIVER_STATE_BYTES:
+        raise BadMessage(f"not a driver_state record: {len(data)} bytes, more than {MAX_DRIVER_STATE_BYTES}")
+    text = _decoded(cdr.decode_string, data, "std_msgs/String")
+    try:
+        state = json.loads(text).get("state")
+    except (ValueError, AttributeError, RecursionError):
+        raise BadMessage("not a driver_state record: not a JSON object") from None
+    if state not in STATES:
+        raise BadMessage(f"not a driver_state record: state {str(state)[:40]!r} is not one of {', '.join(STATES)}")
+    return state
 
 
 def parse_command(data) -> float:

@@ -10,10 +10,11 @@
 from .errors import ParamError
 from .file import ParamFile, load_param_file, load_param_files, load_yaml, merged_values, node_key, parse_param_dict
 from .schema import (NODE_SPECS, PAPER_ACTUAL, PAPER_NOMINAL, ROS_OWN, ROS_OWN_PREFIXES, SHARED, SHARED_SPECS,
-                     ParamSpec, check_derived, defaults_for, specs_for, spelling_hint)
+                     ParamSpec, check_derived, check_geometry, defaults_for, specs_for, spelling_hint)
 from .typed import closed_loop, gains, motor, observer_gain, period, physical, plant_config, sinusoid
 
 __all__ = ["ParamError", "ParamFile", "load_param_file", "load_param_files", "load_yaml", "check_derived",
+           "check_geometry",
            "merged_values", "node_key", "parse_param_dict", "NODE_SPECS", "PAPER_ACTUAL", "PAPER_NOMINAL", "ROS_OWN",
            "ROS_OWN_PREFIXES", "SHARED", "SHARED_SPECS", "ParamSpec", "defaults_for", "specs_for", "spelling_hint",
            "closed_loop", "gains", "motor", "observer_gain", "period", "physical", "plant_config", "sinusoid"]

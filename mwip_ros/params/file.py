@@ -139,8 +139,10 @@ def load_param_file(path, option: str = "--params-file") -> ParamFile:
     p = Path(path)
     if p.is_dir():
         raise ParamError(option, f"{p} is a directory, not a parameter file")
-    if not p.is_file():
+    if not p.exists():
         raise ParamError(option, f"no such file: {p}")
+    if not p.is_file():   # a FIFO, a device: never read (mwip_ros.yamlio)
+        raise ParamError(option, f"{p}: not a regular file (a FIFO or a device), not read")
     try:
         doc = load_yaml(p, "parameter file")   # bounded: size, no aliases, nodes, depth (mwip_ros.yamlio)
     except YamlRefused as exc:

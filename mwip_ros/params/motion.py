@@ -8,10 +8,15 @@ from __future__ import annotations
 
 from typing import Any, List, Mapping, Optional
 
-__all__ = ["specs", "motion", "yaw", "profile_rule", "yaw_profile_rule", "PROFILE_MAX_POINTS", "ABSURD_SPEED"]
+from mwip_ros.core.motion import ABSURD_SPEED
+
+__all__ = ["specs", "motion", "yaw", "profile_rule", "yaw_profile_rule", "PROFILE_MAX_POINTS", "ABSURD_SPEED",
+           "DRIVE_KEYS", "drive_wheel_limit", "wheel_limit", "wheel_limit_warning"]
 
 PROFILE_MAX_POINTS = 10000
-ABSURD_SPEED = 1e3   # m/s: a profile's (and a cmd_vel's, core.motion) speed beyond this is no robot's
+# plant_sim's drive (docs/theory.md 6.7): what the yaw stage's wheel limit is derived from (:func:`drive_wheel_limit`)
+DRIVE_KEYS = ("torque_limit", "motor.enabled", "motor.torque_constant", "motor.resistance", "motor.voltage_limit",
+              "motor.current_limit")
 
 
 def _timed_pairs_rule(v, what: str, unit: str) -> Optional[str]:
@@ -87,7 +92,9 @@ def specs() -> List[Any]:
                   lo=0.0, hi=60.0, unit="s"),
         ParamSpec("motion.yaw_wheel_limit", "double", 0.0, "motion, a spatial plant: the torque one wheel's drive "
                   "gives [N m]; balance first: the yaw pair uses only what the law's u leaves of it, |u_psi| <= "
-                  "2 limit - |u| (docs/theory.md 6.13); 0 = no limit", lo=0.0, hi=1e6, unit="N m"),
+                  "2 limit - |u| (docs/theory.md 6.13); 0 = the drive's own (plant_sim's torque_limit / 2 and the "
+                  "motor's peak / 2, the smaller; none without either); never more than the drive's",
+                  lo=0.0, hi=1e6, unit="N m"),
     ]
 
 
@@ -111,12 +118,46 @@ def _pairs(flat):
     return tuple(zip(f[0::2], f[1::2]))
 
 
+def drive_wheel_limit(v: Mapping[str, Any]) -> float:
+    """The torque one wheel's drive gives [N m] (plant_sim's :data:`DRIVE_KEYS`, docs/theory.md 6.7 and 6.13): half of
+    ``torque_limit`` (the drive stage clips each wheel there), half of the motor's peak torque at rest (each wheel has
+    half the lumped motor), the smaller of the two; 0 when the drive has neither (no limit: the paper's robot)."""
+    from .typed import motor
+    limits = []
+    if v.get("torque_limit", 0.0) > 0.0:
+        limits.append(0.5 * float(v["torque_limit"]))
+    m = motor(v)
+    if m.enabled:
+        limits.append(0.5 * m.peak_torque)
+    return min(limits) if limits else 0.0
+
+
+def wheel_limit(v: Mapping[str, Any]) -> float:
+    """The yaw stage's wheel limit L (balance first, docs/theory.md 6.13): the drive's own (:func:`drive_wheel_limit`),
+    or ``motion.yaw_wheel_limit`` when it is less: the yaw pair never counts on torque the wheels do not have (a
+    larger one is taken down to the drive's, :func:`wheel_limit_warning` says so)."""
+    given, drive = float(v.get("motion.yaw_wheel_limit", 0.0)), drive_wheel_limit(v)
+    if given > 0.0 and drive > 0.0:
+        return min(given, drive)
+    return given if given > 0.0 else drive
+
+
+def wheel_limit_warning(v: Mapping[str, Any]) -> Optional[str]:
+    """The line that says ``motion.yaw_wheel_limit`` is more than the drive gives a wheel (and the drive's is used),
+    None otherwise."""
+    given, drive = float(v.get("motion.yaw_wheel_limit", 0.0)), drive_wheel_limit(v)
+    if given > 0.0 and drive > 0.0 and given > drive:
+        return (f"motion.yaw_wheel_limit: {given:g} N m is more than the drive gives a wheel ({drive:.6g} N m: "
+                f"plant_sim's torque_limit / 2 and the motor's peak / 2, the smaller); the yaw stage uses the drive's")
+    return None
+
+
 def yaw(v: Mapping[str, Any]):
     """The :class:`~mwip_ros.core.yaw.YawConfig` of merged values (the yaw stage runs on a spatial plant), or None
-    while ``motion.enabled`` is false."""
+    while ``motion.enabled`` is false.  Its wheel limit is :func:`wheel_limit`'s (the values include plant_sim's
+    drive: merged files, or a node's values with the drive's from the plant_sim sections)."""
     if not v.get("motion.enabled", False):
         return None
     from mwip_ros.core.yaw import YawConfig
     return YawConfig(kp=v["motion.yaw_kp"], ki=v["motion.yaw_ki"],
-                     calibration_s=v.get("motion.yaw_gyro_calibration_s", 0.0),
-                     wheel_limit=v.get("motion.yaw_wheel_limit", 0.0))
+                     calibration_s=v.get("motion.yaw_gyro_calibration_s", 0.0), wheel_limit=wheel_limit(v))

@@ -21,7 +21,7 @@ from .errors import ParamError
 
 __all__ = ["SHARED", "ParamSpec", "PAPER_NOMINAL", "PAPER_ACTUAL", "SHARED_SPECS", "NODE_SPECS", "ROS_OWN",
            "ROS_OWN_PREFIXES", "QOS_OVERRIDES", "QOS_OVERRIDES_REFUSED", "specs_for", "defaults_for", "spelling_hint",
-           "check_derived"]
+           "check_derived", "check_geometry"]
 
 SHARED = "/**"
 
@@ -446,7 +446,8 @@ NODE_SPECS: Dict[str, List[ParamSpec]] = {
                   "them is closed at once and logged (and refused at start-up if the descriptor limit leaves no "
                   "room for it)", **_count_range(1, 100000)),
         ParamSpec("idle_timeout_s", "double", 60.0, "a connection that subscribes to nothing and sends nothing for "
-                  "this long is closed (also one that never completes the WebSocket handshake)",
+                  "this long is closed (also one that never completes the WebSocket handshake, and a subscribed one "
+                  "that reads nothing that long while data waits for it)",
                   **_positive_from(0.5, 86400.0, "a client needs a moment to subscribe once it connected"), unit="s"),
     ],
     "robot_markers": [],   # the shared section only (the nominal model sizes the robot)
@@ -532,9 +533,10 @@ def _check_designs(values: Mapping[str, Any], nominal, source: Optional[str]) ->
             raise ParamError(key, reason, source) from None
 
 
-def _check_mujoco(values: Mapping[str, Any], source: Optional[str]) -> None:
-    """The 3D model of ``backend: mujoco`` (docs/theory.md 6.10): a body inertia a rigid body can have (each
-    principal moment at most the sum of the other two), wheels that do not overlap, and the package."""
+def check_geometry(values: Mapping[str, Any], source: Optional[str] = None) -> None:
+    """The 3D robot (``actual.*``: what ``backend: mujoco`` builds, docs/theory.md 6.10, and what ``robot_state``'s
+    URDF describes): a body inertia a rigid body can have (each principal moment at most the sum of the other two)
+    and wheels that do not overlap; ParamError naming the key, else."""
     moments = {"actual.I_b_roll": values["actual.I_b_roll"], "actual.I_b": values["actual.I_b"],
                "actual.I_b_yaw": values["actual.I_b_yaw"]}
     for key, v in moments.items():
@@ -547,6 +549,11 @@ def _check_mujoco(values: Mapping[str, Any], source: Optional[str]) -> None:
     if values["actual.track_width"] <= width:
         raise ParamError("actual.track_width", f"{values['actual.track_width']:g} m: the wheels (each "
                                                f"actual.r / 5 = {width:g} m wide) would overlap", source)
+
+
+def _check_mujoco(values: Mapping[str, Any], source: Optional[str]) -> None:
+    """The 3D model of ``backend: mujoco`` (docs/theory.md 6.10): :func:`check_geometry`, and the package."""
+    check_geometry(values, source)
     from mwip_ros.optional import missing
     why = missing("mujoco")
     if why is not None:

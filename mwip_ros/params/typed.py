@@ -90,7 +90,8 @@ def limit_warnings(v: Mapping[str, Any], law_names: Iterable[str] = ()) -> List[
     """The torque limits too weak for the true robot (:func:`mwip_ros.core.drive.limit_warning`, one line each):
     the motor's peak torque at ``fall_angle`` (:func:`~mwip_ros.core.drive.torque_warning`); ``torque_limit``
     (when > 0) and the own limit of each law of ``law_names`` (``Law.limit_key``: ``mpc.u_max``) at the initial
-    tilt, where a limit below the holding torque starts the run beyond what it can turn back."""
+    tilt, where a limit below the holding torque starts the run beyond what it can turn back; and a yaw wheel limit
+    above the drive's (:func:`.motion.wheel_limit_warning`: the drive's is used)."""
     actual = physical(v, "actual")
     out = [torque_warning(motor(v), actual, v["fall_angle"])]
     limits = {"torque_limit": v["torque_limit"]} if v.get("torque_limit", 0.0) > 0.0 else {}
@@ -101,6 +102,9 @@ def limit_warnings(v: Mapping[str, Any], law_names: Iterable[str] = ()) -> List[
     tilt = abs(v["initial.theta_b"])
     out += [limit_warning(key, lim, actual, tilt, f"the initial tilt |initial.theta_b| = {tilt:g} rad")
             for key, lim in limits.items()]
+    if v.get("motion.enabled"):   # the yaw stage's wheel limit above the drive's (the drive's is used)
+        from .motion import wheel_limit_warning
+        out.append(wheel_limit_warning(v))
     return [w for w in out if w]
 
 

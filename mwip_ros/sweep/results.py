@@ -18,6 +18,7 @@ import csv
 import io
 import json
 import math
+import os
 import re
 from pathlib import Path
 from typing import Dict, List, Optional
@@ -140,8 +141,21 @@ def read_results(path: Path) -> Dict[str, list]:
     (128 KiB).  A row cut by a crash mid-write (fewer fields) is not a result and is skipped."""
     path = Path(path)
     cols: Dict[str, list] = {}
+    from mwip_ros.core.budget import RESULT_COLUMN, fmt_bytes, memory_budget
+    from mwip_ros.yamlio import NotRegularFile, open_regular
     try:
-        with open(path, newline="") as f:
+        raw = open_regular(path, "results file")
+    except NotRegularFile as exc:
+        raise ValueError(f"{path}: {exc}") from None
+    # a cell read back costs RESULT_COLUMN bytes and takes at least 2 characters of the file: within the budget
+    most = 2 * memory_budget() // RESULT_COLUMN
+    size = os.fstat(raw.fileno()).st_size
+    if size > most:
+        raw.close()
+        raise ValueError(f"{path} is {fmt_bytes(size)}: reading it back may take more than the memory budget "
+                         f"({fmt_bytes(memory_budget())}, MWIP_MEMORY_BUDGET); at most {fmt_bytes(most)} is read")
+    try:
+        with io.TextIOWrapper(raw, encoding="utf-8", newline="") as f:
             reader = csv.reader(f)
             head = next(reader, None)
             if not head:

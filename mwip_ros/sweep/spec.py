@@ -133,7 +133,8 @@ def load_spec(path, base_override: Optional[Path] = None, backends=("rk4",)) -> 
     another one is refused naming the key."""
     p = Path(path)
     if not p.is_file():
-        raise SpecError("<spec>", f"no such file: {p}" if not p.is_dir() else f"{p} is a directory")
+        raise SpecError("<spec>", f"no such file: {p}" if not p.exists() else f"{p} is a directory" if p.is_dir()
+                        else f"{p}: not a regular file (a FIFO or a device), not read")
     try:
         doc = load_yaml(p, "sweep spec")   # bounded: size, no aliases, nodes, depth (mwip_ros.yamlio)
     except YamlRefused as exc:

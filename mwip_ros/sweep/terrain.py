@@ -27,7 +27,6 @@ has its own, 120 N m), as the shipped disturbance and region-of-attraction sweep
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import math
 import sys
 from dataclasses import dataclass
@@ -72,16 +71,23 @@ def base_values(realistic: bool = False) -> Dict[str, object]:
 
 
 def _simulate(values, law: str, duration: float, push: Optional[Tuple[float, float, float]] = None):
-    """``mwip_sim``'s run of ``law`` with ``values``: its columns, or None when it failed (fell, diverged)."""
+    """``mwip_sim``'s run of ``law`` with ``values``: its columns, or None when it failed (fell, diverged).  ``push``
+    (start [s], length [s], force.y [N]): external_wrench's lateral force held over that window (the offline loop's
+    wrench, :class:`~mwip_ros.core.loop.Period`, as the node holds a published one)."""
     from mwip_ros import params as P
     from mwip_ros.core.sim import simulate
     P.check_derived(values)
     loop = P.closed_loop(values, controller=law, duration=duration)
-    if push is not None:
-        loop = dataclasses.replace(loop, plant=dataclasses.replace(
-            loop.plant, backend=_PUSHED, mujoco=_Push(**dataclasses.asdict(loop.plant.mujoco), push=push)))
-    tr = simulate(loop, diverged_fails=True)
+    tr = simulate(loop, diverged_fails=True, wrench=_push_wrench(*push) if push is not None else None)
     return None if tr.record.get("failure") else tr.columns
+
+
+def _push_wrench(t0: float, length: float, fy: float):
+    """external_wrench's (tau_ext1, tau_ext2, force.y, torque.z) at t_k: force.y ``fy`` [N] for t_k in [t0, t0 +
+    length), none else."""
+    def wrench(t: float):
+        return (0.0, 0.0, fy if t0 - 1e-9 <= t < t0 + length - 1e-9 else 0.0, 0.0)
+    return wrench
 
 
 @dataclass(frozen=True)
@@ -168,53 +174,6 @@ def scan(run, grid: Sequence[float]) -> Tuple[Optional[float], List[Outcome]]:
     return best, seen
 
 
-# --- the push: external_wrench's force.y over a window, offline (a plant backend: core.plant.PLANTS) -------------
-_PUSHED = "_mujoco_pushed"   # private: not a plant_sim.backend value (core.plant.make_plant)
-
-
-def _push_config():
-    from mwip_ros.core.mujoco_plant import MujocoConfig
-
-    @dataclass(frozen=True)
-    class Push(MujocoConfig):
-        push: Tuple[float, float, float] = (0.0, 0.0, 0.0)   # (start [s], length [s], force.y [N])
-    return Push
-
-
-def _pushed_plant(cfg):
-    from mwip_ros.core.mujoco_plant import MujocoPlant
-
-    class Pushed(MujocoPlant):
-        """MuJoCo's plant with external_wrench's force.y held over ``cfg.mujoco.push``'s window (as the node does)."""
-
-        def _wrench(self, extra):
-            t0, length, fy = self.cfg.mujoco.push
-            on = t0 - 1e-9 <= self.t < t0 + length - 1e-9
-            return (extra[0], extra[1], fy if on else 0.0, 0.0)
-
-        def step(self, u, extra=(0.0, 0.0), enabled=True):
-            super().step(u, self._wrench(extra), enabled)
-
-        def lumped_disturbance(self, u, extra=(0.0, 0.0)):
-            return super().lumped_disturbance(u, self._wrench(extra))
-    return Pushed(cfg)
-
-
-def _register():
-    from mwip_ros.core.plant import PLANTS
-    PLANTS.setdefault(_PUSHED, _pushed_plant)
-
-
-_Push = None
-
-
-def _init():
-    global _Push
-    if _Push is None:
-        _Push = _push_config()
-        _register()
-
-
 # --- the tables -----------------------------------------------------------------------------------------------------
 def _fmt(v, unit=""):
     return "-" if v is None else f"{v:g}{unit}"
@@ -228,7 +187,6 @@ def _num(v: float, spec: str) -> str:
 def tables(laws: Sequence[str] = LAWS, realistic: bool = False, which: Sequence[str] = ("slope", "step",
            "friction", "push"), progress=None) -> Dict[str, Dict[str, object]]:
     """Per table and law, the scans' answers (module docstring)."""
-    _init()
     base = base_values(realistic)
     out: Dict[str, Dict[str, object]] = {w: {} for w in which}
     for law in laws:
@@ -316,6 +274,12 @@ def main(argv=None) -> int:
     ap.add_argument("--realistic", action="store_true", help="raw sensors and the drive (config overlays)")
     ap.add_argument("--figure", help="write the bar figure here (needs slope and step)")
     a = ap.parse_args(argv)
+    from mwip_ros.core import laws
+    unknown = [law for law in a.laws if law not in laws.names()]
+    if unknown:   # before any scan: one line, not a KeyError after an hour of them
+        ap.error(f"--laws: {', '.join(unknown)} is not a registered law ({', '.join(laws.names())})")
+    if a.figure and not {"slope", "step"} <= set(a.only):
+        ap.error(f"--figure draws the slope and step scans: give --only with slope and step (got {' '.join(a.only)})")
     res = tables(a.laws, a.realistic, a.only, progress=lambda law: print(f"... {law}", file=sys.stderr))
     print(markdown(res))
     if a.figure:

@@ -44,7 +44,7 @@ def test_keys_step_and_clip_the_command():
 @pytest.mark.unit
 def test_limits_from_a_file_else_defaults(tmp_path):
     f = tmp_path / "m.yaml"
-    f.write_text("dscndo_controller:\n  ros__parameters:\n    motion:\n      max_speed: 0.4\n      max_yaw_rate: 2\n")
+    f.write_text("dscndo_controller:\n  ros__parameters:\n    motion:\n      max_speed: 0.4\n      max_yaw_rate: 2.0\n")
     assert limits([f]) == Limits(0.4, 2.0)
     d = limits([])
     assert d.max_speed > 0 and d.max_yaw_rate > 0

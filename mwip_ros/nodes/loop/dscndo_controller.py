@@ -23,6 +23,12 @@ REP-103: linear.x, angular.z).  A Twist only sets the target (:class:`mwip_ros.c
 of period k are made inside the period, in ``core.loop.command``, as offline.  A Twist that is not one, not finite or
 absurd is rejected and counted; one over the limits is clipped and counted; no cmd_vel for
 ``motion.cmd_vel_timeout_s`` ramps the references to zero (logged once per silence, counted on /diagnostics).
+While no torque acts (``driver_state``, the plant's driver: disabled, in fault, the emergency stop held; docs/theory.md
+6.8) the references hold at the measured state (the position target, v* and psi'* do not advance), the yaw integral
+stays zero and a cmd_vel is not taken (counted): on enable the robot starts from where it is, at rest.  Until a
+``driver_state`` comes the torque is taken to act.  ``cmd_vel`` and ``driver_state`` are read with each state and
+between the executor's callbacks, the newest one (:class:`~mwip_ros.nodes.runtime.rclpy_compat.PolledInput`), not as
+they arrive: a flood of them costs the controller one message per look.
 With motion on and a state that carries the gyro's yaw rate (a spatial plant's ``joint_states``: the joint ``yaw``),
 the yaw stage runs after the law (docs/theory.md 6.13, ``core.yaw``) and the answer is the two wheels' torques on
 ``wheel_torques_cmd`` (sensor_msgs/JointState, names wheel_left_joint, wheel_right_joint, effort [u_L, u_R]) instead
@@ -36,7 +42,7 @@ import sys
 from geometry_msgs.msg import Twist, WrenchStamped
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64
+from std_msgs.msg import Float64, String
 
 from mwip_ros import params as P
 from mwip_ros.core import laws
@@ -46,12 +52,13 @@ from mwip_ros.core.motion import Shaper
 from mwip_ros.core.yaw import YawLoop, wheel_torques
 from mwip_ros.msgs import BadMessage
 from mwip_ros.msgs import layouts as L
-from mwip_ros.msgs.qos import qos_for
-from mwip_ros.params.motion import motion as motion_config, yaw as yaw_config
+from mwip_ros.msgs.qos import DRIVER_STATE_QOS, qos_for
+from mwip_ros.params.motion import motion as motion_config, wheel_limit_warning, yaw as yaw_config
 from mwip_ros.nodes.runtime.diagnostics import OK
 from mwip_ros.nodes.runtime.guards import REPEAT, RESTART, STAMP_WINDOW_PERIODS, PublisherWatch, Rejects
 from mwip_ros.nodes.runtime.state_input import StateInput
-from mwip_ros.nodes.runtime.params import declare
+from mwip_ros.nodes.runtime.params import declare, plant_file_values
+from mwip_ros.nodes.runtime.rclpy_compat import PolledInput
 from mwip_ros.nodes.runtime.process import GracefulNodeMixin, run_node
 
 NAME = "dscndo_controller"
@@ -65,6 +72,13 @@ def _installed(values) -> None:
     text = laws.unavailable(law) if law is not None else None
     if text:
         raise P.ParamError("law", text)
+
+
+def _drive_values(argv) -> dict:
+    """plant_sim's drive (``params.motion.DRIVE_KEYS``) from the plant_sim sections of the command line's parameter
+    files, the later file winning (the yaw stage's wheel limit is derived from it)."""
+    from mwip_ros.params.motion import DRIVE_KEYS
+    return plant_file_values(argv, DRIVE_KEYS)
 
 
 class DscndoController(Node, GracefulNodeMixin):
@@ -97,14 +111,22 @@ class DscndoController(Node, GracefulNodeMixin):
         self.watch = PublisherWatch(self, ["joint_states", "disturbance_estimate"])
         mc = motion_config(self.v)   # docs/theory.md 6.11: None while motion.enabled is false (nothing changes)
         self.motion = Shaper(mc, self.h, self.nominal) if mc is not None else None
-        self.yaw = YawLoop(yaw_config(self.v), self.h) if mc is not None else None   # theory 6.13: with a yaw rate
+        # theory 6.13, with a yaw rate: the wheel limit is the drive's (plant_sim's sections of the same files) unless
+        # motion.yaw_wheel_limit says less (more: the drive's, and a warning)
+        with_drive = {**self.v, **_drive_values(argv)}
+        self.yaw = YawLoop(yaw_config(with_drive), self.h) if mc is not None else None
+        if mc is not None and wheel_limit_warning(with_drive):
+            self.get_logger().warning(wheel_limit_warning(with_drive))
         self.yaw_rates = {}   # stamp -> the gyro's yaw rate of that state (a spatial plant's joint_states)
+        # the plant's driver (docs/theory.md 6.8): None until a driver_state came (the torque is taken to act)
+        self.driver = None
+        self.ignored = 0            # cmd_vel that came while no torque acts: not taken
+        self.driver_in = PolledInput(self, String, "driver_state", DRIVER_STATE_QOS, self._on_driver_state)
         self.cmd_vel_sub = None
         if mc is not None and not (mc.profile or mc.yaw_profile):   # cmd_vel sets the target; the newest counts
             from rclpy.qos import QoSProfile, ReliabilityPolicy
-            self.cmd_vel_sub = self.create_subscription(
-                Twist, "cmd_vel", self._on_cmd_vel, QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT),
-                raw=True)
+            self.cmd_vel_sub = PolledInput(self, Twist, "cmd_vel", QoSProfile(
+                depth=1, reliability=ReliabilityPolicy.BEST_EFFORT), self._on_cmd_vel)
         self.get_logger().info(self._ready_text())
 
     @property
@@ -163,7 +185,36 @@ class DscndoController(Node, GracefulNodeMixin):
         if {"law", "use_observer"} & changed:
             self.get_logger().info(f"law now {self._describe()}")
 
+    @property
+    def driving(self) -> bool:
+        """Whether the torque acts: the driver enabled, or no driver_state yet."""
+        return self.driver in (None, "enabled")
+
+    def _on_driver_state(self, data: bytes) -> None:
+        try:
+            state = L.parse_driver_state(data)
+        except BadMessage as exc:
+            self.rejects("driver_state", str(exc))
+            return
+        if state != self.driver and self.motion is not None:
+            self.get_logger().info(f"driver {state}: " + (
+                "the references start from the measured state" if state == "enabled" else
+                "no torque acts; the references hold at the measured state and cmd_vel is not taken"))
+        self.driver = state
+
+    def _poll_side_inputs(self) -> None:
+        """driver_state and cmd_vel: what came since the last look (the newest of each: depth 1)."""
+        self.driver_in.poll()
+        if self.cmd_vel_sub is not None:
+            self.cmd_vel_sub.poll()
+
+    def spin_step(self, executor) -> None:
+        """Between the executor's callbacks too (a command before the first state is taken then, within 0.1 s)."""
+        self._poll_side_inputs()
+        GracefulNodeMixin.spin_step(self, executor)
+
     def _on_state(self, data: bytes) -> None:
+        self._poll_side_inputs()   # before the state is answered: what came before it counts for it
         taken = self.input.take(data)
         if taken is None:
             return
@@ -222,14 +273,18 @@ class DscndoController(Node, GracefulNodeMixin):
         x = self.states.pop(stamp)
         self.estimates.pop(stamp, None)
         before = ctrl.snapshot()
+        shaped = self.motion.snapshot() if self.motion is not None else None
         k = round((stamp - self.stamp0) / (self.h * 1e9)) if self.stamp0 is not None else 0
-        try:
-            u, internals = command(ctrl, x, tau_hat, self.excitation, k, self.motion)   # core.loop: the law stage
+        driving = self.driving
+        try:   # core.loop: the law stage (no torque acting: the references hold)
+            u, internals = command(ctrl, x, tau_hat, self.excitation, k, self.motion, driving)
             ok = math.isfinite(u) and ctrl.finite()
         except (ArithmeticError, ValueError):
             ok = False
         if not ok:
             ctrl.restore(before)  # keep the law's state as it was: setting a bad gain back repairs the loop
+            if shaped is not None:
+                self.motion.restore(shaped)   # and the references' (the period did not happen)
             self.rejects("joint_states", f"the law gives no finite command for t = {stamp * 1e-9:.3f} s "
                                          f"({self._describe()}); nothing published")
             return
@@ -238,7 +293,7 @@ class DscndoController(Node, GracefulNodeMixin):
                                       f"and the robot holds its position (stop #{self.motion.timeouts})")
         w = self.yaw_rates.pop(stamp, None)
         if w is not None:   # stage yaw (docs/theory.md 6.13): the two wheels' torques answer the state
-            u_psi = self.yaw.step(self.motion.ref.dpsi, w, u)
+            u_psi = self.yaw.step(self.motion.ref.dpsi, w, u) if driving else self.yaw.idle(w)
             self.cmds_pub.publish(L.encode_wheel_torques(stamp, *wheel_torques(u, u_psi, 0.0)))
         else:
             self.cmd_pub.publish(L.encode_command(u))
@@ -260,6 +315,12 @@ class DscndoController(Node, GracefulNodeMixin):
             self.rejects("cmd_vel", str(exc))
             self.motion.rejected += 1
             return
+        if not self.driving:   # no torque acts: a command now would be stored up and hit the robot on enable
+            self.ignored += 1
+            if self.ignored in (1, 10) or self.ignored % 1000 == 0:
+                self.get_logger().warning(f"cmd_vel while the driver is {self.driver}: not taken ({self.ignored} so "
+                                          f"far); enable the driver first")
+            return
         why = self.motion.command(vx, wz)
         if why is not None:
             self.rejects("cmd_vel", why)
@@ -273,11 +334,13 @@ class DscndoController(Node, GracefulNodeMixin):
         return self.count
 
     def diagnostic_status(self):
-        values = {"commands": self.count, "law": self._name(), "waiting_states": len(self.states)}
+        values = {"commands": self.count, "law": self._name(), "waiting_states": len(self.states),
+                  "driver": self.driver or "unknown"}
         if self.motion is not None:   # docs/theory.md 6.11: the stops and the refused or clipped cmd_vel
             m = self.motion
             values.update(cmd_vel_accepted=m.accepted, cmd_vel_timeouts=m.timeouts, cmd_vel_rejected=m.rejected,
-                          cmd_vel_clipped=m.clipped, v_ref=m.ref.v if m.ref is not None else 0.0)
+                          cmd_vel_clipped=m.clipped, cmd_vel_not_driving=self.ignored,
+                          v_ref=m.ref.v if m.ref is not None else 0.0)
         return OK, f"{self._describe()} answering", values
 
     def on_shutdown(self) -> None:

@@ -19,6 +19,9 @@ the robot, publish ``external_wrench`` (``geometry_msgs/Wrench``: ``torque.x`` a
 tau_ext1, ``torque.y`` to tau_ext2, until the next one; a zero wrench clears it; with
 ``backend: mujoco`` ``force.y`` pushes the body sideways at its centre of gravity and
 ``torque.z`` turns it about the vertical, both in the robot's heading frame; rk4 ignores them).
+``external_wrench``, ``emergency_stop`` and a raw plant's ``/diagnostics`` are read between the node's callbacks, the
+newest :data:`SIDE_DEPTH` of each (:class:`~mwip_ros.nodes.runtime.rclpy_compat.PolledInput`): within a period while
+the loop runs, and a flood of them queues nothing in front of the period.
 
 The driver's state machine (docs/theory.md 6.8; the pure machine, its states, faults, levels and answers:
 :mod:`mwip_ros.core.safety`; one machine for the node's life) stands between the command and the plant: not
@@ -82,6 +85,7 @@ from mwip_ros.nodes.runtime.diagnostics import ERROR, OK, WARN, StepRate
 from mwip_ros.nodes.runtime.guards import PublisherWatch, Rejects
 from mwip_ros.nodes.runtime.lockstep import LockstepDriver, subscriber_floor
 from mwip_ros.nodes.runtime.params import declare
+from mwip_ros.nodes.runtime.rclpy_compat import PolledInput
 from mwip_ros.nodes.loop.plant_runners import RUNNERS
 from mwip_ros.nodes.loop.plant_truth import TruthPublishers
 from mwip_ros.nodes.runtime.process import EXIT_ERROR, EXIT_FALLEN, GracefulNodeMixin, run_node
@@ -90,6 +94,7 @@ from mwip_ros.params.typed import limit_warnings
 from mwip_ros.runs import CsvStream
 
 NAME = "plant_sim"
+SIDE_DEPTH = 10   # messages of each side input kept between two looks (the newest: keep-last history)
 SETTLE_S = 0.3  # the discovered graph must be unchanged this long before the first state
 ESTIMATOR = "state_estimator"   # the node whose /diagnostics status a raw plant watches (its namespace's)
 
@@ -149,7 +154,9 @@ class PlantSimNode(Node, GracefulNodeMixin):
         cmd_sub = self.create_subscription(Float64, "wheel_torque_cmd", self._on_cmd, in_qos, raw=True)
         if self.plant.spatial:   # the yaw stage's two torques (docs/theory.md 6.13), instead of wheel_torque_cmd
             self.create_subscription(JointState, "wheel_torques_cmd", self._on_wheel_cmd, in_qos, raw=True)
-        self.create_subscription(Wrench, "external_wrench", self._on_wrench, INPUT_QOS, raw=True)
+        # the side inputs are read between the node's callbacks, the newest few of each (rclpy_compat.PolledInput):
+        # a flood of them cannot queue up in front of the period (the realtime tick, the lockstep command)
+        self.wrench_in = PolledInput(self, Wrench, "external_wrench", INPUT_QOS, self._on_wrench, SIDE_DEPTH)
         self.create_service(Trigger, "~/reset", self._on_reset, qos_profile=SERVICE_QOS)
         self.create_service(Trigger, "~/enable", self._on_enable, qos_profile=SERVICE_QOS)
         self.create_service(Trigger, "~/disable", self._on_disable, qos_profile=SERVICE_QOS)
@@ -157,14 +164,15 @@ class PlantSimNode(Node, GracefulNodeMixin):
         # users publish it with any QoS: reliable (nothing lost) and best effort (matches a best-effort publisher);
         # the e-stop is a level (core.safety): the latest value heard on each subscription, asserted while one is true
         self.estop_heard: dict = {}
-        for via, qos in (("reliable", INPUT_QOS), ("best_effort", BEST_EFFORT_INPUT_QOS)):
-            self.create_subscription(Bool, "emergency_stop", lambda data, via=via: self._on_estop(data, via), qos,
-                                     raw=True)
+        self.side_inputs = [self.wrench_in] + [
+            PolledInput(self, Bool, "emergency_stop", qos, lambda data, via=via: self._on_estop(data, via), SIDE_DEPTH)
+            for via, qos in (("reliable", INPUT_QOS), ("best_effort", BEST_EFFORT_INPUT_QOS))]
         self.estimator_status = None
         if self.raw:   # the estimator reports its health on /diagnostics (ERROR: diverged)
             from diagnostic_msgs.msg import DiagnosticArray
             self.estimator_status = f"{self.get_namespace().rstrip('/')}/{ESTIMATOR}"
-            self.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, INPUT_QOS, raw=True)
+            self.side_inputs.append(PolledInput(self, DiagnosticArray, "/diagnostics", INPUT_QOS,
+                                                self._on_diagnostics, SIDE_DEPTH))
         # one graph, one controller: a second publisher of commands or states means mixed streams
         self.watch = PublisherWatch(self, ["wheel_torque_cmd", "joint_states",
                                            *(("wheel_torques_cmd",) if self.plant.spatial else ()),
@@ -218,6 +226,8 @@ class PlantSimNode(Node, GracefulNodeMixin):
             e = L.parse_external_wrench(data)
         except BadMessage as exc:
             self.rejects("external_wrench", str(exc))
+            return
+        if e == self.extra:   # the same wrench again: nothing changes, nothing to say
             return
         self.extra = e
         self.get_logger().info(f"external wrench: tau_ext1 += {e[0]:g}, tau_ext2 += {e[1]:g} N m, force.y {e[2]:g} N, "
@@ -470,11 +480,7 @@ class PlantSimNode(Node, GracefulNodeMixin):
     def _lie(self) -> None:
         """A fallen robot (``exit_on_fall: false``) lies where it fell, at rest: the model has no ground (its body
         would swing through the floor), so the period passes without integrating, no torque acting."""
-        p = self.plant
-        p.x = type(p.x)(p.x[0], p.x[1], 0.0, 0.0)
-        p.k += 1
-        p.u_prev = p.u_cmd_prev = 0.0
-        p.saturation, p.enabled_prev = 0, False
+        self.plant.lie()   # MuJoCo's velocities too (core.mujoco_plant.MujocoPlant.lie)
 
     def _start(self, why: str) -> None:
         self.started = True
@@ -483,7 +489,14 @@ class PlantSimNode(Node, GracefulNodeMixin):
         self.get_logger().info(f"{why}; starting {self.mode} run")
         self.runner.start()
 
+    def poll_inputs(self) -> None:
+        """The side inputs (external_wrench, emergency_stop, a raw plant's /diagnostics): what came since the last
+        look, at most :data:`SIDE_DEPTH` of each, in order."""
+        for side in self.side_inputs:
+            side.poll()
+
     def spin_step(self, executor) -> None:
+        self.poll_inputs()
         if not self.started:
             ready = self.lockstep.wait_for_graph()
             if ready:

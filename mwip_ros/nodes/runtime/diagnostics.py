@@ -95,7 +95,7 @@ def publishers_by_topic(node) -> str:
     subscription has matched, as this node's DDS reader sees them (the fewest, when it has two readers on a topic);
     '' with no subscription."""
     counts: Dict[str, int] = {}
-    for sub in getattr(node, "subscriptions", ()):
+    for sub in (*getattr(node, "subscriptions", ()), *getattr(node, "polled_inputs", ())):   # rclpy_compat.PolledInput
         n = sub.get_publisher_count()
         counts[sub.topic_name] = min(n, counts.get(sub.topic_name, n))
     return ", ".join(f"{t}: {n}" for t, n in sorted(counts.items()))

@@ -51,6 +51,7 @@ __all__ = ["LockstepDriver", "RESEND_S", "graph_missing", "CHAIN", "measurement_
 CHAIN = answering()   # the answering stages of today's loop: the observer, then the law (core.loop.STAGES)
 
 RESEND_S = 0.5          # resend a state nobody answered after this long [s]
+HEARD_DEPTH = 10        # the chain's intermediate answers kept between two looks (the newest)
 WAIT_GRACE_S = 2.0      # discovery takes a moment: until then a wait for the graph is the normal start
 WAIT_LOG_PERIOD_S = 2.0
 COMPLETE_WAIT_S = 3.0   # once the required nodes are there, wait at most this long for every discovered subscriber
@@ -152,6 +153,7 @@ class LockstepDriver:
         what = graph_missing(self.node, self.state_pub, self.need_subs, self.answers)
         what += [f"{t}: {m} of {n} discovered subscribers matched" for t, m, n in self.unmatched()]
         if self.awaiting is not None and self._listening is not None:
+            self._poll_heard()
             k, stamp = self.awaiting
             for a in self.answers[:-1]:   # the first stage of the chain that did not answer the resent state
                 if any(a.node in w for w in what):
@@ -169,6 +171,7 @@ class LockstepDriver:
         stamped ``since_stamp`` or later was heard (:meth:`listen` first); the last stage (the command's) when
         every other one answered.  The realtime watchdog names it (lockstep names it in :meth:`missing`); times
         are said from ``stamp0`` (the run's first stamp) [ns]."""
+        self._poll_heard()
         for a in self.answers[:-1]:
             heard = self._heard.get(a.topic)
             if heard is None or heard < since_stamp:
@@ -198,8 +201,15 @@ class LockstepDriver:
                     self._heard[topic] = stamp
             return heard
 
-        self._listening = [self.node.create_subscription(msg_class(graph_type(a.topic)), a.topic, on_answer(a.topic),
-                                                         qos, raw=True) for a in self.answers[:-1]]
+        # read when a verdict needs them (the newest few: keep-last), not as they come: the chain's answers are a
+        # side input of the plant, and a flood of them must not queue up in front of its period
+        from mwip_ros.nodes.runtime.rclpy_compat import PolledInput
+        self._listening = [PolledInput(self.node, msg_class(graph_type(a.topic)), a.topic, qos, on_answer(a.topic),
+                                       HEARD_DEPTH) for a in self.answers[:-1]]
+
+    def _poll_heard(self) -> None:
+        for sub in self._listening or ():
+            sub.poll()
 
     def wait_for_graph(self) -> Optional[bool]:
         """True once the graph is ready, complete and settled; False when ``timeout_s`` passed; else None."""

@@ -337,6 +337,8 @@ def run_node(factory: Callable[..., object], argv: Optional[Sequence[str]] = Non
             except TypeError:  # pragma: no cover
                 executor.shutdown()
         if node is not None:
+            from mwip_ros.nodes.runtime.rclpy_compat import destroy_polled_inputs
+            destroy_polled_inputs(node)   # its readers outside the executor, before the node
             node.destroy_node()
         if context.ok():
             rclpy.shutdown(context=context)

@@ -14,6 +14,7 @@ test/nodes/test_param_hostile.py); a missing internal raises :class:`RclpyChange
 :func:`parameter_overrides`           ``Node._parameter_overrides``: the start-up values rclpy read
 :func:`name_undeclared_parameters`    ``Node._check_undeclared_parameters``: a refusal names the keys
 :func:`use_ros_time_override`         ``ROSClock._set_ros_time_is_active``: a clock the node sets
+:class:`PolledInput`                  ``_rclpy.Subscription``: a subscription the executor never serves
 ====================================  ==================================================================
 
 rclpy's parameter services (``rclpy.parameter_service.ParameterService``) read each request
@@ -47,7 +48,8 @@ from mwip_ros.nodes.runtime.guards import NEW, REPEAT, RESTART, Rejects, StampGu
 
 __all__ = ["WRITTEN_FOR", "MAX_NAME_CHARS", "MAX_ARRAY_LEN", "MAX_PARAMETERS", "CLOCK_WINDOW_NS", "RclpyChanged",
            "rclpy_version", "check_version", "install", "installed", "parameter_from_msg", "shown_name", "guard_clock",
-           "clock_guarded", "parameter_overrides", "name_undeclared_parameters", "use_ros_time_override"]
+           "clock_guarded", "parameter_overrides", "name_undeclared_parameters", "use_ros_time_override",
+           "PolledInput", "polled_inputs", "destroy_polled_inputs"]
 
 WRITTEN_FOR = ("7.1.6",)   # the rclpy versions whose internals this module was written against (and tested with)
 MAX_NAME_CHARS = 256       # a longer name that the node has not declared is refused unread
@@ -406,3 +408,89 @@ def install() -> None:
         setattr(ParameterService, attr, replacement)
     _state["installed"] = True
 
+
+
+# --- inputs the executor never serves ---------------------------------------------------------------
+
+class PolledInput:
+    """A subscription that the node reads when it is ready, not when a message arrives: what keeps a flood on a side
+    input (``cmd_vel``, ``driver_state``, ``emergency_stop``, ``external_wrench``) from starving the control period.
+
+    rclpy's ``EventsExecutor`` queues one event per message that arrives (asio's first-in first-out queue, the
+    timers' events in the same queue), and serves each with the GIL held: 50,000 Twists a second on ``cmd_vel`` put
+    the controller's ``joint_states`` behind thousands of events, its commands came late and the realtime robot fell
+    (BENCHMARKS.md, "Input floods").  This subscription is made with rclpy's own ``_rclpy.Subscription`` (the DDS
+    reader: the graph, the QoS matching and ``get_publisher_count`` are a subscription's) but is not in the node's
+    ``subscriptions``, so no executor ever sees it: a flood costs DDS's receive thread only, and the node takes
+    at most ``depth`` messages at each :meth:`poll` (the newest ones: keep-last history), so its work per period is
+    bounded whatever comes in.
+
+    ``callback(data)`` gets each message's CDR bytes, as a ``raw=True`` subscription's callback does (``depth``: keep
+    that many, whatever ``qos`` says); the node calls
+    :meth:`poll` where its period is (the controller with each state, the plant between its callbacks) and
+    :meth:`destroy` before it is destroyed (``run_node`` does: :func:`destroy_polled_inputs`).  It is listed in
+    ``node.polled_inputs`` (:func:`polled_inputs`), where the diagnostics and the tests' node harness find it."""
+
+    raw = True
+
+    def __init__(self, node, msg_type, topic: str, qos, callback: Callable[[bytes], None],
+                 depth: Optional[int] = None):
+        from copy import copy
+
+        from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+        from rclpy.type_support import check_is_valid_msg_type
+        check_is_valid_msg_type(msg_type)
+        if depth is not None:   # ``qos``'s reliability and durability (the publishers it matches), the newest ``depth``
+            qos = copy(qos)
+            qos.depth = depth
+        c_qos = qos.get_c_qos_profile()
+        make = getattr(_rclpy, "Subscription", None)
+        if make is None:   # pragma: no cover - another rclpy
+            raise RclpyChanged("no _rclpy.Subscription")
+        with node.handle:
+            self.handle = make(node.handle, msg_type, topic, c_qos)
+        self.msg_type, self.qos_profile, self.callback = msg_type, qos, callback
+        self.topic_name = self.handle.get_topic_name()
+        self.depth = max(1, int(qos.depth or 1))
+        self.taken = 0
+        if not hasattr(node, "polled_inputs"):
+            node.polled_inputs = []
+        node.polled_inputs.append(self)
+
+    @property
+    def topic(self) -> str:
+        return self.topic_name
+
+    def get_publisher_count(self) -> int:
+        """The publishers this subscription has matched (as ``rclpy.subscription.Subscription``'s)."""
+        return self.handle.get_publisher_count()
+
+    def poll(self, limit: Optional[int] = None) -> int:
+        """Hand the messages waiting (at most ``limit``, default the QoS depth) to the callback, oldest first;
+        returns how many."""
+        n, most = 0, self.depth if limit is None else limit
+        while n < most:
+            got = self.handle.take_message(self.msg_type, True)
+            if got is None:
+                break
+            n += 1
+            self.callback(got[0])
+        self.taken += n
+        return n
+
+    def destroy(self) -> None:
+        """The DDS reader destroyed (idempotent)."""
+        if self.handle is not None:
+            self.handle.destroy_when_not_in_use()
+            self.handle = None
+
+
+def polled_inputs(node) -> List[PolledInput]:
+    """The node's :class:`PolledInput` subscriptions (none: [])."""
+    return list(getattr(node, "polled_inputs", ()))
+
+
+def destroy_polled_inputs(node) -> None:
+    """Destroy the node's :class:`PolledInput` subscriptions, before the node itself."""
+    for p in polled_inputs(node):
+        p.destroy()

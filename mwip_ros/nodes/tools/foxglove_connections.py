@@ -383,6 +383,9 @@ class ConnectionWatch:
         finally:
             s.detach()
         c.closed = True
+        relay = getattr(self.node, "relay", None)
+        if relay is not None:   # its client's end too, at once: the relay may not be reading the SDK's (a stalled one)
+            relay.drop(c.peer)
         return True
 
     def _listen_again(self, now: float, descriptors: int) -> None:

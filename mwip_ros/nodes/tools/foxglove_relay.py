@@ -11,15 +11,19 @@ moves the bytes (``selectors``); a side that cannot take more stops the reading 
 per-client backlog then drops a slow client's oldest messages, as it does without the relay).
 
 Each client is three descriptors: the client's, the relay's to the SDK and the SDK's own end, which the connection
-watch (:mod:`.foxglove_connections`) judges as before (max_clients, idle_timeout_s): when it shuts the SDK's end,
-the relay closes the client's.  When the client ends, the relay ends its side to the SDK and closes both once the
-SDK has closed.
+watch (:mod:`.foxglove_connections`) judges as before (max_clients, idle_timeout_s): when it shuts the SDK's end it
+tells the relay (:meth:`Relay.drop`), which closes the client's at once (the relay no longer reads the SDK's side of a
+client that reads nothing, so it would never see that end).  A client that reads nothing for ``stall_s`` while data
+waits for it (it subscribed and never reads) is closed too, counted as ``stalled_connections``: it held a slot of
+``max_clients`` and the SDK's queue for it.  When the client ends, the relay ends its side to the SDK and closes both
+once the SDK has closed.
 """
 from __future__ import annotations
 
 import errno
 import selectors
 import socket
+import struct
 import threading
 import time
 from typing import Callable, Dict, Optional, Tuple
@@ -31,6 +35,7 @@ SDK_SUBPROTOCOL = "foxglove.sdk.v1"
 CLASSIC_SUBPROTOCOL = "foxglove.websocket.v1"
 DESCRIPTORS_PER_CLIENT = 3    # the client's, the relay's to the SDK, the SDK's end of it
 HEADER_MAX = 16384            # a handshake longer than this is passed on as it is (the SDK refuses it)
+FLUSH_S = 1.0                 # a client whose connection the SDK ended has this long to take what was sent to it
 CHUNK = 1 << 16
 _PROTOCOL = b"sec-websocket-protocol"
 _END = b"\r\n\r\n"
@@ -67,13 +72,33 @@ def answer_for_client(head: bytes) -> bytes:
     return b"\r\n".join(lines) + _END
 
 
-class _Side:
-    """One socket of a pair: what waits to be sent to it, and whether it has ended its sending."""
+def _reset(sock: socket.socket) -> None:
+    """Make ``sock``'s close a reset (SO_LINGER 0): the kernel drops what it holds for the peer."""
+    try:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
+    except OSError:
+        pass
 
-    __slots__ = ("sock", "pending", "ended", "head")
+
+def _unsent(sock: socket.socket) -> int:
+    """Bytes the kernel still holds to send on ``sock`` (SIOCOUTQ); 0 when it cannot say."""
+    import fcntl
+    import termios
+    try:
+        return struct.unpack("i", fcntl.ioctl(sock.fileno(), termios.TIOCOUTQ, b"\0\0\0\0"))[0]
+    except OSError:
+        return 0
+
+
+class _Side:
+    """One socket of a pair: what waits to be sent to it (since when no byte of it went: ``waiting_since``), and
+    whether it has ended its sending."""
+
+    __slots__ = ("sock", "pending", "ended", "head", "waiting_since")
 
     def __init__(self, sock: socket.socket):
         self.sock, self.pending, self.ended = sock, bytearray(), False
+        self.waiting_since: Optional[float] = None
         self.head: Optional[bytearray] = None   # the handshake being read from this side, before it is passed on
 
 
@@ -90,7 +115,7 @@ class Relay:
     changes when the connection watch starts the server again).  ``counts()``: the clients that offered only the
     classic subprotocol."""
 
-    def __init__(self, host: str, port: int, target: Callable[[], Tuple[str, int]], log):
+    def __init__(self, host: str, port: int, target: Callable[[], Tuple[str, int]], log, stall_s: float = 60.0):
         family, kind, proto, _, addr = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM,
                                                            flags=socket.AI_PASSIVE)[0]
         self.listener = socket.socket(family, kind, proto)
@@ -109,7 +134,13 @@ class Relay:
         self.sides: Dict[int, Tuple[_Pair, _Side, _Side]] = {}   # fd -> (pair, this side, the other side)
         self.lock = threading.Lock()
         self.classic = 0                                           # handshakes offering only the classic one
+        self.stalled = 0                                           # clients closed for reading nothing (stall_s)
+        self.stall_s = stall_s
         self.origin: Dict[str, str] = {}   # "ip:port" of the relay's end to the SDK -> the client's "ip:port"
+        self.pairs: Dict[str, _Pair] = {}  # the same key -> its pair
+        self._drops: set = set()           # keys of pairs the connection watch shut (Relay.drop), for the thread
+        self.closing: list = []            # (client socket, when to close it): its end sent, its bytes in flight
+        self._looked = 0.0
         self.stop_event = threading.Event()
         self.paused_until = 0.0                                    # out of descriptors: accept again later
         self.thread = threading.Thread(target=self._run, name="foxglove-relay", daemon=True)
@@ -124,12 +155,41 @@ class Relay:
             self.thread.join(5.0)
         for pair, _, _ in list(self.sides.values()):
             self._close(pair)
+        self._closing(time.monotonic(), final=True)
         self.selector.close()
         self.listener.close()
 
     def counts(self) -> Dict[str, int]:
         with self.lock:
-            return {"classic_subprotocol_clients": self.classic}
+            return {"classic_subprotocol_clients": self.classic, "stalled_connections": self.stalled}
+
+    def drop(self, own: str) -> None:
+        """Close the client whose pair's end to the SDK is ``own`` ("ip:port"): the connection watch shut the SDK's
+        end of it (any thread; the relay's thread closes it within a turn of its loop)."""
+        with self.lock:
+            self._drops.add(own)
+
+    def _housekeeping(self, now: float) -> None:
+        """The pairs the watch shut, and the clients that read nothing for ``stall_s`` while data waits for them."""
+        with self.lock:
+            drops, self._drops = self._drops, set()
+        for own in drops:
+            pair = self.pairs.get(own)
+            if pair is not None:
+                self._close(pair, abort=True)
+        if now - self._looked < 0.1:
+            return
+        self._looked = now
+        self._closing(now)
+        for pair in list(self.pairs.values()):
+            c = pair.client
+            if c.pending and c.waiting_since is not None and now - c.waiting_since > self.stall_s:
+                with self.lock:
+                    self.stalled += 1
+                self.log.warning(f"closed a client that read nothing for {self.stall_s:g} s while data waited for it "
+                                 f"({self.origin.get(pair.own, '?')}); {self.stalled} since the start",
+                                 throttle_duration_sec=1.0)
+                self._close(pair, abort=True)
 
     # --- the thread ----------------------------------------------------------------------------------
 
@@ -138,6 +198,7 @@ class Relay:
             if self.paused_until and time.monotonic() >= self.paused_until:
                 self.paused_until = 0.0
                 self._events(self.listener, selectors.EVENT_READ)
+            self._housekeeping(time.monotonic())
             try:
                 events = self.selector.select(0.1)
             except OSError:   # pragma: no cover - a socket closed under the selector
@@ -177,6 +238,7 @@ class Relay:
             pair = _Pair(client, sdk)
             pair.own = "%s:%d" % sdk.getsockname()[:2]
             self.origin[pair.own] = "%s:%d" % addr[:2]
+            self.pairs[pair.own] = pair
             self.sides[client.fileno()] = (pair, pair.client, pair.sdk)
             self.sides[sdk.fileno()] = (pair, pair.sdk, pair.client)
             self.selector.register(client, selectors.EVENT_READ, None)
@@ -230,6 +292,8 @@ class Relay:
                 head = answer_for_client(head) if end >= 0 else head
             other.pending += head + rest
         if other.pending:
+            if other.waiting_since is None:
+                other.waiting_since = time.monotonic()
             self._send(other)
 
     def _send(self, side: _Side) -> None:
@@ -243,6 +307,7 @@ class Relay:
                 self._close(entry[0])
             return
         del side.pending[:n]
+        side.waiting_since = (time.monotonic() if side.pending else None) if n else side.waiting_since
         entry = self.sides.get(side.sock.fileno())
         if not side.pending and entry is not None and entry[2].ended:
             self._end_sending(side)
@@ -254,12 +319,24 @@ class Relay:
             pass
 
     def _flush_and_close(self, pair: _Pair) -> None:
-        if pair.client.pending:
+        """The SDK ended the connection: what was read of it goes to the client, then its end (FIN).  A client that
+        reads nothing would never get that FIN (it waits behind the closed window), so its socket is kept for
+        :data:`FLUSH_S` at most: closed then, reset if the kernel still holds bytes for it."""
+        client = pair.client
+        if client.pending:
             try:
-                pair.client.sock.send(pair.client.pending)
+                del client.pending[:client.sock.send(client.pending)]
             except OSError:
                 pass
-        self._close(pair)
+        if client.pending or client.sock.fileno() == -1:
+            self._close(pair, abort=True)   # it could not even take what was read: it goes with a reset
+            return
+        try:
+            client.sock.shutdown(socket.SHUT_WR)
+        except OSError:
+            pass
+        self._close(pair, keep_client=True)
+        self.closing.append((client.sock, time.monotonic() + FLUSH_S))
 
     def _watch(self, pair: _Pair) -> None:
         """Read a side only while nothing waits to go to the other; write a side while something waits for it."""
@@ -281,8 +358,12 @@ class Relay:
         elif key.events != events:
             self.selector.modify(sock, events, None)
 
-    def _close(self, pair: _Pair) -> None:
+    def _close(self, pair: _Pair, abort: bool = False, keep_client: bool = False) -> None:
+        """Close both sockets of ``pair``; ``abort``: the client is reset at once (SO_LINGER 0: what waits for a client
+        that reads nothing is dropped, not kept by the kernel behind its closed window); ``keep_client``: its socket
+        is only forgotten (:meth:`_flush_and_close` closes it later)."""
         self.origin.pop(pair.own, None)
+        self.pairs.pop(pair.own, None)
         for side in (pair.client, pair.sdk):
             fd = side.sock.fileno()
             if fd == -1:
@@ -292,4 +373,21 @@ class Relay:
                 self.selector.unregister(side.sock)
             except (KeyError, ValueError):
                 pass
+            if side is pair.client and keep_client:
+                continue
+            if abort and side is pair.client:
+                _reset(side.sock)
             side.sock.close()
+
+    def _closing(self, now: float, final: bool = False) -> None:
+        """Close the clients whose end was sent (:meth:`_flush_and_close`) once :data:`FLUSH_S` passed: reset those
+        for which the kernel still holds bytes (they read nothing)."""
+        keep = []
+        for sock, deadline in self.closing:
+            if now < deadline and not final:
+                keep.append((sock, deadline))
+                continue
+            if _unsent(sock):
+                _reset(sock)
+            sock.close()
+        self.closing = keep

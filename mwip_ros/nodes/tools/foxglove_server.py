@@ -26,7 +26,8 @@ max_clients : int
 idle_timeout_s : float
     A connection that subscribes to no channel and sends nothing for this long [s] is closed
     (default 60; 0.5 .. 86400): one that never completes the WebSocket handshake, or never
-    subscribes, holds a descriptor for no longer than that.
+    subscribes, holds a descriptor for no longer than that.  A subscribed client that reads nothing
+    for this long while data waits for it is closed too (its slot and the SDK's queue for it freed).
 
 Notes
 -----
@@ -142,7 +143,8 @@ class FoxgloveServer(Node, GracefulNodeMixin):
         self.listener = conns.Subscriptions(self.get_logger(), self.sdk_log)
         self.relay = None
         try:   # the port the clients see is the relay's (both subprotocols), the SDK's server is behind it
-            self.relay = Relay(self.host, self.port, lambda: (SDK_HOST, self.server.port), self.get_logger())
+            self.relay = Relay(self.host, self.port, lambda: (SDK_HOST, self.server.port), self.get_logger(),
+                               stall_s=self.idle_timeout_s)   # a client that reads nothing that long is closed
             self.server = self.start_server()
         except (RuntimeError, OSError, OverflowError, ValueError) as exc:
             self.sdk_log.uninstall()

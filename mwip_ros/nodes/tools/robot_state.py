@@ -15,8 +15,12 @@ theta_b', the encoder's rate plus the bias-corrected pitch rate; from a 3D plant
   tf2_msgs is importable; without it (the PyPI wheels), one log line says so.
 
 The robot's geometry (``actual.*``, ``sensors.*``) is plant_sim's: read from the plant_sim sections of the same
-parameter files unless robot_state's own section gives it.  A stamp that goes back (a reset) restarts the
-odometry at the origin, logged.  A state it cannot use is rejected and counted, as everywhere.
+parameter files unless robot_state's own section gives it, and checked as plant_sim checks it (a body inertia no rigid
+body has, wheels that overlap: one line naming the key, exit 2).  The stamps are judged as the observer and the
+controller judge theirs (:class:`~mwip_ros.nodes.runtime.guards.StampGuard`, docs/graph.md): a stamp older than the
+stream's or more than a window ahead of it is rejected and counted, and the odometry restarts at the origin (logged)
+only when the stream itself restarted (agreeing stamps from the topic's one publisher: a plant's ``~/reset``, a new
+plant); a state the odometry refuses (not finite) is rejected and counted and nothing is published for it.
 """
 from __future__ import annotations
 
@@ -36,7 +40,8 @@ from mwip_ros.msgs import BadMessage
 from mwip_ros.msgs import layouts as L
 from mwip_ros.msgs.qos import GRAPH_QOS, RECORD_QOS
 from mwip_ros.msgs.stamps import to_time
-from mwip_ros.nodes.runtime.guards import Rejects
+from mwip_ros.nodes.runtime.guards import NEW, REPEAT, RESTART, STAMP_WINDOW_PERIODS, Rejects, StampGuard, \
+    sole_publisher
 from mwip_ros.nodes.runtime.params import declare, plant_file_values, start_values
 from mwip_ros.nodes.runtime.process import GracefulNodeMixin, run_node
 
@@ -73,6 +78,7 @@ class RobotState(Node, GracefulNodeMixin):
         self.v = declare(self, NAME, argv)
         own, _ = start_values(self, NAME, argv)
         values = {**self.v, **{k: val for k, val in plant_values(argv).items() if k not in own}}
+        P.check_geometry(values, "the robot's geometry (plant_sim's, or robot_state's own)")   # plant_sim's check
         self.model = robot_model(values)
         h = P.period(self.v)
         noise = odometry_noise(self.model.r, self.model.track_width, h, int(values["sensors.encoder_counts_per_rev"]),
@@ -80,7 +86,10 @@ class RobotState(Node, GracefulNodeMixin):
         rule = rule_for(values["sensors.model"])
         self.odom = Odometry(self.model.r, self.model.track_width, noise, rule=rule)
         self.rejects = Rejects(self.get_logger())
-        self.count, self.restarts, self.last_stamp = 0, 0, None
+        self.count, self.restarts = 0, 0
+        # a stray state (another publisher, a stamp far off) neither restarts nor jumps the odometry
+        self.guard = StampGuard(STAMP_WINDOW_PERIODS * round(h * 1e9), "joint_states stamp",
+                                sole_publisher(self, "joint_states"))
         self.description = urdf(self.model)
         self.pub_desc = self.create_publisher(String, "robot_description", LATCHED_QOS)
         self.pub_desc.publish(String(data=self.description))
@@ -102,15 +111,21 @@ class RobotState(Node, GracefulNodeMixin):
         except BadMessage as exc:
             self.rejects("joint_states", str(exc))
             return
-        if self.last_stamp is not None and stamp < self.last_stamp:
+        verdict = self.guard.check(stamp)
+        if verdict == RESTART:
             self.restarts += 1
-            self.get_logger().info("joint_states stamps went back (a reset): the odometry restarts at the origin")
+            self.get_logger().info("joint_states restarted (a reset, a new plant): the odometry restarts at the origin")
             self.odom.reset()
-        elif stamp == self.last_stamp:
+        elif verdict == REPEAT:
             self.rejects("joint_states", f"stamp {stamp} ns repeats the last one")
             return
-        self.last_stamp = stamp
-        state_update(self.odom, stamp * 1e-9, float(x[2]), float(x[1]), gyro_z)   # the planar robot: no yaw
+        elif verdict != NEW:
+            self.rejects("joint_states", verdict)
+            return
+        if not state_update(self.odom, stamp * 1e-9, float(x[2]), float(x[1]), gyro_z):   # the planar robot: no yaw
+            self.rejects("joint_states", f"the odometry refuses the state at t = {stamp * 1e-9:.6f} s (a rate that "
+                                         f"is not finite, or a time that does not advance)")
+            return
         self._publish(stamp, float(x[0]), float(x[1]))
         self.count += 1
 
