@@ -173,9 +173,9 @@ class WheelDriverNode(Node, GracefulNodeMixin):
         self.mode, self.backend_name = v["mode"], v["backend"]
         files = [arg for kind, arg in ros_arguments(argv) if kind == "--params-file"]
         self.robot = D.robot_values(files, v["control_rate_hz"])
-        self.simulated_backend = self.backend_name in D.SIMULATED and not (
-            self.backend_name == "upkie" and v["upkie.backend"] == "spine")
-        if self.mode == "lockstep" and not self.simulated_backend:
+        simulated = self.backend_name in D.SIMULATED and not (self.backend_name == "upkie"
+                                                              and v["upkie.backend"] == "spine")
+        if self.mode == "lockstep" and not simulated:   # refused before a device is opened
             what = "upkie.backend spine" if self.backend_name == "upkie" else f"backend {self.backend_name}"
             raise P.ParamError("mode", f"lockstep needs a simulated backend (mock, rk4, mujoco, upkie with "
                                        f"upkie.backend pybullet); {what} is a robot on the wall clock: mode realtime")
@@ -187,6 +187,7 @@ class WheelDriverNode(Node, GracefulNodeMixin):
         self.h = self.cfg.h
         self.period_ns = round(self.h * 1e9)
         self.backend = open_backend(v, self.robot)
+        self.simulated_backend = bool(self.backend.simulated)   # steps on demand (a simulator) or on the wall clock
         self.driver = WheelDriver(self.backend, self.cfg)
         self.n_steps = int(round(v["duration_s"] / self.h)) if v["duration_s"] > 0 else None
         self.timing = PeriodTiming()
