@@ -45,7 +45,8 @@ def specs() -> List[Any]:
         ParamSpec("require_enable", "bool", True, "start disabled (no torque) until ~/enable; false: enabled at once "
                   "(a simulated robot that nobody enables; never on a robot you are bringing up)"),
         ParamSpec("watchdog_s", "double", 0.1, "realtime: no new wheel_torque_cmd for this long is a fault (stop, "
-                  "latched until ~/reset), counted from the first state published; lockstep: lockstep_timeout_s is "
+                  "latched until ~/reset), counted from the first command (before it every period is a stop, and "
+                  "none within lockstep_timeout_s of the first state is the fault); lockstep: lockstep_timeout_s is "
                   "the watchdog", lo=0.0, hi=1e4, lo_open=True, floor=1e-3,
                   floor_why="a watchdog faster than a millisecond would fire between commands", unit="s"),
         ParamSpec("wheel_torque_limit", "double", 0.0, "each wheel's torque limit [N m] (the moteus maximum_torque "

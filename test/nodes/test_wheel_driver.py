@@ -123,7 +123,8 @@ def test_lockstep_over_the_rk4_plant_is_plant_sims_run_bit_for_bit():
         wire.pump()
         assert drv.node.done and drv.node.exit_code == 0
         ours = {t: list(chain[n].sent(t) if n else drv.sent(t)) for n, t in (
-            (None, "true_joint_states"), ("dscndo_controller", "wheel_torque_cmd"), ("state_estimator", "joint_states"))}
+            (None, "true_joint_states"), ("dscndo_controller", "wheel_torque_cmd"),
+            ("state_estimator", "joint_states"))}
     finally:
         for h in (*chain.values(), drv):
             h.close()
@@ -291,6 +292,25 @@ def test_the_watchdog_stops_a_device_whose_controller_went_silent(monkeypatch):
         assert backend.written[-2:] == [Command(0.2, 0.2), None]
         fault = [r for r in _transitions(h) if r["state"] == "fault"][0]
         assert fault["reason"] == "watchdog" and "> watchdog_s = 100 ms" in fault["detail"]
+    finally:
+        h.close()
+
+
+def test_no_command_at_all_within_the_start_up_bound_is_a_watchdog_fault_naming_the_silent_stage(monkeypatch):
+    backend = Recording()
+    h = _driver(monkeypatch, backend, "-p", "require_enable:=false", "-p", "watchdog_s:=0.1", "-p",
+                "lockstep_timeout_s:=2.0")
+    try:
+        clock = Clock(h)
+        h.node._no_command_since -= 1.9   # the first state 1.9 s ago: within the bound, stops written, no fault
+        clock.tick()
+        assert not h.node.driver.safety.faulted and backend.written == [None, None]
+        h.node._no_command_since -= 0.2
+        clock.tick()
+        fault = [r for r in _transitions(h) if r["state"] == "fault"][0]
+        assert fault["reason"] == "watchdog"
+        assert fault["detail"].startswith("no wheel_torque_cmd within lockstep_timeout_s = 2 s of the first state; "
+                                          "the stage that did not answer: estimator (state_estimator: ")
     finally:
         h.close()
 

@@ -34,7 +34,9 @@ stopped and its faults cleared, a simulator back at its initial state with its s
 level (``emergency_stop``, std_msgs/Bool, reliable and best effort), the state estimator's ERROR on ``/diagnostics``
 as a level, the command watchdog (realtime: ``watchdog_s``; lockstep: ``lockstep_timeout_s``), a bad command, a fall
 (|theta_b| > the robot's ``fall_angle``: a simulator's truth, else the estimate on ``joint_states``) and a device's own
-fault (fault ``device``, its detail the backend's one line naming the device).  Every transition is logged and
+fault (fault ``device``, its detail the backend's one line naming the device).  The realtime watchdog counts from the
+first command (until one comes every period is a stop); no command at all within ``lockstep_timeout_s`` of the first
+state is a ``watchdog`` fault naming the first stage of the chain that did not answer.  Every transition is logged and
 published on ``driver_state``; any fault, a disable or an e-stop makes the next period a stop (moteus ``make_stop``).
 
 **Timing**, per period: the exchange (the transport's round trip, a simulator's step), the read-to-publish time (from
@@ -241,6 +243,8 @@ class WheelDriverNode(Node, GracefulNodeMixin):
             answers=answers)
         self.schedule: Optional[Schedule] = None
         self.wakes = 0
+        self._no_command_since: Optional[float] = None   # realtime: since when no command has come (the start-up)
+        self._first_stamp = 0
         dur = f"{v['duration_s']:g} s" if self.n_steps is not None else "until stopped"
         limit = f"{self.cfg.wheel_torque_limit:g} N m a wheel" if self.cfg.wheel_torque_limit else "no torque limit"
         self.get_logger().info(
@@ -311,6 +315,7 @@ class WheelDriverNode(Node, GracefulNodeMixin):
         self._command(Command(ul, ur))
 
     def _command(self, cmd: Command) -> None:
+        self._no_command_since = None   # a command came: the watchdog (watchdog_s) counts from it
         self._publish_transition(self.driver.take_command(cmd, self._t()))
         self._answered(cmd)
 
@@ -410,8 +415,7 @@ class WheelDriverNode(Node, GracefulNodeMixin):
         if answer.success:
             self._reset_pending = True
             response.message += "; the backend is reset at the next period"
-            if self.started:
-                self.driver.watchdog.arm(time.monotonic())
+            self._no_command_since = time.monotonic() if self.started else None
         return response
 
     def _do_reset(self) -> None:
@@ -429,7 +433,7 @@ class WheelDriverNode(Node, GracefulNodeMixin):
         if tr is None:
             return
         record = {"state": tr.to_state, "from": tr.from_state or None, "reason": tr.reason, "detail": tr.detail,
-                  "t": round(tr.t, 9), "text": tr.text(), **extra}
+                  "t": round(tr.t, 9), "stamp_ns": self._now_ns(), "text": tr.text(), **extra}
         if start:
             self.get_logger().info(f"driver: {tr.to_state} at the start ({tr.detail})")
         else:
@@ -522,7 +526,7 @@ class WheelDriverNode(Node, GracefulNodeMixin):
             self._deferred = True
         else:
             self._deferred = False
-            self._publish_transition(self.driver.check_watchdog(now, self._t()))
+            self._publish_transition(self.driver.check_watchdog(now, self._t()) or self._check_start(now))
         if self._reset_pending:
             self._do_reset()
             obs = self.driver.obs
@@ -546,8 +550,23 @@ class WheelDriverNode(Node, GracefulNodeMixin):
                 self.k_run = wake.k
         self._publish(obs, self._stamp(obs))
         self.timing.add("read_to_publish", time.monotonic() - self._read_end)
-        if first:   # the first state is out: the watchdog counts from it
-            self.driver.watchdog.arm(time.monotonic())
+        if first:   # the first state is out: the start-up's bound counts from it (_check_start)
+            self._no_command_since = time.monotonic()
+            self._first_stamp = self._stamp(obs)
+
+    def _check_start(self, now: float) -> Optional[Transition]:
+        """The start-up's bound: no command at all within ``lockstep_timeout_s`` of the first state (or of a reset) is
+        a ``watchdog`` fault naming the first stage of the chain that did not answer.  (``watchdog_s`` counts from the
+        first command: until one comes the driver writes stops, and a graph that takes a moment to discover the
+        IMU's own driver is no fault.)"""
+        since = self._no_command_since
+        if since is None or self.driver.safety.faulted or now - since <= self.v["lockstep_timeout_s"]:
+            return None
+        self._no_command_since = None
+        _stage, why = self.lockstep.silent_stage(self._first_stamp, self.stamp0)
+        return self.driver.fault(self._t(), "watchdog", f"no wheel_torque_cmd within lockstep_timeout_s = "
+                                                        f"{self.v['lockstep_timeout_s']:g} s of the first state; the "
+                                                        f"stage that did not answer: {why}")
 
     # --- the run -----------------------------------------------------------------------------------------------
     def _start(self, why: str) -> None:
@@ -560,6 +579,8 @@ class WheelDriverNode(Node, GracefulNodeMixin):
             self._send_lockstep()
             return
         from mwip_ros.msgs.qos import REALTIME_INPUT_QOS
+        if not self.simulated_backend:   # a device: stopped and its faults cleared now, when its periods begin (its
+            self.driver.start()          # silence is counted from its last answer: not across the graph's wait)
         self.lockstep.listen(REALTIME_INPUT_QOS)
         timer = self.create_timer(self.h, self._tick)
         now = self._now_ns()
