@@ -5,6 +5,7 @@
 #                             [--no-record] [--out DIR] [--name NAME] [--laws LAW[,LAW...]]
 #                             [--sensors state|raw] [--robot-state]
 #                             [--robot mock|upkie-pybullet|emulated-moteus] [--realtime-priority P]
+#                             [--emulator-options "OPTIONS"]
 #
 # --params takes a base file, then overlays (config/sensing_realistic.yaml, a tuned overlay), merged
 # in order as ROS merges repeated --params-file; every node's section is checked before anything starts.
@@ -34,7 +35,9 @@
 # Upkie's rigid model). The driver starts enabled (require_enable false: nobody is there to enable a simulated
 # robot). The report adds each run's period timing (the driver's summary), and the emulator's counters are in the
 # logs. --realtime-priority P runs the loop's nodes and the driver under SCHED_FIFO P (realtime_priority; root or
-# CAP_SYS_NICE), and the emulator under chrt -f P.
+# CAP_SYS_NICE), and the emulator under chrt -f P. --emulator-options "OPTIONS" (emulated-moteus) passes the
+# emulator its own options, its faults on demand: "--latency 0.002 --loss 0.01", "--silent right --silent-at 20"
+# (mwip_moteus_emulator --help).
 #
 # --robot-state also starts robot_state (odom, the URDF on robot_description, wheel_joint_states; docs/graph.md):
 # the bags then hold odom, robot_description and wheel_joint_states too. Off by default: the bags stay as they were.
@@ -73,6 +76,7 @@ SENSORS=state
 ROBOT_STATE=0   # --robot-state: robot_state beside the loop
 ROBOT=""        # --robot: a robot's side (wheel_driver) instead of plant_sim
 PRIORITY=0      # --realtime-priority: SCHED_FIFO of the loop's nodes, the driver and the emulator
+EMULATOR_OPTIONS=()   # --emulator-options: the emulator's own options (faults on demand)
 
 usage() { awk 'NR > 1 && /^#/ { sub(/^# ?/, ""); print; next } NR > 1 { exit }' "$0"; }
 die() { echo "run_experiment: $*" >&2; exit 2; }
@@ -95,6 +99,8 @@ while [ $# -gt 0 ]; do
         --robot) ROBOT="$(value_of "$@")"; shift 2
                  case "$ROBOT" in mock|upkie-pybullet|emulated-moteus) ;;
                      *) die "--robot must be mock, upkie-pybullet or emulated-moteus, got '$ROBOT'" ;; esac ;;
+        --emulator-options) [ $# -ge 2 ] || die "--emulator-options needs a value (scripts/run_experiment.sh --help)"
+                 read -r -a EMULATOR_OPTIONS <<< "$2"; shift 2 ;;
         --realtime-priority) PRIORITY="$(value_of "$@")"; shift 2
                  [[ "$PRIORITY" =~ ^[0-9]+$ ]] && [ "$PRIORITY" -le 99 ] || die "--realtime-priority takes 0..99, got '$PRIORITY'" ;;
         --out) OUT="$(value_of "$@")"; shift 2
@@ -113,6 +119,7 @@ case "$MODE" in lockstep|realtime) ;; *) die "--mode must be lockstep or realtim
 if [ -n "$ROBOT" ]; then
     [ "$RECORD" = 1 ] || die "--robot needs the recording (the report reads the bag); drop --no-record"
     [ "$SENSORS" = state ] || die "--robot reads the robot's own IMU and encoders already; drop --sensors"
+    [ ${#EMULATOR_OPTIONS[@]} -eq 0 ] || [ "$ROBOT" = emulated-moteus ] || die "--emulator-options is for --robot emulated-moteus"
     if [ ${#PARAMS[@]} -eq 0 ]; then   # each robot's files (the header above)
         case "$ROBOT" in
             mock) PARAMS=("$ROOT/config/paper.yaml" "$ROOT/config/sensors_raw_realistic.yaml") ;;
@@ -283,7 +290,7 @@ for i in "${!LAW_LIST[@]}"; do
         if [ "$BACKEND" = moteus ]; then   # the emulated robot: its own process, its pty's path on its first line
             CHRT=()
             [ "$PRIORITY" = 0 ] || CHRT=(chrt -f "$PRIORITY")
-            "${CHRT[@]}" mwip_moteus_emulator --params "${PARAMS[@]}" --link "$LOGS/${CTRL}_fdcanusb" --hold \
+            "${CHRT[@]}" mwip_moteus_emulator --params "${PARAMS[@]}" --link "$LOGS/${CTRL}_fdcanusb" --hold "${EMULATOR_OPTIONS[@]}" \
                 > "$LOGS/${CTRL}_moteus_emulator.log" 2>&1 &
             EMU=$!
             PIDS+=("$EMU")

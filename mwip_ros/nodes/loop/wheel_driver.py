@@ -390,7 +390,8 @@ class WheelDriverNode(Node, GracefulNodeMixin):
         elif (fx, fy) != self.pushed:
             push(fx, fy)
             self.pushed = (fx, fy)
-            self.get_logger().info(f"push: force ({fx:g}, {fy:g}) N on the torso" if fx or fy else "push released")
+            self.get_logger().info(f"push at t = {self._t():.3f} s: force ({fx:g}, {fy:g}) N on the torso" if fx or fy
+                                   else f"push released at t = {self._t():.3f} s")
 
     # --- services ----------------------------------------------------------------------------------------------
     def _answer(self, response, answer):
