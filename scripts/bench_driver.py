@@ -163,6 +163,7 @@ def goals(out: Path, law: str, seconds: float) -> dict:
     window = (5.0, seconds) if seconds >= 10 else (seconds / 2, seconds)
     s = summary(traj, window)
     s["driver"] = drv
+    s["complete"] = bool(s["upright"] and s["t_end"] >= seconds - 0.003)   # to the run's end, not stopped before
     emu = logs / f"{law}_moteus_emulator.log"
     if emu.exists():
         m = re.search(r"watchdog trips (\d+) left (\d+) right", emu.read_text())
@@ -178,6 +179,16 @@ def _ms(t: dict, f: str, q: str) -> str:
 
 def _num(v, fmt: str) -> str:
     return format(v, fmt) if isinstance(v, float) and math.isfinite(v) else "-"
+
+
+def _verdict(g: dict, code: int) -> str:
+    """'yes' for a run that stayed up to its end with exit 0; else what happened (a fall, a fault that ended it)."""
+    if g["complete"] and code == 0:
+        return "yes"
+    if not g["upright"]:
+        return f"FELL ({g['failure'] or 'at t = %.3f s' % g['t_end']})"
+    d = g.get("driver") or {}
+    return f"ended at t = {g['t_end']:.3f} s: {d.get('fault_reason')} (exit {code})"
 
 
 def upkie(tmp: Path, seconds: float, fifo: int, report: dict) -> List[str]:
@@ -196,7 +207,7 @@ def upkie(tmp: Path, seconds: float, fifo: int, report: dict) -> List[str]:
                 continue
             report["upkie"][mode][law] = g
             drift = f"{_num(g['max_drift'], '.4f')} / {_num(g['final_drift'], '.4f')}"
-            rows.append(f"| {law} | {mode} | {'yes' if g['upright'] else 'FELL'} | {_num(g['theta_b_rms'], '.5f')} | "
+            rows.append(f"| {law} | {mode} | {_verdict(g, r['code'])} | {_num(g['theta_b_rms'], '.5f')} | "
                         f"{_num(g['theta_b_max_abs'], '.5f')} | {_num(g['theta_b_est_err_rms'], '.5f')} | "
                         f"{_num(g['u_rms'], '.4f')} | {drift} | {r['code']} |")
         rows.append(f"| load average (1, 5, 15 min) | {mode} | start {r['load'][0]}, end {r['load'][1]} | | | | | | |")
@@ -217,7 +228,7 @@ def pushes(tmp: Path, fifo: int, report: dict) -> List[str]:
             report.setdefault("push", {})[f"{mode} {law}"] = {"goals": g, "late": late, "applied": r["applied"],
                                                               "code": r["code"], "load": r["load"]}
             applied = ", ".join(f"{t:.3f}" for t in (r["applied"] or [])) or "never"
-            rows.append(f"| {law} | {mode} | {'yes' if g['upright'] else 'FELL'} | {applied} | "
+            rows.append(f"| {law} | {mode} | {_verdict(g, r['code'])} | {applied} | "
                         f"{_num(late['theta_b_rms'], '.5f')} | {_num(g['max_drift'], '.3f')} | {r['code']} |")
     return rows
 
@@ -240,7 +251,7 @@ def moteus(tmp: Path, seconds: float, fifo: int, report: dict) -> List[str]:
         t, sched = d.get("timing", {}), d.get("schedule") or {}
         due = sched.get("periods_due")
         report.setdefault("moteus", {})[label] = {"goals": g, "code": r["code"], "load": r["load"]}
-        rows.append(f"| {label} | {'yes' if g['upright'] else 'FELL'} | {_num(g['theta_b_rms'], '.5f')} | "
+        rows.append(f"| {label} | {_verdict(g, r['code'])} | {_num(g['theta_b_rms'], '.5f')} | "
                     f"{g.get('watchdog_trips')} | {t.get('periods')} / {due} ({seconds * 200:g}) | {t.get('missed')} | "
                     f"{_ms(t, 'exchange', 'p50')} / {_ms(t, 'exchange', 'p99')} | {_ms(t, 'read_to_publish', 'p50')} / "
                     f"{_ms(t, 'read_to_publish', 'p99')} / {_ms(t, 'read_to_publish', 'max')} | "
