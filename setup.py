@@ -52,6 +52,7 @@ setup(
             'mwip_ctl = mwip_ros.cli.ctl:main',
             'state_estimator = mwip_ros.nodes.runtime.entry:state_estimator',
             'mwip_moteus_emulator = mwip_ros.cli.moteus_emulator:main',
+            'wheel_driver = mwip_ros.nodes.runtime.entry:wheel_driver',
         ],
     },
 )

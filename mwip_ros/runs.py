@@ -29,13 +29,18 @@ from mwip_ros.msgs import layouts as L
 from mwip_ros.msgs.topics import leaf
 
 __all__ = ["CsvStream", "write_csv", "read_csv", "read_bag_run", "read_bag_runs", "load_run", "load_runs",
-           "plant_record", "PLANT_NODE", "MAX_ROWS", "MAX_CSV_BYTES", "MAX_BAG_BYTES", "check_size", "check_times",
-           "RUN_COLUMNS"]
+           "plant_record", "PLANT_NODE", "ROBOT_SIDE_NODES", "MAX_ROWS", "MAX_CSV_BYTES", "MAX_BAG_BYTES", "check_size",
+           "check_times", "RUN_COLUMNS"]
 
 PLANT_NODE = "plant_sim"
-# what plant_sim logs (mwip_ros.nodes.loop.plant_sim): its start (the configured duration), a fall, an interruption
+# the nodes that own the robot's clock: plant_sim, or wheel_driver on a robot's side (docs/hardware.md); their logs
+# and parameters are the run's record
+ROBOT_SIDE_NODES = (PLANT_NODE, "wheel_driver")
+# what they log (mwip_ros.nodes.loop.plant_sim, .wheel_driver): the start (the configured duration), a fall, an
+# interruption
 _FALLEN = re.compile(r"FALLEN at t = ([-+0-9.eE]+) s(?:: \|theta_b\| = [-+0-9.eE]+ > fall_angle ([-+0-9.eE]+))?")
-_START = re.compile(r"(?:lockstep|realtime) plant: h = .*?, (?:([-+0-9.eE]+) s|until stopped), seed")
+_START = re.compile(r"(?:lockstep|realtime) (?:plant|driver): h = .*?, (?:([-+0-9.eE]+) s|until stopped), "
+                    r"(?:seed|read_only)")
 _INTERRUPTED = re.compile(r"interrupted at t = ([-+0-9.eE]+) s of ([-+0-9.eE]+) s")
 
 NAN = math.nan
@@ -412,8 +417,9 @@ def _last_torque(cmd: float, limit: Optional[float], largest_applied: float) -> 
 
 
 def plant_record(logs: List[bytes], param_events: List[bytes]) -> dict:
-    """What the plant said of its run, from a bag's ``/rosout`` (rcl_interfaces/Log) and
-    ``/parameter_events`` messages (CDR): ``t_fall`` and ``fall_text`` (its "FALLEN at t = ..." line),
+    """What the plant (or the wheel driver: :data:`ROBOT_SIDE_NODES`) said of its run, from a bag's ``/rosout``
+    (rcl_interfaces/Log) and ``/parameter_events`` messages (CDR): ``t_fall`` and ``fall_text`` (its "FALLEN at t =
+    ..." line),
     ``fall_angle``, ``duration_s`` (configured; 0 = until stopped), ``interrupted_at``, ``torque_limit``,
     ``motor.enabled``.
     Only the keys the bag holds (a recorder that started late has none of the start)."""
@@ -428,7 +434,7 @@ def plant_record(logs: List[bytes], param_events: List[bytes]) -> dict:
             ev = deserialize_message(data, ParameterEvent)
         except Exception:  # noqa: BLE001 - not a decodable event: not part of the record
             continue
-        if ev.node.rsplit("/", 1)[-1] != PLANT_NODE:
+        if ev.node.rsplit("/", 1)[-1] not in ROBOT_SIDE_NODES:
             continue
         for p in list(ev.new_parameters) + list(ev.changed_parameters):
             if p.name in ("torque_limit", "duration_s", "fall_angle") and p.value.type == 3:   # PARAMETER_DOUBLE
@@ -440,7 +446,7 @@ def plant_record(logs: List[bytes], param_events: List[bytes]) -> dict:
             msg = deserialize_message(data, Log)
         except Exception:  # noqa: BLE001
             continue
-        if msg.name.rsplit(".", 1)[-1] != PLANT_NODE:
+        if msg.name.rsplit(".", 1)[-1] not in ROBOT_SIDE_NODES:
             continue
         text = msg.msg
         m = _FALLEN.search(text)

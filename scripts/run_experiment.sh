@@ -4,6 +4,8 @@
 #   scripts/run_experiment.sh [--params FILE [FILE ...]] [--mode lockstep|realtime] [--duration S]
 #                             [--no-record] [--out DIR] [--name NAME] [--laws LAW[,LAW...]]
 #                             [--sensors state|raw] [--robot-state]
+#                             [--robot mock|upkie-pybullet|emulated-moteus] [--realtime-priority P]
+#                             [--emulator-options "OPTIONS"]
 #
 # --params takes a base file, then overlays (config/sensing_realistic.yaml, a tuned overlay), merged
 # in order as ROS merges repeated --params-file; every node's section is checked before anything starts.
@@ -20,6 +22,22 @@
 # and a motor encoder measure, and a state_estimator (started here, with the same files) turns them into
 # joint_states. Files that set sensors.model: state contradict it (refused). A parameter file that sets
 # sensors.model: raw itself starts the estimator too.
+#
+# --robot NAME runs the graph against a robot's own interface instead of plant_sim (docs/hardware.md): the
+# wheel_driver node owns the robot's clock, reads its devices through a backend and writes the commands, and the
+# state_estimator turns its raw IMU and encoders into joint_states. mock: commands mirrored into the wheels' torque
+# states, nothing moves (checks the wiring; default files config/paper.yaml config/sensors_raw_realistic.yaml).
+# upkie-pybullet: Upkie in its own PyBullet, headless, in lockstep or --mode realtime (default files
+# config/paper.yaml config/upkie.yaml). emulated-moteus: the moteus emulator (mwip_moteus_emulator, its own process,
+# started here: two controllers on a pty, the files' plant behind them held at its initial state until the driver
+# first drives, its IMU at 400 Hz on imu/data_raw) and the
+# driver with the moteus backend on that pty, always realtime (default files config/paper.yaml config/upkie.yaml:
+# Upkie's rigid model). The driver starts enabled (require_enable false: nobody is there to enable a simulated
+# robot). The report adds each run's period timing (the driver's summary), and the emulator's counters are in the
+# logs. --realtime-priority P runs the loop's nodes and the driver under SCHED_FIFO P (realtime_priority; root or
+# CAP_SYS_NICE), and the emulator under chrt -f P. --emulator-options "OPTIONS" (emulated-moteus) passes the
+# emulator its own options, its faults on demand: "--latency 0.002 --loss 0.01", "--silent right --silent-at 20"
+# (mwip_moteus_emulator --help).
 #
 # --robot-state also starts robot_state (odom, the URDF on robot_description, wheel_joint_states; docs/graph.md):
 # the bags then hold odom, robot_description and wheel_joint_states too. Off by default: the bags stay as they were.
@@ -48,7 +66,7 @@ shown() {   # a path as the user can use it from where they ran the command
     case "$1" in "$CALLER"/*) printf '%s' "${1#"$CALLER"/}" ;; *) printf '%s' "$1" ;; esac
 }
 PARAMS=()   # --params FILE [FILE ...]: a base file, then overlays (merged in order, as ROS merges repeated --params-file)
-MODE=lockstep
+MODE=""   # --mode; default lockstep (realtime for --robot emulated-moteus)
 DURATION=""
 RECORD=1
 OUT="$ROOT/bags"
@@ -56,6 +74,9 @@ LAWS=""    # --laws; empty: the files' law without and with the observer term (m
 NAME=""
 SENSORS=state
 ROBOT_STATE=0   # --robot-state: robot_state beside the loop
+ROBOT=""        # --robot: a robot's side (wheel_driver) instead of plant_sim
+PRIORITY=0      # --realtime-priority: SCHED_FIFO of the loop's nodes, the driver and the emulator
+EMULATOR_OPTIONS=()   # --emulator-options: the emulator's own options (faults on demand)
 
 usage() { awk 'NR > 1 && /^#/ { sub(/^# ?/, ""); print; next } NR > 1 { exit }' "$0"; }
 die() { echo "run_experiment: $*" >&2; exit 2; }
@@ -75,6 +96,13 @@ while [ $# -gt 0 ]; do
         --duration) DURATION="$(value_of "$@")"; shift 2 ;;
         --no-record) RECORD=0; shift ;;
         --robot-state) ROBOT_STATE=1; shift ;;
+        --robot) ROBOT="$(value_of "$@")"; shift 2
+                 case "$ROBOT" in mock|upkie-pybullet|emulated-moteus) ;;
+                     *) die "--robot must be mock, upkie-pybullet or emulated-moteus, got '$ROBOT'" ;; esac ;;
+        --emulator-options) [ $# -ge 2 ] || die "--emulator-options needs a value (scripts/run_experiment.sh --help)"
+                 read -r -a EMULATOR_OPTIONS <<< "$2"; shift 2 ;;
+        --realtime-priority) PRIORITY="$(value_of "$@")"; shift 2
+                 [[ "$PRIORITY" =~ ^[0-9]+$ ]] && [ "$PRIORITY" -le 99 ] || die "--realtime-priority takes 0..99, got '$PRIORITY'" ;;
         --out) OUT="$(value_of "$@")"; shift 2
                [ ! -e "$OUT" ] || [ -d "$OUT" ] || die "--out: $OUT exists and is not a directory" ;;
         --laws) LAWS="$(value_of "$@")"; shift 2 ;;
@@ -86,7 +114,19 @@ while [ $# -gt 0 ]; do
     esac
 done
 case "$OUT" in /*) ;; *) OUT="$CALLER/$OUT" ;; esac   # a relative --out is where the user is, not the repository
+[ -n "$MODE" ] || { [ "$ROBOT" = emulated-moteus ] && MODE=realtime || MODE=lockstep; }
 case "$MODE" in lockstep|realtime) ;; *) die "--mode must be lockstep or realtime, got '$MODE'" ;; esac
+if [ -n "$ROBOT" ]; then
+    [ "$RECORD" = 1 ] || die "--robot needs the recording (the report reads the bag); drop --no-record"
+    [ "$SENSORS" = state ] || die "--robot reads the robot's own IMU and encoders already; drop --sensors"
+    [ ${#EMULATOR_OPTIONS[@]} -eq 0 ] || [ "$ROBOT" = emulated-moteus ] || die "--emulator-options is for --robot emulated-moteus"
+    if [ ${#PARAMS[@]} -eq 0 ]; then   # each robot's files (the header above)
+        case "$ROBOT" in
+            mock) PARAMS=("$ROOT/config/paper.yaml" "$ROOT/config/sensors_raw_realistic.yaml") ;;
+            *) PARAMS=("$ROOT/config/paper.yaml" "$ROOT/config/upkie.yaml") ;;
+        esac
+    fi
+fi
 case "$SENSORS" in state|raw) ;; *) die "--sensors must be state or raw, got '$SENSORS'" ;; esac
 [ ${#PARAMS[@]} -gt 0 ] || PARAMS=("$ROOT/config/paper.yaml")
 # the overlay first: the user's files are overlays on it, so every key they set wins (their estimator, noise)
@@ -106,16 +146,19 @@ cd "$ROOT"
 
 # The plan (mwip_ros/cli/experiment.py): --laws and --duration checked against the registry and the merged files,
 # the laws to run (NAME FAMILY USE_OBSERVER), the plant's sensors.model (raw needs a state_estimator in the loop).
-PLAN_ARGS=(--params "${PARAMS[@]}" --sensors "$SENSORS")
+PLAN_ARGS=(--params "${PARAMS[@]}" --sensors "$SENSORS" --mode "$MODE")
+[ -n "$ROBOT" ] && PLAN_ARGS+=(--robot "$ROBOT")
 [ -n "$LAWS" ] && PLAN_ARGS+=(--laws "$LAWS")
 [ -n "$DURATION" ] && PLAN_ARGS+=(--duration "$DURATION")
 PLAN="$(python -m mwip_ros.cli.experiment "${PLAN_ARGS[@]}")" || exit 2
 MODEL=state
+BACKEND=""   # the wheel_driver's backend for --robot
 LAW_LIST=(); FAMILY_OF=(); OBSERVER_OF=()
 while read -r what a b c; do
     case "$what" in
         duration) DURATION="$a" ;;   # as Python writes a float (1000.0): ROS 2 reads it as a double, 60 as an integer
         model) MODEL="$a" ;;
+        robot) BACKEND="$b" ;;
         run) LAW_LIST+=("$a"); FAMILY_OF+=("$b"); OBSERVER_OF+=("$c") ;;
     esac
 done <<< "$PLAN"
@@ -182,8 +225,20 @@ SIMTIME=()
 [ "$MODE" = lockstep ] && SIMTIME=(-p mcap_recorder:use_sim_time:=true)
 PLANT_EXTRA=(-p "plant_sim:mode:=$MODE")
 [ -n "$DURATION" ] && PLANT_EXTRA+=(-p "plant_sim:duration_s:=$DURATION")
+SIDE=plant_sim   # the node that owns the robot's clock: plant_sim, or wheel_driver with --robot
+DRIVER_EXTRA=()
+if [ -n "$ROBOT" ]; then
+    SIDE=wheel_driver
+    DRIVER_EXTRA=(-p "wheel_driver:mode:=$MODE" -p "wheel_driver:backend:=$BACKEND" -p "wheel_driver:require_enable:=false")
+    # a file's plant_sim duration_s is the robot's run too (the driver's own section may say otherwise)
+    DRIVER_DURATION="${DURATION:-$(python -c "import sys; from mwip_ros import params as P; print(repr(float(P.merged_values(P.load_param_files(sys.argv[1:]))['duration_s'])))" "${PARAMS[@]}")}"
+    DRIVER_EXTRA+=(-p "wheel_driver:duration_s:=$DRIVER_DURATION")
+fi
+PRIO=()   # --realtime-priority: each loop node's and the driver's realtime_priority
+prio() { [ "$PRIORITY" = 0 ] || printf '%s\n' -p "$1:realtime_priority:=$PRIORITY"; }
 
 RUNS=()
+SUMMARIES=()   # --robot: each run's driver summary (its period timing)
 RAN=()         # the laws whose run ended (or was interrupted): the report's
 FELL=()        # the laws whose robot fell: the script then ends with exit 3, as plant_sim does
 ESTIMATES=()   # the observer's estimates (CSV), for a report from the plant's CSVs (--no-record)
@@ -204,11 +259,15 @@ for i in "${!LAW_LIST[@]}"; do
         RUNS+=("$LOGS/${CTRL}.csv")
     fi
     ESTIMATES+=("$LOGS/${CTRL}_estimates.csv")
+    mapfile -t PRIO < <(prio disturbance_observer)
     disturbance_observer --ros-args "${PF[@]}" -p "disturbance_observer:mode:=$MODE" -p "disturbance_observer:csv:=$LOGS/${CTRL}_estimates.csv" \
-        > "$LOGS/${CTRL}_disturbance_observer.log" 2>&1 &
+        "${PRIO[@]}" > "$LOGS/${CTRL}_disturbance_observer.log" 2>&1 &
     PIDS+=($!)
     if [ "$MODEL" = raw ]; then   # the first stage of the chain: imu/data_raw + wheel_encoder -> joint_states
-        state_estimator --ros-args "${PF[@]}" -p "state_estimator:mode:=$MODE" \
+        SYNC=()   # the emulated moteus robot's IMU has its own driver and rate: the newest sample at each encoder's
+        [ "$BACKEND" = moteus ] && SYNC=(-p "state_estimator:imu_sync:=latest")
+        mapfile -t PRIO < <(prio state_estimator)
+        state_estimator --ros-args "${PF[@]}" -p "state_estimator:mode:=$MODE" "${SYNC[@]}" "${PRIO[@]}" \
             > "$LOGS/${CTRL}_state_estimator.log" 2>&1 &
         PIDS+=($!)
     fi
@@ -218,15 +277,43 @@ for i in "${!LAW_LIST[@]}"; do
         # it reads joint_states: without raw sensors the plant's first topic, so the plant counts it
         [ "$MODEL" = raw ] || SUBS=$((SUBS + 1))
     fi
+    mapfile -t PRIO < <(prio dscndo_controller)
     dscndo_controller --ros-args "${PF[@]}" -p "dscndo_controller:mode:=$MODE" -p "dscndo_controller:use_observer:=$USE_OBS" -p "dscndo_controller:law:=$LAW" \
-        > "$LOGS/${CTRL}_dscndo_controller.log" 2>&1 &
+        "${PRIO[@]}" > "$LOGS/${CTRL}_dscndo_controller.log" 2>&1 &
     PIDS+=($!)
-    : > "$LOGS/${CTRL}_plant_sim.log"   # exists before tail opens it
-    plant_sim --ros-args "${PF[@]}" "${PLANT_EXTRA[@]}" -p "plant_sim:expected_subscribers:=$SUBS" \
-        -p "plant_sim:csv:=$LOGS/${CTRL}.csv" >> "$LOGS/${CTRL}_plant_sim.log" 2>&1 &
+    : > "$LOGS/${CTRL}_${SIDE}.log"   # exists before tail opens it
+    if [ -z "$ROBOT" ]; then
+        plant_sim --ros-args "${PF[@]}" "${PLANT_EXTRA[@]}" -p "plant_sim:expected_subscribers:=$SUBS" \
+            -p "plant_sim:csv:=$LOGS/${CTRL}.csv" >> "$LOGS/${CTRL}_plant_sim.log" 2>&1 &
+    else
+        LINK=()
+        if [ "$BACKEND" = moteus ]; then   # the emulated robot: its own process, its pty's path on its first line
+            CHRT=()
+            [ "$PRIORITY" = 0 ] || CHRT=(chrt -f "$PRIORITY")
+            "${CHRT[@]}" mwip_moteus_emulator --params "${PARAMS[@]}" --link "$LOGS/${CTRL}_fdcanusb" --hold "${EMULATOR_OPTIONS[@]}" \
+                > "$LOGS/${CTRL}_moteus_emulator.log" 2>&1 &
+            EMU=$!
+            PIDS+=("$EMU")
+            for _ in $(seq 1 300); do   # up to 30 s (a loaded machine imports slowly)
+                grep -q '^fdcanusb: ' "$LOGS/${CTRL}_moteus_emulator.log" 2>/dev/null && break
+                kill -0 "$EMU" 2>/dev/null || break
+                sleep 0.1
+            done
+            if ! grep -q '^fdcanusb: ' "$LOGS/${CTRL}_moteus_emulator.log" 2>/dev/null; then
+                echo "run_experiment: the moteus emulator did not start (see $(shown "$LOGS")/${CTRL}_moteus_emulator.log)" >&2
+                exit 1
+            fi
+            LINK=(-p "wheel_driver:moteus.path:=$LOGS/${CTRL}_fdcanusb")
+        fi
+        SUMMARIES+=("$LOGS/${CTRL}_driver.json")
+        mapfile -t PRIO < <(prio wheel_driver)
+        wheel_driver --ros-args "${PF[@]}" "${DRIVER_EXTRA[@]}" "${LINK[@]}" "${PRIO[@]}" \
+            -p "wheel_driver:expected_subscribers:=$SUBS" -p "wheel_driver:summary_json:=$LOGS/${CTRL}_driver.json" \
+            >> "$LOGS/${CTRL}_wheel_driver.log" 2>&1 &
+    fi
     PLANT=$!
     PIDS+=("$PLANT")
-    tail --pid="$PLANT" -n +1 -f "$LOGS/${CTRL}_plant_sim.log" &   # show the plant's progress live
+    tail --pid="$PLANT" -n +1 -f "$LOGS/${CTRL}_${SIDE}.log" &   # show the robot side's progress live
     TAIL=$!
     code=0
     wait "$PLANT" || code=$?
@@ -241,12 +328,15 @@ for i in "${!LAW_LIST[@]}"; do
                echo "run_experiment: the robot FELL in the $CTRL run; the next run and the report go on" >&2
            fi ;;
         130|143) INTERRUPTED=1 ;;
-        *) echo "run_experiment: plant_sim failed in the $CTRL run (exit $code); see $(shown "$LOGS")/" >&2
+        *) echo "run_experiment: $SIDE failed in the $CTRL run (exit $code); see $(shown "$LOGS")/" >&2
            exit 1 ;;
     esac
     RAN+=("$CTRL")
     if [ "$RECORD" = 1 ]; then
         tail -n 1 "$LOGS/${CTRL}_mcap_recorder.log"
+    fi
+    if [ "$BACKEND" = moteus ]; then   # its counters (frames, lost, watchdog trips) are its last line
+        tail -n 1 "$LOGS/${CTRL}_moteus_emulator.log"
     fi
 done
 trap 'echo; echo "run_experiment: interrupted, stopping" >&2; exit 130' INT TERM
@@ -262,6 +352,9 @@ reported=0
 if [ "$N" -gt 0 ]; then
     if [ "$RECORD" = 1 ]; then
         mwip_report "${RUNS[@]:0:$N}" --labels "${RAN[@]}" --out "$REPORT" && reported=1
+        if [ "$reported" = 1 ] && [ -n "$ROBOT" ]; then   # the period timing of each run's robot side, added
+            python -m mwip_ros.cli.experiment --timing "${SUMMARIES[@]:0:$N}" "${RAN[@]}" | tee -a "$REPORT/metrics.md"
+        fi
     else
         mwip_report "${RUNS[@]:0:$N}" --estimates "${ESTIMATES[@]:0:$N}" --labels "${RAN[@]}" --out "$REPORT" \
             && reported=1

@@ -37,8 +37,11 @@ NOT_COMPARED = {"external_wrench", "emergency_stop", "cmd_vel",   # what a user 
                 "odom", "robot_description", "wheel_joint_states",   # robot_state's view of the states;
                 "rosout", "parameter_events", "diagnostics"}   # ROS's own topics
 # published only with sensing options on (the truth), raw sensors (the IMU, the encoder), a spatial plant (its
-# pose and wheel angles) or the yaw stage (the two wheel torques): judged when they have messages
-OPTIONAL = {"true_joint_states", "data_raw", "wheel_encoder", "true_pose", "true_wheel_states", "wheel_torques_cmd"}
+# pose and wheel angles) or the yaw stage (the two wheel torques), or only by plant_sim (the true lumped
+# disturbance: a robot's side, wheel_driver, has none; it publishes each wheel's read on wheel_states): judged when
+# they have messages
+OPTIONAL = {"true_joint_states", "data_raw", "wheel_encoder", "true_pose", "true_wheel_states", "wheel_torques_cmd",
+            "lumped_disturbance", "wheel_states"}
 MAX_STAMPS = 10_000_000     # per topic; past it a topic is only counted (its judgement would hold them all at once)
 MAX_RUNS = 100_000          # per topic (2.4 MB); past it (stamps on no grid) a topic is only counted
 

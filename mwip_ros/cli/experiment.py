@@ -18,6 +18,14 @@ then ``run NAME FAMILY USE_OBSERVER`` per run, in order), or one line naming the
   since the script's runs must end for the next law and the report.
 * ``--sensors raw``: the overlay comes before the user's files (the script puts it first), so a key the user
   sets (``state_estimator.method: complementary``) wins; the files must leave ``sensors.model`` raw.
+* ``--robot``: a robot's side (docs/hardware.md) instead of ``plant_sim``: the ``wheel_driver`` with a backend
+  (:data:`ROBOTS`), its raw IMU and encoders through the ``state_estimator`` (``model raw``).  ``emulated-moteus`` is
+  the moteus emulator's robot on the wall clock: ``--mode realtime`` only, and a torque limit (the files'
+  ``torque_limit`` or ``wheel_driver.wheel_torque_limit``), which the controllers get as ``maximum_torque``.  The
+  plan then says ``robot NAME BACKEND``.
+
+``python -m mwip_ros.cli.experiment --timing SUMMARY.json [LABEL]...`` prints each run's period timing (the
+driver's ``summary_json``) as the Markdown section the script adds to the report.
 """
 from __future__ import annotations
 
@@ -30,6 +38,8 @@ from mwip_ros.core import laws
 
 PROG = "run_experiment"
 PAPER_LAW = "dsc"   # the paper's family (config/paper.yaml, the schema's default): naming it replaces nothing
+# --robot NAME: the wheel_driver's backend for it (docs/hardware.md)
+ROBOTS = {"mock": "mock", "upkie-pybullet": "upkie", "emulated-moteus": "moteus"}
 
 
 class PlanError(ValueError):
@@ -42,6 +52,8 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--laws", default=None)
     ap.add_argument("--duration", default=None)
     ap.add_argument("--sensors", default="state", choices=("state", "raw"))
+    ap.add_argument("--robot", default=None, choices=tuple(ROBOTS))
+    ap.add_argument("--mode", default="lockstep", choices=("lockstep", "realtime"))
     return ap
 
 
@@ -101,16 +113,68 @@ def plan(argv=None) -> List[str]:
     model = values.get("sensors.model", "state")
     if args.sensors == "raw" and model != "raw":
         raise PlanError(f"--sensors raw, but the parameter files set plant_sim sensors.model: {model}")
+    robot = robot_line(args.robot, args.mode, args.params, values) if args.robot else None
+    if robot:
+        model = "raw"   # the driver publishes what the robot's IMU and encoders read: the estimator is in the loop
     runs, note = law_runs(args.laws, values["law"])
     if note:
         print(f"{PROG}: {note}", file=sys.stderr)
     lines = [f"duration {duration!r}"] if duration is not None else []
     lines.append(f"model {model}")
+    if robot:
+        lines.append(robot)
     lines += [f"run {law.name} {law.family} {str(law.observer).lower()}" for law in runs]
     return lines
 
 
+def robot_line(robot: str, mode: str, files, values) -> str:
+    """The plan's ``robot NAME BACKEND`` line for ``--robot``; PlanError for what that robot cannot run (module doc)."""
+    if robot == "emulated-moteus":
+        if mode != "realtime":
+            raise PlanError("--robot emulated-moteus runs on the wall clock (moteus controllers, emulated in real "
+                            "time): give --mode realtime")
+        own = P.load_param_files(files, option="--params").for_node("wheel_driver")
+        if not (own["wheel_torque_limit"] > 0 or values["torque_limit"] > 0):
+            raise PlanError("--robot emulated-moteus needs a torque limit (moteus maximum_torque): plant_sim "
+                            "torque_limit or wheel_driver wheel_torque_limit in the parameter files (config/upkie.yaml "
+                            "sets torque_limit 1.8)")
+    return f"robot {robot} {ROBOTS[robot]}"
+
+
+def timing_markdown(paths, labels) -> List[str]:
+    """The report's section on each run's period timing, from the drivers' ``summary_json`` files (one line per
+    item: :func:`mwip_ros.robot.driver.timing_lines`); a file that is missing or unreadable is said so."""
+    import json
+
+    from mwip_ros.robot.driver import timing_lines
+    out = ["", "## The robot side's period", ""]
+    for path, label in zip(paths, list(labels) + [None] * len(paths)):
+        out.append(f"**{label or path}**")
+        out.append("")
+        try:
+            with open(path) as f:
+                s = json.load(f)
+            rep = dict(s["timing"])
+            if s.get("schedule"):
+                rep["periods_due"] = s["schedule"]["periods_due"]
+            lines = [f"{s['mode']}, backend {s['backend']}, driver {s['driver_state']}"
+                     + (f" ({s['fault_reason']}: {s['fault_detail']})" if s.get("fault_reason") else "")]
+            lines += timing_lines(rep, 1.0 / s["control_rate_hz"])
+            if s.get("device_replies_missed"):
+                lines.append(f"device replies missed (left, right): {s['device_replies_missed']}")
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            lines = [f"no timing: {path}: {exc}"]
+        out += [f"- {line}" for line in lines] + [""]
+    return out
+
+
 def main(argv=None) -> int:
+    args = list(sys.argv[1:] if argv is None else argv)
+    if args[:1] == ["--timing"]:
+        files = [a for a in args[1:] if a.endswith(".json")]
+        labels = [a for a in args[1:] if not a.endswith(".json")]
+        print("\n".join(timing_markdown(files, labels)))
+        return 0
     try:
         lines = plan(argv)
     except PlanError as exc:

@@ -101,6 +101,9 @@ def _parser() -> argparse.ArgumentParser:
                     help="that wheel's controller overheats (moteus fault 38 while it drives) at --overheat-at")
     ap.add_argument("--overheat-at", type=float, default=0.0, metavar="S", help="seconds after the start (default 0)")
     ap.add_argument("--seed", type=int, default=0, help="of the loss and jitter draws (default 0)")
+    ap.add_argument("--hold", action="store_true",
+                    help="hold the robot at its initial state (a hand on it) until a controller first drives "
+                         "(position mode): a graph that takes a while to come up meets it where the file starts it")
     ap.add_argument("--duration", type=float, default=0.0, metavar="S",
                     help="stop after S seconds (default 0: until SIGINT or SIGTERM)")
     return ap
@@ -148,7 +151,7 @@ def _robot(args, cfg):
     injection = Injection(latency=args.latency, jitter=args.jitter, loss=args.loss, seed=args.seed,
                           silent={wheel_id[args.silent]: args.silent_at} if args.silent_at is not None else {},
                           overheat={wheel_id[args.overheat]: args.overheat_at} if args.overheat else {})
-    return EmulatedRobot(SimBackend(plant), servos, injection)
+    return EmulatedRobot(SimBackend(plant), servos, injection, hold=args.hold)
 
 
 class _ImuPublisher:
@@ -252,7 +255,8 @@ def main(argv: Optional[List[str]] = None) -> int:
         print(f"{PROG}: controllers {args.ids[0]} (left, sign {args.signs[0]:+d}) and {args.ids[1]} (right, sign "
               f"{args.signs[1]:+d}); plant {cfg.backend} at {args.physics_rate:g} Hz; IMU "
               f"{'imu/data_raw at %g Hz' % args.imu_rate if imu else 'off'}; latency {args.latency:g} s, jitter "
-              f"{args.jitter:g} s, loss {args.loss:g}", file=sys.stderr, flush=True)
+              f"{args.jitter:g} s, loss {args.loss:g}{'; held until driven' if args.hold else ''}", file=sys.stderr,
+              flush=True)
         from mwip_ros.robot.backend import BackendError
         from mwip_ros.robot.moteus_emu import serve
         end = time.monotonic() + args.duration if args.duration > 0 else math.inf
@@ -266,9 +270,9 @@ def main(argv: Optional[List[str]] = None) -> int:
         c = robot.counters
         trips = [s.watchdog_trips for s in robot.servos]
         print(f"{PROG}: {c.frames} frames ({c.lost} lost, {c.unheard} unheard), {c.replies} replies, {c.errors} "
-              f"errors, {c.steps} physics steps, {c.stalls} stalls (worst {c.worst_stall * 1e3:.1f} ms), watchdog "
-              f"trips {trips[0]} left {trips[1]} right, {imu.count if imu else 0} IMU messages", file=sys.stderr,
-              flush=True)
+              f"errors, {c.steps} physics steps ({c.held} held), {c.stalls} stalls (worst {c.worst_stall * 1e3:.1f} "
+              f"ms), watchdog trips {trips[0]} left {trips[1]} right, {imu.count if imu else 0} IMU messages",
+              file=sys.stderr, flush=True)
         if imu is not None:
             imu.close()
         if args.link is not None and args.link.is_symlink() and os.readlink(args.link) == os.ttyname(slave):

@@ -23,8 +23,10 @@ event           disabled       enabled                       fault
 Fault reasons (:data:`FAULT_REASONS`): ``watchdog`` (no new command for ``watchdog_s``; lockstep: the
 lockstep timeout), ``bad_command`` (non-finite or implausible, :meth:`DriverStateMachine.check_command`),
 ``fall`` (|theta_b| > fall_angle), ``emergency_stop`` (std_msgs/Bool true), ``estimator_unhealthy``
-(raw mode: the state estimator reports ERROR) and ``diverged`` (the plant's simulation diverged,
-:class:`~mwip_ros.core.plant.PlantDiverged`: the run ends there).  A fault is a fault whatever the enable
+(raw mode: the state estimator reports ERROR), ``diverged`` (the plant's simulation diverged,
+:class:`~mwip_ros.core.plant.PlantDiverged`: the run ends there) and ``device`` (a robot's device reported its own
+fault: a moteus fault code, a controller that stopped answering, a transport that failed; the detail is the
+backend's one line naming it, :attr:`mwip_ros.robot.backend.Observation.fault`).  A fault is a fault whatever the enable
 state (a fall while disabled is latched too).
 
 **Levels.** ``emergency_stop`` and ``estimator_unhealthy`` are inputs with a level (:data:`LEVEL_INPUTS`,
@@ -69,7 +71,7 @@ __all__ = ["DISABLED", "ENABLED", "FAULT", "STATES", "FAULT_REASONS", "LEVEL_INP
 
 DISABLED, ENABLED, FAULT = "disabled", "enabled", "fault"
 STATES = (DISABLED, ENABLED, FAULT)
-FAULT_REASONS = ("watchdog", "bad_command", "fall", "emergency_stop", "estimator_unhealthy", "diverged")
+FAULT_REASONS = ("watchdog", "bad_command", "fall", "emergency_stop", "estimator_unhealthy", "diverged", "device")
 LEVEL_INPUTS = ("emergency_stop", "estimator_unhealthy")   # faults that are held while their input is asserted
 # how a refused reset names a held level, and what releases it
 _HELD_TEXT = {"emergency_stop": ("the emergency stop is still asserted",

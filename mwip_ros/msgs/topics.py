@@ -19,6 +19,7 @@ GRAPH_TOPICS: Dict[str, str] = {
     "true_wheel_states": "sensor_msgs/msg/JointState",   # a spatial plant's wheels: each one's absolute angle
     "imu/data_raw": "sensor_msgs/msg/Imu",               # raw sensors (sensors.model: raw): the body's IMU
     "wheel_encoder": "sensor_msgs/msg/JointState",       # raw sensors: the wheel's angle relative to the body
+    "wheel_states": "sensor_msgs/msg/JointState",        # wheel_driver: each wheel's angle, rate, torque (the servos)
     "wheel_torque_cmd": "std_msgs/msg/Float64",
     "wheel_torques_cmd": "sensor_msgs/msg/JointState",  # the yaw stage (mujoco, motion): [u_L, u_R] (theory 6.13)
     "cmd_vel": "geometry_msgs/msg/Twist",                # motion: v* (linear.x) and psi'* (angular.z) (theory 6.11)

@@ -419,6 +419,13 @@ NODE_SPECS: Dict[str, List[ParamSpec]] = {
                   "believes it [m] (the plant's sensors.imu.offset is the truth)", **_non_negative(100.0), unit="m"),
         ParamSpec("csv", "string", "", "write the estimates (t, theta_w_hat, theta_b_hat, dtheta_w_hat, "
                   "dtheta_b_hat) to this file at the end; '' = none"),
+        ParamSpec("imu_sync", "string", "stamp", "how an IMU sample meets an encoder sample: stamp (the two of one "
+                  "stamp, as plant_sim and a driver whose backend reads both at once publish them) or latest (the "
+                  "IMU has its own driver and rate: each encoder sample takes the newest IMU sample, held)",
+                  **_one_of("stamp", "latest")),
+        ParamSpec("imu_max_age_s", "double", 0.05, "imu_sync latest: an IMU sample further than this from the "
+                  "encoder sample's stamp (older, or ahead) is not used: that encoder sample is dropped, counted "
+                  "(an IMU that stopped publishing stops the estimates)", **_positive(10.0), unit="s"),
         *_estimator_parameters(),
     ],
     "mcap_recorder": [
@@ -478,6 +485,8 @@ NODE_SPECS["robot_state"] = [s for s in NODE_SPECS["plant_sim"] if s.name in (
     "actual.I_b_yaw",
     "actual.track_width", "sensors.model", "sensors.imu.offset", "sensors.encoder_counts_per_rev",
     "sensors.imu.gyro_noise_std")]
+# wheel_driver (docs/hardware.md): the node that owns a robot's clock; its settings and its backends' (params.driver)
+NODE_SPECS["wheel_driver"] = _specs_of("driver")
 
 # Parameters ROS itself declares on every node; allowed anywhere in the file.
 ROS_OWN = {"use_sim_time": ParamSpec("use_sim_time", "bool", False, "use /clock"),

@@ -43,6 +43,13 @@ from the plant's read of the wheel (phi relative to the body, as a servo measure
 the wheel with sign tau [N m].  :meth:`EmulatedRobot.advance_to` steps the plant in periods of its ``h``, each
 with the torques the controllers apply at its start (held over it, as the plant's drive stage holds a command).
 
+**Held until driven** (``hold``): a robot is held upright by hand until its driver drives it.  A held
+:class:`EmulatedRobot` keeps its plant at the initial state (its clock goes on) until a controller first takes a
+command in position mode; from then on the physics runs.  Held, it is at rest: its IMU reads no rotation and the
+specific force of a body at rest at the initial pitch (:func:`mwip_ros.core.raw_sensors.specific_force` with no
+acceleration; the plant's own first read has the accelerations of a robot let go at that instant).  So a graph
+that takes seconds to come up meets the robot where the parameter file starts it.
+
 **Faults on demand** (:class:`Injection`): an added latency and a uniform jitter on every answer of the fdcanusb
 (in order: a serial line does not reorder), a fraction of the frames lost on the bus (the fdcanusb still says
 ``OK``; the controller never sees the frame), a controller that stops answering from a time (or when told: the
@@ -60,11 +67,13 @@ import select
 import time
 from collections import deque
 from dataclasses import dataclass, field
+from dataclasses import replace as _replace
 from typing import Callable, Deque, Dict, List, Optional, Sequence, Tuple
 
+from mwip_ros.core.raw_sensors import specific_force
 from mwip_ros.optional import required
 
-from .backend import Command, Observation
+from .backend import Command, Imu, Observation
 from .moteus_backend import MODE_FAULT, MODE_TIMEOUT, TWO_PI
 
 with required("moteus"):
@@ -452,6 +461,7 @@ class Counters:
     errors: int = 0
     steps: int = 0
     stalls: int = 0        # wake-ups more than 5 ms after their time (the process was not scheduled)
+    held: int = 0          # periods the robot was held (hold: before the first command to drive)
     worst_stall: float = 0.0   # how late the latest wake-up was [s]
 
 
@@ -466,9 +476,11 @@ class EmulatedRobot:
         The left wheel's controller, then the right one's.
     injection : Injection or None
         Faults on demand (None: none).
+    hold : bool
+        Hold the plant at its initial state until a controller first drives (module docstring).
     """
 
-    def __init__(self, backend, servos: Sequence[Servo], injection: Optional[Injection] = None):
+    def __init__(self, backend, servos: Sequence[Servo], injection: Optional[Injection] = None, hold: bool = False):
         injection = injection if injection is not None else Injection()
         if len(servos) != 2 or servos[0].cfg.can_id == servos[1].cfg.can_id:
             raise ValueError("moteus emulator: two controllers with distinct CAN ids (left, right)")
@@ -493,6 +505,11 @@ class EmulatedRobot:
         self.imu_samples: List[Tuple[float, Observation]] = []   # (its time [s], the read) not yet taken
         self.events: List[str] = []                # the plant's own events (its driver refused a torque), one line
         self._last_due = 0.0
+        self.held = bool(hold)                     # the plant held at its initial state (until a controller drives)
+        if self.held:   # at rest in a hand: no rotation, gravity's specific force alone (module docstring)
+            c = backend.cfg
+            fx, fz = specific_force(backend.plant.x, (0.0, 0.0), c.actual.r, c.raw.offset, c.actual.g)
+            self.obs = _replace(self.obs, imu=Imu((0.0, 0.0, 0.0), (fx, 0.0, fz)))
         self._measure()
 
     def start(self, now: float, imu_period: Optional[float] = None) -> None:
@@ -544,13 +561,19 @@ class EmulatedRobot:
             watch = watch_until is None or start <= watch_until
             torques = [s.update(start, watch or (commanded is not None and s.cfg.can_id not in commanded)) * s.cfg.sign
                        for s in self.servos]
-            fault = self.obs.fault
-            self.obs = self.backend.step(Command(*torques))
-            if self.obs.fault and not fault:
-                self.events.append(f"the plant: {self.obs.fault} (no torque acts on it from now on)")
-            self._measure()
+            if self.held and any(s.mode == MODE_POSITION for s in self.servos):
+                self.held = False
+                self.events.append(f"the robot is let go at t = {start - self.t0:.3f} s: a controller drives")
+            if self.held:   # a hand holds it: the period passes, the plant stays at its initial state
+                self.counters.held += 1
+            else:
+                fault = self.obs.fault
+                self.obs = self.backend.step(Command(*torques))
+                if self.obs.fault and not fault:
+                    self.events.append(f"the plant: {self.obs.fault} (no torque acts on it from now on)")
+                self._measure()
+                n += 1
             self.t_next = self.obs_t = start + self.h
-            n += 1
             if self.next_imu is not None and self.obs_t >= self.next_imu - 1e-9:
                 # the IMU's own clock: the read of the period its sample time falls in, once per sample time
                 self.imu_samples.append((self.obs_t, self.obs))

@@ -33,7 +33,7 @@ from dataclasses import replace
 from typing import Optional
 
 from mwip_ros.core.loop import PlantSide
-from mwip_ros.core.plant import PlantConfig, PlantDiverged, finite_state
+from mwip_ros.core.plant import PlantConfig, PlantDiverged, Pose, finite_state
 from mwip_ros.core.raw_sensors import RawSensorConfig
 from mwip_ros.core.safety import FAULT
 
@@ -129,6 +129,10 @@ class SimBackend(Backend):
 
     def close(self) -> None:
         """Nothing to release (idempotent)."""
+
+    def true_pose(self) -> Optional[Pose]:
+        """A spatial plant's 3D pose at the current read (MuJoCo: :attr:`Plant.pose`); None on the planar plant."""
+        return self.side.plant.pose if self.side.plant.spatial else None
 
     def _read(self) -> Observation:
         """Stage ``sensors`` of the current period as an :class:`~.backend.Observation` (module docstring)."""

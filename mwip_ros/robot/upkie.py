@@ -64,6 +64,7 @@ from typing import ClassVar, Dict, Mapping, Optional, Tuple
 
 import numpy as np
 
+from ..core.plant import Pose
 from .backend import Backend, BackendError, Command, Imu, Observation, Wheel
 from .planar_model import PlanarModel, upkie_planar_model
 
@@ -469,6 +470,21 @@ class UpkieBackend(Backend):
         p = [pybullet.getLinkState(rid, self._link_index(n), computeForwardKinematics=True)[4]
              for n in ("left_wheel_tire", "right_wheel_tire")]
         return 0.5 * (p[0][0] + p[1][0]), 0.5 * (p[0][1] + p[1][1])
+
+    def true_pose(self) -> Optional[Pose]:
+        """The robot's pose at the last read (PyBullet; None on the spine): the axle's centre (x, y, z) [m], the base's
+        yaw and roll [rad] (PyBullet's Euler angles), eq. (1)'s theta_b as the pitch (the truth's) and each wheel's
+        angle, phi + theta_b [rad]."""
+        if not self.simulated or self._last is None or self._last.truth is None:
+            return None
+        import pybullet
+        rid = self.inner.robot_id
+        p = [pybullet.getLinkState(rid, self._link_index(n), computeForwardKinematics=True)[4]
+             for n in ("left_wheel_tire", "right_wheel_tire")]
+        roll, _pitch, yaw = pybullet.getEulerFromQuaternion(pybullet.getBasePositionAndOrientation(rid)[1])
+        th = self._last.truth[1]
+        return Pose(0.5 * (p[0][0] + p[1][0]), 0.5 * (p[0][1] + p[1][1]), 0.5 * (p[0][2] + p[1][2]), yaw, th, roll,
+                    self._last.left.position + th, self._last.right.position + th)
 
     def push(self, force_x: float, force_y: float = 0.0, link: str = "torso") -> None:
         """Hold a horizontal force [N] on ``link``'s centre of mass, in the world frame, from the next step until the

@@ -1,6 +1,7 @@
 """``state_estimator``: the raw IMU and encoder of a ``sensors.model: raw`` plant to the state (theory 6.4), a node.
 
-Subscribes ``imu/data_raw`` and ``wheel_encoder``, pairs the two samples of one stamp, runs the configured
+Subscribes ``imu/data_raw`` and ``wheel_encoder``, pairs the two samples of one stamp (``imu_sync: stamp``; with
+``imu_sync: latest`` each encoder sample takes the newest IMU sample instead, below), runs the configured
 estimator (``method``: complementary or kalman, :mod:`mwip_ros.core.estimators`; ``imu_offset`` and the
 method's own parameters) and publishes ``joint_states`` in the layout of section 7 (the estimate's positions
 and velocities, effort = the torque the encoder's driver reported) with the sample's stamp; when the plant_sim
@@ -27,6 +28,16 @@ second); a diverged estimate is never published on ``joint_states`` (withheld an
 (when the schema has the parameter) it writes the samples and the estimates (``t``, ``gyro``, ``accel_x``,
 ``accel_z``, ``encoder``, ``encoder_rate``, ``theta_w_hat``, ``theta_b_hat``, ``dtheta_w_hat``, ``dtheta_b_hat``:
 mwip_sim's raw columns) as it goes.
+
+**An IMU with its own driver** (``imu_sync: latest``, docs/hardware.md): on a robot whose IMU is read by its own ROS
+driver (a moteus robot: the emulator's IMU at 400 Hz on its own clock) the IMU's stamps never meet the wheel driver's.
+The estimator then does what a ROS controller does with a sensor topic of another rate: it keeps the newest IMU
+message (a realtime buffer of one) and, at each encoder sample, runs one step with it, so the estimate comes at the
+encoders' rate and stamp.  The IMU sample is at most one IMU period older than the encoder's (2.5 ms at 400 Hz,
+plus its transport); one further than ``imu_max_age_s`` from the encoder's stamp (older, or ahead of it) is not
+used: the encoder sample is dropped and counted, so an IMU that stopped stops the estimates (the controller then
+gets no state, and the driver's watchdog stops the robot).  A repeated encoder stamp (a lockstep resend) is
+answered again.  ``imu_sync: stamp`` stays the default and is unchanged: the lockstep oracle's pairs, bit for bit.
 """
 from __future__ import annotations
 
@@ -78,6 +89,10 @@ class StateEstimatorNode(Node, GracefulNodeMixin):
         self.stamp_guards = {t: StampGuard(window, f"{t} stamp", sole_publisher(self, t))
                              for t in (IMU_TOPIC, ENCODER_TOPIC)}
         self.pending = {IMU_TOPIC: {}, ENCODER_TOPIC: {}}   # topic -> {stamp: (parsed, arrival, restarted)}
+        self.latest = self.v["imu_sync"] == "latest"   # the IMU at its own rate: the newest sample held (module doc)
+        self.imu_max_age_ns = round(self.v["imu_max_age_s"] * 1e9)
+        self.newest_imu = None    # imu_sync latest: (stamp, parsed, restarted) of the newest IMU sample
+        self.imu_stale = 0        # encoder samples dropped for want of an IMU sample within imu_max_age_s
         self.answered = None      # the stamp of the last sample pair answered
         self.last_msg = None      # its joint_states message (answered again for a resent sample)
         self.count = 0
@@ -95,8 +110,10 @@ class StateEstimatorNode(Node, GracefulNodeMixin):
         self.filtered = self.v["mode"] == "realtime" and self._filter(subs)
         self.watch = PublisherWatch(self, [IMU_TOPIC, ENCODER_TOPIC, "joint_states"])
         own = ", ".join(f"{k} = {v!r}" for k, v in self.est.values.items())
+        sync = (f"the newest IMU sample at each encoder sample (within {self.v['imu_max_age_s'] * 1e3:g} ms)"
+                if self.latest else "IMU and encoder samples paired by stamp")
         self.get_logger().info(f"{self.est.title} state estimator ready: imu_offset = {self.config.imu_offset:g} m, "
-                               f"h = {self.h * 1e3:.3f} ms{'; ' + own if own else ''}")
+                               f"h = {self.h * 1e3:.3f} ms, {sync}{'; ' + own if own else ''}")
 
     def _filter(self, subs) -> bool:
         """Realtime: a DDS content filter on each raw subscription (layouts.RAW_FILTERS), so that a flood of
@@ -128,6 +145,9 @@ class StateEstimatorNode(Node, GracefulNodeMixin):
         stamp = parsed[0]
         guard = self.stamp_guards[topic]
         last = guard.last
+        if self.latest:
+            self._take_latest(topic, parsed, guard)
+            return
         verdict = guard.check(stamp, commit=False)   # committed when its pair is estimated
         if verdict == REPEAT:
             # a resent sample: its pair answered, answer it again (once per resend: on the IMU's copy)
@@ -143,6 +163,39 @@ class StateEstimatorNode(Node, GracefulNodeMixin):
             return
         self.pending[topic][stamp] = (parsed, time.monotonic(), verdict == RESTART)
         self._pair(stamp)
+
+    def _take_latest(self, topic: str, parsed, guard) -> None:
+        """``imu_sync: latest`` (module doc): an IMU sample becomes the newest held; an encoder sample is estimated
+        with it, if it is within ``imu_max_age_s`` of the encoder's stamp."""
+        stamp = parsed[0]
+        last = guard.last
+        verdict = guard.check(stamp)   # each stream's time moves with its own samples
+        if verdict not in (NEW, REPEAT, RESTART):
+            self.rejects(topic, verdict)
+            return
+        if verdict == RESTART:
+            self.get_logger().warning(f"{topic} restarted at t = {stamp * 1e-9:.3f} s (the last sample was "
+                                      f"t = {last * 1e-9:.3f} s)")
+        if topic == IMU_TOPIC:
+            if verdict != REPEAT:
+                self.newest_imu = (stamp, parsed, verdict == RESTART)
+            return
+        if verdict == REPEAT:   # a resent encoder sample: its estimate again, nothing integrated
+            if stamp == self.answered and self.last_msg is not None:
+                self.pub.publish(self.last_msg)
+            return
+        imu = self.newest_imu
+        if imu is None or abs(stamp - imu[0]) > self.imu_max_age_ns:
+            self.imu_stale += 1
+            said = ("none has come" if imu is None else
+                    f"the newest is {(stamp - imu[0]) * 1e-6:+.1f} ms from it")
+            self.rejects(ENCODER_TOPIC, f"the sample of t = {stamp * 1e-9:.6f} s has no imu/data_raw sample within "
+                                        f"imu_max_age_s = {self.imu_max_age_ns * 1e-6:g} ms ({said}); dropped, not "
+                                        "integrated")
+            return
+        restart = verdict == RESTART or imu[2] or (self.answered is not None and stamp <= self.answered)
+        self.newest_imu = (imu[0], imu[1], False)
+        self._estimate(stamp, imu[1], parsed, restart, commit=False)
 
     def _drop(self, topic: str, stamps, why: str) -> None:
         """Drop the waiting samples of ``topic`` at ``stamps`` (counted: rejected on ``topic``)."""
@@ -179,7 +232,7 @@ class StateEstimatorNode(Node, GracefulNodeMixin):
         self._estimate(stamp, imu[0], enc[0], restart)
 
     # --- the core's step ------------------------------------------------------------------------------
-    def _estimate(self, stamp: int, imu, enc, restart: bool) -> None:
+    def _estimate(self, stamp: int, imu, enc, restart: bool, commit: bool = True) -> None:
         _s, gyro, accel_x, accel_z, gyro_z = imu
         _s, phi, phi_rate, torque = enc
         sample = RawSample(gyro, accel_x, accel_z, phi, phi_rate)
@@ -208,8 +261,9 @@ class StateEstimatorNode(Node, GracefulNodeMixin):
             self.rejects(IMU_TOPIC, f"the estimate for t = {stamp * 1e-9:.3f} s is not usable: {problem}; the "
                                     "sample is not integrated, nothing published")
             return
-        for guard in self.stamp_guards.values():
-            guard.commit(stamp)
+        if commit:   # (imu_sync latest: each stream's guard moved with its own samples)
+            for guard in self.stamp_guards.values():
+                guard.commit(stamp)
         self.answered = stamp
         self.count += 1
         if self.written is not None:
@@ -244,6 +298,7 @@ class StateEstimatorNode(Node, GracefulNodeMixin):
     def diagnostic_status(self):
         hl = self.est.health
         values = {"method": self.est.name, "estimates": self.count, "unpaired_dropped": self.unpaired,
+                  "imu_sync": self.v["imu_sync"], "imu_stale_dropped": self.imu_stale,
                   "content_filter": "on: messages outside the limits are dropped by DDS, not counted"
                   if self.filtered else "off",
                   "withheld_diverged": self.withheld,
@@ -256,7 +311,8 @@ class StateEstimatorNode(Node, GracefulNodeMixin):
     def on_shutdown(self) -> None:
         waiting = sum(len(w) for w in self.pending.values())
         self.get_logger().info(f"estimated {self.count} samples ({self.est.title}); unpaired dropped: "
-                               f"{self.unpaired} (+{waiting} still waiting at the end); withheld diverged: "
+                               f"{self.unpaired} (+{waiting} still waiting at the end); no IMU sample within "
+                               f"imu_max_age_s: {self.imu_stale}; withheld diverged: "
                                f"{self.withheld}; rejected: "
                                f"{self.rejects.summary()}")
         if self.written is not None:

@@ -18,11 +18,11 @@ from typing import Optional, Sequence
 
 __all__ = ["NODES", "M_ARENA_MAX", "bound_malloc_arenas", "run", "main", *(
     "plant_sim", "disturbance_observer", "dscndo_controller", "mcap_recorder", "bag_replay", "robot_markers",
-    "foxglove_server", "state_estimator", "robot_state")]
+    "foxglove_server", "state_estimator", "robot_state", "wheel_driver")]
 
 # every node by name, and its module: the loop's nodes in nodes/loop, the tool nodes in nodes/tools
 NODES = {name: f"mwip_ros.nodes.{room}.{name}" for room, names in (
-    ("loop", ("plant_sim", "disturbance_observer", "dscndo_controller", "state_estimator")),
+    ("loop", ("plant_sim", "disturbance_observer", "dscndo_controller", "state_estimator", "wheel_driver")),
     ("tools", ("mcap_recorder", "bag_replay", "robot_markers", "foxglove_server", "robot_state"))) for name in names}
 M_ARENA_MAX = -8   # glibc's mallopt() parameter number for the arena limit
 
@@ -86,6 +86,10 @@ def state_estimator(argv=None) -> int:
 
 def robot_state(argv=None) -> int:
     return run("robot_state", argv)
+
+
+def wheel_driver(argv=None) -> int:
+    return run("wheel_driver", argv)
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:

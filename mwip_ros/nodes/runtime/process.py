@@ -121,7 +121,8 @@ def _realtime_priority(node) -> None:
     node.get_logger().info(f"SCHED_FIFO priority {prio}")
 
 
-_TOPIC_CALLS = {"create_publisher": "publishes", "create_subscription": "subscribes", "create_service": "services"}
+_TOPIC_CALLS = {"create_publisher": "publishes", "create_subscription": "subscribes", "create_service": "services",
+                "side_input": "subscribes"}   # side_input: wheel_driver's side inputs (a subscription)
 _GENERIC_EXIT_CODES = ("exit codes: 0 done (or stopped by SIGINT/SIGTERM), 1 a runtime error, 2 bad parameters or "
                        "arguments, or an optional package the node needs is missing (one line naming the key or the "
                        "package; nothing started)")
