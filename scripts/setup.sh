@@ -13,7 +13,7 @@ PIP_VERSION="26.3"
 CONSOLE_SCRIPTS=(plant_sim disturbance_observer dscndo_controller mcap_recorder
                  bag_replay mwip_sim mwip_theorem mwip_report mwip_bag_repair mwip_sweep mwip_tune
                  robot_markers foxglove_server mwip_ctl state_estimator mwip_identify mwip_moteus_emulator
-                 mwip_robot)
+                 mwip_robot robot_state wheel_driver)
 
 cd "$ROOT"
 

@@ -42,6 +42,8 @@ CONSOLE_SCRIPTS = [
     'mwip_ctl',
     'state_estimator',
     'robot_state',
+    'mwip_robot',
+    'wheel_driver',
 ]
 PACKAGE_FILES = ['package.xml', 'setup.py', 'setup.cfg']
 PACKAGE_DIRS = ['resource', PACKAGE, 'config']
