@@ -21,7 +21,6 @@ SUBSET = ("dscndo", "lqr")
 
 @pytest.fixture(scope="module")
 def base():
-    T._init()
     return T.base_values()
 
 

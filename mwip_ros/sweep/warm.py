@@ -49,7 +49,6 @@ def cold_kernels(chunks: Sequence[Chunk]) -> List[Tuple[str, Chunk]]:
     (a label, a chunk of one of its scenarios, :data:`WARM_S` long, that compiles it)."""
     from mwip_ros import params as P
     from mwip_ros.core.batch import compiled_form
-    from mwip_ros.core.jitcache import cached
     seen, out = set(), []
     for chunk in chunks:
         for idx in batch_groups(chunk).values():
@@ -59,6 +58,7 @@ def cold_kernels(chunks: Sequence[Chunk]) -> List[Tuple[str, Chunk]]:
             if form is None or id(form[0]) in seen:
                 continue
             seen.add(id(form[0]))
+            from mwip_ros.core.jitcache import cached   # numba's: only once there is a compiled loop (numba there)
             if cached(form[0]) is False:
                 h = 1.0 / v["control_rate_hz"]
                 length = max(WARM_S, 4 * h)

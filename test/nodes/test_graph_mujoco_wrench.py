@@ -11,7 +11,7 @@ pytestmark = pytest.mark.node
 
 def test_a_lateral_push_and_a_yaw_torque_reach_the_mujoco_body():
     from mwip_ros.msgs import layouts as L
-    from nodeharness import NodeHarness, node_class
+    from nodeharness import NodeHarness, node_class, realtime_tick
 
     with NodeHarness(node_class("plant_sim"), "-p", "mode:=realtime", "-p", "duration_s:=0.0",
                      "-p", "initial.theta_b:=0.0", "-p", "backend:=mujoco", "-p", "actual.D_w_variance:=0.0",
@@ -24,7 +24,7 @@ def test_a_lateral_push_and_a_yaw_torque_reach_the_mujoco_body():
 
         def ticks_until(cond, most=2000):   # 10 s of simulated time at most
             for _ in range(most):
-                node.runner._tick()
+                realtime_tick(node)
                 if cond(pose()):
                     return True
             return False
