@@ -74,6 +74,8 @@ def pytest_collection_modifyitems(config, items):
         tiers = sorted({m.name for m in item.iter_markers() if m.name in TIERS})
         if len(tiers) != 1:
             bad.append(f"  {item.nodeid}: {' + '.join(tiers) if tiers else 'no tier'}")
+        else:   # in the test's reports (a worker's too): the summary's check reads it there
+            item.user_properties.append(("tier", tiers[0]))
     if bad:
         raise pytest.UsageError(
             f"{len(bad)} test(s) not in exactly one tier of {', '.join(TIERS)} (test/conftest.py says which; "
@@ -87,7 +89,7 @@ def pytest_terminal_summary(terminalreporter, exitstatus, config):
     for reports in terminalreporter.stats.values():
         for r in reports:
             if getattr(r, "when", None) == "call" and getattr(r, "duration", 0.0) > FAST_LIMIT_S and \
-                    any(k in FAST for k in getattr(r, "keywords", {})):
+                    dict(getattr(r, "user_properties", ())).get("tier") in FAST:
                 slow.append((r.duration, r.nodeid))
     if slow:
         terminalreporter.write_line(f"tier: {len(slow)} unit/node test(s) over {FAST_LIMIT_S:g} s (move them to "

@@ -33,7 +33,7 @@ from typing import Any, Callable, Dict, List, Optional
 
 from graphproc import PARAMS, loop_chain, node_rules, param_files
 
-__all__ = ["Loop", "NodeHarness", "Wire", "node_class", "refused", "run_ctl"]
+__all__ = ["Loop", "NodeHarness", "Wire", "node_class", "realtime_tick", "refused", "run_ctl"]
 
 _LOGS: Dict[str, List[tuple]] = {}   # logger name -> [(severity name, message)], while a harness records it
 _PATCHED = False
