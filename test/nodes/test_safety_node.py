@@ -491,7 +491,10 @@ def test_the_realtime_watchdog_faults_within_watchdog_s_and_one_period_of_the_la
         # verdict, one more period
         bound = WATCHDOG_S + H if gap <= 1.5 * H else WATCHDOG_S + 2 * H + stalled
         assert plant_side <= bound + SCHEDULING_MARGIN_S, measured
-        assert test_side <= WATCHDOG_S + 2.0, measured   # delivery to this process: loose (it may stall too)
+    # the test's own view (the last command it saw -> the fault record it saw): a stall of this process or of its
+    # delivery lengthens one run's (2.5 s once, on a fresh clone's run), so the median of the runs is checked
+    test_sides = sorted(m[1] for m in measured)
+    assert test_sides[len(test_sides) // 2] <= WATCHDOG_S + 0.5, measured
     s = json.loads(summary.read_text())
     reasons = [r["reason"] for r in s["transitions"]]
     assert reasons == ["watchdog", "reset"] * (runs + spurious), s["transitions"]
