@@ -34,10 +34,10 @@ else
     exit 1
 fi
 
-# Without -m, -n or test paths of the caller's: two runs, so that every core works and nothing timed shares it.
+# Without -m, -n or test paths of the caller's: three runs, so that every core works and nothing timed shares it.
 # First the tiers that run in this process (unit, node, slow, montecarlo: test/conftest.py) on every core
-# (pytest-xdist), then the tiers that start processes and keep real-time deadlines (graph, e2e, bench), one test
-# at a time. With -m, -n or paths of yours: one pytest run, as you asked.
+# (pytest-xdist), then the graph and e2e tests on every core, then those marked alone (they keep real-time
+# deadlines, time the graph or hand a domain to a script) and the bench one test at a time. With -m, -n or paths of yours: one pytest run.
 split=1
 [ "${#targets[@]}" -eq 0 ] && split=0
 for a in "$@"; do
@@ -65,6 +65,12 @@ start=$SECONDS
 rc=0
 run_pytest "${targets[@]}" -m "unit or node or slow or montecarlo" -n auto --dist worksteal "$@" || rc=$?
 in_process=$((SECONDS - start))
-run_pytest "${targets[@]}" -m "graph or e2e or bench" "$@" || rc=$?
-echo "test: in-process tiers ${in_process} s, process tiers $((SECONDS - start - in_process)) s, in all $((SECONDS - start)) s"
+# lockstep graphs and whole jobs wait on their processes' answers, not on a clock: two at a time (each graph on a
+# domain of its own; --dist loadfile keeps a module's tests, and the graph they share, on one worker)
+run_pytest "${targets[@]}" -m "(graph or e2e) and not alone" -n auto --dist loadfile "$@" || rc=$?
+shared=$((SECONDS - start - in_process))
+# what keeps real-time deadlines or times the graph, and the bench: alone
+run_pytest "${targets[@]}" -m "(graph or e2e) and alone or bench" --durations=10 "$@" || rc=$?
+echo "test: in-process tiers ${in_process} s, process tests ${shared} s two at a time and" \
+     "$((SECONDS - start - in_process - shared)) s alone, in all $((SECONDS - start)) s"
 exit "$rc"

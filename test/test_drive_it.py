@@ -32,6 +32,7 @@ def _session_pids(sid: int) -> list:
     return [int(p) for p, s in (line.split() for line in out.splitlines()) if int(s) == sid]
 
 
+@pytest.mark.alone
 @pytest.mark.e2e
 def test_the_documented_drive_command_drives_forward_and_turns_upright(tmp_path):
     run, cmd = _documented_commands()

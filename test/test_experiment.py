@@ -246,6 +246,7 @@ def test_two_experiments_started_together_never_collide(tmp_path):
 
 
 @pytest.mark.e2e
+@pytest.mark.alone   # the domain it frees for the script must not be taken by another test meanwhile
 def test_the_users_domain_is_kept_and_a_domain_in_use_is_refused(tmp_path):
     from graphproc import fresh_domain_id, release_domain_id
     free = fresh_domain_id()

@@ -49,6 +49,7 @@ def test_upkie_in_its_own_pybullet_balances_through_the_graph(tmp_path):
     assert float(row.split("|")[4]) < 0.01   # theta_b RMS over the run's second half: the truth, upright
 
 
+@pytest.mark.alone
 def test_the_emulated_moteus_robot_balances_in_realtime(tmp_path):
     pytest.importorskip("moteus")
     r, metrics = _run(tmp_path, "--robot", "emulated-moteus", "--duration", "3", "--realtime-priority", "10")

@@ -220,6 +220,7 @@ def graph(tmp_path_factory):
         yield g
 
 
+@pytest.mark.alone
 @pytest.mark.graph
 def test_the_console_script_sets_a_parameter_another_reads_back_and_the_node_logs_it(graph):
     r = ctl(graph, "param", "set", "dscndo_controller", "k1", "8")
@@ -229,6 +230,7 @@ def test_the_console_script_sets_a_parameter_another_reads_back_and_the_node_log
     assert r.returncode == 0 and r.stdout.strip() == "8.0", (r.stdout, r.stderr)
 
 
+@pytest.mark.alone
 @pytest.mark.graph
 def test_reset_restarts_the_plant_and_the_loop_follows(graph):
     r = ctl(graph, "reset")
@@ -238,6 +240,7 @@ def test_reset_restarts_the_plant_and_the_loop_follows(graph):
         assert p.wait_for_output("joint_states restarted at t = ", 10), p.output()[-2000:]
 
 
+@pytest.mark.alone
 @pytest.mark.graph
 def test_push_reaches_the_plant_process_and_ends_with_a_zero_wrench(graph):
     r = ctl(graph, "push", "--wheel", "50", "--duration", "0.2")
@@ -249,6 +252,7 @@ def test_push_reaches_the_plant_process_and_ends_with_a_zero_wrench(graph):
     assert graph.plant.poll() is None, graph.plant.output()[-2000:]
 
 
+@pytest.mark.alone
 @pytest.mark.graph
 def test_ctrl_c_ends_a_push_with_a_zero_wrench_and_exits_130_quietly(graph):
     p = subprocess.Popen([str(MWIP_CTL), "push", "--wheel", "5", "--duration", "60"],
@@ -269,6 +273,7 @@ def test_ctrl_c_ends_a_push_with_a_zero_wrench_and_exits_130_quietly(graph):
     assert graph.plant.output().count("external wrench cleared") > cleared
 
 
+@pytest.mark.alone
 @pytest.mark.graph
 def test_the_estop_sequence_on_the_drive_graph_the_robot_falls_then_reset_picks_it_up(tmp_path):
     """docs/real-robot.md's sequence on the drive graph (config/drive.yaml: MuJoCo, motion from cmd_vel,

@@ -211,6 +211,7 @@ def test_a_lockstep_bag_gives_the_offline_csvs_result_to_the_bit(tmp_path):
         assert a.values[k] == pytest.approx(truth, rel=0.01), k
 
 
+@pytest.mark.alone
 @pytest.mark.graph
 def test_a_realtime_bag_identifies_the_robot(tmp_path, capsys):
     """The realtime graph with raw sensors and the recorder (wall-clock stamps, jitter, late periods), 10 s of the

@@ -86,6 +86,7 @@ def test_every_process_that_makes_a_participant_applies_it_before_rclpy_init():
     assert {"mwip_ros/cli/ctl.py", "mwip_ros/nodes/runtime/process.py"} <= set(inits), inits
 
 
+@pytest.mark.alone
 @pytest.mark.graph
 def test_a_newcomer_finds_a_running_node_within_a_second(tmp_path):
     """The lost first answer, measured as scripts/bench_discovery.py measures it: a node running for 1.5 s, then
@@ -102,6 +103,7 @@ def test_a_newcomer_finds_a_running_node_within_a_second(tmp_path):
     assert row.count("over 1 s: 0/6") == 2, row
 
 
+@pytest.mark.alone
 @pytest.mark.graph
 def test_mwip_ctl_param_get_answers_a_running_graph_at_once(tmp_path):
     """mwip_ctl, a newcomer to a running node: each of three calls is answered well within a second of its

@@ -82,6 +82,7 @@ def test_a_silent_state_estimator_is_named():
     assert "disturbance_observer (it did not answer" not in failure and "controller is running" not in failure
 
 
+@pytest.mark.alone
 @pytest.mark.graph
 def test_a_paused_controller_is_named(tmp_path):
     with Graph(tmp_path) as g:

@@ -60,6 +60,7 @@ def _flooded_run(tmp_path, rate, flood_s, run_s=RUN_S, upright=True):
     return sent, rejected, estimated, e_out + out, run, rms, unflooded
 
 
+@pytest.mark.alone
 def test_a_flood_of_rejected_raw_messages_leaves_the_realtime_robot_balancing(tmp_path):
     sent, rejected, estimated, e_out, run, rms, unflooded = _flooded_run(tmp_path, RATE, FLOOD_S)
     assert sent > 0.5 * 2 * RATE * FLOOD_S
@@ -76,6 +77,7 @@ def test_a_flood_of_rejected_raw_messages_leaves_the_realtime_robot_balancing(tm
     assert rms < 5.0 * unflooded, (rms, unflooded)
 
 
+@pytest.mark.alone
 def test_a_flood_faster_than_the_parser_rejects_is_dropped_by_the_content_filter(tmp_path):
     """16,000 messages a second (both topics), twice what the estimator's parser rejects a second on this machine
     (BENCHMARKS.md: about 7,900): without the content filter the queue overflows and genuine samples are lost."""

@@ -382,6 +382,7 @@ def realtime(tmp_path_factory):
     return out
 
 
+@pytest.mark.alone
 @pytest.mark.graph
 def test_realtime_graph_with_raw_sensors_balances(realtime):
     code, out = realtime["raw"]
@@ -395,6 +396,7 @@ def test_realtime_graph_with_raw_sensors_balances(realtime):
     assert e_code == 0, e_out
 
 
+@pytest.mark.alone
 @pytest.mark.graph
 def test_realtime_graph_balances(realtime):
     """... with messages stamped by the node clock (wall time here), which the estimates join by."""
@@ -413,6 +415,7 @@ def test_realtime_graph_balances(realtime):
     assert all(isinstance(rt[k], int) and rt[k] >= 0 for k in ("stale_command_substitutions", "missed_deadlines")), rt
 
 
+@pytest.mark.alone
 @pytest.mark.graph
 def test_nodes_exit_promptly_on_signals(realtime):
     """SIGINT and SIGTERM (run_node's one handler for both): the observer, the controller and a plant without an
@@ -424,6 +427,7 @@ def test_nodes_exit_promptly_on_signals(realtime):
         assert "shutting down" in p.output(), p.output()
 
 
+@pytest.mark.alone
 @pytest.mark.graph
 @pytest.mark.parametrize("sig,code", [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
 def test_plant_stopped_before_its_duration_says_so_in_its_exit_code(realtime, sig, code):
@@ -435,6 +439,7 @@ def test_plant_stopped_before_its_duration_says_so_in_its_exit_code(realtime, si
     assert len(read_csv(work / f"cut{int(sig)}.csv")) == summary["periods"]  # what ran is still written
 
 
+@pytest.mark.alone
 @pytest.mark.graph
 def test_realtime_without_controller_substitutes_zero_torque_and_reports_jitter(realtime):
     """A realtime plant alone (its own process: the period's jitter is its process's): no controller after
@@ -582,6 +587,7 @@ def test_gains_change_at_runtime_and_bad_updates_are_refused():
 
 
 # ---------------------------------------------------------------------------------------- one process each
+@pytest.mark.alone
 @pytest.mark.graph
 def test_realtime_priority_puts_every_thread_under_sched_fifo(tmp_path):
     with Graph(tmp_path) as g:
@@ -618,6 +624,7 @@ sys.exit(_runtime.run_node(Hangs))
 '''
 
 
+@pytest.mark.alone
 @pytest.mark.graph
 def test_a_hang_in_middleware_clean_up_ends_the_process(tmp_path):
     """After on_shutdown, a node stuck in the middleware's clean-up is ended by the watchdog (exit 1)."""

@@ -22,6 +22,7 @@ FLOODER = Path(__file__).resolve().parents[1] / "side_flooder.py"
 FLOOD_S, RUN_S = 3.0, 5.0
 
 
+@pytest.mark.alone
 def test_a_flood_on_every_side_input_leaves_the_realtime_loop_its_period(tmp_path):
     cfg = tmp_path / "drive.yaml"
     cfg.write_text("dscndo_controller:\n  ros__parameters:\n    motion: {enabled: true, cmd_vel_timeout_s: 0.5}\n")

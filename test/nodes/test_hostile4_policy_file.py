@@ -19,6 +19,7 @@ MWIP_CTL = Path(sys.executable).with_name("mwip_ctl")
 RUN_S = 8.0
 
 
+@pytest.mark.alone
 def test_policy_file_set_at_run_time_to_a_fifo_or_a_device_is_refused_and_the_loop_goes_on(tmp_path):
     policy = tmp_path / "p.json"
     policy.write_text(json.dumps({"policy": "linear", "features": ["theta_b", "dtheta_b", "dtheta_w"],

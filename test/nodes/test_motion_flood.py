@@ -53,6 +53,7 @@ def _run(tmp_path, rate):
     return sent, rejected, missed, stale, answered
 
 
+@pytest.mark.alone
 def test_a_cmd_vel_flood_leaves_the_controller_answering_every_period(tmp_path):
     quiet = _run(tmp_path / "quiet", 0)
     sent, rejected, missed, stale, answered = _run(tmp_path / "flood", RATE)

@@ -62,6 +62,7 @@ def changed_bag(tmp_path_factory):
     return out
 
 
+@pytest.mark.alone
 def test_the_bag_has_the_robot_and_the_gain_change(changed_bag):
     from bagcheck import decoded_messages, distinct_stamps
     from mwip_ros.bag import topic_counts
@@ -78,6 +79,7 @@ def test_the_bag_has_the_robot_and_the_gain_change(changed_bag):
     assert stamp % 5_000_000 == 0 and CHANGE_AFTER_NS <= stamp < DURATION_S * 10 ** 9, stamp
 
 
+@pytest.mark.alone
 @pytest.mark.parametrize("apply, code, result", [(True, 0, "RESULT: REPRODUCED"), (False, 4, "RESULT: DIFFERENT")])
 def test_resim_applies_the_recorded_change_at_the_same_state(tmp_path, changed_bag, apply, code, result):
     with Graph(tmp_path) as g:

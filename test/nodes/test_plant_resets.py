@@ -129,6 +129,7 @@ def test_resets_back_to_back_and_in_bursts_in_lockstep_keep_the_run_going_and_ba
 N_REALTIME_CALLS = 1000
 
 
+@pytest.mark.alone
 @pytest.mark.graph
 def test_a_thousand_concurrent_resets_in_realtime_are_all_answered_and_the_loop_balances(tmp_path):
     csv_path, summary = tmp_path / "plant.csv", tmp_path / "summary.json"

@@ -433,6 +433,7 @@ def _wait_record(inj, ds, plant, timeout=30.0, after=0, **match):
     return found
 
 
+@pytest.mark.alone
 @pytest.mark.graph
 def test_the_realtime_watchdog_faults_within_watchdog_s_and_one_period_of_the_last_command(tmp_path):
     """The controller SIGSTOPped: the plant's watchdog faults; the reaction, from the plant's receipt of the last

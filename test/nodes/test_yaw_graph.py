@@ -175,6 +175,7 @@ def test_bad_wheel_torques_are_rejected_and_counted():
     assert state == "fault", state
 
 
+@pytest.mark.alone
 @pytest.mark.graph
 def test_realtime_cmd_vel_angular_z_turns_the_3d_robot(tmp_path):
     """Realtime on the MuJoCo plant: a Twist with angular.z = 0.5 rad/s for 3 s, published by this test's process,

@@ -85,6 +85,7 @@ def _imu_messages(g: Graph, seconds: float):
         rclpy.try_shutdown(context=ctx)
 
 
+@pytest.mark.alone
 def test_the_imu_at_its_rate_torque_that_moves_the_wheels_a_stop_and_a_controller_unplugged(tmp_path):
     with Graph(tmp_path) as g:
         emu, path = _emulator(g, tmp_path)
@@ -142,6 +143,7 @@ for k in range(100000):
 """
 
 
+@pytest.mark.alone
 def test_the_controllers_stop_by_their_watchdog_when_the_driver_is_killed(tmp_path):
     """SIGKILL of the driving process: no stop command, only silence; both controllers enter their timeout mode
     within watchdog_timeout of the kill and stop driving (--timeout-mode 0: no torque)."""
@@ -180,6 +182,7 @@ def test_the_controllers_stop_by_their_watchdog_when_the_driver_is_killed(tmp_pa
             assert watchdog <= after_s <= watchdog + 0.005, line
 
 
+@pytest.mark.alone
 def test_an_over_temperature_is_a_fault_naming_the_wheel_and_no_torque_follows(tmp_path):
     with Graph(tmp_path) as g:
         emu, path = _emulator(g, tmp_path, "--overheat", "left", "--overheat-at", "0")

@@ -93,6 +93,7 @@ def _graph(g: Graph, tmp_path: Path, *emulator: str, driver=()):
     return emu, drv, summary
 
 
+@pytest.mark.alone
 def test_the_torque_reaches_the_controllers_and_a_killed_driver_leaves_them_to_their_watchdog(tmp_path):
     with Graph(tmp_path) as g:
         probe = Probe(g, ("wheel_states", "wheel_encoder"))
@@ -122,6 +123,7 @@ def test_the_torque_reaches_the_controllers_and_a_killed_driver_leaves_them_to_t
     (("--overheat", "left", "--overheat-at", "0.0"), "moteus left wheel (CAN id 1): fault 38 (over temperature)",
      (0, 1)),
 ])
+@pytest.mark.alone
 def test_a_controller_that_stops_answering_or_faults_is_named_and_no_torque_follows(tmp_path, fault, named,
                                                                                     answering):
     """The injection is armed from the start; the robot is held until the first command, so the fault meets a
@@ -145,6 +147,7 @@ def test_a_controller_that_stops_answering_or_faults_is_named_and_no_torque_foll
         assert emu.stop() == 0
 
 
+@pytest.mark.alone
 def test_an_estop_stops_the_device(tmp_path):
     with Graph(tmp_path) as g:
         probe = Probe(g, ("wheel_states", "wheel_encoder", "driver_state"))
