@@ -35,7 +35,7 @@ else
 fi
 
 # Without -m, -n or test paths of the caller's: three runs, so that every core works and nothing timed shares it.
-# First the tiers that run in this process (unit, node, slow, montecarlo: test/conftest.py) on every core
+# First the tiers that start no ROS process (unit, cli, node, slow, montecarlo: test/conftest.py) on every core
 # (pytest-xdist), then the graph and e2e tests on every core, then those marked alone (they keep real-time
 # deadlines, time the graph or hand a domain to a script) and the bench one test at a time. With -m, -n or paths of yours: one pytest run.
 split=1
@@ -63,7 +63,7 @@ if [ "$split" -eq 0 ]; then
 fi
 start=$SECONDS
 rc=0
-run_pytest "${targets[@]}" -m "unit or node or slow or montecarlo" -n auto --dist worksteal "$@" || rc=$?
+run_pytest "${targets[@]}" -m "unit or cli or node or slow or montecarlo" -n auto --dist worksteal "$@" || rc=$?
 in_process=$((SECONDS - start))
 # lockstep graphs and whole jobs wait on their processes' answers, not on a clock: two at a time (each graph on a
 # domain of its own; --dist loadfile keeps a module's tests, and the graph they share, on one worker)

@@ -5,9 +5,11 @@ Every test is in exactly one tier (pytest.ini registers the markers; a module sa
 ``pytestmark = pytest.mark.<tier>`` after its imports; a test's own tier mark replaces its module's, so a module of
 unit tests may hold one slow test marked ``@pytest.mark.slow``):
 
-- ``unit``: no ROS middleware and no project script. In this process (no ``rclpy.init``, no ``Graph``), or a
-  short-lived child process that starts no ROS node (a project CLI, ``python -c`` that imports the package,
-  ``colcon list``). At most 5 s each (``--durations``; a run lists the unit and node tests that took longer).
+- ``unit``: in this process, with no ROS middleware (no ``rclpy.init``, no ``Graph``) and no child process. At
+  most 5 s each (a run lists the unit, cli and node tests that took longer, and the unit tests that started a
+  process).
+- ``cli``: a child process that starts no ROS node: a project command run whole as a user types it (its exit code,
+  its one line on stderr, its files), ``python -c`` with a package hidden, ``colcon list``. At most 5 s each.
 - ``node``: a node built in the test's own process by test/nodeharness.py (rclpy with discovery off: no other
   process, no DDS traffic), fed messages, service calls and parameter requests directly. At most 5 s each.
 - ``slow``: like ``unit``, but longer than 5 s: a kernel compiled into an empty cache, a documentation table
@@ -24,12 +26,13 @@ unit tests may hold one slow test marked ``@pytest.mark.slow``):
 ``alone`` is not a tier but a mark on a graph or e2e test that keeps real-time deadlines or times the graph (a
 realtime loop, a watchdog, discovery's second) or hands a domain to a script: such a test runs alone.
 
-``scripts/test.sh`` runs every tier (CI): the in-process tiers (unit, node, slow, montecarlo) on every core
-(pytest-xdist), then the graph and e2e tests not marked alone on every core (a module's tests on one worker:
+``scripts/test.sh`` runs every tier (CI): the tiers without ROS processes (unit, cli, node, slow, montecarlo) on
+every core (pytest-xdist), then the graph and e2e tests not marked alone on every core (a module's tests on one worker:
 its graph is shared), then the ones marked alone and the bench one test at a time.
 ``scripts/test.sh -m unit`` is the fast loop. A test with no tier or more than one fails collection.
 """
 import os
+import subprocess
 import sys
 
 import pytest
@@ -40,9 +43,9 @@ from mwip_ros.optional import headless_gl  # noqa: E402
 
 headless_gl()   # before a test module imports mujoco itself: MuJoCo picks its GL platform then (mwip_sim --render)
 
-TIERS = ("unit", "node", "slow", "montecarlo", "graph", "e2e", "bench")
-IN_PROCESS = ("unit", "node", "slow", "montecarlo")   # scripts/test.sh runs these on every core (pytest-xdist)
-FAST = ("unit", "node")                               # at most 5 s a test here
+TIERS = ("unit", "cli", "node", "slow", "montecarlo", "graph", "e2e", "bench")
+IN_PROCESS = ("unit", "cli", "node", "slow", "montecarlo")   # scripts/test.sh runs these on every core (xdist)
+FAST = ("unit", "cli", "node")                        # at most 5 s a test here
 FAST_LIMIT_S = 5.0
 
 
@@ -68,6 +71,26 @@ def _lift_overridden_module_tiers(items) -> None:
             if item not in overriding:
                 for m in marks:
                     item.add_marker(m.name)
+
+
+_SPAWNED = [0]   # child processes this test process started (subprocess.Popen), for the unit tier's promise
+_popen_init = subprocess.Popen.__init__
+
+
+def _counted_popen_init(self, *args, **kwargs):
+    _SPAWNED[0] += 1
+    return _popen_init(self, *args, **kwargs)
+
+
+subprocess.Popen.__init__ = _counted_popen_init
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_call(item):
+    before = _SPAWNED[0]
+    yield
+    if _SPAWNED[0] > before:   # in the report (a worker's too): the summary names a unit test that started one
+        item.user_properties.append(("spawned", _SPAWNED[0] - before))
 
 
 @pytest.hookimpl(tryfirst=True)   # before -m deselects: a test outside the tier asked for is checked too
@@ -98,7 +121,15 @@ def pytest_terminal_summary(terminalreporter, exitstatus, config):
                     dict(getattr(r, "user_properties", ())).get("tier") in FAST:
                 slow.append((r.duration, r.nodeid))
     if slow:
-        terminalreporter.write_line(f"tier: {len(slow)} unit/node test(s) over {FAST_LIMIT_S:g} s (move them to "
+        terminalreporter.write_line(f"tier: {len(slow)} unit/cli/node test(s) over {FAST_LIMIT_S:g} s (move them to "
                                     "slow, or make them faster):", yellow=True)
         for d, nodeid in sorted(slow, reverse=True):
             terminalreporter.write_line(f"  {d:6.1f} s  {nodeid}", yellow=True)
+    spawning = sorted({r.nodeid for reports in terminalreporter.stats.values() for r in reports
+                       if getattr(r, "when", None) == "call" and dict(getattr(r, "user_properties", ())).get("tier")
+                       == "unit" and dict(getattr(r, "user_properties", ())).get("spawned")})
+    if spawning:
+        terminalreporter.write_line(f"tier: {len(spawning)} unit test(s) started a child process (mark them cli):",
+                                    yellow=True)
+        for nodeid in spawning:
+            terminalreporter.write_line(f"  {nodeid}", yellow=True)

@@ -52,6 +52,7 @@ def nav_pages(nav):
             yield from (nav_pages(value) if isinstance(value, list) else [value])
 
 
+@pytest.mark.cli
 def test_the_site_builds_with_warnings_as_errors(site):
     pages = sorted(p.stem for p in DOCS.glob("*.md"))
     assert sorted(p.stem for p in site.glob("*.html") if p.stem not in ("404", "search")) == pages
@@ -65,6 +66,7 @@ def test_every_page_is_in_the_navigation_and_broken_anchors_are_errors():
     assert links["not_found"] == links["anchors"] == "warn", links   # warnings, so --strict fails on them
 
 
+@pytest.mark.cli
 def test_a_broken_link_fails_the_build(tmp_path):
     """Not vacuous: a missing page, a missing anchor and a missing image each fail the strict build."""
     shutil.copytree(DOCS, tmp_path / "docs")
@@ -98,12 +100,14 @@ def broken_links(text: str, base: Path, site: Path):
     return bad
 
 
+@pytest.mark.cli
 def test_every_readme_link_reaches_a_file_and_a_heading(site):
     text = README.read_text()
     assert LINK.findall(text)
     assert broken_links(text, REPO, site) == []
 
 
+@pytest.mark.cli
 def test_a_broken_readme_link_is_caught(site):
     bad = broken_links("[x](docs/laws.md#over-the-sweeps) [y](docs/laws.md#no-such) [z](docs/none.md) "
                        "[w](config/none.yaml) [v](https://example.com/x)", REPO, site)
@@ -121,6 +125,7 @@ def test_the_readme_is_the_door_the_two_commands_and_every_page():
     assert len(text.splitlines()) <= 60
 
 
+@pytest.mark.cli
 def test_the_site_loads_nothing_from_the_network(site):
     remote = re.compile(r"""<(?:link|script|img)\b[^>]*\b(?:href|src)=["'](?:https?:)?//|@import\s+url\(["']?"""
                         r"""(?:https?:)?//|url\(["']?(?:https?:)?//""", re.I)

@@ -118,6 +118,7 @@ def _mwip_sim(tmp_path, *args, timeout=60):
                           text=True, timeout=timeout, env=env, cwd=tmp_path)
 
 
+@pytest.mark.cli
 @pytest.mark.parametrize("target", ["fifo", "/dev/zero"])
 def test_mwip_sim_refuses_a_policy_file_that_is_not_a_regular_file_at_once(tmp_path, fifo, target):
     path = fifo if target == "fifo" else target
@@ -131,6 +132,7 @@ def test_mwip_sim_refuses_a_policy_file_that_is_not_a_regular_file_at_once(tmp_p
     assert time.monotonic() - t0 < 25
 
 
+@pytest.mark.cli
 def test_a_parameter_file_that_is_a_fifo_is_refused_in_one_line(tmp_path, fifo):
     r = subprocess.run([sys.executable, "-m", "mwip_ros.cli.sim", "--params", str(fifo), "--duration", "0.1", "-q"],
                        capture_output=True, text=True, timeout=30, cwd=tmp_path)
@@ -144,6 +146,7 @@ def test_a_csv_that_is_a_fifo_is_refused(fifo):
         _within(2.0, lambda: read_csv(fifo))
 
 
+@pytest.mark.cli
 @pytest.mark.parametrize("cli", ["bag_repair", "report"])
 def test_a_bag_with_a_fifo_for_a_file_is_refused_in_one_line(tmp_path, cli):
     bag = tmp_path / "bag"

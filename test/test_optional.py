@@ -27,7 +27,7 @@ def one_line_naming(text: str, pip: str, key: str) -> None:
     assert f"pip install '{pip}'" in lines[0] and key in lines[0], text
 
 
-@pytest.mark.unit
+@pytest.mark.cli
 def test_mwip_sim_runs_dsc_and_dscndo_without_daqp(tmp_path):
     r = run(tmp_path, ["daqp"], "-m", "mwip_ros.cli.sim", "--compare", "dsc", "dscndo", "--duration", "1",
             "--window", "0.5", "1", "-q")
@@ -35,7 +35,7 @@ def test_mwip_sim_runs_dsc_and_dscndo_without_daqp(tmp_path):
     assert "dsc: stayed upright" in r.stdout and "dscndo: stayed upright" in r.stdout, r.stdout
 
 
-@pytest.mark.unit
+@pytest.mark.cli
 @pytest.mark.parametrize("args", [["--controller", "mpc"], ["--compare", "dsc", "mpc_ndo"]])
 def test_mwip_sim_refuses_mpc_without_daqp_in_one_line_exit_2(tmp_path, args):
     r = run(tmp_path, ["daqp"], "-m", "mwip_ros.cli.sim", *args, "--duration", "1", "-q")
@@ -44,7 +44,7 @@ def test_mwip_sim_refuses_mpc_without_daqp_in_one_line_exit_2(tmp_path, args):
     assert "mwip_sim: error: the law mpc" in r.stderr and r.stdout == "", r.stdout
 
 
-@pytest.mark.unit
+@pytest.mark.cli
 def test_the_controllers_laws_are_built_without_daqp_but_mpc(tmp_path):
     """What dscndo_controller builds at start-up (core.laws.instances): every family but mpc, whose refusal
     names daqp."""
@@ -65,7 +65,7 @@ def test_the_controllers_laws_are_built_without_daqp_but_mpc(tmp_path):
     assert float(u) != 0.0
 
 
-@pytest.mark.unit
+@pytest.mark.cli
 def test_mwip_sweep_runs_without_numba_and_says_so(tmp_path):
     from mwip_ros.params.paths import default_params_file
     spec = tmp_path / "s.yaml"
@@ -81,10 +81,10 @@ def test_mwip_sweep_runs_without_numba_and_says_so(tmp_path):
     assert len(rows) == 1 + 6, rows
 
 
-@pytest.mark.unit
 @pytest.mark.parametrize("hidden, args, pip, key", [
     ("daqp", [], "daqp", "python3-daqp-pip"),
     ("dask", ["--dask", "local:1"], "dask[distributed]", "python3-dask-pip")])
+@pytest.mark.cli
 def test_mwip_sweep_refuses_a_missing_package_before_any_work(tmp_path, hidden, args, pip, key):
     from mwip_ros.params.paths import default_params_file
     spec = tmp_path / "s.yaml"
@@ -121,7 +121,7 @@ def test_every_optional_package_is_declared_and_every_pip_key_is_defined_for_ros
         assert key in defined and defined[key]["ubuntu"]["pip"]["packages"], key
 
 
-@pytest.mark.unit
+@pytest.mark.cli
 def test_mwip_tune_refuses_mpc_without_daqp_in_one_line(tmp_path):
     r = run(tmp_path, ["daqp"], "-m", "mwip_ros.cli.tune", REPO / "config" / "sweeps" / "tune_dscndo.yaml",
             "--controller", "mpc", "--tune", "mpc.R", "--out", tmp_path / "t.yaml")

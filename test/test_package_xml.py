@@ -28,6 +28,7 @@ def test_catkin_pkg_reads_an_ament_python_package_with_its_dependencies():
     assert {'rclpy', 'sensor_msgs', 'std_msgs', 'geometry_msgs', 'std_srvs'} <= runtime
 
 
+@pytest.mark.cli
 def test_colcon_identifies_the_package_as_ros_ament_python():
     colcon = Path(sys.executable).parent / 'colcon'
     env = {k: v for k, v in os.environ.items() if k != 'COLCON_PREFIX_PATH'}

@@ -201,13 +201,13 @@ def test_a_p_rule_with_an_alias_is_refused():
 
 # --- the tools and the nodes: exit 2, one line, fast, low memory ------------------------------------------
 
-@pytest.mark.unit
+@pytest.mark.cli
 def test_mwip_sim_refuses_a_bomb(tmp_path):
     assert_refused(measured("mwip_ros.cli.sim", ["--params", param_bomb(tmp_path / "bomb.yaml"), "-q"]),
                    "mwip_sim: error:", "bomb.yaml", "YAML aliases")
 
 
-@pytest.mark.unit
+@pytest.mark.cli
 def test_mwip_sweep_refuses_a_spec_bomb_and_a_base_bomb(tmp_path):
     spec = spec_bomb(tmp_path / "spec.yaml", base=PAPER)
     assert spec.stat().st_size < 700

@@ -86,6 +86,7 @@ def test_past_its_stamp_limit_a_ledger_judges_nothing(monkeypatch):
     assert led.overflow and led.gaps() == [] and led.counts["/joint_states"] == 50
 
 
+@pytest.mark.cli
 def test_the_report_shows_the_gaps_of_a_flagged_bag(tmp_path):
     bag = tmp_path / "flagged"
     with BagWriter(bag, custom_data={GAPS_KEY: "/disturbance_estimate: 48 of 50"}) as w:

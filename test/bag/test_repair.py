@@ -215,6 +215,7 @@ def test_repair_cli_exit_codes(tmp_path, capsys):
     assert "saved" in out and "b_0.mcap.broken" in out and "total:" in out
 
 
+@pytest.mark.cli
 def test_repair_cli_as_module(tmp_path):
     bag = tmp_path / "b"
     write_graph_bag(bag, n=6, chunk_size=400)

@@ -18,6 +18,7 @@ def run(*args):
     return subprocess.run([sys.executable, "-m", *args], capture_output=True, text=True, timeout=300)
 
 
+@pytest.mark.cli
 def test_mwip_sim_compare_writes_csv_plot_and_metrics(tmp_path):
     r = run("mwip_ros.cli.sim", "--compare", "--csv", str(tmp_path / "run.csv"), "--plot", str(tmp_path / "f.png"))
     assert r.returncode == 0, r.stderr
@@ -33,6 +34,7 @@ def test_mwip_sim_compare_writes_csv_plot_and_metrics(tmp_path):
     assert "stayed upright" in r.stdout and "Theorem 2" in r.stderr
 
 
+@pytest.mark.cli
 def test_mwip_sim_bad_param_file_names_the_key(tmp_path):
     bad = default_params_file().read_text().replace("tau4: 0.1", "tau4: -0.1")
     f = tmp_path / "bad.yaml"
@@ -42,6 +44,7 @@ def test_mwip_sim_bad_param_file_names_the_key(tmp_path):
     assert "dscndo_controller.tau4" in r.stderr and "> 0" in r.stderr
 
 
+@pytest.mark.cli
 def test_mwip_sim_reports_a_fall(tmp_path):
     text = default_params_file().read_text().replace("k1: 6.0", "k1: 0.05").replace("k2: 6.0", "k2: 0.05")
     f = tmp_path / "weak.yaml"
@@ -51,6 +54,7 @@ def test_mwip_sim_reports_a_fall(tmp_path):
     assert "VIOLATED" in r.stderr
 
 
+@pytest.mark.cli
 def test_mwip_theorem_table():
     r = run("mwip_ros.cli.theorem")
     assert r.returncode == 0
@@ -59,12 +63,14 @@ def test_mwip_theorem_table():
     assert "hold" in r.stdout
 
 
+@pytest.mark.cli
 def test_help_texts():
     for mod in ("mwip_ros.cli.sim", "mwip_ros.cli.theorem"):
         r = run(mod, "--help")
         assert r.returncode == 0 and "usage" in r.stdout
 
 
+@pytest.mark.cli
 def test_mwip_sim_compares_the_four_laws_and_prints_the_lqr_gain(tmp_path):
     r = run("mwip_ros.cli.sim", "--compare", "dsc", "dscndo", "lqr", "lqr_ndo", "--duration", "6", "--window", "3", "6",
             "--csv", str(tmp_path / "r.csv"))
@@ -88,6 +94,7 @@ def _one_error_line(r, *words):
         assert w in r.stderr, (w, r.stderr)
 
 
+@pytest.mark.cli
 @pytest.mark.parametrize("mod, prog", [("mwip_ros.cli.sim", "mwip_sim"), ("mwip_ros.cli.theorem", "mwip_theorem")])
 def test_a_missing_or_directory_params_file_names_the_option_the_user_typed(tmp_path, mod, prog):
     r = run(mod, "--params", str(tmp_path / "missing.yaml"))
@@ -97,6 +104,7 @@ def test_a_missing_or_directory_params_file_names_the_option_the_user_typed(tmp_
     _one_error_line(r, "'--params'", "is a directory")
 
 
+@pytest.mark.cli
 @pytest.mark.parametrize("value", ["nan", "inf", "-inf", "1e9", "0", "-1"])
 def test_mwip_sim_refuses_a_duration_outside_the_parameter_files_range(tmp_path, value):
     r = subprocess.run([sys.executable, "-m", "mwip_ros.cli.sim", f"--duration={value}", "-q", "--csv",
@@ -105,6 +113,7 @@ def test_mwip_sim_refuses_a_duration_outside_the_parameter_files_range(tmp_path,
     assert not (tmp_path / "r.csv").exists()
 
 
+@pytest.mark.cli
 def test_mwip_sim_checks_its_outputs_before_simulating_and_overwrites_only_with_force(tmp_path):
     old_csv, old_png = tmp_path / "old.csv", tmp_path / "old.png"
     old_csv.write_text("mine\n")
@@ -130,6 +139,7 @@ def test_mwip_sim_checks_its_outputs_before_simulating_and_overwrites_only_with_
 
 @pytest.mark.parametrize("Q, words", [("[-1.0, 10.0, 1.0]", ">= 0"), ("[0.0, 0.0, 0.0]", NO_DESIGN),
                                       ("[1.0e300, 10.0, 1.0]", "<= 1e+12")])
+@pytest.mark.cli
 def test_a_bad_mpc_state_weight_is_one_line_naming_the_key_and_exit_2_whatever_the_law(tmp_path, Q, words):
     """mpc.Q is checked at start-up by every registered law's design (as lqr.Q is), not when MPC first steps:
     old code ended in exit 1 with an LqrDesignError traceback (--controller mpc) or ran on (--controller dsc)."""
@@ -149,6 +159,7 @@ def test_a_bad_mpc_state_weight_is_one_line_naming_the_key_and_exit_2_whatever_t
     ("dscndo_controller", "mpc", "{u_max: 20.0}", "dscndo", False),   # not the law that runs: its limit says nothing
     ("dscndo_controller", "mpc", "{u_max: 120.0}", "mpc", False),
     ("plant_sim", "torque_limit", "20.0", "dscndo", True)])
+@pytest.mark.cli
 def test_a_torque_limit_too_weak_for_the_initial_tilt_is_warned_of_as_the_motor_is(tmp_path, section, key, value, law,
                                                                                    warned):
     """mpc.u_max and torque_limit below the torque that holds the body at the initial tilt: the run falls, and

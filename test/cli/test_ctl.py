@@ -170,7 +170,7 @@ def test_nothing_answering_exits_1_within_the_timeout_naming_the_node_and_the_do
     assert 0.3 <= took < 5, took
 
 
-@pytest.mark.unit
+@pytest.mark.cli
 def test_help_of_every_subcommand_exits_0_without_ros_and_usage_errors_exit_2_in_one_line(capsys):
     script = ("import sys, contextlib, io\n"
               "from mwip_ros.cli.ctl import main\n"

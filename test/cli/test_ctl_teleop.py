@@ -53,7 +53,7 @@ def test_limits_from_a_file_else_defaults(tmp_path):
         limits([f])
 
 
-@pytest.mark.unit
+@pytest.mark.cli
 def test_drive_refuses_without_a_terminal():
     r = subprocess.run([str(MWIP_CTL), "drive"], stdin=subprocess.DEVNULL, capture_output=True, text=True,
                        timeout=60)

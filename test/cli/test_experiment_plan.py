@@ -43,6 +43,7 @@ def test_an_unknown_or_empty_law_is_one_line_naming_the_known_ones(spec):
     assert "mpc" in str(e.value) and "\n" not in str(e.value)
 
 
+@pytest.mark.cli
 def test_a_plug_in_law_from_MWIP_ROS_LAWS_is_accepted():
     env = dict(os.environ, MWIP_ROS_LAWS="trivial_law",
                PYTHONPATH=os.pathsep.join([str(REPO / "test"), os.environ.get("PYTHONPATH", "")]))

@@ -29,6 +29,7 @@ def _csv(path: Path, rows: int = 400, **override) -> Path:
     return path
 
 
+@pytest.mark.cli
 def test_a_value_no_robot_reads_is_refused_naming_its_column(tmp_path):
     log = _csv(tmp_path / "log.csv", dtheta_b=(99, 1e300))
     r = subprocess.run([sys.executable, "-m", "mwip_ros.cli.identify", str(log), "--params", str(CONFIG / "paper.yaml"),

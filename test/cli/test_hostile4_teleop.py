@@ -112,6 +112,7 @@ def test_a_limit_the_controller_refuses_is_refused(tmp_path):
     assert limits([f]).max_speed == 0.4
 
 
+@pytest.mark.cli
 @pytest.mark.parametrize("command", [["drive"], ["cmd", "--vx", "0.1"], ["push", "--wheel", "1"]])
 def test_a_rate_that_would_flood_the_robot_is_a_usage_error(command):
     import subprocess

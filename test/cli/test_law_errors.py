@@ -47,6 +47,7 @@ def _one_line(r):
                             "No module named 'no_such_law_module'")),
     ("trivial_law:broken_plugin", ("the law module 'broken_plugin' raised while importing",
                                    "RuntimeError: broken_plugin's own import error"))])
+@pytest.mark.cli
 def test_a_plugin_that_fails_to_import_stops_every_tool_in_one_line(tmp_path, plugins, words):
     spec = _spec(tmp_path / "s.yaml", ["dscndo"])
     for prog, args in (("mwip_sim", ("mwip_ros.cli.sim", "--duration", "0.1", "-q")),
@@ -64,12 +65,14 @@ def test_a_plugin_that_fails_to_import_stops_every_tool_in_one_line(tmp_path, pl
     assert not (tmp_path / "out").exists() and not (tmp_path / "t.yaml").exists()
 
 
+@pytest.mark.cli
 def test_a_law_that_raises_in_mwip_sim_is_one_line_naming_it():
     line = _one_line(_run("bad_laws", "mwip_ros.cli.sim", "--controller", "raising", "--duration", "1", "-q"))
     assert line.strip() == (f"mwip_sim: error: the law 'raising' raised at t = {T_BAD:.3f} s: "
                             "RuntimeError: raising law's own error")
 
 
+@pytest.mark.cli
 def test_a_law_that_raises_inside_a_sweep_is_named_with_its_scenario_not_as_numpys_error(tmp_path):
     spec = _spec(tmp_path / "s.yaml", ["raising"])
     r = _run("bad_laws", "mwip_ros.cli.sweep", spec, "--out", tmp_path / "out", "--workers", "1", "--no-figures")
@@ -79,6 +82,7 @@ def test_a_law_that_raises_inside_a_sweep_is_named_with_its_scenario_not_as_nump
             "RuntimeError: raising law's own error") in r.stderr
 
 
+@pytest.mark.cli
 def test_a_sweep_never_scores_a_law_commanding_nan_or_1e300_upright(tmp_path):
     spec = _spec(tmp_path / "s.yaml", ["nan_cmd", "huge_cmd"])
     r = _run("bad_laws", "mwip_ros.cli.sweep", spec, "--out", tmp_path / "out", "--workers", "1", "--no-figures")

@@ -44,6 +44,7 @@ def _spec(tmp_path):
     return f
 
 
+@pytest.mark.cli
 def test_mwip_sweep_and_mwip_tune_run_a_motion_spec(tmp_path):
     out = tmp_path / "sweep"
     r = subprocess.run([sys.executable, "-m", "mwip_ros.cli.sweep", str(_spec(tmp_path)), "--out", str(out)],

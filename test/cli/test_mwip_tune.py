@@ -25,6 +25,7 @@ def tune(*args, timeout=600):
                           timeout=timeout)
 
 
+@pytest.mark.cli
 def test_tuning_writes_an_overlay_and_judges_it_on_the_held_out_set(tmp_path):
     spec, out = write_spec(tmp_path / "s.yaml"), tmp_path / "tuned.yaml"
     r = tune(spec, "--controller", "dscndo", "--tune", "k1", "tau4", "--out", out, "--maxiter", "3", "--popsize", "4",
@@ -66,6 +67,7 @@ def test_tuning_writes_an_overlay_and_judges_it_on_the_held_out_set(tmp_path):
     (["--tune", "k1", "--seed", "-1"], "--seed must be >= 0, got -1"),
     (["--tune", "k1", "--holdout-seed", "-1"], "--holdout-seed must be >= 0"),
 ])
+@pytest.mark.cli
 def test_bad_input_exits_2_before_any_work(tmp_path, args, words):
     r = tune(write_spec(tmp_path / "s.yaml"), "--controller", "dscndo", "--out", tmp_path / "t.yaml", *args)
     assert r.returncode == 2 and words in r.stderr and "Traceback" not in r.stderr, r.stderr
@@ -79,6 +81,7 @@ def test_bad_input_exits_2_before_any_work(tmp_path, args, words):
     ("no_dir/t.yaml", "does not exist"),
     ("old.yaml", "exists; choose another name or add --force"),
 ])
+@pytest.mark.cli
 def test_an_output_it_cannot_or_must_not_write_exits_2_before_the_search(tmp_path, out, words):
     (tmp_path / "spec_file").write_text("a file\n")
     (tmp_path / "old.yaml").write_text("# mine\n")
@@ -89,6 +92,7 @@ def test_an_output_it_cannot_or_must_not_write_exits_2_before_the_search(tmp_pat
     assert (tmp_path / "old.yaml").read_text() == "# mine\n"
 
 
+@pytest.mark.cli
 def test_force_overwrites_an_existing_output(tmp_path):
     out = tmp_path / "old.yaml"
     out.write_text("# mine\n")
@@ -98,6 +102,7 @@ def test_force_overwrites_an_existing_output(tmp_path):
     assert set(yaml.safe_load(out.read_text())["dscndo_controller"]["ros__parameters"]) == {"k1"}
 
 
+@pytest.mark.cli
 def test_ctrl_c_keeps_the_best_so_far(tmp_path):
     out = tmp_path / "t.yaml"
     p = subprocess.Popen([sys.executable, "-m", "mwip_ros.cli.tune", str(write_spec(tmp_path / "s.yaml", samples=8)),

@@ -89,6 +89,7 @@ def test_an_unwritable_directory_is_refused(tmp_path):
     ("FILE", "is a file, not a directory"),
     ("/proc/x", "--out /proc/x: cannot create it in /proc"),
 ])
+@pytest.mark.cli
 def test_mwip_sweep_out_where_no_directory_can_be_is_one_line(tmp_path, out, words):
     spec = write_spec(tmp_path / "s.yaml", samples=1, vary={})
     (tmp_path / "FILE").write_text("a file\n")
@@ -145,6 +146,7 @@ M_B = "plant_sim.actual.m_b"
      "has no column 'plant_sim.actual.l'"),
     ("long_duration", dict(info=lambda d: d.update(duration_s=1e308)), "plant_sim.duration_s"),
 ])
+@pytest.mark.cli
 def test_write_params_on_an_edited_results_directory_is_one_line(finished, tmp_path, name, edit, words):
     d = _edit(finished, tmp_path / name, **edit)
     f = tmp_path / "s0.yaml"
@@ -153,6 +155,7 @@ def test_write_params_on_an_edited_results_directory_is_one_line(finished, tmp_p
     assert not f.exists() and not [p for p in tmp_path.iterdir() if p.name.endswith(".tmp")]
 
 
+@pytest.mark.cli
 def test_write_params_never_removes_or_writes_dev_null(finished):
     r = sweep("--results", finished, "--scenario", 0, "--write-params", "/dev/null", "--force")
     one_line(r, "--write-params /dev/null is a device, not a regular file")

@@ -36,6 +36,7 @@ def test_the_pose_summary_is_relative_to_the_start_and_none_without_a_pose_or_fr
     assert report.pose_summary(nan) is None   # never a figure from NaN
 
 
+@pytest.mark.cli
 def test_the_docs_pose_note_is_what_mwip_report_prints_for_a_mujoco_run(tmp_path):
     pytest.importorskip("mujoco")
     text = " ".join((REPO / "docs" / "recording.md").read_text().split())

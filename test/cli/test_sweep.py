@@ -33,7 +33,7 @@ def sweep(*args, timeout=300):
                           text=True, timeout=timeout)
 
 
-@pytest.mark.unit
+@pytest.mark.cli
 def test_a_sweep_writes_rows_summary_and_figures(tmp_path):
     spec = write_spec(tmp_path / "s.yaml")
     r = sweep(spec, "--out", tmp_path / "out", "--workers", "1", "--chunk", "8")
@@ -76,7 +76,6 @@ def test_results_csv_is_the_same_file_however_many_workers_ran_it(tmp_path):
     assert "2 worker processes" in r.stderr
 
 
-@pytest.mark.unit
 @pytest.mark.parametrize("over, words", [
     ({"vary": {"plant_sim.actual.mb": {"scale": [0.7, 1.3]}}}, "did you mean 'actual.m_b'"),
     ({"vary": {"dscndo_controller.actual.m_b": {"grid": [1.0]}}}, "belongs under plant_sim"),
@@ -84,6 +83,7 @@ def test_results_csv_is_the_same_file_however_many_workers_ran_it(tmp_path):
     ({"vary": {"dscndo_controller.k1": {"grid": []}}}, "non-empty list"),
     ({"controlers": ["dsc"]}, "did you mean 'controllers'"),
 ])
+@pytest.mark.cli
 def test_a_bad_spec_exits_2_naming_the_key_before_any_work(tmp_path, over, words):
     spec = write_spec(tmp_path / "s.yaml", **over)
     r = sweep(spec, "--out", tmp_path / "out", "--workers", "1")
@@ -92,7 +92,7 @@ def test_a_bad_spec_exits_2_naming_the_key_before_any_work(tmp_path, over, words
     assert not (tmp_path / "out").exists()
 
 
-@pytest.mark.unit
+@pytest.mark.cli
 def test_an_unreadable_spec_and_existing_results_exit_2(tmp_path):
     bad = tmp_path / "bad.yaml"
     bad.write_text("vary: {a: [1, 2\n")
@@ -104,7 +104,7 @@ def test_an_unreadable_spec_and_existing_results_exit_2(tmp_path):
     assert r.returncode == 2 and "--force" in r.stderr
 
 
-@pytest.mark.unit
+@pytest.mark.cli
 def test_ctrl_c_keeps_every_finished_row_readable(tmp_path):
     spec = write_spec(tmp_path / "s.yaml", samples=400, duration_s=4.0, metrics_window_s=[2.0, 4.0])
     out = tmp_path / "out"
@@ -128,7 +128,7 @@ def test_ctrl_c_keeps_every_finished_row_readable(tmp_path):
     assert 50 <= n < 4000 and n % 50 == 0 and "interrupted" in err and f"{n:,} of 4,000 rows" in err
 
 
-@pytest.mark.unit
+@pytest.mark.cli
 def test_write_params_gives_the_rows_scenario_to_mwip_sim(tmp_path):
     spec = write_spec(tmp_path / "s.yaml", samples=2, duration_s=4.0, metrics_window_s=[2.0, 4.0],
                       vary={"plant_sim.actual.m_b": {"scale": [0.7, 1.3]},

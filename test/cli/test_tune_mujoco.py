@@ -46,6 +46,7 @@ def test_the_objective_on_a_mujoco_base_is_mujocos_scalar_loop(tmp_path):
     assert j != sum(_scalar_j(v, "rk4") for v in per) / 2             # not eq. (1)'s (they differ at 1e-7)
 
 
+@pytest.mark.cli
 def test_mwip_tune_tunes_on_mujoco_and_writes_the_overlay(tmp_path):
     out = tmp_path / "tuned.yaml"
     r = subprocess.run([sys.executable, "-m", "mwip_ros.cli.tune", str(_spec(tmp_path)), "--controller", "dscndo",
@@ -76,6 +77,7 @@ def test_a_backend_axis_is_refused_by_a_caller_that_runs_rk4_only(tmp_path):
     assert ei.value.key == "vary.plant_sim.backend" and "mujoco" in str(ei.value) and "\n" not in str(ei.value)
 
 
+@pytest.mark.cli
 @pytest.mark.parametrize("tool", ["tune", "sweep"])
 def test_a_backend_axis_whose_base_no_mujoco_model_can_be_is_one_line_exit_2(tmp_path, tool):
     """The base file runs on rk4, but its body (I_b_roll > I_b + I_b_yaw) is no rigid body: the axis's mujoco

@@ -116,6 +116,7 @@ def test_each_lane_width_caches_its_kernels_in_files_of_its_own(tmp_path, monkey
             "<", "").replace(">", ""))   # no tag: numba's own name
 
 
+@pytest.mark.cli
 @pytest.mark.parametrize("cache_dir", [None, "numba_cache"])
 def test_an_edit_to_the_equations_is_compiled_afresh(tmp_path, cache_dir):
     """numba renews a cached function only when its own file changes; the compiled RK4 period must follow an

@@ -101,6 +101,7 @@ def test_one_implementation_of_each_limit_and_clip():
 @pytest.mark.parametrize("args, words", [
     (["--laws", "bogus", "dsc"], "--laws: bogus is not a registered law"),
     (["--only", "push", "--figure", "f.png"], "--figure draws the slope and step")])
+@pytest.mark.cli
 def test_the_terrain_cli_refuses_before_any_scan(tmp_path, args, words):
     import subprocess
     import sys

@@ -40,6 +40,7 @@ def test_a_wheel_limit_above_the_drives_is_taken_down_to_it_and_said():
     assert P.closed_loop(values).yaw.wheel_limit == pytest.approx(60.0)
 
 
+@pytest.mark.cli
 def test_the_realistic_drive_and_the_square_without_the_limit_stay_up(tmp_path):
     overlay = tmp_path / "no_limit.yaml"
     overlay.write_text("dscndo_controller:\n  ros__parameters:\n    motion:\n      yaw_wheel_limit: 0.0\n")

@@ -110,6 +110,7 @@ def _with_plugin():
     return env
 
 
+@pytest.mark.cli
 def test_the_plugin_hook_gives_the_law_to_the_schema_and_to_mwip_sim(tmp_path):
     code = ("from mwip_ros import params as P; s = P.specs_for('dscndo_controller'); "
             "print(s['law'].choices, s['trivial.k'].default, s['trivial.k'].dynamic)")

@@ -100,6 +100,7 @@ def test_a_step_under_the_starting_wheel_is_refused_naming_ground_bumps():
     P.check_derived(dict(v, **{"ground.bumps": [0.1, 0.0, 0.3, 0.05]}))   # a zero step is flat; 0.3 m is clear
 
 
+@pytest.mark.cli
 def test_mwip_sim_exits_2_on_a_bad_slope_naming_the_key(tmp_path):
     f = tmp_path / "g.yaml"
     f.write_text("plant_sim:\n  ros__parameters:\n    backend: mujoco\n    ground: {slope: 1.0}\n")

@@ -48,6 +48,7 @@ def env_episode(duration):
         xs.append(np.array(env._period.side.plant.x))
 
 
+@pytest.mark.cli
 def test_mwip_sim_with_the_law_policy_repeats_the_envs_episode_bit_for_bit(tmp_path):
     POLICY.save(tmp_path / "p.json")
     r = mwip_sim(tmp_path, "--params", PAPER, overlay(tmp_path, tmp_path / "p.json"), "--duration", "3", "--csv",
@@ -63,6 +64,7 @@ def test_mwip_sim_with_the_law_policy_repeats_the_envs_episode_bit_for_bit(tmp_p
     assert np.abs(run["u"]).max() == 256.0   # the policy's clip is the law's
 
 
+@pytest.mark.cli
 @pytest.mark.parametrize("content", ["not json", '{"policy": "linear", "w": [1, 2], "scale": 256}'])
 def test_a_bad_policy_file_is_refused_naming_policy_file(tmp_path, content):
     (tmp_path / "p.json").write_text(content)

@@ -11,6 +11,7 @@ from without import env_without
 pytestmark = pytest.mark.unit
 
 
+@pytest.mark.cli
 def test_without_gymnasium_the_envs_refuse_in_one_line_and_the_simulator_runs(tmp_path):
     code = ("from mwip_ros.core.sim import simulate\n"
             "from mwip_ros import params as P\n"
@@ -31,6 +32,7 @@ def test_without_gymnasium_the_envs_refuse_in_one_line_and_the_simulator_runs(tm
     assert "pip install 'gymnasium'" in refusal and "python3-gymnasium-pip" in refusal
 
 
+@pytest.mark.cli
 def test_without_numba_the_scalar_env_runs_and_the_vector_env_refuses_in_one_line(tmp_path):
     code = ("import numpy as np\n"
             "from mwip_ros.envs import MwipEnv\n"

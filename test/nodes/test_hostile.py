@@ -219,7 +219,7 @@ def _malloc_heaps(*runs) -> list:
     return [out.count("<heap nr=") for out, _ in outs]
 
 
-@pytest.mark.unit
+@pytest.mark.cli
 def test_a_node_process_allocates_from_one_malloc_arena():
     """What keeps a flood's RSS flat (scripts/soak.py): threads that allocate share one glibc arena."""
     import os

@@ -186,7 +186,7 @@ def test_another_rclpy_version_is_warned_of_once(monkeypatch):
     assert C.rclpy_version() in C.WRITTEN_FOR   # the venv's rclpy is the one this was written for
 
 
-@pytest.mark.unit
+@pytest.mark.cli
 def test_importing_installs_nothing_and_install_is_idempotent():
     code = ("import mwip_ros.nodes.runtime.rclpy_compat as C\n"
             "from rclpy.parameter_service import ParameterService as S\n"

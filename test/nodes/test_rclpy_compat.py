@@ -142,7 +142,7 @@ def test_the_clock_guard_rejects_what_rclpys_time_source_raises_on(node):
     assert clock.now().nanoseconds == 2_500_000_000 and len(seen) == 3
 
 
-@pytest.mark.unit
+@pytest.mark.cli
 def test_importing_patches_nothing_and_install_patches_the_clock_too():
     code = ("import importlib\n"
             "from rclpy.node import Node\n"

@@ -48,6 +48,7 @@ def test_out_of_range_is_one_line_naming_the_key(tmp_path, line, key):
     assert key in str(ei.value) and "\n" not in str(ei.value)
 
 
+@pytest.mark.cli
 def test_mwip_sim_exits_2_naming_the_key(tmp_path):
     r = subprocess.run([sys.executable, "-m", "mwip_ros.cli.sim", "--params", str(default_params_file()),
                         str(_file(tmp_path, ["motion: {max_accel: 0.0}"])), "-q"], capture_output=True, text=True,

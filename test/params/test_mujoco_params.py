@@ -61,6 +61,7 @@ def test_a_missing_mujoco_is_one_line_naming_the_package(monkeypatch):
     assert ei.value.key == "backend" and "mujoco" in text and "python3-mujoco-pip" in text and "\n" not in text
 
 
+@pytest.mark.cli
 def test_mwip_sim_runs_the_mujoco_backend(tmp_path):
     pytest.importorskip("mujoco")
     r = _sim("--params", str(default_params_file()), str(_file(tmp_path, ["backend: mujoco"])), "--compare",
@@ -117,6 +118,7 @@ def test_the_batch_runs_the_mujoco_backend_scenario_by_scenario_as_mwip_sim_and_
     assert not r.fallen[0] and r.fallen[1]
 
 
+@pytest.mark.cli
 def test_mwip_sweep_runs_the_mujoco_backend(tmp_path):
     pytest.importorskip("mujoco")
     from mwip_ros.sweep.results import read_results

@@ -20,6 +20,7 @@ def _run(*args, pre: str = "", timeout: float = 60.0):
                           timeout=timeout, stdin=subprocess.DEVNULL, cwd=REPO)
 
 
+@pytest.mark.cli
 def test_help_names_the_faults_and_the_exit_codes():
     r = _run("--help")
     assert r.returncode == 0 and r.stdout.startswith("usage: mwip_moteus_emulator")
@@ -32,12 +33,14 @@ def test_help_names_the_faults_and_the_exit_codes():
     (("--silent-at", "1.0"), "--silent-at needs --silent"), (("--timeout-mode", "3"), "--timeout-mode"),
     (("--ids", "1", "1"), "distinct CAN ids"), (("--signs", "1", "2"), "sign must be +1 or -1"),
     (("--params", "/nonexistent.yaml"), "/nonexistent.yaml")])
+@pytest.mark.cli
 def test_a_bad_option_is_one_line_and_exit_2(args, key):
     r = _run(*args)
     assert r.returncode == 2, r.stderr
     assert len(r.stderr.strip().splitlines()) == 1 and key in r.stderr and r.stdout == ""
 
 
+@pytest.mark.cli
 def test_an_existing_link_is_never_replaced_unless_it_is_a_symlink_and_forced(tmp_path):
     mine = tmp_path / "mine"
     mine.write_text("keep")
@@ -49,6 +52,7 @@ def test_an_existing_link_is_never_replaced_unless_it_is_a_symlink_and_forced(tm
     assert r.returncode == 2 and "--force replaces it" in r.stderr and os.readlink(old) == "/dev/null"
 
 
+@pytest.mark.cli
 def test_a_short_run_serves_its_link_and_removes_it(tmp_path):
     old = tmp_path / "old"
     old.symlink_to("/dev/null")
@@ -58,6 +62,7 @@ def test_a_short_run_serves_its_link_and_removes_it(tmp_path):
     assert "0 frames" in r.stderr and "0 IMU messages" in r.stderr
 
 
+@pytest.mark.cli
 def test_without_the_moteus_package_it_says_so_in_one_line():
     r = _run("--imu-rate", "0", pre="sys.modules['moteus'] = None")
     assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1

@@ -157,6 +157,7 @@ def test_tune_refuses_a_search_beyond_the_budget(tmp_path):
 
 # --- the commands: exit 2, one line, fast, low memory -----------------------------------------------------
 
+@pytest.mark.cli
 def test_mwip_sweep_refuses_sizes_beyond_the_budget(tmp_path):
     out = tmp_path / "o"
     for body, words in [
@@ -169,6 +170,7 @@ def test_mwip_sweep_refuses_sizes_beyond_the_budget(tmp_path):
     assert not out.exists()
 
 
+@pytest.mark.cli
 def test_mwip_sim_refuses_a_duration_beyond_the_budget(tmp_path):
     assert_refused(measured("mwip_ros.cli.sim", ["--duration", "100000", "-q"]),
                    "mwip_sim: error: --duration 100000 s at 200 Hz is 20,000,001 rows", "memory budget is 2.0 GiB")
@@ -179,6 +181,7 @@ def test_mwip_sim_refuses_a_duration_beyond_the_budget(tmp_path):
                    "plant_sim.duration_s 1e+07 s", "x 2 law(s)")
 
 
+@pytest.mark.cli
 def test_mwip_tune_refuses_a_search_beyond_the_budget(tmp_path):
     p = spec_file(tmp_path, "samples: 200000\nvary:\n  plant_sim.actual.m_b: {scale: [0.7, 1.3]}\n")
     assert_refused(measured("mwip_ros.cli.tune", [p, "--controller", "dscndo", "--tune", "k1", "k2", "tau4", "X",

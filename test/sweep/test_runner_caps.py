@@ -41,6 +41,7 @@ def test_a_local_dask_cluster_of_no_workers_is_refused(dask, words):
         S.runner_from(args("--dask", dask))
 
 
+@pytest.mark.cli
 def test_mwip_sweep_refuses_dask_local_0_in_one_line(tmp_path):
     spec = tmp_path / "s.yaml"
     spec.write_text(f"base: {default_params_file()}\nduration_s: 1.0\nmetrics_window_s: [0.5, 1.0]\n")
