@@ -12,8 +12,9 @@ unit tests may hold one slow test marked ``@pytest.mark.slow``):
   its one line on stderr, its files), ``python -c`` with a package hidden, ``colcon list``. At most 5 s each.
 - ``node``: a node built in the test's own process by test/nodeharness.py (rclpy with discovery off: no other
   process, no DDS traffic), fed messages, service calls and parameter requests directly. At most 5 s each.
-- ``slow``: like ``unit``, but longer than 5 s: a kernel compiled into an empty cache, a documentation table
-  recomputed whole, a search run to its end.
+- ``slow``: like ``unit``, but heavy: a test longer than 5 s (a kernel compiled into an empty cache, a search run to
+  its end), the documentation's tables recomputed (MuJoCo runs: test/test_docs_motion.py, _terrain, _real_robot),
+  the rest of an oracle's matrix over every law and sensing whose fast loop keeps two cases.
 - ``montecarlo``: statistical coverage over many seeds or fits (a confidence interval's coverage over 100 runs).
 - ``graph``: brings up ROS across processes: starts a node process (``Graph``, ``run_lockstep``, ``python -m
   mwip_ros.nodes.X``), runs ``mwip_ctl`` against a graph, or an rclpy participant of the test's that discovers

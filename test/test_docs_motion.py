@@ -10,7 +10,7 @@ from mwip_ros.core import metrics
 from mwip_ros.core.sim import simulate
 from test_docs_numbers import table_after
 
-pytestmark = pytest.mark.unit
+pytestmark = pytest.mark.slow   # the documentation's tables recomputed (MuJoCo runs): heavy, not a unit of code
 
 PAGE = REPO / "docs" / "laws.md"
 FILES = [REPO / "config" / "paper.yaml", REPO / "config" / "motion.yaml"]

@@ -20,7 +20,7 @@ from mwip_ros.core.sim import simulate
 from mwip_ros.runs import write_csv
 from test_docs_numbers import page_with, table_after
 
-pytestmark = pytest.mark.unit
+pytestmark = pytest.mark.slow   # the documentation's tables recomputed (MuJoCo runs): heavy, not a unit of code
 
 CONFIG = REPO / "config"
 PAPER, RAW, MOTOR, IDENT = (CONFIG / f for f in ("paper.yaml", "sensors_raw_realistic.yaml", "motor_realistic.yaml",

@@ -13,7 +13,7 @@ pytest.importorskip("mujoco")
 
 from mwip_ros.sweep import terrain as T  # noqa: E402
 
-pytestmark = pytest.mark.unit
+pytestmark = pytest.mark.slow   # the documentation's tables recomputed (MuJoCo runs): heavy, not a unit of code
 
 PAGE = REPO / "docs" / "laws.md"
 SUBSET = ("dscndo", "lqr")

@@ -95,8 +95,14 @@ def check_law(controller: str, sensing: str) -> None:
     assert np.isnan(r.metrics["speed_rms"][5])   # no motion: no tracking numbers
 
 
-@pytest.mark.parametrize("sensing", sorted(BASES))
-@pytest.mark.parametrize("controller", COMPILED_LAWS)
+# two cases in the fast loop (unit), the rest of every law and sensing in the slow tier: the scalar reference runs
+# of 6 scenarios x 22 s are a second or two a case
+FAST_CASES = {("dscndo", "off"), ("lqr_ndo", "raw_motor")}
+
+
+@pytest.mark.parametrize("controller, sensing", [
+    pytest.param(c, s, marks=() if (c, s) in FAST_CASES else pytest.mark.slow)
+    for c in COMPILED_LAWS for s in sorted(BASES)])
 def test_the_compiled_batch_tracks_the_profile_as_the_scalar_loop(controller, sensing):
     check_law(controller, sensing)
 
