@@ -37,10 +37,8 @@ def _flooded_run(tmp_path, rate, flood_s, run_s=RUN_S, upright=True):
         est = g.start("state_estimator", "-p", "mode:=realtime", params=RAW)
         g.start("disturbance_observer", "-p", "mode:=realtime", params=RAW)
         g.start("dscndo_controller", "-p", "mode:=realtime", params=RAW)
-        # from the 100th state the loop answers on (t = 0.5 s); niced: the flooder (a core of this 2-core machine at
-        # full rate) must not also starve the graph's nodes of the CPU, which is not what is tested here
-        flood = g.start("flooder", cmd=["nice", "-n", "10", sys.executable, str(FLOODER), str(rate), str(flood_s),
-                                        "100"], params=None, as_given=True)
+        flood = g.start("flooder", cmd=[sys.executable, str(FLOODER), str(rate), str(flood_s), "100"], params=None,
+                        as_given=True)   # from the 100th state the loop answers on (t = 0.5 s)
         assert flood.wait_for_output("flooder: listening to joint_states", 60), flood.output()
         plant = g.start("plant_sim", "-p", "mode:=realtime", "-p", f"duration_s:={run_s}",
                         "-p", f"csv:={tmp_path / 'rt.csv'}", params=RAW)

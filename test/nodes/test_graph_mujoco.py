@@ -178,7 +178,6 @@ def test_a_diverging_mujoco_simulation_is_a_diverged_fault_exit_1_and_nothing_no
     assert len(from_bag) == 1 and all(math.isfinite(from_bag[c][0]) for c in ("theta_b", "x", "yaw"))
 
 
-@pytest.mark.alone
 @pytest.mark.graph
 def test_a_fall_in_the_state_no_stage_answers_is_fallen_at_its_time_never_upright(mujoco):
     """At the default 5 ms physics step the diverging model does not overflow within a period: it lands at
