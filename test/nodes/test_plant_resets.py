@@ -166,8 +166,10 @@ def test_a_recorded_run_with_a_reset_splits_into_two_segments_with_the_plants_co
         rec = g.start("mcap_recorder", "-p", f"output:={bag}", "-p", "use_sim_time:=true")
         g.start("disturbance_observer", "-p", "use_sim_time:=true")
         g.start("dscndo_controller", "-p", "use_sim_time:=true")
-        # expected_subscribers 3: the observer, the controller and the recorder (the user's count)
-        plant = g.start("plant_sim", "-p", "duration_s:=2.0", "-p", "expected_subscribers:=3", "-p", f"csv:={csv_path}")
+        # expected_subscribers 4: the observer, the controller, the recorder (the user's count) and this test's reader,
+        # made once its reset client is answered: the lockstep run (2 s of states in well under a second) starts
+        # only then, so the reset comes inside it (with 3, a run that started first could end before the client)
+        plant = g.start("plant_sim", "-p", "duration_s:=2.0", "-p", "expected_subscribers:=4", "-p", f"csv:={csv_path}")
         with Injector(g.domain_id) as inj:
             client = _client(inj)
             states = inj.record("joint_states", JointState)
