@@ -61,20 +61,15 @@ if [ "$split" -eq 0 ]; then
     run_pytest "${targets[@]}" "$@"
     exit $?
 fi
-# Fast DDS's shared-memory ports and segments that SIGKILLed processes leave behind (the suite kills some on purpose;
-# a crashed run leaves more): removed before each run of processes, as `fastdds shm clean` does (only zombies).
-shm_clean() { command -v fastdds > /dev/null && fastdds shm clean > /dev/null 2>&1 || true; }
 start=$SECONDS
 rc=0
 run_pytest "${targets[@]}" -m "unit or cli or node or slow or montecarlo" -n auto --dist worksteal "$@" || rc=$?
 in_process=$((SECONDS - start))
 # lockstep graphs and whole jobs wait on their processes' answers, not on a clock: two at a time (each graph on a
 # domain of its own; --dist loadfile keeps a module's tests, and the graph they share, on one worker)
-shm_clean
 run_pytest "${targets[@]}" -m "(graph or e2e) and not alone" -n auto --dist loadfile "$@" || rc=$?
 shared=$((SECONDS - start - in_process))
 # what keeps real-time deadlines or times the graph, and the bench: alone
-shm_clean
 run_pytest "${targets[@]}" -m "(graph or e2e) and alone or bench" --durations=10 "$@" || rc=$?
 echo "test: in-process tiers ${in_process} s, process tests ${shared} s two at a time and" \
      "$((SECONDS - start - in_process - shared)) s alone, in all $((SECONDS - start)) s"
