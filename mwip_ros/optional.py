@@ -53,6 +53,8 @@ OPTIONAL: Dict[str, OptionalPackage] = {
     "upkie": OptionalPackage("upkie", "python3-upkie-pip", "the Upkie backend"),
     "upkie_description": OptionalPackage("upkie-description", "python3-upkie-description-pip",
                                          "the Upkie backend (Upkie's URDF)"),
+    "urdf_parser_py": OptionalPackage("urdf_parser_py", "urdfdom_py", "a robot's planar model from its URDF "
+                                      "(robot.planar_model: the Upkie backend)"),
     "pybullet": OptionalPackage("pybullet", "python3-pybullet-pip", "the Upkie backend's simulation (PyBullet)"),
 }
 

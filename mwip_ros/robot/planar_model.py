@@ -153,7 +153,9 @@ def _joint_motion(joint, q: float) -> np.ndarray:
 @contextlib.contextmanager
 def _quiet_parser() -> Iterator[None]:
     """urdf_parser_py reports tags it does not model (``<contact>``) on stderr; they are not errors here."""
-    from urdf_parser_py.xml_reflection import core
+    from ..optional import required
+    with required("urdf_parser_py"):   # one line naming the package and its rosdep key when it is missing
+        from urdf_parser_py.xml_reflection import core
     old = core.on_error
     core.on_error = lambda message: None
     try:
@@ -164,7 +166,9 @@ def _quiet_parser() -> Iterator[None]:
 
 def _read(urdf: Union[str, Path]):
     """The parsed URDF of a path or of an XML string."""
-    from urdf_parser_py.urdf import URDF
+    from ..optional import required
+    with required("urdf_parser_py"):
+        from urdf_parser_py.urdf import URDF
     with _quiet_parser():
         text = str(urdf)
         if text.lstrip().startswith("<"):

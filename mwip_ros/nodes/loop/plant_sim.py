@@ -76,12 +76,13 @@ from std_srvs.srv import Trigger
 from mwip_ros.core import metrics
 from mwip_ros.core.loop import PlantSide, answering
 from mwip_ros.core.plant import PlantDiverged
-from mwip_ros.core.safety import FAULT, HISTORY, DriverStateMachine, Transition, Watchdog
+from mwip_ros.core.safety import HISTORY, DriverStateMachine, Transition, Watchdog
 from mwip_ros.core.trajectory import TrajectoryTable
 from mwip_ros.msgs import BadMessage, cdr
 from mwip_ros.msgs import layouts as L
 from mwip_ros.msgs.qos import BEST_EFFORT_INPUT_QOS, DRIVER_STATE_QOS, INPUT_QOS, SERVICE_QOS, qos_for
 from mwip_ros.nodes.runtime.diagnostics import ERROR, OK, WARN, StepRate
+from mwip_ros.nodes.runtime.driver_state import publish_transition
 from mwip_ros.nodes.runtime.guards import PublisherWatch, Rejects
 from mwip_ros.nodes.runtime.lockstep import LockstepDriver, subscriber_floor
 from mwip_ros.nodes.runtime.params import declare
@@ -394,19 +395,8 @@ class PlantSimNode(Node, GracefulNodeMixin):
 
     def _publish_transition(self, tr: Optional[Transition], start: bool = False, **extra) -> None:
         """Log a transition (one line), publish it on ``driver_state`` and keep it for the summary."""
-        if tr is None:
-            return
-        record = {"state": tr.to_state, "from": tr.from_state or None, "reason": tr.reason, "detail": tr.detail,
-                  "t": round(tr.t, 9), "stamp_ns": self._stamp(), "text": tr.text(), **extra}
-        if start:
-            self.get_logger().info(f"driver: {tr.to_state} at the start ({tr.detail})")
-        else:
-            self.transitions.append(record)
-            if tr.to_state == FAULT:   # (one call site per severity: rclpy's logger wants that)
-                self.get_logger().error(f"driver: {tr.text()}")
-            else:
-                self.get_logger().warning(f"driver: {tr.text()}")
-        self.driver_pub.publish(String(data=json.dumps(record, allow_nan=False)))
+        if tr is not None:
+            publish_transition(self, self.driver_pub, self.transitions, tr, self._stamp(), start, **extra)
 
     # --- the plant's stages, the same for both runners ------------------------------------------
     def _stamp(self, k: Optional[int] = None) -> int:

@@ -75,11 +75,12 @@ from std_srvs.srv import Trigger
 from mwip_ros import params as P
 from mwip_ros.core.loop import answering
 from mwip_ros.core.metrics import json_safe
-from mwip_ros.core.safety import FAULT, HISTORY, Transition
+from mwip_ros.core.safety import HISTORY, Transition
 from mwip_ros.msgs import BadMessage, cdr
 from mwip_ros.msgs import layouts as L
 from mwip_ros.msgs.qos import BEST_EFFORT_INPUT_QOS, DRIVER_STATE_QOS, INPUT_QOS, SERVICE_QOS, qos_for
 from mwip_ros.nodes.runtime.diagnostics import ERROR, OK, WARN
+from mwip_ros.nodes.runtime.driver_state import publish_transition
 from mwip_ros.nodes.runtime.guards import PublisherWatch, Rejects
 from mwip_ros.nodes.runtime.lockstep import LockstepDriver, subscriber_floor
 from mwip_ros.nodes.runtime.params import declare, ros_arguments
@@ -431,19 +432,8 @@ class WheelDriverNode(Node, GracefulNodeMixin):
     # --- transitions ---------------------------------------------------------------------------------------------
     def _publish_transition(self, tr: Optional[Transition], start: bool = False, **extra) -> None:
         """Log a transition (one line), publish it on ``driver_state`` and keep it for the summary."""
-        if tr is None:
-            return
-        record = {"state": tr.to_state, "from": tr.from_state or None, "reason": tr.reason, "detail": tr.detail,
-                  "t": round(tr.t, 9), "stamp_ns": self._now_ns(), "text": tr.text(), **extra}
-        if start:
-            self.get_logger().info(f"driver: {tr.to_state} at the start ({tr.detail})")
-        else:
-            self.transitions.append(record)
-            if tr.to_state == FAULT:
-                self.get_logger().error(f"driver: {tr.text()}")
-            else:
-                self.get_logger().warning(f"driver: {tr.text()}")
-        self.driver_pub.publish(String(data=json.dumps(record, allow_nan=False)))
+        if tr is not None:
+            publish_transition(self, self.driver_pub, self.transitions, tr, self._now_ns(), start, **extra)
 
     # --- the period --------------------------------------------------------------------------------------------
     def _run_periods(self, n: int) -> Optional[Observation]:
