@@ -16,7 +16,7 @@ import ``mwip_ros`` from DIR (PYTHONPATH), the others from this checkout.
    Then the rk4 and the mujoco (default step) graphs of this checkout side by side, at the same time, ``--pairs``
    times: the same load at every moment.  Each graph run simulates ``--seconds`` (default 60 s, 8-11 s of wall
    time): a run of the paper's 10 s lasts 1.2-1.6 s, and on 2 shared cores the ratio of two such runs scattered
-   from 0.80x to 1.00x over 7 turns, where 60 s runs in the same turns gave 0.81x-0.87x (BENCHMARKS.md,
+   from 0.80x to 1.00x over 7 turns, where 60 s runs in the same turns gave 0.81x-0.87x (docs/benchmarks-history.md,
    "Steady-state runs").
 2. ``mwip_sim``'s loop (10 s of DSCNDO, one process per run, the first run of each process not timed), the same
    variants taking turns: periods/s and the ratios per turn.

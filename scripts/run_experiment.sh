@@ -218,7 +218,8 @@ interrupted() {   # Ctrl-C or SIGTERM during the runs: end this run, then the re
 
 # Lockstep: the recorder logs in sim time (the plant publishes /clock). The observer and the
 # controller never read a clock (each output carries the stamp of the state it answers), so
-# they run without use_sim_time: that spares each a /clock message per step (BENCHMARKS.md).
+# they run without use_sim_time: that spares each a /clock message per step
+# (docs/benchmarks-history.md, "What the profiles showed, and what was done").
 # Every -p names its node (-p NODE:name:=value): in ROS 2 a node's own section of a parameter file
 # wins over a -p rule without a node name (docs/parameters.md).
 SIMTIME=()

@@ -69,7 +69,7 @@ def test_bench_help_and_bad_arguments():
 
 
 def test_the_soak_script_runs_the_realtime_graph_and_reports_every_nodes_memory(tmp_path):
-    """scripts/soak_graph.py, briefly (its 10-minute figures are in BENCHMARKS.md): every node's RSS at the start,
+    """scripts/soak_graph.py, briefly (its 15-minute figures are in BENCHMARKS.md): every node's RSS at the start,
     after the warm-up and at the end, and a slope; the recorder split its bag by duration and the bag reads as one
     run.  The slope of 30 s is not judged here (it still holds the warm-up's tail and the machine's load); the
     bounded buffers are checked by size, not by time: test/nodes/test_plant_runners.py, test/core/test_trajectory.py,

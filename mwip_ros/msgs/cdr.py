@@ -2,9 +2,9 @@
 
 rclpy turns every typed message into a Python object, converts it to a C struct and
 (de)serializes it by introspection.  For the small messages the graph exchanges every
-control period that costs more CPU than the control law itself (the repository's BENCHMARKS.md: a typed
-Float64 ping-pong manages about 60 % of the round trips of a serialized one).  So the
-nodes publish bytes (``Publisher.publish(bytes)``), subscribe with ``raw=True`` and use
+control period that costs more CPU than the control law itself (the repository's docs/benchmarks-history.md,
+"What the profiles showed, and what was done": a typed Float64 ping-pong manages about 60 % of the round trips
+of a serialized one).  So the nodes publish bytes (``Publisher.publish(bytes)``), subscribe with ``raw=True`` and use
 this module.  The bytes are standard ROS 2 CDR (XCDR1; encapsulation CDR_LE, and
 CDR_BE when decoding), so every ROS tool sees the usual types on the usual topics;
 the tests check each function against rclpy's own serializer.

@@ -35,7 +35,7 @@ __all__ = ["Chunk", "ChunkResult", "make_chunks", "chunks_of", "chunk_size_for",
            "run_local", "run_dask", "DEFAULT_CHUNK", "SLOW_CHUNK"]
 
 DEFAULT_CHUNK = 5000   # scenarios per chunk: numpy's per-call cost is small against 5,000 elements, and a
-                       # 10 s run's window (4 x 1,001 samples per scenario) takes 160 MB (BENCHMARKS.md)
+                       # 10 s run's window (4 x 1,001 samples per scenario) takes 160 MB (docs/benchmarks-history.md)
 SLOW_CHUNK = 50        # scenarios per chunk of a law without a pure form (Law.pure_step: MPC, a plug-in): the batch
                        # runs it over numpy arrays or scenario by scenario, about 100 times slower per scenario
                        # than a compiled law (BENCHMARKS.md), so a chunk is seconds, not minutes, of a worker

@@ -35,7 +35,7 @@ WATCHDOG_S = 0.5            # the watchdog_s the watchdog test sets: the default
 # The watchdog is checked at every realtime tick: a fault comes at most one period after watchdog_s has
 # passed, plus how late the tick runs.  On this 2-core machine, shared by the plant, the observer, the
 # controller and the test, a realtime tick is a few ms late at its worst in a minute without SCHED_FIFO
-# (BENCHMARKS.md: a few periods of 8 ms per minute); 20 ms covers that twice over.
+# (docs/benchmarks-history.md: a few periods of 8 ms per minute); 20 ms covers that twice over.
 SCHEDULING_MARGIN_S = 0.020
 BALANCED = 0.05             # |theta_b| [rad] a balancing loop stays within here
 AT_REST = ("initial.theta_b:=0.0", "tau_ext1.amplitude:=0.0", "tau_ext2.amplitude:=0.0", "actual.D_w_variance:=0.0")

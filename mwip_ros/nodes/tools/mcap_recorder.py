@@ -113,7 +113,8 @@ class McapRecorder(Node, GracefulNodeMixin):
 
     def _split(self) -> None:
         """The bag was split: say so, and give the heap's pages the finished file's writer and index held back to
-        the system (glibc keeps them otherwise: the recorder's RSS stepped up at each split, BENCHMARKS: the soak)."""
+        the system (glibc keeps them otherwise: the recorder's RSS stepped up at each split,
+        docs/benchmarks-history.md: the soak)."""
         memtrace.trim()
         self.get_logger().info(f"split: now writing {self.writer.files[-1]} (file {self.writer.file_count}; "
                                f"{self.received} messages so far)")
