@@ -20,11 +20,16 @@ Variants (``--variants``; each is run in turns with the others, so a machine's l
 ``--busy N`` runs N busy-loop processes beside the trials (the issue's load: two). Prints one table: per variant
 the median, 90th percentile and largest time of each measure, and how many newcomers took over 1 s.
 
+``--stall N`` measures what a newcomer that stops in the middle of its discovery (a Ctrl-Z, a process starved of
+CPU) costs a running realtime graph: N newcomers join the plant's graph one after another, each stopped 0.3 + 0.1 i s
+after its start, and the plant's line on its wake periods is printed (the largest period is the loop's stall).
+
 ``--ctl N`` measures instead what a user waits for: a realtime graph (observer, controller, plant) runs under each
 variant, and ``mwip_ctl param get dscndo_controller k1`` is timed N times, whole (its Python start included).
 
     python scripts/bench_discovery.py --trials 20 --busy 2
     python scripts/bench_discovery.py --ctl 6 --busy 2 --variants default,product
+    python scripts/bench_discovery.py --stall 12 --variants product
 """
 from __future__ import annotations
 
@@ -191,6 +196,49 @@ def ctl_calls(env: Dict[str, str], calls: int) -> List[float]:
         return took
 
 
+STALLED_NEWCOMER = """
+import time, rclpy
+from mwip_ros.nodes.runtime import discovery
+discovery.apply()
+rclpy.init()
+node = rclpy.create_node("newcomer")
+time.sleep(120)
+"""
+
+
+def stalled_newcomers(env: Dict[str, str], newcomers: int, duration: float = 20.0) -> str:
+    """The realtime graph's plant (started in ``env``, ``duration`` s) while ``newcomers`` processes join it one after
+    another, each stopped (SIGSTOP) 0.3 + 0.1 i s after its start, in the middle of its discovery, as a terminal's
+    Ctrl-Z stops a ``ros2 topic echo``: the plant's own line on its wake periods (their largest is a stall of the
+    loop), and whether it stayed upright."""
+    sys.path.insert(0, str(REPO / "test"))
+    from graphproc import Graph
+    stopped = []
+    with tempfile.TemporaryDirectory() as tmp, Graph(Path(tmp)) as g:
+        g.env = dict(env)
+        for node in ("disturbance_observer", "dscndo_controller"):
+            g.start(node, "-p", "mode:=realtime")
+        plant = g.start("plant_sim", "-p", "mode:=realtime", "-p", f"duration_s:={duration:.1f}")
+        if not plant.wait_for_output("starting realtime run", 60):
+            raise SystemExit(f"bench_discovery: the graph did not start:\n{plant.output()[-2000:]}")
+        try:
+            time.sleep(1.0)
+            for i in range(newcomers):
+                p = subprocess.Popen([sys.executable, "-c", STALLED_NEWCOMER], env=g.env, stdout=subprocess.DEVNULL,
+                                     stderr=subprocess.DEVNULL)
+                stopped.append(p)
+                time.sleep(0.3 + 0.1 * i)
+                p.send_signal(signal.SIGSTOP)
+            code = plant.wait(duration + 60)
+        finally:
+            for p in stopped:
+                p.kill()
+                p.wait()
+        out = plant.output()
+    line = next((ln for ln in reversed(out.splitlines()) if "periods due" in ln), "no realtime line")
+    return f"exit {code} ({'upright' if code == 0 else 'not upright'}); " + line[line.find("realtime:"):]
+
+
 def summary(values: List[float], limit: float) -> str:
     lost = sum(1 for v in values if v < 0)
     seen = sorted(v for v in values if v >= 0)
@@ -214,6 +262,8 @@ def main(argv: Optional[List[str]] = None) -> int:
     ap.add_argument("--busy", type=int, default=0, help="busy-loop processes beside the trials (default 0)")
     ap.add_argument("--ctl", type=int, default=0, metavar="N",
                     help="time N mwip_ctl param get calls against a running graph per variant instead")
+    ap.add_argument("--stall", type=int, default=0, metavar="N",
+                    help="a realtime graph per variant, N newcomers joining it stopped mid-start: the plant's stall")
     ap.add_argument("--variants", default="default,product,server",
                     help="comma-separated: default, product, lease=S, server (default: default,product,server)")
     args = ap.parse_args(argv)
@@ -240,6 +290,11 @@ def main(argv: Optional[List[str]] = None) -> int:
                                           env=base, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
                                           start_new_session=True)   # the fastdds wrapper's server child too
                 time.sleep(1.0)
+            if args.stall:
+                for v in variants:
+                    print(f"| {v} | {args.stall} stopped newcomers: {stalled_newcomers(envs[v], args.stall)} |",
+                          flush=True)
+                return 0
             if args.ctl:
                 for v in variants:
                     took = ctl_calls(envs[v], args.ctl)
