@@ -33,6 +33,14 @@ else
     echo "test: ruff found problems" >&2
     exit 1
 fi
+# Then the type checker (mypy.ini: core/, params/, msgs/; its cache .mypy_cache/): an error fails the run too.
+echo "test: python -m mypy"
+if python -m mypy; then
+    echo "test: mypy: clean"
+else
+    echo "test: mypy found type errors (mypy.ini; run it alone: python -m mypy)" >&2
+    exit 1
+fi
 
 # Without -m, -n or test paths of the caller's: three runs, so that every core works and nothing timed shares it
 # with anything but idle work. The tiers that start no ROS process (unit, cli, node, slow, montecarlo:

@@ -179,7 +179,7 @@ def _declared_pip_requirements():
     for line in (REPO_ROOT / 'requirements.txt').read_text().splitlines():
         line = line.split('#', 1)[0].strip()
         if line:
-            pins[_norm(re.split(r'[=<>!~ ]', line, 1)[0])] = line
+            pins[_norm(re.split(r'[=<>!~ ]', line, maxsplit=1)[0])] = line
     wanted = []
     for name in dict.fromkeys(KEY_TO_PIP[k] for k in keys if KEY_TO_PIP[k]):
         if _norm(name) in pins:

@@ -42,11 +42,12 @@ import functools
 import math
 import os
 from dataclasses import dataclass, fields, is_dataclass
-from typing import Dict, List, Optional, Sequence
+from typing import Dict, List, Optional, Sequence, Tuple, Type
 
 import numpy as np
 
 from .budget import window_samples
+from .estimators import Estimator
 from . import laws
 from .metrics import compute as metrics_compute
 from .metrics import MOTION_METRICS, motion_metrics, window_metrics
@@ -285,9 +286,10 @@ def _raw_stage(loops: Sequence[ClosedLoop]):
     if not raws.pop():
         return False, None
     methods = {lp.estimator.method if lp.estimator is not None else None for lp in loops}
-    if len(methods) != 1 or None in methods:
+    method = methods.pop() if len(methods) == 1 else None
+    if method is None:
         return None
-    cls = estimators.get(methods.pop())
+    cls = estimators.get(method)
     return (True, cls) if getattr(cls, "pure_step", None) is not None else None
 
 
@@ -353,7 +355,7 @@ def _simulate_numpy(loops: Sequence[ClosedLoop], window: Sequence[float], record
 
     sensors, actuator = _sensing(pcs, n)
     rk4_periods = RK4Periods(actual, D_b, n)
-    x = State(*(arr(pc.initial[i] for pc in pcs) for i in range(4)))
+    x = State._make(arr(pc.initial[i] for pc in pcs) for i in range(4))   # a column per variable
     u_prev = np.zeros(n)
     D_w = noise.draw()
     active = np.ones(n, dtype=bool)
@@ -362,7 +364,7 @@ def _simulate_numpy(loops: Sequence[ClosedLoop], window: Sequence[float], record
     first_w, n_window = window_samples(n_steps, h, window)   # the steps k with k h in the window (+-1e-9)
     # a row per sample, a column per scenario: each step writes one contiguous row
     win = {c: np.full((n_window, n), np.nan) for c in ("theta_b", "u", "e1", "e2")}
-    rows = [] if record else None
+    rows: List[Tuple[np.ndarray, np.ndarray]] = []   # (record only)
     steps = 0
     with np.errstate(all="ignore"):  # a diverging scenario may overflow: it is frozen, the others go on
         for k in range(n_steps + 1):
@@ -434,8 +436,8 @@ def _simulate_numpy(loops: Sequence[ClosedLoop], window: Sequence[float], record
                        else None, failure)
 
 
-def _simulate_compiled(loops: Sequence[ClosedLoop], window: Sequence[float], law: type, kernel, raw: bool = False,
-                       estimator: Optional[type] = None) -> BatchResult:
+def _simulate_compiled(loops: Sequence[ClosedLoop], window: Sequence[float], law: Type[laws.Law], kernel,
+                       raw: bool = False, estimator: Optional[Type[Estimator]] = None) -> BatchResult:
     """The whole loop compiled (``core.compiled._loop``), NOISE_BLOCK periods per call, the normal draws made
     here by each scenario's own generators in the scalar loop's order and handed in as blocks.  ``raw``: the
     plants measure raw (every one), ``estimator`` the class of their state estimator; the motor and the
@@ -454,7 +456,8 @@ def _simulate_compiled(loops: Sequence[ClosedLoop], window: Sequence[float], law
     counts = int(_same((sc.encoder_counts_per_rev for sc in scs), "the encoder resolution"))
     delay = int(_same((sc.delay_periods for sc in scs), "the measurement delay"))
     act_delay = int(_same((sc.actuator_delay_periods for sc in scs), "the actuator delay"))
-    core = getattr(law, "base", law)
+    core: Type[laws.Law] = getattr(law, "base", law)
+    raws = [pc.raw for pc in pcs if pc.raw is not None]   # every plant's with ``raw``
     arr = lambda rows: np.ascontiguousarray(np.array(rows, dtype=float).reshape(n, -1))  # noqa: E731
     terms = {}   # PhysicalParams -> its eq. (2) terms (the property's own function: no cached_property lock)
 
@@ -480,7 +483,7 @@ def _simulate_compiled(loops: Sequence[ClosedLoop], window: Sequence[float], law
     var = np.array([pc.D_w_variance for pc in pcs], dtype=float)
     random = np.flatnonzero(var != 0.0)
     dw_gens = [np.random.default_rng(int(pcs[i].seed)) for i in random]
-    raw_noisy = np.array([raw and pc.raw.noisy for pc in pcs], dtype=bool)
+    raw_noisy = np.array([rc.noisy for rc in raws] if raw else [False] * n, dtype=bool)
     # the four normals of a period: the state-mode sensors' (core.sensing.Normals) or the raw sensors' (raw_rng)
     z_idx = np.flatnonzero(raw_noisy if raw else noisy)
     z_gens = [(raw_rng if raw else sensor_rng)(int(pcs[i].seed)) for i in z_idx]
@@ -510,11 +513,11 @@ def _simulate_compiled(loops: Sequence[ClosedLoop], window: Sequence[float], law
     motion, MO, PT, PV, NP, MS, MA = motion_arrays(loops)   # the references (docs/theory.md 6.11), their metrics
     # the raw sensors (r, d, g, gyro_noise_std, gyro_bias_walk, accel_noise_std, counts) and their state (bias,
     # phi, D_w and the command of the previous period); the estimator's numbers and state
-    RW = arr([[pc.actual.r, pc.raw.offset, pc.actual.g, pc.raw.gyro_noise_std, pc.raw.gyro_bias_walk,
-               pc.raw.accel_noise_std, pc.raw.encoder_counts_per_rev] for pc in pcs]) if raw else np.zeros((1, 7))
+    RW = arr([[pc.actual.r, rc.offset, pc.actual.g, rc.gyro_noise_std, rc.gyro_bias_walk, rc.accel_noise_std,
+               rc.encoder_counts_per_rev] for pc, rc in zip(pcs, raws)]) if raw else np.zeros((1, 7))
     RS = np.zeros((n, 4))
     if raw:
-        RS[:, 0] = [pc.raw.gyro_bias for pc in pcs]
+        RS[:, 0] = [rc.gyro_bias for rc in raws]
         made = {}
 
         def numbers(lp):
@@ -523,6 +526,7 @@ def _simulate_compiled(loops: Sequence[ClosedLoop], window: Sequence[float], law
                 made[key] = [float(v) for v in lp.estimator.make(h, key[1], key[2]).P]
             return made[key]
         PE = arr([numbers(lp) for lp in loops])
+        assert estimator is not None   # raw: _raw_stage gave the scenarios' estimator class
         ES = np.zeros((n, estimator.state_size))
     else:
         PE, ES = np.zeros((1, 1)), np.zeros((1, 1))

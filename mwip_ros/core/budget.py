@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import os
 import re
+from typing import Optional
 
 __all__ = ["DEFAULT_BUDGET", "BUDGET_ENV", "memory_budget", "batch_budget", "fmt_bytes", "window_samples",
            "scenario_batch_bytes", "batch_fixed_bytes", "sweep_table_bytes", "tune_table_bytes", "offline_bytes",
@@ -71,7 +72,7 @@ def memory_budget() -> int:
     return int(n)
 
 
-def batch_budget(budget: int = None) -> int:
+def batch_budget(budget: Optional[int] = None) -> int:
     """What one simulation batch may hold: a quarter of the budget (512 MiB by default)."""
     return (memory_budget() if budget is None else budget) // 4
 

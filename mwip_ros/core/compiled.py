@@ -36,7 +36,7 @@ from __future__ import annotations
 
 import math
 import types
-from typing import NamedTuple
+from typing import NamedTuple, Optional
 
 import numpy as np
 
@@ -561,7 +561,7 @@ def pure_form(law: type):
     return None if fn is None or _owner(core, "step") is not _owner(core, "pure_step") else fn
 
 
-def kernel_for(law: type, estimator: type = None):
+def kernel_for(law: type, estimator: Optional[type] = None):
     """The compiled batch loop of the law class ``law`` (its ``pure_step``, or its base's for an observer
     variant) and, for raw sensors, of the estimator class ``estimator`` (:mod:`.estimators`: its ``pure_step``),
     or None when either has no pure form (the batch then runs over numpy arrays, or the scalar loop)."""

@@ -23,6 +23,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from functools import lru_cache
+from typing import Optional
 
 import numpy as np
 
@@ -104,7 +105,7 @@ class Excitation:
         self.cfg, self.h = cfg, float(h)
         self._end = int(math.ceil(cfg.duration_s / self.h - 1e-9))   # first period at or after duration_s
         self._bits = np.empty(0, dtype=np.int8)
-        self._rng = None
+        self._rng: Optional[np.random.Generator] = None
         self.bit_periods = prbs_bit_periods(cfg, self.h) if cfg.type == "prbs" else 0
 
     def _bit(self, j: int) -> int:

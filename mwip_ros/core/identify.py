@@ -77,9 +77,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Dict, Sequence, Tuple
+from typing import Dict, Optional, Sequence, Tuple
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .model import PhysicalParams
 
@@ -161,7 +162,7 @@ class IdentificationResult:
     blocks: int            # the delete-a-block jackknife's blocks (its degrees of freedom: blocks - 1)
     block_s: float         # their length [s] (the last of a stretch may be longer)
     known: PhysicalParams  # m_w, I_w, r, g used (its m_b, I_b, l are not)
-    covariance: np.ndarray = field(repr=False, compare=False, default=None)   # of THETA, 6 x 6
+    covariance: Optional[np.ndarray] = field(repr=False, compare=False, default=None)   # of THETA, 6 x 6
     duplicates: int = 0    # rows that repeated an earlier row's time and values, counted once (dropped)
 
     def physical(self) -> PhysicalParams:
@@ -278,7 +279,7 @@ def _jackknife(Z: np.ndarray, y: np.ndarray, n: int, blocks) -> np.ndarray:
     return d.T @ d * (B - 1) / B
 
 
-def identify(t: Sequence[float], theta_w: Sequence[float], theta_b: Sequence[float], dtheta_w: Sequence[float],
+def identify(t: ArrayLike, theta_w: Sequence[float], theta_b: Sequence[float], dtheta_w: Sequence[float],
              dtheta_b: Sequence[float], u: Sequence[float], known: PhysicalParams, cutoff_hz: float = CUTOFF_HZ,
              min_samples: int = MIN_SAMPLES, max_condition: float = MAX_CONDITION,
              max_relative_ci: float = MAX_RELATIVE_CI, block_s: float = BLOCK_S) -> IdentificationResult:

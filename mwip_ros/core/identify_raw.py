@@ -53,9 +53,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
-from typing import Dict, Sequence, Tuple
+from typing import Dict, Optional, Tuple, cast
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .model import PhysicalParams, accel
 from .plant import rk4_period
@@ -86,7 +87,7 @@ class RawIdentificationResult:
     known: PhysicalParams
     dof: Dict[str, float] = field(default_factory=dict)
     quantile: Dict[str, float] = field(default_factory=dict)
-    covariance: np.ndarray = field(repr=False, compare=False, default=None)   # of RAW_GLOBALS, 7 x 7 (CR2)
+    covariance: Optional[np.ndarray] = field(repr=False, compare=False, default=None)   # of RAW_GLOBALS, 7 x 7 (CR2)
     condition_number: float = math.nan   # of the globals' profiled Jacobian, its columns scaled to unit norm
 
     def physical(self) -> PhysicalParams:
@@ -102,7 +103,7 @@ class RawIdentificationResult:
         return v - w, v + w
 
 
-def identify_raw(t: Sequence[float], gyro, accel_x, accel_z, encoder, encoder_rate, u, known: PhysicalParams,
+def identify_raw(t: ArrayLike, gyro, accel_x, accel_z, encoder, encoder_rate, u, known: PhysicalParams,
                  start: PhysicalParams, imu_offset: float, window_s: float = WINDOW_S,
                  noise: Tuple[float, float, float] = NOISE, max_evaluations: int = 200) -> RawIdentificationResult:
     """Fit the raw log (module doc).  ``known``'s m_w, I_w, r, g are used; ``start``'s m_b, I_b, l and
@@ -219,7 +220,8 @@ def identify_raw(t: Sequence[float], gyro, accel_x, accel_z, encoder, encoder_ra
     q = np.array([student.ppf(0.975, v) if np.isfinite(v) and v > 0 else math.inf for v in dof])
     condition = _condition(S)
     rr = r.reshape(J, W, 4)
-    rms = tuple(float(np.sqrt(np.mean(rr[:, :, i] ** 2)) * s) for i, s in enumerate((sg, sa, sa, se)))
+    rms = cast(Tuple[float, float, float, float],
+               tuple(float(np.sqrt(np.mean(rr[:, :, i] ** 2)) * s) for i, s in enumerate((sg, sa, sa, se))))
     named = lambda a: {k: float(v) for k, v in zip(RAW_GLOBALS, a)}   # noqa: E731
     return RawIdentificationResult(named(z[:n_g]), named(std), rms, J, counted[0], known,
                                    named(dof), named(q), cov, condition)

@@ -19,9 +19,10 @@ about 0.1 deg: the floor of the figure).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Sequence
+from typing import List
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .identify_raw import NOISE
 from .model import PhysicalParams, accel
@@ -72,7 +73,7 @@ def _checked(t: np.ndarray, pitch: np.ndarray) -> float:
     return float(np.median(steps))
 
 
-def prediction_errors(t: Sequence[float], theta_w, theta_b, dtheta_w, dtheta_b, u, p: PhysicalParams, D_w: float,
+def prediction_errors(t: ArrayLike, theta_w, theta_b, dtheta_w, dtheta_b, u, p: PhysicalParams, D_w: float,
                       D_b: float, window_s: float = WINDOW_S, substeps: int = 4) -> PredictionError:
     """The pitch prediction error of the model ``(p, D_w, D_b)`` over the windows of a log (module doc).
 
@@ -84,7 +85,8 @@ def prediction_errors(t: Sequence[float], theta_w, theta_b, dtheta_w, dtheta_b, 
     per = max(1, int(round(window_s / h)))
     ok = np.isfinite(t) & np.isfinite(w) & np.isfinite(b) & np.isfinite(dw) & np.isfinite(db) & np.isfinite(u)
     zeros = [0.0] * (2 * substeps + 1)
-    errs, windows = [], 0
+    errs: List[float] = []
+    windows = 0
     for a in range(0, len(t) - 1, per):
         z = min(a + per, len(t) - 1)
         bad = np.flatnonzero(~ok[a:z + 1])
@@ -100,7 +102,7 @@ def prediction_errors(t: Sequence[float], theta_w, theta_b, dtheta_w, dtheta_b, 
     return _summary(errs, windows, window_s)
 
 
-def raw_prediction_errors(t: Sequence[float], gyro, accel_x, accel_z, encoder, encoder_rate, u, theta_b_ref,
+def raw_prediction_errors(t: ArrayLike, gyro, accel_x, accel_z, encoder, encoder_rate, u, theta_b_ref,
                           p: PhysicalParams, D_w: float, D_b: float, gyro_bias: float, imu_offset: float,
                           noise=NOISE, window_s: float = WINDOW_S,
                           fit_s: float = FIT_S) -> PredictionError:
@@ -133,7 +135,8 @@ def raw_prediction_errors(t: Sequence[float], gyro, accel_x, accel_z, encoder, e
                 x = rk4_period(p, D_w, D_b, zeros, zeros, x, u[k], t[k + 1] - t[k], 1, np)
         return np.asarray(res, dtype=float), x
 
-    errs, windows = [], 0
+    errs: List[float] = []
+    windows = 0
     for a in range(1, len(t) - 1, per):
         z = min(a + per, len(t))
         bad = np.flatnonzero(~ok[a - 1:z])

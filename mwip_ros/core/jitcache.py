@@ -178,7 +178,8 @@ def jit(fn, tag: str = ""):
     (:func:`made_of`), in files of their own for ``tag``."""
     compiled = numba.njit(error_model="numpy")(fn)
     try:
-        compiled._cache = cache_for(fn, tag)(compiled.py_func)   # what ``cache=True`` sets, with the stamp above
+        # what ``cache=True`` sets, with the stamp above (numba's stubs do not declare the Dispatcher's _cache)
+        compiled._cache = cache_for(fn, tag)(compiled.py_func)   # type: ignore[attr-defined]
     except RuntimeError:   # no writable cache directory: compile in every process
         pass
     return compiled

@@ -36,10 +36,10 @@ from __future__ import annotations
 
 from collections import deque
 from dataclasses import dataclass
-from typing import Optional, Tuple
+from typing import Any, Deque, Optional, Tuple, cast
 
 from .laws import LawError
-from .plant import Plant, PlantConfig, finite_state, make_plant, saturate
+from .plant import Plant, PlantConfig, SpatialPlant, finite_state, make_plant, saturate
 from .raw_sensors import RawSensors, YawGyro
 from .safety import PLAUSIBLE_TORQUE, DriverStateMachine
 from .yaw import YawLoop, wheel_torques
@@ -106,7 +106,7 @@ def _runs(s: Stage, estimator: bool) -> bool:
 def answering(estimator: bool = False) -> Tuple[Answer, ...]:
     """The answering stages of the lockstep chain, in order: the stages the plant does not run itself
     (``estimator``: whether the configuration has a state estimator)."""
-    return tuple(Answer(s.name, s.node, s.output, s.waits_for) for s in STAGES
+    return tuple(Answer(s.name, s.node, cast(str, s.output), s.waits_for) for s in STAGES   # off the plant: a topic
                  if s.node != PLANT_NODE and _runs(s, estimator))
 
 
@@ -131,21 +131,22 @@ class PlantSide:
         self.cfg = cfg
         sc = cfg.sensing
         self.plant: Plant = make_plant(cfg)
-        self.raw = None
+        self.raw: Optional[RawSensors] = None
         if cfg.raw is not None:   # docs/theory.md 6.4: the IMU and the relative encoder, delayed as the state would be
             self.raw = RawSensors.for_plant(cfg.raw, cfg.seed, cfg.h, cfg.actual.r, cfg.actual.g)
-            self.raw_queue = deque(maxlen=sc.delay_periods + 1)
+            self.raw_queue: Deque[Tuple[Any, float]] = deque(maxlen=sc.delay_periods + 1)
         self.sensors = Sensors.for_plant(sc, cfg.seed) if sc.measuring and self.raw is None else None
         self.actuator = Actuator(sc.actuator_delay_periods) if sc.actuator_delay_periods else None
         # the yaw stage's inputs (docs/theory.md 6.13, a spatial plant only): the gyro's yaw rate, delayed as the
         # state is, and the wheels' pair through the actuator's delay
-        self.yaw_queue = deque(maxlen=sc.delay_periods + 1)
+        self.yaw_queue: Deque[float] = deque(maxlen=sc.delay_periods + 1)
         # with raw sensors the IMU's z-axis gyro measures it, with the pitch axis's noise and bias (theory 6.4)
         self.yaw_gyro = (YawGyro.for_plant(cfg.raw, cfg.seed, cfg.h) if cfg.raw is not None and self.plant.spatial
                          else None)
         self.wheel_actuator = (Actuator(sc.actuator_delay_periods, zero=(0.0, 0.0)) if sc.actuator_delay_periods
                                else None)
-        self.wheels = None   # the wheels' torques (u_L, u_R) of the period :meth:`act` decided, None: u / 2 each
+        # the wheels' torques (u_L, u_R) of the period :meth:`act` decided, None: u / 2 each
+        self.wheels: Optional[Tuple[float, float]] = None
         # the driver's state machine (docs/theory.md 6.8): disabled or faulted, the torque that acts is zero; a
         # command that is not a number or beyond PLAUSIBLE_TORQUE is a ``bad_command`` fault (the node's own limit)
         self.safety = DriverStateMachine(require_enable=cfg.require_enable, max_command=PLAUSIBLE_TORQUE)
@@ -157,7 +158,7 @@ class PlantSide:
         p = self.plant
         if self.raw is not None:
             ddq = p.sample_accel()   # a spatial plant: its own accelerometer (MuJoCo's, read at t_k^- after this)
-            force = p.imu_reading()[1][::2] if p.spatial else None
+            force = cast(Tuple[float, float], cast(SpatialPlant, p).imu_reading()[1][::2]) if p.spatial else None
             self.raw_queue.append((self.raw.sample(p.x, ddq, force), p.u_prev))
             return self.raw_queue[0]   # the sample of step k - d (or the first one while k < d)
         return self.sensors.sample(p.x, p.u_prev) if self.sensors else (p.x, p.u_prev)
@@ -166,7 +167,7 @@ class PlantSide:
         """Stage ``sensors`` of a spatial plant (docs/theory.md 6.13): the gyro's yaw rate (the body's z rate) of step
         k - d, as the state is delayed (ideal: no noise, no bias; with raw sensors the IMU's z-axis gyro,
         :class:`~.raw_sensors.YawGyro`).  Called once per period, after :meth:`sense`."""
-        w = self.plant.yaw_rate
+        w = cast(SpatialPlant, self.plant).yaw_rate   # called for a spatial plant only
         self.yaw_queue.append(w if self.yaw_gyro is None else self.yaw_gyro.sample(w))
         return self.yaw_queue[0]
 
@@ -199,13 +200,13 @@ class PlantSide:
         pair = (self.safety.torque_gate(pair[0]), self.safety.torque_gate(pair[1]))
         self.wheels = pair
         u = pair[0] + pair[1]
-        return u, self.plant.lumped_disturbance(u, extra, wheels=pair)
+        return u, cast(SpatialPlant, self.plant).lumped_disturbance(u, extra, wheels=pair)   # the yaw stage's plant
 
     def advance(self, u: float, extra=(0.0, 0.0)) -> None:
         """Stage ``plant``: integrate t_k -> t_k+1 with the torque that acts (the bridge as :meth:`act` found it;
         with the yaw stage, the wheels' pair)."""
         if self.wheels is not None:
-            self.plant.step(u, extra, enabled=self.enabled, wheels=self.wheels)
+            cast(SpatialPlant, self.plant).step(u, extra, enabled=self.enabled, wheels=self.wheels)
             return
         self.plant.step(u, extra, enabled=self.enabled)
 
@@ -226,7 +227,8 @@ class Period:
         self.yaw = yaw   # the yaw stage (core.yaw, theory 6.13): a spatial plant with motion; None: none
         if yaw is not None and (motion is None or not side.plant.spatial):
             raise ValueError("the yaw stage needs the motion references and a spatial plant (backend mujoco)")
-        self.failure = None   # (t, one line, cause: a FAILURES name) once the run has failed
+        # (t, one line, cause: a FAILURES name) once the run has failed
+        self.failure: Optional[Tuple[float, str, str]] = None
         if (side.raw is None) != (estimator is None):
             raise ValueError("a raw plant needs a state estimator, and only a raw plant has one")
 
@@ -256,6 +258,7 @@ class Period:
         side = self.side
         if self.yaw is not None:   # stage yaw (after the law): u_psi from psi'* and the gyro's yaw rate
             dpsi_ref = self.motion.ref.dpsi
+            assert dpsi is not None   # the yaw stage runs with the sensors' yaw rate (Period.run)
             u_psi = self.yaw.step(dpsi_ref, dpsi, u_law) if side.safety.enabled else self.yaw.idle(dpsi)
             internals = {**internals, "dpsi_ref": dpsi_ref, "u_psi": u_psi, "gyro_z": dpsi}
             wheels = wheel_torques(u_law, u_psi, 0.0)   # clipped per wheel in the drive stage

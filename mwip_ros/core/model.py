@@ -14,9 +14,12 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from functools import cached_property
-from typing import NamedTuple, Tuple
+from typing import NamedTuple, Tuple, Union
 
 import numpy as np
+
+# a number, or a numpy array of them: the scalar functions run over a batch's columns too (``m = numpy``)
+Real = Union[float, np.ndarray]
 
 __all__ = ["State", "PhysicalParams", "Friction", "Sinusoid", "mass_matrix", "coriolis_gravity", "accel",
            "plant_accel", "lumped_disturbance", "nominal_accel", "semi_strict_feedback", "x1_of"]
@@ -110,7 +113,7 @@ def coriolis_gravity(p: PhysicalParams, x) -> np.ndarray:
     return np.array([-cent, -p.G_b * s - cent])
 
 
-def accel(p: PhysicalParams, D_w: float, D_b: float, x, u: float, tau_ext1: float,
+def accel(p: PhysicalParams, D_w: Real, D_b: Real, x, u: Real, tau_ext1: float,
           tau_ext2: float, m=math) -> Tuple[float, float]:
     """True accelerations (theta_w'', theta_b'') of eq. (1) with eq. (3)'s disturbances, as floats.
 

@@ -200,10 +200,10 @@ class Shaper:
 
     def reset(self) -> None:
         """Forget the run: the next :meth:`reference` is period 0 again (the counters stay)."""
-        self.k = None            # the last period a reference was made for
+        self.k: Optional[int] = None   # the last period a reference was made for
         self.ref: Optional[Reference] = None
         self.cmd = (0.0, 0.0)    # the target (v, psi'), clipped
-        self.cmd_k = None        # the period the newest command came in (None: none yet)
+        self.cmd_k: Optional[int] = None   # the period the newest command came in (None: none yet)
         self.stopped = True      # no command in force (none yet, or timed out)
         self.stopped_now = False   # True for the period the timeout stopped the robot (log it once)
         self.hold: Optional[Hold] = None   # this period's equilibrium (theory 6.14), None: none (moving, or off)
@@ -276,7 +276,7 @@ class Shaper:
         about once the robot came to rest."""
         c, h = self.cfg, self.h
         self.stopped_now = False
-        if self.ref is None:
+        if self.ref is None or self.k is None:   # (the two are None together: reset)
             v, w = self._target(k)
             tw, dtw, v = speed_start(v, float(theta_w0 if x is None else x[0]), c.max_accel, h, c.r)   # from rest
             w = _clip(w, c.max_yaw_rate * h)
@@ -292,18 +292,18 @@ class Shaper:
                 self.ref = Reference(tw, dtw, v, w, c.position_gain, c.lean_gain)
                 if v == 0.0 and r.v != 0.0:
                     self.k_stop = self.k   # a stop: v* reached 0
-        return self.ref if x is None else self._held(x, tau_hat)
+        return self.ref if x is None else self._held(self.ref, self.k, x, tau_hat)
 
-    def _held(self, x, tau_hat) -> Reference:
+    def _held(self, ref: Reference, k: int, x, tau_hat) -> Reference:
         """The hold of this period for the measured state ``x`` and the estimate ``tau_hat`` (None: no observer
         term, no equilibrium) (docs/theory.md 6.14): theta_w* and :attr:`hold`."""
-        c, h, ref = self.cfg, self.h, self.ref
+        c, h = self.cfg, self.h
         equilibrium = tau_hat is not None and self.hold_gain > 0.0 and self.nominal is not None
         near = abs(x[1] - (self.hold.lean if self.hold is not None else 0.0)) <= HOLD_NEAR
         if equilibrium and near:   # far from the equilibrium (a recovery, a drive at its limit) tau_bar is held
             self.tau_bar = hold_estimate(tau_hat[0], tau_hat[1], *self.tau_bar, self.hold_gain)
         still = ref.v == 0.0
-        held = still and (self.k - self.k_stop) * h < c.hold_settle_s - 1e-9
+        held = still and (k - self.k_stop) * h < c.hold_settle_s - 1e-9
         tw, self.offset, self.pending, rest = anchor_step(x[0], x[2], self.prev_rate, ref.theta_w, self.offset,
                                                           self.pending, held, self.rested, REST_MOVE / c.r, self.blend)
         self.prev_rate = x[2] if still else math.nan

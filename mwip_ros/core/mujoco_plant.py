@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import ClassVar, Optional, Tuple
+from typing import Any, ClassVar, Optional, Tuple
 
 from .drive import motor_torque
 from .markers import pose_angles
@@ -170,10 +170,10 @@ class MujocoPlant(PlantSim):
     """The :class:`~.plant.Plant` of a MuJoCo model (module docstring); the D_w generator, the clock and the
     bookkeeping of the previous period are :class:`~.plant.PlantSim`'s."""
 
-    pose: Optional[Pose] = None
+    pose: Optional[Pose] = None   # type: ignore[misc]  # a field here; PlantSim's (planar) is the class's None
     wheels_prev: Optional[Tuple[float, float]] = None   # the yaw stage's (u_L, u_R) that acted (theory 6.13)
     wheels_cmd_prev: Optional[Tuple[float, float]] = None   # ... and what was commanded (the motor's inputs)
-    _mj: object = field(default=None, repr=False)
+    _mj: Any = field(default=None, repr=False)   # the mujoco module
     _pushed: bool = False   # external_wrench's force.y or torque.z acts on the body (xfrc_applied, :meth:`_push`)
     spatial: ClassVar[bool] = True   # a 3D pose (Pose, core.plant)
 
@@ -291,12 +291,13 @@ class MujocoPlant(PlantSim):
 
     def sample_accel(self) -> Tuple[float, float]:
         c = self.cfg
-        u, wheels = self.u_prev, self.wheels_prev
+        u, wheels, cmd = self.u_prev, self.wheels_prev, self.wheels_cmd_prev
         if c.motor.enabled and self.k > 0 and self.enabled_prev:
-            if wheels is not None:   # the yaw stage's pair: each wheel's half motor at its own rate
+            if wheels is not None and cmd is not None:   # the yaw stage's pair (the two are set together): each
+                # wheel's half motor at its own rate
                 half = self._half_motor(c.motor_constants)
-                wheels = (motor_torque(self.wheels_cmd_prev[0], float(self._qvel[6]), *half)[0],
-                          motor_torque(self.wheels_cmd_prev[1], float(self._qvel[7]), *half)[0])
+                wheels = (motor_torque(cmd[0], float(self._qvel[6]), *half)[0],
+                          motor_torque(cmd[1], float(self._qvel[7]), *half)[0])
                 u = wheels[0] + wheels[1]
             else:
                 u = motor_torque(self.u_cmd_prev, self.x[2] - self.x[3], *c.motor_constants)[0]

@@ -11,11 +11,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Optional, Tuple
+from typing import Any, Optional, Tuple, Union, cast
 
 import numpy as np
 
-from .model import PhysicalParams, coriolis_gravity, mass_matrix
+from .model import PhysicalParams, Real, coriolis_gravity, mass_matrix
 
 __all__ = ["gain_matrix", "z_dot", "z_dot_explicit", "error_rates", "DiscreteObserver"]
 
@@ -82,7 +82,7 @@ def tau_hat_of(c, z, dw, db) -> Tuple[float, float]:
 def _flat(X) -> Tuple[float, float, float, float]:
     if isinstance(X, tuple) and len(X) == 4:
         return X
-    return tuple(float(v) for v in np.asarray(X, dtype=float).ravel())
+    return cast(Tuple[float, float, float, float], tuple(float(v) for v in np.asarray(X, dtype=float).ravel()))
 
 
 def error_rates(nominal: PhysicalParams, X: np.ndarray, x) -> np.ndarray:
@@ -104,7 +104,7 @@ class DiscreteObserver:
     """
 
     nominal: PhysicalParams
-    X: np.ndarray
+    X: Union[np.ndarray, Tuple[Any, ...]]   # (a tuple of four arrays over a batch)
     h: float
     z: Optional[tuple] = None
     m: object = math
@@ -122,7 +122,7 @@ class DiscreteObserver:
         """Forget the past: the next update starts again with tau_hat = 0."""
         self.z = self._prev = None
 
-    def update(self, x, u_prev: float, h: Optional[float] = None) -> Tuple[float, float]:
+    def update(self, x, u_prev: Real, h: Optional[float] = None) -> Tuple[float, float]:
         if self._gains[0] is not self.X:  # X was (re)assigned, e.g. a parameter update
             self._gains = (self.X, _flat(self.X))
         c = self._gains[1]

@@ -10,7 +10,7 @@ largest |theta_b| there is the pitch bound of the turn.  Non-finite samples are 
 from __future__ import annotations
 
 import math
-from typing import Mapping, Sequence, Tuple
+from typing import Mapping, Sequence, Tuple, Union
 
 import numpy as np
 
@@ -20,7 +20,8 @@ from .odometry import arc_step
 __all__ = ["ideal_path", "cross_track", "path_metrics", "PATH_HEADERS", "path_rows", "path_table"]
 
 
-def ideal_path(v_ref: Sequence[float], dpsi_ref: Sequence[float], h: float, start=(0.0, 0.0, 0.0)
+def ideal_path(v_ref: Union[Sequence[float], np.ndarray], dpsi_ref: Union[Sequence[float], np.ndarray],
+               h: float, start=(0.0, 0.0, 0.0)
                ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(x, y, psi) of the references at every t_k: the pose ``start`` at t_0, then v*_k, psi'*_k held over period k."""
     n = len(v_ref)

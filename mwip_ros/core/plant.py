@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Callable, ClassVar, Dict, NamedTuple, Optional, Protocol, Tuple, runtime_checkable
+from typing import TYPE_CHECKING, Callable, ClassVar, Dict, NamedTuple, Optional, Protocol, Tuple, runtime_checkable
 
 import numpy as np
 
@@ -21,9 +21,12 @@ from .model import PhysicalParams, Sinusoid, State, accel, lumped_disturbance
 from .raw_sensors import RawSensorConfig
 from .sensing import NOISE_BLOCK, SensingConfig
 
+if TYPE_CHECKING:   # for the annotations only: importing it here would import mujoco_plant with every plant
+    from .mujoco_plant import MujocoConfig
+
 __all__ = ["Plant", "PLANTS", "make_plant", "PlantConfig", "PlantSim", "RK4Plant", "stage_torques", "rk4_period",
            "rk4_driven", "NO_MOTOR", "saturate", "D_w_of", "gated_drive", "finite_state", "PlantDiverged",
-           "Pose"]
+           "Pose", "SpatialPlant"]
 
 
 @dataclass(frozen=True)
@@ -48,7 +51,7 @@ class PlantConfig:
     motor: MotorConfig = MotorConfig()         # the DC motor and its driver (docs/theory.md 6.7); off
     require_enable: bool = False               # the driver starts disabled (docs/theory.md 6.8)
     backend: str = "rk4"                       # a key of PLANTS: rk4 (eq. 1, this module) or mujoco (theory.md 6.10)
-    mujoco: Optional[object] = None            # the MuJoCo model's own values (core.mujoco_plant.MujocoConfig)
+    mujoco: Optional[MujocoConfig] = None      # the MuJoCo model's own values (core.mujoco_plant.MujocoConfig)
 
     @property
     def motor_constants(self) -> Tuple[float, float, float, float]:
@@ -110,8 +113,11 @@ class Plant(Protocol):
     k: int
     x: State
     u_prev: float
+    saturation: int
     spatial: ClassVar[bool]
-    pose: Optional[Pose]
+
+    @property
+    def pose(self) -> Optional[Pose]: ...   # read here: a class constant (planar) or a field (spatial)
 
     @property
     def integration(self) -> str: ...
@@ -131,6 +137,20 @@ class Plant(Protocol):
     def lie(self) -> None: ...
 
 
+class SpatialPlant(Plant, Protocol):
+    """A :class:`Plant` whose ``spatial`` is True (:class:`~.mujoco_plant.MujocoPlant`): the body's yaw rate and the
+    IMU's reading too (docs/theory.md 6.13, 6.4)."""
+
+    @property
+    def yaw_rate(self) -> float: ...
+
+    def imu_reading(self) -> Tuple[Tuple[float, ...], Tuple[float, ...]]: ...
+
+    def lumped_disturbance(self, u: float, extra=(0.0, 0.0), wheels=None) -> Tuple[float, float]: ...
+
+    def step(self, u: float, extra=(0.0, 0.0), enabled: bool = True, wheels=None) -> None: ...
+
+
 @dataclass
 class PlantSim:
     """The true state ``x`` (a :class:`State`) at t_k = k h.
@@ -142,15 +162,15 @@ class PlantSim:
 
     cfg: PlantConfig
     k: int = 0
-    x: Optional[State] = None
+    x: State = None   # type: ignore[assignment]  # None: cfg.initial; __post_init__ makes it a State
     D_w: float = 0.0                 # ground friction over the current period
     u_prev: float = 0.0              # the torque that acted over the previous period (0 at k = 0)
     u_cmd_prev: float = 0.0          # the command held over the previous period (the motor's input)
     saturation: int = 0              # the drive's worst saturation code over the previous period (core.drive)
     D_w_prev: float = 0.0            # the previous period's D_w (period 0's at k = 0): a raw sample's instant
-    extra_prev: Tuple[float, float] = (0.0, 0.0)   # the external wrench held over the previous period
+    extra_prev: Tuple[float, ...] = (0.0, 0.0)   # the external wrench held over the previous period
     enabled_prev: bool = True        # the driver was enabled over the previous period (its bridge closed)
-    _rng: np.random.Generator = field(default=None, repr=False)
+    _rng: np.random.Generator = field(default=None, repr=False)   # type: ignore[assignment]  # set in __post_init__
     _noise: list = field(default_factory=list, repr=False)
     spatial: ClassVar[bool] = False  # planar: no 3D pose
     pose: ClassVar[Optional[Pose]] = None
@@ -181,7 +201,7 @@ class PlantSim:
             self._noise = self._rng.standard_normal(NOISE_BLOCK).tolist()[::-1]
         return D_w_of(c.D_w_mean, math.sqrt(c.D_w_variance), self._noise.pop())
 
-    def tau_ext(self, t: float, extra: Tuple[float, float] = (0.0, 0.0)) -> Tuple[float, float]:
+    def tau_ext(self, t: float, extra: Tuple[float, ...] = (0.0, 0.0)) -> Tuple[float, float]:
         return self.cfg.tau_ext1(t) + extra[0], self.cfg.tau_ext2(t) + extra[1]
 
     def accel(self, t: float, x, u: float, extra=(0.0, 0.0)) -> Tuple[float, float]:

@@ -257,7 +257,8 @@ class DriverStateMachine:
     def diagnostic(self) -> Tuple[int, str]:
         """(level, message) for /diagnostics: 0 OK (enabled), 1 WARN (disabled), 2 ERROR (fault, with its reason)."""
         if self.state == FAULT:
-            extra = f" (+{self.suppressed} later fault(s), last: {self.last_suppressed[1]})" if self.suppressed else ""
+            last = self.last_suppressed   # set with every suppressed fault
+            extra = f" (+{self.suppressed} later fault(s), last: {last[1]})" if self.suppressed and last else ""
             held = f"; held: {', '.join(self.held)} (reset refused until released)" if self.held else ""
             return _LEVEL[FAULT], f"fault: {self._fault_text()}{extra}{held}"
         return _LEVEL[self.state], self.state

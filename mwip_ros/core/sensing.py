@@ -23,7 +23,7 @@ from __future__ import annotations
 import math
 from collections import deque
 from dataclasses import dataclass
-from typing import Callable, Optional, Sequence, Tuple
+from typing import Any, Callable, Deque, List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -82,7 +82,8 @@ class Normals:
     """Four standard normal draws per period from one generator, drawn in blocks."""
 
     def __init__(self, rng: np.random.Generator):
-        self.rng, self.block, self.used = rng, None, NOISE_BLOCK
+        self.rng, self.used = rng, NOISE_BLOCK
+        self.block: List[List[float]] = []   # filled at the first call (used == NOISE_BLOCK)
 
     def __call__(self) -> Tuple[float, float, float, float]:
         if self.used == NOISE_BLOCK:
@@ -100,7 +101,7 @@ class Sensors:
 
     def __init__(self, delay_periods: int, counts, std, normals: Optional[Callable[[], Sequence]] = None, m=math):
         self.counts, self.std, self.normals, self.m = counts, std, normals, m
-        self.queue = deque(maxlen=int(delay_periods) + 1)
+        self.queue: Deque[Tuple[Any, Any]] = deque(maxlen=int(delay_periods) + 1)
 
     @classmethod
     def for_plant(cls, cfg: SensingConfig, seed: int) -> "Sensors":
@@ -118,7 +119,7 @@ class Actuator:
     """``apply(u_k)`` once per period: the torque acting over [t_k, t_{k+1}), the command of d periods ago."""
 
     def __init__(self, delay_periods: int, zero=0.0):
-        self.queue = deque(maxlen=delay_periods + 1)
+        self.queue: Deque[Any] = deque(maxlen=delay_periods + 1)
         self.zero = zero
 
     def apply(self, u):

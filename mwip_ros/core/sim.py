@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any, Callable, Optional, Tuple
+from typing import Any, Callable, Optional, Tuple, Type
 
 from . import laws
 from .estimators import EstimatorConfig
@@ -69,7 +69,7 @@ class ClosedLoop:
         return self.controller
 
     @property
-    def law_class(self) -> type:
+    def law_class(self) -> Type[laws.Law]:
         return laws.get(self.controller)
 
     @property
@@ -104,7 +104,9 @@ def make_period(loop: ClosedLoop, plant: Optional[PlantConfig] = None, law=None)
     """
     pc = loop.plant if plant is None else plant
     h = pc.h
-    estimator = loop.estimator.make(h, pc.nominal.r, pc.nominal.g) if pc.raw is not None else None
+    # (a raw plant without an estimator: Period refuses it, ValueError)
+    estimator = (loop.estimator.make(h, pc.nominal.r, pc.nominal.g)
+                 if pc.raw is not None and loop.estimator is not None else None)
     excitation = Excitation(loop.excitation, h) if loop.excitation is not None else None
     motion = Shaper(loop.motion, h, pc.nominal) if loop.motion is not None else None
     side = PlantSide(pc)

@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import functools
 import struct
-from typing import Dict, List, Sequence, Tuple
+from typing import Dict, List, Optional, Sequence, Tuple, cast
 
 from .errors import CdrError
 from .stamps import NS_PER_S as _NS, join_ns, split_ns
@@ -47,6 +47,7 @@ __all__ = ["CDR_LE", "CdrError", "JointStateEncoder", "WrenchStampedEncoder", "I
 IMU_DOUBLES = 4 + 9 + 3 + 9 + 3 + 9   # sensor_msgs/Imu after its Header: every field a float64, no sequence
 
 CDR_LE = b"\x00\x01\x00\x00"
+_V3 = Tuple[float, float, float]   # a vector xyz (the typing of the decoders below)
 
 
 # Compiled formats; bounded, since a foreign publisher can send any sequence length.
@@ -169,7 +170,7 @@ def decode_joint_state(data) -> Tuple[int, str, List[str], Tuple[float, ...], Tu
     names = [r.string() for _ in range(n)]
     body_at = r.pos
     fmt, counts_at, at = r.e, [], r.pos
-    seqs = []
+    seqs: List[Tuple[float, ...]] = []
     for _ in range(3):
         pad = -(at - 4) % 4
         fmt += f"{pad}xI"
@@ -183,7 +184,7 @@ def decode_joint_state(data) -> Tuple[int, str, List[str], Tuple[float, ...], Tu
             at += pad + 8 * len(seq)
         seqs.append(seq)
     _learn("JointState", data, body_at, fmt, tuple(counts_at), (frame, tuple(names)))
-    return (stamp, frame, names, *seqs)
+    return stamp, frame, names, seqs[0], seqs[1], seqs[2]
 
 
 def decode_wrench_stamped(data) -> Tuple[int, str, Tuple[float, float, float], Tuple[float, float, float]]:
@@ -198,7 +199,7 @@ def decode_wrench_stamped(data) -> Tuple[int, str, Tuple[float, float, float], T
     body_at = r.pos
     v = r.doubles(6)
     _learn("WrenchStamped", data, body_at, f"{r.e}{-(body_at - 4) % 8}x6d", (), (frame,))
-    return stamp, frame, v[:3], v[3:]
+    return stamp, frame, cast(_V3, v[:3]), cast(_V3, v[3:])
 
 
 def decode_imu(data) -> Tuple[int, str, Tuple[float, ...], Tuple[float, ...], Tuple[float, ...], Tuple[float, ...],
@@ -230,7 +231,7 @@ def decode_odometry(data) -> Tuple[int, str, str, Tuple[float, ...]]:
 def decode_wrench(data) -> Tuple[Tuple[float, float, float], Tuple[float, float, float]]:
     """geometry_msgs/Wrench -> (force xyz, torque xyz)."""
     v = _Reader(data, "Wrench").doubles(6)
-    return v[:3], v[3:]
+    return cast(_V3, v[:3]), cast(_V3, v[3:])
 
 
 def peek_stamp(data):
@@ -271,7 +272,7 @@ def decode_pose_stamped(data) -> Tuple[int, str, Tuple[float, float, float], Tup
     stamp = r.time_ns()
     frame = r.string()
     v = r.doubles(7)
-    return stamp, frame, v[:3], v[3:]
+    return stamp, frame, cast(_V3, v[:3]), cast(Tuple[float, float, float, float], v[3:])
 
 
 # --- encoding (little endian) ----------------------------------------------------------------------
@@ -283,7 +284,7 @@ def _string(s: str, pos: int) -> Tuple[bytes, int]:
     return b"\x00" * pad + struct.pack("<I", len(b)) + b, pos + pad + 4 + len(b)
 
 
-def _header_tail(frame_id: str, names: Sequence[str] = None) -> Tuple[bytes, int]:
+def _header_tail(frame_id: str, names: Optional[Sequence[str]] = None) -> Tuple[bytes, int]:
     """The bytes after the stamp: frame_id and, for a JointState, the name sequence; and the end offset."""
     out, pos = _string(frame_id, 8)
     if names is not None:

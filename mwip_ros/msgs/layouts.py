@@ -238,7 +238,7 @@ def encode_encoder(stamp: int, phi: float, rate: float, torque: float) -> bytes:
     return _ENCODER(stamp, (float(phi),), (float(rate),), (float(torque),))
 
 
-_INTERNAL_ENCODERS = {INTERNAL_NAMES: _INTERNALS}
+_INTERNAL_ENCODERS: Dict[Tuple[str, ...], cdr.JointStateEncoder] = {INTERNAL_NAMES: _INTERNALS}
 
 
 def encode_internals(stamp: int, out, names: Sequence[str] = INTERNAL_NAMES) -> bytes:

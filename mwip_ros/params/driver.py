@@ -12,7 +12,7 @@ a value no backend can run with is a :class:`~.errors.ParamError` naming its key
 from __future__ import annotations
 
 import math
-from typing import Any, List, Mapping
+from typing import Any, Dict, List, Mapping
 
 from .errors import ParamError
 
@@ -29,7 +29,8 @@ def specs() -> List[Any]:
     from mwip_ros.robot.moteus_backend import MoteusConfig
     from .schema import ParamSpec
     m = MoteusConfig(path="-", maximum_torque=1.0)   # the moteus defaults, one place (MoteusConfig)
-    time_range = dict(lo=0.0, hi=10.0, lo_open=True, floor=1e-4, floor_why="a bound below 0.1 ms", hi_why="")
+    time_range: Dict[str, Any] = dict(lo=0.0, hi=10.0, lo_open=True, floor=1e-4, floor_why="a bound below 0.1 ms",
+                                      hi_why="")
     return [
         ParamSpec("mode", "string", "realtime", "realtime (the driver keeps the wall-clock schedule: period k due at "
                   "t0 + k h) or lockstep (simulated backends only: /clock and one period per command, as plant_sim's "
@@ -144,7 +145,8 @@ def moteus_config(values: Mapping[str, Any], robot: Mapping[str, Any]):
     try:
         return MoteusConfig(path=values["moteus.path"], maximum_torque=limit,
                             ids=(values["moteus.left_id"], values["moteus.right_id"]),
-                            signs=tuple(-1 if values[f"moteus.{w}_reversed"] else 1 for w in ("left", "right")),
+                            signs=(-1 if values["moteus.left_reversed"] else 1,
+                                   -1 if values["moteus.right_reversed"] else 1),
                             watchdog_timeout=values["moteus.watchdog_timeout"],
                             reply_timeout=values["moteus.reply_timeout"], silence_limit=values["moteus.silence_limit"])
     except ValueError as exc:   # "moteus: KEY: why": the key is moteus.KEY (ids: the two ids)

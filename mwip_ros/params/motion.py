@@ -6,7 +6,7 @@
 """
 from __future__ import annotations
 
-from typing import Any, List, Mapping, Optional
+from typing import Any, Dict, List, Mapping, Optional
 
 from mwip_ros.core.motion import ABSURD_SPEED
 
@@ -47,7 +47,7 @@ def yaw_profile_rule(v) -> Optional[str]:
 def specs() -> List[Any]:
     """The ``motion.*`` ParamSpecs (called by ``params.schema`` once ``ParamSpec`` exists)."""
     from .schema import ParamSpec
-    pos = dict(lo=0.0, lo_open=True)
+    pos: Dict[str, Any] = dict(lo=0.0, lo_open=True)
     return [
         ParamSpec("motion.enabled", "bool", False, "track references from cmd_vel (or motion.profile): every law "
                   "tracks the wheel's reference angle and rate (docs/theory.md 6.11); false = balance only, "

@@ -63,15 +63,15 @@ def _positive_from(floor: float, hi: float, why: str) -> Dict[str, Any]:
 # tau4 so small that (x4_bar - x4d) / tau4 overflows is no filter; a rate below 1 mHz has no nanosecond period
 _tau4 = _positive_from(1e-6, 1e6, "a filter faster than a microsecond is no filter")
 _rate = _positive_from(1e-3, 1e5, "a control period of at most 1000 s")
-_at_least_zero = dict(lo=0)     # an integer: its descriptor's range ends at INT32_MAX
-_at_least_one = dict(lo=1)
+_at_least_zero: Dict[str, Any] = dict(lo=0)     # an integer: its descriptor's range ends at INT32_MAX
+_at_least_one: Dict[str, Any] = dict(lo=1)
 
 
 def _count_range(lo: int, hi: int) -> Dict[str, Any]:
     return dict(lo=lo, hi=hi)
 
 
-_priority = dict(lo=0, hi=99, words="0 (normal scheduling) or a SCHED_FIFO priority 1..99")
+_priority: Dict[str, Any] = dict(lo=0, hi=99, words="0 (normal scheduling) or a SCHED_FIFO priority 1..99")
 
 
 def _one_of(*choices) -> Dict[str, Any]:
@@ -96,8 +96,8 @@ def _lqr_q_rule(v):
     return None
 
 
-_four_finite = dict(rule=_four_finite_rule, words="must have 4 entries [c1, c2, c3, c4]")
-_lqr_q = dict(rule=_lqr_q_rule, words="give the diagonal (3 entries) or the 3x3 matrix row by row (9)")
+_four_finite: Dict[str, Any] = dict(rule=_four_finite_rule, words="must have 4 entries [c1, c2, c3, c4]")
+_lqr_q: Dict[str, Any] = dict(rule=_lqr_q_rule, words="give the diagonal (3 entries) or the 3x3 matrix row by row (9)")
 
 INT32_MAX = 2 ** 31 - 1   # the top of an integer parameter's descriptor range when it has no ``hi``
 HI_WHY = "far beyond any robot of this kind"

@@ -1,7 +1,7 @@
 """Typed configurations of the core, built from a node's (or a merged) parameter dict."""
 from __future__ import annotations
 
-from typing import Any, Iterable, List, Mapping, Optional
+from typing import Any, Iterable, List, Mapping, Optional, Tuple, cast
 
 from mwip_ros.core import laws
 from mwip_ros.core.controller import DscGains
@@ -216,7 +216,8 @@ def closed_loop(v: Mapping[str, Any], use_observer: Optional[bool] = None,
                                   v["use_observer"] if use_observer is None else use_observer).name
     cls = laws.get(controller)
     plant = plant_config(v)
-    return ClosedLoop(plant=plant, X=tuple(float(c) for c in v["X"]), controller=controller,
+    X = cast(Tuple[float, float, float, float], tuple(float(c) for c in v["X"]))   # 4 entries: the schema's rule
+    return ClosedLoop(plant=plant, X=X, controller=controller,
                       params=cls.design(v, plant.nominal, plant.h),
                       duration_s=v["duration_s"] if duration is None else duration,
                       estimator=estimator(v) if plant.raw is not None else None, excitation=excitation(v),

@@ -294,7 +294,7 @@ class MoteusBackend(Backend):
                 cmd.reply_filter = self._recorder(cmd.reply_filter, frames, cid)
         try:
             await asyncio.wait_for(self.transport.cycle(commands), self.cfg.reply_timeout)
-        except asyncio.TimeoutError:
+        except TimeoutError:
             pass
         return {cid: cmd.parse(frames[cid]).values for cid, cmd in zip(self.cfg.ids, commands) if cid in frames}
 

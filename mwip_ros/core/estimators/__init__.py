@@ -14,7 +14,7 @@ Today's estimators: ``complementary`` (:mod:`.complementary`) and ``kalman`` (:m
 from __future__ import annotations
 
 import math
-from typing import Any, Dict, Mapping, NamedTuple, Optional, Tuple
+from typing import Any, Callable, Dict, Mapping, NamedTuple, Optional, Tuple, Type, TypeVar
 
 from ..model import State
 
@@ -83,7 +83,7 @@ class Estimator:
     name: str = ""
     title: str = ""
     parameters: Tuple[EstimatorParam, ...] = ()
-    pure_step = None
+    pure_step: Optional[Callable[..., Any]] = None
     state_size: int = 0
 
     def __init__(self, params: Optional[Mapping[str, Any]], h: float, r: float, d: float, g: float):
@@ -134,8 +134,10 @@ class Estimator:
     def step(self, sample, dt: Optional[float] = None) -> State:
         """The estimated state at the sample's instant, ``dt`` [s] after the last sample (the period ``h`` when
         None: no sample lost between them); :attr:`health` tells how the step went."""
-        est, self.s, health = type(self).pure_step(self.P, self.h if dt is None else dt, tuple(sample), self.s,
-                                                   self.first)
+        pure_step = type(self).pure_step
+        if pure_step is None:   # the same TypeError as calling None, naming the class
+            raise TypeError(f"{type(self).__name__} has no pure_step")
+        est, self.s, health = pure_step(self.P, self.h if dt is None else dt, tuple(sample), self.s, self.first)
         self.first = False
         self.health = Health(*health)
         return State(*est)
@@ -151,10 +153,11 @@ class Estimator:
         self.s, self.first, self.health = snap
 
 
-_ESTIMATORS: Dict[str, type] = {}
+_ESTIMATORS: Dict[str, Type[Estimator]] = {}
+_E = TypeVar("_E", bound=Type[Estimator])
 
 
-def register(cls: type) -> type:
+def register(cls: _E) -> _E:
     """Register ``cls`` under ``cls.name`` (the same class again is allowed, another under a taken name not)."""
     if not cls.name:
         raise ValueError(f"{cls.__name__} has no name")
@@ -166,7 +169,7 @@ def register(cls: type) -> type:
     return cls
 
 
-def get(method: str) -> type:
+def get(method: str) -> Type[Estimator]:
     """The estimator registered as ``method``; KeyError naming the known ones."""
     try:
         return _ESTIMATORS[method]

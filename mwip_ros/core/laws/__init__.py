@@ -28,7 +28,7 @@ from __future__ import annotations
 import importlib
 import math
 import os
-from typing import Any, Dict, List, Mapping, NamedTuple, Optional, Tuple
+from typing import Any, Callable, Dict, List, Mapping, NamedTuple, Optional, Tuple, Type, TypeVar
 
 from ..motion import error_state
 
@@ -110,11 +110,12 @@ class Law:
     internal_names: Tuple[str, ...] = ("u",)
     Params: type = type(None)
     announce: bool = False
-    pure_step = None
-    pure_track = None
+    pure_step: Optional[Callable[..., Any]] = None
+    pure_track: Optional[Callable[..., Any]] = None
     pure_lanes = 0
     limit_key: Optional[str] = None
     requires: Tuple[str, ...] = ()
+    _with_observer: Type[Law]   # set by .ndo.with_observer on the base class it composes (annotation only)
     ref = None   # the motion reference (core.motion.Reference) of this period; None: regulation, as in the paper
 
     @staticmethod
@@ -229,10 +230,11 @@ class PluginError(ImportError):
     the module and the error."""
 
 
-_LAWS: Dict[str, type] = {}
+_LAWS: Dict[str, Type[Law]] = {}
+_L = TypeVar("_L", bound=Type[Law])
 
 
-def register(cls: type, with_observer: Optional[str] = None, title: Optional[str] = None) -> type:
+def register(cls: _L, with_observer: Optional[str] = None, title: Optional[str] = None) -> _L:
     """Register the law ``cls`` under ``cls.name``; ``with_observer`` also registers, under that name, its
     variant with the observer term (eq. 19-21, :func:`.ndo.with_observer`), titled ``title``.
 
@@ -259,7 +261,7 @@ def _same_law(a: type, b: type) -> bool:
     return getattr(a, "base", None) is not None and getattr(a, "base", None) is getattr(b, "base", None)
 
 
-def get(name: str) -> type:
+def get(name: str) -> Type[Law]:
     """The law registered as ``name``; KeyError naming the known ones."""
     try:
         return _LAWS[name]
@@ -278,7 +280,7 @@ def families() -> Tuple[str, ...]:
     return tuple(dict.fromkeys(law.family for law in _LAWS.values()))
 
 
-def lookup(family: str, use_observer: bool) -> Optional[type]:
+def lookup(family: str, use_observer: bool) -> Optional[Type[Law]]:
     """The law of ``family`` with (``use_observer``) or without the observer term, or None."""
     for law in _LAWS.values():
         if law.family == family and law.observer == bool(use_observer):
@@ -286,7 +288,7 @@ def lookup(family: str, use_observer: bool) -> Optional[type]:
     return None
 
 
-def variant(family: str, use_observer: bool) -> type:
+def variant(family: str, use_observer: bool) -> Type[Law]:
     """:func:`lookup`, or ValueError naming what is missing."""
     law = lookup(family, use_observer)
     if law is None:
@@ -297,7 +299,7 @@ def variant(family: str, use_observer: bool) -> type:
     return law
 
 
-def unavailable(law: type) -> Optional[str]:
+def unavailable(law: Type[Law]) -> Optional[str]:
     """None when the optional packages ``law`` needs (:attr:`Law.requires`, its base's for an observer variant) can
     be imported, else the one line naming the first missing one and how to install it."""
     from mwip_ros.optional import missing

@@ -8,7 +8,7 @@ controller node switching ``use_observer`` at run time keeps the law's state (th
 from __future__ import annotations
 
 import math
-from typing import Optional
+from typing import Optional, Type
 
 from ..controller import u_taud_of
 from . import Law
@@ -19,7 +19,7 @@ __all__ = ["WithObserver", "with_observer"]
 class WithObserver(Law):
     """``base`` (a :class:`~mwip_ros.core.laws.Law` class) with the observer term subtracted."""
 
-    base: type = Law
+    base: Type[Law] = Law
     observer = True
 
     def __init__(self, params, nominal, h: float, m=math):
@@ -86,7 +86,7 @@ class WithObserver(Law):
         return self.inner.warnings()
 
 
-def with_observer(base: type, name: str, title: Optional[str] = None) -> type:
+def with_observer(base: Type[Law], name: str, title: Optional[str] = None) -> Type[Law]:
     """The law ``base`` plus the observer term, registered as ``name`` (one class per base and name)."""
     cached = base.__dict__.get("_with_observer")
     if cached is not None and cached.name == name:

@@ -71,7 +71,7 @@ def markers(nominal, x, stamp: int) -> MarkerArray:
     t = to_time(stamp)
     out = []
 
-    def marker(mid, kind, position=(0.0, 0.0, 0.0), angle=0.0, scale=(1.0, 1.0, 1.0), color=_color(1, 1, 1)):
+    def marker(mid, kind, position=(0.0, 0.0, 0.0), angle=0.0, scale=(1.0, 1.0, 1.0), color=_color(1, 1, 1)):   # noqa: B008 - read-only
         m = Marker()
         m.header.frame_id, m.header.stamp = FRAME, t
         m.ns, m.id, m.type, m.action = "mwip", mid, kind, Marker.ADD
