@@ -237,10 +237,12 @@ def read_bag_run(bag, label: Optional[str] = None, segment: Optional[int] = None
     can have clipped it), else NaN (unknown).  A state resent with the same stamp counts once.
     When the plant measured with noise or delay, the bag has ``true_joint_states`` too: the
     trajectory (and so every metric) is the true one, and the last row's torque is NaN (with an
-    actuator delay no message holds it).  The run's ``record`` is :func:`plant_record`'s.  A spatial plant's bag
-    (backend mujoco) has ``true_pose`` and ``true_wheel_states`` too: the trajectory then has the pose columns (x, y,
-    yaw, roll from the one, wheel_left, wheel_right from the other; NaN where a stamp has none); a bag without them
-    reads as before.
+    actuator delay no message holds it).  With raw sensors and no truth (a robot's bag: the wheel_driver on a
+    device) joint_states is the state estimator's estimate: the trajectory is the estimate, and its ``record`` says
+    so (``states_from``: ``"estimate"``).  The run's ``record`` is otherwise :func:`plant_record`'s.  A spatial
+    plant's bag (backend mujoco) has ``true_pose`` and ``true_wheel_states`` too: the trajectory then has the pose
+    columns (x, y, yaw, roll from the one, wheel_left, wheel_right from the other; NaN where a stamp has none); a bag
+    without them reads as before.
 
     A bag of several runs (a reset or a new plant: the stamps go back, :mod:`mwip_ros.bag.segments`) is
     never merged: without ``segment`` it raises :class:`~mwip_ros.bag.segments.SpliceError` (a
@@ -311,6 +313,9 @@ def read_bag_run(bag, label: Optional[str] = None, segment: Optional[int] = None
         except BadMessage:
             continue  # not the graph's message (a foreign publisher): not part of the run
     estimates = None
+    # raw sensors and no truth (a robot, the wheel_driver on a device): joint_states is the state estimator's
+    # estimate, and so is every metric of the trajectory; the record says so (states_from)
+    estimated_only = bool(len(imu)) and not len(true_states)
     if len(true_states):   # the measurement is what the loop saw; the truth is what happened
         # the torque that acted over the last period is in no message (an actuator delay holds it back)
         if len(imu):   # raw sensors: joint_states is the state_estimator's estimate (its columns *_hat)
@@ -339,6 +344,8 @@ def read_bag_run(bag, label: Optional[str] = None, segment: Optional[int] = None
     check_times(run.t, bag)
     run.h = float(np.median(np.diff(run.t))) if len(run) > 1 else NAN
     run.record = record
+    if estimated_only:
+        run.record["states_from"] = "estimate"
     if len(odom):
         drift = _bag_odometry_drift(odom, states, poses)
         if drift is not None:

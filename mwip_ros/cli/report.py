@@ -132,13 +132,16 @@ def ratio_table(named: Sequence[tuple], markdown: bool = True) -> List[str]:
 
 
 def run_notes(run: Trajectory, m: metrics.Metrics) -> List[str]:
-    """What a run's end was: its fall, its cut (the plant's configured duration, where the bag recorded it); a
-    spatial plant's (backend mujoco) 3D pose at the end (:func:`pose_summary`); with robot_state's odom in the bag,
-    its drift from the true pose (docs/theory.md 6.12)."""
+    """What a run's end was: its fall, its cut (the plant's configured duration, where the bag recorded it); that a
+    robot's bag has no truth (its numbers are the estimate's); a spatial plant's (backend mujoco) 3D pose at the end
+    (:func:`pose_summary`); with robot_state's odom in the bag, its drift from the true pose (docs/theory.md 6.12)."""
     rec = run.record or {}
     odo = rec.get("odometry")
     pose = pose_summary(run)
     notes = _end_notes(run, m, rec)
+    if rec.get("states_from") == "estimate":   # a robot's bag (runs.read_bag_run): no truth to judge
+        notes.append("no truth in the bag (a robot): its states and metrics are the state estimator's estimate "
+                     "(joint_states)")
     if pose:
         f = {k: _fixed(v, 4 if k != "t_s" else 3) for k, v in pose.items()}
         notes.append(f"3D pose at t = {f['t_s']} s: x {f['x_m']} m, y {f['y_m']} m, yaw {f['yaw_rad']} rad (max "

@@ -210,38 +210,58 @@ def run(backend: Backend, loop: ClosedLoop, duration: float, measure: str = "raw
 
 
 def summary(traj: Trajectory, window=(5.0, 60.0)) -> dict:
-    """A run's numbers against the goals (docs/hardware-upkie.md): over ``window`` [s] the true theta_b's RMS and
-    worst, the estimator's pitch error's RMS, u's RMS; over the whole run whether it stayed up, the axle's largest
-    distance from where it started [m] and where it ended [m]. Values that the run lacks are NaN (a window the run
-    does not cover gives NaN, never a verdict).
+    """A run's numbers against the goals (docs/hardware-upkie.md): over ``window`` [s] theta_b's RMS and worst, the
+    estimator's pitch error's RMS, u's RMS; over the whole run whether it stayed up, the axle's largest distance from
+    where it started [m] and where it ended [m]. Values that the run lacks are NaN (a window the run does not cover, a
+    column the run does not have: never a verdict).
+
+    theta_b is the truth where the run has one (a simulator's). A robot has none: its pitch is the state estimator's
+    estimate, and ``judged_on`` says so (``"estimate"``): a run of :func:`run` whose backend has no truth (its truth
+    columns NaN, its ``theta_b_hat`` the estimate), or a bag whose ``joint_states`` is the estimator's with no
+    ``true_joint_states`` (:func:`mwip_ros.runs.read_bag_run`'s ``record["states_from"]``). The estimator's error
+    then is unknown (NaN), and so is the drift without a pose.
 
     Parameters
     ----------
     traj : Trajectory
-        A run of :func:`run`.
+        A run of :func:`run`, or a bag's (:func:`mwip_ros.runs.read_bag_run`).
     window : pair of float
         The metrics window [s].
 
     Returns
     -------
     dict
-        ``upright``, ``covers_window``, ``theta_b_rms``, ``theta_b_max_abs``, ``theta_b_est_err_rms``, ``u_rms``,
-        ``max_drift``, ``final_drift``, ``t_end``, ``failure``.
+        ``upright``, ``covers_window``, ``judged_on`` (``truth`` or ``estimate``), ``theta_b_rms``,
+        ``theta_b_max_abs``, ``theta_b_est_err_rms``, ``u_rms``, ``max_drift``, ``final_drift``, ``t_end``,
+        ``failure``.
     """
     c = traj.columns
     t = c["t"]
+    n = len(t)
+    nan = np.full(n, np.nan)
     sel = (t >= window[0] - 1e-9) & (t <= window[1] + 1e-9)
     covers = (not traj.fallen) and bool(sel.any()) and t[-1] >= window[1] - 1e-9
+
+    def col(name):
+        return np.asarray(c[name], dtype=float) if name in c else nan
 
     def rms(x):
         x = np.asarray(x, dtype=float)[sel]
         return float(np.sqrt(np.mean(x ** 2))) if covers and len(x) and np.all(np.isfinite(x)) else math.nan
 
-    th = np.asarray(c["theta_b"], dtype=float)
-    d = np.hypot(c["x"] - c["x"][0], c["y"] - c["y"][0]) if "x" in c and len(t) else np.full(len(t), np.nan)
-    return {"upright": not traj.fallen, "covers_window": bool(covers), "theta_b_rms": rms(th),
+    th, th_hat = col("theta_b"), col("theta_b_hat")
+    if traj.record.get("states_from") == "estimate":   # a bag's joint_states: the estimator's, no truth
+        judged_on, err = "estimate", nan
+    elif n and not np.any(np.isfinite(th)) and np.any(np.isfinite(th_hat)):   # a backend without truth
+        judged_on, th, err = "estimate", th_hat, nan
+    else:
+        judged_on, err = "truth", th_hat - th
+    x, y = col("x"), col("y")
+    d = np.hypot(x - x[0], y - y[0]) if n else nan
+    return {"upright": not traj.fallen, "covers_window": bool(covers), "judged_on": judged_on,
+            "theta_b_rms": rms(th),
             "theta_b_max_abs": float(np.max(np.abs(th[sel]))) if covers and np.all(np.isfinite(th[sel])) else math.nan,
-            "theta_b_est_err_rms": rms(c["theta_b_hat"] - th), "u_rms": rms(c["u"]),
-            "max_drift": float(np.max(d)) if len(d) and np.all(np.isfinite(d)) else math.nan,
-            "final_drift": float(d[-1]) if len(d) and np.isfinite(d[-1]) else math.nan,
-            "t_end": float(t[-1]) if len(t) else math.nan, "failure": traj.record.get("fall_text", "")}
+            "theta_b_est_err_rms": rms(err), "u_rms": rms(col("u")),
+            "max_drift": float(np.max(d)) if n and np.all(np.isfinite(d)) else math.nan,
+            "final_drift": float(d[-1]) if n and np.isfinite(d[-1]) else math.nan,
+            "t_end": float(t[-1]) if n else math.nan, "failure": traj.record.get("fall_text", "")}

@@ -368,3 +368,29 @@ def test_timing_goes_to_diagnostics_and_the_summary(monkeypatch, tmp_path):
     # 22 exchanges: period 0 (no command yet: a stop, no age), 20 with a fresh command, 1 late with the held one
     assert t["exchange_count"] == 22 and t["command_age_count"] == 21 and t["wake_latency_count"] == 22
     assert t["wake_latency_ms_max"] == pytest.approx(0.1)   # every wake 0.1 ms after its deadline (the test's clock)
+
+
+@pytest.mark.parametrize("backend_class", [SimulatedRecording, Recording])
+def test_a_realtime_run_ends_at_its_planned_duration_with_exit_0(monkeypatch, tmp_path, backend_class):
+    # the run's own end (duration_s) is exit 0 in its summary too, a simulator's (every period stepped) as a device's
+    # (read once a wake, a late wake's periods missed); bench_driver judges each law on this exit
+    backend = backend_class()
+    summary = tmp_path / "s.json"
+    h = _driver(monkeypatch, backend, "-p", "require_enable:=false", "-p", "duration_s:=0.05", "-p",
+                f"summary_json:={summary}")
+    try:
+        clock = Clock(h)
+        for i in range(12):
+            if h.node.done:
+                break
+            h.feed("wheel_torque_cmd", L.encode_command(0.1))
+            clock.tick(periods=2 if i == 3 else 1)
+        assert h.node.done and h.node.exit_code == 0 and h.node.failure is None
+        assert h.node.driver.safety.state == "enabled"
+    finally:
+        h.close()
+    s = json.loads(summary.read_text())
+    assert s["exit_code"] == 0 and s["fault_reason"] is None and s["fell_at"] is None
+    # a simulator: periods 1 to 10 stepped (state 0 is the reset's); a device: exchanges at periods 0 to 10 but 4
+    device = backend_class is Recording
+    assert s["timing"]["periods"] == 10 and s["timing"]["missed"] == (1 if device else 0)

@@ -118,6 +118,67 @@ def test_a_fall_ends_the_run_and_the_summary_gives_no_numbers():
     assert math.isnan(s["theta_b_rms"]) and s["failure"].startswith("FELL at t = ")
 
 
+class NoTruthBackend(PlantBackend):
+    """The plant as a robot has it: its reads carry no truth (a device's)."""
+
+    name = "device"
+    simulated = False
+
+    def _read(self) -> Observation:
+        return replace(super()._read(), truth=None)
+
+
+def test_a_robot_without_truth_is_judged_on_its_estimate_and_says_so():
+    loop = _paper_raw()
+    traj = run(NoTruthBackend(loop.plant), loop, 2.0)
+    assert not traj.fallen and np.all(np.isnan(traj["theta_b"]))   # no truth: NaN, never a number
+    s = summary(traj, (1.0, 2.0))
+    assert s["judged_on"] == "estimate" and s["upright"] and s["covers_window"]
+    est = traj["theta_b_hat"][(traj.t >= 1.0 - 1e-9)]
+    assert s["theta_b_rms"] == pytest.approx(float(np.sqrt(np.mean(est ** 2))), rel=1e-12)
+    assert 0.0 < s["theta_b_rms"] < 0.05 and s["theta_b_max_abs"] > 0.0
+    assert math.isnan(s["theta_b_est_err_rms"])   # no truth to compare the estimate with
+    assert math.isnan(s["max_drift"]) and math.isnan(s["final_drift"])   # no pose
+
+
+def test_a_robots_bag_its_estimate_on_joint_states_is_summarised_as_the_estimate(tmp_path):
+    """A bag of the wheel_driver on a device (imu/data_raw, wheel_encoder, the estimator's joint_states, no
+    true_joint_states, no pose): its summary is the estimate's, said so; what the bag lacks is NaN (it was a
+    KeyError on theta_b_hat)."""
+    from mwip_ros.bag import BagWriter, qos_profiles_yaml
+    from mwip_ros.msgs import layouts as L
+    from mwip_ros.runs import read_bag_run
+    from bagcheck import ENDPOINT_QOS
+
+    h_ns, n = 5_000_000, 401
+    theta = [0.02 * math.cos(0.5 * k * 0.005) for k in range(n)]
+    topics = {"/imu/data_raw": "sensor_msgs/msg/Imu", "/wheel_encoder": "sensor_msgs/msg/JointState",
+              "/joint_states": "sensor_msgs/msg/JointState"}
+    with BagWriter(tmp_path / "robot") as bag:
+        for topic, type_name in topics.items():
+            bag.add_topic(topic, type_name, qos_profiles_yaml([ENDPOINT_QOS]), "")
+        for k in range(n):
+            stamp = 1_000_000_000 + k * h_ns
+            bag.write("/imu/data_raw", L.encode_imu(stamp, 0.0, 0.0, 9.81), stamp)
+            bag.write("/wheel_encoder", L.encode_encoder(stamp, 0.0, 0.0, 0.1), stamp)
+            bag.write("/joint_states", L.encode_state(stamp, (0.0, theta[k], 0.0, 0.0), 0.1), stamp + 1000)
+    traj = read_bag_run(tmp_path / "robot")
+    assert traj.record["states_from"] == "estimate"
+    s = summary(traj, (1.0, 2.0))
+    assert s["judged_on"] == "estimate" and s["upright"] and s["covers_window"]
+    assert s["theta_b_rms"] == pytest.approx(float(np.sqrt(np.mean(np.square(theta[200:])))), rel=1e-9)
+    assert s["theta_b_max_abs"] == pytest.approx(max(abs(v) for v in theta[200:]), rel=1e-9)
+    assert math.isnan(s["theta_b_est_err_rms"]) and math.isnan(s["max_drift"])
+    assert s["t_end"] == pytest.approx(2.0, abs=1e-9)
+    short = summary(traj, (1.0, 2.5))   # a window the bag does not cover: NaN, no verdict
+    assert not short["covers_window"] and math.isnan(short["theta_b_rms"])
+    from mwip_ros.cli.report import run_notes
+    from mwip_ros.core import metrics
+    notes = run_notes(traj, metrics.compute(traj.columns, (1.0, 2.0), 1.0, None))
+    assert any(n.startswith("no truth in the bag (a robot): its states and metrics are the state estimator's")
+               for n in notes), notes
+
+
 # --- Upkie in PyBullet ------------------------------------------------------------------------------------------------
 
 pytest.importorskip("pybullet")
