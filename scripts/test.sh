@@ -42,12 +42,13 @@ else
     exit 1
 fi
 
-# Without -m, -n or test paths of the caller's: three runs, so that every core works and nothing timed shares it
-# with anything but idle work. The tiers that start no ROS process (unit, cli, node, slow, montecarlo:
-# test/conftest.py) run on every core (pytest-xdist) at the idle scheduling class (SCHED_IDLE: they get only the
-# CPU that nothing else wants: scripts/idle_priority.py) while the tests marked alone (they keep real-time
-# deadlines, time the graph or hand a domain to a script) and the bench run one at a time at normal priority; then
-# the rest of the in-process run at normal priority, and the other graph and e2e tests on every core. With -m, -n or paths of yours: one pytest run.
+# Without -m, -n or test paths of the caller's: three runs, so that every core works and nothing timed shares it.
+# First the tiers that start no ROS process (unit, cli, node, slow, montecarlo: test/conftest.py) on every core
+# (pytest-xdist), then the graph and e2e tests on every core, then those marked alone (they keep real-time
+# deadlines, time the graph or hand a domain to a script) and the bench one test at a time. (The first run at the
+# idle scheduling class beside the third was tried: it took as long, since the third leaves little idle CPU, and its
+# timed tests lost deadlines at 1 kHz beside it; BENCHMARKS.md, "The test suite".) With -m, -n or paths of yours:
+# one pytest run.
 split=1
 [ "${#targets[@]}" -eq 0 ] && split=0
 for a in "$@"; do
@@ -73,32 +74,16 @@ if [ "$split" -eq 0 ]; then
 fi
 start=$SECONDS
 rc=0
-logs="$(mktemp -d "${TMPDIR:-/tmp}/mwip_test.XXXXXX")"
-echo "test: the in-process tiers run at idle priority beside the tests marked alone (their log: $logs/in_process.log)"
-python scripts/idle_priority.py run python -m pytest "${targets[@]}" -m "unit or cli or node or slow or montecarlo" -n auto --dist worksteal "$@" \
-    > "$logs/in_process.log" 2>&1 &
-in_pid=$!
-trap 'kill -TERM "$in_pid" 2>/dev/null || true' INT TERM EXIT   # (a background job ignores SIGINT)
-# what keeps real-time deadlines or times the graph, and the bench: one at a time, beside only idle work
-run_pytest "${targets[@]}" -m "(graph or e2e) and alone or bench" --durations=10 "$@" || rc=$?
-alone=$((SECONDS - start))
-python scripts/idle_priority.py restore "$in_pid"   # the rest of the in-process run at normal priority
-in_rc=0
-wait "$in_pid" || in_rc=$?
-trap - INT TERM EXIT
+run_pytest "${targets[@]}" -m "unit or cli or node or slow or montecarlo" -n auto --dist worksteal "$@" || rc=$?
 in_process=$((SECONDS - start))
-echo "test: python -m pytest ${targets[*]} -m \"unit or cli or node or slow or montecarlo\" -n auto --dist worksteal $*" \
-     "(at idle priority; its output:)"
-cat "$logs/in_process.log"
-if [ "$in_rc" -eq 5 ]; then
-    echo "test: pytest collected no tests; treating as failure" >&2
-    in_rc=1
-fi
-if [ "$in_rc" -ne 0 ]; then rc=$in_rc; fi
-rm -rf "$logs"
 # lockstep graphs and whole jobs wait on their processes' answers, not on a clock: two at a time (each graph on a
-# domain of its own; --dist loadgroup keeps the tests that share a module's graph on one worker: test/conftest.py)
-run_pytest "${targets[@]}" -m "(graph or e2e) and not alone" -n auto --dist loadgroup "$@" || rc=$?
-echo "test: ${alone} s alone, the in-process tiers beside them ${in_process} s, then the graph and e2e tests" \
-     "$((SECONDS - start - in_process)) s two at a time; in all $((SECONDS - start)) s"
+# domain of its own; --dist loadfile keeps a module's tests, and the graph they share, on one worker. --dist
+# loadgroup with only the modules that share a graph grouped took twice as long: 724 s against 341-374 s,
+# BENCHMARKS.md, "The test suite")
+run_pytest "${targets[@]}" -m "(graph or e2e) and not alone" -n auto --dist loadfile "$@" || rc=$?
+shared=$((SECONDS - start - in_process))
+# what keeps real-time deadlines or times the graph, and the bench: alone
+run_pytest "${targets[@]}" -m "(graph or e2e) and alone or bench" --durations=10 "$@" || rc=$?
+echo "test: in-process tiers ${in_process} s, process tests ${shared} s two at a time and" \
+     "$((SECONDS - start - in_process - shared)) s alone, in all $((SECONDS - start)) s"
 exit "$rc"

@@ -27,11 +27,9 @@ unit tests may hold one slow test marked ``@pytest.mark.slow``):
 ``alone`` is not a tier but a mark on a graph or e2e test that keeps real-time deadlines or times the graph (a
 realtime loop, a watchdog, discovery's second) or hands a domain to a script: such a test runs alone.
 
-``scripts/test.sh`` runs every tier (CI): the ones marked alone and the bench one test at a time, with the tiers
-without ROS processes (unit, cli, node, slow, montecarlo) on every core (pytest-xdist) beside them at the idle
-scheduling class (scripts/idle_priority.py: they take only the CPU the timed tests leave), then the graph and e2e
-tests not marked alone on every core (the tests that share a module's graph or run on one worker:
-``_group_by_shared_fixture``).
+``scripts/test.sh`` runs every tier (CI): the tiers without ROS processes (unit, cli, node, slow, montecarlo) on
+every core (pytest-xdist), then the graph and e2e tests not marked alone on every core (a module's tests on one worker:
+its graph is shared), then the ones marked alone and the bench one test at a time.
 ``scripts/test.sh -m unit`` is the fast loop. A test with no tier or more than one fails collection.
 """
 import os
@@ -96,17 +94,6 @@ def pytest_runtest_call(item):
         item.user_properties.append(("spawned", _SPAWNED[0] - before))
 
 
-def _group_by_shared_fixture(item) -> None:
-    """A test that uses a module- or package-scoped fixture of the suite's own (a graph, a run that several tests
-    read) is put in its module's ``xdist_group``: with ``--dist loadgroup`` (scripts/test.sh's graph and e2e run)
-    the module's tests that share it run on one worker, and the fixture is built once; every other test goes to
-    whichever worker is free."""
-    for defs in getattr(item, "_fixtureinfo", None) and item._fixtureinfo.name2fixturedefs.values() or ():
-        if any(d.scope in ("module", "package") and d.baseid for d in defs):   # baseid "": a plugin's own
-            item.add_marker(pytest.mark.xdist_group(item.nodeid.split("::")[0]))
-            return
-
-
 @pytest.hookimpl(tryfirst=True)   # before -m deselects: a test outside the tier asked for is checked too
 def pytest_collection_modifyitems(config, items):
     _lift_overridden_module_tiers(items)
@@ -119,7 +106,6 @@ def pytest_collection_modifyitems(config, items):
             item.user_properties.append(("tier", tiers[0]))
             if item.get_closest_marker("alone") is not None and tiers[0] not in ("graph", "e2e"):
                 bad.append(f"  {item.nodeid}: alone on a {tiers[0]} test (only graph and e2e tests are run alone)")
-        _group_by_shared_fixture(item)
     if bad:
         raise pytest.UsageError(
             f"{len(bad)} test(s) not in exactly one tier of {', '.join(TIERS)} (test/conftest.py says which; "
