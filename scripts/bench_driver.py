@@ -218,7 +218,11 @@ def _num(v, fmt: str) -> str:
 
 def _verdict(g: dict) -> str:
     """'yes' for a run that stayed up to its planned end (its driver's exit 0); else what happened: a fall, the fault
-    that ended it (its reason and detail), or the exit code that says how it ended."""
+    that ended it (its reason and detail), or the exit code that says how it ended (a table cell: ``|`` escaped)."""
+    return _what_happened(g).replace("|", "\\|")
+
+
+def _what_happened(g: dict) -> str:
     if g["complete"]:
         return "yes"
     if not g["upright"]:

@@ -92,6 +92,9 @@ def test_each_law_is_judged_on_its_own_drivers_exit_not_the_invocations(bench, t
     fell = bench.goals(tmp_path, "mpc_ndo", 10.0, 3)
     assert fell["exit"] == 3 and not fell["complete"] and bench._verdict(fell).startswith("FELL (FALLEN at t = 2.000 s")
     assert bench.upkie_goals(fell).startswith("MISSES") and math.isnan(fell["theta_b_rms"])
+    # a table cell: the plant's "|theta_b|" would split the row
+    cell = bench._verdict(dict(fell, failure="FALLEN at t = 2.000 s: |theta_b| = 1.0 > 1.0"))
+    assert "|" not in cell.replace("\\|", "") and "\\|theta_b\\|" in cell
     with pytest.raises(ValueError, match="no bag of smc_ndo under "):   # a law the invocation never ran
         bench.goals(tmp_path, "smc_ndo", 10.0, 1)
 
