@@ -486,7 +486,7 @@ def table(plan: Plan, quick: bool, m: Dict[str, str], floor: dict, typed: dict, 
             f"{rt['period_ms_p50']:.3f} / {rt['period_ms_p99']:.3f} / {rt['period_ms_max']:.3f} ms "
             f"(nominal {1e3 / hz:g} ms)")
         row(f"3. realtime {hz:g} Hz, {rt['sched']}: missed deadlines / stale-command substitutions",
-            f"{rt['missed_deadlines']} / {rt['stale_command_substitutions']} of {rt['ticks']} periods", target,
+            f"{rt['missed_deadlines']} / {rt['stale_command_substitutions']} of {rt['periods_due']} periods", target,
             (rt["missed_deadlines"] == 0) if hz == 200 else None)
     for law, runs in pairs.items():   # another law beside DSCNDO, alternating: no more missed deadlines
         mine, ref = ([r[j]["missed_deadlines"] for r in runs] for j in (1, 0))
@@ -496,7 +496,7 @@ def table(plan: Plan, quick: bool, m: Dict[str, str], floor: dict, typed: dict, 
             f"last run", f"{statistics.median(mine):g} ({', '.join(map(str, mine))}; {sum(mine)}) against DSCNDO's "
             f"{statistics.median(ref):g} ({', '.join(map(str, ref))}; {sum(ref)}); "
             f"{last['stale_command_substitutions']} stale "
-            f"of {last['ticks']} periods; {last['period_ms_p99']:.3f} / {last['period_ms_max']:.3f} ms",
+            f"of {last['periods_due']} periods; {last['period_ms_p99']:.3f} / {last['period_ms_max']:.3f} ms",
             "<= DSCNDO's median", statistics.median(mine) <= statistics.median(ref))
     for f in sleep:
         row(f"3. for comparison: a bare Python loop sleeping to {f['h_ms']:g} ms deadlines beside a second one, "

@@ -46,9 +46,8 @@ fi
 # First the tiers that start no ROS process (unit, cli, node, slow, montecarlo: test/conftest.py) on every core
 # (pytest-xdist), then the graph and e2e tests on every core, then those marked alone (they keep real-time
 # deadlines, time the graph or hand a domain to a script) and the bench one test at a time. (The first run at the
-# idle scheduling class beside the third was tried: it took as long, since the third leaves little idle CPU, and its
-# timed tests lost deadlines at 1 kHz beside it; BENCHMARKS.md, "The test suite".) With -m, -n or paths of yours:
-# one pytest run.
+# idle scheduling class beside the third was tried: shorter, but a test starved at that class misses what it times;
+# docs/benchmarks-history.md.) With -m, -n or paths of yours: one pytest run.
 split=1
 [ "${#targets[@]}" -eq 0 ] && split=0
 for a in "$@"; do
@@ -78,8 +77,8 @@ run_pytest "${targets[@]}" -m "unit or cli or node or slow or montecarlo" -n aut
 in_process=$((SECONDS - start))
 # lockstep graphs and whole jobs wait on their processes' answers, not on a clock: two at a time (each graph on a
 # domain of its own; --dist loadfile keeps a module's tests, and the graph they share, on one worker. --dist
-# loadgroup with only the modules that share a graph grouped took twice as long: 724 s against 341-374 s,
-# BENCHMARKS.md, "The test suite")
+# loadgroup with only the modules that share a graph grouped took longer: 724 s against 582 s,
+# docs/benchmarks-history.md)
 run_pytest "${targets[@]}" -m "(graph or e2e) and not alone" -n auto --dist loadfile "$@" || rc=$?
 shared=$((SECONDS - start - in_process))
 # what keeps real-time deadlines or times the graph, and the bench: alone
