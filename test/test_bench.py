@@ -47,10 +47,11 @@ def test_bench_quick_prints_every_row(tmp_path):
         assert re.search(row, r.stdout), f"missing row /{row}/ in:\n{r.stdout}"
     assert re.search(r"- cpu: .+\n- cores: \d+", r.stdout)
     assert md.read_text() == r.stdout
-    # the realtime rows come from 2 s runs of 400 and 2000 periods (+1: the first state)
-    ticks = [int(x) for x in re.findall(r"of (\d+) periods", r.stdout)]
-    assert len(ticks) == 5, ticks   # 200 Hz twice, 1 kHz twice, then MPC+NDO at 200 Hz beside DSCNDO
-    assert all(380 <= t <= 402 for t in ticks[:2] + ticks[4:]) and all(1800 <= t <= 2002 for t in ticks[2:4]), ticks
+    # the realtime rows come from 2 s runs of 400 and 2000 periods (+1: the first state), counted as the periods due
+    # at the run's last wake (a late last wake finds a few more due; the loop's wakes are fewer when wakes are late)
+    due = [int(x) for x in re.findall(r"of (\d+) periods", r.stdout)]
+    assert len(due) == 5, due   # 200 Hz twice, 1 kHz twice, then MPC+NDO at 200 Hz beside DSCNDO
+    assert all(401 <= t <= 405 for t in due[:2] + due[4:]) and all(2001 <= t <= 2010 for t in due[2:4]), due
     # MPC+NDO beside DSCNDO: one run of each in the quick bench, their missed deadlines side by side
     assert re.search(r"realtime 200 Hz, .*law mpc \(\+NDO\) beside DSCNDO, 1 run\(s\) each, alternating: missed "
                      r"deadlines.* \| (\d+) \(\1; \1\) against DSCNDO's (\d+) \(\2; \2\); \d+ stale of \d+ periods",
