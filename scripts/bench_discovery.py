@@ -34,6 +34,7 @@ variant, and ``mwip_ctl param get dscndo_controller k1`` is timed N times, whole
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import signal
 import statistics
@@ -173,18 +174,26 @@ def one_trial(env: Dict[str, str], newcomers: int, settle: float, limit: float) 
             idle.wait()
 
 
-def ctl_calls(env: Dict[str, str], calls: int) -> List[float]:
-    """Seconds each of ``calls`` runs of ``mwip_ctl param get dscndo_controller k1`` takes against a realtime graph
-    started in ``env`` (the graph ended by PID after)."""
+@contextlib.contextmanager
+def realtime_graph(env: Dict[str, str], duration: float):
+    """(the Graph, its plant) of the realtime loop (observer, controller, plant for ``duration`` s, 0: until
+    stopped) started in ``env`` and running; every process ended by PID after."""
     sys.path.insert(0, str(REPO / "test"))
     from graphproc import Graph
     with tempfile.TemporaryDirectory() as tmp, Graph(Path(tmp)) as g:
         g.env = dict(env)
         for node in ("disturbance_observer", "dscndo_controller"):
             g.start(node, "-p", "mode:=realtime")
-        plant = g.start("plant_sim", "-p", "mode:=realtime", "-p", "duration_s:=0.0")
+        plant = g.start("plant_sim", "-p", "mode:=realtime", "-p", f"duration_s:={duration:.1f}")
         if not plant.wait_for_output("starting realtime run", 60):
             raise SystemExit(f"bench_discovery: the graph did not start:\n{plant.output()[-2000:]}")
+        yield g, plant
+
+
+def ctl_calls(env: Dict[str, str], calls: int) -> List[float]:
+    """Seconds each of ``calls`` runs of ``mwip_ctl param get dscndo_controller k1`` takes against a realtime graph
+    started in ``env`` (the graph ended by PID after)."""
+    with realtime_graph(env, 0.0) as (g, plant):
         took = []
         for _ in range(calls):
             t0 = time.monotonic()
@@ -211,16 +220,8 @@ def stalled_newcomers(env: Dict[str, str], newcomers: int, duration: float = 20.
     another, each stopped (SIGSTOP) 0.3 + 0.1 i s after its start, in the middle of its discovery, as a terminal's
     Ctrl-Z stops a ``ros2 topic echo``: the plant's own line on its wake periods (their largest is a stall of the
     loop), and whether it stayed upright."""
-    sys.path.insert(0, str(REPO / "test"))
-    from graphproc import Graph
     stopped = []
-    with tempfile.TemporaryDirectory() as tmp, Graph(Path(tmp)) as g:
-        g.env = dict(env)
-        for node in ("disturbance_observer", "dscndo_controller"):
-            g.start(node, "-p", "mode:=realtime")
-        plant = g.start("plant_sim", "-p", "mode:=realtime", "-p", f"duration_s:={duration:.1f}")
-        if not plant.wait_for_output("starting realtime run", 60):
-            raise SystemExit(f"bench_discovery: the graph did not start:\n{plant.output()[-2000:]}")
+    with realtime_graph(env, duration) as (g, plant):
         try:
             time.sleep(1.0)
             for i in range(newcomers):
