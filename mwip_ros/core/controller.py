@@ -15,8 +15,12 @@ from typing import Optional
 
 from .model import PhysicalParams
 
-__all__ = ["DscGains", "ControlOutput", "u_taud_of", "x4_bar_of", "dsc_law", "dsc_terms", "dsc_terms_tracking",
-           "filter_step", "DscController"]
+__all__ = ["INTERNALS", "DscGains", "ControlOutput", "u_taud_of", "x4_bar_of", "dsc_law", "dsc_terms",
+           "dsc_terms_tracking", "filter_step", "DscController"]
+
+# The names of controller_internals (its JointState's joints, docs/graph.md) of DSC and DSCNDO, LQR, SMC and MPC:
+# fields of :class:`ControlOutput`
+INTERNALS = ("S1", "S2", "x4d", "x4_bar", "u_dsc", "u_taud", "u", "x1")
 
 
 @dataclass(frozen=True)

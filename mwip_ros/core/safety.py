@@ -67,7 +67,7 @@ from dataclasses import dataclass
 from typing import Deque, Dict, Optional, Tuple
 
 __all__ = ["DISABLED", "ENABLED", "FAULT", "STATES", "FAULT_REASONS", "LEVEL_INPUTS", "EVENTS", "Transition",
-           "Answer", "DriverStateMachine", "Watchdog", "HISTORY", "PLAUSIBLE_TORQUE"]
+           "Answer", "DriverStateMachine", "Watchdog", "HISTORY", "PLAUSIBLE_TORQUE", "PLAUSIBLE_STATE"]
 
 DISABLED, ENABLED, FAULT = "disabled", "enabled", "fault"
 STATES = (DISABLED, ENABLED, FAULT)
@@ -83,6 +83,15 @@ EVENTS = ("enable", "disable", "reset") + FAULT_REASONS   # the ``reason`` a Tra
 # run stays below 150 N m) and far inside what the model's arithmetic survives (1e300 overflows eq. 1 in a period).
 # The plant node's driver refuses such a message, the offline loop's driver the law's command (core.loop).
 PLAUSIBLE_TORQUE = 1e6
+# What a measured state may read (|value| at most), far beyond anything the robot reaches (the paper's run: |theta_b|
+# below 0.2 rad, the rates below 5 rad/s) and far inside what the arithmetic survives (a rate of 1e160 overflows the
+# law): a joint_states message beyond it is rejected like a NaN (msgs.layouts.LIMITS), and a plant's measurement
+# noise must stay well inside it (params.schema).
+PLAUSIBLE_STATE = {
+    "theta_b": math.pi,        # body pitch [rad]: beyond it the body is upside down
+    "theta_w": 1e9,            # wheel angle [rad]: 250,000 km of travel
+    "rate": 1e3,               # theta_w', theta_b' [rad/s]
+}
 HISTORY = 1000     # transitions kept by a machine (older ones drop: a node that runs for days stays bounded)
 
 # /diagnostics levels (diagnostic_msgs/DiagnosticStatus): OK, WARN, ERROR

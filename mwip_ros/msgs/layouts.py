@@ -41,9 +41,11 @@ import json
 import math
 from typing import Dict, Optional, Sequence, Tuple
 
+from mwip_ros.core.controller import INTERNALS
 from mwip_ros.core.markers import pose_angles, pose_quaternion
 from mwip_ros.core.model import State
-from mwip_ros.core.safety import PLAUSIBLE_TORQUE, STATES
+from mwip_ros.core.safety import PLAUSIBLE_STATE, PLAUSIBLE_TORQUE, STATES
+from mwip_ros.core.urdf import WHEEL_JOINTS
 
 from . import cdr
 from .errors import BadMessage, CdrError
@@ -59,17 +61,15 @@ __all__ = ["JOINT_NAMES", "INTERNAL_NAMES", "LIMITS", "RAW_LIMITS", "IMU_FRAME",
 
 JOINT_NAMES = ("wheel", "body_pitch")
 YAW_JOINT = "yaw"   # joint_states' third joint from a spatial plant: velocity = the gyro's yaw rate (theory 6.13)
-WHEEL_TORQUE_JOINTS = ("wheel_left_joint", "wheel_right_joint")   # wheel_torques_cmd's names (the URDF's joints)
-INTERNAL_NAMES = ("S1", "S2", "x4d", "x4_bar", "u_dsc", "u_taud", "u", "x1")
+WHEEL_TORQUE_JOINTS = WHEEL_JOINTS   # wheel_torques_cmd's names: the URDF's wheel joints (core.urdf)
+INTERNAL_NAMES = INTERNALS   # controller_internals' names (core.controller)
 
 # Plausible values, far beyond anything the robot reaches (in the paper's scenario |theta_b| stays
 # below 0.2 rad, the rates below 5 rad/s and the torques below 150 N m; a fall ends a run at
 # fall_angle, at most pi/2 in practice) and far inside what the arithmetic survives (a rate of
 # 1e160 overflows the law).  A message outside them is rejected like a NaN.
 LIMITS = {
-    "theta_b": math.pi,        # body pitch [rad]: beyond it the body is upside down
-    "theta_w": 1e9,            # wheel angle [rad]: 250,000 km of travel
-    "rate": 1e3,               # theta_w', theta_b' [rad/s]
+    **PLAUSIBLE_STATE,         # theta_b [rad], theta_w [rad], rate: theta_w', theta_b' [rad/s] (core.safety)
     "torque": PLAUSIBLE_TORQUE,   # u, tau_hat, tau_d, tau_ext [N m] (core.safety: the driver's own limit)
 }
 

@@ -17,6 +17,8 @@ import math
 from dataclasses import dataclass
 from typing import Any, Callable, Dict, Iterable, List, Mapping, Optional
 
+from mwip_ros.core.safety import PLAUSIBLE_STATE
+
 from .errors import ParamError
 
 __all__ = ["SHARED", "ParamSpec", "PAPER_NOMINAL", "PAPER_ACTUAL", "SHARED_SPECS", "NODE_SPECS", "ROS_OWN",
@@ -25,12 +27,12 @@ __all__ = ["SHARED", "ParamSpec", "PAPER_NOMINAL", "PAPER_ACTUAL", "SHARED_SPECS
 
 SHARED = "/**"
 
-# What a published measurement may read: mwip_ros.msgs.layouts.LIMITS (the observer and the controller reject a
-# joint_states message beyond them as implausible; a test keeps the two equal).  A noise standard deviation is
+# What a published measurement may read: mwip_ros.core.safety.PLAUSIBLE_STATE (msgs.layouts.LIMITS: the observer and
+# the controller reject a joint_states message beyond them as implausible).  A noise standard deviation is
 # at most NOISE_LIMIT_FRACTION of the limit, and theta_b's noise must leave NOISE_SIGMAS standard deviations
 # between the fall angle and the limit (check_derived): noise that makes a measurement implausible is a
 # configuration error, refused at start-up, not a fault of the observer found during the run.
-MEASURED_LIMITS = {"theta_b": math.pi, "theta_w": 1e9, "rate": 1e3}
+MEASURED_LIMITS = PLAUSIBLE_STATE
 NOISE_LIMIT_FRACTION = 10.0
 NOISE_SIGMAS = 8.0
 
@@ -294,10 +296,14 @@ NODE_SPECS: Dict[str, List[ParamSpec]] = {
         ParamSpec("actual.D_w_mean", "double", 0.5, "mean of the ground friction D_w [N m s/rad]", **_non_negative()),
         ParamSpec("actual.D_w_variance", "double", 0.2, "variance of D_w, drawn once per period; 0 = deterministic",
                   **_non_negative()),
-        ParamSpec("initial.theta_w", "double", 0.0, "initial wheel angle [rad]", **_symmetric(1e9)),
-        ParamSpec("initial.theta_b", "double", -0.1745, "initial body pitch [rad]", **_symmetric(math.pi)),
-        ParamSpec("initial.dtheta_w", "double", 0.0, "initial wheel rate [rad/s]", **_symmetric(1e3)),
-        ParamSpec("initial.dtheta_b", "double", 0.0, "initial body pitch rate [rad/s]", **_symmetric(1e3)),
+        ParamSpec("initial.theta_w", "double", 0.0, "initial wheel angle [rad]",
+                  **_symmetric(MEASURED_LIMITS["theta_w"])),
+        ParamSpec("initial.theta_b", "double", -0.1745, "initial body pitch [rad]",
+                  **_symmetric(MEASURED_LIMITS["theta_b"])),
+        ParamSpec("initial.dtheta_w", "double", 0.0, "initial wheel rate [rad/s]",
+                  **_symmetric(MEASURED_LIMITS["rate"])),
+        ParamSpec("initial.dtheta_b", "double", 0.0, "initial body pitch rate [rad/s]",
+                  **_symmetric(MEASURED_LIMITS["rate"])),
         ParamSpec("tau_ext1.amplitude", "double", 30.0, "tau_ext1 amplitude [N m] (wheel row)", **_symmetric(1e6)),
         ParamSpec("tau_ext1.omega", "double", 2.0, "tau_ext1 angular frequency [rad/s]", **_symmetric(1e6)),
         ParamSpec("tau_ext1.phase", "double", math.pi / 2, "tau_ext1 phase [rad]", **_symmetric(1e6)),
@@ -306,7 +312,7 @@ NODE_SPECS: Dict[str, List[ParamSpec]] = {
         ParamSpec("tau_ext2.phase", "double", 0.0, "tau_ext2 phase [rad]", **_symmetric(1e6)),
         ParamSpec("torque_limit", "double", 0.0, "|u| cap [N m]; 0 = none", **_non_negative()),
         ParamSpec("fall_angle", "double", 1.0472, "|theta_b| beyond this ends the run as fallen [rad]",
-                  **_positive(math.pi)),
+                  **_positive(MEASURED_LIMITS["theta_b"])),
         ParamSpec("lockstep_timeout_s", "double", 10.0, "wall time [s] to wait for the graph (the controller and "
                   "expected_subscribers) before the first state, and in lockstep for each command; lockstep gives "
                   "up after it, realtime starts without the missing nodes", **_positive()),

@@ -48,7 +48,7 @@ from ..core.model import PhysicalParams
 
 __all__ = ["PlanarModel", "planar_model", "upkie_planar_model", "UPKIE_WHEEL_JOINTS", "UPKIE_IMU_LINK"]
 
-UPKIE_WHEEL_JOINTS = ("left_wheel", "right_wheel")
+UPKIE_WHEEL_JOINTS = ("left_wheel", "right_wheel")   # Upkie's wheel joints in its URDF and its spine, left first
 UPKIE_IMU_LINK = "imu"
 _AXIS_TOL = 1e-6   # [rad or m]: the wheel axes along y and on one line, to rounding
 

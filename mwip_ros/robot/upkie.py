@@ -66,13 +66,13 @@ import numpy as np
 
 from ..core.plant import Pose
 from .backend import Backend, BackendError, Command, Imu, Observation, Wheel
-from .planar_model import PlanarModel, upkie_planar_model
+from .planar_model import UPKIE_WHEEL_JOINTS, PlanarModel, upkie_planar_model
 
 __all__ = ["LEG_JOINTS", "WHEEL_JOINTS", "UpkieConfig", "UpkieBackend", "spine_action", "observation_from_spine",
            "pybullet_inertias", "UPKIE_KINDS"]
 
 LEG_JOINTS = ("left_hip", "left_knee", "right_hip", "right_knee")
-WHEEL_JOINTS = ("left_wheel", "right_wheel")
+WHEEL_JOINTS = UPKIE_WHEEL_JOINTS   # Upkie's wheel joints (robot.planar_model)
 UPKIE_KINDS = ("pybullet", "spine")
 NO_JOYSTICK = "/dev/null/no-joystick"   # a path that cannot exist: Upkie's backends then read no gamepad
 
@@ -499,6 +499,6 @@ class UpkieBackend(Backend):
         tensors (:func:`pybullet_inertias`)."""
         self._simulator()
         from upkie.model import Model
-        from .planar_model import UPKIE_IMU_LINK, UPKIE_WHEEL_JOINTS, planar_model
+        from .planar_model import UPKIE_IMU_LINK, planar_model
         return planar_model(Model().urdf_path, UPKIE_WHEEL_JOINTS, imu_link=UPKIE_IMU_LINK,
                             inertias=pybullet_inertias(self.inner.robot_id))

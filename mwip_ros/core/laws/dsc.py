@@ -10,14 +10,11 @@ from __future__ import annotations
 import math
 from typing import List
 
-from ..controller import DscGains, dsc_terms, dsc_terms_tracking, filter_step
+from ..controller import INTERNALS, DscGains, dsc_terms, dsc_terms_tracking, filter_step
 from ..motion import rate_reference
 from . import Law
 
 __all__ = ["DscLaw", "INTERNALS", "dsc_step", "dsc_track_step", "lean_reference"]
-
-# controller_internals of DSC and DSCNDO (docs/graph.md: plot them): msgs.layouts.INTERNAL_NAMES
-INTERNALS = ("S1", "S2", "x4d", "x4_bar", "u_dsc", "u_taud", "u", "x1")
 
 
 def dsc_step(P, p, h, x, s, first, m=math):
