@@ -135,6 +135,7 @@ def _check(args) -> Optional[str]:
 
 def _robot(args, cfg):
     """The emulated robot of the options and the plant ``cfg``."""
+    from mwip_ros.core.plant import per_wheel
     from mwip_ros.robot.moteus_emu import EmulatedRobot, Injection, Servo, ServoConfig
     from mwip_ros.robot.sim import SimBackend
     dt = 1.0 / args.physics_rate
@@ -142,7 +143,7 @@ def _robot(args, cfg):
     plant = replace(cfg, h=dt, substeps=max(1, round(cfg.substeps * dt / cfg.h)),
                     sensing=replace(cfg.sensing, delay_periods=0, actuator_delay_periods=0))
     max_torque = args.max_torque if args.max_torque is not None else (
-        0.5 * cfg.torque_limit if cfg.torque_limit > 0 else math.inf)
+        per_wheel(cfg.torque_limit) if cfg.torque_limit > 0 else math.inf)
     servos = [Servo(ServoConfig(can_id=i, sign=s, kp=args.kp, kd=args.kd, max_torque=max_torque,
                                 default_timeout=args.default_timeout, timeout_mode=args.timeout_mode,
                                 timeout_max_torque=args.timeout_max_torque))

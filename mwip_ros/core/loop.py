@@ -39,7 +39,7 @@ from dataclasses import dataclass
 from typing import Any, Deque, Optional, Tuple, cast
 
 from .laws import LawError
-from .plant import Plant, PlantConfig, SpatialPlant, finite_state, make_plant, saturate
+from .plant import Plant, PlantConfig, SpatialPlant, finite_state, make_plant, per_wheel, saturate
 from .raw_sensors import RawSensors, YawGyro
 from .safety import PLAUSIBLE_TORQUE, DriverStateMachine
 from .yaw import YawLoop, wheel_torques
@@ -190,7 +190,7 @@ class PlantSide:
         return u, self.plant.lumped_disturbance(u, extra)
 
     def _act_wheels(self, wheels, extra):
-        t, lim = self.plant.t, 0.5 * self.cfg.torque_limit
+        t, lim = self.plant.t, per_wheel(self.cfg.torque_limit)
         self.safety.check_command(t, wheels[0])
         self.safety.check_command(t, wheels[1])
         pair = (saturate(wheels[0], lim), saturate(wheels[1], lim))

@@ -25,7 +25,7 @@ if TYPE_CHECKING:   # for the annotations only: importing it here would import m
     from .mujoco_plant import MujocoConfig
 
 __all__ = ["Plant", "PLANTS", "make_plant", "PlantConfig", "PlantSim", "RK4Plant", "stage_torques", "rk4_period",
-           "rk4_driven", "NO_MOTOR", "saturate", "D_w_of", "gated_drive", "finite_state", "PlantDiverged",
+           "rk4_driven", "NO_MOTOR", "saturate", "per_wheel", "D_w_of", "gated_drive", "finite_state", "PlantDiverged",
            "Pose", "SpatialPlant"]
 
 
@@ -68,6 +68,12 @@ def finite_state(x) -> bool:
 def D_w_of(mean: float, sd: float, z: float) -> float:
     """The wheel friction of one period from its standard normal draw ``z``: Gaussian, clipped at 0 (table II)."""
     return max(0.0, mean + sd * z)
+
+
+def per_wheel(lumped: float) -> float:
+    """A wheel's share [N m] of a lumped torque (a ``torque_limit``, a motor's peak): half, each wheel drives u / 2;
+    0 stays 0 (no limit)."""
+    return 0.5 * lumped
 
 
 def saturate(u: float, limit: float) -> float:

@@ -32,7 +32,7 @@ import math
 from dataclasses import dataclass
 from typing import Tuple
 
-from .plant import saturate
+from .plant import per_wheel, saturate
 
 __all__ = ["YawConfig", "YawLoop", "wheel_torques"]
 
@@ -102,5 +102,5 @@ class YawLoop:
 
 def wheel_torques(u: float, u_psi: float, torque_limit: float) -> Tuple[float, float]:
     """(u_L, u_R) = (u / 2 - u_psi / 2, u / 2 + u_psi / 2), each clipped to +-``torque_limit`` / 2 (0: no limit)."""
-    lim = 0.5 * torque_limit
+    lim = per_wheel(torque_limit)
     return saturate(0.5 * u - 0.5 * u_psi, lim), saturate(0.5 * u + 0.5 * u_psi, lim)

@@ -110,9 +110,17 @@ def robot_values(param_files, control_rate_hz: float) -> dict:
 
 
 def wheel_limit(values: Mapping[str, Any], robot: Mapping[str, Any]) -> float:
-    """Each wheel's torque limit [N m]: ``wheel_torque_limit``, or half the robot's lumped ``torque_limit`` (SPEC 16:
-    each wheel gets u/2 and half the limit); 0 = none."""
-    return values["wheel_torque_limit"] or 0.5 * robot.get("torque_limit", 0.0)
+    """Each wheel's torque limit [N m]: ``wheel_torque_limit``, or the wheel's share of the robot's lumped
+    ``torque_limit`` (:func:`~mwip_ros.core.plant.per_wheel`, SPEC 16: each wheel gets u/2 and half the limit); 0 =
+    none.  ParamError naming both keys when ``wheel_torque_limit`` is more than that share (the robot's two limits
+    disagree)."""
+    from mwip_ros.core.plant import per_wheel
+    own, share = values["wheel_torque_limit"], per_wheel(robot.get("torque_limit", 0.0))
+    if own > 0.0 and share > 0.0 and own > share:
+        raise ParamError("wheel_torque_limit", f"{own:g} N m is more than plant_sim's torque_limit gives a wheel "
+                                               f"(torque_limit / 2 = {share:g} N m): the robot's two limits disagree; "
+                                               f"give at most {share:g}, or 0 for the torque_limit's share")
+    return own or share
 
 
 def driver_config(values: Mapping[str, Any], robot: Mapping[str, Any]):

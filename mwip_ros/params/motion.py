@@ -122,13 +122,14 @@ def drive_wheel_limit(v: Mapping[str, Any]) -> float:
     """The torque one wheel's drive gives [N m] (plant_sim's :data:`DRIVE_KEYS`, docs/theory.md 6.7 and 6.13): half of
     ``torque_limit`` (the drive stage clips each wheel there), half of the motor's peak torque at rest (each wheel has
     half the lumped motor), the smaller of the two; 0 when the drive has neither (no limit: the paper's robot)."""
+    from mwip_ros.core.plant import per_wheel
     from .typed import motor
     limits = []
     if v.get("torque_limit", 0.0) > 0.0:
-        limits.append(0.5 * float(v["torque_limit"]))
+        limits.append(per_wheel(float(v["torque_limit"])))
     m = motor(v)
     if m.enabled:
-        limits.append(0.5 * m.peak_torque)
+        limits.append(per_wheel(m.peak_torque))
     return min(limits) if limits else 0.0
 
 

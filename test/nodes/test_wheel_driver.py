@@ -98,6 +98,13 @@ def test_a_driver_that_cannot_run_refuses_in_one_line_naming_the_key(args, words
     assert "\n" not in line and all(w in line for w in words), line
 
 
+def test_a_wheel_limit_above_plant_sims_share_refuses_in_one_line_naming_both_keys(tmp_path):
+    robot = tmp_path / "robot.yaml"   # plant_sim gives each wheel torque_limit / 2 = 0.9 N m
+    robot.write_text("plant_sim:\n  ros__parameters:\n    torque_limit: 1.8\n")
+    line = refused(W.WheelDriverNode, "-p", "wheel_torque_limit:=1.0", params=[*RAW, robot])
+    assert "\n" not in line and "'wheel_torque_limit'" in line and "plant_sim's torque_limit" in line, line
+
+
 def test_help_lists_its_parameters_topics_and_exit_codes(capsys):
     from mwip_ros import params as P
     assert W.main(["wheel_driver", "--help"]) == 0
