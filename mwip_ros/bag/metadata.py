@@ -21,6 +21,7 @@ from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence, Union
 
 import yaml
 
+from mwip_ros.msgs.stamps import NS_PER_S
 from mwip_ros.params.errors import bounded
 from mwip_ros.yamlio import YamlRefused, load_yaml, shown
 
@@ -90,7 +91,7 @@ def _duration_map(value: Any) -> Dict[str, int]:
     if isinstance(value, Mapping):
         return {"sec": int(value.get("sec", 0)), "nsec": int(value.get("nsec", 0))}
     ns = int(getattr(value, "nanoseconds", value))
-    return {"sec": ns // 1_000_000_000, "nsec": ns % 1_000_000_000}
+    return {"sec": ns // NS_PER_S, "nsec": ns % NS_PER_S}
 
 
 def _policy_name(kind: str, value: Any) -> str:

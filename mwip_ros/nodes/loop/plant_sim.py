@@ -84,9 +84,9 @@ from mwip_ros.msgs.qos import BEST_EFFORT_INPUT_QOS, DRIVER_STATE_QOS, INPUT_QOS
 from mwip_ros.nodes.runtime.diagnostics import ERROR, OK, WARN, StepRate
 from mwip_ros.nodes.runtime.driver_state import publish_transition
 from mwip_ros.nodes.runtime.guards import PublisherWatch, Rejects
-from mwip_ros.nodes.runtime.lockstep import LockstepDriver, subscriber_floor
+from mwip_ros.nodes.runtime.lockstep import SETTLE_S, LockstepDriver, subscriber_floor
 from mwip_ros.nodes.runtime.params import declare
-from mwip_ros.nodes.runtime.rclpy_compat import PolledInput
+from mwip_ros.nodes.runtime.rclpy_compat import SIDE_DEPTH, PolledInput
 from mwip_ros.nodes.loop.plant_runners import RUNNERS
 from mwip_ros.nodes.loop.plant_truth import TruthPublishers
 from mwip_ros.nodes.runtime.process import EXIT_ERROR, EXIT_FALLEN, GracefulNodeMixin, run_node
@@ -95,8 +95,6 @@ from mwip_ros.params.typed import limit_warnings
 from mwip_ros.runs import CsvStream
 
 NAME = "plant_sim"
-SIDE_DEPTH = 10   # messages of each side input kept between two looks (the newest: keep-last history)
-SETTLE_S = 0.3  # the discovered graph must be unchanged this long before the first state
 ESTIMATOR = "state_estimator"   # the node whose /diagnostics status a raw plant watches (its namespace's)
 
 

@@ -82,7 +82,7 @@ from mwip_ros.msgs.qos import BEST_EFFORT_INPUT_QOS, DRIVER_STATE_QOS, INPUT_QOS
 from mwip_ros.nodes.runtime.diagnostics import ERROR, OK, WARN
 from mwip_ros.nodes.runtime.driver_state import publish_transition
 from mwip_ros.nodes.runtime.guards import PublisherWatch, Rejects
-from mwip_ros.nodes.runtime.lockstep import LockstepDriver, subscriber_floor
+from mwip_ros.nodes.runtime.lockstep import SETTLE_S, LockstepDriver, subscriber_floor
 from mwip_ros.nodes.runtime.params import declare, ros_arguments
 from mwip_ros.nodes.runtime.process import EXIT_ERROR, EXIT_FALLEN, GracefulNodeMixin, run_node
 from mwip_ros.nodes.runtime.schedule import Reservoir, Schedule
@@ -91,11 +91,9 @@ from mwip_ros.robot.backend import Backend, BackendError, Command, Observation
 from mwip_ros.robot.driver import WheelDriver, timing_lines
 
 NAME = "wheel_driver"
-SETTLE_S = 0.3   # the discovered graph must be unchanged this long before the first state (as plant_sim)
 ESTIMATOR = "state_estimator"   # the node whose /diagnostics status the driver watches (its namespace's)
 WHEEL_JOINTS = L.WHEEL_TORQUE_JOINTS   # wheel_states' names: the URDF's wheel joints (left, right)
 TIMING_FIELDS = ("exchange", "read_to_publish", "command_age", "wake_latency")   # a period's timing series [s]
-SIDE_DEPTH = 10   # side inputs: the newest messages kept between two looks (issue 46's PolledInput, at the merge)
 
 _WHEEL_STATES = cdr.JointStateEncoder(WHEEL_JOINTS)
 

@@ -46,7 +46,8 @@ from mwip_ros.core.loop import STAGES, Answer, answering
 from mwip_ros.msgs.cdr import peek_stamp
 from mwip_ros.msgs.layouts import encode_clock
 
-__all__ = ["LockstepDriver", "RESEND_S", "graph_missing", "CHAIN", "measurement_listeners", "subscriber_floor"]
+__all__ = ["LockstepDriver", "RESEND_S", "SETTLE_S", "graph_missing", "CHAIN", "measurement_listeners",
+           "subscriber_floor"]
 
 CHAIN = answering()   # the answering stages of today's loop: the observer, then the law (core.loop.STAGES)
 
@@ -54,6 +55,8 @@ RESEND_S = 0.5          # resend a state nobody answered after this long [s]
 HEARD_DEPTH = 10        # the chain's intermediate answers kept between two looks (the newest)
 WAIT_GRACE_S = 2.0      # discovery takes a moment: until then a wait for the graph is the normal start
 WAIT_LOG_PERIOD_S = 2.0
+SETTLE_S = 0.3          # a robot side (plant_sim, wheel_driver): the discovered graph unchanged this long before the
+                        # first state
 COMPLETE_WAIT_S = 3.0   # once the required nodes are there, wait at most this long for every discovered subscriber
 NOT_FOUND_HINT = "started? same ROS_DOMAIN_ID?"
 

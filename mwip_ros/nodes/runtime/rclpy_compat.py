@@ -44,19 +44,21 @@ from __future__ import annotations
 import sys
 from typing import Callable, Dict, List, Optional, Tuple
 
+from mwip_ros.msgs.stamps import NS_PER_S, join_ns
 from mwip_ros.nodes.runtime.guards import NEW, REPEAT, RESTART, Rejects, StampGuard
 
 __all__ = ["WRITTEN_FOR", "MAX_NAME_CHARS", "MAX_ARRAY_LEN", "MAX_PARAMETERS", "CLOCK_WINDOW_NS", "RclpyChanged",
            "rclpy_version", "check_version", "install", "installed", "parameter_from_msg", "shown_name", "guard_clock",
            "clock_guarded", "parameter_overrides", "name_undeclared_parameters", "use_ros_time_override",
-           "PolledInput", "polled_inputs", "destroy_polled_inputs"]
+           "PolledInput", "polled_inputs", "destroy_polled_inputs", "SIDE_DEPTH"]
 
 WRITTEN_FOR = ("7.1.6",)   # the rclpy versions whose internals this module was written against (and tested with)
 MAX_NAME_CHARS = 256       # a longer name that the node has not declared is refused unread
 MAX_ARRAY_LEN = 4096       # an array value longer than this is refused unread (the schema's arrays hold a few values)
 MAX_PARAMETERS = 1000      # per request: the parameters after these are refused unread (each still answered)
 SHOWN_NAME_CHARS = 80      # in a reason, a name is cut to this many characters
-CLOCK_WINDOW_NS = 1_000_000_000  # /clock may jump ahead by at most 1 s (simulated time) at once
+CLOCK_WINDOW_NS = NS_PER_S   # /clock may jump ahead by at most 1 s (simulated time) at once
+SIDE_DEPTH = 10   # a robot side's side inputs: the newest messages of each a PolledInput keeps between two looks
 
 _CALLBACKS = ("_set_parameters_callback", "_set_parameters_atomically_callback", "_get_parameters_callback",
               "_get_parameter_types_callback", "_describe_parameters_callback", "_list_parameters_callback")
@@ -186,7 +188,7 @@ def guard_clock() -> None:
         return
 
     def clock_callback(self, msg) -> None:
-        stamp = int(msg.clock.sec) * 1_000_000_000 + int(msg.clock.nanosec)
+        stamp = join_ns(msg.clock.sec, msg.clock.nanosec)
         guard = self.__dict__.setdefault("_mwip_guard", StampGuard(CLOCK_WINDOW_NS, "/clock"))
         verdict = guard.check(stamp) if stamp >= 0 else f"/clock {stamp} ns is negative"
         if verdict == REPEAT:
