@@ -15,11 +15,12 @@ from pathlib import Path
 from typing import Optional, Sequence
 
 from mwip_ros.bag import BagError, repair
+from mwip_ros.cli.exits import EXIT_OK, EXIT_USAGE
 from mwip_ros.yamlio import NotRegularFile
 
 __all__ = ["EXIT_NOTHING", "EXIT_OK", "EXIT_USAGE", "main"]
 
-EXIT_OK, EXIT_NOTHING, EXIT_USAGE = 0, 1, 2
+EXIT_NOTHING = 1   # nothing could be recovered
 
 
 def _parser() -> argparse.ArgumentParser:

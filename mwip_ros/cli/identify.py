@@ -38,14 +38,14 @@ from pathlib import Path
 
 import numpy as np
 
-from mwip_ros.cli.exits import plugin_refusal
+from mwip_ros.cli.exits import EXIT_USAGE, plugin_refusal
 from mwip_ros import params as P
 from mwip_ros.cli.outputs import refuse_existing
 from mwip_ros.core import identify as ID
 from mwip_ros.params.paths import default_params_file
 
 PROG = "mwip_identify"
-EXIT_REFUSED = 2
+EXIT_REFUSED = EXIT_USAGE   # an input it refuses, in one line (cli.exits)
 NEEDED = ("t", "theta_b", "dtheta_w", "dtheta_b")
 RAW = ("gyro", "accel_x", "accel_z", "encoder", "encoder_rate", "u_applied")
 SATURATED_SHARE = 0.5   # --raw: refused when the torque sits at its largest magnitude in more of the periods

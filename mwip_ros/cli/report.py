@@ -49,7 +49,7 @@ import numpy as np
 from mwip_ros.bag import REPAIRED_KEY, BagError, read_metadata
 from mwip_ros.bag.ledger import GAPS_KEY
 from mwip_ros.cli import animation, interrupts, outputs, plotting
-from mwip_ros.cli.exits import epilog
+from mwip_ros.cli.exits import EXIT_USAGE, epilog
 from mwip_ros.core import metrics
 from mwip_ros.core.trajectory import Trajectory
 from mwip_ros.params import defaults_for
@@ -59,7 +59,7 @@ FALL_ANGLE = defaults_for("plant_sim")["fall_angle"]
 REPORT_FILES = ("fig3.png", "observer.png", "metrics.md", "metrics.json", "animation.gif")
 REFERENCE = "dscndo"     # the law the ratios compare to, when a run carries its label
 RATIOS = [("theta_b_p2p", "theta_b p2p"), ("theta_b_rms", "theta_b RMS"), ("u_rms", "u RMS")]
-EXIT_BAD_INPUT = 2
+EXIT_BAD_INPUT = EXIT_USAGE   # a run directory or CSV it cannot read (cli.exits)
 
 
 def bag_custom_data(path) -> dict:

@@ -14,7 +14,7 @@ from pathlib import Path
 
 from mwip_ros import params as P
 from mwip_ros.cli import interrupts, outputs
-from mwip_ros.cli.exits import epilog
+from mwip_ros.cli.exits import EXIT_USAGE, epilog
 from mwip_ros.sweep import engine, results, warm
 from mwip_ros.sweep import progress as sweep_progress
 from mwip_ros.sweep.scenarios import expand, parameter_file
@@ -23,7 +23,7 @@ from mwip_ros.core import laws as registry
 from mwip_ros.sweep.spec import SWEEP_BACKENDS, SpecError, load_spec
 
 PROG = "mwip_sweep"
-EXIT_BAD_INPUT, EXIT_INTERRUPTED = 2, interrupts.EXIT_SIGINT   # 143 after SIGTERM (interrupts.run_main)
+EXIT_BAD_INPUT, EXIT_INTERRUPTED = EXIT_USAGE, interrupts.EXIT_SIGINT   # 143 after SIGTERM (interrupts.run_main)
 # what a sweep writes into --out: an --out holding any of them is refused without --force, which removes them
 SWEEP_FILES = ("results.csv", "summary.md", "summary.json", "sweep.json", "base.yaml", "spec.yaml",
                "upright_map.png", "theta_b_rms.png", "roa.png")

@@ -21,10 +21,8 @@ from typing import Optional, Sequence, Tuple
 
 from mwip_ros.core.plant import saturate
 
-__all__ = ["DEFAULT_MAX_SPEED", "DEFAULT_MAX_YAW_RATE", "Limits", "limits", "apply_key", "read_keys", "cmd", "drive"]
+__all__ = ["Limits", "limits", "apply_key", "read_keys", "cmd", "drive"]
 
-DEFAULT_MAX_SPEED = 1.0      # [m/s] when neither the schema nor a file gives motion.max_speed
-DEFAULT_MAX_YAW_RATE = 1.0   # [rad/s] ... motion.max_yaw_rate
 UP, DOWN, RIGHT, LEFT = "\x1b[A", "\x1b[B", "\x1b[C", "\x1b[D"
 
 
@@ -40,11 +38,6 @@ def _spec(name: str):
     return next((s for specs in NODE_SPECS.values() for s in specs if s.name == name), None)
 
 
-def _schema_default(name: str, fallback: float) -> float:
-    spec = _spec(name)
-    return float(spec.default) if spec is not None else fallback
-
-
 def _lookup(tree, dotted: str):
     for part in dotted.split("."):
         if not isinstance(tree, dict) or part not in tree:
@@ -55,13 +48,14 @@ def _lookup(tree, dotted: str):
 
 def limits(files: Sequence[str] = ()) -> Limits:
     """``motion.max_speed`` and ``motion.max_yaw_rate``: the last of the ``files`` (any section) that gives them,
-    else the schema's defaults (:data:`DEFAULT_MAX_SPEED`, :data:`DEFAULT_MAX_YAW_RATE` without one).  Raises
+    else the schema's defaults (the controller's, :mod:`mwip_ros.params.motion`).  Raises
     ValueError naming the key for a value the controller refuses (the schema's check: its type, finite, its range)."""
     from pathlib import Path
 
+    from mwip_ros.params import defaults_for
     from mwip_ros.yamlio import load_yaml
-    out = {"motion.max_speed": _schema_default("motion.max_speed", DEFAULT_MAX_SPEED),
-           "motion.max_yaw_rate": _schema_default("motion.max_yaw_rate", DEFAULT_MAX_YAW_RATE)}
+    own = defaults_for("dscndo_controller")
+    out = {"motion.max_speed": float(own["motion.max_speed"]), "motion.max_yaw_rate": float(own["motion.max_yaw_rate"])}
     for f in files:
         doc = load_yaml(Path(f)) or {}
         for section in doc.values() if isinstance(doc, dict) else ():
