@@ -52,7 +52,7 @@ def specs() -> List[Any]:
                   floor_why="a watchdog faster than a millisecond would fire between commands", unit="s"),
         ParamSpec("wheel_torque_limit", "double", 0.0, "each wheel's torque limit [N m] (the moteus maximum_torque "
                   "too); 0 = half of the robot's lumped torque_limit (its plant_sim section; none when that is 0 "
-                  "too, refused with moteus)", lo=0.0, hi=1e6, unit="N m"),
+                  "too, refused with moteus); more than that half is refused", lo=0.0, hi=1e6, unit="N m"),
         ParamSpec("expected_subscribers", "integer", 2, "lockstep: matched subscriptions imu/data_raw needs before "
                   "the first state, counted as plant_sim's (2 = observer + controller, +1 per recorder; the "
                   "state_estimator alone listens, so the floor is this - 1)", lo=0),
