@@ -9,7 +9,7 @@ from mwip_ros.core.drive import MotorConfig, limit_warning, torque_warning
 from mwip_ros.core.estimators import EstimatorConfig
 from mwip_ros.core.excitation import ExcitationConfig
 from mwip_ros.core.model import PhysicalParams, Sinusoid, State
-from mwip_ros.core.plant import PlantConfig
+from mwip_ros.core.plant import MujocoConfig, PlantConfig
 from mwip_ros.core.raw_sensors import RawSensorConfig
 from mwip_ros.core.sensing import SensingConfig
 from mwip_ros.core.sim import ClosedLoop
@@ -60,11 +60,11 @@ def plant_config(v: Mapping[str, Any]) -> PlantConfig:
         mujoco=mujoco(v))
 
 
-def mujoco(v: Mapping[str, Any]):
-    """The MuJoCo model's own values (``backend: mujoco``, docs/theory.md 6.10); None with the rk4 backend."""
+def mujoco(v: Mapping[str, Any]) -> Optional[MujocoConfig]:
+    """The MuJoCo model's own values and its ground (``backend: mujoco``, docs/theory.md 6.10); None with the rk4
+    backend."""
     if v.get("backend", "rk4") != "mujoco":
         return None
-    from mwip_ros.core.mujoco_plant import MujocoConfig
     return MujocoConfig(track_width=v["actual.track_width"], I_b_roll=v["actual.I_b_roll"],
                         I_b_yaw=v["actual.I_b_yaw"], friction=v["ground.friction"], timestep=v["mujoco.timestep"],
                         slope=v.get("ground.slope", 0.0), bumps=tuple(float(x) for x in v.get("ground.bumps", ())))
