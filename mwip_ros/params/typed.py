@@ -5,7 +5,7 @@ from typing import Any, Iterable, List, Mapping, Optional, Tuple, cast
 
 from mwip_ros.core import laws
 from mwip_ros.core.controller import DscGains
-from mwip_ros.core.drive import MotorConfig, limit_warning, torque_warning
+from mwip_ros.core.drive import limit_warning, torque_warning
 from mwip_ros.core.estimators import EstimatorConfig
 from mwip_ros.core.excitation import ExcitationConfig
 from mwip_ros.core.model import PhysicalParams, Sinusoid, State
@@ -14,7 +14,8 @@ from mwip_ros.core.raw_sensors import RawSensorConfig
 from mwip_ros.core.sensing import SensingConfig
 from mwip_ros.core.sim import ClosedLoop
 
-from .motion import motion as motion_config, yaw as yaw_config
+from .drive import motor
+from .motion import motion as motion_config, wheel_limit_warning, yaw as yaw_config
 
 from .schema import PAPER_NOMINAL
 
@@ -79,13 +80,6 @@ def excitation(v: Mapping[str, Any]) -> Optional[ExcitationConfig]:
     return cfg if cfg.active else None
 
 
-def motor(v: Mapping[str, Any]) -> MotorConfig:
-    """The DC motor and its driver (docs/theory.md 6.7), ``motor.enabled`` false by default."""
-    return MotorConfig(enabled=v.get("motor.enabled", False), **{
-        k: v.get(f"motor.{k}", getattr(MotorConfig, k))
-        for k in ("torque_constant", "resistance", "voltage_limit", "current_limit")})
-
-
 def limit_warnings(v: Mapping[str, Any], law_names: Iterable[str] = ()) -> List[str]:
     """The torque limits too weak for the true robot (:func:`mwip_ros.core.drive.limit_warning`, one line each):
     the motor's peak torque at ``fall_angle`` (:func:`~mwip_ros.core.drive.torque_warning`); ``torque_limit``
@@ -103,7 +97,6 @@ def limit_warnings(v: Mapping[str, Any], law_names: Iterable[str] = ()) -> List[
     out += [limit_warning(key, lim, actual, tilt, f"the initial tilt |initial.theta_b| = {tilt:g} rad")
             for key, lim in limits.items()]
     if v.get("motion.enabled"):   # the yaw stage's wheel limit above the drive's (the drive's is used)
-        from .motion import wheel_limit_warning
         out.append(wheel_limit_warning(v))
     return [w for w in out if w]
 
