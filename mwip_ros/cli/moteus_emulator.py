@@ -211,8 +211,8 @@ def _open_pty(link: Optional[Path]):
 
 def main(argv: Optional[List[str]] = None) -> int:
     """The emulator's command line (module docstring); returns the exit code."""
-    from mwip_ros.nodes.runtime.entry import bound_malloc_arenas
-    bound_malloc_arenas()   # before rclpy is imported (mwip_ros.nodes.runtime.entry)
+    from mwip_ros.nodes.runtime.arenas import bound_malloc_arenas
+    bound_malloc_arenas()   # before rclpy is imported (mwip_ros.nodes.runtime.arenas)
     argv = list(sys.argv[1:] if argv is None else argv)
     ros_args: List[str] = []
     if "--ros-args" in argv:

@@ -18,10 +18,11 @@ boxes; ``external_wrench``'s force.y and torque.z act on the body at its centre 
 The laws see the planar :class:`~.model.State`: theta_b the body's pitch, theta_w the mean of the two wheels'
 absolute angles; :attr:`MujocoPlant.pose` is the 3D pose. The true tau_d is eq. (6-7) on those coordinates with
 MuJoCo's accelerations and u = u_L + u_R, defined while both wheels touch the ground (NaN otherwise: theory 6.10).
-``D_w`` is drawn per period from the same seeded generator as :class:`~.plant.PlantSim`'s, so both backends see the
-same friction sequence. A simulation that diverges (a MuJoCo warning, a state that is not finite) raises
-:class:`PlantDiverged` naming the time and the cause: it never hands a NaN state or MuJoCo's silent reset to the
-loop. ``mujoco`` is imported when the backend is built, not before (:func:`mujoco_module`).
+``D_w`` is drawn per period from the same seeded generator as :class:`~.plant.PlantSim`'s (both extend
+:class:`~.plant_base.PlantBase`), so both backends see the same friction sequence. A simulation that diverges (a
+MuJoCo warning, a state that is not finite) raises :class:`PlantDiverged` naming the time and the cause: it never
+hands a NaN state or MuJoCo's silent reset to the loop. ``mujoco`` is imported when the backend is built, not
+before (:func:`mujoco_module`).
 """
 from __future__ import annotations
 
@@ -32,7 +33,7 @@ from typing import Any, ClassVar, Optional, Tuple
 from .drive import motor_torque
 from .markers import pose_angles
 from .model import State, lumped_disturbance
-from .plant import PlantDiverged, PlantSim, Pose, gated_drive
+from .plant_base import MujocoConfig, PlantBase, PlantDiverged, Pose, gated_drive
 from mwip_ros.optional import required
 
 __all__ = ["MujocoConfig", "MujocoPlant", "PlantDiverged", "Pose", "mjcf", "mujoco_module"]
@@ -49,20 +50,6 @@ def mujoco_module():
 
 def _unlogged(text: str) -> None:
     """MuJoCo's warning handler: nothing (the plant turns the warning counts into :class:`PlantDiverged`)."""
-
-
-@dataclass(frozen=True)
-class MujocoConfig:
-    """What the 3D model has that eq. (1) has not (``actual.track_width``, ``actual.I_b_roll``, ``actual.I_b_yaw``,
-    ``ground.friction``, ``mujoco.timestep``; defaults as the schema's)."""
-
-    track_width: float = 0.5     # wheel to wheel [m]
-    I_b_roll: float = 65.0       # the body's inertia about its x axis (through the centre of gravity) [kg m^2]
-    I_b_yaw: float = 20.0        # ... about its z axis [kg m^2]
-    friction: float = 2.0        # ground sliding friction coefficient
-    timestep: float = 5e-3       # largest physics step [s]; a control period is an integer number of steps
-    slope: float = 0.0           # the ground's slope about y [rad], uphill ahead for > 0 (ground.slope)
-    bumps: Tuple[float, ...] = ()   # steps [x0, h0, x1, h1, ...] along the slope [m] (ground.bumps, params.ground)
 
 
 _D0, _DMAX = 0.99, 0.999   # the contact's impedance (solimp) at rest and deep in
@@ -166,11 +153,11 @@ def _ground(mc: MujocoConfig, contact: str) -> str:
 
 
 @dataclass
-class MujocoPlant(PlantSim):
-    """The :class:`~.plant.Plant` of a MuJoCo model (module docstring); the D_w generator, the clock and the
-    bookkeeping of the previous period are :class:`~.plant.PlantSim`'s."""
+class MujocoPlant(PlantBase):
+    """The :class:`~.plant.Plant` of a MuJoCo model (module docstring), a :class:`~.plant.SpatialPlant`; the D_w
+    generator, the clock and the bookkeeping of the previous period are :class:`~.plant_base.PlantBase`'s."""
 
-    pose: Optional[Pose] = None   # type: ignore[misc]  # a field here; PlantSim's (planar) is the class's None
+    pose: Optional[Pose] = None   # a field here (3D); PlantSim's (planar) is the class's None
     wheels_prev: Optional[Tuple[float, float]] = None   # the yaw stage's (u_L, u_R) that acted (theory 6.13)
     wheels_cmd_prev: Optional[Tuple[float, float]] = None   # ... and what was commanded (the motor's inputs)
     _mj: Any = field(default=None, repr=False)   # the mujoco module

@@ -1,79 +1,77 @@
-"""The true plant as a discrete-time stepper (docs/theory.md: the plant and discrete time).
+"""The plant interface: one contract for every simulated plant, its RK4 implementation, and the registry.
 
-``PlantSim`` integrates eq. (1) with classic RK4 in ``substeps`` equal sub-steps
-per control period, holding ``u`` and ``D_w`` over the period and evaluating
-tau_ext at each stage time.  ``D_w`` is drawn once per period from a seeded
-generator (Gaussian, clipped at 0).  The offline simulator and the
-``plant_sim`` node both drive this class, so they integrate the same numbers.
-A period integrated with the driver not enabled (docs/theory.md 6.8) has its bridge open:
-no current, no torque, whatever the command or the wheel's speed (:func:`gated_drive`).
+**The contract** (:class:`Plant`; a runner: the offline loop's :class:`~.loop.PlantSide`, hence ``mwip_sim``,
+the ``plant_sim`` node's lockstep and realtime runners, :class:`mwip_ros.robot.sim.SimBackend`).  A plant is built
+once, from its configuration, and then advanced one control period at a time; it has no other way in:
+
+- construction: :func:`make_plant` ``(cfg)``, ``cfg`` a :class:`PlantConfig` (``mwip_ros.params.plant_config``):
+  the true physical parameters, the control period h [s], the D_w noise's seed, the initial :class:`~.model.State`,
+  the motor and its driver, and for a spatial plant the 3D model and the ground it rolls on (``cfg.mujoco``, a
+  :class:`MujocoConfig`: ``slope`` [rad] about y, uphill ahead for > 0; ``bumps`` [x0, h0, ...] [m], steps across
+  the path; ``friction``).  The terrain is a construction input: a plant on other ground is another ``cfg``.
+- state, read at t_k = k h: :attr:`Plant.k`, :attr:`Plant.t` [s], :attr:`Plant.x` = (theta_w, theta_b,
+  theta_w', theta_b') [rad, rad/s] (theta_w the wheel's absolute angle, on a spatial plant the mean of the two
+  wheels'; theta_b the body's pitch from upright, positive as eq. 1 has it), :attr:`Plant.u_prev` [N m] the lumped
+  torque that acted over [t_k-1, t_k), :attr:`Plant.saturation` the drive's worst code over it (:mod:`.drive`),
+  :attr:`Plant.fallen` (|theta_b| beyond ``cfg.fall_angle``, or a state that is not finite).
+- one period: :meth:`Plant.step` ``(u, extra, enabled)`` integrates [t_k, t_k+1) with the lumped torque u [N m]
+  (eq. 1's u, already clipped; the drive's command when the motor model is on) held; ``extra``, the
+  **external wrench** held over the period, is the one input for everything that pushes the robot (the
+  configured tau_ext sinusoids are added to it): (tau_ext1 [N m] on the wheels' axis, tau_ext2 [N m] on the
+  body's pitch axis[, force.y [N] on the body's centre of gravity along the heading frame's y (REP-103: left),
+  torque.z [N m] about the vertical]); the last two act on a spatial plant only (``plant_sim``'s
+  ``external_wrench``, :class:`~.loop.Period`'s ``wrench``, the terrain scan's push: :mod:`mwip_ros.sweep.terrain`).
+  ``enabled`` False: the driver's bridge is open over the period, no torque at all (:func:`gated_drive`).  A
+  simulation that diverges raises :class:`PlantDiverged` and leaves ``x`` at t_k.  :meth:`Plant.lie` is the
+  period of a fallen robot lying still (nothing integrated, no torque, no wrench).
+- what the runner records and senses, at t_k: :meth:`Plant.lumped_disturbance` ``(u, extra)`` the true tau_d
+  (eq. 6-7) [N m] with u applied (NaN on a spatial plant while a wheel is off the ground);
+  :meth:`Plant.sample_accel` (theta_w'', theta_b'') [rad/s^2] at t_k^-, a raw sample's instant (docs/theory.md
+  6.4); :attr:`Plant.integration`, in words (the node's start line).
+- frames: the planar state is along the path (the slope's plane on sloped ground).  ``spatial`` says whether the
+  plant has a 3D pose: then :attr:`Plant.pose` is the :class:`Pose` at t_k (the axle's centre (x, y, z) [m] in
+  the world frame, REP-103: x forward at the start, z up; yaw, pitch, roll [rad]; each wheel's absolute angle
+  [rad]) and the plant is a :class:`SpatialPlant`: the body's yaw rate [rad/s] about its own z, the IMU's
+  reading in the body frame (x forward, y left: the pitch axis, z up), and each wheel's torque (u_L, u_R) [N m]
+  (``wheels=``, the yaw stage's pair, docs/theory.md 6.13) instead of u / 2 each.
+
+**The implementations.**  :class:`PlantSim` (``backend: rk4``, alias :data:`RK4Plant`), in this module: eq. (1)
+integrated with classic RK4 in ``substeps`` equal sub-steps per period, ``u`` and ``D_w`` held over the period and
+tau_ext evaluated at each stage time; planar.  :class:`~.mujoco_plant.MujocoPlant` (``backend: mujoco``), in
+:mod:`.mujoco_plant`: the 3D model in MuJoCo (docs/theory.md 6.10); spatial.  Both extend
+:class:`~.plant_base.PlantBase` (:mod:`.plant_base`: the configuration, the pose, the error, the driver's gate and
+the bookkeeping of a period, with ``D_w`` drawn once per period from one seeded generator, Gaussian clipped at 0,
+so both see the same friction).  :data:`PLANTS` maps a backend's name to its class, read-only: a new physics is a
+new module implementing :class:`Plant` and one more entry there, not a subclass of a plant, and nothing registers
+a plant at run time.  The batch simulators (:mod:`.batch`, :mod:`.compiled`, ``mwip_ros.envs.lanes``) run
+:func:`rk4_driven` on arrays of scenarios, not through this interface; the lockstep oracle tests keep them equal
+to :class:`PlantSim` bit for bit.
+
+**The robot one level up.**  ``mwip_ros/robot/backend.py``'s :class:`~mwip_ros.robot.backend.Backend` is the same
+idea where the robot is a device: four methods as Upkie's backends (``observe``, ``reset``, ``step(command)``,
+``close``), a :class:`~mwip_ros.robot.backend.Command` of per-wheel torques [N m] in and an
+:class:`~mwip_ros.robot.backend.Observation` (each wheel as its servo reads it, the IMU in ``imu_link``) out.
+``mwip_ros/robot/sim.py``'s :class:`~mwip_ros.robot.sim.SimBackend` puts any plant of :data:`PLANTS` behind it
+(through :class:`~.loop.PlantSide`: the sensors, the drive, the driver's state machine): its ``reset`` is a fresh
+:func:`make_plant`, its ``step`` is :meth:`Plant.step` between the drive's stage and the sensors'; the devices
+(``robot/mock.py``, ``robot/upkie.py``, ``robot/moteus_backend.py``) implement it directly.
 """
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Callable, ClassVar, Dict, NamedTuple, Optional, Protocol, Tuple, runtime_checkable
+from dataclasses import dataclass
+from types import MappingProxyType
+from typing import Callable, ClassVar, Mapping, Optional, Protocol, Tuple, runtime_checkable
 
-import numpy as np
-
-from .drive import MotorConfig, motor_torque
+from .drive import motor_torque
 from .model import PhysicalParams, Sinusoid, State, accel, lumped_disturbance
-from .raw_sensors import RawSensorConfig
-from .sensing import NOISE_BLOCK, SensingConfig
+from .mujoco_plant import MujocoPlant
+from .plant_base import (NO_MOTOR, D_w_of, per_wheel, MujocoConfig, PlantBase, PlantConfig, PlantDiverged, Pose, Wrench,
+                         finite_state, gated_drive)
 
-if TYPE_CHECKING:   # for the annotations only: importing it here would import mujoco_plant with every plant
-    from .mujoco_plant import MujocoConfig
-
-__all__ = ["Plant", "PLANTS", "make_plant", "PlantConfig", "PlantSim", "RK4Plant", "stage_torques", "rk4_period",
-           "rk4_driven", "NO_MOTOR", "saturate", "per_wheel", "D_w_of", "gated_drive", "finite_state", "PlantDiverged",
-           "Pose", "SpatialPlant"]
-
-
-@dataclass(frozen=True)
-class PlantConfig:
-    """Everything the true plant needs; built from the parameter file by ``mwip_ros.params.plant_config``."""
-
-    actual: PhysicalParams
-    nominal: PhysicalParams          # only to report the true lumped disturbance
-    D_b: float
-    D_w_mean: float
-    D_w_variance: float
-    tau_ext1: Sinusoid
-    tau_ext2: Sinusoid
-    h: float                         # control period [s]
-    substeps: int                    # RK4 sub-steps per period
-    seed: int                        # of the D_w noise
-    initial: State
-    torque_limit: float              # 0 = none
-    fall_angle: float                # |theta_b| beyond this is a fall [rad]
-    sensing: SensingConfig = SensingConfig()   # measurement noise, encoder, delays (core.sensing); off
-    raw: Optional[RawSensorConfig] = None      # sensors.model raw: the IMU and the relative encoder (theory.md 6.4)
-    motor: MotorConfig = MotorConfig()         # the DC motor and its driver (docs/theory.md 6.7); off
-    require_enable: bool = False               # the driver starts disabled (docs/theory.md 6.8)
-    backend: str = "rk4"                       # a key of PLANTS: rk4 (eq. 1, this module) or mujoco (theory.md 6.10)
-    mujoco: Optional[MujocoConfig] = None      # the MuJoCo model's own values (core.mujoco_plant.MujocoConfig)
-
-    @property
-    def motor_constants(self) -> Tuple[float, float, float, float]:
-        """(K_t, R, V_max, I_max) for :func:`rk4_driven`, or :data:`NO_MOTOR` when the motor is off."""
-        mc = self.motor
-        return (mc.torque_constant, mc.resistance, mc.voltage_limit, mc.current_limit) if mc.enabled else NO_MOTOR
-
-
-def finite_state(x) -> bool:
-    """Every component of the state ``x`` is a finite number (a run whose state is not has diverged)."""
-    return all(math.isfinite(v) for v in x)
-
-
-def D_w_of(mean: float, sd: float, z: float) -> float:
-    """The wheel friction of one period from its standard normal draw ``z``: Gaussian, clipped at 0 (table II)."""
-    return max(0.0, mean + sd * z)
-
-
-def per_wheel(lumped: float) -> float:
-    """A wheel's share [N m] of a lumped torque (a ``torque_limit``, a motor's peak): half, each wheel drives u / 2;
-    0 stays 0 (no limit)."""
-    return 0.5 * lumped
+__all__ = ["Plant", "PLANTS", "make_plant", "PlantConfig", "MujocoConfig", "PlantBase", "PlantSim", "RK4Plant",
+           "stage_torques", "rk4_period", "rk4_driven", "NO_MOTOR", "saturate", "per_wheel", "D_w_of", "gated_drive",
+           "finite_state", "PlantDiverged", "Pose", "SpatialPlant", "Wrench"]
 
 
 def saturate(u: float, limit: float) -> float:
@@ -84,35 +82,12 @@ def saturate(u: float, limit: float) -> float:
     return u
 
 
-class Pose(NamedTuple):
-    """A spatial plant's 3D pose at t_k (:attr:`Plant.pose`): the axle's centre (x, y, z) [m], the body's yaw, pitch
-    (theta_b) and roll [rad] (REP-103: x forward, z up), each wheel's absolute angle [rad]."""
-
-    x: float
-    y: float
-    z: float
-    yaw: float
-    pitch: float
-    roll: float
-    wheel_left: float
-    wheel_right: float
-
-
-class PlantDiverged(RuntimeError):
-    """A plant's simulation diverged (a physics engine's warning, a state that is not finite); the message names
-    the time and the cause.  The run ends there: no row of it is scored."""
-
-
 @runtime_checkable
 class Plant(Protocol):
-    """What a runner needs of a plant (the offline loop, the ``plant_sim`` node's lockstep and realtime runners):
-    the true state at t_k = k h, the torque that acted over the previous period, one period's integration, and the
-    true lumped disturbance.  :class:`PlantSim` (RK4 of eq. 1) implements it, and so does
-    :class:`~.mujoco_plant.MujocoPlant` (MuJoCo, docs/theory.md 6.10); a backend is one more entry in :data:`PLANTS`.
-
-    ``spatial`` says whether the plant has a 3D pose: then :attr:`pose` is the :class:`Pose` at t_k (the runners
-    record :data:`.trajectory.POSE_COLUMNS` and publish it), else None.  ``integration`` says in words how a period is
-    integrated (the node's start line).  :meth:`step` raises :class:`PlantDiverged` when the simulation
+    """What a runner needs of a plant: the contract of the module docstring (its units and frames).  The state at
+    t_k = k h, the torque that acted over the previous period, one period's integration with the torque and the
+    external wrench held, the true lumped disturbance; :class:`PlantSim` and :class:`~.mujoco_plant.MujocoPlant`
+    implement it, :data:`PLANTS` names them.  :meth:`step` raises :class:`PlantDiverged` when the simulation
     diverges."""
 
     cfg: PlantConfig
@@ -136,59 +111,39 @@ class Plant(Protocol):
 
     def sample_accel(self) -> Tuple[float, float]: ...
 
-    def step(self, u: float, extra=(0.0, 0.0), enabled: bool = True) -> None: ...
+    def step(self, u: float, extra: Wrench = (0.0, 0.0), enabled: bool = True) -> None: ...
 
-    def lumped_disturbance(self, u: float, extra=(0.0, 0.0)) -> Tuple[float, float]: ...
+    def lumped_disturbance(self, u: float, extra: Wrench = (0.0, 0.0)) -> Tuple[float, float]: ...
 
     def lie(self) -> None: ...
 
 
 class SpatialPlant(Plant, Protocol):
-    """A :class:`Plant` whose ``spatial`` is True (:class:`~.mujoco_plant.MujocoPlant`): the body's yaw rate and the
-    IMU's reading too (docs/theory.md 6.13, 6.4)."""
+    """A :class:`Plant` whose ``spatial`` is True (:class:`~.mujoco_plant.MujocoPlant`): the body's yaw rate [rad/s]
+    about its own z, the IMU's reading in the body frame (angular velocity [rad/s], specific force [m/s^2]) and the
+    wheels' own torques (u_L, u_R) [N m] (docs/theory.md 6.13, 6.4)."""
 
     @property
     def yaw_rate(self) -> float: ...
 
     def imu_reading(self) -> Tuple[Tuple[float, ...], Tuple[float, ...]]: ...
 
-    def lumped_disturbance(self, u: float, extra=(0.0, 0.0), wheels=None) -> Tuple[float, float]: ...
+    def lumped_disturbance(self, u: float, extra: Wrench = (0.0, 0.0), wheels=None) -> Tuple[float, float]: ...
 
-    def step(self, u: float, extra=(0.0, 0.0), enabled: bool = True, wheels=None) -> None: ...
+    def step(self, u: float, extra: Wrench = (0.0, 0.0), enabled: bool = True, wheels=None) -> None: ...
 
 
 @dataclass
-class PlantSim:
-    """The true state ``x`` (a :class:`State`) at t_k = k h.
+class PlantSim(PlantBase):
+    """The RK4 plant of eq. (1) (module docstring): the true state ``x`` (a :class:`State`) at t_k = k h.
 
     The state is four Python floats: the plant evaluates eq. (1) 4 x ``substeps``
     times per period, on scalars rather than 4-element numpy arrays (the cheaper of
     the two for so few numbers).
     """
 
-    cfg: PlantConfig
-    k: int = 0
-    x: State = None   # type: ignore[assignment]  # None: cfg.initial; __post_init__ makes it a State
-    D_w: float = 0.0                 # ground friction over the current period
-    u_prev: float = 0.0              # the torque that acted over the previous period (0 at k = 0)
-    u_cmd_prev: float = 0.0          # the command held over the previous period (the motor's input)
-    saturation: int = 0              # the drive's worst saturation code over the previous period (core.drive)
-    D_w_prev: float = 0.0            # the previous period's D_w (period 0's at k = 0): a raw sample's instant
-    extra_prev: Tuple[float, ...] = (0.0, 0.0)   # the external wrench held over the previous period
-    enabled_prev: bool = True        # the driver was enabled over the previous period (its bridge closed)
-    _rng: np.random.Generator = field(default=None, repr=False)   # type: ignore[assignment]  # set in __post_init__
-    _noise: list = field(default_factory=list, repr=False)
     spatial: ClassVar[bool] = False  # planar: no 3D pose
     pose: ClassVar[Optional[Pose]] = None
-
-    def __post_init__(self):
-        self.x = State(*(float(v) for v in (self.cfg.initial if self.x is None else self.x)))
-        self._rng = np.random.default_rng(self.cfg.seed)
-        self.D_w = self.D_w_prev = self._draw_D_w()
-
-    @property
-    def t(self) -> float:
-        return self.k * self.cfg.h
 
     @property
     def integration(self) -> str:
@@ -198,14 +153,6 @@ class PlantSim:
     def fallen(self) -> bool:
         """|theta_b| beyond the fall angle, or the state not a number (diverged: NaN or infinite; never upright)."""
         return not (abs(self.x[1]) <= self.cfg.fall_angle and finite_state(self.x))
-
-    def _draw_D_w(self) -> float:
-        c = self.cfg
-        if c.D_w_variance == 0.0:
-            return c.D_w_mean
-        if not self._noise:  # draw in blocks: the same sequence as one standard_normal() per period
-            self._noise = self._rng.standard_normal(NOISE_BLOCK).tolist()[::-1]
-        return D_w_of(c.D_w_mean, math.sqrt(c.D_w_variance), self._noise.pop())
 
     def tau_ext(self, t: float, extra: Tuple[float, ...] = (0.0, 0.0)) -> Tuple[float, float]:
         return self.cfg.tau_ext1(t) + extra[0], self.cfg.tau_ext2(t) + extra[1]
@@ -269,19 +216,6 @@ def stage_torques(f1: Sinusoid, f2: Sinusoid, extra, t0: float, h: float, n: int
     return [f1.at(t, m) + extra[0] for t in times], [f2.at(t, m) + extra[1] for t in times]
 
 
-NO_MOTOR = (0.0, 0.0, 0.0, 0.0)   # rk4_driven's ``motor`` when the motor model is off: the torque is the command
-
-
-def gated_drive(u: float, motor, enabled: bool) -> Tuple[float, Tuple[float, float, float, float]]:
-    """The command and the drive (:func:`rk4_driven`'s ``u`` and ``motor``) of a period through the driver's gate
-    (docs/theory.md 6.7 and 6.8): enabled, as they are; disabled or in fault, the driver's bridge is open, so no
-    current flows (i = 0) whatever the back-EMF: (0.0, :data:`NO_MOTOR`), a torque of exactly zero.  Fed the zero
-    command instead, the drive model would apply V = K_t w and, once the wheel turns faster than V_max / K_t,
-    drive a braking current (up to I_max K_t) through a bridge that is meant to be open.  The batch simulator
-    has no driver state machine (it always runs enabled) and calls :func:`rk4_driven` as it is."""
-    return (u, motor) if enabled else (0.0, NO_MOTOR)
-
-
 def rk4_period(p: PhysicalParams, D_w, D_b, tau1, tau2, x, u, h: float, n: int, m=math) -> Tuple:
     """The state after one control period [t0, t0 + h] with the torque ``u`` held (the motor model off):
     :func:`rk4_driven` without a motor.  The batch simulator runs this same function compiled by numba, once
@@ -340,21 +274,16 @@ def rk4_driven(p: PhysicalParams, D_w, D_b, tau1, tau2, x, u, h: float, n: int, 
 
 RK4Plant = PlantSim
 
-
-def _mujoco(cfg: PlantConfig) -> Plant:
-    from .mujoco_plant import MujocoPlant   # imports mujoco: only when this backend is chosen
-    return MujocoPlant(cfg)
-
-
-PLANTS: Dict[str, Callable[[PlantConfig], Plant]] = {"rk4": PlantSim, "mujoco": _mujoco}   # backend -> Plant maker
+# backend -> its plant class; read-only: a backend is a module implementing Plant and one entry here (module docstring)
+PLANTS: Mapping[str, Callable[[PlantConfig], Plant]] = MappingProxyType({"rk4": PlantSim, "mujoco": MujocoPlant})
 
 
 def make_plant(cfg: PlantConfig, backend: Optional[str] = None) -> Plant:
-    """A fresh plant at the initial state of ``cfg`` (``backend``: a key of :data:`PLANTS`; None: ``cfg.backend``)."""
+    """A fresh plant at the initial state of ``cfg`` (``backend``: a key of :data:`PLANTS`; None: ``cfg.backend``).
+    MuJoCo itself is imported when its plant is built (:func:`.mujoco_plant.mujoco_module`), not before."""
     backend = cfg.backend if backend is None else backend
     try:
         cls = PLANTS[backend]
     except KeyError:
-        known = ", ".join(sorted(b for b in PLANTS if not b.startswith("_")))   # "_name": a module's own, not a value
-        raise ValueError(f"unknown plant backend {backend!r}; known: {known}") from None
+        raise ValueError(f"unknown plant backend {backend!r}; known: {', '.join(sorted(PLANTS))}") from None
     return cls(cfg)

@@ -1,9 +1,10 @@
 """The ``wheel_driver`` node's parameters (docs/hardware.md): the driver's own settings and each backend's.
 
-:func:`specs` gives their :class:`~.schema.ParamSpec` (``params.schema`` lists them as the node's section).  The robot
+:func:`specs` gives their :class:`~.spec.ParamSpec` (``params.schema`` lists them as the node's section).  The robot
 a simulated backend runs (its model, initial state, raw sensors, ``torque_limit``, ``fall_angle``, Upkie's
 ``upkie.*``) is not here: it is the ``plant_sim`` section of the same parameter files, the one description of the
-robot that ``mwip_sim``, ``plant_sim``, ``mwip_robot`` and the moteus emulator read too (:func:`robot_values`).
+robot that ``mwip_sim``, ``plant_sim``, ``mwip_robot`` and the moteus emulator read too
+(:func:`.file.robot_values`).
 
 :func:`driver_config`, :func:`mock_config` and :func:`moteus_config` make the typed settings of
 :mod:`mwip_ros.robot.driver`, :mod:`mwip_ros.robot.mock` and :mod:`mwip_ros.robot.moteus_backend` from the values;
@@ -14,9 +15,12 @@ from __future__ import annotations
 import math
 from typing import Any, Dict, List, Mapping
 
-from .errors import ParamError
+from mwip_ros.core.plant_base import per_wheel
 
-__all__ = ["NODE", "BACKENDS", "SIMULATED", "specs", "robot_values", "wheel_limit", "driver_config", "mock_config",
+from .errors import ParamError
+from .spec import ParamSpec
+
+__all__ = ["NODE", "BACKENDS", "SIMULATED", "specs", "wheel_limit", "driver_config", "mock_config",
            "moteus_config"]
 
 NODE = "wheel_driver"
@@ -24,10 +28,9 @@ BACKENDS = ("mock", "rk4", "mujoco", "upkie", "moteus")
 SIMULATED = ("mock", "rk4", "mujoco", "upkie")   # upkie: its PyBullet (upkie.backend: spine is the robot)
 
 
-def specs() -> List[Any]:
-    """The ``wheel_driver`` ParamSpecs (called by ``params.schema`` once ``ParamSpec`` exists)."""
+def specs() -> List[ParamSpec]:
+    """The ``wheel_driver`` ParamSpecs."""
     from mwip_ros.robot.moteus_backend import MoteusConfig
-    from .schema import ParamSpec
     m = MoteusConfig(path="-", maximum_torque=1.0)   # the moteus defaults, one place (MoteusConfig)
     time_range: Dict[str, Any] = dict(lo=0.0, hi=10.0, lo_open=True, floor=1e-4, floor_why="a bound below 0.1 ms",
                                       hi_why="")
@@ -88,33 +91,11 @@ def specs() -> List[Any]:
     ]
 
 
-def robot_values(param_files, control_rate_hz: float) -> dict:
-    """The robot a simulated backend runs: the ``plant_sim`` section of ``param_files`` (merged in order, over the
-    schema's defaults, checked as plant_sim checks it), at the driver's ``control_rate_hz``.
-
-    Parameters
-    ----------
-    param_files : list of path
-        The node's ``--params-file`` files, in command-line order ([]: the defaults: the paper's robot).
-    control_rate_hz : float
-        The driver's rate (the period a simulated backend integrates).
-
-    Returns
-    -------
-    dict
-        plant_sim's values.
-    """
-    from .file import ParamFile, load_param_files
-    pf = load_param_files(param_files) if param_files else ParamFile(path="<defaults>")
-    return pf.for_node("plant_sim", {"control_rate_hz": float(control_rate_hz)})
-
-
 def wheel_limit(values: Mapping[str, Any], robot: Mapping[str, Any]) -> float:
     """Each wheel's torque limit [N m]: ``wheel_torque_limit``, or the wheel's share of the robot's lumped
     ``torque_limit`` (:func:`~mwip_ros.core.plant.per_wheel`, SPEC 16: each wheel gets u/2 and half the limit); 0 =
     none.  ParamError naming both keys when ``wheel_torque_limit`` is more than that share (the robot's two limits
     disagree)."""
-    from mwip_ros.core.plant import per_wheel
     own, share = values["wheel_torque_limit"], per_wheel(robot.get("torque_limit", 0.0))
     if own > 0.0 and share > 0.0 and own > share:
         raise ParamError("wheel_torque_limit", f"{own:g} N m is more than plant_sim's torque_limit gives a wheel "

@@ -18,7 +18,7 @@ from .schema import (NODE_SPECS, QOS_OVERRIDES, QOS_OVERRIDES_REFUSED, ROS_OWN, 
 TYPO_CUTOFF = 0.8   # a foreign section name this close to one of ours is refused as a misspelling
 
 __all__ = ["ParamFile", "RosYamlLoader", "load_param_file", "load_param_files", "load_yaml", "merged_values",
-           "node_key", "parse_param_dict"]
+           "node_key", "parse_param_dict", "robot_values"]
 
 
 def _flatten(d: Mapping, prefix: str, key_path: str, source: str) -> Dict[str, Any]:
@@ -187,3 +187,23 @@ def merged_values(pf: ParamFile, overrides: Optional[Mapping] = None) -> Dict[st
     v.update(overrides or {})
     check_derived(v, pf.path)
     return v
+
+
+def robot_values(param_files, control_rate_hz: float) -> dict:
+    """The robot a simulated backend runs: the ``plant_sim`` section of ``param_files`` (merged in order, over the
+    schema's defaults, checked as plant_sim checks it), at the driver's ``control_rate_hz``.
+
+    Parameters
+    ----------
+    param_files : list of path
+        The node's ``--params-file`` files, in command-line order ([]: the defaults: the paper's robot).
+    control_rate_hz : float
+        The driver's rate (the period a simulated backend integrates).
+
+    Returns
+    -------
+    dict
+        plant_sim's values.
+    """
+    pf = load_param_files(param_files) if param_files else ParamFile(path="<defaults>")
+    return pf.for_node("plant_sim", {"control_rate_hz": float(control_rate_hz)})

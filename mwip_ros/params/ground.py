@@ -1,7 +1,7 @@
 """The ``ground.*`` parameters of ``plant_sim`` with ``backend: mujoco`` (docs/theory.md 6.10): the ground the
 3D model rolls on.
 
-:func:`specs` gives their :class:`~.schema.ParamSpec` (``params.schema`` lists them with the plant's own);
+:func:`specs` gives their :class:`~.spec.ParamSpec` (``params.schema`` lists them with the plant's own);
 :func:`check` refuses what passes each key's range but no robot can start on (``params.schema.check_derived``).
 ``ground.slope`` tilts the plane about y, uphill ahead for a positive slope; ``ground.bumps`` are steps across the
 path, [x0, h0, x1, h1, ...]: from x_i [m, along the slope] on, the ground is h_i [m] above the plane (up to the
@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import math
 from typing import Any, List, Mapping, Optional
+
+from .spec import ParamSpec
 
 __all__ = ["specs", "check", "bumps_rule", "MAX_SLOPE", "MAX_BUMP", "MAX_BUMPS"]
 
@@ -33,9 +35,8 @@ def bumps_rule(v) -> Optional[str]:
     return None
 
 
-def specs() -> List[Any]:
-    """The ``ground.*`` ParamSpecs (called by ``params.schema`` once ``ParamSpec`` exists)."""
-    from .schema import ParamSpec
+def specs() -> List[ParamSpec]:
+    """The ``ground.*`` ParamSpecs."""
     return [
         ParamSpec("ground.friction", "double", 2.0, "mujoco: the ground's sliding friction coefficient (wheel on "
                   "ground)", lo=0.0, hi=100.0, lo_open=True, floor=1e-3, floor_why="ground with no grip", hi_why=""),

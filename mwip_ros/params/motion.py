@@ -1,6 +1,6 @@
 """The ``motion.*`` parameters of ``dscndo_controller`` (docs/theory.md 6.11): the references a law tracks.
 
-:func:`specs` gives their :class:`~.schema.ParamSpec` (``params.schema`` lists them with the controller's own);
+:func:`specs` gives their :class:`~.spec.ParamSpec` (``params.schema`` lists them with the controller's own);
 :func:`motion` makes the :class:`mwip_ros.core.motion.MotionConfig` of merged values, None while
 ``motion.enabled`` is false (the default, and config/paper.yaml's: every law regulates, as in the paper).
 """
@@ -9,6 +9,10 @@ from __future__ import annotations
 from typing import Any, Dict, List, Mapping, Optional
 
 from mwip_ros.core.motion import ABSURD_SPEED
+from mwip_ros.core.plant_base import per_wheel
+
+from .drive import motor
+from .spec import ParamSpec
 
 __all__ = ["specs", "motion", "yaw", "profile_rule", "yaw_profile_rule", "PROFILE_MAX_POINTS", "ABSURD_SPEED",
            "DRIVE_KEYS", "drive_wheel_limit", "wheel_limit", "wheel_limit_warning"]
@@ -44,9 +48,8 @@ def yaw_profile_rule(v) -> Optional[str]:
     return _timed_pairs_rule(v, "yaw rate", "rad/s")
 
 
-def specs() -> List[Any]:
-    """The ``motion.*`` ParamSpecs (called by ``params.schema`` once ``ParamSpec`` exists)."""
-    from .schema import ParamSpec
+def specs() -> List[ParamSpec]:
+    """The ``motion.*`` ParamSpecs."""
     pos: Dict[str, Any] = dict(lo=0.0, lo_open=True)
     return [
         ParamSpec("motion.enabled", "bool", False, "track references from cmd_vel (or motion.profile): every law "
@@ -122,8 +125,6 @@ def drive_wheel_limit(v: Mapping[str, Any]) -> float:
     """The torque one wheel's drive gives [N m] (plant_sim's :data:`DRIVE_KEYS`, docs/theory.md 6.7 and 6.13): half of
     ``torque_limit`` (the drive stage clips each wheel there), half of the motor's peak torque at rest (each wheel has
     half the lumped motor), the smaller of the two; 0 when the drive has neither (no limit: the paper's robot)."""
-    from mwip_ros.core.plant import per_wheel
-    from .typed import motor
     limits = []
     if v.get("torque_limit", 0.0) > 0.0:
         limits.append(per_wheel(float(v["torque_limit"])))

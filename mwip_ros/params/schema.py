@@ -12,18 +12,17 @@ ROS and is refused (write ``200.0``).
 from __future__ import annotations
 
 import difflib
-import importlib
 import math
-from dataclasses import dataclass
-from typing import Any, Callable, Dict, Iterable, List, Mapping, Optional
+from typing import Any, Dict, Iterable, List, Mapping, Optional
 
 from mwip_ros.core.safety import PLAUSIBLE_STATE
-
+from . import driver, ground, motion, upkie
 from .errors import ParamError
+from .spec import HI_WHY, INT32_MAX, ParamSpec
 
-__all__ = ["SHARED", "ParamSpec", "PAPER_NOMINAL", "PAPER_ACTUAL", "SHARED_SPECS", "NODE_SPECS", "ROS_OWN",
-           "ROS_OWN_PREFIXES", "QOS_OVERRIDES", "QOS_OVERRIDES_REFUSED", "specs_for", "defaults_for", "spelling_hint",
-           "check_derived", "check_geometry"]
+__all__ = ["SHARED", "ParamSpec", "INT32_MAX", "HI_WHY", "PAPER_NOMINAL", "PAPER_ACTUAL", "SHARED_SPECS",
+           "NODE_SPECS", "ROS_OWN", "ROS_OWN_PREFIXES", "QOS_OVERRIDES", "QOS_OVERRIDES_REFUSED", "specs_for",
+           "defaults_for", "spelling_hint", "check_derived", "check_geometry"]
 
 SHARED = "/**"
 
@@ -101,108 +100,6 @@ def _lqr_q_rule(v):
 _four_finite: Dict[str, Any] = dict(rule=_four_finite_rule, words="must have 4 entries [c1, c2, c3, c4]")
 _lqr_q: Dict[str, Any] = dict(rule=_lqr_q_rule, words="give the diagonal (3 entries) or the 3x3 matrix row by row (9)")
 
-INT32_MAX = 2 ** 31 - 1   # the top of an integer parameter's descriptor range when it has no ``hi``
-HI_WHY = "far beyond any robot of this kind"
-
-
-@dataclass(frozen=True)
-class ParamSpec:
-    """One parameter: dotted name, ROS type, default, description, its range or choices, run-time changeable.
-
-    The accepted values are data: ``lo``/``hi`` (``lo_open``: lo < v; else lo <= v; v <= hi), ``floor`` (a
-    smallest value above an open ``lo``, with ``floor_why``), ``choices``; ``rule`` checks what is not a range
-    (an array's shape), ``words`` says it (and replaces an integer range's words).  :attr:`check` (start-up
-    and run-time values), the ROS descriptor and the ``--help`` text are derived from them."""
-
-    name: str
-    type: str  # 'double' | 'integer' | 'bool' | 'string' | 'double_array' | 'string_array'
-    default: Any
-    description: str
-    lo: Optional[float] = None
-    hi: Optional[float] = None
-    lo_open: bool = False
-    floor: Optional[float] = None
-    floor_why: str = ""
-    hi_why: str = HI_WHY     # a double's refusal above ``hi`` says why ('' says nothing)
-    choices: Optional[tuple] = None
-    rule: Optional[Callable[[Any], Optional[str]]] = None
-    words: str = ""
-    dynamic: bool = False
-    unit: str = ""
-
-    def range_reason(self, v: Any) -> Optional[str]:
-        """None when ``v`` (of the right type) is within the range and choices, else the reason."""
-        if self.choices is not None:
-            return None if v in self.choices else f"must be one of {', '.join(map(repr, self.choices))}, got {v!r}"
-        lo, hi = self.lo, self.hi
-        if self.type == "integer":
-            if (lo is None or v >= lo) and (hi is None or v <= hi):
-                return None
-            if self.words:
-                return f"must be {self.words}, got {v!r}"
-            if hi is None:
-                return f"must be >= {lo}, got {v!r}"
-            if lo is None:
-                return f"must be <= {hi}, got {v!r}"
-            return f"must be a whole number from {lo} to {hi}, got {v!r}"
-        if self.type == "double":
-            if lo is not None and self.lo_open and not v > lo:
-                return f"must be > {lo:g}, got {v!r}"
-            if lo is not None and not self.lo_open and not v >= lo:
-                return f"must be >= {lo:g}, got {v!r}"
-            if self.floor is not None and v < self.floor:
-                return f"must be >= {self.floor:g} ({self.floor_why}), got {v!r}"
-            if hi is not None and not v <= hi:
-                return f"must be <= {hi:g}{f' ({self.hi_why})' if self.hi_why else ''}, got {v!r}"
-        return None
-
-    def check(self, v: Any) -> Optional[str]:
-        """None when ``v`` (of the right type) is accepted, else the reason (the range, then the rule)."""
-        return self.range_reason(v) or (self.rule(v) if self.rule is not None else None)
-
-    def validate(self, value: Any, key: Optional[str] = None, source: Optional[str] = None) -> Any:
-        """Return the value (arrays as lists) or raise ParamError naming ``key``."""
-        key = key or self.name
-        reason = _type_error(self.type, value)
-        if reason:
-            raise ParamError(key, reason, source)
-        if self.type in ("double", "double_array"):
-            vals = value if self.type == "double_array" else [value]
-            if not all(math.isfinite(x) for x in vals):
-                raise ParamError(key, f"must be finite, got {value!r}", source)
-        if self.type.endswith("_array"):
-            value = list(value)
-        reason = self.check(value)
-        if reason:
-            raise ParamError(key, reason, source)
-        return value
-
-
-def _type_error(kind: str, v: Any) -> Optional[str]:
-    def is_int(x):
-        return isinstance(x, int) and not isinstance(x, bool)
-
-    if kind == "double":
-        if is_int(v):
-            return f"expected a floating-point number (write {v}.0 - ROS 2 reads {v} as an integer)"
-        return None if isinstance(v, float) else f"expected a floating-point number, got {type(v).__name__} {v!r}"
-    if kind == "integer":
-        return None if is_int(v) else f"expected an integer, got {type(v).__name__} {v!r}"
-    if kind == "bool":
-        return None if isinstance(v, bool) else f"expected true or false, got {type(v).__name__} {v!r}"
-    if kind == "string":
-        return None if isinstance(v, str) else f"expected a string, got {type(v).__name__} {v!r}"
-    if kind == "double_array":
-        if not isinstance(v, (list, tuple)) or not all(isinstance(x, float) for x in v):
-            return f"expected a list of floating-point numbers (e.g. [100.0, 0.0]), got {v!r}"
-        return None
-    if kind == "string_array":
-        if not isinstance(v, (list, tuple)) or not all(isinstance(x, str) for x in v):
-            return f"expected a list of strings, got {v!r}"
-        return None
-    raise AssertionError(kind)
-
-
 # The robot's physical values: each > 0 with a floor (a value below it is no robot of this kind, and a model built
 # from it has inertia terms that round away: test/params/test_physical_ranges.py runs the model at every range end).
 BODY_FLOORS = {"m_b": (1e-3, "a body lighter than a gram"), "m_w": (1e-3, "wheels lighter than a gram"),
@@ -254,11 +151,6 @@ def _law_parameters() -> List[ParamSpec]:
     return out
 
 
-def _specs_of(module: str) -> List[ParamSpec]:
-    """The ParamSpecs a small module of this package lists (``params.motion``, ``params.ground``: ``specs()``)."""
-    return importlib.import_module(f".{module}", __package__).specs()
-
-
 def _estimator_parameters() -> List[ParamSpec]:
     """The state_estimator parameters the registered estimators declare (core.estimators)."""
     from mwip_ros.core import estimators
@@ -288,8 +180,8 @@ NODE_SPECS: Dict[str, List[ParamSpec]] = {
                     "through the centre of gravity [kg m^2] (actual.I_b is the pitch axis)",
                     **_positive_from(1e-6, 1e6, "a body inertia below 1e-6 kg m^2"), unit="kg m^2")
           for ax, v in (("roll", 65.0), ("yaw", 20.0))],
-        *_specs_of("ground"),   # ground.*: friction, slope, bumps (params.ground)
-        *_specs_of("upkie"),   # upkie.*: how the robot side drives Upkie (params.upkie, mwip_ros.robot.upkie)
+        *ground.specs(),   # ground.*: friction, slope, bumps (params.ground)
+        *upkie.specs(),   # upkie.*: how the robot side drives Upkie (params.upkie, mwip_ros.robot.upkie)
         ParamSpec("seed", "integer", 0, "seed of the D_w friction noise", **_at_least_zero),
         *_body("actual", PAPER_ACTUAL, "true"),
         ParamSpec("actual.D_b", "double", 0.1, "true drive viscous friction D_b [N m s/rad]", **_non_negative()),
@@ -400,7 +292,7 @@ NODE_SPECS: Dict[str, List[ParamSpec]] = {
                   **_lqr_q, dynamic=True),
         ParamSpec("lqr.R", "double", 0.01, "LQR input weight (> 0)", **_positive(), dynamic=True),
         *_law_parameters(),   # what a plug-in law declares itself (core.laws.Law.parameters)
-        *_specs_of("motion"),   # motion.*: the references the laws track (params.motion, docs/theory.md 6.11)
+        *motion.specs(),   # motion.*: the references the laws track (params.motion, docs/theory.md 6.11)
         ParamSpec("excitation.type", "string", "none", "a known torque added to the law's command, recorded, for "
                   "identification (mwip_identify): none, chirp (a linear sweep f0 -> f1) or prbs (+-amplitude, "
                   "random bits)", **_one_of("none", "chirp", "prbs")),
@@ -492,7 +384,7 @@ NODE_SPECS["robot_state"] = [s for s in NODE_SPECS["plant_sim"] if s.name in (
     "actual.track_width", "sensors.model", "sensors.imu.offset", "sensors.encoder_counts_per_rev",
     "sensors.imu.gyro_noise_std")]
 # wheel_driver (docs/hardware.md): the node that owns a robot's clock; its settings and its backends' (params.driver)
-NODE_SPECS["wheel_driver"] = _specs_of("driver")
+NODE_SPECS["wheel_driver"] = driver.specs()
 
 # Parameters ROS itself declares on every node; allowed anywhere in the file.
 ROS_OWN = {"use_sim_time": ParamSpec("use_sim_time", "bool", False, "use /clock"),
@@ -594,7 +486,7 @@ def check_derived(values: Mapping[str, Any], source: Optional[str] = None) -> No
                                               f"{prefix}.{{m_b, m_w, I_b, I_w, l, r, g}}", source)
     if values.get("backend") == "mujoco":
         _check_mujoco(values, source)
-        importlib.import_module(".ground", __package__).check(values, source)
+        ground.check(values, source)
     if values.get("excitation.f0", 0.0) > values.get("excitation.f1", math.inf):
         raise ParamError("excitation.f0", f"must be <= excitation.f1 ({values['excitation.f1']:g} Hz), got "
                                           f"{values['excitation.f0']:g}", source)

@@ -5,16 +5,17 @@ from typing import Any, Iterable, List, Mapping, Optional, Tuple, cast
 
 from mwip_ros.core import laws
 from mwip_ros.core.controller import DscGains
-from mwip_ros.core.drive import MotorConfig, limit_warning, torque_warning
+from mwip_ros.core.drive import limit_warning, torque_warning
 from mwip_ros.core.estimators import EstimatorConfig
 from mwip_ros.core.excitation import ExcitationConfig
 from mwip_ros.core.model import PhysicalParams, Sinusoid, State
-from mwip_ros.core.plant import PlantConfig
+from mwip_ros.core.plant import MujocoConfig, PlantConfig
 from mwip_ros.core.raw_sensors import RawSensorConfig
 from mwip_ros.core.sensing import SensingConfig
 from mwip_ros.core.sim import ClosedLoop
 
-from .motion import motion as motion_config, yaw as yaw_config
+from .drive import motor
+from .motion import motion as motion_config, wheel_limit_warning, yaw as yaw_config
 
 from .schema import PAPER_NOMINAL
 
@@ -60,11 +61,11 @@ def plant_config(v: Mapping[str, Any]) -> PlantConfig:
         mujoco=mujoco(v))
 
 
-def mujoco(v: Mapping[str, Any]):
-    """The MuJoCo model's own values (``backend: mujoco``, docs/theory.md 6.10); None with the rk4 backend."""
+def mujoco(v: Mapping[str, Any]) -> Optional[MujocoConfig]:
+    """The MuJoCo model's own values and its ground (``backend: mujoco``, docs/theory.md 6.10); None with the rk4
+    backend."""
     if v.get("backend", "rk4") != "mujoco":
         return None
-    from mwip_ros.core.mujoco_plant import MujocoConfig
     return MujocoConfig(track_width=v["actual.track_width"], I_b_roll=v["actual.I_b_roll"],
                         I_b_yaw=v["actual.I_b_yaw"], friction=v["ground.friction"], timestep=v["mujoco.timestep"],
                         slope=v.get("ground.slope", 0.0), bumps=tuple(float(x) for x in v.get("ground.bumps", ())))
@@ -77,13 +78,6 @@ def excitation(v: Mapping[str, Any]) -> Optional[ExcitationConfig]:
     cfg = ExcitationConfig(**{k: v[f"excitation.{k}"] for k in ("type", "amplitude", "f0", "f1", "duration_s",
                                                                  "bit_periods", "seed")})
     return cfg if cfg.active else None
-
-
-def motor(v: Mapping[str, Any]) -> MotorConfig:
-    """The DC motor and its driver (docs/theory.md 6.7), ``motor.enabled`` false by default."""
-    return MotorConfig(enabled=v.get("motor.enabled", False), **{
-        k: v.get(f"motor.{k}", getattr(MotorConfig, k))
-        for k in ("torque_constant", "resistance", "voltage_limit", "current_limit")})
 
 
 def limit_warnings(v: Mapping[str, Any], law_names: Iterable[str] = ()) -> List[str]:
@@ -103,7 +97,6 @@ def limit_warnings(v: Mapping[str, Any], law_names: Iterable[str] = ()) -> List[
     out += [limit_warning(key, lim, actual, tilt, f"the initial tilt |initial.theta_b| = {tilt:g} rad")
             for key, lim in limits.items()]
     if v.get("motion.enabled"):   # the yaw stage's wheel limit above the drive's (the drive's is used)
-        from .motion import wheel_limit_warning
         out.append(wheel_limit_warning(v))
     return [w for w in out if w]
 

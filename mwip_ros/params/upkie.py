@@ -1,7 +1,7 @@
 """The ``upkie.*`` parameters of ``plant_sim``: how the robot side drives Upkie (mwip_ros.robot.upkie, SPEC 16,
 docs/hardware-upkie.md).
 
-:func:`specs` gives their :class:`~.schema.ParamSpec` (``params.schema`` lists them with the plant's own);
+:func:`specs` gives their :class:`~.spec.ParamSpec` (``params.schema`` lists them with the plant's own);
 :func:`upkie_config` makes the :class:`~mwip_ros.robot.upkie.UpkieConfig` of merged values: the period from
 ``control_rate_hz``, the initial lean from ``initial.theta_b``, the rest from ``upkie.*``. The defaults are
 :class:`~mwip_ros.robot.upkie.UpkieConfig`'s (one place); config/upkie.yaml sets the values this stack was measured
@@ -11,13 +11,14 @@ from __future__ import annotations
 
 from typing import Any, List, Mapping
 
+from .spec import ParamSpec
+
 __all__ = ["specs", "upkie_config"]
 
 
-def specs() -> List[Any]:
-    """The ``upkie.*`` ParamSpecs (called by ``params.schema`` once ``ParamSpec`` exists)."""
+def specs() -> List[ParamSpec]:
+    """The ``upkie.*`` ParamSpecs."""
     from mwip_ros.robot.upkie import UpkieConfig
-    from .schema import ParamSpec
     d = UpkieConfig()
     return [
         ParamSpec("upkie.leg_kp_scale", "double", d.leg_kp_scale, "upkie: kp_scale of the hips' and knees' servo PD "

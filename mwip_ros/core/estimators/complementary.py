@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import math
 
-from . import NIS_WINDOW_S, Estimator, EstimatorParam
+from .base import NIS_WINDOW_S, Estimator, EstimatorParam
 
 __all__ = ["ComplementaryFilter", "complementary_step"]
 

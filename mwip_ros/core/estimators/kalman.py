@@ -37,7 +37,7 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
-from . import NIS_WINDOW_S, Estimator, EstimatorParam
+from .base import NIS_WINDOW_S, Estimator, EstimatorParam
 
 __all__ = ["KalmanFilter", "KalmanParams", "kalman_step", "STATE_NAMES"]
 

@@ -12,7 +12,7 @@ from typing import List
 
 from ..controller import INTERNALS, DscGains, dsc_terms, dsc_terms_tracking, filter_step
 from ..motion import rate_reference
-from . import Law
+from .base import Law
 
 __all__ = ["DscLaw", "INTERNALS", "dsc_step", "dsc_track_step", "lean_reference"]
 

@@ -6,7 +6,7 @@ import math
 from typing import NamedTuple, Optional
 
 from ..lqr import lqr_gain, lqr_u
-from . import Law
+from .base import Law
 from .dsc import INTERNALS
 
 __all__ = ["LqrGain", "LqrLaw", "lqr_step"]

@@ -54,7 +54,7 @@ from typing import NamedTuple, Optional, Tuple
 
 import numpy as np
 
-from . import Law, LawParam
+from .base import Law, LawParam
 from .dsc import INTERNALS
 
 __all__ = ["MpcParams", "MpcLaw", "QpMatrices", "qp_matrices", "PARAMETERS", "ITER_LIMIT", "SOLVER"]

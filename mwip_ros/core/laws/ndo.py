@@ -11,7 +11,7 @@ import math
 from typing import Optional, Type
 
 from ..controller import u_taud_of
-from . import Law
+from .base import Law
 
 __all__ = ["WithObserver", "with_observer"]
 

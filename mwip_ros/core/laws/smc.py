@@ -25,7 +25,7 @@ from __future__ import annotations
 import math
 from typing import NamedTuple, Optional, Tuple
 
-from . import Law, LawParam
+from .base import Law, LawParam
 from .dsc import INTERNALS
 
 __all__ = ["SmcGains", "SmcLaw", "smc_step", "sliding_surface", "sat", "layer_rate", "boundary_layer_warning",

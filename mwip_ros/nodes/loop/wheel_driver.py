@@ -87,6 +87,7 @@ from mwip_ros.nodes.runtime.params import declare, ros_arguments
 from mwip_ros.nodes.runtime.process import EXIT_ERROR, EXIT_FALLEN, GracefulNodeMixin, run_node
 from mwip_ros.nodes.runtime.schedule import Reservoir, Schedule
 from mwip_ros.params import driver as D
+from mwip_ros.params.file import robot_values
 from mwip_ros.robot.backend import Backend, BackendError, Command, Observation
 from mwip_ros.robot.driver import WheelDriver, timing_lines
 
@@ -173,7 +174,7 @@ class WheelDriverNode(Node, GracefulNodeMixin):
         v = self.v
         self.mode, self.backend_name = v["mode"], v["backend"]
         files = [arg for kind, arg in ros_arguments(argv) if kind == "--params-file"]
-        self.robot = D.robot_values(files, v["control_rate_hz"])
+        self.robot = robot_values(files, v["control_rate_hz"])
         simulated = self.backend_name in D.SIMULATED and not (self.backend_name == "upkie"
                                                               and v["upkie.backend"] == "spine")
         if self.mode == "lockstep" and not simulated:   # refused before a device is opened

@@ -10,11 +10,11 @@ This module imports neither rclpy nor numpy; importing it changes nothing.
 """
 from __future__ import annotations
 
-import ctypes
 import importlib
-import os
 import sys
 from typing import Optional, Sequence
+
+from .arenas import M_ARENA_MAX, bound_malloc_arenas
 
 __all__ = ["NODES", "M_ARENA_MAX", "bound_malloc_arenas", "run", "main", *(
     "plant_sim", "disturbance_observer", "dscndo_controller", "mcap_recorder", "bag_replay", "robot_markers",
@@ -24,26 +24,6 @@ __all__ = ["NODES", "M_ARENA_MAX", "bound_malloc_arenas", "run", "main", *(
 NODES = {name: f"mwip_ros.nodes.{room}.{name}" for room, names in (
     ("loop", ("plant_sim", "disturbance_observer", "dscndo_controller", "state_estimator", "wheel_driver")),
     ("tools", ("mcap_recorder", "bag_replay", "robot_markers", "foxglove_server", "robot_state"))) for name in names}
-M_ARENA_MAX = -8   # glibc's mallopt() parameter number for the arena limit
-
-
-def bound_malloc_arenas(arenas: int = 1) -> bool:
-    """Let every thread of this process allocate from ``arenas`` glibc malloc arena(s), unless the user set
-    ``MALLOC_ARENA_MAX``; True when the limit was set.
-
-    Under a flood of messages Fast DDS's receive threads and the executor allocate and free small
-    buffers in turns; with an arena per thread (glibc's default, up to 8 per core) the arenas keep
-    their fragments, and an observer's resident memory grew by about 5 MiB per 100,000 messages, for
-    as long as the flood lasted.  With one arena it stays flat (``scripts/soak.py``, BENCHMARKS.md).
-    glibc keeps the arenas a thread made before the limit: call this before any thread allocates
-    (before rclpy is imported).  No effect on a C library without ``mallopt``.
-    """
-    if os.environ.get("MALLOC_ARENA_MAX"):
-        return False
-    try:
-        return bool(ctypes.CDLL(None).mallopt(M_ARENA_MAX, arenas))
-    except (OSError, AttributeError):  # pragma: no cover - not glibc
-        return False
 
 
 def run(node: str, argv: Optional[Sequence[str]] = None) -> int:

@@ -27,6 +27,8 @@ from rclpy.signals import SignalHandlerOptions
 from mwip_ros.optional import MissingPackage
 from mwip_ros.params import ParamError
 
+from .arenas import bound_malloc_arenas
+
 __all__ = ["EXIT_OK", "EXIT_ERROR", "EXIT_BAD_PARAMS", "EXIT_FALLEN", "GracefulNodeMixin", "StopRequested",
            "StartRefused", "build_node", "init_context", "node_help", "node_name", "run_node"]
 
@@ -264,7 +266,6 @@ def run_node(factory: Callable[..., object], argv: Optional[Sequence[str]] = Non
 
     ``-h`` / ``--help`` before ``--ros-args`` prints :func:`node_help` and returns 0 without a ROS context; any
     other argument outside ``--ros-args`` (rcl would ignore it) is refused with one line, exit 2."""
-    from mwip_ros.nodes.runtime.entry import bound_malloc_arenas
     bound_malloc_arenas()   # first, for a node started as python -m mwip_ros.nodes.NODE (entry.run did it earlier)
     argv = list(sys.argv if argv is None else argv)
     stop = {"signal": None}
