@@ -4,6 +4,7 @@ import pytest
 
 from mwip_ros import params as P
 from mwip_ros.params import driver as D
+from mwip_ros.params.file import robot_values
 
 pytestmark = pytest.mark.unit
 
@@ -13,7 +14,7 @@ def _driver_values(tmp_path, torque_limit: float, wheel_torque_limit: float):
     f.write_text(f"plant_sim:\n  ros__parameters:\n    torque_limit: {torque_limit!r}\n"
                  f"wheel_driver:\n  ros__parameters:\n    wheel_torque_limit: {wheel_torque_limit!r}\n")
     values = P.load_param_file(f).for_node("wheel_driver")
-    return values, D.robot_values([f], values["control_rate_hz"])
+    return values, robot_values([f], values["control_rate_hz"])
 
 
 def test_a_wheel_limit_above_plant_sims_torque_limit_share_is_refused_naming_both_keys(tmp_path):
