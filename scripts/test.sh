@@ -42,12 +42,13 @@ else
     exit 1
 fi
 
-# Without -m, -n or test paths of the caller's: three runs, so that every core works and nothing timed shares it.
-# First the tiers that start no ROS process (unit, cli, node, slow, montecarlo: test/conftest.py) on every core
-# (pytest-xdist), then the graph and e2e tests on every core, then those marked alone (they keep real-time
-# deadlines, time the graph or hand a domain to a script) and the bench one test at a time. (The first run at the
-# idle scheduling class beside the third was tried: shorter, but a test starved at that class misses what it times;
-# docs/benchmarks-history.md.) With -m, -n or paths of yours: one pytest run.
+# Without -m, -n or test paths of the caller's: three runs, so that every core works and nothing timed shares it
+# with work of its own class. The tests marked alone (they keep real-time deadlines or time something on the wall
+# clock) and the bench run one at a time, with the tiers that start no ROS process (unit, cli, node, slow,
+# montecarlo: test/conftest.py) on every core beside them at Linux's idle scheduling class (scripts/idle_priority.py):
+# those take only the CPU the timed tests leave. Then the in-process run goes back to normal priority and the graph
+# and e2e tests run on every core beside what is left of it (docs/development.md has the measurements).
+# With -m, -n or paths of yours: one pytest run.
 split=1
 [ "${#targets[@]}" -eq 0 ] && split=0
 for a in "$@"; do
@@ -73,16 +74,35 @@ if [ "$split" -eq 0 ]; then
 fi
 start=$SECONDS
 rc=0
-run_pytest "${targets[@]}" -m "unit or cli or node or slow or montecarlo" -n auto --dist worksteal "$@" || rc=$?
-in_process=$((SECONDS - start))
-# lockstep graphs and whole jobs wait on their processes' answers, not on a clock: two at a time (each graph on a
-# domain of its own; --dist loadfile keeps a module's tests, and the graph they share, on one worker. --dist
-# loadgroup with only the modules that share a graph grouped took longer: 724 s against 582 s,
-# docs/benchmarks-history.md)
+logs="$(mktemp -d "${TMPDIR:-/tmp}/mwip_test.XXXXXX")"
+in_process_cmd=(python -m pytest "${targets[@]}" -m "(unit or cli or node or slow or montecarlo) and not alone" -n auto
+                --dist worksteal "$@")
+echo "test: ${in_process_cmd[*]} (at idle priority beside the tests marked alone; its output at its end)"
+python scripts/idle_priority.py run "${in_process_cmd[@]}" > "$logs/in_process.log" 2>&1 &
+in_pid=$!
+trap 'kill -TERM "$in_pid" 2>/dev/null || true; rm -rf "$logs"' INT TERM EXIT   # (a background job ignores SIGINT)
+# what keeps real-time deadlines or times the wall clock, and the bench: one at a time, beside only idle work
+run_pytest "${targets[@]}" -m "alone or bench" --durations=10 "$@" || rc=$?
+alone=$((SECONDS - start))
+python scripts/idle_priority.py restore "$in_pid"   # the rest of the in-process run at normal priority
+# lockstep graphs and whole jobs wait on their processes' answers, not on a clock: two at a time beside the rest of
+# the in-process run (each graph on a domain of its own; --dist loadfile keeps a module's tests, and the graph they
+# share, on one worker. --dist loadgroup with only the modules that share a graph grouped took longer: 724 s against
+# 582 s, docs/benchmarks-history.md)
 run_pytest "${targets[@]}" -m "(graph or e2e) and not alone" -n auto --dist loadfile "$@" || rc=$?
-shared=$((SECONDS - start - in_process))
-# what keeps real-time deadlines or times the graph, and the bench: alone
-run_pytest "${targets[@]}" -m "(graph or e2e) and alone or bench" --durations=10 "$@" || rc=$?
-echo "test: in-process tiers ${in_process} s, process tests ${shared} s two at a time and" \
-     "$((SECONDS - start - in_process - shared)) s alone, in all $((SECONDS - start)) s"
+shared=$((SECONDS - start - alone))
+in_rc=0
+wait "$in_pid" || in_rc=$?
+trap - INT TERM EXIT
+in_process=$((SECONDS - start))
+echo "test: ${in_process_cmd[*]} (its output:)"
+cat "$logs/in_process.log"
+rm -rf "$logs"
+if [ "$in_rc" -eq 5 ]; then
+    echo "test: pytest collected no tests; treating as failure" >&2
+    in_rc=1
+fi
+if [ "$in_rc" -ne 0 ]; then rc=$in_rc; fi
+echo "test: ${alone} s alone (the in-process tiers beside them at idle priority), then the graph and e2e tests" \
+     "${shared} s two at a time; the in-process tiers ended at ${in_process} s; in all $((SECONDS - start)) s"
 exit "$rc"

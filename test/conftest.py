@@ -24,12 +24,15 @@ unit tests may hold one slow test marked ``@pytest.mark.slow``):
   them where that is not fast (signalled with their worker processes, several whole sweeps in one test).
 - ``bench``: ``scripts/bench.sh``.
 
-``alone`` is not a tier but a mark on a graph or e2e test that keeps real-time deadlines or times the graph (a
-realtime loop, a watchdog, discovery's second) or hands a domain to a script: such a test runs alone.
+``alone`` is not a tier but a mark on a test that keeps real-time deadlines or times something on the wall clock (a
+realtime loop, a watchdog, discovery's second, a device's timeout) or hands a domain to a script: such a test runs
+alone, at normal priority, with only idle-class work beside it.
 
-``scripts/test.sh`` runs every tier (CI): the tiers without ROS processes (unit, cli, node, slow, montecarlo) on
-every core (pytest-xdist), then the graph and e2e tests not marked alone on every core (a module's tests on one worker:
-its graph is shared), then the ones marked alone and the bench one test at a time.
+``scripts/test.sh`` runs every tier (CI): the ones marked alone and the bench one test at a time, with the tiers
+without ROS processes (unit, cli, node, slow, montecarlo) on every core (pytest-xdist) beside them at the idle
+scheduling class (scripts/idle_priority.py: they take only the CPU the timed tests leave); then the in-process run
+goes back to normal priority, and the graph and e2e tests not marked alone run on every core beside what is left of
+it (a module's tests on one worker: its graph is shared).
 ``scripts/test.sh -m unit`` is the fast loop. A test with no tier or more than one fails collection.
 """
 import os
@@ -104,8 +107,6 @@ def pytest_collection_modifyitems(config, items):
             bad.append(f"  {item.nodeid}: {' + '.join(tiers) if tiers else 'no tier'}")
         else:   # in the test's reports (a worker's too): the summary's check reads it there
             item.user_properties.append(("tier", tiers[0]))
-            if item.get_closest_marker("alone") is not None and tiers[0] not in ("graph", "e2e"):
-                bad.append(f"  {item.nodeid}: alone on a {tiers[0]} test (only graph and e2e tests are run alone)")
     if bad:
         raise pytest.UsageError(
             f"{len(bad)} test(s) not in exactly one tier of {', '.join(TIERS)} (test/conftest.py says which; "

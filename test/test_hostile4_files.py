@@ -118,6 +118,7 @@ def _mwip_sim(tmp_path, *args, timeout=60):
                           text=True, timeout=timeout, env=env, cwd=tmp_path)
 
 
+@pytest.mark.alone   # "at once" is on the wall clock: not beside other work of its class
 @pytest.mark.cli
 @pytest.mark.parametrize("target", ["fifo", "/dev/zero"])
 def test_mwip_sim_refuses_a_policy_file_that_is_not_a_regular_file_at_once(tmp_path, fifo, target):

@@ -26,14 +26,15 @@ from hostile import PAPER, assert_refused, laughs, measured, param_bomb, spec_bo
 
 @pytest.mark.unit
 def test_an_alias_is_refused_at_once_in_text_and_files(tmp_path):
-    t0 = time.monotonic()
+    """At once: the CPU time of the refusals (process_time: a loaded machine stretches the wall, not the work)."""
+    t0 = time.process_time()
     with pytest.raises(yamlio.YamlRefused, match=r"YAML aliases \(\*l0\) are not supported"):
         yamlio.load_yaml(laughs(5))
     with pytest.raises(yaml.YAMLError):   # callers that catch YAML errors catch the refusal
         yamlio.load_yaml(param_bomb(tmp_path / "b.yaml", 5))
     with pytest.raises(yamlio.YamlRefused, match="aliases"):   # a merge key needs an alias
         yamlio.load_yaml("a: &a {x: 1}\nb:\n  <<: *a\n")
-    assert time.monotonic() - t0 < 2.0
+    assert time.process_time() - t0 < 2.0
 
 
 @pytest.mark.unit
@@ -51,14 +52,14 @@ def test_the_composer_refuses_aliases_even_without_libyaml(monkeypatch):
 
 @pytest.mark.unit
 def test_nodes_depth_and_huge_integers_are_bounded():
-    t0 = time.monotonic()
+    t0 = time.process_time()
     with pytest.raises(yamlio.YamlRefused, match="more than 200,000 YAML nodes"):
         yamlio.load_yaml("a: [" + ",".join(["0"] * 1_000_000) + "]")
     with pytest.raises(yamlio.YamlRefused, match="nested deeper than 64 levels"):
         yamlio.load_yaml("a: " + "[" * 100_000 + "]" * 100_000)
     with pytest.raises(yamlio.YamlRefused, match="an integer of more than 4,300 digits"):
         yamlio.load_yaml("a: " + "9" * 100_000)
-    assert time.monotonic() - t0 < 5.0
+    assert time.process_time() - t0 < 5.0
     assert yamlio.load_yaml("[" * 64 + "]" * 64) is not None   # at the bound: accepted
     assert yamlio.load_yaml("a: &x 1\nb: 2\n") == {"a": 1, "b": 2}   # an anchor alone costs nothing
     assert yamlio.load_yaml("x: 1e-1\nn: 200") == {"x": 0.1, "n": 200}   # ROS 2's numbers
@@ -69,12 +70,12 @@ def test_a_file_is_sized_before_it_is_read(tmp_path):
     big = tmp_path / "big.yaml"
     with open(big, "wb") as f:   # sparse: 1 GiB on paper, nothing on disk
         f.truncate(1 << 30)
-    t0 = time.monotonic()
+    t0 = time.process_time()
     with pytest.raises(yamlio.YamlRefused, match=r"the parameter file is 1024.0 MiB; at most 4.0 MiB is read"):
         yamlio.load_yaml(big, "parameter file")
     with pytest.raises(P.ParamError, match=r"big.yaml: parameter '<file>': refused: the parameter file is 1024.0 MiB"):
         P.load_param_file(big)
-    assert time.monotonic() - t0 < 1.0
+    assert time.process_time() - t0 < 1.0
     edge = tmp_path / "edge.yaml"
     edge.write_text("a: 1\n" + "#" * (yamlio.MAX_BYTES - 6) + "\n")
     assert edge.stat().st_size == yamlio.MAX_BYTES and yamlio.load_yaml(edge) == {"a": 1}
@@ -162,10 +163,10 @@ def test_a_spec_bomb_and_a_base_bomb_are_refused(tmp_path):
     with open(tmp_path / "huge.yaml", "wb") as f:
         f.truncate(1 << 30)
     spec.write_text("base: huge.yaml\n")
-    t0 = time.monotonic()
+    t0 = time.process_time()
     with pytest.raises(P.ParamError, match=r"huge.yaml: parameter '<file>': refused: the parameter file is 1024.0 MiB"):
         load_spec(spec)
-    assert time.monotonic() - t0 < 1.0
+    assert time.process_time() - t0 < 1.0
 
 
 @pytest.mark.unit
@@ -183,10 +184,10 @@ def test_bag_metadata_is_bounded(tmp_path):
         read_metadata(tmp_path)
     with open(tmp_path / "metadata.yaml", "wb") as f:
         f.truncate(1 << 30)
-    t0 = time.monotonic()
+    t0 = time.process_time()
     with pytest.raises(BagError, match=r"refused: the metadata.yaml is 1024.0 MiB"):
         read_metadata(tmp_path)
-    assert time.monotonic() - t0 < 1.0
+    assert time.process_time() - t0 < 1.0
     with pytest.raises(BagError, match="offered_qos_profiles refused: YAML aliases"):
         parse_qos_yaml(laughs(5) + "- *l4\n")
     assert parse_qos_yaml("- history: keep_last\n  depth: 10\n")[0]["depth"] == 10

@@ -24,7 +24,9 @@ from mwip_ros.robot.sim import SimBackend  # noqa: E402
 
 from graphproc import wait_until  # noqa: E402
 
-pytestmark = pytest.mark.unit
+# alone: the backend's timeouts (silence_limit, a write's bound) and the emulator's watchdog are on the wall clock,
+# and the tests bound them there (scripts/test.sh runs them without other work of their class beside them)
+pytestmark = [pytest.mark.unit, pytest.mark.alone]
 
 CONFIG = Path(__file__).resolve().parents[2] / "config"
 WATCHDOG = 1.0   # a machine loaded 7 times over its cores stalls this process for 300 ms and more

@@ -30,10 +30,10 @@ def spec_file(tmp_path: Path, body: str, base: str = None) -> Path:
 
 
 def refused(path, key: str, *words):
-    t0 = time.monotonic()
+    t0 = time.process_time()   # CPU, not wall: a loaded machine stretches the wall, not the work refused
     with pytest.raises(SpecError) as exc:
         load_spec(path)
-    assert time.monotonic() - t0 < 2.0
+    assert time.process_time() - t0 < 2.0
     assert exc.value.key == key, str(exc.value)
     for w in words:
         assert w in str(exc.value), str(exc.value)
@@ -131,9 +131,9 @@ def test_the_window_is_found_without_listing_the_steps():
         b = rng.choice([n * h, rng.uniform(a, n * h * 1.2), a])
         steps = [k for k in range(n + 1) if a - 1e-9 <= k * h <= b + 1e-9]   # what simulate_batch listed
         assert budget.window_samples(n, h, (a, b)) == ((steps[0] if steps else 0), len(steps))
-    t0 = time.monotonic()
+    t0 = time.process_time()
     assert budget.window_samples(2 * 10 ** 9, 0.005, (5e6, 1e7)) == (10 ** 9, 10 ** 9 + 1)
-    assert time.monotonic() - t0 < 0.1
+    assert time.process_time() - t0 < 0.1
 
 
 def test_workers_beyond_the_limit_are_refused():
