@@ -67,6 +67,7 @@ def _drive(keys, rate=RATE):
     return ros.pub.times, alive
 
 
+@pytest.mark.alone   # the twists' rate and the keys' timing are on the wall clock
 def test_a_burst_of_keys_neither_delays_nor_multiplies_the_twists():
     marks = {}
 
@@ -90,6 +91,7 @@ def test_a_burst_of_keys_neither_delays_nor_multiplies_the_twists():
     assert after[-1][1] == pytest.approx(limits([]).max_speed)   # what the screen shows: vx at max_speed
 
 
+@pytest.mark.alone   # the twists' rate and the keys' timing are on the wall clock
 def test_ctrl_s_is_a_key_not_a_stop():
     def keys(master):
         time.sleep(0.2)

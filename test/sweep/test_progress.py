@@ -70,6 +70,7 @@ def test_the_plain_progress_line_says_the_weighted_time_left(monkeypatch):
     assert "2,010/2,100 runs (96 %)" in line and line.endswith("45 s left"), line
 
 
+@pytest.mark.alone   # the lines' rhythm is on the wall clock
 def test_a_plain_progress_line_comes_every_5_s_while_no_chunk_finishes(monkeypatch):
     """sweeps.md's promise: a line every 5 s, also while a chunk of a slow configuration runs for tens of seconds
     (laws_mass_mismatch_realistic.yaml said nothing for 27 s, then a line every 30 s). Here every 0.05 s."""
