@@ -65,7 +65,9 @@ class Observation:
     ``imu`` is None when the backend has no IMU of its own (on a moteus robot the IMU is read by its own driver and
     published at its own rate). ``fault`` is None while every device is healthy, else one line naming the device
     and its fault. ``truth`` is a simulator's true planar state (theta_w, theta_b, theta_w', theta_b'), None on a
-    device."""
+    device. ``stale`` is True when a device did not answer this exchange and a wheel reads its last answer (a
+    moteus reply lost): that read is no sample of ``time`` (published with it, the state estimator would take the
+    wheels as standing still since their answer), so the driver publishes no ``wheel_encoder`` for it."""
 
     time: float
     left: Wheel
@@ -73,6 +75,7 @@ class Observation:
     imu: Optional[Imu] = None
     fault: Optional[str] = None
     truth: Optional[Tuple[float, float, float, float]] = None
+    stale: bool = False
 
     @property
     def phi(self) -> float:

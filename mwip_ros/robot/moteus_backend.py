@@ -34,7 +34,8 @@ both ways).
 - a controller in mode 1 (fault) with its code (:data:`FAULT_CODES`: 38 over temperature, 33 motor driver, ...);
 - a controller in mode 11 (its watchdog expired: it went without a command for ``watchdog_timeout``);
 - a controller that has not answered for ``silence_limit`` seconds (a reply lost now and then is not a fault: the
-  wheel reads its last answer, counted in :attr:`MoteusBackend.missed`); one that never answered reads NaN;
+  wheel reads its last answer, counted in :attr:`MoteusBackend.missed`, and the read is :attr:`Observation.stale`,
+  no new sample); one that never answered reads NaN;
 - a transport that fails (the serial device gone, an ``ERR`` line, a reader that died, a write it does not take):
   then nothing more is sent until :meth:`MoteusBackend.reset` (each step returns the latched read at once), and the
   controllers stop by their own watchdogs.
@@ -322,10 +323,11 @@ class MoteusBackend(Backend):
             self._transport_error = self._transport_error or why
         t1 = time.monotonic()
         self.round_trips.append(t1 - t0)
-        reads, faults = [], []
+        reads, faults, stale = [], [], False
         for i, (wheel, cid, sign) in enumerate(zip(WHEELS, self.cfg.ids, self.cfg.signs)):
             values = by_id.get(cid)
             if values is None:
+                stale = True   # its last answer is not a read of this exchange's time
                 self.missed[i] += 1
                 self._flush = True
                 silent = t1 - self._heard[i]
@@ -342,7 +344,8 @@ class MoteusBackend(Backend):
             faults.insert(0, f"moteus: the fdcanusb at {self.cfg.path!r} failed: {self._transport_error}")
         if faults and self.fault is None:
             self.fault = "; ".join(faults)
-        self._last_obs = Observation(time=0.5 * (t0 + t1), left=reads[0], right=reads[1], fault=self.fault)
+        self._last_obs = Observation(time=0.5 * (t0 + t1), left=reads[0], right=reads[1], fault=self.fault,
+                                     stale=stale)
         return self._last_obs
 
     def _wheel(self, values: dict, sign: int) -> Wheel:

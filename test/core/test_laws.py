@@ -162,3 +162,35 @@ def test_a_declared_parameter_out_of_range_is_refused_naming_the_key(key, value,
     with pytest.raises(P.ParamError) as ei:
         P.parse_param_dict(doc, "p.yaml")
     assert ei.value.key == f"dscndo_controller.{key}" and words in str(ei.value)
+
+
+@pytest.mark.parametrize("name", ["dsc", "dscndo"])
+@pytest.mark.parametrize("tracking", [False, True])
+def test_dsc_told_of_a_gap_advances_its_filters_over_it(name, tracking):
+    """A realtime controller whose states come n periods apart says so (Law.elapsed(n h)) and DSC's filters (eq. 25:
+    x4d, and x_d when it tracks a reference) advance over the whole gap with the last step's targets held: the same
+    as the law stepped every period with the state of the gap's start repeated.  Told nothing, it is unchanged."""
+    from mwip_ros.core.motion import Reference
+    h, gap = 0.005, 10
+    cls = laws.get(name)
+    gapped, every = (cls(PAPER_GAINS, NOM, h) for _ in range(2))
+    ref = Reference(0.3, 0.5, 0.5 * NOM.r, 0.0, 2.0, 0.8) if tracking else None
+    rng = np.random.default_rng(49)
+    states = [tuple(rng.uniform(-0.1, 0.1, 4)) for _ in range(8)]
+    tau = (0.0, 0.0) if name == "dscndo" else None
+    for law in (gapped, every):
+        law.track(ref)
+        law.step(states[0], tau)
+    for j in range(1, len(states)):
+        for _ in range(gap - 1):
+            every.step(states[j - 1], tau)
+        want_u, want = every.step(states[j], tau)
+        gapped.elapsed(gap * h)
+        got_u, got = gapped.step(states[j], tau)
+        assert got_u == pytest.approx(want_u, rel=1e-9, abs=1e-9)
+        assert got["x4d"] == pytest.approx(want["x4d"], rel=1e-9, abs=1e-12)
+    plain, told = (cls(PAPER_GAINS, NOM, h) for _ in range(2))
+    for k, x in enumerate(states):   # elapsed(h): one period, the lockstep step to the bit
+        if k:
+            told.elapsed(h)
+        assert told.step(x, tau) == plain.step(x, tau)

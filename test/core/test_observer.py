@@ -70,3 +70,45 @@ def test_observer_converges_at_the_predicted_rate():
     # The slowest eigenvalue sets the tail: |e| decays like exp(-lam_min t).
     ratio = np.linalg.norm(errs[300]) / np.linalg.norm(errs[200])
     assert ratio == pytest.approx(math.exp(-lam[0] * (ts[300] - ts[200])), rel=0.05)
+
+
+def _stiff_gain():
+    """A gain whose X M_hat^-1 has an eigenvalue of 180 1/s (Upkie's, config/upkie.yaml): one Euler step of
+    h = 5 ms is stable (180 h = 0.9 < 2), one of 10 h is not (|1 - 9| = 8)."""
+    X = np.diag([180.0, 2.4]) @ mass_matrix(NOM, UPRIGHT)
+    rates = np.sort(error_rates(NOM, X, UPRIGHT).real)
+    assert rates[-1] == pytest.approx(180.0, rel=1e-9)
+    return X
+
+
+@pytest.mark.parametrize("gap", [2, 3, 10, 14])
+def test_a_gap_of_n_periods_is_n_steps_of_one_period_with_the_state_held(gap):
+    """A realtime observer whose states come n periods apart (update(x, u, n h)) integrates eq. (12) in n explicit
+    Euler steps of one period, x_{k-1} and u held (the torque the driver held; nothing else is known of the gap): the
+    same as an observer called every period with the state repeated.  One step of n h (before issue 49's mend)
+    multiplied the error by 1 - 180 n h: -8 at n = 10, and diverged."""
+    h = 0.005
+    X = _stiff_gain()
+    gapped, every = DiscreteObserver(NOM, X, h), DiscreteObserver(NOM, X, h)
+    rng = np.random.default_rng(gap)
+    states = [tuple(rng.uniform(-0.05, 0.05, 4)) for _ in range(20)]
+    torques = list(rng.uniform(-5.0, 5.0, 20))
+    gapped.update(states[0], 0.0)
+    every.update(states[0], 0.0)
+    for j in range(1, len(states)):
+        for _ in range(gap - 1):                 # the periods in between: the state of the gap's start again
+            every.update(states[j - 1], torques[j])
+        want = every.update(states[j], torques[j])
+        got = gapped.update(states[j], torques[j], gap * h)
+        np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-9)
+        assert max(abs(v) for v in got) < 1e3   # (one step of n h: 8^j)
+
+
+def test_one_period_given_explicitly_is_the_lockstep_step():
+    """update(x, u, h) with h the period is bit for bit update(x, u): lockstep (no h given) is unchanged."""
+    h = 0.005
+    X = _stiff_gain()
+    a, b = DiscreteObserver(NOM, X, h), DiscreteObserver(NOM, X, h)
+    for k in range(10):
+        x, u = random_state(RNG), RNG.uniform(-10, 10)
+        assert a.update(x, u) == b.update(x, u, None if k % 2 else h)

@@ -172,6 +172,34 @@ def test_realtime_period_publishes_the_read_stamped_at_it_and_writes_the_newest_
         h.close()
 
 
+def test_a_read_in_which_a_device_did_not_answer_is_no_sample_for_the_estimator(monkeypatch):
+    """A device's exchange that lost a reply (Observation.stale: the wheel holds its last answer) is no sample for
+    the estimator (no wheel_encoder, no imu/data_raw; wheel_states only): stamped now, that answer would tell the
+    estimator the wheels stood still since it came (issue 49: the emulated moteus robot's estimator diverged on such
+    reads). The next answer is published, its stamp spanning the gap; the count is on /diagnostics and in the
+    summary."""
+    backend = Recording()
+    stale_steps = {2, 3}   # the 2nd and 3rd exchanges lose a reply
+    step = backend.step
+    backend.step = lambda command: replace(step(command), stale=len(backend.written) in stale_steps)
+    h = _driver(monkeypatch, backend, "-p", "require_enable:=false")
+    try:
+        clock = Clock(h)
+        for _ in range(4):
+            clock.tick()
+        assert len(backend.written) == 5   # every period an exchange, the command written
+        stamps = [L.parse_encoder(m)[0] for m in h.sent("wheel_encoder")]
+        assert len(stamps) == 3 and len(h.sent("imu/data_raw")) == 3
+        assert len(h.sent("wheel_states")) == 5   # each wheel's read goes out still (the answering wheels')
+        gaps = [round((b - a) / H_NS) for a, b in zip(stamps, stamps[1:])]
+        assert gaps == [3, 1]   # the read after the two lost ones spans them
+        assert h.node.stale_reads == 2
+        _level, _text, values = h.node.diagnostic_status()
+        assert values["stale_reads"] == 2
+    finally:
+        h.close()
+
+
 def test_a_device_is_read_once_a_wake_stamped_at_its_read_and_missed_periods_are_counted(monkeypatch):
     backend = Recording()
     h = _driver(monkeypatch, backend, "-p", "require_enable:=false")

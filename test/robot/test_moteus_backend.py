@@ -142,9 +142,11 @@ def test_a_controller_that_stops_answering_is_named_alone_and_no_torque_follows(
     with _backend(path) as b:
         b.reset()
         _run(b, Command(1.0, 1.0), 0.05)
+        assert not b.step(Command(1.0, 1.0)).stale   # both answered: a read of now
         robot.silence(2, True)
         t0 = time.monotonic()
         obs = b.step(Command(1.0, 1.0))
+        assert obs.stale   # the right wheel's last answer: no read of now (the driver does not publish it)
         while obs.fault is None and time.monotonic() - t0 < 4.0:
             obs = b.step(Command(1.0, 1.0))
         assert obs.fault is not None and obs.fault.startswith("moteus right wheel (CAN id 2): no answer for ")

@@ -138,6 +138,11 @@ class Law:
     def reset(self) -> None:
         """Forget the state: the next step is a first step."""
 
+    def elapsed(self, dt: float) -> None:
+        """The time since the previous step when it is not the period ``h`` [s]: a realtime controller that lost
+        states (n periods apart: n h) says so before :meth:`step`, and that step advances the law's own filters over
+        ``dt`` instead of one period.  Only that one step; a law without a state in time ignores it."""
+
     def step(self, x, tau_hat=None):
         """``(u, internals)`` for the measured state ``x`` and the estimate ``tau_hat`` (None: none).
 

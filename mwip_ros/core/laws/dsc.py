@@ -61,6 +61,8 @@ class DscLaw(Law):
         super().__init__(params, nominal, h, m)
         self.x4d = None   # None: the next step is the first, x4d(0) = x4_bar(0) (eq. 25)
         self.xd = None    # the outer loop's filtered lean reference x_d (motion only; None: x_d(0) = x_d_bar(0))
+        self.last = None  # the state of the last step: held over the periods a gap skipped (:meth:`elapsed`)
+        self.skipped = 0  # whole periods the next step comes late by (:meth:`elapsed`)
 
     @classmethod
     def design(cls, values, nominal, h) -> DscGains:
@@ -77,15 +79,39 @@ class DscLaw(Law):
     def reset(self) -> None:
         self.x4d = None
         self.xd = None
+        self.last = None
+        self.skipped = 0
+
+    def elapsed(self, dt: float) -> None:
+        """The next step comes ``dt`` after the last one, not one period: each step advanced its filters over one
+        period (eq. 25), so the next one first advances them over the periods the gap skipped, one period at a time
+        with the last step's state held (what the law stepped every period would do with that state repeated; DSC's
+        x4_bar follows x_d while it tracks, so the cascade is stepped, not solved at once)."""
+        self.skipped = max(0, round(dt / self.h) - 1)
+
+    def _catch_up(self) -> None:
+        """The filters over the periods :meth:`elapsed` said were skipped (eq. 25; with a reference, x_d's too)."""
+        n, self.skipped = self.skipped, 0
+        if not n or self.x4d is None or self.last is None:
+            return
+        P, x = self.pure_params(self.params), self.last
+        for _ in range(n):
+            if self.ref is not None and self.xd is not None:
+                _u, self.x4d, self.xd, _i = dsc_track_step(P, self.nominal, self.h, x, self.x4d, self.xd, False,
+                                                            self.ref, self.m)
+            else:
+                _u, self.x4d, _i = dsc_step(P, self.nominal, self.h, x, self.x4d, False, self.m)
 
     def step(self, x, tau_hat=None):
         """u_DSC (eq. 28) for ``x`` with the current x4d, then x4d advanced over one period (eq. 25); with a motion
         reference (:meth:`track`) the surfaces track the outer loop's lean x_d (:meth:`_step_tracking`)."""
+        self._catch_up()
         first = self.x4d is None
         if self.ref is not None:
             return self._step_tracking(x, first)
         u, self.x4d, (S1, S2, x4d, x4_bar, u_dsc, x1) = dsc_step(self.pure_params(self.params), self.nominal, self.h,
                                                                  x, 0.0 if first else self.x4d, first, self.m)
+        self.last = x
         return u, {"S1": S1, "S2": S2, "x4d": x4d, "x4_bar": x4_bar, "u_dsc": u_dsc,
                    "u_taud": 0.0, "u": u, "x1": x1}   # u_taud: 0, the term is off
 
@@ -96,6 +122,7 @@ class DscLaw(Law):
         u, self.x4d, self.xd, (S1, S2, x4d, x4_bar, u_dsc, x1) = dsc_track_step(
             self.pure_params(self.params), self.nominal, self.h, x, 0.0 if first else self.x4d, xd, first, self.ref,
             self.m)
+        self.last = x
         return u, {"S1": S1, "S2": S2, "x4d": x4d, "x4_bar": x4_bar, "u_dsc": u, "u_taud": 0.0, "u": u, "x1": x1}
 
     pure_step = staticmethod(dsc_step)

@@ -67,6 +67,9 @@ class WithObserver(Law):
     def reset(self) -> None:
         self.inner.reset()
 
+    def elapsed(self, dt: float) -> None:
+        self.inner.elapsed(dt)
+
     def finite(self) -> bool:
         return self.inner.finite()
 

@@ -76,8 +76,8 @@ class DisturbanceObserver(Node, GracefulNodeMixin):
             self.obs.reset()
         else:
             n = round((stamp - last) / self.period_ns) if last is not None else 1
-            if n > 1:  # realtime: a state was lost; integrate over the whole gap (at most the window)
-                h = n * self.h
+            if n > 1:  # realtime: states were lost; integrate over the whole gap (at most the window) in steps of
+                h = n * self.h   # at most one period (core.observer.substeps: one step of n h is unstable)
         try:
             tau_hat = self.obs.update(x, u_prev, h)
             ok = math.isfinite(tau_hat[0]) and math.isfinite(tau_hat[1])

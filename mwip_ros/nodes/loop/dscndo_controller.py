@@ -276,6 +276,9 @@ class DscndoController(Node, GracefulNodeMixin):
         shaped = self.motion.snapshot() if self.motion is not None else None
         k = round((stamp - self.stamp0) / (self.h * 1e9)) if self.stamp0 is not None else 0
         driving = self.driving
+        gap = round((stamp - self.last_answered) / (self.h * 1e9)) if self.last_answered is not None else 1
+        if gap > 1:   # realtime: states lost; the law's filters (DSC's eq. 25) advance over the time that passed
+            ctrl.elapsed(gap * self.h)
         try:   # core.loop: the law stage (no torque acting: the references hold)
             u, internals = command(ctrl, x, tau_hat, self.excitation, k, self.motion, driving)
             ok = math.isfinite(u) and ctrl.finite()

@@ -20,13 +20,16 @@ Then the read is published, each message stamped at the read:
   acceleration); a moteus robot's IMU has its own driver (the state estimator's ``imu_sync: latest``);
 - a simulator's truth: ``true_joint_states`` (eq. 1's state) and, where it has one, ``true_pose`` (for the report).
 
-**Modes.** ``realtime``: period k is due at t0 + k h on the node's clock (:mod:`..runtime.schedule`: absolute
-deadlines, no sliding).  A device is read at each wake, once (the newest period; the periods whose deadline passed
-with no wake are counted as missed); a simulated backend steps every period that came due (its physics goes on as a
-robot's would) and publishes the newest.  A device's read is stamped at its exchange's middle on the node's clock, a
-simulator's at its period's deadline.  ``lockstep`` (simulated backends only): ``/clock`` and state k, then the
-command that answers it (:mod:`..runtime.lockstep`, the chain state_estimator, observer, controller), then the next
-period: the graph runs in simulated time, stamps k h.
+**Modes.** ``realtime``: period k is due at t0 + k h on the node's clock (:mod:`..runtime.schedule`: absolute deadlines,
+no sliding). A device is read at each wake, once (the newest period; the periods whose deadline passed with no wake are
+counted as missed); a simulated backend steps every period that came due (its physics goes on as a robot's would) and
+publishes the newest. A device's read is stamped at its exchange's middle on the node's clock, a simulator's at its
+period's deadline. A read in which a device did not answer (a moteus reply lost: the wheel holds its last answer,
+:attr:`~mwip_ros.robot.backend.Observation.stale`) is no sample of now: stamped now it would tell the estimator the
+wheels stood still since their answer, so only ``wheel_states`` goes out (each wheel's read, the answering ones') and
+the next answer's stamp spans the gap. ``lockstep`` (simulated backends only):
+``/clock`` and state k, then the command that answers it (:mod:`..runtime.lockstep`, the chain state_estimator,
+observer, controller), then the next period: the graph runs in simulated time, stamps k h.
 
 **Safety** (:mod:`mwip_ros.core.safety`, one machine for the node's life): ``~/enable``, ``~/disable``, ``~/reset``
 (std_srvs/Trigger; a reset clears the driver's fault and resets the backend at the next period boundary: a device
@@ -202,6 +205,7 @@ class WheelDriverNode(Node, GracefulNodeMixin):
         self.k_run = 0                   # periods since the start (or the last reset)
         self._reset_pending = False
         self.resets = 0
+        self.stale_reads = 0             # realtime reads not published: a device did not answer (Observation.stale)
         self.pushed = (0.0, 0.0)
         obs = self.driver.start()
         self.has_imu = obs.imu is not None
@@ -538,8 +542,14 @@ class WheelDriverNode(Node, GracefulNodeMixin):
                 return
             if not self.simulated_backend:   # a device's period is the schedule's: k periods since the start
                 self.k_run = wake.k
-        self._publish(obs, self._stamp(obs))
-        self.timing.add("read_to_publish", time.monotonic() - self._read_end)
+        if obs.stale:   # a device did not answer: its last answer is no sample of now (module doc); wheel_states
+            self.stale_reads += 1   # only (the answering wheels' reads), the next sample's stamp spans the gap
+            for pub, data in self._messages(obs, self._stamp(obs)):
+                if pub is self.wheels_pub:
+                    pub.publish(data)
+        else:
+            self._publish(obs, self._stamp(obs))
+            self.timing.add("read_to_publish", time.monotonic() - self._read_end)
         if first:   # the first state is out: the start-up's bound counts from it (_check_start)
             self._no_command_since = time.monotonic()
             self._first_stamp = self._stamp(obs)
@@ -617,7 +627,8 @@ class WheelDriverNode(Node, GracefulNodeMixin):
         values = {"mode": self.mode, "backend": self.backend_name, "read_only": str(self.cfg.read_only).lower(),
                   "driver_state": sm.state, "fault_reason": sm.fault_reason or "none",
                   "held": ", ".join(sm.held) or "none", "periods": rep["periods"], "missed_periods": rep["missed"],
-                  "torque_writes": self.driver.torque_writes, "stop_writes": self.driver.stops}
+                  "torque_writes": self.driver.torque_writes, "stop_writes": self.driver.stops,
+                  "stale_reads": self.stale_reads}
         for f in TIMING_FIELDS:
             if rep[f"{f}_ms_p99"] is not None:
                 values[f"{f}_ms_newest"] = f"{self.timing.newest[f] * 1e3:.3f}"
@@ -661,6 +672,7 @@ class WheelDriverNode(Node, GracefulNodeMixin):
                  f"writes, {self.driver.stops} stops; driver {sm.state}"
                  + (f" ({sm.fault_reason})" if sm.faulted else "")
                  + (f"; first stop {max(stops) * 1e3:.3f} ms after leaving enabled (worst)" if stops else "")
+                 + f"; reads not published (a device did not answer): {self.stale_reads}"
                  + f"; rejected messages: {self.rejects.summary()}")
         if self.v["summary_json"]:
             summary = {"mode": self.mode, "backend": self.backend_name, "control_rate_hz": 1.0 / self.h,
@@ -668,7 +680,7 @@ class WheelDriverNode(Node, GracefulNodeMixin):
                        "driver_state": sm.state, "fault_reason": sm.fault_reason, "fault_detail": sm.fault_detail,
                        "transitions": list(self.transitions), "timing": rep,
                        "torque_writes": self.driver.torque_writes, "stop_writes": self.driver.stops,
-                       "stop_after_s": stops, "rejected": dict(self.rejects.counts),
+                       "stale_reads": self.stale_reads, "stop_after_s": stops, "rejected": dict(self.rejects.counts),
                        "device_replies_missed": list(getattr(self.backend, "missed", []) or []) or None,
                        "schedule": self.schedule.report() if self.schedule is not None else None}
             with open(self.v["summary_json"], "w") as f:
