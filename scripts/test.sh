@@ -12,9 +12,6 @@ cd "$ROOT"
 # shellcheck disable=SC1091
 source "$ROOT/scripts/domain.sh"
 mwip_domain test || exit $?
-bash "$ROOT/scripts/setup.sh"
-# shellcheck disable=SC1091
-source "$ROOT/scripts/env.sh"
 
 # Run test/ unless the caller named test paths of their own.
 targets=(test/)
@@ -24,6 +21,32 @@ for a in "$@"; do
         *) if [ -e "${a%%::*}" ]; then targets=(); break; fi ;;
     esac
 done
+
+# Without -m, -n or test paths of the caller's: three runs, so that every core works and nothing timed shares it
+# with work of its own class. The tests marked alone (they keep real-time deadlines or time something on the wall
+# clock) and the bench run one at a time, with the tiers that start no ROS process (unit, cli, node, slow,
+# montecarlo: test/conftest.py) on every core beside them at Linux's idle scheduling class (scripts/idle_priority.py):
+# those take only the CPU the timed tests leave. Then the in-process run goes back to normal priority and the graph
+# and e2e tests run on every core beside what is left of it (docs/development.md has the measurements).
+# With -m, -n or paths of yours: one pytest run.
+split=1
+[ "${#targets[@]}" -eq 0 ] && split=0
+for a in "$@"; do
+    case "$a" in
+        -m|-m?*|-n|-n?*|--numprocesses|--numprocesses=*) split=0 ;;
+    esac
+done
+
+# The set-up (scripts/setup.sh). In the three runs, the batch loops it would compile ahead (mwip_ros/sweep/warm.py,
+# about 370 s of CPU) are compiled in the background at the idle scheduling class before the in-process tiers,
+# beside the timed tests, instead of before every test.
+if [ "$split" -eq 1 ]; then
+    MWIP_SETUP_WARM=0 bash "$ROOT/scripts/setup.sh"
+else
+    bash "$ROOT/scripts/setup.sh"
+fi
+# shellcheck disable=SC1091
+source "$ROOT/scripts/env.sh"
 
 # The linter first (ruff.toml): a finding fails the run before any test starts.
 echo "test: python -m ruff check ."
@@ -41,21 +64,6 @@ else
     echo "test: mypy found type errors (mypy.ini; run it alone: python -m mypy)" >&2
     exit 1
 fi
-
-# Without -m, -n or test paths of the caller's: three runs, so that every core works and nothing timed shares it
-# with work of its own class. The tests marked alone (they keep real-time deadlines or time something on the wall
-# clock) and the bench run one at a time, with the tiers that start no ROS process (unit, cli, node, slow,
-# montecarlo: test/conftest.py) on every core beside them at Linux's idle scheduling class (scripts/idle_priority.py):
-# those take only the CPU the timed tests leave. Then the in-process run goes back to normal priority and the graph
-# and e2e tests run on every core beside what is left of it (docs/development.md has the measurements).
-# With -m, -n or paths of yours: one pytest run.
-split=1
-[ "${#targets[@]}" -eq 0 ] && split=0
-for a in "$@"; do
-    case "$a" in
-        -m|-m?*|-n|-n?*|--numprocesses|--numprocesses=*) split=0 ;;
-    esac
-done
 
 run_pytest() {   # pytest's exit code; 5 (nothing collected) is a failure of the whole run
     local rc=0
@@ -77,8 +85,11 @@ rc=0
 logs="$(mktemp -d "${TMPDIR:-/tmp}/mwip_test.XXXXXX")"
 in_process_cmd=(python -m pytest "${targets[@]}" -m "(unit or cli or node or slow or montecarlo) and not alone" -n auto
                 --dist worksteal "$@")
-echo "test: ${in_process_cmd[*]} (at idle priority beside the tests marked alone; its output at its end)"
-python scripts/idle_priority.py run "${in_process_cmd[@]}" > "$logs/in_process.log" 2>&1 &
+echo "test: python -m mwip_ros.sweep.warm, then ${in_process_cmd[*]} (at idle priority beside the tests marked" \
+     "alone; their output at their end)"
+python scripts/idle_priority.py run bash -c 'python -m mwip_ros.sweep.warm ||
+    echo "test: warning: the batch loops were not compiled ahead (the tests compile what they need)" >&2
+    exec "$@"' in_process "${in_process_cmd[@]}" > "$logs/in_process.log" 2>&1 &
 in_pid=$!
 trap 'kill -TERM "$in_pid" 2>/dev/null || true; rm -rf "$logs"' INT TERM EXIT   # (a background job ignores SIGINT)
 # what keeps real-time deadlines or times the wall clock, and the bench: one at a time, beside only idle work
