@@ -24,6 +24,7 @@ SENSING = PAPER + [CONFIG / "sensing_realistic.yaml"]
 MOTOR = SENSING + [CONFIG / "motor_realistic.yaml"]
 CHIRP = PAPER + [CONFIG / "identify.yaml"]   # the identification's chirp added to the law's command
 RAW = PAPER + [CONFIG / "sensors_raw_realistic.yaml"]   # raw sensors, the kalman estimator
+MOTION = PAPER + [CONFIG / "motion.yaml"]   # the motion references every law tracks (theory 6.11)
 N, SEED, DURATION, WINDOW = 6, 40, 2.0, (1.0, 2.0)
 
 
@@ -246,7 +247,9 @@ def test_require_enable_a_driver_nobody_enables_equals_the_batch_simulator(files
 
 @pytest.mark.parametrize("files, key", [
     ({**load_values(PAPER), "backend": "mujoco"}, "plant_sim.backend"),
-    (PAPER + [CONFIG / "motion.yaml"], "motion.enabled"),   # it would ignore the references without a word
+    # the compiled loop's motion stage does not idle the references while the driver is disabled (the batch runs
+    # such a loop in the scalar loop only)
+    ({**load_values(PAPER + [CONFIG / "motion.yaml"]), "require_enable": True}, "require_enable"),
 ])
 def test_what_the_vector_env_does_not_run_is_refused_naming_the_key(files, key):
     with pytest.raises(ValueError) as err:
@@ -339,3 +342,61 @@ def test_a_sweep_spec_that_varies_more_than_the_true_robot_is_refused_naming_the
     with pytest.raises(ValueError) as err:
         MwipVectorEnv(2, sweep=spec)
     assert str(err.value).startswith("sweep:") and "dscndo_controller.k1" in str(err.value), err.value
+
+
+def motion_run(files, law, duration):
+    """(the vector env's run of N robots with a zero residual, simulate_batch's trajectories (the scalar loop, as
+    mwip_sim) and the compiled loop's metrics) of ``law`` on ``files`` for ``duration``."""
+    env = MwipVectorEnv(N, files, duration=duration, base_law=law)
+    xs, us = run(env, lambda obs, u: np.zeros((N, 1)))
+    loop = P.closed_loop(load_values(files), duration=duration, controller=law)
+    loops = [dataclasses.replace(loop, plant=dataclasses.replace(loop.plant, seed=SEED + i)) for i in range(N)]
+    window = (duration / 2, duration)
+    return (env, xs, us, simulate_batch(loops, window, record=True).trajectories,
+            simulate_batch(loops, window, compiled=True).metrics)
+
+
+@pytest.mark.slow   # 12 s of 6 robots and of mwip_sim's 6 runs; the law's motion kernel compiled into an empty cache
+@pytest.mark.parametrize("files, law, exact", [(MOTION, "dscndo", True), (MOTION, "lqr_ndo", True),
+                                               (MOTION + [CONFIG / "sensing_realistic.yaml"], "dsc", False)])
+def test_motion_references_with_a_zero_residual_equal_mwip_sims_run_bit_for_bit(files, law, exact):
+    """config/motion.yaml (1 m/s from 2 s, -0.5 m/s from 10 s): the vector env runs the compiled loop's motion stage
+    (core.compiled_motion.law_track), every robot equal to mwip_sim's run of it (the batch's record: the scalar loop)
+    to the bit, and to the compiled batch's metrics; it drove.  DSC's tracking step compiled is the scalar one's
+    within an ulp (one command of robot 1's 2,400 differed by 1 ulp, its states not at all): 1e-9 there, as the
+    other vector env tests.  Before, the vector env refused motion.enabled."""
+    env, xs, us, trajectories, metrics = motion_run(files, law, 12.0)
+    for i, tr in enumerate(trajectories):
+        c = tr.columns
+        for j, name in enumerate(("theta_w", "theta_b", "dtheta_w", "dtheta_b")):
+            if exact:
+                assert np.array_equal(xs[:, i, j], c[name]), (i, name, np.max(np.abs(xs[:, i, j] - c[name])))
+            else:
+                assert np.allclose(xs[:, i, j], c[name], rtol=0, atol=1e-9), (i, name)
+        if exact:
+            assert np.array_equal(us[:, i], c["u"][:-1]), i
+        else:
+            assert np.allclose(us[:, i], c["u"][:-1], rtol=0, atol=1e-9), i
+    h = env.setup.loop.plant.h
+    first, count = window_samples(us.shape[0], h, (6.0, 12.0))
+    theta_rms = np.sqrt(np.mean(xs[first:first + count, :, 1] ** 2, axis=0))
+    assert np.allclose(theta_rms, metrics["theta_b_rms"], rtol=1e-9, atol=0)
+    assert np.all(xs[int(round(10.0 / h)), :, 0] > 20.0)   # 1 m/s from 2 s on wheels of r = 0.25 m: it drove
+
+
+def test_motion_references_track_per_robot_after_an_autoreset():
+    """A robot restarted in place (NEXT_STEP) takes the references from t = 0 again (its own references' state reset):
+    its second episode repeats its first while the other robot's goes on."""
+    values = {**load_values(MOTION), "actual.D_w_variance": 0.0}
+    env = MwipVectorEnv(2, values, duration=3.0, base_law="dscndo", torque_scale=4096.0)
+    env.reset(seed=1)
+    n, first, second = env.setup.n_steps, [], []
+    nan = np.array([[0.0], [np.nan]])
+    for step in range(n + 4 + n):
+        obs, r, term, trunc, info = env.step(nan if step == 3 else np.zeros((2, 1)))
+        if step < n:
+            first.append(obs[0].copy())
+        elif step > n:
+            second.append(obs[0].copy())
+    assert np.array_equal(np.array(first[:n - 1]), np.array(second[:n - 1]))
+    assert abs(first[-1][0]) > 1.0   # robot 0 drove in its first episode
