@@ -29,6 +29,11 @@ ones, the same delay queue) and the estimator (its ``pure_step``: one kernel per
 torque that acted reported to the observer, the saturated periods counted; the lanes' RK4 is motorless) and the
 excitation (a table of each distinct one's periods, added to the law's command before the torque limit).
 
+The stages ``sensors`` (:func:`sense_state`; raw: :func:`sense_raw`, with the estimator), ``law`` with the motion
+references (:func:`track_for`: :func:`.compiled_motion.law_track` per law) and ``drive`` (:func:`drive_stage`) are
+functions of their own, one scenario's period each: the loop calls them, and so does the vector env
+(:mod:`mwip_ros.envs.kernels`, robot by robot at each robot's own period), so the stages are written once for both.
+
 numba compiles on first use and caches the machine code (:mod:`.jitcache`: every cached function stamped with
 everything it is made of, callees and frozen constants included, so an edit to any of them is compiled afresh).
 """

@@ -400,3 +400,26 @@ def test_motion_references_track_per_robot_after_an_autoreset():
             second.append(obs[0].copy())
     assert np.array_equal(np.array(first[:n - 1]), np.array(second[:n - 1]))
     assert abs(first[-1][0]) > 1.0   # robot 0 drove in its first episode
+
+
+def test_mpc_tracks_the_motion_references_through_the_scalar_loops_command_equal_to_mwip_sim():
+    """A law without a pure step (mpc) with motion: the vector env calls core.loop.command with a Shaper per robot,
+    the scalar loop's own law stage; each robot equals mwip_sim's run (the batch's record) to the bit."""
+    pytest.importorskip("daqp")
+    duration, n = 3.0, 2
+    env = MwipVectorEnv(n, MOTION, duration=duration, base_law="mpc")
+    assert env.lanes.shapers is not None and env.lanes.track is None
+    obs, _ = env.reset(seed=SEED)
+    xs, us = [np.stack(env.lanes.x, 1)], []
+    for _ in range(env.setup.n_steps):
+        obs, r, term, trunc, info = env.step(np.zeros((n, 1)))
+        us.append(info["u"])
+        xs.append(np.stack(env.lanes.x, 1))
+    assert trunc.all() and not term.any()
+    loop = P.closed_loop(load_values(MOTION), duration=duration, controller="mpc")
+    loops = [dataclasses.replace(loop, plant=dataclasses.replace(loop.plant, seed=SEED + i)) for i in range(n)]
+    for i, tr in enumerate(simulate_batch(loops, (1.0, duration), record=True).trajectories):
+        for j, name in enumerate(("theta_w", "theta_b", "dtheta_w", "dtheta_b")):
+            assert np.array_equal(np.array(xs)[:, i, j], tr.columns[name]), (i, name)
+        assert np.array_equal(np.array(us)[:, i], tr.columns["u"][:-1]), i
+    assert np.all(np.array(xs)[-1, :, 2] > 0.5)   # the wheels turn forward: v* = 0.5 m/s at 3 s
