@@ -305,6 +305,29 @@ def test_the_stepper_holds_every_stage_of_the_loop_in_its_order():
     assert tuple(marks) == STAGE_NAMES
 
 
+def test_the_stepper_calls_the_compiled_loops_own_stage_functions():
+    """The stages sensors (state, raw with its estimator), law with the motion references and drive are the compiled
+    loop's own functions (core.compiled), the very objects its kernel binds: the env writes none of them again."""
+    from mwip_ros.core import compiled
+    from mwip_ros.core.estimators import kalman
+    from mwip_ros.envs import kernels
+    law = laws.get("dscndo")
+    assert kernels.sense.py_func.__globals__["sense_state"].py_func.__code__ is compiled.sense_state.__code__
+    assert kernels.drive.py_func.__globals__["drive_stage"].py_func.__code__ is compiled.drive_stage.__code__
+    stage = kernels.track_kernel(law).py_func.__globals__["law_track"]
+    assert stage is compiled.track_for(law) is compiled.kernel_for(law).py_func.__globals__["law_track"]
+    raw = kernels.raw_kernel(kalman.KalmanFilter).py_func.__globals__["sense_raw"].py_func
+    assert raw.__code__ is compiled.sense_raw.__code__
+    assert raw.__globals__["est_step"].py_func.__code__ is kalman.kalman_step.__code__
+    source = open(kernels.__file__).read() + open(lanes_file()).read()
+    assert "PLAUSIBLE_TORQUE" not in source and "raw_sample(" not in source   # no drive gate, no raw sample of its own
+
+
+def lanes_file():
+    import mwip_ros.envs.lanes as lanes_module
+    return lanes_module.__file__
+
+
 def test_a_sweep_spec_gives_robot_i_the_specs_scenario_i_equal_to_the_batch_and_restarts_draw_the_next():
     """sweep=mass_mismatch.yaml, reset(seed=7): robot i is scenario i of the spec with seed 7 and samples N (its true
     m_b, I_b, l and its noise seed), its episode the batch simulator's run of that scenario (1e-9)."""
