@@ -29,6 +29,11 @@ ones, the same delay queue) and the estimator (its ``pure_step``: one kernel per
 torque that acted reported to the observer, the saturated periods counted; the lanes' RK4 is motorless) and the
 excitation (a table of each distinct one's periods, added to the law's command before the torque limit).
 
+The stages ``sensors`` (:func:`sense_state`; raw: :func:`sense_raw`, with the estimator), ``law`` with the motion
+references (:func:`track_for`: :func:`.compiled_motion.law_track` per law) and ``drive`` (:func:`drive_stage`) are
+functions of their own, one scenario's period each: the loop calls them, and so does the vector env
+(:mod:`mwip_ros.envs.kernels`, robot by robot at each robot's own period), so the stages are written once for both.
+
 numba compiles on first use and caches the machine code (:mod:`.jitcache`: every cached function stamped with
 everything it is made of, callees and frozen constants included, so an edit to any of them is compiled afresh).
 """
@@ -52,7 +57,8 @@ from .raw_sensors import raw_sample
 from .safety import PLAUSIBLE_TORQUE
 from .sensing import quantize
 
-__all__ = ["Inertia", "RK4Periods", "Sin", "kernel_for", "load_cached"]
+__all__ = ["Inertia", "RK4Periods", "Sin", "kernel_for", "track_for", "sense_state", "sense_raw", "raw_stage",
+           "drive_stage", "load_cached"]
 
 class Inertia(NamedTuple):
     """The terms of eq. (2) that :func:`.model.accel` reads, for one scenario."""
@@ -235,6 +241,78 @@ def _stage(tau1, tau2, f1, f2, t, dt, substeps):   # pragma: no cover
         tau2[2 * j + 2] = at(f2, tb) + 0.0
 
 
+def sense_state(xt, zk, noisy, std, counts, q, k, delay, u_prev):   # pragma: no cover - compiled
+    """Stage ``sensors`` of one scenario that measures the state (:meth:`.sensing.Sensors.sample`): the true state
+    ``xt`` plus ``std`` times the period's normals ``zk`` (``noisy``), the wheel angle quantized by the encoder
+    (:func:`.sensing.quantize`, ``counts`` > 0), put with ``u_prev`` (the torque of period k - 1) into slot
+    k % (delay + 1) of the queue ``q`` (delay + 1, >= 5; in place); returns the sample of step k - ``delay`` (the
+    first one while k < delay): (the measured state, the torque reported with it).  The compiled loop
+    (:func:`_loop`) and the vector env (:mod:`mwip_ros.envs.kernels`) both run it."""
+    w, b, dw, db = xt
+    if noisy:
+        w, b, dw, db = w + std[0] * zk[0], b + std[1] * zk[1], dw + std[2] * zk[2], db + std[3] * zk[3]
+    if counts > 0:
+        w = quantize(w, counts)
+    slot = k % (delay + 1)
+    q[slot, 0], q[slot, 1], q[slot, 2], q[slot, 3], q[slot, 4] = w, b, dw, db, u_prev
+    r = (k - delay) % (delay + 1) if k >= delay else 0
+    return (q[r, 0], q[r, 1], q[r, 2], q[r, 3]), q[r, 4]
+
+
+def sense_raw(pa, D_b, xt, u_prev, MC, e1, e2, zr, RS, RW, k, h, delay, q, PE, ES):   # pragma: no cover - compiled
+    """Stages ``sensors`` and ``estimator`` of one scenario with raw sensors (docs/theory.md 6.4,
+    :meth:`.loop.PlantSide.sense` with :meth:`.plant.PlantSim.sample_accel`): the accelerations at t_k^- of eq. (1)
+    (:func:`.model.accel` of the true robot ``pa``, ``D_b``, the state ``xt``, with what acted over the previous
+    period: ``u_prev``, or with the motor (``MC``: K_t, R, V_max, I_max; K_t = 0: none) its torque at x_k for the
+    previous command, its D_w, and tau_ext ``e1``, ``e2`` at t_k), the raw sample (:func:`.raw_sensors.raw_sample`
+    with the normals ``zr``; ``RW``: r, d, g, gyro_noise_std, gyro_bias_walk, accel_noise_std, counts), put with
+    ``u_prev`` into slot k % (delay + 1) of the queue ``q`` (delay + 1, 6), and the estimator's ``pure_step``
+    (``est_step``, bound per estimator; ``PE`` its numbers, ``ES`` its state, in place) on the sample of step
+    k - ``delay``.  ``RS`` (in place): the gyro's bias, the previous phi, D_w and the drive's command of the previous
+    period.  Returns (the estimate, the torque reported with the sample, the sample's slot in ``q``).  The compiled
+    loop (:func:`_loop`) and the vector env (:mod:`mwip_ros.envs.kernels`) both run it."""
+    ua = u_prev
+    if MC[0] > 0.0 and k > 0:   # the motor's torque at x_k for the previous command
+        ua = motor_torque(RS[3], xt[2] - xt[3], MC[0], MC[1], MC[2], MC[3])[0]
+    ddq = accel(pa, RS[2], D_b, xt, ua, e1, e2)
+    gy, fx, fz, phi, rate, bias = raw_sample(xt, ddq, zr, RS[0], RS[1], k == 0, h, RW[0], RW[1], RW[2], RW[3],
+                                             RW[4], RW[5], int(RW[6]))
+    RS[0], RS[1] = bias, phi
+    slot = k % (delay + 1)
+    q[slot, 0], q[slot, 1], q[slot, 2], q[slot, 3], q[slot, 4] = gy, fx, fz, phi, rate
+    q[slot, 5] = u_prev
+    r = (k - delay) % (delay + 1) if k >= delay else 0
+    # the estimator (the delayed raw sample to a state, core.estimators: its pure_step)
+    est, sn, _ = est_step(PE, h, (q[r, 0], q[r, 1], q[r, 2], q[r, 3], q[r, 4]), ES, k == 0)
+    for j in range(len(sn)):
+        ES[j] = sn[j]
+    return est, q[r, 5], r
+
+
+def raw_stage(estimator_step, suffix: str = ""):
+    """:func:`sense_raw` compiled with the estimator's ``pure_step`` ``estimator_step`` (the compiled functions of the
+    scalar loop for the rest)."""
+    return _deep(sense_raw, suffix, est_step=_deep(estimator_step) if estimator_step is not _no_est
+                 else _jit(_no_est, _lanes_tag()), accel=_accel, raw_sample=_deep(raw_sample),
+                 motor_torque=_motor_torque)
+
+
+def drive_stage(u, limit, qa, k, act_delay):   # pragma: no cover - compiled
+    """Stage ``drive`` of one scenario's period k (:meth:`.loop.PlantSide.act`): the driver's ``bad_command`` (a
+    command not a number or beyond :data:`.safety.PLAUSIBLE_TORQUE`), the torque limit (:func:`.plant.saturate`,
+    ``limit`` 0: none), the actuator delay (:class:`.sensing.Actuator`: the queue ``qa`` of act_delay + 1 slots, in
+    place); returns (the torque that acts over [t_k, t_k+1): zero in fault, whether the command was refused).  The
+    compiled loop (:func:`_loop`) and the vector env (:mod:`mwip_ros.envs.kernels`) both run it."""
+    bad = not abs(u) <= PLAUSIBLE_TORQUE
+    u = saturate(u, limit)
+    if act_delay > 0:
+        qa[k % (act_delay + 1)] = u
+        u = qa[(k - act_delay) % (act_delay + 1)] if k >= act_delay else 0.0
+    if bad:
+        u = 0.0   # in fault: zero torque acts
+    return u, bad
+
+
 def _loop(k0, k1, n_steps, h, substeps, first_w, n_window, counts, delay, act_delay, observer_law,
           act, nom, D_b, sins, shared, limit, fall, X, P, use_obs, noisy, std, D_w_mean, D_w_sd, D_w_random,
           Nw, Z, x, u_prev, z, prev, s, qx, qa, active, t_fall, steps, acc, ext, T, tau1, tau2,
@@ -343,52 +421,27 @@ def _loop(k0, k1, n_steps, h, substeps, first_w, n_window, counts, delay, act_de
                     xt = (xs[0, lane], xs[1, lane], xs[2, lane], xs[3, lane])
                     if k == 0:   # D_w of period 0
                         RS[i, 2] = D_w_of(D_w_mean[i], D_w_sd[i], Nw[i, 0]) if D_w_random[i] else D_w_mean[i]
-                    ua = u_prev[i]
-                    if MC[i, 0] > 0.0 and k > 0:   # the motor's torque at x_k for the previous command
-                        ua = motor_torque(RS[i, 3], xt[2] - xt[3], MC[i, 0], MC[i, 1], MC[i, 2], MC[i, 3])[0]
                     if shared:
                         e1, e2 = tau1k[0], tau2k[0]
                     else:
                         e1 = at(Sin(sins[i, 0], sins[i, 1], sins[i, 2]), t) + 0.0
                         e2 = at(Sin(sins[i, 3], sins[i, 4], sins[i, 5]), t) + 0.0
-                    ddq = accel(Inertia(act[i, 0], act[i, 1], act[i, 2], act[i, 3]), RS[i, 2], D_b[i], xt, ua, e1, e2)
                     if raw_noisy[i]:
                         zk = Z[i, k - k0]
                         zr = (zk[0], zk[1], zk[2], zk[3])
                     else:
                         zr = (0.0, 0.0, 0.0, 0.0)
-                    gy, fx, fz, phi, rate, bias = raw_sample(xt, ddq, zr, RS[i, 0], RS[i, 1], k == 0, h, RW[i, 0],
-                                                             RW[i, 1], RW[i, 2], RW[i, 3], RW[i, 4], RW[i, 5],
-                                                             int(RW[i, 6]))
-                    RS[i, 0], RS[i, 1] = bias, phi
-                    slot = k % (delay + 1)
-                    qx[i, slot, 0], qx[i, slot, 1], qx[i, slot, 2], qx[i, slot, 3], qx[i, slot, 4] = \
-                        gy, fx, fz, phi, rate
-                    qx[i, slot, 5] = u_prev[i]
-                    r = (k - delay) % (delay + 1) if k >= delay else 0
-                    umg[lane] = qx[i, r, 5]
-                    # the estimator (the delayed raw sample to a state, core.estimators: its pure_step)
-                    est, sn, _ = est_step(PE[i], h, (qx[i, r, 0], qx[i, r, 1], qx[i, r, 2], qx[i, r, 3], qx[i, r, 4]),
-                                          ES[i], k == 0)
-                    for j in range(len(sn)):
-                        ES[i, j] = sn[j]
+                    est, umg[lane], _ = sense_raw(Inertia(act[i, 0], act[i, 1], act[i, 2], act[i, 3]), D_b[i], xt,
+                                                  u_prev[i], MC[i], e1, e2, zr, RS[i], RW[i], k, h, delay, qx[i],
+                                                  PE[i], ES[i])
                     for j in range(4):
                         xmg[j, lane] = est[j]
                 elif noisy[i] or counts > 0 or delay > 0:
-                    w, b, dw, db = xs[0, lane], xs[1, lane], xs[2, lane], xs[3, lane]
-                    if noisy[i]:
-                        zk = Z[i, k - k0]
-                        w, b, dw, db = w + std[i, 0] * zk[0], b + std[i, 1] * zk[1], dw + std[i, 2] * zk[2], \
-                            db + std[i, 3] * zk[3]
-                    if counts > 0:
-                        w = quantize(w, counts)
-                    slot = k % (delay + 1)
-                    qx[i, slot, 0], qx[i, slot, 1], qx[i, slot, 2], qx[i, slot, 3], qx[i, slot, 4] = \
-                        w, b, dw, db, u_prev[i]
-                    r = (k - delay) % (delay + 1) if k >= delay else 0
+                    zk = Z[i, k - k0] if noisy[i] else Z[0, 0]   # (Z holds rows of the noisy scenarios only)
+                    ms, umg[lane] = sense_state((xs[0, lane], xs[1, lane], xs[2, lane], xs[3, lane]), zk, noisy[i],
+                                                std[i], counts, qx[i], k, delay, u_prev[i])
                     for j in range(4):
-                        xmg[j, lane] = qx[i, r, j]
-                    umg[lane] = qx[i, r, 4]
+                        xmg[j, lane] = ms[j]
                 else:
                     for j in range(4):
                         xmg[j, lane] = xs[j, lane]
@@ -468,13 +521,7 @@ def _loop(k0, k1, n_steps, h, substeps, first_w, n_window, counts, delay, act_de
                     u = u + EXT[exi[i], k]
                 # stage: yaw (none: the planar plant; a spatial plant runs through the scalar loop)
                 # stage: drive
-                bad = not abs(u) <= PLAUSIBLE_TORQUE   # the driver's bad_command (core.loop.PlantSide.act)
-                u = saturate(u, limit[i])
-                if act_delay > 0:   # core.sensing.Actuator.apply
-                    qa[i, k % (act_delay + 1)] = u
-                    u = qa[i, (k - act_delay) % (act_delay + 1)] if k >= act_delay else 0.0
-                if bad:
-                    u = 0.0   # in fault: zero torque acts
+                u, bad = drive_stage(u, limit[i], qa[i], k, act_delay)
                 # stage: plant (row k's true tau_d in the window, the fall check, then RK4)
                 # D_w of this period from its own draw z, as core.plant.PlantSim._draw_D_w
                 D_w = D_w_of(D_w_mean[i], D_w_sd[i], Nw[i, k - k0]) if D_w_random[i] else D_w_mean[i]
@@ -561,6 +608,20 @@ def pure_form(law: type):
     return None if fn is None or _owner(core, "step") is not _owner(core, "pure_step") else fn
 
 
+def track_for(law: type):
+    """Stage ``law`` with the motion references (docs/theory.md 6.11, 6.14), compiled for the law class ``law``:
+    :func:`.compiled_motion.law_track` with the law's ``pure_track`` (or its ``pure_step`` on the error state,
+    :func:`.compiled_motion.tracked_step`), the one the compiled loop calls and the vector env too; None when the law
+    has no pure form (:func:`pure_form`)."""
+    fn = pure_form(law)
+    if fn is None:
+        return None
+    own = getattr(getattr(law, "base", law), "pure_track", None)
+    suffix = f"__{fn.__module__}.{fn.__qualname__}".replace(".", "_")
+    track = _deep(own) if own is not None else _deep(compiled_motion.tracked_step, suffix, law_step=_deep(fn))
+    return _deep(compiled_motion.law_track, suffix, track_step=track)
+
+
 def kernel_for(law: type, estimator: Optional[type] = None):
     """The compiled batch loop of the law class ``law`` (its ``pure_step``, or its base's for an observer
     variant) and, for raw sensors, of the estimator class ``estimator`` (:mod:`.estimators`: its ``pure_step``),
@@ -584,14 +645,13 @@ def kernel_for(law: type, estimator: Optional[type] = None):
         if est is not _no_est:
             suffix += f"__{est.__module__}.{est.__qualname__}".replace(".", "_")
         own = getattr(core, "pure_track", None)   # the law tracking a motion reference (core.compiled_motion)
-        track = _deep(own) if own is not None else _deep(compiled_motion.tracked_step, suffix, law_step=step)
         law_l = _lanes_of(fn) if by_lanes else _jit(_no_law_lanes, _lanes_tag())
         own_l = (_lanes_of(own) if own is not None else
                  _deep(compiled_motion.tracked_step, suffix + "__lanes", law_step=law_l)) if by_lanes else None
         track_l = (_deep(compiled_motion.law_track_lanes, suffix, load=load, store=store, track_lanes=own_l)
                    if by_lanes else _jit(compiled_motion.no_track_lanes, _lanes_tag()))
         _KERNELS[fn, est] = _deep(_loop, suffix, law_step=step,
-                             est_step=_deep(est) if est is not _no_est else _jit(_no_est, _lanes_tag()),
+                             sense_raw=raw_stage(est, suffix),
                              raw_sample=_deep(raw_sample), motor_torque=_compiled(drive.motor_torque),
                              rk4_driven=_rk4_driven,
                              Inertia=Inertia, Sin=Sin, at=at, _stage=_deep(_stage, at=at), accel=_accel,
@@ -599,6 +659,6 @@ def kernel_for(law: type, estimator: Optional[type] = None):
                              z_next_lanes=z_lanes, LAW_LANES=by_lanes,
                              law_lanes=law_l, law_track_lanes=track_l,
                              params_lanes=_jit(_params3, _lanes_tag()),
-                             law_track=_deep(compiled_motion.law_track, suffix, track_step=track),
+                             law_track=track_for(law),
                              motion_row=_deep(compiled_motion.motion_row))
     return _KERNELS[fn, est]

@@ -1,36 +1,44 @@
-"""N robots stepped one period at a time over numpy arrays, each at its own period k: the vector env's stepper.
+"""N robots stepped one period at a time, each at its own period k: the vector env's stepper.
 
 The batch simulator (:mod:`mwip_ros.core.batch`, :mod:`mwip_ros.core.compiled`) runs whole episodes with one period
 k shared by every scenario; a vector env steps its robots one period per call, takes the command from outside, and
 restarts a robot whose episode ended while the others go on (so the robots' periods differ).  This module is that
-stepper, numpy-vectorised over the robots; it writes no equation: each stage calls the core's own pure functions
-over arrays (the functions the compiled loop compiles), in :data:`mwip_ros.core.loop.STAGES`' order:
+stepper; it writes no stage of its own: each stage of :data:`mwip_ros.core.loop.STAGES` (docs/theory.md, section 4)
+calls the compiled loop's own stage function robot by robot (:mod:`.kernels`) or the core's pure functions over
+arrays, in that order:
 
-* ``sensors``: :func:`~mwip_ros.core.sensing.measure` (noise from each robot's own stream,
-  :func:`~mwip_ros.core.sensing.sensor_rng`, the encoder), the measurement delay (the queue of
-  :class:`~mwip_ros.core.sensing.Sensors`, a ring per robot); with raw sensors (``sensors.model: raw``) the raw
-  sample (:func:`~mwip_ros.core.raw_sensors.raw_sample`, noise from each robot's
-  :func:`~mwip_ros.core.raw_sensors.raw_rng` stream) and its delay queue, compiled (:func:`.kernels.raw_kernel`);
+* ``sensors``: a plant that measures the state, :func:`mwip_ros.core.compiled.sense_state` (noise from each robot's
+  own stream, :func:`~mwip_ros.core.sensing.sensor_rng`, the encoder, the measurement delay queue); with raw sensors
+  (``sensors.model: raw``, docs/theory.md 6.4) the raw sample (:func:`~mwip_ros.core.raw_sensors.raw_sample`, noise
+  from each robot's :func:`~mwip_ros.core.raw_sensors.raw_rng` stream) and its delay queue
+  (:func:`.kernels.raw_kernel`);
 * ``estimator``: the identity, or with raw sensors the estimator's ``pure_step`` (:mod:`mwip_ros.core.estimators`,
   its state a row per robot; a restarted robot's next step is a first step), in the same kernel;
-* ``observer``: :func:`~mwip_ros.core.observer.z_start`, :func:`~mwip_ros.core.observer.z_next`,
-  :func:`~mwip_ros.core.observer.tau_hat_of`;
+* ``observer``: eq. (12)-(14), :func:`~mwip_ros.core.observer.z_start`, :func:`~mwip_ros.core.observer.z_next`,
+  :func:`~mwip_ros.core.observer.tau_hat_of` over arrays;
 * ``law``: the base law's ``pure_step`` (:mod:`mwip_ros.core.laws`) and the observer term
-  :func:`~mwip_ros.core.controller.u_taud_of` (a law without one, ``mpc``: a QP per robot, the law's own object per
-  robot, its ``step`` one robot after another; a restart is its ``reset``, a cold start), the excitation
-  (:mod:`mwip_ros.core.excitation`), plus the action;
-* ``drive``: the driver's ``bad_command`` (:data:`~mwip_ros.core.safety.PLAUSIBLE_TORQUE`), the torque limit, the
-  actuator delay (the queue of :class:`~mwip_ros.core.sensing.Actuator`);
+  :func:`~mwip_ros.core.controller.u_taud_of`; with the motion references (``motion.enabled``, docs/theory.md 6.11
+  and the hold, 6.14) the compiled loop's own stage, :func:`mwip_ros.core.compiled_motion.law_track`
+  (:func:`mwip_ros.core.compiled.track_for`), each robot with its references' state; a law without a pure step
+  (``mpc``: a QP per robot) is the law's own object per robot through :func:`mwip_ros.core.loop.command` (with
+  motion, a :class:`~mwip_ros.core.motion.Shaper` per robot; a restart is its ``reset``, a cold start); then the
+  excitation (:mod:`mwip_ros.core.excitation`).  **The action enters here, once**: the env adds the residual torque
+  to this command (:meth:`Lanes.advance` takes the sum), where :func:`mwip_ros.core.loop.command` adds the
+  excitation, before the drive;
+* ``yaw``: none (the planar plant; the MuJoCo plant's yaw stage runs in :class:`~mwip_ros.envs.scalar.MwipEnv`);
+* ``drive``: :func:`mwip_ros.core.compiled.drive_stage` (the driver's ``bad_command``, the torque limit, the
+  actuator delay queue), then the driver's gate (``require_enable``: the bridge open, zero torque);
 * ``plant``: D_w (:func:`~mwip_ros.core.plant.D_w_of`'s arithmetic, each robot's own stream), tau_ext at each robot's
-  own t_k (:func:`~mwip_ros.core.plant.stage_torques`, a table of the episode's periods), one RK4 period with the
-  motor when the files have it (:func:`~mwip_ros.core.plant.rk4_driven` compiled: :mod:`.kernels`), the fall check.
+  own t_k (:func:`~mwip_ros.core.plant.stage_torques`, a table of the episode's periods), one RK4 period of eq. (1)
+  with the motor when the files have it (:func:`~mwip_ros.core.plant.rk4_driven` compiled: :mod:`.kernels`), the
+  fall check.
 
 With ``require_enable: true`` the driver starts disabled and nobody enables it (as in ``mwip_sim``): its bridge is
 open in every period, no torque acts and the motor carries no current (:func:`~mwip_ros.core.plant.gated_drive`);
-a command that is not plausible still faults it.  Another plant backend and the motion references are refused,
-naming the key (``plant_sim.backend``, ``motion.enabled``; the scalar env, :class:`~mwip_ros.envs.scalar.MwipEnv`,
-runs both).
-A restarted robot keeps its noise streams (its next draws), so no generator is built again.
+a command that is not plausible still faults it.  Another plant backend, and the motion references with
+``require_enable`` (the compiled stage does not idle the references), are refused naming the key
+(:class:`~mwip_ros.envs.scalar.MwipEnv` runs both).  A restarted robot keeps its noise streams (its next draws), so
+no generator is built again.
 """
 from __future__ import annotations
 
@@ -40,17 +48,20 @@ import numpy as np
 
 from mwip_ros.core import estimators
 from mwip_ros.core.compiled import pure_form
+from mwip_ros.core.compiled_motion import motion_arrays
+from mwip_ros.core.loop import command
+from mwip_ros.core.model import State
+from mwip_ros.core.motion import Shaper
 from mwip_ros.core.controller import u_taud_of
 from mwip_ros.core.excitation import Excitation
 from mwip_ros.core.observer import tau_hat_of, z_next, z_start
 from mwip_ros.core.plant import NO_MOTOR
 from mwip_ros.core.raw_sensors import raw_rng
-from mwip_ros.core.safety import PLAUSIBLE_TORQUE
-from mwip_ros.core.sensing import NOISE_BLOCK, measure, sensor_rng
+from mwip_ros.core.sensing import NOISE_BLOCK, sensor_rng
 from mwip_ros.core.trajectory import BAD_COMMAND, DIVERGED, FALL
 
 from .common import EnvSetup
-from .kernels import TauTable, advance, raw_kernel
+from .kernels import TauTable, advance, drive, raw_kernel, sense, track_kernel
 from .robots import TERMS
 
 __all__ = ["Lanes", "refusal"]
@@ -62,8 +73,9 @@ def refusal(s: EnvSetup) -> Optional[str]:
     pc = loop.plant
     if pc.backend != "rk4":
         return f"plant_sim.backend: the vector env runs the rk4 plant only, got {pc.backend!r} (MwipEnv runs it)"
-    if loop.motion is not None:
-        return "motion.enabled: the vector env tracks no motion references (MwipEnv runs them); set it false"
+    if loop.motion is not None and pc.require_enable:
+        return ("require_enable: the vector env tracks the motion references with the driver enabled only (the "
+                "compiled loop's stage does not idle them; MwipEnv runs it)")
     return None
 
 
@@ -111,15 +123,26 @@ class Lanes:
         self.enabled = not pc.require_enable
         self.motor = tuple(float(c) for c in pc.motor_constants) if self.enabled else NO_MOTOR
         self.c = tuple(float(v) for v in np.asarray(loop.X, dtype=float).ravel())   # c1..c4 (eq. 14)
-        self.law = self.laws = None
+        self.law = self.laws = self.track = self.shapers = None
+        # the motion references (docs/theory.md 6.11): the compiled loop's numbers and each robot's references' state
+        self.motion = loop.motion is not None and s.base_law is not None   # no base law: nothing tracks them
+        if self.motion:
+            self.MO, self.PT, self.PV, self.NP, self.MS0, _ = (a[0] for a in motion_arrays([loop])[1:])
+            self.MS = np.tile(self.MS0, (n, 1))
         if s.base_law is not None:
             cls = loop.law_class
             self.law = pure_form(cls)
             if self.law is not None:
                 self.P = getattr(cls, "base", cls).pure_params(loop.params)
                 self.observer_term = bool(cls.observer)
+                if self.motion:   # the compiled loop's law stage with the references (core.compiled.track_for)
+                    self.track = track_kernel(cls)
+                    self.PA = np.array([float(v) for v in self.P])
+                    self.nom = tuple(float(getattr(pc.nominal, f)) for f in TERMS)
             else:   # no pure step (mpc: a QP per robot): the law's own object per robot, stepped one by one
                 self.laws = [cls(loop.params, pc.nominal, pc.h) for _ in range(n)]
+                if self.motion:   # the scalar loop's references, a Shaper per robot (core.loop.command)
+                    self.shapers = [Shaper(loop.motion, pc.h, pc.nominal) for _ in range(n)]
         sc = pc.sensing
         self.delay, self.act_delay, self.counts = sc.delay_periods, sc.actuator_delay_periods, sc.encoder_counts_per_rev
         self.raw = pc.raw
@@ -140,11 +163,16 @@ class Lanes:
             self.PE = np.array([float(v) for v in est.make(pc.h, pc.nominal.r, pc.nominal.g).P])
             self.ES = np.zeros((n, estimators.get(est.method).state_size))
             self.zs = _Streams(n, 4, raw_rng) if pc.raw.noisy else None
-            self.bias, self.phi = np.full(n, float(pc.raw.gyro_bias)), np.zeros(n)
+            # each robot's sensors' state (core.compiled.sense_raw): the gyro's bias, the previous phi, and what acted
+            # over the previous period (D_w, the drive's command): the raw sample's instant
+            self.RS = np.zeros((n, 4))
+            self.RS[:, 0], self.RS[:, 2] = float(pc.raw.gyro_bias), float(pc.D_w_mean)
+            rc = pc.raw   # r, d, g, gyro_noise_std, gyro_bias_walk, accel_noise_std, counts (r, g: each robot's)
+            self.RW = np.array([float(pc.actual.r), float(rc.offset), float(pc.actual.g), float(rc.gyro_noise_std),
+                                float(rc.gyro_bias_walk), float(rc.accel_noise_std), float(rc.encoder_counts_per_rev)])
+            self.MC = np.array(self.motor, dtype=float)
             self.qr = np.zeros((n, self.delay + 1, 6))
             self.sample = np.zeros((n, 5))
-            self.D_w = np.full(n, float(pc.D_w_mean))   # what acted over the previous period (the raw sample's)
-            self.u_drive = np.zeros(n)
         self.x = tuple(np.full(n, float(v)) for v in pc.initial)
         self.k = np.zeros(n, dtype=np.int64)
         self.u_prev = np.zeros(n)
@@ -152,8 +180,10 @@ class Lanes:
         self.prev = tuple(np.zeros(n) for _ in range(4))
         self.s = np.zeros(n)
         self.first = np.ones(n, dtype=bool)
-        self.qx = np.zeros((self.delay + 1, 5, n))
-        self.qa = np.zeros((self.act_delay + 1, n))
+        self.qx = np.zeros((n, self.delay + 1, 5))
+        self.qa = np.zeros((n, self.act_delay + 1))
+        self.std = np.array([float(v) for v in sc.noise_std])
+        self.limit = float(pc.torque_limit)
         self.u_base = np.zeros(n)
         self.tau_hat = (np.zeros(n), np.zeros(n))
 
@@ -171,9 +201,14 @@ class Lanes:
         self.u_prev[idx] = 0.0
         self.s[idx] = 0.0
         self.first[idx] = True
-        self.qa[:, idx] = 0.0
+        self.qa[idx] = 0.0
+        if self.motion:
+            self.MS[idx] = self.MS0
+        if self.shapers is not None:
+            for i in idx:
+                self.shapers[i] = Shaper(self.setup.loop.motion, self.h, self.pc.nominal)
         if self.raw is not None:
-            self.bias[idx] = float(self.raw.gyro_bias)
+            self.RS[idx, 0] = float(self.raw.gyro_bias)
         if self.laws is not None:   # a cold start (the scalar env builds the law again)
             for i in idx:
                 self.laws[i].reset()
@@ -186,19 +221,11 @@ class Lanes:
         x, u_m = self.x, self.u_prev
         if self.raw is not None:   # the raw sample, its delay and the estimator: kernels._sense_raw
             xm, u_m = self._sense_raw()
-        elif self.noisy or self.counts or self.delay:
-            std = self.pc.sensing.noise_std
-            z = self.zs.draw(np.ones(n, dtype=bool)).T if self.noisy else None
-            xm = measure(x, z, std, self.counts, np)
-            if self.delay:
-                d1 = self.delay + 1
-                slot = k % d1
-                for j in range(4):
-                    self.qx[slot, j, self.rows] = xm[j]
-                self.qx[slot, 4, self.rows] = u_m
-                r = np.where(k >= self.delay, (k - self.delay) % d1, 0)
-                xm = tuple(self.qx[r, j, self.rows] for j in range(4))
-                u_m = self.qx[r, 4, self.rows]
+        elif self.noisy or self.counts or self.delay:   # core.compiled.sense_state, robot by robot
+            Z = self.zs.draw(np.ones(n, dtype=bool)) if self.noisy else np.zeros((1, 4))
+            xm_, u_m = np.empty((4, n)), np.empty(n)
+            sense(k, *x, self.u_prev, Z, self.noisy, self.std, self.counts, self.delay, self.qx, xm_, u_m)
+            xm = tuple(xm_)
         else:
             xm = x
         # stage: estimator (the identity when the measurement is a state; raw: run above, in the sensors' kernel)
@@ -211,7 +238,11 @@ class Lanes:
         self.z, self.prev = z, xm
         self.tau_hat = th = tau_hat_of(c, z, xm[2], xm[3])
         # stage: law (the base law; the action is added in advance)
-        if self.law is not None:
+        if self.track is not None:   # with the motion references: the compiled loop's stage (core.compiled_motion)
+            u, xc = np.empty(n), [np.ascontiguousarray(v, dtype=float) for v in xm]
+            self.track(self.PA, *self.nom, self.h, *xc, self.s, k, self.MO, self.PT, self.PV, int(self.NP), self.MS,
+                       np.ascontiguousarray(th[0]), np.ascontiguousarray(th[1]), self.observer_term, u)
+        elif self.law is not None:
             u, s_next, _ = self.law(self.P, p, self.h, xm, self.s, False, np)
             if first.any():
                 u0, s0, _ = self.law(self.P, p, self.h, xm, self.s, True, np)
@@ -221,8 +252,9 @@ class Lanes:
             self.s = s_next
         elif self.laws is not None:   # core.loop.command: the law's step with the state and tau_hat it sees
             xs, ts = [np.asarray(v, dtype=float).tolist() for v in xm], [v.tolist() for v in th]
-            u = np.array([float(lw.step((xs[0][i], xs[1][i], xs[2][i], xs[3][i]), (ts[0][i], ts[1][i]))[0])
-                          for i, lw in enumerate(self.laws)])
+            shapers = self.shapers if self.shapers is not None else [None] * n
+            u = np.array([float(command(lw, State(xs[0][i], xs[1][i], xs[2][i], xs[3][i]), (ts[0][i], ts[1][i]),
+                                        None, int(k[i]), shapers[i])[0]) for i, lw in enumerate(self.laws)])
         else:
             u = np.zeros(n)   # no base law: the action is the whole command
         if self.ext is not None:   # core.loop.command: the law's command plus the excitation of period k
@@ -238,19 +270,17 @@ class Lanes:
     def _sense_raw(self) -> tuple:
         """The raw sample of every robot's period k, delayed, and its estimate: (the estimate, four arrays; the
         torque reported with the sample); :attr:`sample` the delayed samples."""
-        n, raw = self.n, self.raw
+        n = self.n
         first = self.k == 0
         if first.any() and self.dw is not None:   # D_w of period 0 (the draw the plant stage takes next)
-            self.D_w = np.where(first, self._D_w(self.dw.peek(first)[:, 0]), self.D_w)
+            self.RS[:, 2] = np.where(first, self._D_w(self.dw.peek(first)[:, 0]), self.RS[:, 2])
         Z = self.zs.draw(np.ones(n, dtype=bool)) if self.zs is not None else np.zeros((1, 4))
         self.tau.cover(int(self.k.max()))
         xm, u_m = np.empty((4, n)), np.empty(n)
         with np.errstate(all="ignore"):
-            self.kernel(*self.robot, self.D_w, self.tau.T1, self.tau.T2, self.k, *self.x, self.u_prev, self.u_drive,
-                        *self.motor, Z, self.zs is not None, self.bias, self.phi,
-                        float(raw.offset), float(raw.gyro_noise_std), float(raw.gyro_bias_walk),
-                        float(raw.accel_noise_std), int(raw.encoder_counts_per_rev), self.h, self.delay, self.qr,
-                        self.PE, self.ES, self.sample, xm, u_m)
+            self.kernel(*self.robot, self.tau.T1, self.tau.T2, self.k, *self.x, self.u_prev, self.MC, Z,
+                        self.zs is not None, self.RS, self.RW, self.h, self.delay, self.qr, self.PE, self.ES,
+                        self.sample, xm, u_m)
         return tuple(xm), u_m
 
     def advance(self, u_cmd: np.ndarray, go: np.ndarray):
@@ -259,17 +289,10 @@ class Lanes:
         of :mod:`mwip_ros.core.trajectory`)."""
         pc, k = self.pc, self.k
         # stage: yaw (none: the vector env runs the planar plant)
-        # stage: drive
-        bad = go & ~(np.abs(u_cmd) <= PLAUSIBLE_TORQUE)   # the driver's bad_command (core.loop.PlantSide.act)
-        u = np.clip(u_cmd, -pc.torque_limit, pc.torque_limit) if pc.torque_limit > 0.0 else u_cmd
-        if self.act_delay:   # core.sensing.Actuator.apply
-            a1 = self.act_delay + 1
-            slot = k % a1
-            self.qa[slot, self.rows] = np.where(go, u, self.qa[slot, self.rows])
-            u = np.where(k >= self.act_delay, self.qa[(k - self.act_delay) % a1, self.rows], 0.0)
-        u = np.where(bad, 0.0, u)
-        if not self.enabled:   # core.safety.DriverStateMachine.torque_gate: disabled, zero torque acts
-            u = np.zeros(self.n)
+        # stage: drive (core.compiled.drive_stage robot by robot, then the driver's gate)
+        u, bad = np.empty(self.n), np.empty(self.n, dtype=bool)
+        drive(np.ascontiguousarray(u_cmd, dtype=float), go, self.limit, self.qa, k, self.act_delay, self.enabled,
+              u, bad)
         # stage: plant (D_w of the period, tau_ext at each robot's own t_k, RK4)
         run = go & ~bad
         if self.dw is not None:   # core.plant.D_w_of over arrays
@@ -288,8 +311,8 @@ class Lanes:
             fell = run & ~(np.abs(x[1]) <= pc.fall_angle)
         self.u_prev = np.where(go, acted, self.u_prev)   # what the sensors report next (core.plant.PlantSim.u_prev)
         if self.raw is not None:   # what acted over this period: the next raw sample's instant
-            self.D_w = np.where(go, D_w, self.D_w)
-            self.u_drive = np.where(go, u, self.u_drive)
+            self.RS[:, 2] = np.where(go, D_w, self.RS[:, 2])
+            self.RS[:, 3] = np.where(go, u, self.RS[:, 3])
         self.k = k + go
         code = np.where(bad, BAD_COMMAND, np.where(fell, np.where(finite, FALL, DIVERGED), 0))
         return u, code

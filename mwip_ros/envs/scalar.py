@@ -37,6 +37,7 @@ class NoLaw:
     """The law stage without a law (the action is the whole command): u = 0, to which the action is added."""
 
     name = "none"
+    observer = False   # no observer term: core.loop.command hands the references without tau_hat (motion on)
 
     def track(self, ref) -> None:
         """The motion references (core.loop.command hands them to every law): nothing to track."""

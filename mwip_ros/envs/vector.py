@@ -32,7 +32,12 @@ class MwipVectorEnv(VectorEnv):
     """``num_envs`` robots of the parameter files (the arguments as :class:`~mwip_ros.envs.scalar.MwipEnv`'s).  The
     files may set the state sensors (noise, encoder, delay) or raw sensors with their estimator (``observation``:
     ``state`` the estimate, ``raw`` the raw samples), the torque limit, the actuator delay, the motor, D_w, tau_ext,
-    the model error and the excitation; the driver's enable is refused, naming the key (``MwipEnv`` runs it).
+    the model error, the excitation, the driver nobody enables (``require_enable``) and the motion references
+    (``motion.enabled``, docs/theory.md 6.11: the base law tracks them as in ``mwip_sim``); another plant backend,
+    and the motion references with ``require_enable``, are refused naming the key (``MwipEnv`` runs them).  Each
+    step runs the stages of :data:`mwip_ros.core.loop.STAGES` with the compiled loop's own stage functions
+    (:class:`~mwip_ros.envs.lanes.Lanes`); the action, a residual torque, is added to the base law's command (the
+    stage ``law``, where the excitation is added) before the stage ``drive``.
     ``sweep``: a sweep spec instead of ``params``
     (:class:`~mwip_ros.envs.robots.SpecRobots`: it may vary the true robot only): ``reset(seed=s)`` gives robot i
     scenario i of the spec with ``seed: s`` and ``samples: num_envs`` (its true robot and its noise seed); a restarted

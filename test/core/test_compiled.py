@@ -247,10 +247,13 @@ def test_the_compiled_loop_calls_the_scalar_loops_own_functions():
     g = kernel.py_func.__globals__
     assert kernel.py_func.__code__ is compiled._loop.__code__
     for name, fn in (("z_start", observer.z_start), ("z_next", observer.z_next), ("tau_hat_of", observer.tau_hat_of),
-                     ("u_taud_of", controller.u_taud_of), ("saturate", plant.saturate),
-                     ("lumped_disturbance", model.lumped_disturbance), ("quantize", sensing.quantize),
-                     ("at", model.Sinusoid.at), ("law_step", dsc.dsc_step)):
+                     ("u_taud_of", controller.u_taud_of), ("lumped_disturbance", model.lumped_disturbance),
+                     ("at", model.Sinusoid.at), ("law_step", dsc.dsc_step),
+                     ("drive_stage", compiled.drive_stage), ("sense_state", compiled.sense_state)):
         assert g[name].py_func.__code__ is fn.__code__, name
+    # the stages drive and sensors (which the vector env runs too, envs.kernels) call the scalar loop's functions
+    assert g["drive_stage"].py_func.__globals__["saturate"].py_func.__code__ is plant.saturate.__code__
+    assert g["sense_state"].py_func.__globals__["quantize"].py_func.__code__ is sensing.quantize.__code__
     assert g["accel"] is compiled._accel and g["rk4_period"] is compiled._rk4_period
     assert g["z_next"].py_func.__globals__["z_dot_of"].py_func.__code__ is observer.z_dot_of.__code__
     assert compiled.kernel_for(law("lqr_ndo")).py_func.__globals__["law_step"].py_func.__code__ is \
@@ -395,7 +398,8 @@ def test_the_stamp_follows_the_callees_and_the_frozen_values():
     assert any(c.endswith(f"NIS_WINDOW_S={kalman.NIS_WINDOW_S!r}") for c in consts), consts
     stamp = jitcache.stamp_of(kernel.py_func)
     assert jitcache.stamp_of(kernel.py_func) == stamp   # the same in every process (no address in it)
-    est = kernel.py_func.__globals__["est_step"].py_func.__globals__   # the compiled step's globals (a copy)
+    # the compiled step's globals (a copy), through the stage that calls it (core.compiled.sense_raw)
+    est = kernel.py_func.__globals__["sense_raw"].py_func.__globals__["est_step"].py_func.__globals__
     old = est["NIS_WINDOW_S"]
     try:
         est["NIS_WINDOW_S"] = old * 2

@@ -128,9 +128,13 @@ def test_the_kernel_calls_the_estimators_and_the_raw_sensors_own_code():
     assert k is not compiled.kernel_for(law, complementary.ComplementaryFilter)
     g = k.py_func.__globals__
     assert k.py_func.__code__ is compiled._loop.__code__
+    # the stages sensors and estimator: core.compiled.sense_raw, which the vector env runs too (envs.kernels)
+    assert g["sense_raw"].py_func.__code__ is compiled.sense_raw.__code__
+    g = g["sense_raw"].py_func.__globals__
     assert g["est_step"].py_func.__code__ is kalman.kalman_step.__code__
     assert g["raw_sample"].py_func.__code__ is raw_sensors.raw_sample.__code__
     assert g["motor_torque"].py_func.__code__ is drive.motor_torque.__code__
+    g = k.py_func.__globals__
     assert g["rk4_driven"] is compiled._rk4_driven
 
 

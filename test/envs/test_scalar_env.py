@@ -98,6 +98,27 @@ def test_a_zero_residual_with_motion_references_is_mwip_sims_run_bit_for_bit():
     assert xs[-1, 0] > 30.0   # it drove: 1 m/s from 2 s on wheels of r = 0.25 m (not regulated to rest)
 
 
+@pytest.mark.parametrize("files, law, seed", [(PAPER + [CONFIG / "motion.yaml"], "lqr_ndo", 4),
+                                              (PAPER + [CONFIG / "motion.yaml", CONFIG / "sensing_realistic.yaml"],
+                                               "dsc", 9), (PAPER, "dsc", 1)])
+def test_a_zero_residual_on_another_law_with_motion_is_mwip_sims_run_bit_for_bit(files, law, seed):
+    """The motion references and the hold (theory 6.11, 6.14) on laws other than DSCNDO, and the paper's file."""
+    env = MwipEnv(files, duration=12.0, base_law=law)
+    xs, us, rs, terminated, truncated, _ = episode(env, lambda o, i: np.zeros(1), seed)
+    assert truncated and not terminated
+    assert_same_rows(xs, us, reference(files, law, 12.0, seed))
+
+
+def test_without_a_base_law_the_action_is_the_whole_command_with_motion_references_too():
+    """The files' motion references on (config/motion.yaml) and no base law: the action is the whole command, the
+    torque that acts (the env raised AttributeError before: its NoLaw had no ``observer``, which the law stage reads
+    with the references)."""
+    env = MwipEnv(PAPER + [CONFIG / "motion.yaml"], duration=1.0, normalize_action=False)
+    obs, info = env.reset(seed=3)
+    obs, r, terminated, truncated, info = env.step(np.array([5.0]))
+    assert info["u"] == 5.0 and info["v_ref"] == 0.0 and not terminated
+
+
 def test_the_yaw_stage_of_a_spatial_plant_is_mwip_sims_bit_for_bit():
     """The MuJoCo plant with motion and the yaw stage (theory 6.13: u_psi, the wheels' pair), a turn in place of
     0.5 rad/s from 0.5 s: the env runs the period's yaw stage as mwip_sim does (the residual adds to the law's

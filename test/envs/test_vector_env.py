@@ -24,6 +24,7 @@ SENSING = PAPER + [CONFIG / "sensing_realistic.yaml"]
 MOTOR = SENSING + [CONFIG / "motor_realistic.yaml"]
 CHIRP = PAPER + [CONFIG / "identify.yaml"]   # the identification's chirp added to the law's command
 RAW = PAPER + [CONFIG / "sensors_raw_realistic.yaml"]   # raw sensors, the kalman estimator
+MOTION = PAPER + [CONFIG / "motion.yaml"]   # the motion references every law tracks (theory 6.11)
 N, SEED, DURATION, WINDOW = 6, 40, 2.0, (1.0, 2.0)
 
 
@@ -246,7 +247,9 @@ def test_require_enable_a_driver_nobody_enables_equals_the_batch_simulator(files
 
 @pytest.mark.parametrize("files, key", [
     ({**load_values(PAPER), "backend": "mujoco"}, "plant_sim.backend"),
-    (PAPER + [CONFIG / "motion.yaml"], "motion.enabled"),   # it would ignore the references without a word
+    # the compiled loop's motion stage does not idle the references while the driver is disabled (the batch runs
+    # such a loop in the scalar loop only)
+    ({**load_values(PAPER + [CONFIG / "motion.yaml"]), "require_enable": True}, "require_enable"),
 ])
 def test_what_the_vector_env_does_not_run_is_refused_naming_the_key(files, key):
     with pytest.raises(ValueError) as err:
@@ -302,6 +305,29 @@ def test_the_stepper_holds_every_stage_of_the_loop_in_its_order():
     assert tuple(marks) == STAGE_NAMES
 
 
+def test_the_stepper_calls_the_compiled_loops_own_stage_functions():
+    """The stages sensors (state, raw with its estimator), law with the motion references and drive are the compiled
+    loop's own functions (core.compiled), the very objects its kernel binds: the env writes none of them again."""
+    from mwip_ros.core import compiled
+    from mwip_ros.core.estimators import kalman
+    from mwip_ros.envs import kernels
+    law = laws.get("dscndo")
+    assert kernels.sense.py_func.__globals__["sense_state"].py_func.__code__ is compiled.sense_state.__code__
+    assert kernels.drive.py_func.__globals__["drive_stage"].py_func.__code__ is compiled.drive_stage.__code__
+    stage = kernels.track_kernel(law).py_func.__globals__["law_track"]
+    assert stage is compiled.track_for(law) is compiled.kernel_for(law).py_func.__globals__["law_track"]
+    raw = kernels.raw_kernel(kalman.KalmanFilter).py_func.__globals__["sense_raw"].py_func
+    assert raw.__code__ is compiled.sense_raw.__code__
+    assert raw.__globals__["est_step"].py_func.__code__ is kalman.kalman_step.__code__
+    source = open(kernels.__file__).read() + open(lanes_file()).read()
+    assert "PLAUSIBLE_TORQUE" not in source and "raw_sample(" not in source   # no drive gate, no raw sample of its own
+
+
+def lanes_file():
+    import mwip_ros.envs.lanes as lanes_module
+    return lanes_module.__file__
+
+
 def test_a_sweep_spec_gives_robot_i_the_specs_scenario_i_equal_to_the_batch_and_restarts_draw_the_next():
     """sweep=mass_mismatch.yaml, reset(seed=7): robot i is scenario i of the spec with seed 7 and samples N (its true
     m_b, I_b, l and its noise seed), its episode the batch simulator's run of that scenario (1e-9)."""
@@ -339,3 +365,84 @@ def test_a_sweep_spec_that_varies_more_than_the_true_robot_is_refused_naming_the
     with pytest.raises(ValueError) as err:
         MwipVectorEnv(2, sweep=spec)
     assert str(err.value).startswith("sweep:") and "dscndo_controller.k1" in str(err.value), err.value
+
+
+def motion_run(files, law, duration):
+    """(the vector env's run of N robots with a zero residual, simulate_batch's trajectories (the scalar loop, as
+    mwip_sim) and the compiled loop's metrics) of ``law`` on ``files`` for ``duration``."""
+    env = MwipVectorEnv(N, files, duration=duration, base_law=law)
+    xs, us = run(env, lambda obs, u: np.zeros((N, 1)))
+    loop = P.closed_loop(load_values(files), duration=duration, controller=law)
+    loops = [dataclasses.replace(loop, plant=dataclasses.replace(loop.plant, seed=SEED + i)) for i in range(N)]
+    window = (duration / 2, duration)
+    return (env, xs, us, simulate_batch(loops, window, record=True).trajectories,
+            simulate_batch(loops, window, compiled=True).metrics)
+
+
+@pytest.mark.slow   # 12 s of 6 robots and of mwip_sim's 6 runs; the law's motion kernel compiled into an empty cache
+@pytest.mark.parametrize("files, law, exact", [(MOTION, "dscndo", True), (MOTION, "lqr_ndo", True),
+                                               (MOTION + [CONFIG / "sensing_realistic.yaml"], "dsc", False)])
+def test_motion_references_with_a_zero_residual_equal_mwip_sims_run_bit_for_bit(files, law, exact):
+    """config/motion.yaml (1 m/s from 2 s, -0.5 m/s from 10 s): the vector env runs the compiled loop's motion stage
+    (core.compiled_motion.law_track), every robot equal to mwip_sim's run of it (the batch's record: the scalar loop)
+    to the bit, and to the compiled batch's metrics; it drove.  DSC's tracking step compiled is the scalar one's
+    within an ulp (one command of robot 1's 2,400 differed by 1 ulp, its states not at all): 1e-9 there, as the
+    other vector env tests.  Before, the vector env refused motion.enabled."""
+    env, xs, us, trajectories, metrics = motion_run(files, law, 12.0)
+    for i, tr in enumerate(trajectories):
+        c = tr.columns
+        for j, name in enumerate(("theta_w", "theta_b", "dtheta_w", "dtheta_b")):
+            if exact:
+                assert np.array_equal(xs[:, i, j], c[name]), (i, name, np.max(np.abs(xs[:, i, j] - c[name])))
+            else:
+                assert np.allclose(xs[:, i, j], c[name], rtol=0, atol=1e-9), (i, name)
+        if exact:
+            assert np.array_equal(us[:, i], c["u"][:-1]), i
+        else:
+            assert np.allclose(us[:, i], c["u"][:-1], rtol=0, atol=1e-9), i
+    h = env.setup.loop.plant.h
+    first, count = window_samples(us.shape[0], h, (6.0, 12.0))
+    theta_rms = np.sqrt(np.mean(xs[first:first + count, :, 1] ** 2, axis=0))
+    assert np.allclose(theta_rms, metrics["theta_b_rms"], rtol=1e-9, atol=0)
+    assert np.all(xs[int(round(10.0 / h)), :, 0] > 20.0)   # 1 m/s from 2 s on wheels of r = 0.25 m: it drove
+
+
+def test_motion_references_track_per_robot_after_an_autoreset():
+    """A robot restarted in place (NEXT_STEP) takes the references from t = 0 again (its own references' state reset):
+    its second episode repeats its first while the other robot's goes on."""
+    values = {**load_values(MOTION), "actual.D_w_variance": 0.0}
+    env = MwipVectorEnv(2, values, duration=3.0, base_law="dscndo", torque_scale=4096.0)
+    env.reset(seed=1)
+    n, first, second = env.setup.n_steps, [], []
+    nan = np.array([[0.0], [np.nan]])
+    for step in range(n + 4 + n):
+        obs, r, term, trunc, info = env.step(nan if step == 3 else np.zeros((2, 1)))
+        if step < n:
+            first.append(obs[0].copy())
+        elif step > n:
+            second.append(obs[0].copy())
+    assert np.array_equal(np.array(first[:n - 1]), np.array(second[:n - 1]))
+    assert abs(first[-1][0]) > 1.0   # robot 0 drove in its first episode
+
+
+def test_mpc_tracks_the_motion_references_through_the_scalar_loops_command_equal_to_mwip_sim():
+    """A law without a pure step (mpc) with motion: the vector env calls core.loop.command with a Shaper per robot,
+    the scalar loop's own law stage; each robot equals mwip_sim's run (the batch's record) to the bit."""
+    pytest.importorskip("daqp")
+    duration, n = 3.0, 2
+    env = MwipVectorEnv(n, MOTION, duration=duration, base_law="mpc")
+    assert env.lanes.shapers is not None and env.lanes.track is None
+    obs, _ = env.reset(seed=SEED)
+    xs, us = [np.stack(env.lanes.x, 1)], []
+    for _ in range(env.setup.n_steps):
+        obs, r, term, trunc, info = env.step(np.zeros((n, 1)))
+        us.append(info["u"])
+        xs.append(np.stack(env.lanes.x, 1))
+    assert trunc.all() and not term.any()
+    loop = P.closed_loop(load_values(MOTION), duration=duration, controller="mpc")
+    loops = [dataclasses.replace(loop, plant=dataclasses.replace(loop.plant, seed=SEED + i)) for i in range(n)]
+    for i, tr in enumerate(simulate_batch(loops, (1.0, duration), record=True).trajectories):
+        for j, name in enumerate(("theta_w", "theta_b", "dtheta_w", "dtheta_b")):
+            assert np.array_equal(np.array(xs)[:, i, j], tr.columns[name]), (i, name)
+        assert np.array_equal(np.array(us)[:, i], tr.columns["u"][:-1]), i
+    assert np.all(np.array(xs)[-1, :, 2] > 0.5)   # the wheels turn forward: v* = 0.5 m/s at 3 s
