@@ -203,6 +203,7 @@ def test_every_node_answers_help_from_the_schema(node, capsys):
     assert "exit code" in out.lower() and f"python -m pydoc {NODE_MODULES[node]}" in out
 
 
+@pytest.mark.alone   # "at once" is timed on the wall clock
 @pytest.mark.graph
 def test_help_as_typed_is_an_import_and_a_print(tmp_path):
     """``plant_sim --help`` as typed (and as ``ros2 run mwip_ros plant_sim --help`` passes it): exit 0 at once, no
