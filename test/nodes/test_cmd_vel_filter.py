@@ -6,6 +6,8 @@ publisher and the controller's reader are peers in one private context, no disco
 * a flood of such Twists cannot displace the operator's valid command from the controller's depth-1 cmd_vel reader
   (before: the newest NaN displaced it, the controller rejected that and never saw the command), and the log and
   /diagnostics say that the middleware drops them (not counted).
+* a realtime controller reads cmd_vel on a DDS participant of its own whose threads run at nice 19
+  (rclpy_compat.IsolatedInput), so a flood of valid Twists no longer shares joint_states' receive thread.
 
 The process-level flood (the realtime graph, NaN/inf/1e300 and valid Twists at 70-80 k/s beside a 20 Hz operator):
 ``scripts/bench_input_flood.py --topics cmd_vel_bad,cmd_vel_valid``, BENCHMARKS.md "Input floods".
@@ -92,3 +94,45 @@ def test_a_flood_of_hostile_twists_cannot_displace_the_operators_command():
         status = node.diagnostic_status()[2]
         assert status["cmd_vel_filter"].startswith("on: ") and "dropped by DDS" in status["cmd_vel_filter"]
         assert "content filter on cmd_vel" in h.logs()
+
+
+def _nice(tid: str) -> int:
+    import os
+    return os.getpriority(os.PRIO_PROCESS, int(tid))
+
+
+def test_a_realtime_controller_reads_cmd_vel_on_a_participant_of_its_own_at_the_lowest_priority():
+    """Realtime, cmd_vel has a DDS participant of its own (rclpy_compat.IsolatedInput) whose threads run at nice 19:
+    a flood of valid Twists, which no filter can tell from the operator's, no longer shares the receive thread that
+    carries the controller's joint_states (before: one participant, the flood cost that thread a third of a core and
+    the robot fell; BENCHMARKS.md "Input floods").  It is filtered as the shared one is, still one of the node's
+    polled inputs (fed, read, reported), and destroyed with the node."""
+    import os
+
+    from geometry_msgs.msg import Twist
+
+    import rclpy
+    from mwip_ros.nodes.runtime.rclpy_compat import IsolatedInput
+    with NodeHarness(node_class("dscndo_controller"), *MOTION, "-p", "mode:=realtime") as h:
+        node = h.node
+        sub = node.cmd_vel_sub
+        assert isinstance(sub, IsolatedInput) and sub in node.polled_inputs
+        assert sub.side_context is not node.context and sub.topic == "/cmd_vel"
+        assert sub.niced >= 1 and node.cmd_vel_filtered
+        main_tid = str(os.getpid())
+        assert _nice(main_tid) < 19   # the node's own thread keeps its priority
+        assert f"{sub.niced} threads at nice 19" in h.logs()
+        # a publisher in the reader's own participant: the flood of hostile Twists is filtered there too
+        op = rclpy.create_node("operator", context=sub.side_context, start_parameter_services=False)
+        try:
+            pub = op.create_publisher(Twist, "/cmd_vel", REALTIME_QOS)
+            assert h.spin(lambda: pub.get_subscription_count() >= 1, 5)
+            pub.publish(L.encode_twist(0.2, 0.0))
+            for i in range(100):
+                pub.publish(BAD[i % len(BAD)])
+            assert h.spin(lambda: sub.taken >= 1, 5)
+            assert node.motion.accepted == 1 and node.motion.cmd == (0.2, 0.0) and node.motion.rejected == 0
+            assert h.feed("cmd_vel", L.encode_twist(0.1, 0.0)) == 1 and node.motion.cmd == (0.1, 0.0)
+        finally:
+            op.destroy_node()
+    assert sub.side_node is None and not sub.side_context.ok()

@@ -30,7 +30,9 @@ While no torque acts (``driver_state``, the plant's driver: disabled, in fault, 
 stays zero and a cmd_vel is not taken (counted): on enable the robot starts from where it is, at rest.  Until a
 ``driver_state`` comes the torque is taken to act.  ``cmd_vel`` and ``driver_state`` are read with each state and
 between the executor's callbacks, the newest one (:class:`~mwip_ros.nodes.runtime.rclpy_compat.PolledInput`), not as
-they arrive: a flood of them costs the controller one message per look.
+they arrive: a flood of them costs the controller one message per look.  In realtime cmd_vel is read on a DDS
+participant of its own whose threads run at nice 19 (:class:`~mwip_ros.nodes.runtime.rclpy_compat.IsolatedInput`):
+a flood of valid Twists does not share the receive thread of ``joint_states``.
 With motion on and a state that carries the gyro's yaw rate (a spatial plant's ``joint_states``: the joint ``yaw``),
 the yaw stage runs after the law (docs/theory.md 6.13, ``core.yaw``) and the answer is the two wheels' torques on
 ``wheel_torques_cmd`` (sensor_msgs/JointState, names wheel_left_joint, wheel_right_joint, effort [u_L, u_R]) instead
@@ -61,7 +63,7 @@ from mwip_ros.nodes.runtime.guards import REPEAT, RESTART, STAMP_WINDOW_PERIODS,
 from mwip_ros.nodes.runtime.content_filter import set_content_filter
 from mwip_ros.nodes.runtime.state_input import StateInput
 from mwip_ros.nodes.runtime.params import declare, plant_file_values
-from mwip_ros.nodes.runtime.rclpy_compat import PolledInput
+from mwip_ros.nodes.runtime.rclpy_compat import IsolatedInput, PolledInput
 from mwip_ros.nodes.runtime.process import GracefulNodeMixin, run_node
 
 NAME = "dscndo_controller"
@@ -129,9 +131,20 @@ class DscndoController(Node, GracefulNodeMixin):
         self.cmd_vel_filtered = False   # layouts.CMD_VEL_FILTER on the cmd_vel reader (the middleware drops)
         if mc is not None and not (mc.profile or mc.yaw_profile):   # cmd_vel sets the target; the newest counts
             from rclpy.qos import QoSProfile, ReliabilityPolicy
-            self.cmd_vel_sub = PolledInput(self, Twist, "cmd_vel", QoSProfile(
-                depth=1, reliability=ReliabilityPolicy.BEST_EFFORT), self._on_cmd_vel)
+            qos = QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
+            if self.v["mode"] == "realtime":   # a participant of its own at the lowest priority (issue 46 item 2)
+                try:
+                    self.cmd_vel_sub = IsolatedInput(self, Twist, "cmd_vel", qos, self._on_cmd_vel)
+                except Exception as exc:   # rcl could not make a second context: the node's own participant
+                    self.get_logger().warning(f"cmd_vel on the node's own participant ({exc}): a flood of valid "
+                                              f"Twists shares the receive thread of joint_states")
+            if self.cmd_vel_sub is None:
+                self.cmd_vel_sub = PolledInput(self, Twist, "cmd_vel", qos, self._on_cmd_vel)
             self.cmd_vel_filtered = self._filter_cmd_vel()
+            if isinstance(self.cmd_vel_sub, IsolatedInput):
+                self.get_logger().info(f"cmd_vel is read on a DDS participant of its own, its "
+                                       f"{self.cmd_vel_sub.niced} threads at nice {self.cmd_vel_sub.nice}: a flood "
+                                       f"of valid Twists takes only the CPU the loop leaves")
         self.get_logger().info(self._ready_text())
 
     @property
