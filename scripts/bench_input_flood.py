@@ -29,8 +29,8 @@ sys.path.insert(0, str(REPO / "test"))
 from graphproc import Graph  # noqa: E402
 
 FLOODER = REPO / "test" / "side_flooder.py"
-TOPICS = ("none", "cmd_vel", "emergency_stop", "external_wrench", "driver_state", "disturbance_estimate",
-          "joint_states")
+TOPICS = ("none", "cmd_vel", "cmd_vel_bad", "cmd_vel_valid", "emergency_stop", "external_wrench", "driver_state",
+          "disturbance_estimate", "joint_states")
 
 
 def run(work: Path, topic: str, files, flood_s: float) -> dict:
@@ -73,19 +73,22 @@ def run(work: Path, topic: str, files, flood_s: float) -> dict:
         row["sim"], row["wall"] = float(sim.group(1)), float(sim.group(2))
     ans = re.search(r"answered (\d+) states", c_out)
     row["answered"] = int(ans.group(1)) if ans else None
+    acc = re.search(r"cmd_vel: (\d+) accepted", c_out)
+    row["accepted"] = int(acc.group(1)) if acc else None
     return row
 
 
 def table(rows) -> str:
     lines = ["| flood on | sent (rate) | outcome | plant period p99 / longest [ms] | missed deadlines | stale commands "
-             "| answered | simulated / wall [s] |", "|---|---|---|---|---|---|---|---|"]
+             "| answered | cmd_vel accepted | simulated / wall [s] |", "|---|---|---|---|---|---|---|---|---|"]
     nan = float("nan")
     for r in rows:
         sent = "-" if r["topic"] == "none" else (f"{r['sent']:,} ({r['rate'] / 1000:.0f} k/s)" if r.get("sent")
                                                  else "the flooder failed")
         lines.append(f"| {r['topic']} | {sent} | {r['outcome']} | {r.get('p99', nan):.1f} / "
                      f"{r.get('longest', nan):.0f} | {r.get('missed', '-')} | {r.get('stale', '-')} | "
-                     f"{r.get('answered', '-')} | {r.get('sim', nan):.2f} / {r.get('wall', nan):.2f} |")
+                     f"{r.get('answered', '-')} | {r.get('accepted') if r.get('accepted') is not None else '-'} | "
+                     f"{r.get('sim', nan):.2f} / {r.get('wall', nan):.2f} |")
     return "\n".join(lines)
 
 

@@ -44,6 +44,7 @@ from typing import Dict, Optional, Sequence, Tuple
 from mwip_ros.core.controller import INTERNALS
 from mwip_ros.core.markers import pose_angles, pose_quaternion
 from mwip_ros.core.model import State
+from mwip_ros.core.motion import ABSURD_SPEED, ABSURD_YAW_RATE
 from mwip_ros.core.safety import PLAUSIBLE_STATE, PLAUSIBLE_TORQUE, STATES
 from mwip_ros.core.urdf import WHEEL_JOINTS
 
@@ -54,8 +55,9 @@ __all__ = ["JOINT_NAMES", "INTERNAL_NAMES", "LIMITS", "RAW_LIMITS", "IMU_FRAME",
            "encode_state", "encode_wrench", "encode_internals",
            "encode_command", "encode_clock", "encode_external_wrench", "parse_joint_state", "parse_wrench",
            "parse_command", "parse_clock", "parse_internals", "parse_external_wrench", "encode_imu", "parse_imu",
-           "encode_encoder", "parse_encoder", "parse_odometry", "check_state", "RAW_FILTERS", "encode_twist",
-           "parse_twist", "POSE_FRAME", "encode_pose", "parse_pose", "parse_bool", "YAW_JOINT", "parse_yaw_rate",
+           "encode_encoder", "parse_encoder", "parse_odometry", "check_state", "RAW_FILTERS", "CMD_VEL_FILTER",
+           "encode_twist", "parse_twist", "POSE_FRAME", "encode_pose", "parse_pose", "parse_bool", "YAW_JOINT",
+           "parse_yaw_rate",
            "WHEEL_TORQUE_JOINTS", "encode_wheel_torques", "parse_wheel_torques", "encode_wheel_states",
            "parse_wheel_states", "parse_driver_state", "MAX_DRIVER_STATE_BYTES"]
 
@@ -111,6 +113,13 @@ RAW_FILTERS = {
                                   + [_inside(f"{f}[0]", RAW_LIMITS[k])
                                      for f, k in (("position", "phi"), ("velocity", "rate"), ("effort", "torque"))]),
 }
+
+# cmd_vel's DDS content filter (the controller's cmd_vel reader, nodes.runtime.content_filter; issue 46 item 2): what
+# core.motion.Shaper.command rejects for its numbers (linear.x or angular.z not finite, or beyond ABSURD_SPEED /
+# ABSURD_YAW_RATE), and bytes that cannot be deserialized, dropped by the middleware before the reader's depth-1
+# history: a flood of them can neither displace a valid command nor cost the controller's Python a look.  The other
+# four fields are read by no one (parse_twist), so they are not judged here either.
+CMD_VEL_FILTER = f"{_inside('linear.x', ABSURD_SPEED)} AND {_inside('angular.z', ABSURD_YAW_RATE)}"
 
 _STATE = cdr.JointStateEncoder(JOINT_NAMES)
 _STATE_YAW = cdr.JointStateEncoder(JOINT_NAMES + (YAW_JOINT,))

@@ -115,4 +115,4 @@ def test_cmd_vel_is_followed_then_the_timeout_stops_it_and_hostile_twists_are_co
                 "not a geometry_msgs/Twist"):
         assert why in out, why
     assert int(out.rsplit("rejected: cmd_vel: ", 1)[1].split()[0]) == 4
-    assert "cmd_vel: 1 timeout stop(s), 4 rejected, 0 clipped" in out
+    assert "cmd_vel: 80 accepted, 1 timeout stop(s), 4 rejected, 0 clipped" in out

@@ -21,14 +21,18 @@ With ``motion.enabled`` (docs/theory.md 6.11) the law tracks references: from ``
 lockstep scenarios: the graph then equals ``mwip_sim``) or, without one, from ``cmd_vel`` (geometry_msgs/Twist,
 REP-103: linear.x, angular.z).  A Twist only sets the target (:class:`mwip_ros.core.motion.Shaper`); the references
 of period k are made inside the period, in ``core.loop.command``, as offline.  A Twist that is not one, not finite or
-absurd is rejected and counted; one over the limits is clipped and counted; no cmd_vel for
+absurd is dropped by DDS (a content filter, ``layouts.CMD_VEL_FILTER``: logged and on /diagnostics as such, not
+counted) or, where the middleware does not filter, rejected and counted; one over the limits is clipped and
+counted; no cmd_vel for
 ``motion.cmd_vel_timeout_s`` ramps the references to zero (logged once per silence, counted on /diagnostics).
 While no torque acts (``driver_state``, the plant's driver: disabled, in fault, the emergency stop held; docs/theory.md
 6.8) the references hold at the measured state (the position target, v* and psi'* do not advance), the yaw integral
 stays zero and a cmd_vel is not taken (counted): on enable the robot starts from where it is, at rest.  Until a
 ``driver_state`` comes the torque is taken to act.  ``cmd_vel`` and ``driver_state`` are read with each state and
 between the executor's callbacks, the newest one (:class:`~mwip_ros.nodes.runtime.rclpy_compat.PolledInput`), not as
-they arrive: a flood of them costs the controller one message per look.
+they arrive: a flood of them costs the controller one message per look.  In realtime cmd_vel is read on a DDS
+participant of its own whose threads run at nice 19 (:class:`~mwip_ros.nodes.runtime.rclpy_compat.IsolatedInput`):
+a flood of valid Twists does not share the receive thread of ``joint_states``.
 With motion on and a state that carries the gyro's yaw rate (a spatial plant's ``joint_states``: the joint ``yaw``),
 the yaw stage runs after the law (docs/theory.md 6.13, ``core.yaw``) and the answer is the two wheels' torques on
 ``wheel_torques_cmd`` (sensor_msgs/JointState, names wheel_left_joint, wheel_right_joint, effort [u_L, u_R]) instead
@@ -48,7 +52,7 @@ from mwip_ros import params as P
 from mwip_ros.core import laws
 from mwip_ros.core.excitation import Excitation
 from mwip_ros.core.loop import command
-from mwip_ros.core.motion import Shaper
+from mwip_ros.core.motion import ABSURD_SPEED, ABSURD_YAW_RATE, Shaper
 from mwip_ros.core.yaw import YawLoop, wheel_torques
 from mwip_ros.msgs import BadMessage
 from mwip_ros.msgs import layouts as L
@@ -56,9 +60,10 @@ from mwip_ros.msgs.qos import DRIVER_STATE_QOS, qos_for
 from mwip_ros.params.motion import motion as motion_config, wheel_limit_warning, yaw as yaw_config
 from mwip_ros.nodes.runtime.diagnostics import OK
 from mwip_ros.nodes.runtime.guards import REPEAT, RESTART, STAMP_WINDOW_PERIODS, PublisherWatch, Rejects
+from mwip_ros.nodes.runtime.content_filter import set_content_filter
 from mwip_ros.nodes.runtime.state_input import StateInput
 from mwip_ros.nodes.runtime.params import declare, plant_file_values
-from mwip_ros.nodes.runtime.rclpy_compat import PolledInput
+from mwip_ros.nodes.runtime.rclpy_compat import IsolatedInput, PolledInput
 from mwip_ros.nodes.runtime.process import GracefulNodeMixin, run_node
 
 NAME = "dscndo_controller"
@@ -123,10 +128,23 @@ class DscndoController(Node, GracefulNodeMixin):
         self.ignored = 0            # cmd_vel that came while no torque acts: not taken
         self.driver_in = PolledInput(self, String, "driver_state", DRIVER_STATE_QOS, self._on_driver_state)
         self.cmd_vel_sub = None
+        self.cmd_vel_filtered = False   # layouts.CMD_VEL_FILTER on the cmd_vel reader (the middleware drops)
         if mc is not None and not (mc.profile or mc.yaw_profile):   # cmd_vel sets the target; the newest counts
             from rclpy.qos import QoSProfile, ReliabilityPolicy
-            self.cmd_vel_sub = PolledInput(self, Twist, "cmd_vel", QoSProfile(
-                depth=1, reliability=ReliabilityPolicy.BEST_EFFORT), self._on_cmd_vel)
+            qos = QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
+            if self.v["mode"] == "realtime":   # a participant of its own at the lowest priority (issue 46 item 2)
+                try:
+                    self.cmd_vel_sub = IsolatedInput(self, Twist, "cmd_vel", qos, self._on_cmd_vel)
+                except Exception as exc:   # rcl could not make a second context: the node's own participant
+                    self.get_logger().warning(f"cmd_vel on the node's own participant ({exc}): a flood of valid "
+                                              f"Twists shares the receive thread of joint_states")
+            if self.cmd_vel_sub is None:
+                self.cmd_vel_sub = PolledInput(self, Twist, "cmd_vel", qos, self._on_cmd_vel)
+            self.cmd_vel_filtered = self._filter_cmd_vel()
+            if isinstance(self.cmd_vel_sub, IsolatedInput):
+                self.get_logger().info(f"cmd_vel is read on a DDS participant of its own, its "
+                                       f"{self.cmd_vel_sub.niced} threads at nice {self.cmd_vel_sub.nice}: a flood "
+                                       f"of valid Twists takes only the CPU the loop leaves")
         self.get_logger().info(self._ready_text())
 
     @property
@@ -184,6 +202,21 @@ class DscndoController(Node, GracefulNodeMixin):
             self.ctrl.reset()   # the law starts afresh (DSC: its filter) from the next state
         if {"law", "use_observer"} & changed:
             self.get_logger().info(f"law now {self._describe()}")
+
+    def _filter_cmd_vel(self) -> bool:
+        """A DDS content filter on cmd_vel (layouts.CMD_VEL_FILTER): a Twist whose linear.x or angular.z is not
+        finite or absurd, or that cannot be deserialized, is dropped by the middleware, in C++, before the reader's
+        depth-1 history (issue 46 item 2): a flood of them cannot displace the operator's valid command, and Fast DDS
+        filters at the writer when it can, so such a flood costs this process nothing.  What it drops is not counted
+        (the log and /diagnostics' ``cmd_vel_filter`` say so); Shaper.command still judges what passes."""
+        why = set_content_filter(self.cmd_vel_sub, L.CMD_VEL_FILTER)
+        if why:
+            self.get_logger().warning(f"no content filter on cmd_vel ({why}): every Twist reaches the controller")
+            return False
+        self.get_logger().info(f"content filter on cmd_vel: a Twist whose linear.x is not finite or beyond "
+                               f"{ABSURD_SPEED:g} m/s, or angular.z beyond {ABSURD_YAW_RATE:g} rad/s, or that cannot "
+                               f"be deserialized, is dropped by DDS and not counted")
+        return True
 
     @property
     def driving(self) -> bool:
@@ -343,6 +376,8 @@ class DscndoController(Node, GracefulNodeMixin):
             m = self.motion
             values.update(cmd_vel_accepted=m.accepted, cmd_vel_timeouts=m.timeouts, cmd_vel_rejected=m.rejected,
                           cmd_vel_clipped=m.clipped, cmd_vel_not_driving=self.ignored,
+                          cmd_vel_filter="on: non-finite or absurd Twists are dropped by DDS, not counted"
+                          if self.cmd_vel_filtered else "off",
                           v_ref=m.ref.v if m.ref is not None else 0.0)
         return OK, f"{self._describe()} answering", values
 
@@ -350,7 +385,8 @@ class DscndoController(Node, GracefulNodeMixin):
         self.get_logger().info(f"answered {self.count} states; rejected: {self.rejects.summary()}")
         if self.motion is not None:
             m = self.motion
-            self.get_logger().info(f"cmd_vel: {m.timeouts} timeout stop(s), {m.rejected} rejected, {m.clipped} clipped")
+            self.get_logger().info(f"cmd_vel: {m.accepted} accepted, {m.timeouts} timeout stop(s), {m.rejected} "
+                                   f"rejected, {m.clipped} clipped")
 
 
 def main(argv=None) -> int:

@@ -15,6 +15,7 @@ test/nodes/test_param_hostile.py); a missing internal raises :class:`RclpyChange
 :func:`name_undeclared_parameters`    ``Node._check_undeclared_parameters``: a refusal names the keys
 :func:`use_ros_time_override`         ``ROSClock._set_ros_time_is_active``: a clock the node sets
 :class:`PolledInput`                  ``_rclpy.Subscription``: a subscription the executor never serves
+:class:`IsolatedInput`                the same, on a context (participant) of its own, threads at nice 19
 ====================================  ==================================================================
 
 rclpy's parameter services (``rclpy.parameter_service.ParameterService``) read each request
@@ -50,7 +51,7 @@ from mwip_ros.nodes.runtime.guards import NEW, REPEAT, RESTART, Rejects, StampGu
 __all__ = ["WRITTEN_FOR", "MAX_NAME_CHARS", "MAX_ARRAY_LEN", "MAX_PARAMETERS", "CLOCK_WINDOW_NS", "RclpyChanged",
            "rclpy_version", "check_version", "install", "installed", "parameter_from_msg", "shown_name", "guard_clock",
            "clock_guarded", "parameter_overrides", "name_undeclared_parameters", "use_ros_time_override",
-           "PolledInput", "polled_inputs", "destroy_polled_inputs", "SIDE_DEPTH"]
+           "PolledInput", "IsolatedInput", "polled_inputs", "destroy_polled_inputs", "SIDE_DEPTH"]
 
 WRITTEN_FOR = ("7.1.6",)   # the rclpy versions whose internals this module was written against (and tested with)
 MAX_NAME_CHARS = 256       # a longer name that the node has not declared is refused unread
@@ -496,3 +497,59 @@ def destroy_polled_inputs(node) -> None:
     """Destroy the node's :class:`PolledInput` subscriptions, before the node itself."""
     for p in polled_inputs(node):
         p.destroy()
+
+
+def _own_threads() -> set:
+    """The ids of this process's threads (Linux: /proc/self/task; elsewhere none)."""
+    import os
+    try:
+        return set(os.listdir("/proc/self/task"))
+    except OSError:   # pragma: no cover - not Linux
+        return set()
+
+
+class IsolatedInput(PolledInput):
+    """A :class:`PolledInput` on a DDS participant of its own, whose threads (Fast DDS's receive, event and
+    discovery threads) run at the lowest priority (nice ``nice``): a flood of *valid* messages on its topic, which
+    no content filter can tell from genuine ones, costs the process only CPU that its own loop does not want.
+
+    A :class:`PolledInput` shares its node's participant, and so the receive thread that also carries the node's
+    control inputs (the controller's ``joint_states``): 60,000-76,000 valid Twists a second on ``cmd_vel`` cost
+    that thread a third of a core and the realtime robot fell (BENCHMARKS.md, "Input floods").  Here the topic has
+    a context (rclpy ``Context``: one participant), a node ``<node>_<topic>_reader`` in the node's namespace and
+    shared-memory and UDP ports of its own; what the low-priority thread cannot take in time the transport drops
+    (best effort).  It is listed in the node's ``polled_inputs`` as a :class:`PolledInput` is."""
+
+    def __init__(self, node, msg_type, topic: str, qos, callback: Callable[[bytes], None],
+                 depth: Optional[int] = None, nice: int = 19):
+        import os
+
+        import rclpy
+        from rclpy.signals import SignalHandlerOptions
+        before = _own_threads()
+        self.side_context = rclpy.Context()
+        rclpy.init(args=[], context=self.side_context, domain_id=node.context.get_domain_id(),
+                   signal_handler_options=SignalHandlerOptions.NO)
+        name = f"{node.get_name()}_{topic.strip('/').replace('/', '_')}_reader"
+        self.side_node = rclpy.create_node(name, namespace=node.get_namespace(), context=self.side_context,
+                                           start_parameter_services=False, enable_rosout=False,
+                                           use_global_arguments=False)
+        super().__init__(self.side_node, msg_type, node.resolve_topic_name(topic), qos, callback, depth)
+        self.niced, self.nice = 0, nice
+        for tid in _own_threads() - before:   # the new participant's threads
+            try:
+                os.setpriority(os.PRIO_PROCESS, int(tid), max(nice, os.getpriority(os.PRIO_PROCESS, int(tid))))
+                self.niced += 1
+            except OSError:   # gone, or not allowed: it keeps its priority
+                pass
+        if not hasattr(node, "polled_inputs"):
+            node.polled_inputs = []
+        node.polled_inputs.append(self)
+
+    def destroy(self) -> None:
+        """The DDS reader, its node and its context destroyed (idempotent)."""
+        super().destroy()
+        if self.side_node is not None:
+            self.side_node.destroy_node()
+            self.side_node = None
+            self.side_context.try_shutdown()
