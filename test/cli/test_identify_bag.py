@@ -5,6 +5,7 @@ offline run, message by message as the plant publishes them, check each refusal 
 from __future__ import annotations
 
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -223,14 +224,19 @@ def test_a_realtime_bag_identifies_the_robot(tmp_path, capsys):
     files, bag = [*FILES, robot], tmp_path / "bag"
     with Graph(tmp_path) as g:
         rec = g.start("mcap_recorder", "-p", f"output:={bag}", params=None)
-        for node in ("state_estimator", "disturbance_observer", "dscndo_controller"):
-            g.start(node, "-p", "mode:=realtime", params=files)
+        nodes = {node: g.start(node, "-p", "mode:=realtime", params=files)
+                 for node in ("state_estimator", "disturbance_observer", "dscndo_controller")}
         plant = g.start("plant_sim", "-p", "mode:=realtime", "-p", "expected_subscribers:=3", params=files)
         assert plant.wait(60) == 0, plant.output()
         assert rec.stop(timeout=20) == 0, rec.output()
+        assert nodes["state_estimator"].stop(timeout=20) == 0, nodes["state_estimator"].output()
     assert "upright" in plant.output()
     log = read_raw_bag(bag)
-    assert len(log.columns["t"]) >= 1990 and log.columns["t"][0] == 0.0   # t from the first stamp, not the clock's
+    # the bag holds every estimate the estimator made (a late wake of the realtime plant skips the periods it
+    # missed: 17 of 2,002 after one 65 ms stall, so their count is the plant's, not a constant), and most periods
+    estimated = re.search(r"estimated (\d+) samples", nodes["state_estimator"].output())
+    assert estimated and len(log.columns["t"]) == int(estimated[1]) >= 1960, nodes["state_estimator"].output()
+    assert log.columns["t"][0] == 0.0   # t from the first stamp, not the clock's
     out = tmp_path / "identified.yaml"
     assert identify.main([str(bag), "--raw", "--params", str(FILES[0]), "--out", str(out)]) == 0, \
         capsys.readouterr().err

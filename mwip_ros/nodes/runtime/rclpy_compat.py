@@ -526,8 +526,10 @@ class IsolatedInput(PolledInput):
 
         import rclpy
         from rclpy.signals import SignalHandlerOptions
+        from mwip_ros.nodes.runtime import discovery
         before = _own_threads()
         self.side_context = rclpy.Context()
+        discovery.apply()   # as the process's own context has it (its start-up applied it already: no change)
         rclpy.init(args=[], context=self.side_context, domain_id=node.context.get_domain_id(),
                    signal_handler_options=SignalHandlerOptions.NO)
         name = f"{node.get_name()}_{topic.strip('/').replace('/', '_')}_reader"
