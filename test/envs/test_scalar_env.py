@@ -76,14 +76,18 @@ def test_the_laws_own_command_as_a_normalised_action_is_mwip_sims_run_bit_for_bi
     assert_same_rows(xs, us, reference(PAPER, "dscndo", 3.0, 0))
 
 
-@pytest.mark.parametrize("files, law, seed", [(PAPER, "dscndo", 0), (REALISTIC, "dscndo", 7), (RAW, "lqr_ndo", 3),
-                                              (REALISTIC, "lqr", 11)])
-def test_a_zero_residual_on_a_base_law_is_mwip_sims_run_of_that_law_bit_for_bit(files, law, seed):
-    """Sensor noise, encoder, delays, the motor, the raw IMU with the Kalman filter: every stage of the files."""
-    env = MwipEnv(files, duration=2.0, base_law=law)
+@pytest.mark.parametrize("files, law, seed, duration", [
+    (PAPER, "dscndo", 0, 2.0), (REALISTIC, "dscndo", 7, 2.0), (RAW, "lqr_ndo", 3, 2.0), (REALISTIC, "lqr", 11, 2.0),
+    # the motion references and the hold (theory 6.11, 6.14) on laws other than DSCNDO, and the paper's file
+    (PAPER + [CONFIG / "motion.yaml"], "lqr_ndo", 4, 12.0),
+    (PAPER + [CONFIG / "motion.yaml", CONFIG / "sensing_realistic.yaml"], "dsc", 9, 12.0), (PAPER, "dsc", 1, 12.0)])
+def test_a_zero_residual_on_a_base_law_is_mwip_sims_run_of_that_law_bit_for_bit(files, law, seed, duration):
+    """Sensor noise, encoder, delays, the motor, the raw IMU with the Kalman filter, the motion references: every
+    stage of the files."""
+    env = MwipEnv(files, duration=duration, base_law=law)
     xs, us, rs, terminated, truncated, _ = episode(env, lambda o, i: np.zeros(1), seed)
     assert truncated and not terminated
-    assert_same_rows(xs, us, reference(files, law, 2.0, seed))
+    assert_same_rows(xs, us, reference(files, law, duration, seed))
 
 
 def test_a_zero_residual_with_motion_references_is_mwip_sims_run_bit_for_bit():
@@ -96,17 +100,6 @@ def test_a_zero_residual_with_motion_references_is_mwip_sims_run_bit_for_bit():
     ref = reference(files, "dscndo", 12.0, 5)
     assert_same_rows(xs, us, ref)
     assert xs[-1, 0] > 30.0   # it drove: 1 m/s from 2 s on wheels of r = 0.25 m (not regulated to rest)
-
-
-@pytest.mark.parametrize("files, law, seed", [(PAPER + [CONFIG / "motion.yaml"], "lqr_ndo", 4),
-                                              (PAPER + [CONFIG / "motion.yaml", CONFIG / "sensing_realistic.yaml"],
-                                               "dsc", 9), (PAPER, "dsc", 1)])
-def test_a_zero_residual_on_another_law_with_motion_is_mwip_sims_run_bit_for_bit(files, law, seed):
-    """The motion references and the hold (theory 6.11, 6.14) on laws other than DSCNDO, and the paper's file."""
-    env = MwipEnv(files, duration=12.0, base_law=law)
-    xs, us, rs, terminated, truncated, _ = episode(env, lambda o, i: np.zeros(1), seed)
-    assert truncated and not terminated
-    assert_same_rows(xs, us, reference(files, law, 12.0, seed))
 
 
 def test_without_a_base_law_the_action_is_the_whole_command_with_motion_references_too():
