@@ -651,9 +651,7 @@ def kernel_for(law: type, estimator: Optional[type] = None):
         track_l = (_deep(compiled_motion.law_track_lanes, suffix, load=load, store=store, track_lanes=own_l)
                    if by_lanes else _jit(compiled_motion.no_track_lanes, _lanes_tag()))
         _KERNELS[fn, est] = _deep(_loop, suffix, law_step=step,
-                             sense_raw=raw_stage(est, suffix),
-                             raw_sample=_deep(raw_sample), motor_torque=_compiled(drive.motor_torque),
-                             rk4_driven=_rk4_driven,
+                             sense_raw=raw_stage(est, suffix), rk4_driven=_rk4_driven,
                              Inertia=Inertia, Sin=Sin, at=at, _stage=_deep(_stage, at=at), accel=_accel,
                              rk4_period=_rk4_period, rk4_lanes=lanes, load=load, store=store,
                              z_next_lanes=z_lanes, LAW_LANES=by_lanes,

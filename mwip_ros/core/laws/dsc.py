@@ -12,6 +12,7 @@ from typing import List
 
 from ..controller import INTERNALS, DscGains, dsc_terms, dsc_terms_tracking, filter_step
 from ..motion import rate_reference
+from ..observer import substeps
 from .base import Law
 
 __all__ = ["DscLaw", "INTERNALS", "dsc_step", "dsc_track_step", "lean_reference"]
@@ -87,7 +88,7 @@ class DscLaw(Law):
         period (eq. 25), so the next one first advances them over the periods the gap skipped, one period at a time
         with the last step's state held (what the law stepped every period would do with that state repeated; DSC's
         x4_bar follows x_d while it tracks, so the cascade is stepped, not solved at once)."""
-        self.skipped = max(0, round(dt / self.h) - 1)
+        self.skipped = substeps(dt, self.h) - 1   # the observer's count of periods (core.observer)
 
     def _catch_up(self) -> None:
         """The filters over the periods :meth:`elapsed` said were skipped (eq. 25; with a reference, x_d's too)."""

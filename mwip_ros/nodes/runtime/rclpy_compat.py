@@ -456,9 +456,7 @@ class PolledInput:
         self.topic_name = self.handle.get_topic_name()
         self.depth = max(1, int(qos.depth or 1))
         self.taken = 0
-        if not hasattr(node, "polled_inputs"):
-            node.polled_inputs = []
-        node.polled_inputs.append(self)
+        _listed(node, self)
 
     @property
     def topic(self) -> str:
@@ -486,6 +484,13 @@ class PolledInput:
         if self.handle is not None:
             self.handle.destroy_when_not_in_use()
             self.handle = None
+
+
+def _listed(node, polled: "PolledInput") -> None:
+    """``polled`` in ``node.polled_inputs`` (:func:`polled_inputs` reads it)."""
+    if not hasattr(node, "polled_inputs"):
+        node.polled_inputs = []
+    node.polled_inputs.append(polled)
 
 
 def polled_inputs(node) -> List[PolledInput]:
@@ -544,9 +549,7 @@ class IsolatedInput(PolledInput):
                 self.niced += 1
             except OSError:   # gone, or not allowed: it keeps its priority
                 pass
-        if not hasattr(node, "polled_inputs"):
-            node.polled_inputs = []
-        node.polled_inputs.append(self)
+        _listed(node, self)
 
     def destroy(self) -> None:
         """The DDS reader, its node and its context destroyed (idempotent)."""
