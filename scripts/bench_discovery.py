@@ -140,6 +140,13 @@ def variant_env(variant: str, base: Dict[str, str], tmp: Path) -> Dict[str, str]
         path.write_text(PROFILE.format(sec=sec, nanosec=round((seconds - sec) * 1e9)))
         env["FASTRTPS_DEFAULT_PROFILES_FILE"] = str(path)
         env["MWIP_DISCOVERY"] = "off"
+    elif variant.startswith("profile="):
+        env["FASTRTPS_DEFAULT_PROFILES_FILE"] = str(Path(variant.split("=", 1)[1]).resolve())
+        env["MWIP_DISCOVERY"] = "off"
+    elif variant == "async":
+        from mwip_ros.nodes.runtime import discovery
+        discovery.apply(env)
+        env["RMW_FASTRTPS_PUBLICATION_MODE"] = "ASYNCHRONOUS"
     elif variant == "server":
         env["ROS_DISCOVERY_SERVER"] = "127.0.0.1:11888"
         env["MWIP_DISCOVERY"] = "off"

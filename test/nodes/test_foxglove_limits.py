@@ -171,12 +171,21 @@ def test_a_flood_beyond_the_descriptor_limit_is_refused_logged_and_the_port_keep
 
             socks = flood(port, FLOOD)
             try:
-                # Every flood connection is answered, and the server holds max_clients of them (the watcher is one,
-                # kept first: it is subscribed).  A burst faster than the node's look at its connections (5 per
-                # second) exhausts the descriptors: the SDK's listening socket is gone then (the connections in its
-                # queue are reset, or left half-open on the client's side), and the node listens again (logged).
-                assert wait_for(lambda: states(socks)[0] == 0 and server_connections(fox.pid, port) == MAX_CLIENTS,
-                                20), (states(socks), server_connections(fox.pid, port), fox.output()[-3000:])
+                # Every flood connection is answered, and the server fills its max_clients (the watcher is one, kept
+                # first: it is subscribed) and holds no more once it has looked (5 times a second).  A burst faster
+                # than that look exhausts the descriptors: the SDK's listening socket is gone then (the connections in
+                # its queue are reset, or left half-open on the client's side), and the node listens again (logged).
+                # The SDK may lose a few of the connections it held while its descriptors ran out (28 of 32 were
+                # left in 2 of 5 runs), and no flood connection is left to take their place: so the cap is checked
+                # as reached while the flood resolved, and as kept after.
+                held = []
+
+                def resolved():
+                    held.append(server_connections(fox.pid, port))
+                    return states(socks)[0] == 0 and max(held) >= MAX_CLIENTS
+                assert wait_for(resolved, 20), (states(socks), max(held), fox.output()[-3000:])
+                assert wait_for(lambda: server_connections(fox.pid, port) <= MAX_CLIENTS, 2), \
+                    (server_connections(fox.pid, port), fox.output()[-3000:])
                 _, opened, closed = states(socks)
                 assert closed >= FLOOD - LIMIT, (opened, closed)
                 # (the SDK closes the descriptors of what was refused as it reads each end)
@@ -223,7 +232,8 @@ def test_a_flood_beyond_the_descriptor_limit_is_refused_logged_and_the_port_keep
             assert fox.stop(timeout=10) == 0, out[-3000:]
             stop_s = time.monotonic() - t_stop
         assert stop_s < 5, stop_s
-    print(f"\nflood of {FLOOD} under a descriptor limit of {LIMIT}: the server held {MAX_CLIENTS} connections "
+    print(f"\nflood of {FLOOD} under a descriptor limit of {LIMIT}: the server reached "
+          f"{max(held)} connections before its look and kept at most {MAX_CLIENTS} "
           f"({descriptors} descriptors), {closed} flood connections closed or reset, "
           f"{opened} open on the client's side; "
           f"{refused} refused (logged), {values['listener_restarts']} listener restart(s); "
