@@ -307,12 +307,16 @@ def run_node(factory: Callable[..., object], argv: Optional[Sequence[str]] = Non
         _realtime_priority(node)
         from mwip_ros.nodes.runtime.diagnostics import Diagnostics
         diagnostics = node.diagnostics = Diagnostics(node)
+        from mwip_ros.nodes.runtime import stallprobe
+        probe = stallprobe.from_environment(name)   # off unless MWIP_STALL_PROBE names a directory (a debugging aid)
         try:
             while stop["signal"] is None and not node.done and context.ok():
                 node.spin_step(executor)
                 diagnostics.tick()
                 if memtrace is not None:
                     memtrace.tick()
+                if probe is not None:
+                    probe.beat()
         except StopRequested:
             pass
         if stop["signal"] is not None:
@@ -321,6 +325,8 @@ def run_node(factory: Callable[..., object], argv: Optional[Sequence[str]] = Non
         node.on_shutdown()
         if memtrace is not None:
             memtrace.close()
+        if probe is not None:
+            probe.close()
         if context.ok():
             diagnostics.tick(force=True)   # the run's last word: ERROR with the reason if it failed
         code = node.exit_code
