@@ -48,7 +48,9 @@ class DisturbanceObserver(Node, GracefulNodeMixin):
         self.input = StateInput(self, self.rejects, STAMP_WINDOW_PERIODS * self.period_ns, "observer")
         pub_qos, in_qos = qos_for(self.v["mode"])   # msgs.qos: lockstep loses nothing, realtime keeps the newest
         self.pub = self.create_publisher(WrenchStamped, "disturbance_estimate", pub_qos)
-        self.create_subscription(JointState, "joint_states", self._on_state, in_qos, raw=True)
+        sub = self.create_subscription(JointState, "joint_states", self._on_state, in_qos, raw=True)
+        if self.v["mode"] == "realtime":   # a flood of absurd or far-future states is dropped by DDS (issue 46)
+            self.get_logger().info(self.input.filter_readers({"joint_states": (sub, L.STATE_FILTER)}))
         self.watch = PublisherWatch(self, ["joint_states"])
         self.get_logger().info(f"NDO ready: X = {self.v['X']}, h = {self.h * 1e3:.3f} ms")
 
@@ -100,7 +102,8 @@ class DisturbanceObserver(Node, GracefulNodeMixin):
         return self.count
 
     def diagnostic_status(self):
-        return OK, f"estimating; X = {self.v['X']}", {"estimates": self.count}
+        return OK, f"estimating; X = {self.v['X']}", {"estimates": self.count,
+                                                       "input_filter": self.input.filter_status()}
 
     def on_shutdown(self) -> None:
         self.get_logger().info(f"estimated {self.count} states; rejected: {self.rejects.summary()}")

@@ -109,10 +109,15 @@ class DscndoController(Node, GracefulNodeMixin):
         self.cmd_pub = self.create_publisher(Float64, "wheel_torque_cmd", pub_qos)
         self.cmds_pub = self.create_publisher(JointState, "wheel_torques_cmd", pub_qos)   # the yaw stage's pair
         self.int_pub = self.create_publisher(JointState, "controller_internals", pub_qos)
-        self.create_subscription(JointState, "joint_states", self._on_state, in_qos, raw=True)
-        self.create_subscription(WrenchStamped, "disturbance_estimate", self._on_estimate, in_qos, raw=True)
+        state_sub = self.create_subscription(JointState, "joint_states", self._on_state, in_qos, raw=True)
+        estimate_sub = self.create_subscription(WrenchStamped, "disturbance_estimate", self._on_estimate, in_qos,
+                                                raw=True)
         self.input = StateInput(self, self.rejects, STAMP_WINDOW_PERIODS * round(P.period(self.v) * 1e9),
                                 "controller")
+        if self.v["mode"] == "realtime":   # a flood of absurd or far-future inputs is dropped by DDS (issue 46)
+            self.get_logger().info(self.input.filter_readers({"joint_states": (state_sub, L.STATE_FILTER),
+                                                              "disturbance_estimate": (estimate_sub,
+                                                                                       L.ESTIMATE_FILTER)}))
         self.watch = PublisherWatch(self, ["joint_states", "disturbance_estimate"])
         mc = motion_config(self.v)   # docs/theory.md 6.11: None while motion.enabled is false (nothing changes)
         self.motion = Shaper(mc, self.h, self.nominal) if mc is not None else None
@@ -371,7 +376,7 @@ class DscndoController(Node, GracefulNodeMixin):
 
     def diagnostic_status(self):
         values = {"commands": self.count, "law": self._name(), "waiting_states": len(self.states),
-                  "driver": self.driver or "unknown"}
+                  "driver": self.driver or "unknown", "input_filter": self.input.filter_status()}
         if self.motion is not None:   # docs/theory.md 6.11: the stops and the refused or clipped cmd_vel
             m = self.motion
             values.update(cmd_vel_accepted=m.accepted, cmd_vel_timeouts=m.timeouts, cmd_vel_rejected=m.rejected,
