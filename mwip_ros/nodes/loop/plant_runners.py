@@ -33,6 +33,7 @@ from typing import Dict, Optional
 
 import numpy as np
 
+from mwip_ros.nodes.runtime import stallprobe
 from mwip_ros.nodes.runtime.process import EXIT_ERROR
 from mwip_ros.nodes.runtime.schedule import Schedule, TickLog
 
@@ -177,6 +178,7 @@ class RealtimeRunner(_Runner):
         """A wake of the timer: finish every period that became due since the last wake (the schedule keeps the
         clock's grid: a late wake catches up, its missed periods counted), then publish the newest state."""
         n = self.node
+        stallprobe.beat()   # a debugging aid: nothing unless MWIP_STALL_PROBE is set
         wake = self.schedule.wake(self._now())
         if not wake.periods:   # before the next deadline: nothing is due
             return

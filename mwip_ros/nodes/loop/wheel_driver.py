@@ -82,6 +82,7 @@ from mwip_ros.core.safety import HISTORY, Transition
 from mwip_ros.msgs import BadMessage, cdr
 from mwip_ros.msgs import layouts as L
 from mwip_ros.msgs.qos import BEST_EFFORT_INPUT_QOS, DRIVER_STATE_QOS, INPUT_QOS, SERVICE_QOS, qos_for
+from mwip_ros.nodes.runtime import stallprobe
 from mwip_ros.nodes.runtime.diagnostics import ERROR, OK, WARN
 from mwip_ros.nodes.runtime.driver_state import publish_transition
 from mwip_ros.nodes.runtime.guards import PublisherWatch, Rejects
@@ -507,6 +508,7 @@ class WheelDriverNode(Node, GracefulNodeMixin):
 
     def _tick(self) -> None:
         """A realtime wake: the period(s) due (module doc), then the read published."""
+        stallprobe.beat()   # a debugging aid: nothing unless MWIP_STALL_PROBE is set
         wake = self.schedule.wake(self._now_ns())
         if not wake.periods or self.done:
             return

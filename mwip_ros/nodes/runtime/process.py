@@ -315,8 +315,6 @@ def run_node(factory: Callable[..., object], argv: Optional[Sequence[str]] = Non
                 diagnostics.tick()
                 if memtrace is not None:
                     memtrace.tick()
-                if probe is not None:
-                    probe.beat()
         except StopRequested:
             pass
         if stop["signal"] is not None:

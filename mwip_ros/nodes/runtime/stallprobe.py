@@ -2,16 +2,16 @@
 
     MWIP_STALL_PROBE=/tmp/probe [MWIP_STALL_PROBE_MS=60] [MWIP_STALL_PROBE_NODES=plant_sim,...] plant_sim ...
 
-With it set, ``run_node`` writes the monotonic time into a small shared file after each turn of its loop
-(:meth:`StallProbe.beat`, a store into a memory map) and starts a watcher process (this module run as a script) that
-reads that file every 2 ms. When the loop has not turned for ``MWIP_STALL_PROBE_MS`` ms (default 60: a realtime
-loop turns at least once a period), the watcher appends to ``<dir>/<node>-<pid>.stalls`` what every thread of the
+With it set, ``run_node`` makes the probe, and the node's realtime tick (plant_sim's runner, the wheel driver)
+writes the monotonic time into a small shared file at each wake (:func:`beat`: a store into a memory map; a no-op
+without the variable), and a watcher process (this module run as a script) that
+reads that file every 2 ms. When the tick has not run for ``MWIP_STALL_PROBE_MS`` ms (default 60: a realtime
+loop wakes at least once a period), the watcher appends to ``<dir>/<node>-<pid>.stalls`` what every thread of the
 node is doing: from ``/proc`` at once (its state, the kernel function it waits in, the system call and its
 arguments, the kernel stack when readable), then, if ``py-spy`` is on the PATH, the native and Python stack of each
 thread (``py-spy dump --native``: it pauses the node for about 0.2 s, so a probed run misses more deadlines). One
-report per stall; the stall's length is written when the loop turns again. A lockstep node waits for its input
-without turning: probe realtime nodes (``MWIP_STALL_PROBE_NODES``: only these, comma-separated; default every node).
-Without the variable nothing here runs.
+report per stall; the stall's length is written when the tick runs again (``MWIP_STALL_PROBE_NODES``: probe only
+these nodes, comma-separated; default every node that ticks). Without the variable nothing here runs.
 """
 from __future__ import annotations
 
@@ -25,9 +25,16 @@ import time
 from pathlib import Path
 from typing import List, Optional
 
-__all__ = ["StallProbe", "from_environment"]
+__all__ = ["StallProbe", "from_environment", "beat"]
 
 _BEAT = struct.Struct("=q")
+_ACTIVE: List["StallProbe"] = []   # this process's probe, while one runs
+
+
+def beat() -> None:
+    """The realtime tick ran: now (nothing without a probe)."""
+    if _ACTIVE:
+        _ACTIVE[0].beat()
 
 
 class StallProbe:
@@ -47,12 +54,13 @@ class StallProbe:
         directory.mkdir(parents=True, exist_ok=True)
         stem = directory / f"{name}-{os.getpid()}"
         self.path = stem.with_suffix(".beat")
-        self.path.write_bytes(_BEAT.pack(time.monotonic_ns()))
+        self.path.write_bytes(_BEAT.pack(0))   # 0: no tick yet (a node that never ticks is never reported)
         self._file = open(self.path, "r+b")   # noqa: SIM115 (held for the node's life)
         self._map = mmap.mmap(self._file.fileno(), _BEAT.size)
         self.watcher = subprocess.Popen(
             [sys.executable, __file__, str(os.getpid()), str(self.path), str(stem.with_suffix(".stalls")),
              str(threshold_ms)], stdin=subprocess.DEVNULL, start_new_session=True)
+        _ACTIVE[:] = [self]
 
     def beat(self) -> None:
         """The loop turned: now."""
@@ -60,6 +68,7 @@ class StallProbe:
 
     def close(self) -> None:
         """Stop the watcher; the report stays."""
+        _ACTIVE.clear()
         self.watcher.terminate()
         try:
             self.watcher.wait(timeout=5)
@@ -111,9 +120,9 @@ def watch(pid: int, beat_path: str, out_path: str, threshold_ms: float) -> None:
         while os.path.exists(f"/proc/{pid}"):
             last = _BEAT.unpack_from(beats, 0)[0]
             now = time.monotonic_ns()
-            if stalled_since is None and now - last > threshold:
+            if stalled_since is None and last and now - last > threshold:
                 stalled_since = last
-                report = [f"stall: the loop has not turned for {(now - last) / 1e6:.0f} ms "
+                report = [f"stall: the tick has not run for {(now - last) / 1e6:.0f} ms "
                           f"(at monotonic {now / 1e9:.3f} s)"] + _threads(pid)
                 if spy:
                     dump = subprocess.run([spy, "dump", "--native", "--pid", str(pid)], capture_output=True,
@@ -124,7 +133,7 @@ def watch(pid: int, beat_path: str, out_path: str, threshold_ms: float) -> None:
                     out.write("\n".join(report) + "\n")
             elif stalled_since is not None and last != stalled_since:
                 with open(out_path, "a") as out:
-                    out.write(f"  the loop turned again after {(last - stalled_since) / 1e6:.0f} ms\n\n")
+                    out.write(f"  the tick ran again after {(last - stalled_since) / 1e6:.0f} ms\n\n")
                 stalled_since = None
             time.sleep(0.002)
 
