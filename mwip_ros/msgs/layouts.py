@@ -56,7 +56,7 @@ __all__ = ["JOINT_NAMES", "INTERNAL_NAMES", "LIMITS", "RAW_LIMITS", "IMU_FRAME",
            "encode_command", "encode_clock", "encode_external_wrench", "parse_joint_state", "parse_wrench",
            "parse_command", "parse_clock", "parse_internals", "parse_external_wrench", "encode_imu", "parse_imu",
            "encode_encoder", "parse_encoder", "parse_odometry", "check_state", "RAW_FILTERS", "CMD_VEL_FILTER",
-           "STAMP_BOUND", "STATE_FILTER", "ESTIMATE_FILTER",
+           "STATE_FILTER", "ESTIMATE_FILTER",
            "encode_twist", "parse_twist", "POSE_FRAME", "encode_pose", "parse_pose", "parse_bool", "YAW_JOINT",
            "parse_yaw_rate",
            "WHEEL_TORQUE_JOINTS", "encode_wheel_torques", "parse_wheel_torques", "encode_wheel_states",
@@ -123,16 +123,14 @@ RAW_FILTERS = {
 CMD_VEL_FILTER = f"{_inside('linear.x', ABSURD_SPEED)} AND {_inside('angular.z', ABSURD_YAW_RATE)}"
 
 # The control inputs' DDS content filters (the observer's and the controller's realtime joint_states and
-# disturbance_estimate readers, nodes.runtime.content_filter.StampBound; issue 46 item 2): what parse_joint_state and
-# parse_wrench reject for their numbers, whatever the joints' order (both positions within theta_w's limit, the
-# looser; both rates within the rate's), and a stamp beyond the stream's moving bound ``%0`` (whole seconds: the
-# StampGuard's window past the stream's newest stamp, widened by the time the stream has been silent, so that a
-# paused publisher's stamps still come through).  A flood of far-future or absurd states is dropped by the writer's
-# middleware; the parsers and the StampGuard stay the judges of what passes.
-STAMP_BOUND = "header.stamp.sec < %0"
-STATE_FILTER = " AND ".join([_inside(f"{f}[{i}]", LIMITS[k]) for f, k in (("position", "theta_w"), ("velocity", "rate"))
-                             for i in (0, 1)] + [STAMP_BOUND])
-ESTIMATE_FILTER = " AND ".join([_inside(f"wrench.torque.{a}", LIMITS["torque"]) for a in "xy"] + [STAMP_BOUND])
+# disturbance_estimate readers, nodes.runtime.state_input; issue 46 item 2): what parse_joint_state and parse_wrench
+# reject for their numbers, whatever the joints' order (both positions within theta_w's limit, the looser; both rates
+# within the rate's), and bytes that cannot be deserialized.  Stamps are not judged here: a bound that moves with the
+# stream needs the filter's parameters changed as it runs, and Fast DDS 2.14's writers crashed (a segmentation fault in
+# the plant's publish) when a reader changed them under a flood; the StampGuard judges (and counts) stamps.
+STATE_FILTER = " AND ".join(_inside(f"{f}[{i}]", LIMITS[k]) for f, k in (("position", "theta_w"), ("velocity", "rate"))
+                            for i in (0, 1))
+ESTIMATE_FILTER = " AND ".join(_inside(f"wrench.torque.{a}", LIMITS["torque"]) for a in "xy")
 
 _STATE = cdr.JointStateEncoder(JOINT_NAMES)
 _STATE_YAW = cdr.JointStateEncoder(JOINT_NAMES + (YAW_JOINT,))

@@ -125,10 +125,6 @@ class StampGuard:
         runs.clear()
         return RESTART
 
-    def silent_s(self) -> float:
-        """Seconds since the stream's time last moved (since the start when it has not)."""
-        return time.monotonic() - self._moved_at if self.last is not None else 0.0
-
     def commit(self, stamp: int) -> None:
         """``stamp`` (judged :data:`NEW`) is the stream's time now."""
         if self.last is None or stamp > self.last:

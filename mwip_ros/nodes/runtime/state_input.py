@@ -8,17 +8,15 @@ Each state is parsed by the message layer (:func:`mwip_ros.msgs.layouts.parse_jo
 """
 from __future__ import annotations
 
-from typing import Dict, Optional, Tuple
+from typing import Dict, Tuple
 
 from mwip_ros.msgs import BadMessage
 from mwip_ros.msgs.layouts import parse_joint_state
-from mwip_ros.nodes.runtime.content_filter import NO_BOUND, StampBound
+from mwip_ros.nodes.runtime.content_filter import set_content_filter
 from mwip_ros.nodes.runtime.guards import NEW, REPEAT, RESTART, StampGuard, sole_publisher
 from mwip_ros.nodes.runtime.rclpy_compat import use_ros_time_override
 
-__all__ = ["StateInput", "FOLLOW_S"]
-
-FOLLOW_S = 0.25   # [s] how often a realtime node moves its readers' stamp bound (it moves by whole seconds)
+__all__ = ["StateInput"]
 
 
 class StateInput:
@@ -34,7 +32,7 @@ class StateInput:
     def __init__(self, node, rejects, window_ns: int, who: str):
         self.guard = StampGuard(window_ns, "joint_states stamp", sole_publisher(node, "joint_states"))
         self.node, self.rejects, self.who = node, rejects, who
-        self.bound = None   # the readers' moving stamp bound (content_filter.StampBound), realtime only
+        self.filtered = False   # DDS content filters on the node's readers of the stream (realtime)
         self._clock = None
         if not node.get_parameter("use_sim_time").value:
             from rclpy.time import Time
@@ -59,30 +57,24 @@ class StateInput:
             return None
         return verdict, stamp, x, u_prev, last
 
-    def filter_readers(self, readers: Dict[str, Tuple[object, str]]) -> Optional[str]:
-        """Realtime: a DDS content filter on each reader of the stream (``{topic: (subscription, expression)}``, the
-        expressions of ``layouts.STATE_FILTER`` / ``ESTIMATE_FILTER``) whose stamp bound follows this stream's
-        StampGuard (:class:`~.content_filter.StampBound`, moved by a timer every :data:`FOLLOW_S`); the line the node
-        logs. What the middleware drops is not counted; the parsers and the StampGuard still judge what passes."""
-        self.bound = bound = StampBound(readers, self.guard.window_ns)
+    def filter_readers(self, readers: Dict[str, Tuple[object, str]]) -> str:
+        """Realtime: a DDS content filter on each reader ``{topic: (subscription, expression)}`` (the expressions
+        ``layouts.STATE_FILTER``, ``ESTIMATE_FILTER``), so that a flood of absurd or undecodable inputs is dropped by
+        the middleware, at the writer where it can, and costs the control loop nothing; the line the node logs. What
+        is dropped is not counted; the parsers and the StampGuard still judge what passes (stamps: not filtered)."""
+        tried = {t: set_content_filter(sub, expression) for t, (sub, expression) in readers.items()}
+        why = {t: w for t, w in tried.items() if w}
         topics = " and ".join(readers)
-        if bound.unfiltered:
-            return "no content filter (" + "; ".join(f"{t}: {w}" for t, w in bound.unfiltered.items()) + \
+        self.filtered = not why
+        if why:
+            return "no content filter (" + "; ".join(f"{t}: {w}" for t, w in why.items()) + \
                 f"): every message on {topics} reaches the parser"
-        from rclpy.clock import Clock, ClockType   # the wall's: the node's clock follows the stream (it stands still
-        self.node.create_timer(FOLLOW_S, lambda: bound.follow(self.guard.last, self.guard.silent_s()),   # when silent)
-                               clock=Clock(clock_type=ClockType.STEADY_TIME))
-        return (f"content filter on {topics}: a message with a value outside the plausible limits (NaN too), a stamp "
-                f"more than {bound.SLACK_S} s beyond the stream's newest (and its silence), or that cannot be "
-                f"deserialized, is dropped by DDS and not counted")
+        return (f"content filter on {topics}: a message with a value that is not finite or beyond the plausible "
+                f"limits, or that cannot be deserialized, is dropped by DDS and not counted")
 
     def filter_status(self) -> str:
-        """/diagnostics' ``input_filter``: whether DDS filters the stream's readers, and the stamp bound now."""
-        b = self.bound
-        if b is None or b.unfiltered:
-            return "off"
-        bound = "none yet" if b.bound >= NO_BOUND else f"{b.bound} s"
-        return f"on: absurd values and stamps beyond the bound ({bound}, moved {b.moves} times) are dropped by DDS"
+        """/diagnostics' ``input_filter``: whether DDS filters the stream's readers."""
+        return "on: non-finite or absurd values are dropped by DDS, not counted" if self.filtered else "off"
 
     def answered(self, stamp: int) -> None:
         """The node published its answer to the state of ``stamp``: its clock reads that stamp now."""
