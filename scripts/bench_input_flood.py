@@ -5,14 +5,15 @@
         [--flood-s 5] [--markdown FILE]
 
 Per topic (default: none, then cmd_vel, emergency_stop, external_wrench, driver_state, disturbance_estimate,
-joint_states) it runs the realtime graph (disturbance_observer, dscndo_controller, plant_sim for ``--flood-s`` + 3 s;
-the parameter files default to config/paper.yaml and config/drive.yaml: the MuJoCo plant, cmd_vel tracked, the yaw
-stage) and, from the 100th state, ``test/side_flooder.py`` on that topic for ``--flood-s`` seconds (what each topic
-gets: see that file; ``none``: no flooder, the machine's own baseline).  It prints one row per run: what the
-flooder sent and its rate, whether the robot stayed up (or when it fell, or the driver's fault), the plant's period
-(p99 and the longest), its missed deadlines and stale-command substitutions, the states the controller answered,
-and the wall time the run took against its simulated time.  The numbers are this machine's at that moment (print
-``uptime`` beside them): BENCHMARKS.md, "Input floods", has a table.  Exit 0.
+joint_states, and the last two's ``_bad`` kinds: NaN and absurd values) it runs the realtime graph
+(disturbance_observer, dscndo_controller, plant_sim for ``--flood-s`` + 3 s; the parameter files default to
+config/paper.yaml and config/drive.yaml: the MuJoCo plant, cmd_vel tracked, the yaw stage) and, from the 100th state,
+``test/side_flooder.py`` on that topic for ``--flood-s`` seconds (what each topic gets: see that file; ``none``: no
+flooder, the machine's own baseline). It prints one row per run: what the flooder sent and its rate, whether the robot
+stayed up (or when it fell, or the driver's fault), the plant's period (p99 and the longest), its missed deadlines and
+stale-command substitutions, the states the controller answered, and the wall time the run took against its simulated
+time. The numbers are this machine's at that moment (print ``uptime`` beside them): BENCHMARKS.md, "Input floods", has a
+table. Exit 0.
 """
 from __future__ import annotations
 
@@ -30,7 +31,7 @@ from graphproc import Graph  # noqa: E402
 
 FLOODER = REPO / "test" / "side_flooder.py"
 TOPICS = ("none", "cmd_vel", "cmd_vel_bad", "cmd_vel_valid", "emergency_stop", "external_wrench", "driver_state",
-          "disturbance_estimate", "joint_states")
+          "disturbance_estimate", "joint_states", "disturbance_estimate_bad", "joint_states_bad")
 
 
 def run(work: Path, topic: str, files, flood_s: float) -> dict:

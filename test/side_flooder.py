@@ -3,15 +3,16 @@ scripts/bench_input_flood.py, by hand).
 
     python test/side_flooder.py TOPICS DURATION [STATES] [--ros-args ...]
 
-publishes as fast as it can, for DURATION seconds of wall time, on each of TOPICS (comma-separated, any of
-``cmd_vel``, ``cmd_vel_bad``, ``cmd_vel_valid``, ``emergency_stop``, ``external_wrench``, ``driver_state``,
-``disturbance_estimate``, ``joint_states``) in turn, starting once it heard STATES (default 100) ``joint_states`` (the
-loop runs).  Each topic gets what a hostile publisher would send: cmd_vel a NaN Twist and a valid one (0.3 m/s) in
-turn, emergency_stop false (released), external_wrench a zero wrench, cmd_vel_bad Twists with NaN, inf and 1e300 in
-linear.x or angular.z (every one to be rejected), cmd_vel_valid valid Twists of +-0.3 m/s in turn (both on
-``cmd_vel``, beside a second publisher's 20 Hz stream of a valid command, 0.2 m/s: the operator's), driver_state an
-``enabled`` record, disturbance_estimate and joint_states stamps 1,000 s ahead (rejected).  Prints ``flooded N in S
-s`` (the messages, all topics) and exits 0.
+publishes as fast as it can, for DURATION seconds of wall time, on each of TOPICS (comma-separated, any of ``cmd_vel``,
+``cmd_vel_bad``, ``cmd_vel_valid``, ``emergency_stop``, ``external_wrench``, ``driver_state``, ``disturbance_estimate``,
+``joint_states``, ``disturbance_estimate_bad``, ``joint_states_bad``) in turn, starting once it heard STATES (default
+100) ``joint_states`` (the loop runs). Each topic gets what a hostile publisher would send: cmd_vel a NaN Twist and a
+valid one (0.3 m/s) in turn, emergency_stop false (released), external_wrench a zero wrench, cmd_vel_bad Twists with
+NaN, inf and 1e300 in linear.x or angular.z (every one to be rejected), cmd_vel_valid valid Twists of +-0.3 m/s in turn
+(both on ``cmd_vel``, beside a second publisher's 20 Hz stream of a valid command, 0.2 m/s: the operator's),
+driver_state an ``enabled`` record, disturbance_estimate and joint_states stamps 1,000 s ahead (rejected), their
+``_bad`` kinds NaN, inf and absurd values (dropped by the realtime nodes' content filters, layouts.STATE_FILTER /
+ESTIMATE_FILTER). Prints ``flooded N in S s`` (the messages, all topics) and exits 0.
 """
 import json
 import sys
@@ -43,6 +44,10 @@ def streams(topics):
                                                          for i in range(50)]),
         "joint_states": lambda: (JointState, [L.encode_state(ahead + i * 5_000_000, (0.0,) * 4, 0.0)
                                               for i in range(50)]),
+        "disturbance_estimate_bad": lambda: (WrenchStamped, [L.encode_wrench(0, v, 0.0) for v in (nan, inf, 1e300)]
+                                             + [L.encode_wrench(0, 0.0, v) for v in (nan, -inf, -1e300)]),
+        "joint_states_bad": lambda: (JointState, [L.encode_state(0, tuple(v if j == i else 0.0 for j in range(4)), 0.0)
+                                                  for i in range(4) for v in (nan, inf, 1e300)]),
     }
     return [(t_m[0], t.split("_bad")[0].split("_valid")[0], t_m[1]) for t, t_m in ((t, known[t]()) for t in topics)]
 
