@@ -275,7 +275,7 @@ def test_a_fall_ends_the_job_with_exit_3_after_every_run_and_the_report(tmp_path
                        capture_output=True, text=True, timeout=300, env=script_env(), cwd=tmp_path)
     assert r.returncode == 3, r.stdout[-3000:] + r.stderr[-3000:]
     assert r.stdout.count("FALLEN at t = ") == 2   # both runs ran, and each fall was shown live
-    assert "the robot fell in: dsc dscndo (exit 3)" in r.stderr
+    assert "the robot fell in: dsc dscndo (exit 3)" in r.stderr and r.stderr.count("the robot fell in") == 1
     # said once per fall: the first run's line says the job goes on; the last run's fall is in the closing line only
     assert "FELL in the dsc run; the next run and the report go on" in r.stderr and "dscndo run" not in r.stderr
     report = next((tmp_path / "out").glob("*_report"))   # --out relative to where the command ran

@@ -78,6 +78,21 @@ def title_of(runs: Sequence, what: str = "MWIP") -> str:
     return f"{what}: " + " vs ".join(labels) if labels else what
 
 
+def _suptitle(fig, text: str):
+    """``fig.suptitle(text)``, wrapped at spaces into as few lines as fit the figure's width (a title naming
+    parameter files by their absolute paths is not cut at both edges)."""
+    title = fig.suptitle(text)
+    renderer = fig.canvas.get_renderer()
+    width = 0.98 * fig.bbox.width
+    if title.get_window_extent(renderer).width <= width:
+        return title
+    for chars in range(len(text) - 1, 9, -1):
+        title.set_text(textwrap.fill(text, chars, break_long_words=False, break_on_hyphens=False))
+        if title.get_window_extent(renderer).width <= width:
+            break
+    return title
+
+
 def _window_label(window) -> str:
     return f"metrics window [{window[0]:g}, {window[1]:g}] s"
 
@@ -189,7 +204,7 @@ def fig3(runs: Sequence, path, title: Optional[str] = None, window=None, falls: 
                       va="top")
     top = _legend_outside(fig, axes)
     axes[-1].set_xlabel("t [s]")
-    fig.suptitle(title or title_of(runs))
+    _suptitle(fig, title or title_of(runs))
     fig.tight_layout(rect=(0, 0, 1, top))
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -220,7 +235,7 @@ def speed_plot(runs: Sequence, path, r: float, source: str = "", falls: Optional
             ax.legend(loc="center right", fontsize=8, handles=ax.get_legend_handles_labels()[0][2:])
     axes[0, 0].legend(loc="upper right", fontsize=8, handles=axes[0, 0].get_legend_handles_labels()[0][:2])
     axes[-1, 0].set_xlabel("t [s]")
-    fig.suptitle("speed and its reference" + (f" ({source})" if source else ""))
+    _suptitle(fig, "speed and its reference" + (f" ({source})" if source else ""))
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)
@@ -338,7 +353,7 @@ def observer_plot(runs: Sequence, path, window=None) -> None:
             ax.grid(True, alpha=0.3)
         axes[-1][j].set_xlabel("t [s]")
     top = _legend_outside(fig, axes.ravel())
-    fig.suptitle(title_of(runs, "Lumped disturbance and its estimate"))
+    _suptitle(fig, title_of(runs, "Lumped disturbance and its estimate"))
     fig.tight_layout(rect=(0, 0, 1, top))
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -368,7 +383,7 @@ def pitch_estimate_plot(runs: Sequence, path, window=None) -> bool:
         top.set_title(f"{run.label}: body pitch")
         bottom.set_xlabel("t [s]")
     top = _legend_outside(fig, axes.ravel())
-    fig.suptitle(title_of(runs, "Body pitch and its estimate (raw IMU and encoder)"))
+    _suptitle(fig, title_of(runs, "Body pitch and its estimate (raw IMU and encoder)"))
     fig.tight_layout(rect=(0, 0, 1, top))
     fig.savefig(path, dpi=110)
     plt.close(fig)

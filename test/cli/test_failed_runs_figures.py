@@ -113,3 +113,18 @@ def test_a_narrow_figures_legend_is_not_cut_at_its_edges(tmp_path, saved):
     box = fig.legends[0].get_window_extent()
     assert box.x0 >= 0 and box.x1 <= fig.bbox.width
     assert not any(box.overlaps(ax.get_window_extent()) for ax in fig.axes)
+
+
+def test_a_long_title_is_wrapped_inside_the_figure_not_cut_at_its_edges(tmp_path, saved):
+    """The speed figure is titled after the files as the user named them: run from another directory, two absolute
+    paths (about 110 characters) were cut at both edges of the 8.5 in figure; the title is wrapped to fit."""
+    runs = [make_run("lqr"), make_run("dscndo")]
+    source = "/work/wt/h54-verify47/config/paper.yaml /work/wt/h54-verify47/config/square.yaml"
+    plotting.speed_plot(runs, tmp_path / "s.png", R, source)
+    fig = saved[-1]
+    fig.canvas.draw()
+    title = fig._suptitle
+    box = title.get_window_extent()
+    assert box.x0 >= 0 and box.x1 <= fig.bbox.width and box.y1 <= fig.bbox.height, (box, fig.bbox)
+    assert title.get_text().replace("\n", " ") == f"speed and its reference ({source})"   # every word kept
+    assert not any(box.overlaps(ax.get_window_extent()) for ax in fig.axes)

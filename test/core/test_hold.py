@@ -29,10 +29,10 @@ def _stop_run(law: str):
 @pytest.mark.parametrize("law", ["dscndo", "lqr_ndo"])
 def test_after_a_stop_the_robot_holds_where_it_came_to_rest(law):
     """Below 0.05 m/s within 3 s of v* reaching 0, and then near where it first came to rest (its speed reached
-    zero): over the last period of the paper's disturbance (pi s) its mean position is within 15 cm of it (measured
-    -0.9 cm, and -12 cm: LQR+NDO settles in a slow swing, 15 cm peak to peak, and its reference moved to a later
-    rest 10 cm on; before, the position loop pulled them back to where the references stopped, -56 and -91 cm
-    from where they first came below 0.05 m/s)."""
+    zero): over the last period of the paper's disturbance (pi s) its mean position is within 5 cm of it (measured
+    +0.9 and -1.7 cm, as scripts/stop_hold.py prints; plain DSC, without the observer's hold estimate, -19 cm;
+    before, the position loop pulled them back to where the references stopped, -56 and -91 cm from where they
+    first came below 0.05 m/s)."""
     run = _stop_run(law)
     assert not run.fallen
     t, x, v = run["t"], 0.254 * run["theta_w"], 0.254 * run["dtheta_w"]
@@ -40,7 +40,7 @@ def test_after_a_stop_the_robot_holds_where_it_came_to_rest(law):
     assert t[k0 + int(np.argmax(np.abs(v[k0:]) < 0.05))] - t[k0] < 3.0
     rest = k0 + 1 + int(np.argmax(v[k0 + 1:] * v[k0:-1] <= 0.0))
     last = t >= t[-1] - math.pi
-    assert abs(float(np.mean(x[last])) - x[rest]) < 0.15
+    assert abs(float(np.mean(x[last])) - x[rest]) < 0.05
 
 
 @pytest.mark.parametrize("law", ["dscndo", "lqr_ndo"])

@@ -74,3 +74,19 @@ def test_the_true_disturbance_is_undefined_while_a_wheel_is_off_the_ground():
     assert all(math.isnan(t) for t in p.lumped_disturbance(10.0)) and not p.on_ground()
     p.data.qpos[2] -= 0.01
     assert all(math.isfinite(t) for t in p.lumped_disturbance(10.0)) and p.on_ground()
+
+
+def test_the_periods_without_a_true_disturbance_are_left_out_of_the_observers_error(square):
+    """A period with a wheel off the ground has no tau_d (NaN): tau_hat's error RMS is over the periods that have
+    one, not NaN and not spoilt by them (the report's "tau_hat1 err RMS" of a run that hops)."""
+    v, c, _, _ = square
+    cols = {k: np.array(x, dtype=float, copy=True) for k, x in c.items()}
+    t = cols["t"]
+    lifted = (t >= 6.0) & (t < 6.5)   # half a second in the window [5, 10] s without a true disturbance
+    for i in (1, 2):
+        cols[f"tau_d{i}"][lifted] = np.nan
+    m = metrics.compute(cols, (5.0, 10.0), v["fall_angle"])
+    window = (t >= 5.0) & (t <= 10.0) & ~lifted
+    for i, got in ((1, m.tau_err1_rms), (2, m.tau_err2_rms)):
+        err = cols[f"tau_hat{i}"][window] - cols[f"tau_d{i}"][window]
+        assert math.isfinite(got) and got == pytest.approx(float(np.sqrt(np.mean(err ** 2))), rel=1e-9)

@@ -76,3 +76,25 @@ def test_a_state_the_odometry_refuses_publishes_nothing(monkeypatch):
         h.feed("joint_states", _state(3))
         assert len(h.sent("odom")) == n and len(h.sent("wheel_joint_states")) == n
         assert "odometry refuses" in h.logs()
+
+
+def test_a_stall_of_the_plant_pauses_the_stream_and_the_odometry_goes_on():
+    """The realtime plant keeps the clock's schedule (issue 47 item 2): after a stall of its process (335 ms, seen on
+    the drive graph when a mwip_ctl joined) its next state is stamped 72 periods on, wider than the stamp window.
+    That is the stream's own publisher going on after a pause, not a new run: the robot is where it was, so odom
+    goes on (integrating over the gap) instead of restarting at the origin (1.3 m lost on the drive graph)."""
+    import time
+    with NodeHarness(node_class("robot_state")) as h:
+        _stream(h, range(0, 201))   # 1 s at 4 rad/s
+        time.sleep(0.15)            # the plant's process stalled: nothing for longer than the stamp window
+        deadline = time.monotonic() + 3.0
+        k = 273
+        while h.node.restarts == 0 and time.monotonic() < deadline:   # its late states, a period apart
+            _stream(h, [k])
+            k += 1
+            time.sleep(0.005)
+        assert h.node.restarts == 1, h.logs()[-2000:]
+        _stream(h, range(k, 401))
+        assert "restarts at the origin" not in h.logs()
+        # v = r theta_w' = 4 R all along, the gap too: odom is the whole 2 s of it
+        assert _x(h) == pytest.approx(R * 4.0 * 400 * H_NS * 1e-9, rel=1e-9)

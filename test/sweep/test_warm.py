@@ -3,11 +3,13 @@ sweep's chunks run that numba's cache lacks, each once; compiled first with a li
 shipped loops set-up compiles; the cache's answer. Nothing here compiles a batch loop (a test compiles one trivial
 function)."""
 import importlib
+import re
 import sys
 import threading
 from types import SimpleNamespace
 
 import pytest
+from graphproc import REPO
 
 from mwip_ros import params as P
 from mwip_ros.core import jitcache
@@ -101,3 +103,17 @@ def test_the_cache_says_whether_a_functions_machine_code_is_there(tmp_path, monk
         assert jitcache.cached(SimpleNamespace()) is None   # not a dispatcher: not known
     finally:
         sys.modules.pop("warm_probe", None)
+
+
+def test_set_up_runs_the_compile_after_the_install_unless_its_caller_does_it():
+    """The first sweep of a fresh clone at the speed of the next (issue 47 item 5: 99.9 s before, nothing said; 8.8 s
+    after scripts/setup.sh at a load average of 4): setup.sh, which run_experiment.sh and test.sh run first, runs
+    ``python -m mwip_ros.sweep.warm`` once the package is installed and before it stamps the environment up to date,
+    except with MWIP_SETUP_WARM=0 (scripts/test.sh compiles them itself)."""
+    script = (REPO / "scripts" / "setup.sh").read_text()
+    code = [line.strip() for line in script.splitlines() if line.strip() and not line.strip().startswith("#")]
+    warm_at = next(i for i, line in enumerate(code) if re.search(r"-m mwip_ros\.sweep\.warm( |$)", line))
+    install_at = max(i for i, line in enumerate(code) if "pip_install" in line and "-e ." in line)
+    stamp_at = next(i for i, line in enumerate(code) if line.startswith('echo "$WANT" > "$STAMP"'))
+    assert install_at < warm_at < stamp_at
+    assert 'if [ "${MWIP_SETUP_WARM:-1}" = "0" ]; then' in code[warm_at - 3:warm_at]

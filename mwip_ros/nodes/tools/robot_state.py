@@ -111,11 +111,20 @@ class RobotState(Node, GracefulNodeMixin):
         except BadMessage as exc:
             self.rejects("joint_states", str(exc))
             return
+        last, publisher = self.guard.last, getattr(self.guard.may_restart, "own", None)
         verdict = self.guard.check(stamp)
         if verdict == RESTART:
             self.restarts += 1
-            self.get_logger().info("joint_states restarted (a reset, a new plant): the odometry restarts at the origin")
-            self.odom.reset()
+            if last is not None and stamp > last and publisher is not None and \
+                    getattr(self.guard.may_restart, "own", None) == publisher:
+                # the stream's own publisher went on after a pause (a realtime plant that stalled keeps the clock's
+                # schedule: its next stamp is the gap ahead, docs/graph.md "Modes"): the robot is where it was
+                self.get_logger().info(f"joint_states went on after a gap of {(stamp - last) * 1e-9:.3f} s (the "
+                                       f"plant paused or stalled): the odometry goes on over it")
+            else:
+                self.get_logger().info("joint_states restarted (a reset, a new plant): the odometry restarts at the "
+                                       "origin")
+                self.odom.reset()
         elif verdict == REPEAT:
             self.rejects("joint_states", f"stamp {stamp} ns repeats the last one")
             return
