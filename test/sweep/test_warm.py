@@ -10,7 +10,7 @@ from types import SimpleNamespace
 import pytest
 
 from mwip_ros import params as P
-from mwip_ros.core import jitcache
+from mwip_ros.core.kernels import jitcache
 from mwip_ros.params.paths import default_params_file
 from mwip_ros.sweep import warm
 from mwip_ros.sweep.engine import Chunk
