@@ -11,6 +11,7 @@ another module (``core/control/lqr.py``'s ``lqr_u`` in a law's ``pure_step``) or
 from __future__ import annotations
 
 import hashlib
+import pickle
 import sys
 import types
 from pathlib import Path
@@ -18,8 +19,8 @@ from typing import Optional
 
 import numba
 import numpy as np
-from numba.core.caching import (CompileResultCacheImpl, FunctionCache, InTreeCacheLocator, UserProvidedCacheLocator,
-                                UserWideCacheLocator)
+from numba.core.caching import (CompileResultCacheImpl, FunctionCache, IndexDataCacheFile, InTreeCacheLocator,
+                                UserProvidedCacheLocator, UserWideCacheLocator)
 
 __all__ = ["jit", "made_of", "stamp_of", "cache_for", "stamped_cache", "load_cached", "cached"]
 
@@ -146,6 +147,19 @@ class _UserWide(_Stamped, UserWideCacheLocator):
 _LOCATORS = [_UserProvided, _InTree, _UserWide]   # numba's order: NUMBA_CACHE_DIR first
 
 
+class _Index(IndexDataCacheFile):
+    """numba's index of a function's cache files, where an index that no longer unpickles is stale (as one of another
+    stamp: the function is compiled afresh and the index written anew) instead of an error.  An index names the
+    classes of its signatures by module (a NamedTuple argument: ``compiled.Inertia``), so one written before a module
+    moved or a class was renamed raises ImportError or AttributeError in numba's own ``_load_index``."""
+
+    def _load_index(self):
+        try:
+            return super()._load_index()
+        except (ImportError, AttributeError, pickle.UnpicklingError):
+            return {}
+
+
 def stamped_cache(stamp: str, tag: str = "") -> type:
     """A numba function cache whose locators stamp with ``stamp``, in files of their own for ``tag``.
 
@@ -158,7 +172,11 @@ def stamped_cache(stamp: str, tag: str = "") -> type:
         return CompileResultCacheImpl.get_filename_base(self, f"{fullname}__{tag}" if tag else fullname, abiflags)
     impl = type("_Impl", (CompileResultCacheImpl,), {"_locator_classes": locs,
                                                      "get_filename_base": get_filename_base})
-    return type("_StampedCache", (FunctionCache,), {"_impl_class": impl})
+
+    def __init__(self, py_func):
+        FunctionCache.__init__(self, py_func)
+        self._cache_file.__class__ = _Index   # numba's index, read as above
+    return type("_StampedCache", (FunctionCache,), {"_impl_class": impl, "__init__": __init__})
 
 
 _CACHES: dict = {}

@@ -119,6 +119,29 @@ def test_each_lane_width_caches_its_kernels_in_files_of_its_own(tmp_path, monkey
             "<", "").replace(">", ""))   # no tag: numba's own name
 
 
+def test_an_index_that_names_a_module_since_moved_is_stale_not_an_error(tmp_path, monkeypatch):
+    """numba's index of a cached function pickles its signatures' classes by module (``compiled.Inertia``): an index
+    written before a module moved (issue 48: core/ into rooms) raised ModuleNotFoundError at the next compile; it is
+    stale, as one of another stamp, and the function compiles and caches afresh."""
+    import pickle
+
+    import numba
+    monkeypatch.setattr(numba.config, "CACHE_DIR", str(tmp_path))
+
+    def twice(x):   # a function of a file numba can cache (this one)
+        return 2.0 * x
+    index = Path(jitcache.jit(twice, "moved")._cache._cache_file._index_path)
+    index.parent.mkdir(parents=True, exist_ok=True)
+    # numba's header, then (stamp, overloads) naming a class of a module that is no more
+    index.write_bytes(pickle.dumps(numba.__version__) + b"cmwip_ros.core.compiled\nInertia\n.")
+    with pytest.raises(ModuleNotFoundError):
+        pickle.loads(index.read_bytes()[len(pickle.dumps(numba.__version__)):])
+    again = jitcache.jit(twice, "moved")
+    assert jitcache.cached(again) is False   # not an error: nothing cached under this stamp
+    assert again(1.5) == 3.0                 # compiled afresh
+    assert jitcache.cached(jitcache.jit(twice, "moved")) is True   # and cached again, the index written anew
+
+
 @pytest.mark.cli
 @pytest.mark.parametrize("cache_dir", [None, "numba_cache"])
 def test_an_edit_to_the_equations_is_compiled_afresh(tmp_path, cache_dir):
