@@ -7,34 +7,32 @@ is that stepper; it writes no stage of its own: each stage of :data:`mwip_ros.co
 (docs/theory.md, section 4) calls the compiled loop's own stage function robot by robot (:mod:`.kernels`) or the core's
 pure functions over arrays, in that order:
 
-* ``sensors``: a plant that measures the state, :func:`mwip_ros.core.kernels.compiled.sense_state` (noise from each
-robot's
-  own stream, :func:`~mwip_ros.core.plants.sensing.sensor_rng`, the encoder, the measurement delay queue); with raw
-  sensors (``sensors.model: raw``, docs/theory.md 6.4) the raw sample
+* ``sensors``: a plant that measures the state, :func:`mwip_ros.core.kernels.compiled_stages.sense_state` (noise from
+  each robot's own stream, :func:`~mwip_ros.core.plants.sensing.sensor_rng`, the encoder, the measurement delay queue);
+  with raw sensors (``sensors.model: raw``, docs/theory.md 6.4) the raw sample
   (:func:`~mwip_ros.core.plants.raw_sensors.raw_sample`, noise from each robot's
   :func:`~mwip_ros.core.plants.raw_sensors.raw_rng` stream) and its delay queue (:func:`.kernels.raw_kernel`);
 * ``estimator``: the identity, or with raw sensors the estimator's ``pure_step`` (:mod:`mwip_ros.core.estimators`,
   its state a row per robot; a restarted robot's next step is a first step), in the same kernel;
 * ``observer``: eq. (12)-(14), :func:`~mwip_ros.core.control.observer.z_start`,
-:func:`~mwip_ros.core.control.observer.z_next`,
-  :func:`~mwip_ros.core.control.observer.tau_hat_of` over arrays;
+  :func:`~mwip_ros.core.control.observer.z_next`, :func:`~mwip_ros.core.control.observer.tau_hat_of` over arrays;
 * ``law``: the base law's ``pure_step`` (:mod:`mwip_ros.core.laws`) and the observer term
   :func:`~mwip_ros.core.control.controller.u_taud_of`; with the motion references (``motion.enabled``, docs/theory.md
   6.11 and the hold, 6.14) the compiled loop's own stage, :func:`mwip_ros.core.kernels.compiled_motion.law_track`
-  (:func:`mwip_ros.core.kernels.compiled.track_for`), each robot with its references' state; a law without a pure step
-  (``mpc``: a QP per robot) is the law's own object per robot through :func:`mwip_ros.core.closed_loop.loop.command`
-  (with motion, a :class:`~mwip_ros.core.control.motion.Shaper` per robot; a restart is its ``reset``, a cold start);
-  then the excitation (:mod:`mwip_ros.core.identification.excitation`).  **The action enters here, once**: the env adds
-  the residual torque to this command (:meth:`Lanes.advance` takes the sum), where
+  (:func:`mwip_ros.core.kernels.compiled_stages.track_for`), each robot with its references' state; a law without a pure
+  step (``mpc``: a QP per robot) is the law's own object per robot through
+  :func:`mwip_ros.core.closed_loop.loop.command` (with motion, a :class:`~mwip_ros.core.control.motion.Shaper` per
+  robot; a restart is its ``reset``, a cold start); then the excitation
+  (:mod:`mwip_ros.core.identification.excitation`).  **The action enters here, once**: the env adds the residual torque
+  to this command (:meth:`Lanes.advance` takes the sum), where
   :func:`mwip_ros.core.closed_loop.loop.command` adds the excitation, before the drive;
 * ``yaw``: none (the planar plant; the MuJoCo plant's yaw stage runs in :class:`~mwip_ros.envs.scalar.MwipEnv`);
-* ``drive``: :func:`mwip_ros.core.kernels.compiled.drive_stage` (the driver's ``bad_command``, the torque limit, the
-  actuator delay queue), then the driver's gate (``require_enable``: the bridge open, zero torque);
+* ``drive``: :func:`mwip_ros.core.kernels.compiled_stages.drive_stage` (the driver's ``bad_command``, the torque limit,
+  the actuator delay queue), then the driver's gate (``require_enable``: the bridge open, zero torque);
 * ``plant``: D_w (:func:`~mwip_ros.core.plants.plant.D_w_of`'s arithmetic, each robot's own stream), tau_ext at each
-robot's
-  own t_k (:func:`~mwip_ros.core.plants.plant.stage_torques`, a table of the episode's periods), one RK4 period of eq.
-  (1) with the motor when the files have it (:func:`~mwip_ros.core.plants.plant.rk4_driven` compiled: :mod:`.kernels`),
-  the fall check.
+  robot's own t_k (:func:`~mwip_ros.core.plants.plant.stage_torques`, a table of the episode's periods), one RK4 period
+  of eq. (1) with the motor when the files have it (:func:`~mwip_ros.core.plants.plant.rk4_driven` compiled:
+  :mod:`.kernels`), the fall check.
 
 With ``require_enable: true`` the driver starts disabled and nobody enables it (as in ``mwip_sim``): its bridge is
 open in every period, no torque acts and the motor carries no current (:func:`~mwip_ros.core.plants.plant.gated_drive`);
@@ -50,7 +48,7 @@ from typing import Optional, Sequence
 import numpy as np
 
 from mwip_ros.core import estimators
-from mwip_ros.core.kernels.compiled import pure_form
+from mwip_ros.core.kernels.compiled_stages import pure_form
 from mwip_ros.core.kernels.compiled_motion import motion_arrays
 from mwip_ros.core.closed_loop.loop import command
 from mwip_ros.core.plants.model import State
@@ -138,7 +136,8 @@ class Lanes:
             if self.law is not None:
                 self.P = getattr(cls, "base", cls).pure_params(loop.params)
                 self.observer_term = bool(cls.observer)
-                if self.motion:   # the compiled loop's law stage with the references (core.kernels.compiled.track_for)
+                # the compiled loop's law stage with the references (core.kernels.compiled_stages.track_for)
+                if self.motion:
                     self.track = track_kernel(cls)
                     self.PA = np.array([float(v) for v in self.P])
                     self.nom = tuple(float(getattr(pc.nominal, f)) for f in TERMS)
@@ -167,8 +166,8 @@ class Lanes:
             self.PE = np.array([float(v) for v in est.make(pc.h, pc.nominal.r, pc.nominal.g).P])
             self.ES = np.zeros((n, estimators.get(est.method).state_size))
             self.zs = _Streams(n, 4, raw_rng) if pc.raw.noisy else None
-            # each robot's sensors' state (core.kernels.compiled.sense_raw): the gyro's bias, the previous phi, and what
-            # acted over the previous period (D_w, the drive's command): the raw sample's instant
+            # each robot's sensors' state (core.kernels.compiled_stages.sense_raw): the gyro's bias, the previous phi,
+            # and what acted over the previous period (D_w, the drive's command): the raw sample's instant
             self.RS = np.zeros((n, 4))
             self.RS[:, 0], self.RS[:, 2] = float(pc.raw.gyro_bias), float(pc.D_w_mean)
             rc = pc.raw   # r, d, g, gyro_noise_std, gyro_bias_walk, accel_noise_std, counts (r, g: each robot's)
@@ -225,7 +224,7 @@ class Lanes:
         x, u_m = self.x, self.u_prev
         if self.raw is not None:   # the raw sample, its delay and the estimator: kernels._sense_raw
             xm, u_m = self._sense_raw()
-        elif self.noisy or self.counts or self.delay:   # core.kernels.compiled.sense_state, robot by robot
+        elif self.noisy or self.counts or self.delay:   # core.kernels.compiled_stages.sense_state, robot by robot
             Z = self.zs.draw(np.ones(n, dtype=bool)) if self.noisy else np.zeros((1, 4))
             xm_, u_m = np.empty((4, n)), np.empty(n)
             sense(k, *x, self.u_prev, Z, self.noisy, self.std, self.counts, self.delay, self.qx, xm_, u_m)
@@ -294,7 +293,7 @@ class Lanes:
         of :mod:`mwip_ros.core.closed_loop.trajectory`)."""
         pc, k = self.pc, self.k
         # stage: yaw (none: the vector env runs the planar plant)
-        # stage: drive (core.kernels.compiled.drive_stage robot by robot, then the driver's gate)
+        # stage: drive (core.kernels.compiled_stages.drive_stage robot by robot, then the driver's gate)
         u, bad = np.empty(self.n), np.empty(self.n, dtype=bool)
         drive(np.ascontiguousarray(u_cmd, dtype=float), go, self.limit, self.qa, k, self.act_delay, self.enabled,
               u, bad)

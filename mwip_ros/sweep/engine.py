@@ -68,14 +68,14 @@ class ChunkResult:
 
 def chunk_size_for(controller: str, chunk_size: int = DEFAULT_CHUNK) -> int:
     """Scenarios per chunk of ``controller``: ``chunk_size``, at most :data:`SLOW_CHUNK` for a law without a pure
-    form (:func:`~mwip_ros.core.kernels.compiled.pure_form`: the batch cannot compile it), and for every law without
-    numba (the scalar loop runs each scenario: :func:`~mwip_ros.core.kernels.batch.numba_missing`)."""
+    form (:func:`~mwip_ros.core.kernels.compiled_stages.pure_form`: the batch cannot compile it), and for every law
+    without numba (the scalar loop runs each scenario: :func:`~mwip_ros.core.kernels.batch.numba_missing`)."""
     from mwip_ros.core import laws
     from mwip_ros.core.kernels.batch import numba_missing
     slow = max(1, min(chunk_size, SLOW_CHUNK))
     if numba_missing():
         return slow
-    from mwip_ros.core.kernels.compiled import pure_form
+    from mwip_ros.core.kernels.compiled_stages import pure_form
     return chunk_size if pure_form(laws.get(controller)) is not None else slow
 
 

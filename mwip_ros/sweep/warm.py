@@ -109,7 +109,7 @@ def shipped_chunks(config_dir=None) -> List[Chunk]:
 
     from mwip_ros import params as P
     from mwip_ros.core import estimators, laws
-    from mwip_ros.core.kernels.compiled import pure_form
+    from mwip_ros.core.kernels.compiled_stages import pure_form
     from mwip_ros.params.paths import default_params_file
     config = Path(config_dir) if config_dir is not None else default_params_file().parent
     state = P.merged_values(P.load_param_files([config / "paper.yaml"], option="params"))

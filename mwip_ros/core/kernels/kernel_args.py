@@ -59,7 +59,7 @@ class LoopArgs(NamedTuple):
     # --- the results (updated in place)
     t_fall: np.ndarray       # (n,) time of the fall (NaN: none)
     steps: np.ndarray        # (n,) int64 periods integrated
-    acc: np.ndarray          # (n, 15) the window's sums of squares and counts (batch.window_sums_metrics)
+    acc: np.ndarray          # (n, 15) the window's sums of squares and counts (batch_compiled.window_sums_metrics)
     ext: np.ndarray          # (n, 3) max, min, max |.| of theta_b in the window
     # --- scratch: the stage torques
     T: np.ndarray            # (block, 2, 2 substeps + 1) shared stage torques, per period

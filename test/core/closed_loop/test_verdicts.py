@@ -10,6 +10,7 @@ import pytest
 from mathfixtures import P_FILE, assert_batch_equals_scalar
 from mwip_ros import params as P
 from mwip_ros.core.kernels import batch as B
+from mwip_ros.core.kernels import batch_numpy
 from mwip_ros.core.closed_loop import loop, metrics
 from mwip_ros.core.kernels.batch import simulate_batch
 from mwip_ros.core.plants.plant import make_plant
@@ -66,7 +67,7 @@ def test_the_models_arithmetic_failing_is_a_diverged_run_not_a_traceback(monkeyp
     """With the driver's limit lifted, 1e300 reaches eq. (1): offline its math fails (math domain error), the batch
     gets NaN; both end the run, diverged, at the same t."""
     monkeypatch.setattr(loop, "PLAUSIBLE_TORQUE", 0.0)        # 0: only a non-finite command is refused
-    monkeypatch.setattr(B, "PLAUSIBLE_TORQUE", math.inf)
+    monkeypatch.setattr(batch_numpy, "PLAUSIBLE_TORQUE", math.inf)   # the numpy form's driver gate
     lp = _loop("huge_cmd", torque_limit=0.0)
     run = simulate(lp)
     assert run.fallen and run.record["t_fall"] == pytest.approx(T_BAD + H)

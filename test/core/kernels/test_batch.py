@@ -97,11 +97,11 @@ def test_sensing_and_actuation_in_a_batch_equal_the_scalar_loop():
 
 
 def test_the_batch_math_namespace_computes_each_angle_once_and_never_goes_stale(monkeypatch):
-    from mwip_ros.core.kernels import batch
+    from mwip_ros.core.kernels import batch_numpy
     calls = []
     real_sin = np.sin
-    monkeypatch.setattr(batch.np, "sin", lambda a: calls.append(a) or real_sin(a))
-    trig = batch._Trig()
+    monkeypatch.setattr(batch_numpy.np, "sin", lambda a: calls.append(a) or real_sin(a))
+    trig = batch_numpy._Trig()
     a, b, c = (np.linspace(-1, 1, 7) + k for k in range(3))
     assert np.array_equal(trig.sin(a), real_sin(a)) and np.array_equal(trig.cos(a), np.cos(a))
     assert np.array_equal(trig.sin(b), real_sin(b)) and np.array_equal(trig.sin(a), real_sin(a))

@@ -7,7 +7,7 @@ import pytest
 
 from mathfixtures import P_FILE
 from mwip_ros import params as P
-from mwip_ros.core.kernels import compiled, jitcache
+from mwip_ros.core.kernels import compiled, compiled_stages, jitcache
 from mwip_ros.core.plants import drive, model, plant
 from mwip_ros.core.closed_loop import metrics
 from mwip_ros.core.kernels.batch import simulate_batch
@@ -22,14 +22,14 @@ ACTUAL = P.physical(BASE, "actual")
 
 def test_the_compiled_functions_are_the_scalar_ones():
     # not a second copy of eq. (1) or of RK4: numba compiled these very code objects
-    assert compiled._accel.py_func.__code__ is model.accel.__code__
-    assert compiled._rk4_period.py_func.__code__ is plant.rk4_period.__code__
-    assert compiled._rk4_driven.py_func.__code__ is plant.rk4_driven.__code__
+    assert compiled_stages._accel.py_func.__code__ is model.accel.__code__
+    assert compiled_stages._rk4_period.py_func.__code__ is plant.rk4_period.__code__
+    assert compiled_stages._rk4_driven.py_func.__code__ is plant.rk4_driven.__code__
     # and inside the compiled RK4, accel and the motor are the compiled ones
-    assert compiled._rk4_period.py_func.__globals__["rk4_driven"] is compiled._rk4_driven
-    assert compiled._rk4_driven.py_func.__globals__["accel"] is compiled._accel
-    assert compiled._rk4_driven.py_func.__globals__["motor_torque"] is compiled._motor_torque
-    assert compiled._motor_torque.py_func.__code__ is drive.motor_torque.__code__
+    assert compiled_stages._rk4_period.py_func.__globals__["rk4_driven"] is compiled_stages._rk4_driven
+    assert compiled_stages._rk4_driven.py_func.__globals__["accel"] is compiled_stages._accel
+    assert compiled_stages._rk4_driven.py_func.__globals__["motor_torque"] is compiled_stages._motor_torque
+    assert compiled_stages._motor_torque.py_func.__code__ is drive.motor_torque.__code__
 
 
 def _scenarios(n, seed=5):
