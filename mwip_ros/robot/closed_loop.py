@@ -12,7 +12,7 @@ Period k (docs/theory.md section 4's contract, the robot's side of it as SPEC se
    servos report it; the torque that acted over period k - 1, ``u_L + u_R`` as the servos report it. With
    ``measure="truth"`` the simulator's true planar state instead (the estimator bypassed, for comparison);
 3. :func:`~mwip_ros.core.closed_loop.loop.decide`: the estimate, tau_hat_k, u_k (with the excitation and the
-references);
+   references);
 4. the drive: ``torque_limit`` (the lumped |u|, ``saturate``), a command that is not finite ends the run
    (``bad_command``), u split over the wheels by :meth:`~mwip_ros.robot.backend.Command.lumped`;
 5. the write and the next read: :meth:`~mwip_ros.robot.backend.Backend.step`.

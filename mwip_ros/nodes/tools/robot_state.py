@@ -9,7 +9,7 @@ theta_b', the encoder's rate plus the bias-corrected pitch rate; from a 3D plant
   theta_b, with the covariances of the sensors' noise (``sensors.encoder_counts_per_rev``,
   ``sensors.imu.gyro_noise_std``);
 - ``robot_description`` (std_msgs/String, latched: transient local, depth 1):
-:func:`mwip_ros.core.mobile_base.urdf.urdf`;
+  :func:`mwip_ros.core.mobile_base.urdf.urdf`;
 - ``wheel_joint_states`` (sensor_msgs/JointState: ``wheel_left_joint``, ``wheel_right_joint``, position phi =
   theta_w - theta_b): what robot_state_publisher reads (remap its ``joint_states`` to it: the project's
   ``joint_states`` is the robot's state, another layout);
