@@ -68,9 +68,10 @@ class LinearPolicy:
     def parse(cls, doc, where: str = "the policy") -> "LinearPolicy":
         """The policy of a policy file's document: ``policy: linear``, ``features`` (if given) exactly
         :data:`FEATURES`, ``w`` a list of three numbers (JSON numbers, not strings), each within
-        +/-:data:`MAX_WEIGHT`, and ``scale`` a number > 0 and at most :data:`~mwip_ros.core.safety.PLAUSIBLE_TORQUE`
-        [N m]; ValueError naming ``policy.file`` and what is wrong, else."""
-        from mwip_ros.core.safety import PLAUSIBLE_TORQUE
+        +/-:data:`MAX_WEIGHT`, and ``scale`` a number > 0 and at most
+        :data:`~mwip_ros.core.control.safety.PLAUSIBLE_TORQUE` [N m]; ValueError naming ``policy.file`` and what is
+        wrong, else."""
+        from mwip_ros.core.control.safety import PLAUSIBLE_TORQUE
 
         def bad(why: str) -> ValueError:
             return ValueError(f"policy.file: {where!r} is not a linear policy: {why}")

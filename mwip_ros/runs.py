@@ -1,6 +1,6 @@
 """Runs on disk: a trajectory's CSV, and a recorded bag rebuilt into the same trajectory table.
 
-* :func:`write_csv` / :func:`read_csv`: the columns of :mod:`mwip_ros.core.trajectory`
+* :func:`write_csv` / :func:`read_csv`: the columns of :mod:`mwip_ros.core.closed_loop.trajectory`
   (whichever a run has, in that order), floats written exactly.  ``mwip_sim`` and
   ``plant_sim`` write whole trajectories; the ``disturbance_observer`` node writes
   ``t, tau_hat1, tau_hat2``, which :func:`load_run` joins to a plant CSV by stamp.
@@ -21,9 +21,9 @@ from typing import Dict, List, Optional
 
 import numpy as np
 
-from mwip_ros.core.plant import Pose
-from mwip_ros.core.trajectory import (ALL_COLUMNS, FAILURE_COLUMNS, FAILURES, TRAJECTORY_COLUMNS, Trajectory,
-                                     TrajectoryTable, join_estimates)
+from mwip_ros.core.plants.plant import Pose
+from mwip_ros.core.closed_loop.trajectory import (ALL_COLUMNS, FAILURE_COLUMNS, FAILURES, TRAJECTORY_COLUMNS,
+                                                 Trajectory, TrajectoryTable, join_estimates)
 from mwip_ros.msgs import BadMessage
 from mwip_ros.msgs import layouts as L
 from mwip_ros.msgs.topics import leaf
@@ -93,7 +93,8 @@ def write_csv(run: Trajectory, path) -> None:
     cols = [run.columns[c] for c in names]
     rec = run.record or {}
     if run.fallen and rec.get("failure") in FAILURES[1:] and rec.get("t_fall") is not None:
-        # a failed run (core.sim.simulate): when and why, in every row (read_csv gives them back as its record)
+        # a failed run (core.closed_loop.sim.simulate): when and why, in every row (read_csv gives them back as its
+        # record)
         names += list(FAILURE_COLUMNS)
         cols += [np.full(len(run), float(rec["t_fall"])), np.full(len(run), float(FAILURES.index(rec["failure"])))]
     with CsvStream(path, names) as out:

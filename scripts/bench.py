@@ -328,7 +328,7 @@ def offline(plan: Plan) -> dict:
     installed, the two backends' runs taking turns, so both see the same load."""
     import importlib.util
     from mwip_ros import params as P
-    from mwip_ros.core.sim import simulate
+    from mwip_ros.core.closed_loop.sim import simulate
     values = P.merged_values(P.load_param_file(PARAMS))
     loop = P.closed_loop(values, use_observer=True, duration=10.0)
     mj = None
@@ -357,7 +357,7 @@ def batch(plan: Plan) -> list:
     import tracemalloc
 
     from mwip_ros import params as P
-    from mwip_ros.core.batch import simulate_batch
+    from mwip_ros.core.kernels.batch import simulate_batch
     from mwip_ros.sweep import engine
     from mwip_ros.sweep.scenarios import expand
     from mwip_ros.sweep.spec import parse_spec

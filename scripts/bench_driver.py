@@ -443,7 +443,7 @@ def main(argv=None) -> int:
             lines = []
     print(f"load average at the end: {_load()}")
     if args.json:
-        from mwip_ros.core.metrics import json_safe
+        from mwip_ros.core.closed_loop.metrics import json_safe
         args.json.write_text(json.dumps(json_safe(report), indent=1, default=str) + "\n")
     return 0
 

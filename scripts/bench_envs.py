@@ -9,7 +9,7 @@ Rows (config/paper.yaml unless --params; best of --repeat, after a warm-up that 
   torque topples a robot in about 0.15 s, so about N / 30 of them restart in every step): env-steps/s;
 * ``MwipVectorEnv, base_law dscndo``: the same with a zero residual on DSCNDO (no falls);
 * ``simulate_batch (compiled)``: the batch simulator over the same N scenarios (DSCNDO, seeds 0 .. N - 1) for the
-  same number of periods, its compiled loop (``core.compiled``): scenario-steps/s;
+  same number of periods, its compiled loop (``core.kernels.compiled``): scenario-steps/s;
 * ``MwipEnv``: one robot, a random policy, env-steps/s;
 * the two ``raw sensors, kalman`` rows: the vector env with a random policy and the batch simulator as above, with
   ``config/sensors_raw_realistic.yaml`` added (raw IMU and encoder samples, the EKF per robot).
@@ -50,7 +50,7 @@ def _vector(n, steps, params, base_law):
 
 def _batch(n, steps, params):
     from mwip_ros import params as P
-    from mwip_ros.core.batch import simulate_batch
+    from mwip_ros.core.kernels.batch import simulate_batch
     from mwip_ros.envs import load_values
     values = load_values(params)
     loop = P.closed_loop(values, controller="dscndo")

@@ -16,7 +16,7 @@
    dense, eps 1e-9, warm start given by hand) are measured when installed, and skipped with a note when not.
    ``--paced``: idle a control period before each solve, as the controller node does between states; the caches
    are cold at every solve, as they are there.
-3. ``--batch N``: the batch simulator (``core.batch.simulate_batch``, the numpy loop: ``mpc`` has no compiled
+3. ``--batch N``: the batch simulator (``core.kernels.batch.simulate_batch``, the numpy loop: ``mpc`` has no compiled
    form) over N copies of the scenario with different seeds, 2 s: scenario-steps/s.
 
 The table goes to stdout, progress to stderr; ``--json`` also writes the numbers.
@@ -33,7 +33,7 @@ import numpy as np
 
 def _states(values, duration: float):
     from mwip_ros import params as P
-    from mwip_ros.core.sim import simulate
+    from mwip_ros.core.closed_loop.sim import simulate
     traj = simulate(P.closed_loop(values, controller="mpc", duration=duration))
     return np.column_stack([traj["theta_b"], traj["dtheta_b"], traj["dtheta_w"]])
 
@@ -114,7 +114,7 @@ def _replay(make, qp, u_max, Z, pause: float = 0.0):
 
 def _batch(values, n: int) -> float:
     from mwip_ros import params as P
-    from mwip_ros.core.batch import simulate_batch
+    from mwip_ros.core.kernels.batch import simulate_batch
     warm = [P.closed_loop(dict(values, seed=i), controller="mpc", duration=0.05) for i in range(2)]
     simulate_batch(warm, (0.0, 0.05))   # the RK4 period compiled or loaded (numba) before the clock starts
     loops = [P.closed_loop(dict(values, seed=i), controller="mpc", duration=2.0) for i in range(n)]

@@ -54,7 +54,7 @@ LABELS = {"before": "mujoco, the `--before` checkout, 1 ms", "mujoco_1ms": "mujo
 OFFLINE = """
 import json, sys, time
 from mwip_ros import params as P
-from mwip_ros.core.sim import simulate
+from mwip_ros.core.closed_loop.sim import simulate
 v = P.merged_values(P.load_param_file(sys.argv[1]))
 v.update(json.loads(sys.argv[2]))
 loop = P.closed_loop(v, use_observer=True, duration=float(sys.argv[3]))
@@ -136,7 +136,7 @@ def per_period(n: int = 2000, repeat: int = 5):
     import mujoco
 
     from mwip_ros import params as P
-    from mwip_ros.core.plant import make_plant
+    from mwip_ros.core.plants.plant import make_plant
     values = P.merged_values(P.load_param_file(PARAMS))
     out = {}
     for name, over in (("rk4", {"backend": "rk4"}), ("mujoco_1ms", {"backend": "mujoco", "mujoco.timestep": 0.001}),

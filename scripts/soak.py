@@ -29,7 +29,7 @@ def main(argv=None) -> int:
     from geometry_msgs.msg import WrenchStamped
     from sensor_msgs.msg import JointState
 
-    from mwip_ros.core.model import State
+    from mwip_ros.core.plants.model import State
     from mwip_ros.msgs import layouts as L
 
     with tempfile.TemporaryDirectory() as work, Graph(Path(work)) as g:

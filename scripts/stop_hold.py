@@ -23,7 +23,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from mwip_ros import params as P  # noqa: E402
-from mwip_ros.core.sim import simulate  # noqa: E402
+from mwip_ros.core.closed_loop.sim import simulate  # noqa: E402
 
 LAWS = ("dsc", "dscndo", "lqr", "lqr_ndo", "smc", "smc_ndo", "mpc", "mpc_ndo")
 

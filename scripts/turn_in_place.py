@@ -22,9 +22,9 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from mwip_ros import params as P  # noqa: E402
-from mwip_ros.core import metrics  # noqa: E402
-from mwip_ros.core.mujoco_plant import scrub_torque  # noqa: E402
-from mwip_ros.core.sim import simulate  # noqa: E402
+from mwip_ros.core.closed_loop import metrics   # noqa: E402
+from mwip_ros.core.plants.mujoco_plant import scrub_torque  # noqa: E402
+from mwip_ros.core.closed_loop.sim import simulate  # noqa: E402
 
 
 def turn_stats(c, h: float, values) -> dict:

@@ -195,9 +195,9 @@ def param_files(params) -> List[Path]:
 
 def loop_chain(params, *plant_args: str):
     """The answering stages of the loop these parameter files (and ``-p`` rules for the plant) configure
-    (:func:`mwip_ros.core.loop.answering`): a raw plant's chain starts with the state estimator."""
+    (:func:`mwip_ros.core.closed_loop.loop.answering`): a raw plant's chain starts with the state estimator."""
     from mwip_ros import params as P
-    from mwip_ros.core.loop import answering
+    from mwip_ros.core.closed_loop.loop import answering
     model = P.merged_values(P.load_param_files(param_files(params))).get("sensors.model", "state")
     for i, a in enumerate(plant_args):   # a -p sensors.model:=... rule for the plant wins
         if i > 0 and plant_args[i - 1] in ("-p", "--param") and a.split(":=", 1)[0].endswith("sensors.model"):

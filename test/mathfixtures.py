@@ -4,8 +4,8 @@ import math
 import numpy as np
 
 from mwip_ros import params as P
-from mwip_ros.core.model import PhysicalParams, Sinusoid, State
-from mwip_ros.core.plant import PlantConfig
+from mwip_ros.core.plants.model import PhysicalParams, Sinusoid, State
+from mwip_ros.core.plants.plant import PlantConfig
 from mwip_ros.params.paths import default_params_file
 
 NOM = PhysicalParams(**P.PAPER_NOMINAL)
@@ -33,9 +33,9 @@ def assert_batch_equals_scalar(loops, window, batch=None, scalar=None):
     """The oracle of the batch simulator: its trajectories (``record=True``) equal the scalar loop's, scenario by
     scenario, every column of the trajectory table to 1e-9, the same length, fall and label. Returns
     (batch result, scalar trajectories)."""
-    from mwip_ros.core.batch import simulate_batch
-    from mwip_ros.core.sim import simulate
-    from mwip_ros.core.trajectory import COLUMNS
+    from mwip_ros.core.kernels.batch import simulate_batch
+    from mwip_ros.core.closed_loop.sim import simulate
+    from mwip_ros.core.closed_loop.trajectory import COLUMNS
     batch = batch if batch is not None else simulate_batch(loops, window, record=True)
     scalar = scalar if scalar is not None else [simulate(lp) for lp in loops]
     for i, (b, s) in enumerate(zip(batch.trajectories, scalar)):

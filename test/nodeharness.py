@@ -64,7 +64,7 @@ def _schema_laws():
     """The law registry (:mod:`mwip_ros.core.laws`) as a node process has it, while a node is built here: the laws
     whose parameters the parameter schema declares. A process imports its plug-ins ($MWIP_ROS_LAWS) before the
     schema is made, so the schema declares every law it has; a law a test registered in this process afterwards
-    (test/trivial_law.py, imported by test/core/test_laws.py) is not declared, and the controller, which designs
+    (test/trivial_law.py, imported by test/core/laws/test_laws.py) is not declared, and the controller, which designs
     every registered family at start-up, would fail on its missing parameter."""
     from mwip_ros import params as P
     from mwip_ros.core import laws

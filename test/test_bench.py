@@ -73,8 +73,8 @@ def test_the_soak_script_runs_the_realtime_graph_and_reports_every_nodes_memory(
     """scripts/soak_graph.py, briefly (its 15-minute figures are in BENCHMARKS.md): every node's RSS at the start,
     after the warm-up and at the end, and a slope; the recorder split its bag by duration and the bag reads as one
     run.  The slope of 30 s is not judged here (it still holds the warm-up's tail and the machine's load); the
-    bounded buffers are checked by size, not by time: test/nodes/test_plant_runners.py, test/core/test_trajectory.py,
-    test/bag/test_ledger.py, test/bag/test_writer.py."""
+    bounded buffers are checked by size, not by time: test/nodes/test_plant_runners.py,
+    test/core/closed_loop/test_trajectory.py, test/bag/test_ledger.py, test/bag/test_writer.py."""
     import json
     import sys
     out = tmp_path / "soak.json"

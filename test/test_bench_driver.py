@@ -39,7 +39,7 @@ def _run(out: Path, law: str, seconds: float, *, truth: bool, fell_at=None, exit
     ``truth`` true_joint_states and true_pose too; from period ``first_k``, to the fall or the end), the driver's
     summary, the emulator's last line (``trips``)."""
     from mwip_ros.bag import BagWriter, qos_profiles_yaml
-    from mwip_ros.core.plant import Pose
+    from mwip_ros.core.plants.plant import Pose
     from mwip_ros.msgs import layouts as L
 
     n = int(round(seconds / (H_NS * 1e-9)))

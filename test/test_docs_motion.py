@@ -6,8 +6,8 @@ import pytest
 
 from graphproc import REPO
 from mwip_ros import params as P
-from mwip_ros.core import metrics
-from mwip_ros.core.sim import simulate
+from mwip_ros.core.closed_loop import metrics
+from mwip_ros.core.closed_loop.sim import simulate
 from test_docs_numbers import table_after
 
 pytestmark = pytest.mark.slow   # the documentation's tables recomputed (MuJoCo runs): heavy, not a unit of code

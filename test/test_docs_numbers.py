@@ -18,8 +18,8 @@ import pytest
 from graphproc import PARAMS, REPO
 from printed import prints_as
 from mwip_ros import params as P
-from mwip_ros.core import metrics
-from mwip_ros.core.sim import LAWS, simulate
+from mwip_ros.core.closed_loop import metrics
+from mwip_ros.core.closed_loop.sim import LAWS, simulate
 
 pytestmark = pytest.mark.unit
 

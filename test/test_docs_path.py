@@ -6,8 +6,8 @@ import pytest
 
 from graphproc import REPO
 from mwip_ros import params as P
-from mwip_ros.core.path import path_rows, path_metrics
-from mwip_ros.core.sim import simulate
+from mwip_ros.core.mobile_base.path import path_rows, path_metrics
+from mwip_ros.core.closed_loop.sim import simulate
 from test_docs_numbers import table_after
 
 pytestmark = pytest.mark.slow
@@ -47,9 +47,9 @@ def test_the_raw_sensors_and_drive_path_table_is_what_the_code_computes():
 
 
 def test_the_odometry_drift_table_is_what_the_code_computes():
-    """docs/real-robot.md: robot_state's integration (core.odometry.state_update) of the runs' states against the
-    true pose, on both paths."""
-    from mwip_ros.core.odometry import odometry_drift
+    """docs/real-robot.md: robot_state's integration (core.mobile_base.odometry.state_update) of the runs' states
+    against the true pose, on both paths."""
+    from mwip_ros.core.mobile_base.odometry import odometry_drift
     head, rows = table_after((REPO / "docs" / "real-robot.md").read_text(), "Odometry drift against the true pose")
     assert len(rows) == 4
     for row in rows:

@@ -15,8 +15,8 @@ import yaml
 from graphproc import REPO
 from mwip_ros import params as P
 from mwip_ros.cli import identify
-from mwip_ros.core import metrics
-from mwip_ros.core.sim import simulate
+from mwip_ros.core.closed_loop import metrics
+from mwip_ros.core.closed_loop.sim import simulate
 from mwip_ros.runs import write_csv
 from test_docs_numbers import page_with, table_after
 
@@ -134,9 +134,9 @@ def test_an_edited_cell_is_caught(monkeypatch):
 
 
 def test_the_drive_identification_table():
-    """config/identify_drive.yaml under DSCNDO with the realistic motor, fitted by core.drive_identify (what
-    mwip_identify --drive prints)."""
-    from mwip_ros.core.drive_identify import identify_drive
+    """config/identify_drive.yaml under DSCNDO with the realistic motor, fitted by core.identification.drive_identify
+    (what mwip_identify --drive prints)."""
+    from mwip_ros.core.identification.drive_identify import identify_drive
     files = [PAPER, MOTOR, CONFIG / "identify_drive.yaml"]
     v = P.merged_values(P.load_param_files(files))
     r = simulate(P.closed_loop(v, controller="dscndo"))
@@ -155,7 +155,7 @@ UNSEEN = {"m_b": 250.0, "I_b": 48.0, "l": 0.28}   # the retune table's robot, ne
 def test_the_raw_bag_table(tmp_path):
     """mwip_identify --raw on mwip_sim's CSV of 15 s of the chirp on a 280 / 58 / 0.29 robot (the lockstep graph's bag
     of the same run gives the same fit to the bit: test/cli/test_identify_bag.py)."""
-    from mwip_ros.core.identify_raw import identify_raw
+    from mwip_ros.core.identification.identify_raw import identify_raw
     v = P.merged_values(P.load_param_files([PAPER, RAW, IDENT]))
     v.update({"actual.m_b": 280.0, "actual.I_b": 58.0, "actual.l": 0.29, "duration_s": 15.0,
               "excitation.duration_s": 15.0})

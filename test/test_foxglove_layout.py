@@ -161,7 +161,7 @@ def test_the_layout_shows_what_the_docs_say(doc):
     three_d = [cfg for panel, cfg in doc["configById"].items() if panel.startswith("3D!")]
     assert len(three_d) == 2 and three_d[0]["followTf"] == FRAME and three_d[0]["topics"]["/robot_markers"]["visible"]
     # the URDF (robot_state's robot_description) on the frames the server sends (foxglove_frames), its grid on odom
-    from mwip_ros.core.urdf import BASE_LINK, ODOM_FRAME
+    from mwip_ros.core.mobile_base.urdf import BASE_LINK, ODOM_FRAME
     urdf = three_d[1]
     assert urdf["followTf"] == BASE_LINK and urdf["topics"] == {"/robot_description": {"visible": True}}
     assert urdf["layers"]["mwip_grid"]["frameId"] == ODOM_FRAME

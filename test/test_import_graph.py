@@ -4,7 +4,8 @@ The graph is read from the source with ``ast``, nothing imported: an edge a -> b
 a, wherever it is written (at the top, inside a function, under ``if TYPE_CHECKING:``, in a ``try``), and for every
 ``importlib.import_module`` / ``__import__`` of a string constant (relative to ``__package__`` when given).  An
 import hidden in a function or behind ``import_module`` is still an edge: it closes the circle as soon as it runs, so
-a circle is broken by moving the shared piece down (``core/plant_base.py``, ``params/spec.py``, ``core/laws/base.py``,
+a circle is broken by moving the shared piece down (``core/plants/plant_base.py``, ``params/spec.py``,
+``core/laws/base.py``,
 ...), not by hiding the import.  ``from pkg import name`` is an edge to the submodule ``pkg.name`` when there is one,
 else to ``pkg``.  The implicit import of a module's parent packages is not an edge (a package that imports its own
 submodules is the normal shape); an import of a name computed at run time (a plug-in, a node by its name) cannot be
@@ -145,7 +146,7 @@ def _said(graph: Graph, cycle: List[str]) -> str:
 
 def test_mwip_ros_has_no_import_cycle():
     graph = import_graph(PACKAGE)
-    assert len(graph) > 150 and graph["mwip_ros.core.plant"]   # the package, read whole
+    assert len(graph) > 150 and graph["mwip_ros.core.plants.plant"]   # the package, read whole
     found = cycles(graph)
     assert not found, "import circles in mwip_ros/ (break each by moving the shared piece down):\n" + "\n".join(
         _said(graph, c) for c in found)
@@ -153,9 +154,10 @@ def test_mwip_ros_has_no_import_cycle():
 
 def test_the_plant_s_registry_imports_both_plants_and_neither_plant_imports_it():
     graph = import_graph(PACKAGE)
-    assert {"mwip_ros.core.mujoco_plant", "mwip_ros.core.plant_base"} <= set(graph["mwip_ros.core.plant"])
-    assert "mwip_ros.core.plant" not in graph["mwip_ros.core.mujoco_plant"]
-    assert "mwip_ros.core.plant" not in graph["mwip_ros.core.plant_base"]
+    assert {"mwip_ros.core.plants.mujoco_plant", "mwip_ros.core.plants.plant_base"} <= set(
+        graph["mwip_ros.core.plants.plant"])
+    assert "mwip_ros.core.plants.plant" not in graph["mwip_ros.core.plants.mujoco_plant"]
+    assert "mwip_ros.core.plants.plant" not in graph["mwip_ros.core.plants.plant_base"]
 
 
 def _package(tmp_path: Path, files: Dict[str, str]) -> Path:

@@ -4,7 +4,7 @@
 wheel drives under the body), which the law declares itself (so the controller node declares
 it too); ``trivial_ndo`` is it with the observer term, composed by the registry.  Offline, in a
 batch and in the graph (``MWIP_ROS_LAWS=trivial_law``, this directory on ``PYTHONPATH``) it gives
-the same numbers (test/core/test_laws.py, test/nodes/test_graph.py).
+the same numbers (test/core/laws/test_laws.py, test/nodes/test_graph.py).
 """
 from __future__ import annotations
 

@@ -1,6 +1,6 @@
 """``animation.gif``: the robot seen from the side over time, one panel per run, the same time in every panel.
 
-Each panel draws what :func:`mwip_ros.core.markers.robot_pose` says (the one geometry of the
+Each panel draws what :func:`mwip_ros.core.plants.markers.robot_pose` says (the one geometry of the
 robot): the ground, the wheel (a circle and a spoke that shows its rotation), the body (a rod
 from the axle to twice the centre of gravity's distance) and a dashed upright reference through
 the axle, so the tilt theta_b reads directly.  The view follows each robot horizontally (a run
@@ -27,9 +27,9 @@ from typing import List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from mwip_ros.core import metrics
-from mwip_ros.core.markers import robot_pose
-from mwip_ros.core.model import PhysicalParams
+from mwip_ros.core.closed_loop import metrics
+from mwip_ros.core.plants.markers import robot_pose
+from mwip_ros.core.plants.model import PhysicalParams
 
 __all__ = ["FPS", "MAX_FRAMES", "MAX_SPAN_S", "MAX_FRAME_MS", "frame_count", "refusal", "TICK", "HOLD_END_MS",
            "PANEL_SIZE", "HEADER", "ROD_COLOUR", "SPOKE_COLOUR", "FELL_COLOUR", "default_nominal", "fall_time",

@@ -12,7 +12,7 @@ drive its driver's state machine (docs/theory.md 6.8), drive the robot on cmd_ve
     mwip_ctl cmd --vx V --wz W --duration S [--rate HZ]   # cmd_vel (geometry_msgs/Twist), then a zero one
     mwip_ctl drive [--params FILE ...] [--rate HZ]        # keyboard teleop on cmd_vel (cli.teleop)
 
-The e-stop is a level that the plant holds (core.safety): ``estop`` publishes true once, waits until the plant
+The e-stop is a level that the plant holds (core.control.safety): ``estop`` publishes true once, waits until the plant
 has acknowledged it and exits; the plant keeps it asserted (its driver in fault, ``~/reset`` and ``~/enable``
 refused) until a false comes, ``estop --release``, which does not clear the fault: ``reset`` (and, with
 ``require_enable: true``, ``enable``) follow.  So the command needs no process that stays up to hold the level,

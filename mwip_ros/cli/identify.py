@@ -8,21 +8,22 @@ Reads a CSV written by ``mwip_sim --csv`` (or ``plant_sim``'s) or an MCAP bag wr
 (:func:`mwip_ros.runs.load_run`, as ``mwip_report`` reads them); the torque is the CSV's ``u_applied``
 column where it has one (the torque that acted, with a motor) else ``u``, and a bag's applied torque
 (the effort reported with the next state).  The base parameter file(s) give ``nominal.m_w``, ``I_w``,
-``r``, ``g`` (known); :func:`mwip_ros.core.identify.identify` fits eq. (1) by least squares.
+``r``, ``g`` (known); :func:`mwip_ros.core.identification.identify.identify` fits eq. (1) by least squares.
 
 Prints every value with its 95 % interval, the residual RMS of each row of eq. (1), the condition
 number, D_w, D_b and the check of G_b against m_b g l; writes a ROS 2 parameter overlay with
 ``nominal.m_b``, ``nominal.I_b``, ``nominal.l`` under ``/**`` (where the base file keeps the nominal model
 that the observer and the controller share), checked by merging it over the base file.
 
-``--drive`` fits the drive instead (:mod:`mwip_ros.core.drive_identify`: K_t, R, I_max with V_max the base
-file's ``motor.voltage_limit``) from ``u``, ``u_applied`` and the wheel speed, and writes ``plant_sim``'s
+``--drive`` fits the drive instead (:mod:`mwip_ros.core.identification.drive_identify`: K_t, R, I_max with V_max the
+base file's ``motor.voltage_limit``) from ``u``, ``u_applied`` and the wheel speed, and writes ``plant_sim``'s
 ``motor.*`` overlay; ``config/identify_drive.yaml`` is its experiment.
 
-``--raw`` fits the raw sensors alone (:mod:`mwip_ros.core.identify_raw`); a bag's are read from its ``imu/data_raw``
-and ``wheel_encoder`` messages (:mod:`mwip_ros.cli.identify_bag`: a robot's bag of the realtime graph, nothing else
-needed).  ``--retune`` then tunes ``--law``'s gains on the identified model (:mod:`mwip_ros.cli.identify_retune`,
-``mwip_tune``'s search) and writes them with ``nominal.*`` into one parameter file.
+``--raw`` fits the raw sensors alone (:mod:`mwip_ros.core.identification.identify_raw`); a bag's are read from its
+``imu/data_raw`` and ``wheel_encoder`` messages (:mod:`mwip_ros.cli.identify_bag`: a robot's bag of the realtime graph,
+nothing else needed).  ``--retune`` then tunes ``--law``'s gains on the identified model
+(:mod:`mwip_ros.cli.identify_retune`, ``mwip_tune``'s search) and writes them with ``nominal.*`` into one parameter
+file.
 
 Exit 0 when written; 2 (one line on stderr saying why) for a log that is too short or does not excite
 the parameters, a raw log whose drive is saturated throughout, a bag cut short, for an unreadable log or
@@ -41,7 +42,7 @@ import numpy as np
 from mwip_ros.cli.exits import EXIT_USAGE, plugin_refusal
 from mwip_ros import params as P
 from mwip_ros.cli.outputs import refuse_existing
-from mwip_ros.core import identify as ID
+from mwip_ros.core.identification import identify as ID
 from mwip_ros.params.paths import default_params_file
 
 PROG = "mwip_identify"
@@ -379,7 +380,7 @@ def _retune(args, base, physical, header: str) -> int:
 
 def _drive(args, base, values, cols) -> int:
     """--drive: fit, print and write plant_sim's motor.* overlay; the exit status."""
-    from mwip_ros.core.drive_identify import DriveIdentificationError, identify_drive
+    from mwip_ros.core.identification.drive_identify import DriveIdentificationError, identify_drive
     v_max = float(values.get("motor.voltage_limit", float("nan")))
     try:
         d = identify_drive(cols["u"], cols["u_applied"], cols["dtheta_w"], cols["dtheta_b"], v_max)
@@ -418,7 +419,7 @@ def _raw_refusal(args, c):
 
 def _raw(args, base, values, known, c, notes=()) -> int:
     """--raw: fit, print and write the nominal overlay; the exit status."""
-    from mwip_ros.core.identify_raw import identify_raw
+    from mwip_ros.core.identification.identify_raw import identify_raw
     why = _raw_refusal(args, c)
     if why:
         return _fail(f"{args.log}: {why}")
@@ -472,7 +473,7 @@ def _raw(args, base, values, known, c, notes=()) -> int:
 def _validate(args, identified, D_w: float, D_b: float, nominal):
     """--validate: print the pitch prediction errors on LOG2 of the identified body (with its D_w, D_b) and the
     nominal one; the reason it cannot, or None."""
-    from mwip_ros.core.identify_validate import prediction_errors
+    from mwip_ros.core.identification.identify_validate import prediction_errors
     try:
         c, torque = _load(args, args.validate)
         cols = [c["t"], c.get("theta_w", np.zeros_like(c["t"])), c["theta_b"], c["dtheta_w"], c["dtheta_b"], c[torque]]
@@ -491,9 +492,10 @@ def _validate(args, identified, D_w: float, D_b: float, nominal):
 def _validate_raw(args, res, nominal):
     """--raw --validate: the pitch prediction errors on LOG2's raw samples of the identified body and the nominal one
     (each with the fit's D_w, D_b, gyro bias and IMU offset), each window's start fitted to its first 0.2 s, against
-    LOG2's estimated pitch (core.identify_validate.raw_prediction_errors); the reason it cannot, or None."""
+    LOG2's estimated pitch (core.identification.identify_validate.raw_prediction_errors); the reason it cannot, or
+    None."""
     from mwip_ros.cli.identify_bag import on_stamp_grid
-    from mwip_ros.core.identify_validate import FIT_S, raw_prediction_errors
+    from mwip_ros.core.identification.identify_validate import FIT_S, raw_prediction_errors
     try:
         raw, _ = _load_raw(args, args.validate)
         c, _ = _load(args, args.validate)   # theta_b: the estimator's where the log has it (what a robot knows)

@@ -83,7 +83,7 @@ def retune(base: Sequence[Path], physical, law: str, maxiter: int, popsize: int,
     from mwip_ros import params as P
     from mwip_ros.cli.tune import _base_values
     from mwip_ros.core import laws
-    from mwip_ros.core.metrics import fit_window, WINDOW
+    from mwip_ros.core.closed_loop.metrics import fit_window, WINDOW
     from mwip_ros.sweep import engine
     from mwip_ros.sweep.spec import SpecError, load_spec
     from mwip_ros.sweep.tune import Objective, Tuner, check_memory, knobs_for, overlay, parse_bounds

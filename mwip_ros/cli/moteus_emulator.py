@@ -135,7 +135,7 @@ def _check(args) -> Optional[str]:
 
 def _robot(args, cfg):
     """The emulated robot of the options and the plant ``cfg``."""
-    from mwip_ros.core.plant import per_wheel
+    from mwip_ros.core.plants.plant import per_wheel
     from mwip_ros.robot.moteus_emu import EmulatedRobot, Injection, Servo, ServoConfig
     from mwip_ros.robot.sim import SimBackend
     dt = 1.0 / args.physics_rate

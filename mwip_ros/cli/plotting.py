@@ -242,11 +242,11 @@ def speed_plot(runs: Sequence, path, r: float, source: str = "", falls: Optional
 
 
 def path_plot(runs: Sequence, path, h: float, title: str = "", falls: Optional[dict] = None) -> None:
-    """The axle's centre (x, y) of each run against the ideal path of its references (``core.path.ideal_path``),
-    equal axes; a run that failed ends where it failed, an X there (``falls`` {label: t}: the legend says when); a run
-    whose path a figure cannot tell from an earlier one's is dashed over it and its legend says so
-    (:func:`_same_path`).  The legend sits below the axes (it covers no path)."""
-    from mwip_ros.core.path import ideal_path
+    """The axle's centre (x, y) of each run against the ideal path of its references
+    (``core.mobile_base.path.ideal_path``), equal axes; a run that failed ends where it failed, an X there (``falls``
+    {label: t}: the legend says when); a run whose path a figure cannot tell from an earlier one's is dashed over it and
+    its legend says so (:func:`_same_path`).  The legend sits below the axes (it covers no path)."""
+    from mwip_ros.core.mobile_base.path import ideal_path
     plt = _plt()
     falls = falls or {}
     fig, ax = plt.subplots(figsize=(7.5, 7.0 + 0.18 * len(runs)))

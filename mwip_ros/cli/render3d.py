@@ -1,9 +1,9 @@
 """``mwip_sim --render FILE``: the MuJoCo robot drawn in 3D as it runs (``plant_sim.backend: mujoco``).
 
-The frames are MuJoCo's own renderer looking at the plant's model (:func:`mwip_ros.core.mujoco_plant.mjcf`: the
+The frames are MuJoCo's own renderer looking at the plant's model (:func:`mwip_ros.core.plants.mujoco_plant.mjcf`: the
 same bodies, joints, ground, slope and steps that the physics integrates) with a few shapes added for the eye only
 (:func:`film_model`): the body as a box from the axle to twice its centre of gravity's height (where
-:func:`mwip_ros.core.markers.robot_pose` draws the rod of the 2D animation), a spoke across each wheel so its
+:func:`mwip_ros.core.plants.markers.robot_pose` draws the rod of the 2D animation), a spoke across each wheel so its
 rotation shows, an IMU marker, and a checkered ground whose squares are :data:`SQUARE` m.  The added geoms collide
 with nothing and the frames copy the plant's positions into a model of their own, so drawing never changes the
 simulation: a run with ``--render`` is the run without it, to the bit.
@@ -39,7 +39,7 @@ TRAIL_S = 0.1             # the drawn path of the axle: a point every TRAIL_S of
 
 
 def _mujoco():
-    from mwip_ros.core.mujoco_plant import mujoco_module   # headless: EGL (mwip_ros.optional.required)
+    from mwip_ros.core.plants.mujoco_plant import mujoco_module   # headless: EGL (mwip_ros.optional.required)
     return mujoco_module()
 
 
@@ -70,10 +70,10 @@ def gl_refusal() -> Optional[str]:
 
 
 def film_model(cfg):
-    """The plant's MJCF model (:func:`~mwip_ros.core.mujoco_plant.mjcf` of the :class:`~mwip_ros.core.plant.PlantConfig`
-    ``cfg``) with the shapes of the module docstring added: the same joints in the same order, so a plant's ``qpos``
-    places it."""
-    from mwip_ros.core.mujoco_plant import MujocoConfig, mjcf
+    """The plant's MJCF model (:func:`~mwip_ros.core.plants.mujoco_plant.mjcf` of the
+    :class:`~mwip_ros.core.plants.plant.PlantConfig` ``cfg``) with the shapes of the module docstring added: the same
+    joints in the same order, so a plant's ``qpos`` places it."""
+    from mwip_ros.core.plants.mujoco_plant import MujocoConfig, mjcf
     mj = _mujoco()
     spec = mj.MjSpec.from_string(mjcf(cfg))
     p, mc = cfg.actual, cfg.mujoco or MujocoConfig()
@@ -122,14 +122,15 @@ def _compiled(spec):
 
 
 def urdf_model(urdf_text: str):
-    """The robot of a URDF (``robot_description``: :func:`mwip_ros.core.urdf.urdf`) as MuJoCo reads it, its visuals
-    kept, ``base_link`` free to be placed (a free joint) and a ground: drawn by :class:`UrdfFilm` from a frame tree."""
+    """The robot of a URDF (``robot_description``: :func:`mwip_ros.core.mobile_base.urdf.urdf`) as MuJoCo reads it, its
+    visuals kept, ``base_link`` free to be placed (a free joint) and a ground: drawn by :class:`UrdfFilm` from a frame
+    tree."""
     mj = _mujoco()
     text = urdf_text
     head = '<mujoco><compiler discardvisual="false" fusestatic="false"/></mujoco>'
     at = text.index(">", text.index("<robot")) + 1
     spec = mj.MjSpec.from_string(text[:at] + head + text[at:])
-    from mwip_ros.core.urdf import BASE_LINK
+    from mwip_ros.core.mobile_base.urdf import BASE_LINK
     spec.body(BASE_LINK).add_freejoint()
     for g in spec.geoms:   # a viewer draws a link's visuals, not its collision shapes (group 3: hidden)
         if g.contype:
@@ -230,17 +231,17 @@ class Filmer(Film):
 
 class UrdfFilm(Film):
     """Frames of the URDF placed by a frame tree, as a 3D viewer of ``robot_description`` and ``/tf`` draws it
-    (Foxglove's 3D panel, RViz): call :meth:`see` with each tree (:func:`mwip_ros.core.urdf.frame_transforms`, or
-    the transforms a live view sent)."""
+    (Foxglove's 3D panel, RViz): call :meth:`see` with each tree
+    (:func:`mwip_ros.core.mobile_base.urdf.frame_transforms`, or the transforms a live view sent)."""
 
     def __init__(self, urdf_text: str, duration_s: float, path: Path):
-        from mwip_ros.core.urdf import WHEEL_JOINTS
+        from mwip_ros.core.mobile_base.urdf import WHEEL_JOINTS
         super().__init__(urdf_model(urdf_text), duration_s, path)
         mj = self._mj
         self._wheels = [(mj.mj_name2id(self.model, mj.mjtObj.mjOBJ_JOINT, name), name) for name in WHEEL_JOINTS]
 
     def see(self, t: float, transforms) -> None:
-        from mwip_ros.core.urdf import BASE_LINK, ODOM_FRAME, WHEEL_LINKS
+        from mwip_ros.core.mobile_base.urdf import BASE_LINK, ODOM_FRAME, WHEEL_LINKS
         by_child = {tf.child: tf for tf in transforms}
         base = by_child[BASE_LINK]
         assert base.parent == ODOM_FRAME, base
@@ -262,7 +263,7 @@ def film_bag(bag, path: Path) -> Tuple[Path, int]:
     :class:`~mwip_ros.nodes.tools.foxglove_frames.FrameView`.  Returns the path and the number of frame trees seen;
     a bag without robot_state's topics raises ValueError naming what is missing."""
     from mwip_ros.bag.reader import raw_messages
-    from mwip_ros.core.urdf import BASE_LINK
+    from mwip_ros.core.mobile_base.urdf import BASE_LINK
     from mwip_ros.nodes.tools.foxglove_frames import FRAME_TOPICS, FrameView
     view, description, trees, wheels = FrameView(), None, [], []
     for _, topic, data in raw_messages(bag, [f"/{t}" for t in FRAME_TOPICS]):

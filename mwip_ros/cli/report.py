@@ -50,8 +50,8 @@ from mwip_ros.bag import REPAIRED_KEY, BagError, read_metadata
 from mwip_ros.bag.ledger import GAPS_KEY
 from mwip_ros.cli import animation, interrupts, outputs, plotting
 from mwip_ros.cli.exits import EXIT_USAGE, epilog
-from mwip_ros.core import metrics
-from mwip_ros.core.trajectory import Trajectory
+from mwip_ros.core.closed_loop import metrics
+from mwip_ros.core.closed_loop.trajectory import Trajectory
 from mwip_ros.params import defaults_for
 from mwip_ros.runs import load_runs
 
@@ -159,9 +159,9 @@ def _fixed(v: float, digits: int) -> str:
 
 
 def pose_summary(run: Trajectory) -> Optional[dict]:
-    """A spatial plant's pose columns (core.trajectory.POSE_COLUMNS) summed up: where the axle ends relative to where
-    it started (x, y [m], in the frame ``odom`` fixed at the start), the heading at the end, the largest roll, and
-    how far each wheel turned [rad].  None for a planar run (no pose columns) or a pose that is not finite (no
+    """A spatial plant's pose columns (core.closed_loop.trajectory.POSE_COLUMNS) summed up: where the axle ends relative
+    to where it started (x, y [m], in the frame ``odom`` fixed at the start), the heading at the end, the largest roll,
+    and how far each wheel turned [rad].  None for a planar run (no pose columns) or a pose that is not finite (no
     figure from NaN)."""
     if "x" not in run.columns or not len(run):
         return None

@@ -1,5 +1,5 @@
 """``mwip_robot``: the closed loop on a robot's own interface, offline, in one process (no ROS): the project's state
-estimator, observer and law (:func:`mwip_ros.core.loop.decide`) between a backend's reads and writes
+estimator, observer and law (:func:`mwip_ros.core.closed_loop.loop.decide`) between a backend's reads and writes
 (:mod:`mwip_ros.robot.closed_loop`).
 
     mwip_robot --robot upkie-pybullet --params config/paper.yaml config/upkie.yaml
@@ -23,7 +23,7 @@ from mwip_ros import params as P
 from mwip_ros.cli.exits import EXIT_FELL, EXIT_OK, EXIT_USAGE, epilog, plugin_refusal
 from mwip_ros.cli.outputs import refuse_existing
 from mwip_ros.core import laws
-from mwip_ros.core.metrics import json_safe
+from mwip_ros.core.closed_loop.metrics import json_safe
 from mwip_ros.params.paths import default_params_file
 
 PROG = "mwip_robot"

@@ -1,8 +1,8 @@
 """``mwip_sim``: the offline DSC / DSCNDO simulator (no ROS needed).
 
 The verdict of each run is never computed from NaN: a run fails (exit 3) when the robot falls, the law's command is
-not a finite number or is implausible, or the state diverges (:func:`mwip_ros.core.sim.simulate`), and says when and
-why; a run that ends before the metrics window does is said so, its verdict qualified.  Exit codes:
+not a finite number or is implausible, or the state diverges (:func:`mwip_ros.core.closed_loop.sim.simulate`), and says
+when and why; a run that ends before the metrics window does is said so, its verdict qualified.  Exit codes:
 :mod:`.exits`."""
 from __future__ import annotations
 
@@ -18,11 +18,12 @@ from mwip_ros.cli import interrupts, plotting, render3d
 from mwip_ros.cli.exits import EXIT_FELL, EXIT_OK, EXIT_USAGE, epilog
 from mwip_ros.cli.outputs import refuse_existing
 from mwip_ros.cli.theorem import theorem_report
-from mwip_ros.core import budget, metrics
+from mwip_ros.core.kernels import budget
+from mwip_ros.core.closed_loop import metrics
 from mwip_ros.core import laws
-from mwip_ros.core.path import path_metrics, path_table
-from mwip_ros.core.plant import PlantDiverged
-from mwip_ros.core.sim import simulate
+from mwip_ros.core.mobile_base.path import path_metrics, path_table
+from mwip_ros.core.plants.plant import PlantDiverged
+from mwip_ros.core.closed_loop.sim import simulate
 from mwip_ros.params.paths import default_params_file
 from mwip_ros.runs import write_csv
 
@@ -87,7 +88,7 @@ def duration_error(seconds: float):
 
 
 def _memory_refusal(values, duration, n_runs: int):
-    """Why the runs would not fit the memory budget (core.budget: every law's trajectory is kept), or None."""
+    """Why the runs would not fit the memory budget (core.kernels.budget: every law's trajectory is kept), or None."""
     try:
         cap = budget.memory_budget()
     except ValueError as exc:
@@ -276,7 +277,7 @@ def ratio_line(dsc: metrics.Metrics, dscndo: metrics.Metrics) -> str:
 
 def verdict_line(run, m: metrics.Metrics, window_end: float) -> str:
     """'<label>: stayed upright (max |theta_b| = ... rad)', qualified when the run ended before ``window_end``, or the
-    line of its failure (:func:`mwip_ros.core.sim.simulate`'s ``fall_text``): when and why."""
+    line of its failure (:func:`mwip_ros.core.closed_loop.sim.simulate`'s ``fall_text``): when and why."""
     if not m.upright:
         text = run.record.get("fall_text") or f"FELL at t = {m.t_fall:.3f} s"
         return f"{run.label}: {text}"

@@ -18,7 +18,7 @@ from mwip_ros.cli.exits import EXIT_USAGE, epilog
 from mwip_ros.sweep import engine, results, warm
 from mwip_ros.sweep import progress as sweep_progress
 from mwip_ros.sweep.scenarios import expand, parameter_file
-from mwip_ros.core import batch
+from mwip_ros.core.kernels import batch
 from mwip_ros.core import laws as registry
 from mwip_ros.sweep.spec import SWEEP_BACKENDS, SpecError, load_spec
 
@@ -164,7 +164,7 @@ def _main(argv=None) -> int:
     except ValueError as exc:
         return _fail(str(exc))
     try:
-        spec = load_spec(args.spec, backends=SWEEP_BACKENDS)   # mujoco: the scalar loop (core.batch)
+        spec = load_spec(args.spec, backends=SWEEP_BACKENDS)   # mujoco: the scalar loop (core.kernels.batch)
         scenarios = expand(spec)
     except (SpecError, P.ParamError) as exc:
         return _fail(str(exc))

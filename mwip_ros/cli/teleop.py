@@ -19,7 +19,7 @@ import time
 from dataclasses import dataclass
 from typing import Optional, Sequence, Tuple
 
-from mwip_ros.core.plant import saturate
+from mwip_ros.core.plants.plant import saturate
 
 __all__ = ["Limits", "limits", "apply_key", "read_keys", "cmd", "drive"]
 

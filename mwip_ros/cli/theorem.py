@@ -7,7 +7,7 @@ from pathlib import Path
 
 from mwip_ros.cli.exits import plugin_refusal
 from mwip_ros import params as P
-from mwip_ros.core.theorem import theorem2
+from mwip_ros.core.control.theorem import theorem2
 from mwip_ros.params.paths import default_params_file
 
 MEANING = {"a1": "k1 - (m11+m12)/m22", "a2": "k2 - k1/2 - (m11+m12)/(2 m22)",

@@ -9,7 +9,7 @@ never a silent reshape, clip or traceback from deep inside.
 * ``reset(options=...)``: only ``initial``, four finite numbers within the schema's ranges of ``initial.*``;
 * ``render_mode``: None (the environments render nothing);
 * ``num_envs``: what the robots take, estimated before anything is allocated, within the memory budget
-  (:func:`mwip_ros.core.budget.vector_env_bytes`, ``MWIP_MEMORY_BUDGET``).
+  (:func:`mwip_ros.core.kernels.budget.vector_env_bytes`, ``MWIP_MEMORY_BUDGET``).
 """
 from __future__ import annotations
 
@@ -109,7 +109,7 @@ def render_mode(mode) -> None:
 def num_envs(n, setup=None) -> int:
     """``n`` as an int >= 1 whose robots fit the memory budget (estimated from ``setup``, when given: raw sensors,
     delays); ValueError naming ``num_envs`` with the numbers, else."""
-    from mwip_ros.core.budget import BUDGET_ENV, fmt_bytes, memory_budget, vector_env_bytes
+    from mwip_ros.core.kernels.budget import BUDGET_ENV, fmt_bytes, memory_budget, vector_env_bytes
     if not whole(n) or int(n) < 1:
         raise ValueError(f"num_envs: a whole number >= 1, got {str(n)[:40]}")
     n = int(n)

@@ -3,7 +3,7 @@
 The environments are configured as ``mwip_sim`` is (:func:`mwip_ros.params.closed_loop` of the merged parameter
 files): the robot, its model error, the disturbances, the sensors (the state, or raw with an estimator), the drive
 and the delays all come from the files.  Nothing here is an equation of the loop; the loop's own stages
-(:mod:`mwip_ros.core.loop`) run the robot.
+(:mod:`mwip_ros.core.closed_loop.loop`) run the robot.
 """
 from __future__ import annotations
 
@@ -16,7 +16,7 @@ import numpy as np
 
 from mwip_ros import params as P
 from mwip_ros.core import laws
-from mwip_ros.core.sim import ClosedLoop
+from mwip_ros.core.closed_loop.sim import ClosedLoop
 from mwip_ros.params.paths import default_params_file
 
 __all__ = ["DEFAULT_TORQUE_SCALE", "OBSERVATIONS", "SEED_RANGE", "Reward", "EnvSetup", "load_values", "setup"]

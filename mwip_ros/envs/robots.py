@@ -2,7 +2,7 @@
 
 :class:`SpecRobots` draws pools of robots with the sweep's own :func:`mwip_ros.sweep.scenarios.expand` (the spec
 with its ``seed`` set to the pool's seed and ``samples`` to the number of robots), and gives each robot's numbers
-the plant stage reads: the eq. (2) terms of the true robot (:class:`mwip_ros.core.model.PhysicalParams`) and its
+the plant stage reads: the eq. (2) terms of the true robot (:class:`mwip_ros.core.plants.model.PhysicalParams`) and its
 D_b, with the scenario's noise seed.  The vector env steps every robot with the same nominal model, law, sensors and
 drive, so a spec may vary the true robot only (``plant_sim.actual.*`` but the friction noise's D_w); ``MwipEnv``
 takes any spec.
@@ -15,13 +15,14 @@ from typing import Tuple
 import numpy as np
 
 from mwip_ros import params as P
-from mwip_ros.core.model import PhysicalParams
+from mwip_ros.core.plants.model import PhysicalParams
 from mwip_ros.sweep.scenarios import expand
 
 __all__ = ["ROBOT_KEYS", "TERMS", "SpecRobots", "terms_of"]
 
 ROBOT_KEYS = tuple(f"actual.{f.name}" for f in dataclasses.fields(PhysicalParams)) + ("actual.D_b",)
-TERMS = ("m11", "m12", "m22", "G_b")   # what core.compiled.Inertia holds, then D_b, then r and g (the raw sensors)
+# what core.kernels.compiled.Inertia holds, then D_b, then r and g (the raw sensors)
+TERMS = ("m11", "m12", "m22", "G_b")
 
 
 def terms_of(values) -> Tuple[float, ...]:

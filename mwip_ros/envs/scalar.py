@@ -1,12 +1,14 @@
 """``MwipEnv``: one robot as a Gymnasium environment, a period of the offline loop per step.
 
-An adapter over :class:`mwip_ros.core.loop.Period` (the stages of :data:`mwip_ros.core.loop.STAGES`, built by
-:func:`mwip_ros.core.sim.make_period` as :func:`mwip_ros.core.sim.simulate` builds them): ``reset`` builds the plant
-with its sensors and drive (:class:`~mwip_ros.core.loop.PlantSide`), the observer, the estimator (raw sensors), the
-base law, the motion references (``motion.enabled``) and the yaw stage (a spatial plant with motion), and runs the
-stages ``sensors`` to ``law`` of period 0 (:meth:`~mwip_ros.core.loop.Period.sense_decide`; the observation is what
-the law sees); ``step(a)`` adds the action to the base law's command (the stage ``law``), runs ``yaw`` and
-``drive`` (:meth:`~mwip_ros.core.loop.Period.actuate`) and ``plant`` of period k, then the stages up to the law of
+An adapter over :class:`mwip_ros.core.closed_loop.loop.Period` (the stages of
+:data:`mwip_ros.core.closed_loop.loop.STAGES`, built by
+:func:`mwip_ros.core.closed_loop.sim.make_period` as :func:`mwip_ros.core.closed_loop.sim.simulate` builds them):
+``reset`` builds the plant with its sensors and drive (:class:`~mwip_ros.core.closed_loop.loop.PlantSide`), the
+observer, the estimator (raw sensors), the base law, the motion references (``motion.enabled``) and the yaw stage (a
+spatial plant with motion), and runs the stages ``sensors`` to ``law`` of period 0
+(:meth:`~mwip_ros.core.closed_loop.loop.Period.sense_decide`; the observation is what the law sees); ``step(a)`` adds
+the action to the base law's command (the stage ``law``), runs ``yaw`` and ``drive``
+(:meth:`~mwip_ros.core.closed_loop.loop.Period.actuate`) and ``plant`` of period k, then the stages up to the law of
 period k + 1.  Actions equal to the law's own command give ``mwip_sim``'s trajectory of that law bit for bit
 (``test/envs``, with motion references and the yaw stage too).
 """
@@ -19,10 +21,10 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from mwip_ros.core.loop import Period
-from mwip_ros.core.plant import finite_state
-from mwip_ros.core.sim import make_period
-from mwip_ros.core.trajectory import BAD_COMMAND, DIVERGED, FAILURES, FALL
+from mwip_ros.core.closed_loop.loop import Period
+from mwip_ros.core.plants.plant import finite_state
+from mwip_ros.core.closed_loop.sim import make_period
+from mwip_ros.core.closed_loop.trajectory import BAD_COMMAND, DIVERGED, FAILURES, FALL
 
 from . import checks
 from .common import SEED_RANGE, ParamsArg, setup
@@ -37,10 +39,11 @@ class NoLaw:
     """The law stage without a law (the action is the whole command): u = 0, to which the action is added."""
 
     name = "none"
-    observer = False   # no observer term: core.loop.command hands the references without tau_hat (motion on)
+    # no observer term: core.closed_loop.loop.command hands the references without tau_hat (motion on)
+    observer = False
 
     def track(self, ref) -> None:
-        """The motion references (core.loop.command hands them to every law): nothing to track."""
+        """The motion references (core.closed_loop.loop.command hands them to every law): nothing to track."""
 
     def step(self, x, tau_hat=None):
         return 0.0, {}

@@ -35,7 +35,7 @@ class MwipVectorEnv(VectorEnv):
     the model error, the excitation, the driver nobody enables (``require_enable``) and the motion references
     (``motion.enabled``, docs/theory.md 6.11: the base law tracks them as in ``mwip_sim``); another plant backend,
     and the motion references with ``require_enable``, are refused naming the key (``MwipEnv`` runs them).  Each
-    step runs the stages of :data:`mwip_ros.core.loop.STAGES` with the compiled loop's own stage functions
+    step runs the stages of :data:`mwip_ros.core.closed_loop.loop.STAGES` with the compiled loop's own stage functions
     (:class:`~mwip_ros.envs.lanes.Lanes`); the action, a residual torque, is added to the base law's command (the
     stage ``law``, where the excitation is added) before the stage ``drive``.
     ``sweep``: a sweep spec instead of ``params``
@@ -43,7 +43,7 @@ class MwipVectorEnv(VectorEnv):
     scenario i of the spec with ``seed: s`` and ``samples: num_envs`` (its true robot and its noise seed); a restarted
     robot takes the next scenario, then those of the spec with seed s + 1, s + 2, ...  ``infos``: ``u`` (the torque
     after the drive's limit and delay, as ``MwipEnv``'s ``info["u"]``), ``failure`` (0, or the
-    :data:`mwip_ros.core.trajectory.FAILURES` index of why the episode ended)."""
+    :data:`mwip_ros.core.closed_loop.trajectory.FAILURES` index of why the episode ended)."""
 
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
 

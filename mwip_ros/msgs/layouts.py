@@ -13,7 +13,8 @@
                                                     a lateral push and a yaw torque on a 3D plant's body (mujoco)
     true_pose             geometry_msgs/PoseStamped a spatial plant's (backend mujoco) true 3D pose: frame_id
                                                     odom (REP-105), position the axle's centre, orientation
-                                                    from yaw, pitch, roll (core.markers.pose_quaternion); stamp t_k
+                                                    from yaw, pitch, roll (core.plants.markers.pose_quaternion); stamp
+                                                    t_k
     true_wheel_states     sensor_msgs/JointState    a spatial plant's wheels: name [wheel_left_joint,
                                                     wheel_right_joint] (the URDF's), position each wheel's
                                                     absolute angle [rad], velocity its rate; stamp t_k
@@ -41,12 +42,12 @@ import json
 import math
 from typing import Dict, Optional, Sequence, Tuple
 
-from mwip_ros.core.controller import INTERNALS
-from mwip_ros.core.markers import pose_angles, pose_quaternion
-from mwip_ros.core.model import State
-from mwip_ros.core.motion import ABSURD_SPEED, ABSURD_YAW_RATE
-from mwip_ros.core.safety import PLAUSIBLE_STATE, PLAUSIBLE_TORQUE, STATES
-from mwip_ros.core.urdf import WHEEL_JOINTS
+from mwip_ros.core.control.controller import INTERNALS
+from mwip_ros.core.plants.markers import pose_angles, pose_quaternion
+from mwip_ros.core.plants.model import State
+from mwip_ros.core.control.motion import ABSURD_SPEED, ABSURD_YAW_RATE
+from mwip_ros.core.control.safety import PLAUSIBLE_STATE, PLAUSIBLE_TORQUE, STATES
+from mwip_ros.core.mobile_base.urdf import WHEEL_JOINTS
 
 from . import cdr
 from .errors import BadMessage, CdrError
@@ -64,16 +65,16 @@ __all__ = ["JOINT_NAMES", "INTERNAL_NAMES", "LIMITS", "RAW_LIMITS", "IMU_FRAME",
 
 JOINT_NAMES = ("wheel", "body_pitch")
 YAW_JOINT = "yaw"   # joint_states' third joint from a spatial plant: velocity = the gyro's yaw rate (theory 6.13)
-WHEEL_TORQUE_JOINTS = WHEEL_JOINTS   # wheel_torques_cmd's names: the URDF's wheel joints (core.urdf)
-INTERNAL_NAMES = INTERNALS   # controller_internals' names (core.controller)
+WHEEL_TORQUE_JOINTS = WHEEL_JOINTS   # wheel_torques_cmd's names: the URDF's wheel joints (core.mobile_base.urdf)
+INTERNAL_NAMES = INTERNALS   # controller_internals' names (core.control.controller)
 
 # Plausible values, far beyond anything the robot reaches (in the paper's scenario |theta_b| stays
 # below 0.2 rad, the rates below 5 rad/s and the torques below 150 N m; a fall ends a run at
 # fall_angle, at most pi/2 in practice) and far inside what the arithmetic survives (a rate of
 # 1e160 overflows the law).  A message outside them is rejected like a NaN.
 LIMITS = {
-    **PLAUSIBLE_STATE,         # theta_b [rad], theta_w [rad], rate: theta_w', theta_b' [rad/s] (core.safety)
-    "torque": PLAUSIBLE_TORQUE,   # u, tau_hat, tau_d, tau_ext [N m] (core.safety: the driver's own limit)
+    **PLAUSIBLE_STATE,         # theta_b [rad], theta_w [rad], rate: theta_w', theta_b' [rad/s] (core.control.safety)
+    "torque": PLAUSIBLE_TORQUE,   # u, tau_hat, tau_d, tau_ext [N m] (core.control.safety: the driver's own limit)
 }
 
 # The raw sensors' plausible readings (theory.md 6.4), far beyond a balancing robot (the paper's run: |gyro| < 5 rad/s,
@@ -87,7 +88,7 @@ RAW_LIMITS = {
     "rate": LIMITS["rate"],    # |encoder rate| [rad/s]
     "torque": LIMITS["torque"],   # |reported torque| [N m]
 }
-IMU_FRAME = "imu_link"         # REP-145: the IMU's own frame (the body frame at the IMU, core.raw_sensors)
+IMU_FRAME = "imu_link"         # REP-145: the IMU's own frame (the body frame at the IMU, core.plants.raw_sensors)
 ENCODER_JOINT = "wheel"        # the encoder's joint: the wheel relative to the body
 ENCODER_FRAME = ""             # the encoder's JointState frame_id: none (a joint angle is no pose in a frame)
 POSE_FRAME = "odom"            # true_pose's frame: the world fixed where the run starts (REP-105)
@@ -116,7 +117,7 @@ RAW_FILTERS = {
 }
 
 # cmd_vel's DDS content filter (the controller's cmd_vel reader, nodes.runtime.content_filter; issue 46 item 2): what
-# core.motion.Shaper.command rejects for its numbers (linear.x or angular.z not finite, or beyond ABSURD_SPEED /
+# core.control.motion.Shaper.command rejects for its numbers (linear.x or angular.z not finite, or beyond ABSURD_SPEED /
 # ABSURD_YAW_RATE), and bytes that cannot be deserialized, dropped by the middleware before the reader's depth-1
 # history: a flood of them can neither displace a valid command nor cost the controller's Python a look.  The other
 # four fields are read by no one (parse_twist), so they are not judged here either.
@@ -204,8 +205,8 @@ def parse_wheel_torques(data) -> Tuple[int, float, float]:
 
 def encode_wheel_states(stamp: int, angles: Sequence[float], rates: Sequence[float] = ()) -> bytes:
     """true_wheel_states (sensor_msgs/JointState): name :data:`WHEEL_TORQUE_JOINTS` (the URDF's wheel joints), position
-    each wheel's absolute angle [rad] (:class:`~mwip_ros.core.plant.Pose`'s wheel_left, wheel_right), velocity their
-    rates [rad/s] (empty when the plant has none), stamp t_k."""
+    each wheel's absolute angle [rad] (:class:`~mwip_ros.core.plants.plant.Pose`'s wheel_left, wheel_right), velocity
+    their rates [rad/s] (empty when the plant has none), stamp t_k."""
     return _WHEEL_TORQUES(stamp, tuple(float(a) for a in angles), tuple(float(r) for r in rates))
 
 
@@ -234,7 +235,7 @@ def encode_wrench(stamp: int, t1: float, t2: float) -> bytes:
 
 
 def encode_pose(stamp: int, pose) -> bytes:
-    """true_pose: a :class:`~mwip_ros.core.plant.Pose` as a PoseStamped in :data:`POSE_FRAME`."""
+    """true_pose: a :class:`~mwip_ros.core.plants.plant.Pose` as a PoseStamped in :data:`POSE_FRAME`."""
     return _POSE(stamp, (float(pose.x), float(pose.y), float(pose.z)),
                  pose_quaternion(pose.yaw, pose.pitch, pose.roll))
 
@@ -416,7 +417,7 @@ MAX_DRIVER_STATE_BYTES = 4096   # a driver_state record is a few hundred bytes; 
 
 
 def parse_driver_state(data) -> str:
-    """The driver's state (``disabled``, ``enabled`` or ``fault``, :data:`mwip_ros.core.safety.STATES`) of one
+    """The driver's state (``disabled``, ``enabled`` or ``fault``, :data:`mwip_ros.core.control.safety.STATES`) of one
     ``driver_state`` message (std_msgs/String, the JSON record ``plant_sim`` publishes at each transition), or
     BadMessage: not a String, longer than :data:`MAX_DRIVER_STATE_BYTES`, not JSON, no known ``state``."""
     if len(data) > MAX_DRIVER_STATE_BYTES:
@@ -463,7 +464,7 @@ def encode_twist(vx: float, wz: float) -> bytes:
 
 def parse_twist(data) -> Tuple[float, float]:
     """(linear.x, angular.z) of a cmd_vel Twist, or BadMessage when it is not one; the numbers are judged by
-    :meth:`mwip_ros.core.motion.Shaper.command` (not finite or absurd: rejected and counted)."""
+    :meth:`mwip_ros.core.control.motion.Shaper.command` (not finite or absurd: rejected and counted)."""
     linear, angular = _decoded(cdr.decode_wrench, data, "geometry_msgs/Twist")   # Twist's layout is Wrench's
     return linear[0], angular[2]
 

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from typing import Any, Mapping
 
-from mwip_ros.core.drive import MotorConfig
+from mwip_ros.core.plants.drive import MotorConfig
 
 __all__ = ["motor"]
 

@@ -15,7 +15,7 @@ from __future__ import annotations
 import math
 from typing import Any, Dict, List, Mapping
 
-from mwip_ros.core.plant_base import per_wheel
+from mwip_ros.core.plants.plant_base import per_wheel
 
 from .errors import ParamError
 from .spec import ParamSpec
@@ -93,8 +93,8 @@ def specs() -> List[ParamSpec]:
 
 def wheel_limit(values: Mapping[str, Any], robot: Mapping[str, Any]) -> float:
     """Each wheel's torque limit [N m]: ``wheel_torque_limit``, or the wheel's share of the robot's lumped
-    ``torque_limit`` (:func:`~mwip_ros.core.plant.per_wheel`, SPEC 16: each wheel gets u/2 and half the limit); 0 =
-    none.  ParamError naming both keys when ``wheel_torque_limit`` is more than that share (the robot's two limits
+    ``torque_limit`` (:func:`~mwip_ros.core.plants.plant.per_wheel`, SPEC 16: each wheel gets u/2 and half the limit); 0
+    = none.  ParamError naming both keys when ``wheel_torque_limit`` is more than that share (the robot's two limits
     disagree)."""
     own, share = values["wheel_torque_limit"], per_wheel(robot.get("torque_limit", 0.0))
     if own > 0.0 and share > 0.0 and own > share:

@@ -9,7 +9,7 @@ import difflib
 import yaml
 
 from .errors import ParamError
-from mwip_ros.core.loop import loop_nodes
+from mwip_ros.core.closed_loop.loop import loop_nodes
 from mwip_ros.yamlio import RosYamlLoader, YamlRefused, load_yaml
 from .schema import (NODE_SPECS, QOS_OVERRIDES, QOS_OVERRIDES_REFUSED, ROS_OWN, SHARED, SHARED_SPECS, check_derived,
                      defaults_for, spelling_hint, specs_for)
@@ -174,7 +174,7 @@ def load_param_files(paths, option: str = "--params-file") -> ParamFile:
     return merged
 
 
-# the closed loop's nodes (core.loop.STAGES), the plant's values last (they win where sections share a key)
+# the closed loop's nodes (core.closed_loop.loop.STAGES), the plant's values last (they win where sections share a key)
 NODES_OF_THE_LOOP = tuple(reversed(loop_nodes(estimator=True)))
 
 

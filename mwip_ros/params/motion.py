@@ -1,15 +1,15 @@
 """The ``motion.*`` parameters of ``dscndo_controller`` (docs/theory.md 6.11): the references a law tracks.
 
 :func:`specs` gives their :class:`~.spec.ParamSpec` (``params.schema`` lists them with the controller's own);
-:func:`motion` makes the :class:`mwip_ros.core.motion.MotionConfig` of merged values, None while
+:func:`motion` makes the :class:`mwip_ros.core.control.motion.MotionConfig` of merged values, None while
 ``motion.enabled`` is false (the default, and config/paper.yaml's: every law regulates, as in the paper).
 """
 from __future__ import annotations
 
 from typing import Any, Dict, List, Mapping, Optional
 
-from mwip_ros.core.motion import ABSURD_SPEED
-from mwip_ros.core.plant_base import per_wheel
+from mwip_ros.core.control.motion import ABSURD_SPEED
+from mwip_ros.core.plants.plant_base import per_wheel
 
 from .drive import motor
 from .spec import ParamSpec
@@ -102,10 +102,11 @@ def specs() -> List[ParamSpec]:
 
 
 def motion(v: Mapping[str, Any]):
-    """The :class:`~mwip_ros.core.motion.MotionConfig` of merged values, or None while ``motion.enabled`` is false."""
+    """The :class:`~mwip_ros.core.control.motion.MotionConfig` of merged values, or None while ``motion.enabled`` is
+    false."""
     if not v.get("motion.enabled", False):
         return None
-    from mwip_ros.core.motion import MotionConfig
+    from mwip_ros.core.control.motion import MotionConfig
     prof = [float(x) for x in v["motion.profile"]]
     return MotionConfig(max_speed=v["motion.max_speed"], max_accel=v["motion.max_accel"],
                         max_yaw_rate=v["motion.max_yaw_rate"], timeout_s=v["motion.cmd_vel_timeout_s"],
@@ -155,11 +156,11 @@ def wheel_limit_warning(v: Mapping[str, Any]) -> Optional[str]:
 
 
 def yaw(v: Mapping[str, Any]):
-    """The :class:`~mwip_ros.core.yaw.YawConfig` of merged values (the yaw stage runs on a spatial plant), or None
-    while ``motion.enabled`` is false.  Its wheel limit is :func:`wheel_limit`'s (the values include plant_sim's
+    """The :class:`~mwip_ros.core.control.yaw.YawConfig` of merged values (the yaw stage runs on a spatial plant), or
+    None while ``motion.enabled`` is false.  Its wheel limit is :func:`wheel_limit`'s (the values include plant_sim's
     drive: merged files, or a node's values with the drive's from the plant_sim sections)."""
     if not v.get("motion.enabled", False):
         return None
-    from mwip_ros.core.yaw import YawConfig
+    from mwip_ros.core.control.yaw import YawConfig
     return YawConfig(kp=v["motion.yaw_kp"], ki=v["motion.yaw_ki"],
                      calibration_s=v.get("motion.yaw_gyro_calibration_s", 0.0), wheel_limit=wheel_limit(v))

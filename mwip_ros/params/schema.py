@@ -15,7 +15,7 @@ import difflib
 import math
 from typing import Any, Dict, Iterable, List, Mapping, Optional
 
-from mwip_ros.core.safety import PLAUSIBLE_STATE
+from mwip_ros.core.control.safety import PLAUSIBLE_STATE
 from . import driver, ground, motion, upkie
 from .errors import ParamError
 from .spec import HI_WHY, INT32_MAX, ParamSpec
@@ -26,8 +26,8 @@ __all__ = ["SHARED", "ParamSpec", "INT32_MAX", "HI_WHY", "PAPER_NOMINAL", "PAPER
 
 SHARED = "/**"
 
-# What a published measurement may read: mwip_ros.core.safety.PLAUSIBLE_STATE (msgs.layouts.LIMITS: the observer and
-# the controller reject a joint_states message beyond them as implausible).  A noise standard deviation is
+# What a published measurement may read: mwip_ros.core.control.safety.PLAUSIBLE_STATE (msgs.layouts.LIMITS: the observer
+# and the controller reject a joint_states message beyond them as implausible).  A noise standard deviation is
 # at most NOISE_LIMIT_FRACTION of the limit, and theta_b's noise must leave NOISE_SIGMAS standard deviations
 # between the fall angle and the limit (check_derived): noise that makes a measurement implausible is a
 # configuration error, refused at start-up, not a fault of the observer found during the run.
@@ -451,8 +451,8 @@ def check_geometry(values: Mapping[str, Any], source: Optional[str] = None) -> N
         if v > rest:
             raise ParamError(key, f"{v:g} kg m^2 is more than the other two principal moments of the body together "
                                   f"({rest:g}); no rigid body has it", source)
-    from mwip_ros.core.mujoco_plant import wheel_width
-    width = wheel_width(values["actual.r"])   # each wheel's cylinder is r / 5 wide (core.mujoco_plant.mjcf)
+    from mwip_ros.core.plants.mujoco_plant import wheel_width
+    width = wheel_width(values["actual.r"])   # each wheel's cylinder is r / 5 wide (core.plants.mujoco_plant.mjcf)
     if values["actual.track_width"] <= width:
         raise ParamError("actual.track_width", f"{values['actual.track_width']:g} m: the wheels (each "
                                                f"actual.r / 5 = {width:g} m wide) would overlap", source)
@@ -472,8 +472,8 @@ def check_derived(values: Mapping[str, Any], source: Optional[str] = None) -> No
     inertia terms that are not finite or an A_bar that is not positive (eq. 2, 38); or a law's parameters
     that give it no design (LQR or MPC weights with no stabilizing gain for the nominal model, ...: every
     registered law's design, whatever the law in use, so a switch of law at run time cannot fail).  The
-    inertia terms are the model's (:class:`mwip_ros.core.model.PhysicalParams`)."""
-    from mwip_ros.core.model import PhysicalParams
+    inertia terms are the model's (:class:`mwip_ros.core.plants.model.PhysicalParams`)."""
+    from mwip_ros.core.plants.model import PhysicalParams
 
     for prefix in ("nominal", "actual"):
         if f"{prefix}.m_b" not in values:

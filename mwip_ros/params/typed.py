@@ -4,15 +4,15 @@ from __future__ import annotations
 from typing import Any, Iterable, List, Mapping, Optional, Tuple, cast
 
 from mwip_ros.core import laws
-from mwip_ros.core.controller import DscGains
-from mwip_ros.core.drive import limit_warning, torque_warning
+from mwip_ros.core.control.controller import DscGains
+from mwip_ros.core.plants.drive import limit_warning, torque_warning
 from mwip_ros.core.estimators import EstimatorConfig
-from mwip_ros.core.excitation import ExcitationConfig
-from mwip_ros.core.model import PhysicalParams, Sinusoid, State
-from mwip_ros.core.plant import MujocoConfig, PlantConfig
-from mwip_ros.core.raw_sensors import RawSensorConfig
-from mwip_ros.core.sensing import SensingConfig
-from mwip_ros.core.sim import ClosedLoop
+from mwip_ros.core.identification.excitation import ExcitationConfig
+from mwip_ros.core.plants.model import PhysicalParams, Sinusoid, State
+from mwip_ros.core.plants.plant import MujocoConfig, PlantConfig
+from mwip_ros.core.plants.raw_sensors import RawSensorConfig
+from mwip_ros.core.plants.sensing import SensingConfig
+from mwip_ros.core.closed_loop.sim import ClosedLoop
 
 from .drive import motor
 from .motion import motion as motion_config, wheel_limit_warning, yaw as yaw_config
@@ -44,7 +44,7 @@ def period(values: Mapping[str, Any]) -> float:
 
 def observer_gain(values: Mapping[str, Any]):
     """X as the 2x2 matrix (eq. 14)."""
-    from mwip_ros.core.observer import gain_matrix
+    from mwip_ros.core.control.observer import gain_matrix
     return gain_matrix(values["X"])
 
 
@@ -81,8 +81,8 @@ def excitation(v: Mapping[str, Any]) -> Optional[ExcitationConfig]:
 
 
 def limit_warnings(v: Mapping[str, Any], law_names: Iterable[str] = ()) -> List[str]:
-    """The torque limits too weak for the true robot (:func:`mwip_ros.core.drive.limit_warning`, one line each):
-    the motor's peak torque at ``fall_angle`` (:func:`~mwip_ros.core.drive.torque_warning`); ``torque_limit``
+    """The torque limits too weak for the true robot (:func:`mwip_ros.core.plants.drive.limit_warning`, one line each):
+    the motor's peak torque at ``fall_angle`` (:func:`~mwip_ros.core.plants.drive.torque_warning`); ``torque_limit``
     (when > 0) and the own limit of each law of ``law_names`` (``Law.limit_key``: ``mpc.u_max``) at the initial
     tilt, where a limit below the holding torque starts the run beyond what it can turn back; and a yaw wheel limit
     above the drive's (:func:`.motion.wheel_limit_warning`: the drive's is used)."""
@@ -102,9 +102,10 @@ def limit_warnings(v: Mapping[str, Any], law_names: Iterable[str] = ()) -> List[
 
 
 def observer_warnings(v: Mapping[str, Any]) -> List[str]:
-    """The observer gain X against Theorem 2 (eq. 35: a4, a5 > 0, :func:`mwip_ros.core.theorem.observer_conditions`)
-    on the nominal model: one line when it breaks it, else none."""
-    from mwip_ros.core.theorem import observer_conditions
+    """The observer gain X against Theorem 2 (eq. 35: a4, a5 > 0,
+    :func:`mwip_ros.core.control.theorem.observer_conditions`) on the nominal model: one line when it breaks it, else
+    none."""
+    from mwip_ros.core.control.theorem import observer_conditions
     th = observer_conditions(physical(v, "nominal"), observer_gain(v))
     if th.satisfied:
         return []
@@ -185,7 +186,7 @@ def sensing(v: Mapping[str, Any]) -> SensingConfig:
 
 def lqr_gain(v: Mapping[str, Any]):
     """K of the LQR baseline for these values (nominal model, period, lqr.Q, lqr.R)."""
-    from mwip_ros.core.lqr import lqr_gain as design
+    from mwip_ros.core.control.lqr import lqr_gain as design
     return design(physical(v, "nominal"), period(v), v["lqr.Q"], v["lqr.R"])
 
 

@@ -21,7 +21,7 @@ A simulated backend (:attr:`Backend.simulated`) advances only in :meth:`Backend.
 lockstep; a device runs on the wall clock, and the node paces it. ``step(None)`` is a stop: no torque, and on a
 device its own stop command (moteus ``make_stop``), sent first when anything goes wrong (Upkie's stop-first
 rule). A device's own fault (a fault code, an over-temperature, a controller that does not answer) comes back in
-:attr:`Observation.fault`; the node hands it to the driver's state machine (:mod:`mwip_ros.core.safety`) as the
+:attr:`Observation.fault`; the node hands it to the driver's state machine (:mod:`mwip_ros.core.control.safety`) as the
 fault's reason. This module imports no ROS.
 """
 from __future__ import annotations

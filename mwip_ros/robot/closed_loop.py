@@ -1,5 +1,6 @@
 """The closed loop over a robot's :class:`~mwip_ros.robot.backend.Backend`, in one process, without ROS: the project's
-stages (:func:`mwip_ros.core.loop.decide`: state estimator, observer, law) between a backend's reads and writes.
+stages (:func:`mwip_ros.core.closed_loop.loop.decide`: state estimator, observer, law) between a backend's reads and
+writes.
 
 Period k (docs/theory.md section 4's contract, the robot's side of it as SPEC section 16 has it):
 
@@ -10,21 +11,22 @@ Period k (docs/theory.md section 4's contract, the robot's side of it as SPEC se
    has turned the right servo's ``-phi_R`` into ``+phi_R``: ``(phi_L - phi_R_servo) / 2``) and its rate as the
    servos report it; the torque that acted over period k - 1, ``u_L + u_R`` as the servos report it. With
    ``measure="truth"`` the simulator's true planar state instead (the estimator bypassed, for comparison);
-3. :func:`~mwip_ros.core.loop.decide`: the estimate, tau_hat_k, u_k (with the excitation and the references);
+3. :func:`~mwip_ros.core.closed_loop.loop.decide`: the estimate, tau_hat_k, u_k (with the excitation and the
+   references);
 4. the drive: ``torque_limit`` (the lumped |u|, ``saturate``), a command that is not finite ends the run
    (``bad_command``), u split over the wheels by :meth:`~mwip_ros.robot.backend.Command.lumped`;
 5. the write and the next read: :meth:`~mwip_ros.robot.backend.Backend.step`.
 
-Row k of the :class:`~mwip_ros.core.trajectory.Trajectory` holds the true state where the backend has one (NaN
-else), the command u_k after the torque limit, tau_hat_k, the raw sample and the estimate, the torque that acted over
-[t_k, t_k+1) (``u_applied``: the next read's report), and the pose (the axle's x, y where the backend knows it: an
+Row k of the :class:`~mwip_ros.core.closed_loop.trajectory.Trajectory` holds the true state where the backend has one
+(NaN else), the command u_k after the torque limit, tau_hat_k, the raw sample and the estimate, the torque that acted
+over [t_k, t_k+1) (``u_applied``: the next read's report), and the pose (the axle's x, y where the backend knows it: an
 :class:`~mwip_ros.robot.upkie.UpkieBackend` on PyBullet). The true lumped disturbance is not known (NaN).
 
 A run ends early when the robot falls (|theta_b| beyond ``fall_angle``: the true one where there is one, else the
 estimate), when a command is refused, or when the backend reports a fault; ``record`` says when and why, as
-:func:`mwip_ros.core.sim.simulate`'s does. ``realtime`` paces the periods to the wall clock (a simulated backend is
-stepped on demand otherwise: lockstep) and records the timing: the periods, the late ones (a write more than one
-period behind its slot), the lateness's 99th percentile and the worst, and each period's own work (its stages, the
+:func:`mwip_ros.core.closed_loop.sim.simulate`'s does. ``realtime`` paces the periods to the wall clock (a simulated
+backend is stepped on demand otherwise: lockstep) and records the timing: the periods, the late ones (a write more than
+one period behind its slot), the lateness's 99th percentile and the worst, and each period's own work (its stages, the
 write and the next read: a simulator's physics included): its median, 99th percentile and worst.
 """
 from __future__ import annotations
@@ -36,14 +38,14 @@ from typing import Callable, Optional
 
 import numpy as np
 
-from ..core.excitation import Excitation
-from ..core.loop import decide, fall_text
-from ..core.motion import Shaper
-from ..core.observer import DiscreteObserver, gain_matrix
-from ..core.plant import Pose, saturate
-from ..core.raw_sensors import RawSample
-from ..core.sim import ClosedLoop
-from ..core.trajectory import BAD_COMMAND, FAILURES, FALL, Trajectory, TrajectoryTable
+from ..core.identification.excitation import Excitation
+from ..core.closed_loop.loop import decide, fall_text
+from ..core.control.motion import Shaper
+from ..core.control.observer import DiscreteObserver, gain_matrix
+from ..core.plants.plant import Pose, saturate
+from ..core.plants.raw_sensors import RawSample
+from ..core.closed_loop.sim import ClosedLoop
+from ..core.closed_loop.trajectory import BAD_COMMAND, FAILURES, FALL, Trajectory, TrajectoryTable
 from .backend import Backend, Command, Observation
 
 __all__ = ["Push", "raw_sample", "run", "summary", "MEASURES"]
@@ -74,7 +76,7 @@ def raw_sample(obs: Observation) -> RawSample:
     Returns
     -------
     RawSample
-        What the state estimator takes (:mod:`mwip_ros.core.raw_sensors`).
+        What the state estimator takes (:mod:`mwip_ros.core.plants.raw_sensors`).
     """
     if obs.imu is None:
         raise ValueError("this backend's read has no IMU: the state estimator needs one (imu/data_raw)")

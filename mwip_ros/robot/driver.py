@@ -1,9 +1,9 @@
 """The wheel driver's period, without ROS: what the node that owns a robot's clock (``wheel_driver``,
 docs/hardware.md) does with a :class:`~.backend.Backend`, and the timing it reports.
 
-A :class:`WheelDriver` holds the backend, the driver's state machine (:class:`mwip_ros.core.safety.DriverStateMachine`,
-one for the driver's life), the command watchdog (:class:`mwip_ros.core.safety.Watchdog`) and the newest command.
-Each period (:meth:`WheelDriver.period`) is:
+A :class:`WheelDriver` holds the backend, the driver's state machine
+(:class:`mwip_ros.core.control.safety.DriverStateMachine`, one for the driver's life), the command watchdog
+(:class:`mwip_ros.core.control.safety.Watchdog`) and the newest command. Each period (:meth:`WheelDriver.period`) is:
 
 1. **the command that acts**: the newest command, gated by the state machine (a stop, ``None``, unless enabled;
    always a stop with ``read_only``), each wheel clipped to ``wheel_torque_limit``;
@@ -36,7 +36,7 @@ import time
 from dataclasses import dataclass
 from typing import Callable, List, Optional, Tuple
 
-from mwip_ros.core.safety import ENABLED, PLAUSIBLE_TORQUE, DriverStateMachine, Transition, Watchdog
+from mwip_ros.core.control.safety import ENABLED, PLAUSIBLE_TORQUE, DriverStateMachine, Transition, Watchdog
 
 from .backend import Backend, Command, Observation
 

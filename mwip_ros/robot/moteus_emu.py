@@ -46,7 +46,7 @@ with the torques the controllers apply at its start (held over it, as the plant'
 **Held until driven** (``hold``): a robot is held upright by hand until its driver drives it.  A held
 :class:`EmulatedRobot` keeps its plant at the initial state (its clock goes on) until a controller first takes a
 command in position mode; from then on the physics runs.  Held, it is at rest: its IMU reads no rotation and the
-specific force of a body at rest at the initial pitch (:func:`mwip_ros.core.raw_sensors.specific_force` with no
+specific force of a body at rest at the initial pitch (:func:`mwip_ros.core.plants.raw_sensors.specific_force` with no
 acceleration; the plant's own first read has the accelerations of a robot let go at that instant).  So a graph
 that takes seconds to come up meets the robot where the parameter file starts it.
 
@@ -70,7 +70,7 @@ from dataclasses import dataclass, field
 from dataclasses import replace as _replace
 from typing import Callable, Deque, Dict, List, Optional, Sequence, Tuple
 
-from mwip_ros.core.raw_sensors import specific_force
+from mwip_ros.core.plants.raw_sensors import specific_force
 from mwip_ros.optional import required
 
 from .backend import Command, Imu, Observation

@@ -44,7 +44,7 @@ from typing import Dict, Iterator, Mapping, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
-from ..core.model import PhysicalParams
+from ..core.plants.model import PhysicalParams
 
 __all__ = ["PlanarModel", "planar_model", "upkie_planar_model", "UPKIE_WHEEL_JOINTS", "UPKIE_IMU_LINK"]
 
@@ -99,8 +99,8 @@ class PlanarModel:
     body_links: Tuple[str, ...]
 
     def physical(self, g: float = 9.81) -> PhysicalParams:
-        """The model as :class:`~mwip_ros.core.model.PhysicalParams` (what the laws, the observer, Theorem 2 and the
-        tuner take), with gravity ``g`` [m/s^2]."""
+        """The model as :class:`~mwip_ros.core.plants.model.PhysicalParams` (what the laws, the observer, Theorem 2 and
+        the tuner take), with gravity ``g`` [m/s^2]."""
         return PhysicalParams(m_b=self.m_b, m_w=self.m_w, I_b=self.I_b, I_w=self.I_w, l=self.l, r=self.r, g=g)
 
     def body_from_imu(self) -> np.ndarray:

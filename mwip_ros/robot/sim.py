@@ -1,15 +1,16 @@
 """The project's own plants behind the robot's interface: :class:`SimBackend` (``backend: rk4`` or ``mujoco``).
 
-A :class:`SimBackend` is a :class:`~mwip_ros.core.loop.PlantSide` (the plant of :func:`~mwip_ros.core.plant.make_plant`,
-its raw sensors and its drive stage) seen as a :class:`~.backend.Backend`, so the offline loop, the ``plant_sim``
-node and this backend integrate the same numbers.  Nothing of the physics or of the sensors is written here:
+A :class:`SimBackend` is a :class:`~mwip_ros.core.closed_loop.loop.PlantSide` (the plant of
+:func:`~mwip_ros.core.plants.plant.make_plant`, its raw sensors and its drive stage) seen as a
+:class:`~.backend.Backend`, so the offline loop, the ``plant_sim`` node and this backend integrate the same numbers.
+Nothing of the physics or of the sensors is written here:
 
 - :meth:`SimBackend.step` is the offline loop's stages ``drive`` and ``plant`` (:meth:`PlantSide.act` then
   :meth:`PlantSide.advance`) for u = left + right (eq. 1's lumped torque, SPEC 16); on a spatial plant (MuJoCo) the
   wheels' pair goes to :meth:`PlantSide.act` as the yaw stage's does (each wheel clipped to half of
   ``torque_limit``, docs/theory.md 6.13).  ``step(None)`` is a stop: the drive's bridge open for the period (no
-  current, no torque, :func:`~mwip_ros.core.plant.gated_drive`), through the plant side's own driver state machine
-  (:mod:`mwip_ros.core.safety`);
+  current, no torque, :func:`~mwip_ros.core.plants.plant.gated_drive`), through the plant side's own driver state
+  machine (:mod:`mwip_ros.core.control.safety`);
 - each read is stage ``sensors`` (:meth:`PlantSide.sense`) with raw sensors (docs/theory.md 6.4): the IMU's pitch
   gyro and specific force, and the relative encoder phi = theta_w - theta_b with its rate, delayed as the
   configuration says.  A configuration with ``sensors.model: state`` gets ideal raw sensors (the backend reads what
@@ -23,8 +24,8 @@ node and this backend integrate the same numbers.  Nothing of the physics or of 
 - ``truth`` is the plant's true planar state (theta_w, theta_b, theta_w', theta_b') and ``time`` its simulated
   time k h.
 
-A command that is not a finite number (or beyond :data:`~mwip_ros.core.safety.PLAUSIBLE_TORQUE`) faults the plant
-side's driver (``bad_command``): zero torque from then on, and :attr:`Observation.fault` names it until
+A command that is not a finite number (or beyond :data:`~mwip_ros.core.control.safety.PLAUSIBLE_TORQUE`) faults the
+plant side's driver (``bad_command``): zero torque from then on, and :attr:`Observation.fault` names it until
 :meth:`SimBackend.reset`.  A simulation that diverges raises :class:`~.backend.BackendError`.  No ROS here.
 """
 from __future__ import annotations
@@ -32,10 +33,10 @@ from __future__ import annotations
 from dataclasses import replace
 from typing import Optional
 
-from mwip_ros.core.loop import PlantSide
-from mwip_ros.core.plant import PlantConfig, PlantDiverged, Pose, finite_state
-from mwip_ros.core.raw_sensors import RawSensorConfig
-from mwip_ros.core.safety import FAULT
+from mwip_ros.core.closed_loop.loop import PlantSide
+from mwip_ros.core.plants.plant import PlantConfig, PlantDiverged, Pose, finite_state
+from mwip_ros.core.plants.raw_sensors import RawSensorConfig
+from mwip_ros.core.control.safety import FAULT
 
 from .backend import Backend, BackendError, Command, Imu, Observation, Wheel
 
@@ -62,7 +63,7 @@ def sim_config(cfg: PlantConfig) -> PlantConfig:
 
 
 class SimBackend(Backend):
-    """The plant of a :class:`~mwip_ros.core.plant.PlantConfig` behind :class:`~.backend.Backend` (module
+    """The plant of a :class:`~mwip_ros.core.plants.plant.PlantConfig` behind :class:`~.backend.Backend` (module
     docstring).
 
     Parameters
@@ -82,7 +83,7 @@ class SimBackend(Backend):
 
     @property
     def plant(self):
-        """The plant (:class:`~mwip_ros.core.plant.Plant`) at the current read."""
+        """The plant (:class:`~mwip_ros.core.plants.plant.Plant`) at the current read."""
         return self.side.plant
 
     def observe(self) -> Observation:

@@ -64,7 +64,7 @@ from typing import ClassVar, Dict, Mapping, Optional, Tuple
 
 import numpy as np
 
-from ..core.plant import Pose
+from ..core.plants.plant import Pose
 from .backend import Backend, BackendError, Command, Imu, Observation, Wheel
 from .planar_model import UPKIE_WHEEL_JOINTS, PlanarModel, upkie_planar_model
 

@@ -3,8 +3,8 @@
 A :class:`Chunk` is up to ``chunk_size`` consecutive scenarios under one law (fewer, :data:`SLOW_CHUNK`, for a
 law the batch cannot compile: its chunks take minutes otherwise, and progress would stand still); :func:`run_chunk`
 (a plain function of plain data, so any process or Dask worker can run it) builds each
-scenario's :class:`~mwip_ros.core.sim.ClosedLoop` from the base values and the scenario's
-overrides and runs them through :func:`~mwip_ros.core.batch.simulate_batch`.  The chunks are
+scenario's :class:`~mwip_ros.core.closed_loop.sim.ClosedLoop` from the base values and the scenario's
+overrides and runs them through :func:`~mwip_ros.core.kernels.batch.simulate_batch`.  The chunks are
 cut the same way whatever runs them, so the results are identical however the sweep ran.  :func:`make_chunks`
 takes the laws in turn (each law's first chunk, the slow laws' first, then each law's second, ...), so every
 law's cost per scenario is measured early (:class:`ChunkResult.seconds`; the time left, :mod:`mwip_ros.sweep.progress`).
@@ -27,8 +27,9 @@ from typing import Any, Dict, Iterator, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from mwip_ros.core import budget, laws
-from mwip_ros.core.budget import window_samples
+from mwip_ros.core.kernels import budget
+from mwip_ros.core import laws
+from mwip_ros.core.kernels.budget import window_samples
 from mwip_ros.sweep.workers import signals_held, stop_resource_tracker, worker_init
 
 __all__ = ["Chunk", "ChunkResult", "make_chunks", "chunks_of", "chunk_size_for", "run_chunk", "batch_groups", "Runner",
@@ -61,19 +62,20 @@ class ChunkResult:
     metrics: Dict[str, np.ndarray]
     steps: int
     seconds: float = 0.0   # wall time the chunk took where it ran (a worker): the law's cost, for the time left
-    failure: Optional[np.ndarray] = None   # why each failed: a core.trajectory.FAILURES code (0: it did not)
+    # why each failed: a core.closed_loop.trajectory.FAILURES code (0: it did not)
+    failure: Optional[np.ndarray] = None
 
 
 def chunk_size_for(controller: str, chunk_size: int = DEFAULT_CHUNK) -> int:
     """Scenarios per chunk of ``controller``: ``chunk_size``, at most :data:`SLOW_CHUNK` for a law without a pure
-    form (:func:`~mwip_ros.core.compiled.pure_form`: the batch cannot compile it), and for every law without numba
-    (the scalar loop runs each scenario: :func:`~mwip_ros.core.batch.numba_missing`)."""
+    form (:func:`~mwip_ros.core.kernels.compiled_stages.pure_form`: the batch cannot compile it), and for every law
+    without numba (the scalar loop runs each scenario: :func:`~mwip_ros.core.kernels.batch.numba_missing`)."""
     from mwip_ros.core import laws
-    from mwip_ros.core.batch import numba_missing
+    from mwip_ros.core.kernels.batch import numba_missing
     slow = max(1, min(chunk_size, SLOW_CHUNK))
     if numba_missing():
         return slow
-    from mwip_ros.core.compiled import pure_form
+    from mwip_ros.core.kernels.compiled_stages import pure_form
     return chunk_size if pure_form(laws.get(controller)) is not None else slow
 
 
@@ -97,7 +99,7 @@ def chunks_of(controller: str, base: Dict[str, Any], overrides: Sequence[Dict[st
 
 
 def scenario_cost(values: Dict[str, Any], duration_s: float, window: Tuple[float, float]) -> Tuple[int, int]:
-    """(bytes per scenario, bytes per batch) of a run of these merged values in a batch (core.budget)."""
+    """(bytes per scenario, bytes per batch) of a run of these merged values in a batch (core.kernels.budget)."""
     h = 1.0 / values["control_rate_hz"]   # params.typed.period: the batch's h
     n_steps = int(round(duration_s / h))
     n_window = window_samples(n_steps, h, window)[1]
@@ -107,8 +109,8 @@ def scenario_cost(values: Dict[str, Any], duration_s: float, window: Tuple[float
 
 def run_chunk(chunk: Chunk, batch_bytes: Optional[int] = None) -> ChunkResult:
     """Simulate one chunk (scenarios that differ in control period, RK4 sub-steps, encoder or delays run as
-    separate batches).  A batch whose estimated memory (core.budget) is above ``batch_bytes`` (default: the
-    budget's :func:`~mwip_ros.core.budget.batch_budget`) runs as several, each within it; the scenarios'
+    separate batches).  A batch whose estimated memory (core.kernels.budget) is above ``batch_bytes`` (default: the
+    budget's :func:`~mwip_ros.core.kernels.budget.batch_budget`) runs as several, each within it; the scenarios'
     ClosedLoops are built a batch at a time.  Python's cyclic garbage collector is off meanwhile
     (:class:`_gc_held`)."""
     t0 = time.perf_counter()
@@ -152,7 +154,7 @@ def batch_groups(chunk: Chunk) -> Dict[tuple, List[int]]:
 
 def _run_chunk(chunk: Chunk, batch_bytes: Optional[int]) -> ChunkResult:
     from mwip_ros import params as P
-    from mwip_ros.core.batch import simulate_batch
+    from mwip_ros.core.kernels.batch import simulate_batch
     cap = budget.batch_budget() if batch_bytes is None else batch_bytes
 
     def values(ov):

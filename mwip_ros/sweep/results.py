@@ -38,8 +38,8 @@ UNITS = {"theta_b_p2p": "rad", "theta_b_rms": "rad", "max_abs_theta_b": "rad", "
 REFERENCE = "dscndo"          # the law each law's medians are compared to (else the last law)
 RATIO_METRICS = ("theta_b_p2p", "theta_b_rms", "u_rms")
 # what a run has beside them when its loop has the stage (raw sensors' estimator, the motor, motion references:
-# core.metrics.motion_metrics): written always (NaN without the stage), summarized where some run has a value; a
-# results.csv of before them still reads
+# core.closed_loop.metrics.motion_metrics): written always (NaN without the stage), summarized where some run has a
+# value; a results.csv of before them still reads
 EXTRA_METRICS = {"theta_b_est_err_rms": "theta_b_est_err_rms", "dtheta_b_est_err_rms": "dtheta_b_est_err_rms",
                  "u_applied_rms": "u_applied_rms", "saturated_s": "saturated_s", "speed_rms": "speed_rms",
                  "hold_drift": "hold_drift", "hold_rate": "hold_rate", "max_lean": "max_lean"}
@@ -95,8 +95,9 @@ class ResultsWriter:
 
 
 def _failure(result, j: int) -> str:
-    """Why run ``j`` failed ('fall', 'bad_command', 'diverged': core.trajectory.FAILURES), '' when it did not."""
-    from mwip_ros.core.trajectory import FAILURES
+    """Why run ``j`` failed ('fall', 'bad_command', 'diverged': core.closed_loop.trajectory.FAILURES), '' when it did
+    not."""
+    from mwip_ros.core.closed_loop.trajectory import FAILURES
     f = getattr(result, "failure", None)
     return FAILURES[int(f[j])] if f is not None else ("" if result.upright[j] or math.isnan(result.t_fall[j])
                                                       else "fall")
@@ -141,7 +142,7 @@ def read_results(path: Path) -> Dict[str, list]:
     (128 KiB).  A row cut by a crash mid-write (fewer fields) is not a result and is skipped."""
     path = Path(path)
     cols: Dict[str, list] = {}
-    from mwip_ros.core.budget import RESULT_COLUMN, fmt_bytes, memory_budget
+    from mwip_ros.core.kernels.budget import RESULT_COLUMN, fmt_bytes, memory_budget
     from mwip_ros.yamlio import NotRegularFile, open_regular
     try:
         raw = open_regular(path, "results file")
@@ -345,6 +346,6 @@ def summary_markdown(doc: dict) -> str:
 
 
 def write_summary(doc: dict, out: Path) -> None:
-    from mwip_ros.core.metrics import json_safe
+    from mwip_ros.core.closed_loop.metrics import json_safe
     (out / "summary.json").write_text(json.dumps(json_safe(doc), indent=2, allow_nan=False, default=str))
     (out / "summary.md").write_text(summary_markdown(doc))

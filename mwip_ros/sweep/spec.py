@@ -33,7 +33,8 @@ from typing import Any, Dict, List, Optional, Tuple
 import yaml
 
 from mwip_ros import params as P
-from mwip_ros.core import budget, laws
+from mwip_ros.core.kernels import budget
+from mwip_ros.core import laws
 from mwip_ros.params.errors import bounded
 from mwip_ros.params.file import NODES_OF_THE_LOOP
 from mwip_ros.yamlio import YamlRefused, load_yaml, shown
@@ -45,7 +46,7 @@ RANDOM_KINDS = ("uniform", "scale", "normal")
 TOP_KEYS = ("base", "controllers", "duration_s", "metrics_window_s", "seed", "samples", "vary")
 MAX_SCENARIOS = 50_000_000
 # The plant backends the sweep engine runs (mwip_sweep, mwip_tune): rk4 batched, mujoco through the scalar loop
-# scenario by scenario (core.batch.simulate_batch).
+# scenario by scenario (core.kernels.batch.simulate_batch).
 SWEEP_BACKENDS = ("rk4", "mujoco")
 
 # Parameters of the loop's nodes that do not change the offline closed loop (or that the spec sets itself).
@@ -261,7 +262,7 @@ def _budget(source: str) -> int:
 
 
 def check_memory(spec: SweepSpec) -> None:
-    """Refuse a spec whose runs would not fit the memory budget (core.budget), before anything is built:
+    """Refuse a spec whose runs would not fit the memory budget (core.kernels.budget), before anything is built:
     the sweep's table of scenarios and result rows, and one scenario in a simulation batch (its metrics
     window and delay queues, at the worst values the axes can take).  Raises SpecError naming the key."""
     cap = _budget(spec.path)

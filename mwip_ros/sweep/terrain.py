@@ -3,7 +3,7 @@ steepest slope it balances and holds on, the highest step it drives over, its sl
 largest lateral push it survives.
 
 mwip_sweep's metrics judge the pitch only; these need the 3D pose (drift, passing a step, roll), so each is a scan
-of scalar ``mwip_sim`` runs (:func:`~mwip_ros.core.sim.simulate`, ``backend: mujoco``) judged here:
+of scalar ``mwip_sim`` runs (:func:`~mwip_ros.core.closed_loop.sim.simulate`, ``backend: mujoco``) judged here:
 
 - **slope** (``ground.slope`` 0, 1, ... 15 deg, uphill ahead, the paper's scenario otherwise): *balances* = stays up
   for the run (``motion.enabled`` false, as the paper); *holds* = with ``motion.enabled`` and the profile [0, 0]
@@ -73,9 +73,9 @@ def base_values(realistic: bool = False) -> Dict[str, object]:
 def _simulate(values, law: str, duration: float, push: Optional[Tuple[float, float, float]] = None):
     """``mwip_sim``'s run of ``law`` with ``values``: its columns, or None when it failed (fell, diverged).  ``push``
     (start [s], length [s], force.y [N]): external_wrench's lateral force held over that window (the offline loop's
-    wrench, :class:`~mwip_ros.core.loop.Period`, as the node holds a published one)."""
+    wrench, :class:`~mwip_ros.core.closed_loop.loop.Period`, as the node holds a published one)."""
     from mwip_ros import params as P
-    from mwip_ros.core.sim import simulate
+    from mwip_ros.core.closed_loop.sim import simulate
     P.check_derived(values)
     loop = P.closed_loop(values, controller=law, duration=duration)
     tr = simulate(loop, diverged_fails=True, wrench=_push_wrench(*push) if push is not None else None)

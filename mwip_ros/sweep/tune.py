@@ -22,7 +22,7 @@ from typing import Callable, Dict, List, Optional, Sequence, Tuple
 import numpy as np
 
 from mwip_ros import params as P
-from mwip_ros.core import budget
+from mwip_ros.core.kernels import budget
 from mwip_ros.core import laws
 
 from . import engine
@@ -67,7 +67,7 @@ KNOBS: Dict[str, List[Knob]] = {
 
 
 def check_memory(spec: SweepSpec, knobs: List[Knob], popsize: int) -> None:
-    """Refuse a search whose tables would not fit the memory budget (core.budget): every generation judges
+    """Refuse a search whose tables would not fit the memory budget (core.kernels.budget): every generation judges
     ``popsize * len(knobs)`` candidates on every scenario of the spec (and of the held-out set) at once.
     Raises SpecError naming the spec's ``samples`` (or ``vary``) and ``--popsize``."""
     try:

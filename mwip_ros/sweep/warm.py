@@ -1,10 +1,10 @@
 """The batch loop compiled before a sweep needs it, with a word to the user.
 
-numba compiles a law's whole batch period (:func:`mwip_ros.core.compiled.kernel_for`: one loop per law's pure step,
-and per estimator with raw sensors) the first time a process runs it, 15 to 40 s each on two shared cores, and caches
-the machine code under ``mwip_ros/`` (:mod:`mwip_ros.core.jitcache`) until the code it is made of changes.  A sweep
-of a fresh clone compiled its loops inside its first chunks, each worker the same loop at the same time, saying
-nothing for a minute and a half.  Here:
+numba compiles a law's whole batch period (:func:`mwip_ros.core.kernels.compiled.kernel_for`: one loop per law's pure
+step, and per estimator with raw sensors) the first time a process runs it, 15 to 40 s each on two shared cores, and
+caches the machine code under ``mwip_ros/`` (:mod:`mwip_ros.core.kernels.jitcache`) until the code it is made of
+changes.  A sweep of a fresh clone compiled its loops inside its first chunks, each worker the same loop at the same
+time, saying nothing for a minute and a half.  Here:
 
 * :func:`cold_kernels`: the compiled loops a list of chunks runs that the cache lacks, each with a chunk of one
   scenario and a few periods that compiles it;
@@ -44,11 +44,11 @@ def _label(law: type, stage: tuple, values: dict) -> str:
 
 
 def cold_kernels(chunks: Sequence[Chunk]) -> List[Tuple[str, Chunk]]:
-    """The compiled loops the ``chunks`` run (:func:`mwip_ros.core.batch.compiled_form` of each batch of each chunk)
-    that numba's cache lacks (:func:`mwip_ros.core.jitcache.cached` is False), once each, in the chunks' order:
-    (a label, a chunk of one of its scenarios, :data:`WARM_S` long, that compiles it)."""
+    """The compiled loops the ``chunks`` run (:func:`mwip_ros.core.kernels.batch.compiled_form` of each batch of each
+    chunk) that numba's cache lacks (:func:`mwip_ros.core.kernels.jitcache.cached` is False), once each, in the chunks'
+    order: (a label, a chunk of one of its scenarios, :data:`WARM_S` long, that compiles it)."""
     from mwip_ros import params as P
-    from mwip_ros.core.batch import compiled_form
+    from mwip_ros.core.kernels.batch import compiled_form
     seen, out = set(), []
     for chunk in chunks:
         for idx in batch_groups(chunk).values():
@@ -58,7 +58,8 @@ def cold_kernels(chunks: Sequence[Chunk]) -> List[Tuple[str, Chunk]]:
             if form is None or id(form[0]) in seen:
                 continue
             seen.add(id(form[0]))
-            from mwip_ros.core.jitcache import cached   # numba's: only once there is a compiled loop (numba there)
+            # numba's: only once there is a compiled loop (numba there)
+            from mwip_ros.core.kernels.jitcache import cached
             if cached(form[0]) is False:
                 h = 1.0 / v["control_rate_hz"]
                 length = max(WARM_S, 4 * h)
@@ -108,7 +109,7 @@ def shipped_chunks(config_dir=None) -> List[Chunk]:
 
     from mwip_ros import params as P
     from mwip_ros.core import estimators, laws
-    from mwip_ros.core.compiled import pure_form
+    from mwip_ros.core.kernels.compiled_stages import pure_form
     from mwip_ros.params.paths import default_params_file
     config = Path(config_dir) if config_dir is not None else default_params_file().parent
     state = P.merged_values(P.load_param_files([config / "paper.yaml"], option="params"))
@@ -134,7 +135,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                                              "first sweep runs at the speed of the next.")
     ap.add_argument("--workers", type=int, default=None, help="worker processes (default: the cores)")
     args = ap.parse_args(argv)
-    from mwip_ros.core.batch import numba_missing
+    from mwip_ros.core.kernels.batch import numba_missing
     if numba_missing():
         print("setup: numba is missing: sweeps run the scalar loop, nothing to compile")
         return 0

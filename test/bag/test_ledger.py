@@ -6,7 +6,7 @@ import pytest
 
 from mwip_ros.bag import BagWriter
 from mwip_ros.bag.ledger import GAPS_KEY, Ledger
-from mwip_ros.core.model import State
+from mwip_ros.core.plants.model import State
 from mwip_ros.msgs import layouts as L
 
 pytestmark = pytest.mark.unit

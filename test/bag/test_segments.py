@@ -3,7 +3,7 @@ import pytest
 
 from mwip_ros.bag import BagWriter, raw_messages
 from mwip_ros.bag.segments import Segments, recorded_messages, split
-from mwip_ros.core.model import State
+from mwip_ros.core.plants.model import State
 from mwip_ros.msgs import layouts as L
 
 pytestmark = pytest.mark.unit

@@ -11,7 +11,7 @@ from PIL import Image
 
 from mwip_ros.cli import animation as A
 from mwip_ros.cli import report
-from mwip_ros.core.trajectory import TRAJECTORY_COLUMNS, Trajectory
+from mwip_ros.core.closed_loop.trajectory import TRAJECTORY_COLUMNS, Trajectory
 from mwip_ros.runs import write_csv
 
 pytestmark = pytest.mark.unit

@@ -7,7 +7,7 @@ import pytest
 
 from mwip_ros.params.paths import default_params_file
 from mwip_ros.runs import read_csv
-from mwip_ros.core.lqr import NO_DESIGN
+from mwip_ros.core.control.lqr import NO_DESIGN
 
 pytestmark = pytest.mark.unit
 
@@ -163,7 +163,7 @@ def test_a_bad_mpc_state_weight_is_one_line_naming_the_key_and_exit_2_whatever_t
 def test_a_torque_limit_too_weak_for_the_initial_tilt_is_warned_of_as_the_motor_is(tmp_path, section, key, value, law,
                                                                                    warned):
     """mpc.u_max and torque_limit below the torque that holds the body at the initial tilt: the run falls, and
-    mwip_sim says so first with the motor overlay's figures (core.drive.limit_warning); old code: no warning."""
+    mwip_sim says so first with the motor overlay's figures (core.plants.drive.limit_warning); old code: no warning."""
     f = tmp_path / "w.yaml"
     f.write_text(f"{section}:\n  ros__parameters:\n    {key}: {value}\n")
     r = run("mwip_ros.cli.sim", "--params", str(default_params_file()), str(f), "--controller", law,

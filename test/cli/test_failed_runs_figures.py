@@ -7,7 +7,7 @@ import pytest
 from matplotlib.figure import Figure
 
 from mwip_ros.cli import plotting
-from mwip_ros.core.trajectory import TRAJECTORY_COLUMNS, Trajectory
+from mwip_ros.core.closed_loop.trajectory import TRAJECTORY_COLUMNS, Trajectory
 
 pytestmark = pytest.mark.unit
 

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from mwip_ros import params as P
-from mwip_ros.core.identify_validate import prediction_errors
+from mwip_ros.core.identification.identify_validate import prediction_errors
 
 pytestmark = pytest.mark.unit
 

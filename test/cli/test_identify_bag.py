@@ -15,7 +15,7 @@ from graphproc import Graph, REPO
 from mwip_ros import params as P
 from mwip_ros.cli import identify
 from mwip_ros.cli.identify_bag import read_raw_bag
-from mwip_ros.core.sim import simulate
+from mwip_ros.core.closed_loop.sim import simulate
 from mwip_ros.runs import write_csv
 
 CONFIG = REPO / "config"
@@ -182,7 +182,7 @@ def test_a_lockstep_bag_gives_the_offline_csvs_result_to_the_bit(tmp_path):
     """The lockstep graph with raw sensors and the recorder, 15 s of the chirp on ROBOT: the bag's raw columns are
     mwip_sim's CSV's to the bit, and so is the fit (every global, its deviation, the residuals); the CLI prints the
     same values, the body within 1 %."""
-    from mwip_ros.core.identify_raw import identify_raw
+    from mwip_ros.core.identification.identify_raw import identify_raw
     robot = tmp_path / "robot.yaml"
     robot.write_text("plant_sim:\n  ros__parameters:\n    duration_s: 15.0\n    actual: {m_b: 280.0, I_b: 58.0, "
                      "l: 0.29}\ndscndo_controller:\n  ros__parameters:\n    excitation: {duration_s: 15.0}\n")

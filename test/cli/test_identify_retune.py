@@ -9,8 +9,9 @@ import pytest
 from graphproc import REPO
 from mwip_ros import params as P
 from mwip_ros.cli import identify
-from mwip_ros.core import laws, metrics
-from mwip_ros.core.sim import simulate
+from mwip_ros.core import laws
+from mwip_ros.core.closed_loop import metrics
+from mwip_ros.core.closed_loop.sim import simulate
 from mwip_ros.runs import write_csv
 from test_identify_bag import refused  # noqa: E402  (test/cli is on sys.path under pytest)
 

@@ -1,6 +1,6 @@
 """The batch tracks motion references too (theory 6.11): scenarios with motion.enabled run the compiled loop
-(core.compiled_motion; test/core/test_compiled_motion.py compares it with the scalar loop for every law), so a
-batch's numbers are mwip_sim's, and mwip_sweep and mwip_tune run a spec whose base turns motion on."""
+(core.kernels.compiled_motion; test/core/kernels/test_compiled_motion.py compares it with the scalar loop for every
+law), so a batch's numbers are mwip_sim's, and mwip_sweep and mwip_tune run a spec whose base turns motion on."""
 import subprocess
 import sys
 from pathlib import Path
@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from mwip_ros import params as P
-from mwip_ros.core import metrics
-from mwip_ros.core.batch import simulate_batch
-from mwip_ros.core.sim import simulate
+from mwip_ros.core.closed_loop import metrics
+from mwip_ros.core.kernels.batch import simulate_batch
+from mwip_ros.core.closed_loop.sim import simulate
 
 pytestmark = pytest.mark.unit
 

@@ -8,11 +8,11 @@ import pytest
 from mathfixtures import P_FILE
 from mwip_ros import params as P
 from mwip_ros.cli.identify import main
-from mwip_ros.core.excitation import Excitation, ExcitationConfig
-from mwip_ros.core.lqr import lqr_gain, lqr_u
-from mwip_ros.core.model import Sinusoid
-from mwip_ros.core.plant import PlantSim
-from mwip_ros.core.trajectory import Trajectory
+from mwip_ros.core.identification.excitation import Excitation, ExcitationConfig
+from mwip_ros.core.control.lqr import lqr_gain, lqr_u
+from mwip_ros.core.plants.model import Sinusoid
+from mwip_ros.core.plants.plant import PlantSim
+from mwip_ros.core.closed_loop.trajectory import Trajectory
 from mwip_ros.runs import write_csv
 
 pytestmark = pytest.mark.unit
@@ -148,7 +148,7 @@ def test_a_log_with_every_row_twice_gives_the_logs_own_result(chirp_csv, tmp_pat
 def test_the_g_b_check_gives_no_verdict_from_nan():
     """'within' / 'OUTSIDE' its 95 % interval is a verdict: not from a NaN difference or interval (issue 30)."""
     from mwip_ros.cli.identify import g_b_verdict
-    from mwip_ros.core.identify import Estimate
+    from mwip_ros.core.identification.identify import Estimate
     assert g_b_verdict(Estimate(0.1, 1.0)) == "within" and g_b_verdict(Estimate(5.0, 1.0)) == "OUTSIDE"
     for chk in (Estimate(math.nan, 1.0), Estimate(0.1, math.nan), Estimate(0.1, math.inf)):
         assert g_b_verdict(chk) == "with no verdict (not a number)", chk
@@ -161,7 +161,7 @@ def test_the_shipped_drive_experiment_identifies_the_drive(drive, tmp_path, caps
     mwip_identify --drive gives K_t, R, I_max within 5 % (V_max from the base files), written as plant_sim's motor.*"""
     import yaml
     from graphproc import REPO
-    from mwip_ros.core.sim import simulate
+    from mwip_ros.core.closed_loop.sim import simulate
     files = [REPO / "config" / f for f in ("paper.yaml", "motor_realistic.yaml")]
     if drive:
         overlay = tmp_path / "drive_truth.yaml"
@@ -217,7 +217,7 @@ def test_raw_identifies_from_the_raw_sensors_alone(tmp_path, capsys):
     negative), 15 s of the shipped chirp: the overlay is the true body to 3 %, and the tool never reads the state:
     the CSV has no estimate and its state columns are not a number."""
     from graphproc import REPO
-    from mwip_ros.core.sim import simulate
+    from mwip_ros.core.closed_loop.sim import simulate
     files = [REPO / "config" / f for f in ("paper.yaml", "sensors_raw_realistic.yaml", "identify.yaml")]
     v = P.merged_values(P.load_param_files(files))
     v.update({"actual.m_b": 250.0, "actual.I_b": 50.0, "actual.l": 0.25, "sensors.imu.offset": 0.2,
@@ -247,14 +247,14 @@ def test_raw_identifies_from_the_raw_sensors_alone(tmp_path, capsys):
 def test_raw_validate_on_another_raw_log(tmp_path, capsys):
     """--raw --validate: a robot that is not the paper's (heavy, its IMU high, a negative bias) identified from 15 s of
     its raw chirp log predicts its own 12 s PRBS run over 1 s windows, each start fitted to the window's first 0.2 s
-    of raw samples: within 0.5 deg RMS of the true pitch (core.identify_validate.raw_prediction_errors) and, in the
-    tool against the log's estimated pitch, far better than the paper's nominal body."""
+    of raw samples: within 0.5 deg RMS of the true pitch (core.identification.identify_validate.raw_prediction_errors)
+    and, in the tool against the log's estimated pitch, far better than the paper's nominal body."""
     import re
 
     from graphproc import REPO
-    from mwip_ros.core.identify_raw import identify_raw
-    from mwip_ros.core.identify_validate import raw_prediction_errors
-    from mwip_ros.core.sim import simulate
+    from mwip_ros.core.identification.identify_raw import identify_raw
+    from mwip_ros.core.identification.identify_validate import raw_prediction_errors
+    from mwip_ros.core.closed_loop.sim import simulate
     from mwip_ros.runs import write_csv
     files = [REPO / "config" / f for f in ("paper.yaml", "sensors_raw_realistic.yaml", "identify.yaml")]
     robot = {"actual.m_b": 360.0, "actual.I_b": 80.0, "actual.l": 0.35, "sensors.imu.offset": 0.45,

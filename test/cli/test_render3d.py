@@ -90,7 +90,7 @@ def _robot_state_bag(path, seconds=2.0, rate=50):
     from bagcheck import ENDPOINT_QOS
     from mwip_ros import params as P
     from mwip_ros.bag import BagWriter, qos_profiles_yaml
-    from mwip_ros.core import urdf as U
+    from mwip_ros.core.mobile_base import urdf as U
     model = U.robot_model(P.merged_values(P.load_param_files([PAPER, SQUARE])))
     qos = qos_profiles_yaml([ENDPOINT_QOS])
     with BagWriter(path) as bag:

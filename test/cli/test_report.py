@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from mwip_ros.cli import report
-from mwip_ros.core.trajectory import TRAJECTORY_COLUMNS, Trajectory
+from mwip_ros.core.closed_loop.trajectory import TRAJECTORY_COLUMNS, Trajectory
 from mwip_ros.runs import write_csv
 
 pytestmark = pytest.mark.unit

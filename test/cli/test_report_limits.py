@@ -12,7 +12,7 @@ import pytest
 from mwip_ros import runs as R
 from mwip_ros.cli import animation as A
 from mwip_ros.cli import plotting, report
-from mwip_ros.core.trajectory import TRAJECTORY_COLUMNS, Trajectory
+from mwip_ros.core.closed_loop.trajectory import TRAJECTORY_COLUMNS, Trajectory
 
 pytestmark = pytest.mark.unit
 

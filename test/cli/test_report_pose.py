@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from mwip_ros.cli import report
-from mwip_ros.core.trajectory import Trajectory
+from mwip_ros.core.closed_loop.trajectory import Trajectory
 
 pytestmark = pytest.mark.unit
 REPO = Path(__file__).resolve().parents[2]

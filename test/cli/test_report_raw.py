@@ -10,7 +10,7 @@ import pytest
 
 from mwip_ros import params as P
 from mwip_ros.cli import report
-from mwip_ros.core.sim import simulate
+from mwip_ros.core.closed_loop.sim import simulate
 from mwip_ros.runs import write_csv
 
 pytestmark = pytest.mark.unit

@@ -143,7 +143,7 @@ def test_write_params_gives_the_rows_scenario_to_mwip_sim(tmp_path):
     sim = subprocess.run([sys.executable, "-m", "mwip_ros.cli.sim", "--params", str(f), "-q", "--window", "2", "4",
                           "--csv", str(tmp_path / "run.csv")], capture_output=True, text=True, timeout=120)
     assert sim.returncode == 0, sim.stderr
-    from mwip_ros.core import metrics
+    from mwip_ros.core.closed_loop import metrics
     from mwip_ros.runs import read_csv
     run = read_csv(tmp_path / "run.csv")
     m = metrics.compute(run.columns, (2.0, 4.0), 1.0472)

@@ -28,8 +28,8 @@ def _spec(tmp_path, backend="mujoco", vary=None, extra=None):
 
 def _scalar_j(values, backend, weight=1e-4):
     """J of one scenario as the scalar loop on ``backend`` gives it (sweep/tune.py's definition)."""
-    from mwip_ros.core import metrics
-    from mwip_ros.core.sim import simulate
+    from mwip_ros.core.closed_loop import metrics
+    from mwip_ros.core.closed_loop.sim import simulate
     loop = P.closed_loop(dict(values, backend=backend), duration=1.0, controller="dscndo")
     m = metrics.compute(simulate(loop).columns, (0.5, 1.0), loop.plant.fall_angle)
     return m.theta_b_rms + weight * m.u_rms

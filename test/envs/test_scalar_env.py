@@ -1,6 +1,6 @@
 """MwipEnv (mwip_ros.envs.scalar): an episode whose actions are a law's own command is mwip_sim's trajectory of that
-law bit for bit (the reference computed by core.sim.simulate from the same files, not through the env); Gymnasium's
-own checker passes; the spaces, the ends of an episode, the seeds and the refusals."""
+law bit for bit (the reference computed by core.closed_loop.sim.simulate from the same files, not through the env);
+Gymnasium's own checker passes; the spaces, the ends of an episode, the seeds and the refusals."""
 import dataclasses
 import math
 
@@ -12,9 +12,9 @@ gym = pytest.importorskip("gymnasium")
 from gymnasium.utils.env_checker import check_env  # noqa: E402
 
 from mwip_ros import params as P  # noqa: E402
-from mwip_ros.core import laws  # noqa: E402
-from mwip_ros.core.observer import DiscreteObserver, gain_matrix  # noqa: E402
-from mwip_ros.core.sim import simulate  # noqa: E402
+from mwip_ros.core import laws   # noqa: E402
+from mwip_ros.core.control.observer import DiscreteObserver, gain_matrix  # noqa: E402
+from mwip_ros.core.closed_loop.sim import simulate  # noqa: E402
 from mwip_ros.envs import ENV_ID, MwipEnv, load_values  # noqa: E402
 from mwip_ros.params.paths import default_params_file  # noqa: E402
 
@@ -27,7 +27,7 @@ RAW = PAPER + [CONFIG / "sensors_raw_realistic.yaml"]
 
 
 def reference(files, law, duration, seed):
-    """mwip_sim's run of ``law`` on ``files`` with plant_sim.seed ``seed`` (core.sim.simulate, no env)."""
+    """mwip_sim's run of ``law`` on ``files`` with plant_sim.seed ``seed`` (core.closed_loop.sim.simulate, no env)."""
     loop = P.closed_loop(load_values(files), duration=duration, controller=law)
     return simulate(dataclasses.replace(loop, plant=dataclasses.replace(loop.plant, seed=seed))).columns
 

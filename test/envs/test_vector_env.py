@@ -1,6 +1,6 @@
 """MwipVectorEnv (mwip_ros.envs.vector over envs.lanes): a law's own command as the actions equals the batch
-simulator (core.batch.simulate_batch: its trajectories and the compiled loop's metrics, computed here from the same
-files, not through the env) to 1e-9; autoreset restarts a robot in place; the refusals."""
+simulator (core.kernels.batch.simulate_batch: its trajectories and the compiled loop's metrics, computed here from the
+same files, not through the env) to 1e-9; autoreset restarts a robot in place; the refusals."""
 import dataclasses
 
 import numpy as np
@@ -9,10 +9,10 @@ import pytest
 gym = pytest.importorskip("gymnasium")
 
 from mwip_ros import params as P  # noqa: E402
-from mwip_ros.core import laws  # noqa: E402
-from mwip_ros.core.batch import simulate_batch  # noqa: E402
-from mwip_ros.core.budget import window_samples  # noqa: E402
-from mwip_ros.core.observer import DiscreteObserver  # noqa: E402
+from mwip_ros.core import laws   # noqa: E402
+from mwip_ros.core.kernels.batch import simulate_batch  # noqa: E402
+from mwip_ros.core.kernels.budget import window_samples  # noqa: E402
+from mwip_ros.core.control.observer import DiscreteObserver  # noqa: E402
 from mwip_ros.envs import ENV_ID, MwipVectorEnv, load_values  # noqa: E402
 from mwip_ros.params.paths import default_params_file  # noqa: E402
 
@@ -295,20 +295,22 @@ def test_autoreset_gives_mpc_a_cold_start_of_the_restarted_robot_only():
 
 
 def test_the_stepper_holds_every_stage_of_the_loop_in_its_order():
-    """envs/lanes.py marks each stage as the batch's forms do (core.loop.STAGES; test/core/test_loop.py)."""
+    """envs/lanes.py marks each stage as the batch's forms do (core.closed_loop.loop.STAGES;
+    test/core/closed_loop/test_loop.py)."""
     import re
     from pathlib import Path
 
     import mwip_ros.envs.lanes as lanes_module
-    from mwip_ros.core.loop import STAGE_NAMES
+    from mwip_ros.core.closed_loop.loop import STAGE_NAMES
     marks = re.findall(r"# stage: (\w+)", Path(lanes_module.__file__).read_text())
     assert tuple(marks) == STAGE_NAMES
 
 
 def test_the_stepper_calls_the_compiled_loops_own_stage_functions():
     """The stages sensors (state, raw with its estimator), law with the motion references and drive are the compiled
-    loop's own functions (core.compiled), the very objects its kernel binds: the env writes none of them again."""
-    from mwip_ros.core import compiled
+    loop's own functions (core.kernels.compiled), the very objects its kernel binds: the env writes none of them
+    again."""
+    from mwip_ros.core.kernels import compiled
     from mwip_ros.core.estimators import kalman
     from mwip_ros.envs import kernels
     law = laws.get("dscndo")
@@ -384,8 +386,8 @@ def motion_run(files, law, duration):
                                                (MOTION + [CONFIG / "sensing_realistic.yaml"], "dsc", False)])
 def test_motion_references_with_a_zero_residual_equal_mwip_sims_run_bit_for_bit(files, law, exact):
     """config/motion.yaml (1 m/s from 2 s, -0.5 m/s from 10 s): the vector env runs the compiled loop's motion stage
-    (core.compiled_motion.law_track), every robot equal to mwip_sim's run of it (the batch's record: the scalar loop)
-    to the bit, and to the compiled batch's metrics; it drove.  DSC's tracking step compiled is the scalar one's
+    (core.kernels.compiled_motion.law_track), every robot equal to mwip_sim's run of it (the batch's record: the scalar
+    loop) to the bit, and to the compiled batch's metrics; it drove.  DSC's tracking step compiled is the scalar one's
     within an ulp (one command of robot 1's 2,400 differed by 1 ulp, its states not at all): 1e-9 there, as the
     other vector env tests.  Before, the vector env refused motion.enabled."""
     env, xs, us, trajectories, metrics = motion_run(files, law, 12.0)
@@ -426,8 +428,8 @@ def test_motion_references_track_per_robot_after_an_autoreset():
 
 
 def test_mpc_tracks_the_motion_references_through_the_scalar_loops_command_equal_to_mwip_sim():
-    """A law without a pure step (mpc) with motion: the vector env calls core.loop.command with a Shaper per robot,
-    the scalar loop's own law stage; each robot equals mwip_sim's run (the batch's record) to the bit."""
+    """A law without a pure step (mpc) with motion: the vector env calls core.closed_loop.loop.command with a Shaper per
+    robot, the scalar loop's own law stage; each robot equals mwip_sim's run (the batch's record) to the bit."""
     pytest.importorskip("daqp")
     duration, n = 3.0, 2
     env = MwipVectorEnv(n, MOTION, duration=duration, base_law="mpc")

@@ -13,7 +13,7 @@ pytestmark = pytest.mark.unit
 
 @pytest.mark.cli
 def test_without_gymnasium_the_envs_refuse_in_one_line_and_the_simulator_runs(tmp_path):
-    code = ("from mwip_ros.core.sim import simulate\n"
+    code = ("from mwip_ros.core.closed_loop.sim import simulate\n"
             "from mwip_ros import params as P\n"
             "from mwip_ros.params.paths import default_params_file\n"
             "v = P.merged_values(P.load_param_files([default_params_file()]))\n"

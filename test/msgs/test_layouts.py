@@ -3,8 +3,8 @@ import math
 
 import pytest
 
-from mwip_ros.core.controller import ControlOutput
-from mwip_ros.core.model import State
+from mwip_ros.core.control.controller import ControlOutput
+from mwip_ros.core.plants.model import State
 from mwip_ros.msgs import BadMessage, CdrError, MessageError, cdr
 from mwip_ros.msgs import layouts as L
 from mwip_ros.msgs.stamps import join_ns, split_ns, stamp_ns, to_time

@@ -232,7 +232,7 @@ def test_a_damaged_chunk_stops_the_report_and_the_repair_saves_the_rest(tmp_path
 @pytest.mark.node
 def test_a_resent_state_is_replayed_once(tmp_path):
     from mwip_ros.bag import BagWriter
-    from mwip_ros.core.model import State
+    from mwip_ros.core.plants.model import State
     from mwip_ros.msgs import layouts as L
 
     bag = tmp_path / "resent"

@@ -16,7 +16,7 @@ import math
 
 import pytest
 
-from mwip_ros.core.motion import ABSURD_SPEED, ABSURD_YAW_RATE
+from mwip_ros.core.control.motion import ABSURD_SPEED, ABSURD_YAW_RATE
 from mwip_ros.msgs import BadMessage
 from mwip_ros.msgs import layouts as L
 from mwip_ros.msgs.qos import REALTIME_QOS

@@ -11,7 +11,7 @@ import yaml
 from graphproc import PARAMS, run_lockstep
 from loopgraph import concurrently
 from mwip_ros import params as P
-from mwip_ros.core.sim import simulate
+from mwip_ros.core.closed_loop.sim import simulate
 from mwip_ros.runs import load_run
 
 pytestmark = pytest.mark.graph

@@ -166,7 +166,7 @@ def test_two_namespaced_graphs_in_one_domain_do_not_hear_each_other(tmp_path):
     from bagcheck import decoded_messages
     from graphproc import PARAMS
     from mwip_ros import params as P
-    from mwip_ros.core.sim import simulate
+    from mwip_ros.core.closed_loop.sim import simulate
     from mwip_ros.runs import load_run
 
     offline = simulate(P.closed_loop(P.merged_values(P.load_param_file(PARAMS)), duration=2.0))

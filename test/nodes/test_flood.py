@@ -13,7 +13,7 @@ import pytest
 from graphproc import PARAMS, Graph
 from injector import rejected_counts
 from mwip_ros import params as P
-from mwip_ros.core.sim import simulate
+from mwip_ros.core.closed_loop.sim import simulate
 from mwip_ros.runs import read_csv
 
 pytestmark = pytest.mark.graph

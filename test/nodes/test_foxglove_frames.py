@@ -12,7 +12,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
 from mwip_ros import params as P
-from mwip_ros.core.urdf import frame_transforms, joint_transforms, robot_model, urdf, urdf_joints
+from mwip_ros.core.mobile_base.urdf import frame_transforms, joint_transforms, robot_model, urdf, urdf_joints
 from mwip_ros.nodes.tools.foxglove_frames import FrameView, to_foxglove
 
 pytestmark = pytest.mark.unit

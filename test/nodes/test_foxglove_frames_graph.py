@@ -17,7 +17,7 @@ def test_the_server_sends_the_frames_and_the_urdf_to_a_client(tmp_path):
 
     from graphproc import Graph
     from injector import Injector
-    from mwip_ros.core.model import State
+    from mwip_ros.core.plants.model import State
     from mwip_ros.msgs import layouts as L
     from test_foxglove_server import SUBPROTOCOL, FoxgloveClient, free_port
 

@@ -24,8 +24,8 @@ from loopgraph import LoopGraph, concurrently
 from nodeharness import NodeHarness, node_class, refused
 from mwip_ros import params as P
 from mwip_ros.core import laws
-from mwip_ros.core.lqr import NO_DESIGN
-from mwip_ros.core.sim import LAWS, simulate
+from mwip_ros.core.control.lqr import NO_DESIGN
+from mwip_ros.core.closed_loop.sim import LAWS, simulate
 from mwip_ros.runs import load_run, read_csv
 
 COLUMNS = ["t", "theta_w", "theta_b", "dtheta_w", "dtheta_b", "u", "tau_hat1", "tau_hat2", "tau_d1", "tau_d2"]
@@ -198,7 +198,7 @@ def test_a_run_past_the_metrics_window_streams_its_csv_whole_and_reports_the_off
     """The plant keeps in memory only the rows to the metrics window's end and the newest (a run of days stays
     bounded): its csv, streamed row by row, still holds every period as mwip_sim, and its summary's metrics (the
     window's, the run's end) are the offline ones."""
-    from mwip_ros.core import metrics
+    from mwip_ros.core.closed_loop import metrics
     graph = read_csv(_ran(lockstep, "window").csv)
     loop = P.closed_loop(P.merged_values(P.load_param_file(PARAMS)), use_observer=True, law="dsc", duration=12.0)
     offline = simulate(loop)
@@ -464,7 +464,7 @@ def test_bad_states_and_estimates_are_rejected_counted_and_never_answered():
     """NaN and malformed joint_states, NaN and foreign estimates: the observer and the controller reject, count and
     log each, answer none, and still answer the good states around them."""
     from msgbuilders import joint_state, wrench_stamped
-    from mwip_ros.core.model import State
+    from mwip_ros.core.plants.model import State
     from mwip_ros.msgs import layouts as L
     bad_states = [joint_state(10**12, (0.0, float("nan")), (0.0, 0.0), 0.0),
                   joint_state(10**12 + 1, (0.0, 0.0), (float("inf"), 0.0), 0.0)]

@@ -17,8 +17,8 @@ pytest.importorskip("mujoco")
 from graphproc import PARAMS, Graph  # noqa: E402
 from loopgraph import LoopGraph, concurrently  # noqa: E402
 from mwip_ros import params as P  # noqa: E402
-from mwip_ros.core.sim import simulate  # noqa: E402
-from mwip_ros.core.trajectory import POSE_COLUMNS  # noqa: E402
+from mwip_ros.core.closed_loop.sim import simulate  # noqa: E402
+from mwip_ros.core.closed_loop.trajectory import POSE_COLUMNS  # noqa: E402
 from mwip_ros.runs import read_bag_run, read_csv  # noqa: E402
 
 MUJOCO = ("-p", "backend:=mujoco")

@@ -16,9 +16,9 @@ from sensor_msgs.msg import JointState
 from graphproc import PARAMS, Graph
 from injector import Injector, flood, rejected_counts, rss_mib
 from mwip_ros import params as P
-from mwip_ros.core.controller import DscController
-from mwip_ros.core.model import State
-from mwip_ros.core.observer import DiscreteObserver
+from mwip_ros.core.control.controller import DscController
+from mwip_ros.core.plants.model import State
+from mwip_ros.core.control.observer import DiscreteObserver
 from mwip_ros.msgs import cdr
 from mwip_ros.msgs import layouts as L
 from nodeharness import NodeHarness, Wire, node_class

@@ -6,7 +6,7 @@ plant_sim checks it, and a state the odometry refuses publishes nothing."""
 import pytest
 from nav_msgs.msg import Odometry as OdometryMsg
 
-from mwip_ros.core.model import State
+from mwip_ros.core.plants.model import State
 from mwip_ros.msgs import layouts as L
 from nodeharness import NodeHarness, node_class, refused
 

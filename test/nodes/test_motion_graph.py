@@ -11,7 +11,7 @@ from graphproc import PARAMS
 from loopgraph import LoopGraph, concurrently
 from mwip_ros import params as P
 from mwip_ros.core import laws
-from mwip_ros.core.sim import simulate
+from mwip_ros.core.closed_loop.sim import simulate
 from mwip_ros.runs import load_run
 
 MOTION = Path(__file__).resolve().parents[2] / "config" / "motion.yaml"

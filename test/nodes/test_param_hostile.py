@@ -328,7 +328,7 @@ def test_every_node_refuses_hostile_parameter_requests_naming_the_parameter_and_
     from rcl_interfaces.srv import GetParameters
 
     from mwip_ros.bag import topic_counts
-    from mwip_ros.core.model import State
+    from mwip_ros.core.plants.model import State
     from mwip_ros.msgs import layouts as L
 
     node, fqn, args, names = NODES[label]
@@ -367,7 +367,7 @@ def _event(node: str, stamp_ns: int, *changed):
 @pytest.mark.graph
 def test_resim_skips_a_recorded_value_it_cannot_set_and_completes(tmp_path):
     from mwip_ros.bag import BagWriter
-    from mwip_ros.core.model import State
+    from mwip_ros.core.plants.model import State
     from mwip_ros.msgs import layouts as L
 
     bag = tmp_path / "hostile_events"

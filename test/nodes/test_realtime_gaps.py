@@ -16,8 +16,8 @@ import pytest
 
 from graphproc import PARAMS
 from nodeharness import NodeHarness, node_class
-from mwip_ros.core.controller import filter_step
-from mwip_ros.core.model import State
+from mwip_ros.core.control.controller import filter_step
+from mwip_ros.core.plants.model import State
 from mwip_ros.msgs import layouts as L
 
 pytestmark = pytest.mark.node

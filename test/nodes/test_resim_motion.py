@@ -86,7 +86,7 @@ def test_resim_replays_the_recorded_cmd_vel_and_reproduces_the_run(tmp_path, rec
     import numpy as np
 
     from mwip_ros import params as P
-    from mwip_ros.core.sim import simulate
+    from mwip_ros.core.closed_loop.sim import simulate
     from mwip_ros.runs import read_bag_run
     bag, (code, out) = recordings["cmd_vel"]
     # the recording is the run with v* = 0.5 m/s from state 0 (mwip_sim with that profile): the controller had the

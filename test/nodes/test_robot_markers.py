@@ -6,7 +6,7 @@ import pytest
 from visualization_msgs.msg import MarkerArray
 
 from mathfixtures import NOM
-from mwip_ros.core.model import State
+from mwip_ros.core.plants.model import State
 from mwip_ros.msgs import layouts as L
 from nodeharness import NodeHarness, node_class
 

@@ -69,7 +69,7 @@ def test_odom_matches_the_true_pose_and_the_description_is_latched(tmp_path):
 
 
 def test_a_bad_state_is_rejected_and_a_reset_restarts_the_odometry():
-    from mwip_ros.core.model import State
+    from mwip_ros.core.plants.model import State
     from mwip_ros.msgs import layouts as L
     with NodeHarness(node_class("robot_state")) as rs:
         rs.feed("joint_states", L.encode_state(0, State(0.0, 0.0, 4.0, 0.0), 0.0))

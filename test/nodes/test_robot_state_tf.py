@@ -7,7 +7,7 @@ import pytest
 from builtin_interfaces.msg import Time
 
 from mwip_ros import params as P
-from mwip_ros.core.urdf import frame_transforms, robot_model
+from mwip_ros.core.mobile_base.urdf import frame_transforms, robot_model
 from mwip_ros.nodes.tools import robot_state
 
 pytestmark = pytest.mark.unit

@@ -5,7 +5,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from mwip_ros.core.safety import Watchdog
+from mwip_ros.core.control.safety import Watchdog
 from mwip_ros.nodes.loop.plant_runners import RealtimeRunner
 from mwip_ros.nodes.runtime.schedule import Reservoir, Schedule
 

@@ -13,7 +13,7 @@ from graphproc import PARAMS, Graph
 from nodeharness import NodeHarness, node_class, refused
 from mwip_ros import params as P
 from mwip_ros.nodes.runtime.entry import NODES as NODE_MODULES
-from mwip_ros.core.lqr import NO_DESIGN
+from mwip_ros.core.control.lqr import NO_DESIGN
 
 NODES = ("plant_sim", "disturbance_observer", "dscndo_controller", "mcap_recorder", "bag_replay", "robot_markers",
          "foxglove_server", "state_estimator", "robot_state")

@@ -5,7 +5,7 @@ import pytest
 
 from graphproc import PARAMS
 from mwip_ros import params as P
-from mwip_ros.core.raw_sensors import RawSample
+from mwip_ros.core.plants.raw_sensors import RawSample
 from mwip_ros.msgs import layouts as L
 from nodeharness import NodeHarness, node_class
 

@@ -13,8 +13,8 @@ pytest.importorskip("mujoco")
 from graphproc import PARAMS, run_lockstep  # noqa: E402
 from loopgraph import LoopGraph, concurrently  # noqa: E402
 from mwip_ros import params as P  # noqa: E402
-from mwip_ros.core.sim import simulate  # noqa: E402
-from mwip_ros.core.trajectory import POSE_COLUMNS  # noqa: E402
+from mwip_ros.core.closed_loop.sim import simulate  # noqa: E402
+from mwip_ros.core.closed_loop.trajectory import POSE_COLUMNS  # noqa: E402
 from mwip_ros.runs import read_csv  # noqa: E402
 
 MOTION = Path(__file__).resolve().parents[2] / "config" / "motion.yaml"
@@ -112,7 +112,7 @@ def test_robot_state_on_the_3d_plant_integrates_the_gyro_s_yaw(turning):
     core.odometry.state_update does (1e-9), and within the drift of docs/real-robot.md of the true pose (5 cm,
     2 mrad); without the yaw joint it would have no yaw at all. (The runs before this one: the odometry restarts
     at the origin when the stamps go back.)"""
-    from mwip_ros.core.odometry import Odometry, state_update
+    from mwip_ros.core.mobile_base.odometry import Odometry, state_update
     run = turning["runs"]["odom"]
     assert run.code == 0, run.output()
     code, rs_out = turning["robot_state"]

@@ -73,7 +73,7 @@ def test_mwip_sim_runs_the_mujoco_backend(tmp_path):
 
 def test_mwip_sim_ends_a_diverging_run_as_a_fault_naming_the_law_and_time(monkeypatch, capsys):
     from mwip_ros.cli import sim
-    from mwip_ros.core.plant import PlantDiverged
+    from mwip_ros.core.plants.plant import PlantDiverged
 
     def diverging(loop, label="", progress=None, on_period=None):
         raise PlantDiverged("the MuJoCo simulation diverged in [1.2, 1.205] s: mjWARN_BADQACC (...)")
@@ -104,10 +104,10 @@ def test_the_batch_runs_the_mujoco_backend_scenario_by_scenario_as_mwip_sim_and_
     """A mujoco scenario runs the scalar loop (mwip_sim's numbers); one that diverges is that scenario's
     ``diverged`` failure (not an error of the batch), scored neither upright nor from NaN."""
     pytest.importorskip("mujoco")
-    from mwip_ros.core import metrics
-    from mwip_ros.core.batch import simulate_batch
-    from mwip_ros.core.sim import simulate
-    from mwip_ros.core.trajectory import FAILURES
+    from mwip_ros.core.closed_loop import metrics
+    from mwip_ros.core.kernels.batch import simulate_batch
+    from mwip_ros.core.closed_loop.sim import simulate
+    from mwip_ros.core.closed_loop.trajectory import FAILURES
     good = P.closed_loop(dict(BASE, backend="mujoco"), duration=1.0, controller="dscndo")
     bad = P.closed_loop(dict(BASE, backend="mujoco", **{"actual.I_w": 1e-6, "actual.D_b": 1e6,   # diverges at 1 ms
                                                         "mujoco.timestep": 0.001}), duration=1.0, controller="dscndo")
@@ -129,8 +129,8 @@ def test_mwip_sweep_runs_the_mujoco_backend(tmp_path):
     assert r.returncode == 0, r.stderr
     cols = read_results(out / "results.csv")
     assert len(cols["scenario"]) == 2 and all(float(u) == 1.0 for u in cols["upright"]), cols
-    from mwip_ros.core import metrics
-    from mwip_ros.core.sim import simulate
+    from mwip_ros.core.closed_loop import metrics
+    from mwip_ros.core.closed_loop.sim import simulate
     loop = P.closed_loop(dict(BASE, backend="mujoco", **{"actual.m_b": 340.0, "actual.D_w_variance": 0.0}),
                          duration=1.0, controller="dscndo")
     want = metrics.compute(simulate(loop).columns, (0.5, 1.0), loop.plant.fall_angle)

@@ -9,8 +9,8 @@ import pytest
 
 from hostile import PAPER, assert_refused, measured
 from mwip_ros import params as P
-from mwip_ros.core.model import State
-from mwip_ros.core.sensing import SensingConfig, Sensors
+from mwip_ros.core.plants.model import State
+from mwip_ros.core.plants.sensing import SensingConfig, Sensors
 from mwip_ros.msgs.layouts import LIMITS
 from mwip_ros.params import schema
 

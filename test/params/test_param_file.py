@@ -6,7 +6,7 @@ import yaml
 
 from mwip_ros import params as P
 from mwip_ros.params.paths import default_params_file
-from mwip_ros.core.lqr import NO_DESIGN
+from mwip_ros.core.control.lqr import NO_DESIGN
 
 pytestmark = pytest.mark.unit
 

@@ -6,8 +6,8 @@ import math
 import pytest
 
 from mwip_ros import params as P
-from mwip_ros.core.drive import MotorConfig, motor_torque
-from mwip_ros.core.model import State, accel
+from mwip_ros.core.plants.drive import MotorConfig, motor_torque
+from mwip_ros.core.plants.model import State, accel
 from mwip_ros.params.paths import default_params_file
 
 pytestmark = pytest.mark.unit

@@ -1,6 +1,6 @@
 """Parameter ranges and choices are data on the ParamSpec (``lo``, ``hi``, ``lo_open``, ``floor``, ``choices``):
 the start-up and run-time check, the ROS parameter descriptor and the ``--help`` text are all derived from
-them, and the derived inertia check is the model's (mwip_ros.core.model), not a copy of eq. (2)."""
+them, and the derived inertia check is the model's (mwip_ros.core.plants.model), not a copy of eq. (2)."""
 from __future__ import annotations
 
 import math
@@ -114,7 +114,7 @@ def test_help_ranges_are_derived_from_the_data():
 
 
 def test_the_derived_inertia_check_is_the_models(monkeypatch):
-    from mwip_ros.core import model
+    from mwip_ros.core.plants import model
 
     base = P.defaults_for("plant_sim")
     P.check_derived(base)

@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from mwip_ros import params as P
-from mwip_ros.core.plant import make_plant
-from mwip_ros.core.raw_sensors import RawSensors
-from mwip_ros.core.sim import simulate
+from mwip_ros.core.plants.plant import make_plant
+from mwip_ros.core.plants.raw_sensors import RawSensors
+from mwip_ros.core.closed_loop.sim import simulate
 from mwip_ros.params.paths import default_params_file
 from mwip_ros.robot.backend import Backend, Imu, Observation, Wheel
 from mwip_ros.robot.closed_loop import Push, raw_sample, run, summary
@@ -173,7 +173,7 @@ def test_a_robots_bag_its_estimate_on_joint_states_is_summarised_as_the_estimate
     short = summary(traj, (1.0, 2.5))   # a window the bag does not cover: NaN, no verdict
     assert not short["covers_window"] and math.isnan(short["theta_b_rms"])
     from mwip_ros.cli.report import run_notes
-    from mwip_ros.core import metrics
+    from mwip_ros.core.closed_loop import metrics
     notes = run_notes(traj, metrics.compute(traj.columns, (1.0, 2.0), 1.0, None))
     assert any(n.startswith("no truth in the bag (a robot): its states and metrics are the state estimator's")
                for n in notes), notes

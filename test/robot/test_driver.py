@@ -8,7 +8,7 @@ from dataclasses import replace
 
 import pytest
 
-from mwip_ros.core.safety import DISABLED, ENABLED, FAULT
+from mwip_ros.core.control.safety import DISABLED, ENABLED, FAULT
 from mwip_ros.robot import Command
 from mwip_ros.robot.driver import DriverConfig, WheelDriver, timing_lines
 from mwip_ros.robot.mock import MockBackend, MockConfig

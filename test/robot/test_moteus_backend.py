@@ -16,7 +16,7 @@ import pytest
 pytest.importorskip("moteus")
 
 from mwip_ros import params as P  # noqa: E402
-from mwip_ros.core.model import Sinusoid  # noqa: E402
+from mwip_ros.core.plants.model import Sinusoid  # noqa: E402
 from mwip_ros.robot import Backend, BackendError, Command  # noqa: E402
 from mwip_ros.robot.moteus_backend import MoteusBackend, MoteusConfig  # noqa: E402
 from mwip_ros.robot.moteus_emu import EmulatedRobot, Injection, Servo, ServoConfig, serve  # noqa: E402

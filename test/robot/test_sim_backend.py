@@ -9,8 +9,8 @@ from pathlib import Path
 import pytest
 
 from mwip_ros import params as P
-from mwip_ros.core.model import Sinusoid
-from mwip_ros.core.sim import simulate
+from mwip_ros.core.plants.model import Sinusoid
+from mwip_ros.core.closed_loop.sim import simulate
 from mwip_ros.robot import BackendError, Command
 from mwip_ros.robot.sim import SimBackend
 

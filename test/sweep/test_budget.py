@@ -1,4 +1,4 @@
-"""Sizes a user can ask for are checked against the memory budget (mwip_ros.core.budget) before memory is spent.
+"""Sizes a user can ask for are checked against the memory budget (mwip_ros.core.kernels.budget) before memory is spent.
 
 samples, grid points, duration, the metrics window, delay queues and workers: a spec or a command beyond
 the budget is refused with one line naming the key and the numbers (exit 2), in well under a second of
@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mwip_ros.core import budget
+from mwip_ros.core.kernels import budget
 from mwip_ros.sweep import engine
 from mwip_ros.sweep.scenarios import expand
 from mwip_ros.sweep.spec import SpecError, load_spec
@@ -105,7 +105,7 @@ def test_a_chunk_beyond_the_batch_budget_runs_as_several_batches_with_the_same_r
     sc = expand(s)
     chunk = engine.make_chunks(s, sc, chunk_size=100)[0]
     per, fixed = engine.scenario_cost(dict(s.base_values, **sc.overrides(0)), s.duration_s, s.window)
-    import mwip_ros.core.batch as B
+    import mwip_ros.core.kernels.batch as B
     sizes, real = [], B.simulate_batch
     monkeypatch.setattr(B, "simulate_batch", lambda loops, window, **k: (sizes.append(len(loops)),
                                                                          real(loops, window, **k))[1])

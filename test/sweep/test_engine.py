@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 
 from mwip_ros import params as P
-from mwip_ros.core import metrics
-from mwip_ros.core.sim import LAWS, simulate
+from mwip_ros.core.closed_loop import metrics
+from mwip_ros.core.closed_loop.sim import LAWS, simulate
 from mwip_ros.params.paths import default_params_file
 from mwip_ros.sweep import engine
 from mwip_ros.sweep.results import METRICS

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from mwip_ros.core import laws
-from mwip_ros.core import batch as B
+from mwip_ros.core.kernels import batch as B
 from mwip_ros.params.paths import default_params_file
 from mwip_ros.sweep import engine
 from mwip_ros.sweep.scenarios import expand

@@ -12,7 +12,7 @@ import pytest
 from graphproc import REPO
 
 from mwip_ros import params as P
-from mwip_ros.core import jitcache
+from mwip_ros.core.kernels import jitcache
 from mwip_ros.params.paths import default_params_file
 from mwip_ros.sweep import warm
 from mwip_ros.sweep.engine import Chunk

@@ -8,7 +8,7 @@ from __future__ import annotations
 import math
 from typing import Any, Callable, Dict, Mapping, NamedTuple, Optional, Tuple
 
-from ..model import State
+from ..plants.model import State
 
 __all__ = ["EstimatorParam", "Health", "Estimator", "NIS_WINDOW_S"]
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 import math
 from typing import Any, Callable, List, Mapping, NamedTuple, Optional, Tuple, Type
 
-from ..motion import error_state
+from ..control.motion import error_state
 
 __all__ = ["Law", "LawParam", "LawError", "PluginError"]
 
@@ -57,13 +57,13 @@ class Law:
         ``(u, s_next, internals tuple)``: ``P`` the numbers :meth:`pure_params` makes of the parameters,
         ``nominal`` anything with ``m11``, ``m12``, ``m22``, ``G_b``, ``s`` one float of state (ignored when
         ``first``, the first step).  When a law has one, its :meth:`step` calls it, and the batch simulator runs
-        it compiled by numba inside one compiled loop (``core.compiled``); None: the batch runs :meth:`step`
+        it compiled by numba inside one compiled loop (``core.kernels.compiled``); None: the batch runs :meth:`step`
         over numpy arrays.
     pure_track : function or None
         The law's period tracking a motion reference (docs/theory.md 6.11) as a pure function, ``pure_track(P,
         nominal, h, x, s, s2, first, ref, m=math)`` -> ``(u, s_next, s2_next, internals tuple)`` with a second float
         of state ``s2`` (DSC's x_d); None (the default): ``pure_step`` on the error state (:meth:`tracked`), as
-        :meth:`step` does.  The compiled batch runs it (``core.compiled_motion``).
+        :meth:`step` does.  The compiled batch runs it (``core.kernels.compiled_motion``).
     limit_key : str or None
         The parameter of the law's own torque limit, when it has one (``mpc.u_max``): its command, the observer
         term included, holds |u| <= that value at every step (:meth:`step_observed`); None: no limit.
@@ -72,7 +72,7 @@ class Law:
         refused in one line (:func:`unavailable`), and the other laws run.
     pure_lanes : int
         3 when ``pure_step`` is plain arithmetic and ``m``'s functions on its numbers, with ``P`` three numbers:
-        the compiled loop then runs it for several scenarios at once (``core.simd``); 0 (the default): one
+        the compiled loop then runs it for several scenarios at once (``core.kernels.simd``); 0 (the default): one
         scenario after another.
     """
 
@@ -91,7 +91,8 @@ class Law:
     limit_key: Optional[str] = None
     requires: Tuple[str, ...] = ()
     _with_observer: Type[Law]   # set by .ndo.with_observer on the base class it composes (annotation only)
-    ref = None   # the motion reference (core.motion.Reference) of this period; None: regulation, as in the paper
+    # the motion reference (core.control.motion.Reference) of this period; None: regulation, as in the paper
+    ref = None
 
     @staticmethod
     def pure_params(params) -> tuple:
@@ -124,15 +125,16 @@ class Law:
     # --- state --------------------------------------------------------------------------------------
 
     def track(self, ref) -> None:
-        """The references of the coming step (:class:`~mwip_ros.core.motion.Reference`, theory 6.11; None: none, the law
-        regulates to the upright at rest as in the paper).  The loop calls it once per period before :meth:`step`
-        (:meth:`mwip_ros.core.loop.Period.decide`, the controller node); a law tracks it in error coordinates
-        (:meth:`tracked`), DSC through its outer loop (docs/theory.md 6.11)."""
+        """The references of the coming step (:class:`~mwip_ros.core.control.motion.Reference`, theory 6.11; None: none,
+        the law regulates to the upright at rest as in the paper).  The loop calls it once per period before
+        :meth:`step` (:meth:`mwip_ros.core.closed_loop.loop.Period.decide`, the controller node); a law tracks it in
+        error coordinates (:meth:`tracked`), DSC through its outer loop (docs/theory.md 6.11)."""
         self.ref = ref
 
     def tracked(self, x):
         """``x`` in the error coordinates of the reference (theta_w - theta_w*, theta_b, theta_w' - theta_w'* +
-        lambda (theta_w - theta_w*), theta_b'): :func:`mwip_ros.core.motion.error_state`; ``x`` itself without one."""
+        lambda (theta_w - theta_w*), theta_b'): :func:`mwip_ros.core.control.motion.error_state`; ``x`` itself without
+        one."""
         return x if self.ref is None else error_state(x, self.ref)
 
     def reset(self) -> None:

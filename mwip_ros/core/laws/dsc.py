@@ -1,7 +1,7 @@
 """The law ``dsc``: the dynamic surface controller (eq. 16-28); ``dscndo`` is it with the observer term.
 
-The equations are :func:`mwip_ros.core.controller.dsc_law` (u_DSC of eq. 28, with S1, x4_bar, S2 of
-eq. 22-26) and :func:`~mwip_ros.core.controller.filter_step` (eq. 25, exact over one period);
+The equations are :func:`mwip_ros.core.control.controller.dsc_law` (u_DSC of eq. 28, with S1, x4_bar, S2 of
+eq. 22-26) and :func:`~mwip_ros.core.control.controller.filter_step` (eq. 25, exact over one period);
 this module only holds the filter state x4d between steps.  u_taud (eq. 20) is added by
 :mod:`.ndo`, not here.
 """
@@ -10,9 +10,9 @@ from __future__ import annotations
 import math
 from typing import List
 
-from ..controller import INTERNALS, DscGains, dsc_terms, dsc_terms_tracking, filter_step
-from ..motion import rate_reference
-from ..observer import substeps
+from ..control.controller import INTERNALS, DscGains, dsc_terms, dsc_terms_tracking, filter_step
+from ..control.motion import rate_reference
+from ..control.observer import substeps
 from .base import Law
 
 __all__ = ["DscLaw", "INTERNALS", "dsc_step", "dsc_track_step", "lean_reference"]
@@ -72,7 +72,7 @@ class DscLaw(Law):
     @classmethod
     def stability_margin(cls, nominal, params, X, observer: bool = False) -> float:
         """Theorem 2's gamma (eq. 34-35); without the observer term its controller half min(a1, a2, a3)."""
-        from ..theorem import controller_conditions, theorem2
+        from ..control.theorem import controller_conditions, theorem2
         if observer:
             return theorem2(nominal, params, X).gamma
         return min(vars(controller_conditions(nominal, params)).values())
@@ -88,7 +88,7 @@ class DscLaw(Law):
         period (eq. 25), so the next one first advances them over the periods the gap skipped, one period at a time
         with the last step's state held (what the law stepped every period would do with that state repeated; DSC's
         x4_bar follows x_d while it tracks, so the cascade is stepped, not solved at once)."""
-        self.skipped = substeps(dt, self.h) - 1   # the observer's count of periods (core.observer)
+        self.skipped = substeps(dt, self.h) - 1   # the observer's count of periods (core.control.observer)
 
     def _catch_up(self) -> None:
         """The filters over the periods :meth:`elapsed` said were skipped (eq. 25; with a reference, x_d's too)."""
@@ -142,7 +142,7 @@ class DscLaw(Law):
         return f"k1 = {g.k1}, k2 = {g.k2}, tau4 = {g.tau4}"
 
     def warnings(self) -> List[str]:
-        from ..theorem import controller_conditions
+        from ..control.theorem import controller_conditions
         th = controller_conditions(self.nominal, self.params)
         if th.satisfied:
             return []

@@ -1,11 +1,11 @@
 """The law ``lqr``: u = -K [theta_b, theta_b', theta_w'] (the baseline, docs/theory.md 6.1); ``lqr_ndo`` adds
-the observer term (:mod:`.ndo`).  The gain is :func:`mwip_ros.core.lqr.lqr_gain` of ``lqr.Q``, ``lqr.R``."""
+the observer term (:mod:`.ndo`).  The gain is :func:`mwip_ros.core.control.lqr.lqr_gain` of ``lqr.Q``, ``lqr.R``."""
 from __future__ import annotations
 
 import math
 from typing import NamedTuple, Optional
 
-from ..lqr import lqr_gain, lqr_u
+from ..control.lqr import lqr_gain, lqr_u
 from .base import Law
 from .dsc import INTERNALS
 
@@ -41,7 +41,7 @@ class LqrLaw(Law):
 
     @classmethod
     def design(cls, values, nominal, h) -> LqrGain:
-        """K for the nominal model at period ``h``; :class:`~mwip_ros.core.lqr.LqrDesignError` names lqr.Q or
+        """K for the nominal model at period ``h``; :class:`~mwip_ros.core.control.lqr.LqrDesignError` names lqr.Q or
         lqr.R when there is none."""
         return LqrGain(*lqr_gain(nominal, h, values["lqr.Q"], values["lqr.R"]))
 

@@ -1,7 +1,7 @@
 """The law ``mpc``: linear model predictive control with the torque limit as a hard constraint (docs/theory.md
 6.6); ``mpc_ndo`` is it with DSCNDO's observer term (composed by :mod:`.ndo`, eq. 19-21).
 
-The model is the LQR baseline's (docs/theory.md 6.1, :mod:`mwip_ros.core.lqr`): the nominal linearization at the
+The model is the LQR baseline's (docs/theory.md 6.1, :mod:`mwip_ros.core.control.lqr`): the nominal linearization at the
 upright, z = [theta_b, theta_b', theta_w'], held over the control period h (zero-order hold), ``z+ = A_d z + B_d u``.
 Each period, from the measured z_0, the law solves
 
@@ -103,7 +103,7 @@ class QpMatrices(NamedTuple):
 
 
 def _design_error(key: str, reason: str) -> ValueError:
-    from ..lqr import LqrDesignError
+    from ..control.lqr import LqrDesignError
     return LqrDesignError(key, reason)
 
 
@@ -113,7 +113,7 @@ def qp_matrices(nominal, h: float, horizon: int, Q: Tuple[float, float, float], 
     (remembered: a sweep asks for the same one many times)."""
     from scipy.linalg import expm, solve_discrete_are
 
-    from ..lqr import _zoh, linearization, weights
+    from ..control.lqr import _zoh, linearization, weights
     Qm, Rm = weights(Q, R)
     A, B = linearization(nominal)
     Ad, Bd = _zoh(A, B, float(h), expm)
@@ -266,8 +266,8 @@ class MpcLaw(Law):
     @classmethod
     def design(cls, values, nominal, h) -> MpcParams:
         """The parameters, checked: ``mpc.Q`` 3 entries >= 0, a stabilizing Riccati solution; a
-        :class:`~mwip_ros.core.lqr.LqrDesignError` names the key."""
-        from ..lqr import LqrDesignError, lqr_gain
+        :class:`~mwip_ros.core.control.lqr.LqrDesignError` names the key."""
+        from ..control.lqr import LqrDesignError, lqr_gain
         Q = values["mpc.Q"]
         if len(Q) != 3:
             raise _design_error("mpc.Q", f"give the diagonal (3 entries), got {len(Q)} entries")

@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 from typing import Optional, Type
 
-from ..controller import u_taud_of
+from ..control.controller import u_taud_of
 from .base import Law
 
 __all__ = ["WithObserver", "with_observer"]

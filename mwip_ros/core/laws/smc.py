@@ -5,7 +5,7 @@ disturbances", its drawback "chattering") as the alternative to DSC.  This is th
 regulation of an underactuated MWIP, on the states the other laws regulate, z = [theta_b, theta_b', theta_w']:
 
 * a linear sliding surface ``s = c1 theta_b + c2 theta_b' + c3 theta_w'`` designed on the nominal
-  linearized model (:func:`mwip_ros.core.lqr.linearization`, docs/theory.md 6.1) by Ackermann's formula for
+  linearized model (:func:`mwip_ros.core.control.lqr.linearization`, docs/theory.md 6.1) by Ackermann's formula for
   sliding surfaces (Ackermann & Utkin 1998): ``c^T = e^T (A + p1 I)(A + p2 I)``, ``e^T`` the last row of the
   inverse controllability matrix, so that on ``s = 0`` the linearized motion has the eigenvalues -p1, -p2 and
   ``c^T B = 1`` (``s`` is scaled so that ``s' = ... + u`` near the upright);
@@ -64,7 +64,7 @@ def sliding_surface(nominal, pole1: float, pole2: float) -> Tuple[float, float, 
     e^T = [0, 0, 1] [B, A B, A^2 B]^-1; the motion on s = 0 has the eigenvalues -pole1, -pole2 and c^T B = 1."""
     import numpy as np
 
-    from ..lqr import linearization
+    from ..control.lqr import linearization
     A, B = linearization(nominal)
     C = np.hstack([B, A @ B, A @ A @ B])
     e = np.linalg.solve(C.T, np.array([0.0, 0.0, 1.0]))   # e^T C = [0, 0, 1]
@@ -138,7 +138,7 @@ class SmcLaw(Law):
         the reaching law's proportional part diverges in discrete time (docs/theory.md 6.5)."""
         q = float(values["smc.q"])
         if not q * h < DISCRETE_LIMIT:
-            from ..lqr import LqrDesignError
+            from ..control.lqr import LqrDesignError
             raise LqrDesignError("smc.q", f"{q:g} /s at control_rate_hz {1.0 / h:g} Hz gives q h = {q * h:.3g}, "
                                           f"not below {DISCRETE_LIMIT:g}: the reaching law diverges in discrete time "
                                           f"(|1 - q h| >= 1); keep smc.q < {DISCRETE_LIMIT / h:.4g} /s at this rate")

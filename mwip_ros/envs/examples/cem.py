@@ -27,8 +27,8 @@ from typing import Dict, List, Sequence
 import numpy as np
 
 from mwip_ros import params as P
-from mwip_ros.core.batch import simulate_batch
-from mwip_ros.core.budget import window_samples
+from mwip_ros.core.kernels.batch import simulate_batch
+from mwip_ros.core.kernels.budget import window_samples
 from mwip_ros.params.paths import default_params_file
 from mwip_ros.policy import LinearPolicy
 from mwip_ros.sweep.scenarios import expand

@@ -1,4 +1,4 @@
-"""The nodes of the closed loop, in the order of a period (``core.loop.STAGES``).
+"""The nodes of the closed loop, in the order of a period (``core.closed_loop.loop.STAGES``).
 
 ==========================  ==================================================================
 :mod:`.plant_sim`           the true robot (sensors, drive, safety, plant): lockstep or realtime

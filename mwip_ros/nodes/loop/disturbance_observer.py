@@ -19,7 +19,7 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
 from mwip_ros import params as P
-from mwip_ros.core.observer import DiscreteObserver
+from mwip_ros.core.control.observer import DiscreteObserver
 from mwip_ros.msgs import layouts as L
 from mwip_ros.msgs.qos import qos_for
 from mwip_ros.nodes.runtime.diagnostics import OK
@@ -79,7 +79,7 @@ class DisturbanceObserver(Node, GracefulNodeMixin):
         else:
             n = round((stamp - last) / self.period_ns) if last is not None else 1
             if n > 1:  # realtime: states were lost; integrate over the whole gap (at most the window) in steps of
-                h = n * self.h   # at most one period (core.observer.substeps: one step of n h is unstable)
+                h = n * self.h   # at most one period (core.control.observer.substeps: one step of n h is unstable)
         try:
             tau_hat = self.obs.update(x, u_prev, h)
             ok = math.isfinite(tau_hat[0]) and math.isfinite(tau_hat[1])

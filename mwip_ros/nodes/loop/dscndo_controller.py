@@ -19,11 +19,11 @@ and estimates wait for their partner.
 
 With ``motion.enabled`` (docs/theory.md 6.11) the law tracks references: from ``motion.profile`` (offline and
 lockstep scenarios: the graph then equals ``mwip_sim``) or, without one, from ``cmd_vel`` (geometry_msgs/Twist,
-REP-103: linear.x, angular.z).  A Twist only sets the target (:class:`mwip_ros.core.motion.Shaper`); the references
-of period k are made inside the period, in ``core.loop.command``, as offline.  A Twist that is not one, not finite or
-absurd is dropped by DDS (a content filter, ``layouts.CMD_VEL_FILTER``: logged and on /diagnostics as such, not
-counted) or, where the middleware does not filter, rejected and counted; one over the limits is clipped and
-counted; no cmd_vel for
+REP-103: linear.x, angular.z).  A Twist only sets the target (:class:`mwip_ros.core.control.motion.Shaper`); the
+references of period k are made inside the period, in ``core.closed_loop.loop.command``, as offline.  A Twist that is
+not one, not finite or absurd is dropped by DDS (a content filter, ``layouts.CMD_VEL_FILTER``: logged and on
+/diagnostics as such, not counted) or, where the middleware does not filter, rejected and counted; one over the limits
+is clipped and counted; no cmd_vel for
 ``motion.cmd_vel_timeout_s`` ramps the references to zero (logged once per silence, counted on /diagnostics).
 While no torque acts (``driver_state``, the plant's driver: disabled, in fault, the emergency stop held; docs/theory.md
 6.8) the references hold at the measured state (the position target, v* and psi'* do not advance), the yaw integral
@@ -34,8 +34,8 @@ they arrive: a flood of them costs the controller one message per look.  In real
 participant of its own whose threads run at nice 19 (:class:`~mwip_ros.nodes.runtime.rclpy_compat.IsolatedInput`):
 a flood of valid Twists does not share the receive thread of ``joint_states``.
 With motion on and a state that carries the gyro's yaw rate (a spatial plant's ``joint_states``: the joint ``yaw``),
-the yaw stage runs after the law (docs/theory.md 6.13, ``core.yaw``) and the answer is the two wheels' torques on
-``wheel_torques_cmd`` (sensor_msgs/JointState, names wheel_left_joint, wheel_right_joint, effort [u_L, u_R]) instead
+the yaw stage runs after the law (docs/theory.md 6.13, ``core.control.yaw``) and the answer is the two wheels' torques
+on ``wheel_torques_cmd`` (sensor_msgs/JointState, names wheel_left_joint, wheel_right_joint, effort [u_L, u_R]) instead
 of ``wheel_torque_cmd``.
 """
 from __future__ import annotations
@@ -50,10 +50,10 @@ from std_msgs.msg import Float64, String
 
 from mwip_ros import params as P
 from mwip_ros.core import laws
-from mwip_ros.core.excitation import Excitation
-from mwip_ros.core.loop import command
-from mwip_ros.core.motion import ABSURD_SPEED, ABSURD_YAW_RATE, Shaper
-from mwip_ros.core.yaw import YawLoop, wheel_torques
+from mwip_ros.core.identification.excitation import Excitation
+from mwip_ros.core.closed_loop.loop import command
+from mwip_ros.core.control.motion import ABSURD_SPEED, ABSURD_YAW_RATE, Shaper
+from mwip_ros.core.control.yaw import YawLoop, wheel_torques
 from mwip_ros.msgs import BadMessage
 from mwip_ros.msgs import layouts as L
 from mwip_ros.msgs.qos import DRIVER_STATE_QOS, qos_for
@@ -97,7 +97,8 @@ class DscndoController(Node, GracefulNodeMixin):
         self._composed = {}
         for law in self.laws.values():
             self._warn(law)
-        exc = P.typed.excitation(self.v)   # identification's known torque (core.excitation), added to the command
+        # identification's known torque (core.identification.excitation), added to the command
+        exc = P.typed.excitation(self.v)
         self.excitation = Excitation(exc, self.h) if exc is not None else None
         self.stamp0 = None    # the stamp of the run's first state: period k of the excitation counts from it
         self.states = {}      # stamp -> State waiting for an estimate
@@ -317,7 +318,7 @@ class DscndoController(Node, GracefulNodeMixin):
         gap = round((stamp - self.last_answered) / (self.h * 1e9)) if self.last_answered is not None else 1
         if gap > 1:   # realtime: states lost; the law's filters (DSC's eq. 25) advance over the time that passed
             ctrl.elapsed(gap * self.h)
-        try:   # core.loop: the law stage (no torque acting: the references hold)
+        try:   # core.closed_loop.loop: the law stage (no torque acting: the references hold)
             u, internals = command(ctrl, x, tau_hat, self.excitation, k, self.motion, driving)
             ok = math.isfinite(u) and ctrl.finite()
         except (ArithmeticError, ValueError):
@@ -349,7 +350,8 @@ class DscndoController(Node, GracefulNodeMixin):
                     del d[s]
 
     def _on_cmd_vel(self, data: bytes) -> None:
-        """A Twist sets the target of the coming periods (core.motion.Shaper.command), or is rejected and counted."""
+        """A Twist sets the target of the coming periods (core.control.motion.Shaper.command), or is rejected and
+        counted."""
         try:
             vx, wz = L.parse_twist(data)
         except BadMessage as exc:

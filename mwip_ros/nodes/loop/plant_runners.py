@@ -1,11 +1,11 @@
 """``plant_sim``'s two modes as runners over one node: when a period of the plant's stages is finished.
 
-The node (:mod:`.plant_sim`) holds the plant's stages (:class:`mwip_ros.core.loop.PlantSide`), its
+The node (:mod:`.plant_sim`) holds the plant's stages (:class:`mwip_ros.core.closed_loop.loop.PlantSide`), its
 topics, ``~/reset`` and the end-of-run report; a runner decides what starts a run, what a command
 does and what ends a period:
 
 * :class:`LockstepRunner`: publish ``/clock`` and state k, wait for the command that answers it
-  (the lockstep driver, :mod:`.lockstep`, told the answering stages of ``core.loop``), finish the
+  (the lockstep driver, :mod:`.lockstep`, told the answering stages of ``core.closed_loop.loop``), finish the
   period, send the next state.  The graph then reproduces ``mwip_sim`` sample by sample.
 * :class:`RealtimeRunner`: period k is due at t_0 + k h on the node's clock (:mod:`..runtime.schedule`: absolute
   deadlines); at each wake of a timer at ``control_rate_hz`` it finishes the period of the state published at the
@@ -20,7 +20,7 @@ lockstep timeout is the lockstep watchdog (a ``watchdog`` fault recorded, then e
 realtime runner checks the command watchdog (``watchdog_s``) at every tick (a late tick defers the verdict
 by one tick: the controller first gets the state the plant was late with), counting from the first state
 it publishes, so a controller that never answers is a ``watchdog`` fault that names the first stage of the chain
-(``core.loop.STAGES``) from which no answer came, not an open loop that runs until the robot falls.  A bad
+(``core.closed_loop.loop.STAGES``) from which no answer came, not an open loop that runs until the robot falls.  A bad
 command (non-finite or implausible, a ``bad_command`` fault) answers the lockstep state it came for with zero
 torque (the driver is in fault), so the run goes on; in realtime it is dropped, as before.
 

@@ -24,7 +24,7 @@ newest :data:`SIDE_DEPTH` of each (:class:`~mwip_ros.nodes.runtime.rclpy_compat.
 the loop runs, and a flood of them queues nothing in front of the period.
 
 The driver's state machine (docs/theory.md 6.8; the pure machine, its states, faults, levels and answers:
-:mod:`mwip_ros.core.safety`; one machine for the node's life) stands between the command and the plant: not
+:mod:`mwip_ros.core.control.safety`; one machine for the node's life) stands between the command and the plant: not
 enabled, the bridge is open (no current, no torque: ``effort``, ``u`` and ``u_applied`` are exactly zero).  The
 node feeds it its faults (the realtime watchdog, counted from the first state published and naming the first
 stage that did not answer; the lockstep timeout; a bad command; a fall, which with ``exit_on_fall: true`` ends the
@@ -39,7 +39,7 @@ per state k ``imu/data_raw`` (sensor_msgs/Imu, frame ``imu_link``, no orientatio
 specific force) and ``wheel_encoder`` (sensor_msgs/JointState ``[wheel]``: the wheel's angle relative to
 the body, its rate and the torque that acted), both stamped t_k, and the truth on ``true_joint_states``;
 a ``state_estimator`` publishes ``joint_states`` (the lockstep chain waits for it first).  The sample is
-the plant's stage ``sensors`` (:meth:`mwip_ros.core.loop.PlantSide.sense`).
+the plant's stage ``sensors`` (:meth:`mwip_ros.core.closed_loop.loop.PlantSide.sense`).
 
 With ``backend: mujoco`` (docs/theory.md 6.10: a plant with a 3D pose, ``Plant.spatial``) the plant publishes its
 pose per state on ``true_pose`` (geometry_msgs/PoseStamped, frame ``odom``) and each wheel's angle on
@@ -73,11 +73,11 @@ from sensor_msgs.msg import Imu, JointState
 from std_msgs.msg import Bool, Float64, String
 from std_srvs.srv import Trigger
 
-from mwip_ros.core import metrics
-from mwip_ros.core.loop import PlantSide, answering
-from mwip_ros.core.plant import PlantDiverged
-from mwip_ros.core.safety import HISTORY, DriverStateMachine, Transition, Watchdog
-from mwip_ros.core.trajectory import TrajectoryTable
+from mwip_ros.core.closed_loop import metrics
+from mwip_ros.core.closed_loop.loop import PlantSide, answering
+from mwip_ros.core.plants.plant import PlantDiverged
+from mwip_ros.core.control.safety import HISTORY, DriverStateMachine, Transition, Watchdog
+from mwip_ros.core.closed_loop.trajectory import TrajectoryTable
 from mwip_ros.msgs import BadMessage, cdr
 from mwip_ros.msgs import layouts as L
 from mwip_ros.msgs.qos import BEST_EFFORT_INPUT_QOS, DRIVER_STATE_QOS, INPUT_QOS, SERVICE_QOS, qos_for
@@ -99,7 +99,7 @@ ESTIMATOR = "state_estimator"   # the node whose /diagnostics status a raw plant
 
 
 class PlantSimNode(Node, GracefulNodeMixin):
-    """The plant's stages (:class:`~mwip_ros.core.loop.PlantSide`) as a node; its mode is a runner
+    """The plant's stages (:class:`~mwip_ros.core.closed_loop.loop.PlantSide`) as a node; its mode is a runner
     (:mod:`.plant_runners`: lockstep or realtime), which decides when a period is finished."""
 
     def __init__(self, context=None, argv=()):
@@ -161,7 +161,8 @@ class PlantSimNode(Node, GracefulNodeMixin):
         self.create_service(Trigger, "~/disable", self._on_disable, qos_profile=SERVICE_QOS)
         self.driver_pub = self.create_publisher(String, "driver_state", DRIVER_STATE_QOS)
         # users publish it with any QoS: reliable (nothing lost) and best effort (matches a best-effort publisher);
-        # the e-stop is a level (core.safety): the latest value heard on each subscription, asserted while one is true
+        # the e-stop is a level (core.control.safety): the latest value heard on each subscription, asserted while one
+        # is true
         self.estop_heard: dict = {}
         self.side_inputs = [self.wrench_in] + [
             PolledInput(self, Bool, "emergency_stop", qos, lambda data, via=via: self._on_estop(data, via), SIDE_DEPTH)
@@ -176,8 +177,8 @@ class PlantSimNode(Node, GracefulNodeMixin):
         self.watch = PublisherWatch(self, ["wheel_torque_cmd", "joint_states",
                                            *(("wheel_torques_cmd",) if self.plant.spatial else ()),
                                            *(("imu/data_raw", "wheel_encoder") if self.raw else ())])
-        # both runners wait for the graph of core.loop.STAGES' answering stages (lockstep also steps with it):
-        # a raw plant's chain starts with the state estimator, the one node listening to the first topic
+        # both runners wait for the graph of core.closed_loop.loop.STAGES' answering stages (lockstep also steps with
+        # it): a raw plant's chain starts with the state estimator, the one node listening to the first topic
         answers = answering(estimator=self.raw)
         first_pub = self.imu_pub if self.raw else self.state_pub
         self.lockstep = LockstepDriver(
@@ -268,7 +269,7 @@ class PlantSimNode(Node, GracefulNodeMixin):
                 self.get_logger().warning(f"driver: {st.name} is healthy again; the fault stays latched until ~/reset")
 
     def _answer(self, response, answer):
-        """A std_srvs/Trigger response from core.safety's answer (and its transition published)."""
+        """A std_srvs/Trigger response from core.control.safety's answer (and its transition published)."""
         self._publish_transition(answer.transition)
         response.success, response.message = answer.success, answer.message
         return response
@@ -387,7 +388,8 @@ class PlantSimNode(Node, GracefulNodeMixin):
         self._publish_transition(self.safety.fault(self.plant.t, reason, detail), **extra)
 
     def _arm_watchdog(self) -> None:
-        """A run's first state is out (the start, a reset): the watchdog counts from now (core.safety.Watchdog)."""
+        """A run's first state is out (the start, a reset): the watchdog counts from now
+        (core.control.safety.Watchdog)."""
         self.watchdog.arm(time.monotonic())
         self._watch_stamp = self._stamp()
 
@@ -403,7 +405,7 @@ class PlantSimNode(Node, GracefulNodeMixin):
 
     def _sample_messages(self):
         """Period k's messages as published (stage ``sensors``, once per step): [(publisher, bytes)], the
-        measured state (core.sensing) on ``joint_states``, or a raw plant's sample (core.raw_sensors) on
+        measured state (core.plants.sensing) on ``joint_states``, or a raw plant's sample (core.plants.raw_sensors) on
         ``imu/data_raw`` and ``wheel_encoder``; the truth beside them when sensing or actuation options or
         raw sensors are on."""
         p = self.plant
@@ -468,7 +470,7 @@ class PlantSimNode(Node, GracefulNodeMixin):
     def _lie(self) -> None:
         """A fallen robot (``exit_on_fall: false``) lies where it fell, at rest: the model has no ground (its body
         would swing through the floor), so the period passes without integrating, no torque acting."""
-        self.plant.lie()   # MuJoCo's velocities too (core.mujoco_plant.MujocoPlant.lie)
+        self.plant.lie()   # MuJoCo's velocities too (core.plants.mujoco_plant.MujocoPlant.lie)
 
     def _start(self, why: str) -> None:
         self.started = True

@@ -48,8 +48,8 @@ from rclpy.node import Node
 from sensor_msgs.msg import Imu, JointState
 
 from mwip_ros import params as P
-from mwip_ros.core.raw_sensors import RawSample
-from mwip_ros.core.trajectory import ESTIMATE_COLUMNS, RAW_COLUMNS
+from mwip_ros.core.plants.raw_sensors import RawSample
+from mwip_ros.core.closed_loop.trajectory import ESTIMATE_COLUMNS, RAW_COLUMNS
 from mwip_ros.msgs import BadMessage
 from mwip_ros.msgs import layouts as L
 from mwip_ros.msgs.qos import qos_for

@@ -31,10 +31,10 @@ the next answer's stamp spans the gap. ``lockstep`` (simulated backends only):
 ``/clock`` and state k, then the command that answers it (:mod:`..runtime.lockstep`, the chain state_estimator,
 observer, controller), then the next period: the graph runs in simulated time, stamps k h.
 
-**Safety** (:mod:`mwip_ros.core.safety`, one machine for the node's life): ``~/enable``, ``~/disable``, ``~/reset``
-(std_srvs/Trigger; a reset clears the driver's fault and resets the backend at the next period boundary: a device
-stopped and its faults cleared, a simulator back at its initial state with its stamps restarting), the e-stop as a
-level (``emergency_stop``, std_msgs/Bool, reliable and best effort), the state estimator's ERROR on ``/diagnostics``
+**Safety** (:mod:`mwip_ros.core.control.safety`, one machine for the node's life): ``~/enable``, ``~/disable``,
+``~/reset`` (std_srvs/Trigger; a reset clears the driver's fault and resets the backend at the next period boundary: a
+device stopped and its faults cleared, a simulator back at its initial state with its stamps restarting), the e-stop as
+a level (``emergency_stop``, std_msgs/Bool, reliable and best effort), the state estimator's ERROR on ``/diagnostics``
 as a level, the command watchdog (realtime: ``watchdog_s``; lockstep: ``lockstep_timeout_s``), a bad command, a fall
 (|theta_b| > the robot's ``fall_angle``: a simulator's truth, else the estimate on ``joint_states``) and a device's own
 fault (fault ``device``, its detail the backend's one line naming the device).  The realtime watchdog counts from the
@@ -76,9 +76,9 @@ from std_msgs.msg import Bool, Float64, String
 from std_srvs.srv import Trigger
 
 from mwip_ros import params as P
-from mwip_ros.core.loop import answering
-from mwip_ros.core.metrics import json_safe
-from mwip_ros.core.safety import HISTORY, Transition
+from mwip_ros.core.closed_loop.loop import answering
+from mwip_ros.core.closed_loop.metrics import json_safe
+from mwip_ros.core.control.safety import HISTORY, Transition
 from mwip_ros.msgs import BadMessage, cdr
 from mwip_ros.msgs import layouts as L
 from mwip_ros.msgs.qos import BEST_EFFORT_INPUT_QOS, DRIVER_STATE_QOS, INPUT_QOS, SERVICE_QOS, qos_for
@@ -237,7 +237,8 @@ class WheelDriverNode(Node, GracefulNodeMixin):
             self.side_input(JointState, "joint_states", in_qos, self._on_estimate)
         self.watch = PublisherWatch(self, ["wheel_torque_cmd", "wheel_torques_cmd", "wheel_encoder",
                                            *(("imu/data_raw",) if self.has_imu else ())])
-        answers = answering(estimator=True)   # the chain: state_estimator, observer, controller (core.loop.STAGES)
+        # the chain: state_estimator, observer, controller (core.closed_loop.loop.STAGES)
+        answers = answering(estimator=True)
         first = self.imu_pub if self.has_imu else self.encoder_pub
         others = [p for p in (self.encoder_pub, self.wheels_pub, self.truth_pub, self.pose_pub)
                   if p is not None and p is not first]

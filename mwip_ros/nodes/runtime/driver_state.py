@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 from typing import List, Optional
 
-from mwip_ros.core.safety import FAULT, Transition
+from mwip_ros.core.control.safety import FAULT, Transition
 
 __all__ = ["publish_transition"]
 

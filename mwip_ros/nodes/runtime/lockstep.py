@@ -30,8 +30,8 @@ states the way the plant drives them with simulated ones.
    answers (``disturbance_estimate``): the observer answers a resent state again, and if it does
    not, it is the one to name.
 
-The chain is data (``answers``, :func:`mwip_ros.core.loop.answering`, from
-:data:`mwip_ros.core.loop.STAGES`): the nodes that answer a state, in order, and the topic each
+The chain is data (``answers``, :func:`mwip_ros.core.closed_loop.loop.answering`, from
+:data:`mwip_ros.core.closed_loop.loop.STAGES`): the nodes that answer a state, in order, and the topic each
 answers on.  The plant, the re-simulation and the tests' graph wait all use it.  With a state
 estimator in the chain (``answering(estimator=True)``: a raw plant), the estimator alone listens to the
 plant's measurement and the observer and the controller to the estimator's ``joint_states``: the
@@ -42,14 +42,14 @@ from __future__ import annotations
 import time
 from typing import Optional, Sequence, Tuple, Union
 
-from mwip_ros.core.loop import STAGES, Answer, answering
+from mwip_ros.core.closed_loop.loop import STAGES, Answer, answering
 from mwip_ros.msgs.cdr import peek_stamp
 from mwip_ros.msgs.layouts import encode_clock
 
 __all__ = ["LockstepDriver", "RESEND_S", "SETTLE_S", "graph_missing", "CHAIN", "measurement_listeners",
            "subscriber_floor"]
 
-CHAIN = answering()   # the answering stages of today's loop: the observer, then the law (core.loop.STAGES)
+CHAIN = answering()   # the answering stages of today's loop: the observer, then the law (core.closed_loop.loop.STAGES)
 
 RESEND_S = 0.5          # resend a state nobody answered after this long [s]
 HEARD_DEPTH = 10        # the chain's intermediate answers kept between two looks (the newest)
@@ -101,7 +101,7 @@ def graph_missing(node, state_pub, need_subs: int, answers: Sequence[Answer] = C
 class LockstepDriver:
     """Graph wait, one state in flight, resend and timeout, for a node that publishes states.
 
-    ``answers`` are the answering stages of the chain, in order (:func:`mwip_ros.core.loop.answering`):
+    ``answers`` are the answering stages of the chain, in order (:func:`mwip_ros.core.closed_loop.loop.answering`):
     each names its node and the topic it answers on, the last one the command ``cmd_sub`` reads.  An
     extra answering node (a state estimator) is one more entry, not new code here.  ``needed`` are
     further subscriptions of the caller whose topics must have a publisher before the start (e.g.

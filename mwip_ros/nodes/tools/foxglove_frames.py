@@ -6,8 +6,8 @@ the frames itself on ``/tf`` with the ``foxglove.FrameTransforms`` schema:
 
 - each ``odom`` (nav_msgs/Odometry): odom -> base_link, the message's pose;
 - each ``wheel_joint_states`` (sensor_msgs/JointState): base_link -> each joint's child, from the URDF's joints
-  and the positions (:func:`mwip_ros.core.urdf.joint_transforms`, as robot_state_publisher computes them), the
-  fixed ones (imu_link) included;
+  and the positions (:func:`mwip_ros.core.mobile_base.urdf.joint_transforms`, as robot_state_publisher computes them),
+  the fixed ones (imu_link) included;
 - ``robot_description``: only remembered (its joints).
 
 A message that does not decode, or carries a non-finite value, gives no frame and is counted (``rejected``).
@@ -17,7 +17,7 @@ from __future__ import annotations
 import math
 from typing import List, Optional, Tuple
 
-from mwip_ros.core.urdf import Transform, joint_transforms, urdf_joints
+from mwip_ros.core.mobile_base.urdf import Transform, joint_transforms, urdf_joints
 
 __all__ = ["FRAME_TOPICS", "TF_TOPIC", "FrameView", "to_foxglove"]
 

@@ -24,8 +24,8 @@ is logged with its reason, counted, and the re-simulation goes on without it.
 
 A controller that tracks ``cmd_vel`` (``motion.enabled`` without a ``motion.profile``, docs/theory.md 6.11) is
 given the recorded ``cmd_vel`` where the recording has them: a Twist sets the target of the periods after the one
-the controller last answered (``core.motion.Shaper.command``), so each recorded Twist (the newest of those between
-two states, in the bag's order) is published before the first state recorded after it, and that state is sent
+the controller last answered (``core.control.motion.Shaper.command``), so each recorded Twist (the newest of those
+between two states, in the bag's order) is published before the first state recorded after it, and that state is sent
 only once the controller has answered a ``get_parameters`` request sent after the Twist (its executor took the
 Twist first).  The run starts once the controller's subscription has matched this publisher (its /diagnostics
 ``publishers_by_topic``): the subscription is best effort, so what comes before it matched is lost, even when
@@ -66,7 +66,8 @@ COLLECT_MAX_S = 5.0
 COMMANDS = {"wheel_torque_cmd": lambda data: (L.parse_command(data),),
             "wheel_torques_cmd": lambda data: L.parse_wheel_torques(data)[1:]}
 OUTPUTS = (*COMMANDS, "disturbance_estimate", "controller_internals")
-LOOP_NODES = tuple(a.node for a in CHAIN)   # the answering nodes (core.loop.STAGES): their recorded changes apply
+# the answering nodes (core.closed_loop.loop.STAGES): their recorded changes apply
+LOOP_NODES = tuple(a.node for a in CHAIN)
 
 
 def _estimate(data) -> Tuple[int, Dict[str, float]]:

@@ -4,7 +4,7 @@ Subscribes ``joint_states`` (remap it to ``true_joint_states`` to draw the truth
 plant measures with noise); publishes ``robot_markers`` in frame ``world``: the wheel (a
 cylinder, its rolling shown by a spoke), the body (a rod from the axle, tilted by theta_b,
 with a sphere at its centre of gravity) and a ground line, sized from the nominal model
-(``core.markers``).  The recorder records them, so a bag opened in Foxglove or RViz shows
+(``core.plants.markers``).  The recorder records them, so a bag opened in Foxglove or RViz shows
 the robot too.  A state it cannot use is rejected and counted, as everywhere.
 """
 from __future__ import annotations
@@ -18,7 +18,7 @@ from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 
 from mwip_ros import params as P
-from mwip_ros.core.markers import pitch_quaternion, robot_pose
+from mwip_ros.core.plants.markers import pitch_quaternion, robot_pose
 from mwip_ros.msgs import BadMessage
 from mwip_ros.msgs import layouts as L
 from mwip_ros.msgs.qos import GRAPH_QOS, INPUT_QOS

@@ -2,12 +2,14 @@
 
 Subscribes ``joint_states`` (the plant's state, or the state estimator's with raw sensors: theta_w' = phi' +
 theta_b', the encoder's rate plus the bias-corrected pitch rate; from a 3D plant also the gyro's yaw rate, its joint
-``yaw``: :func:`mwip_ros.core.odometry.state_update`) and publishes (docs/graph.md):
+``yaw``: :func:`mwip_ros.core.mobile_base.odometry.state_update`) and publishes (docs/graph.md):
 
 - ``odom`` (nav_msgs/Odometry, frame ``odom``, child ``base_link``): the pose integrated by
-  :class:`mwip_ros.core.odometry.Odometry` (both wheels at theta_w' on the planar robot, yaw 0), pitched by theta_b,
-  with the covariances of the sensors' noise (``sensors.encoder_counts_per_rev``, ``sensors.imu.gyro_noise_std``);
-- ``robot_description`` (std_msgs/String, latched: transient local, depth 1): :func:`mwip_ros.core.urdf.urdf`;
+  :class:`mwip_ros.core.mobile_base.odometry.Odometry` (both wheels at theta_w' on the planar robot, yaw 0), pitched by
+  theta_b, with the covariances of the sensors' noise (``sensors.encoder_counts_per_rev``,
+  ``sensors.imu.gyro_noise_std``);
+- ``robot_description`` (std_msgs/String, latched: transient local, depth 1):
+  :func:`mwip_ros.core.mobile_base.urdf.urdf`;
 - ``wheel_joint_states`` (sensor_msgs/JointState: ``wheel_left_joint``, ``wheel_right_joint``, position phi =
   theta_w - theta_b): what robot_state_publisher reads (remap its ``joint_states`` to it: the project's
   ``joint_states`` is the robot's state, another layout);
@@ -34,8 +36,9 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
 from mwip_ros import params as P
-from mwip_ros.core.odometry import Odometry, odometry_noise, rule_for, state_update
-from mwip_ros.core.urdf import BASE_LINK, KEYS, ODOM_FRAME, WHEEL_JOINTS, frame_transforms, robot_model, urdf
+from mwip_ros.core.mobile_base.odometry import Odometry, odometry_noise, rule_for, state_update
+from mwip_ros.core.mobile_base.urdf import (BASE_LINK, KEYS, ODOM_FRAME, WHEEL_JOINTS, frame_transforms, robot_model,
+                                             urdf)
 from mwip_ros.msgs import BadMessage
 from mwip_ros.msgs import layouts as L
 from mwip_ros.msgs.qos import GRAPH_QOS, RECORD_QOS
@@ -165,7 +168,7 @@ class RobotState(Node, GracefulNodeMixin):
 
 
 def tf_message(tf_type, frames, stamp):
-    """A tf2_msgs/TFMessage (``tf_type``) of :func:`~mwip_ros.core.urdf.frame_transforms`' ``frames``."""
+    """A tf2_msgs/TFMessage (``tf_type``) of :func:`~mwip_ros.core.mobile_base.urdf.frame_transforms`' ``frames``."""
     from geometry_msgs.msg import TransformStamped
     out = []
     for f in frames:
