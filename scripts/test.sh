@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Set up .venv (if needed) and run the test suite: every tier (CI). Extra args go to pytest, e.g.
-# `scripts/test.sh -m unit` (the fast loop), `-m "unit or node" -n 2`, `-m graph`, `test/core/test_sim.py`;
+# `scripts/test.sh -m unit` (the fast loop), `-m "unit or node" -n 2`, `-m graph`, `test/core/closed_loop/test_sim.py`;
 # the tiers: test/conftest.py.
 set -euo pipefail
 

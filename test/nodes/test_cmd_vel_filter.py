@@ -1,7 +1,8 @@
 """cmd_vel's DDS content filter (layouts.CMD_VEL_FILTER, issue 46 item 2), in this process (test/nodeharness.py: the
 publisher and the controller's reader are peers in one private context, no discovery, no other process):
 
-* the filter passes exactly the Twists that ``core.motion.Shaper.command`` takes (clipped ones too) and drops what it
+* the filter passes exactly the Twists that ``core.control.motion.Shaper.command`` takes (clipped ones too) and drops
+  what it
   rejects for its numbers (NaN, inf, beyond the absurd limits) and bytes that cannot be deserialized;
 * a flood of such Twists cannot displace the operator's valid command from the controller's depth-1 cmd_vel reader
   (before: the newest NaN displaced it, the controller rejected that and never saw the command), and the log and
@@ -40,7 +41,7 @@ def _cases():
 
 
 def _taken(data) -> bool:
-    """Whether the controller takes ``data`` (parse_twist, then core.motion.Shaper.command's judgement of the
+    """Whether the controller takes ``data`` (parse_twist, then core.control.motion.Shaper.command's judgement of the
     numbers: not finite or beyond the absurd limits is rejected, over max_speed clipped and taken)."""
     try:
         vx, wz = L.parse_twist(data)

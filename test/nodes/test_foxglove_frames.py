@@ -43,7 +43,7 @@ def test_joints_of_the_urdf_turn_about_y_like_the_nodes_tf():
     assert tf["wheel_left_link"].rotation == pytest.approx((0.0, math.sin(0.15), 0.0, math.cos(0.15)), abs=1e-15)
     assert tf["wheel_right_link"].rotation == pytest.approx((0.0, math.sin(-0.1), 0.0, math.cos(-0.1)), abs=1e-15)
     assert tf["imu_link"].translation == (0.0, 0.0, 0.3) and tf["imu_link"].rotation == (0.0, 0.0, 0.0, 1.0)
-    # the same tree as robot_state's /tf (core.urdf.frame_transforms), frame for frame
+    # the same tree as robot_state's /tf (core.mobile_base.urdf.frame_transforms), frame for frame
     node = {t.child: t for t in frame_transforms(MODEL, 1.0, 2.0, 0.0, 0.1, 0.3, -0.2)}
     for child, t in tf.items():
         assert node[child].parent == t.parent and node[child].translation == pytest.approx(t.translation)

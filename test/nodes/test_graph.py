@@ -239,7 +239,7 @@ def test_lockstep_graph_runs_a_law_registered_by_a_test_equal_to_offline(lockste
 @pytest.mark.graph
 def test_lockstep_graph_with_raw_sensors_and_the_estimator_equals_mwip_sim(lockstep):
     """sensors.model raw: the plant publishes imu/data_raw and wheel_encoder, the state_estimator joint_states
-    (the chain core.loop.answering(estimator=True)); the plant's true states and torques and the estimator's
+    (the chain core.closed_loop.loop.answering(estimator=True)); the plant's true states and torques and the estimator's
     published estimates equal mwip_sim's to 1e-9, and the estimator's joint_states carry the encoder's torque."""
     offline = simulate(P.closed_loop(P.merged_values(P.load_param_files(RAW)), controller="dscndo"))
     assert not offline.fallen and len(offline) == 2001

@@ -194,8 +194,8 @@ def test_a_fall_in_the_state_no_stage_answers_is_fallen_at_its_time_never_uprigh
 
 @pytest.mark.graph
 def test_lockstep_mujoco_graph_with_raw_sensors_equals_mwip_sim(mujoco):
-    """sensors.model raw: the MuJoCo plant's raw samples (its accelerations at t_k^-, core.raw_sensors) through the
-    state estimator, the observer and the controller: the graph equals mwip_sim with backend mujoco to 1e-9."""
+    """sensors.model raw: the MuJoCo plant's raw samples (its accelerations at t_k^-, core.plants.raw_sensors) through
+    the state estimator, the observer and the controller: the graph equals mwip_sim with backend mujoco to 1e-9."""
     run = mujoco["runs"]["raw"]
     assert run.code == 0, run.output()
     assert mujoco["estimator"] == 0

@@ -1,6 +1,6 @@
 """robot_state with the lockstep loop and the realistic raw sensors: odom follows the true wheel within the
-drift measured offline (test/core/test_odometry.py: at most 1.3 mm over the paper's 10 s, 0.67 mm at the end),
-robot_description is latched for a late subscriber and parses, the wheel joint states carry phi, and a bad state
+drift measured offline (test/core/mobile_base/test_odometry.py: at most 1.3 mm over the paper's 10 s, 0.67 mm at the
+end), robot_description is latched for a late subscriber and parses, the wheel joint states carry phi, and a bad state
 is rejected, never integrated. In this process: the loop's nodes and robot_state wired by their topics
 (test/nodeharness.py's Loop), a late reader a peer in robot_state's own participant (robot_state across processes:
 test_yaw_graph.py, test_foxglove_frames_graph.py)."""

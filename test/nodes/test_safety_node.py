@@ -1,7 +1,7 @@
 """The driver's state machine in ``plant_sim`` (theory.md 6.8): states, faults, services, driver_state, the watchdog.
 
 * a plant in this process (test/nodeharness.py), its services and subscriptions called directly: every service
-  call in every state is answered with core.safety's answer; a NaN or implausible command is a ``bad_command``
+  call in every state is answered with core.control.safety's answer; a NaN or implausible command is a ``bad_command``
   fault that answers the lockstep state with zero torque, bytes that are no Float64 are rejected only; the
   estimator's level and an e-stop during a watchdog fault hold the fault; a late reader of driver_state gets the
   current state only; the realtime watchdog names the stage that never answered; ``exit_on_fall: false`` in

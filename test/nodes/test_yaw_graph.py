@@ -109,8 +109,8 @@ def test_lockstep_mujoco_graph_with_the_yaw_stage_equals_mwip_sim(turning, contr
 @pytest.mark.graph
 def test_robot_state_on_the_3d_plant_integrates_the_gyro_s_yaw(turning):
     """robot_state beside the lockstep mujoco graph turning: its last odom is the offline states integrated as
-    core.odometry.state_update does (1e-9), and within the drift of docs/real-robot.md of the true pose (5 cm,
-    2 mrad); without the yaw joint it would have no yaw at all. (The runs before this one: the odometry restarts
+    core.mobile_base.odometry.state_update does (1e-9), and within the drift of docs/real-robot.md of the true pose
+    (5 cm, 2 mrad); without the yaw joint it would have no yaw at all. (The runs before this one: the odometry restarts
     at the origin when the stamps go back.)"""
     from mwip_ros.core.mobile_base.odometry import Odometry, state_update
     run = turning["runs"]["odom"]
@@ -139,7 +139,7 @@ def test_robot_state_on_the_3d_plant_integrates_the_gyro_s_yaw(turning):
 @pytest.mark.graph
 def test_lockstep_graph_with_raw_sensors_and_the_yaw_stage_equals_mwip_sim(graphs):
     """Raw sensors (config/sensors_raw_realistic.yaml) on the MuJoCo plant, turning from 1 s: the plant's IMU carries
-    its z gyro (angular_velocity.z, core.raw_sensors.YawGyro), the state estimator passes it on as the yaw joint
+    its z gyro (angular_velocity.z, core.plants.raw_sensors.YawGyro), the state estimator passes it on as the yaw joint
     (its files say backend mujoco), the controller answers with the wheels' pair; the graph equals mwip_sim to 1e-9,
     the turn and the yaw gyro's bias and noise included.  The turn in place slips at the 5 ms physics step: the
     filter leaves the slipping samples out (kalman.slip_gate, theory.md 6.4; without it it diverges at 2.04 s)."""
