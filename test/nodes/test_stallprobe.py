@@ -20,6 +20,17 @@ def test_off_unless_the_variable_names_a_directory(monkeypatch, tmp_path):
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.unit
+def test_a_futex_word_is_named_by_its_mapping():
+    maps = ("55d4a9c00000-55d4aa200000 rw-p 00000000 00:00 0                          [heap]\n"
+            "7fb066835000-7fb066836000 rw-s 00000000 00:1a 1234                       /dev/shm/fastrtps_port7003\n"
+            "7fb066837000-7fb066838000 rw-p 00000000 00:00 0\n")
+    assert stallprobe._mapping(maps, 0x7fb066835000) == "/dev/shm/fastrtps_port7003"
+    assert stallprobe._mapping(maps, 0x55d4a9d22ca0) == "[heap]"
+    assert stallprobe._mapping(maps, 0x7fb066837010) == "anonymous"
+    assert stallprobe._mapping(maps, 0x10) == "unmapped"
+
+
 @pytest.mark.alone
 @pytest.mark.cli
 def test_a_stalled_tick_is_reported_once_with_every_thread_and_its_length(monkeypatch, tmp_path):

@@ -95,15 +95,34 @@ def _read(path: str) -> str:
         return f"({exc.strerror})"
 
 
+def _mapping(maps: str, address: int) -> str:
+    """The file (or [heap], [stack]) of ``pid``'s mapping that holds ``address``, from /proc/PID/maps' text."""
+    for line in maps.splitlines():
+        fields = line.split()
+        start, end = (int(x, 16) for x in fields[0].split("-"))
+        if start <= address < end:
+            return fields[5] if len(fields) > 5 else "anonymous"
+    return "unmapped"
+
+
 def _threads(pid: int) -> List[str]:
-    """Each thread of ``pid`` as /proc tells it now."""
+    """Each thread of ``pid`` as /proc tells it now; for a thread in futex(2), the mapping its word is in (a shared
+    memory file names another process's part in the wait)."""
     lines = []
+    maps = _read(f"/proc/{pid}/maps")
     for tid in sorted(os.listdir(f"/proc/{pid}/task"), key=int):
         base = f"/proc/{pid}/task/{tid}"
         stat = _read(f"{base}/stat")
         state = stat.rsplit(")", 1)[-1].split()[0] if ")" in stat else "?"
+        call = _read(base + "/syscall")
+        where = ""
+        if call.startswith("202 "):   # futex(uaddr, op, ...)
+            try:
+                where = f" (futex word in {_mapping(maps, int(call.split()[1], 16))})"
+            except (ValueError, IndexError):
+                pass
         lines.append(f"  thread {tid} {_read(base + '/comm')!r} state {state} wchan {_read(base + '/wchan')} "
-                     f"syscall {_read(base + '/syscall')}")
+                     f"syscall {call}{where}")
         stack = _read(f"{base}/stack")
         if stack and not stack.startswith("("):
             lines.extend("      " + ln for ln in stack.splitlines()[:12])
