@@ -108,6 +108,31 @@ def _argv(name: str, ros_args, params, as_given: bool) -> List[str]:
     return argv + (args if as_given else node_rules(name, args))
 
 
+def _thread_nices() -> Dict[int, int]:
+    """{thread id: nice} of this process's threads now."""
+    import os
+    out = {}
+    for tid in os.listdir("/proc/self/task"):
+        try:
+            out[int(tid)] = os.getpriority(os.PRIO_PROCESS, int(tid))
+        except OSError:
+            pass
+    return out
+
+
+def _restore_nices(before: Dict[int, int]) -> None:
+    """Each of this process's threads that ``before`` knew back at its nice then (a node built here, as
+    foxglove_server's ``nice`` parameter does, lowers every thread of its process: the test worker's too, for the rest
+    of its tests)."""
+    import os
+    for tid, nice in before.items():
+        try:
+            if os.getpriority(os.PRIO_PROCESS, tid) != nice:
+                os.setpriority(os.PRIO_PROCESS, tid, nice)
+        except OSError:   # gone, or not allowed
+            pass
+
+
 class NodeHarness:
     """``factory`` (a node class of mwip_ros.nodes) built in this process with ``ros_args`` after the parameter file
     ``params`` (one, several or None), or with the whole command line ``argv``;
@@ -120,6 +145,7 @@ class NodeHarness:
 
         from mwip_ros.nodes.runtime import process
         _record_logs()
+        self._nice = _thread_nices()   # a node that lowers its process's priority (foxglove_server) is undone at close
         self.name = name or process.node_name(factory, [getattr(factory, "__name__", "node")])
         self.argv = list(argv) if argv is not None else _argv(self.name, ros_args, params, as_given)
         self._published: Dict[str, List[Any]] = {}
@@ -355,6 +381,7 @@ class NodeHarness:
             self.node.destroy_node()
             self.node = None
             rclpy.try_shutdown(context=self.context)
+            _restore_nices(self._nice)
 
     def __enter__(self) -> "NodeHarness":
         return self

@@ -285,3 +285,16 @@ def test_a_bad_or_busy_port_stops_the_node_at_start_naming_the_parameter():
     for port in (0, 65536):
         line = refused(server, "-p", f"port:={port}")
         assert "parameter 'port'" in line, line
+
+
+@pytest.mark.node
+@pytest.mark.skipif(os.geteuid() != 0, reason="raising a thread's priority back needs CAP_SYS_NICE")
+def test_built_in_a_test_its_nice_does_not_outlive_it():
+    """foxglove_server lowers every thread of its process to its ``nice`` (10): built in a test worker's process, the
+    harness puts the worker's threads back when it closes (before: the worker ran every later test at nice 10, starved
+    beside two busy loops)."""
+    from nodeharness import NodeHarness, node_class
+    before = os.getpriority(os.PRIO_PROCESS, 0)
+    with NodeHarness(node_class("foxglove_server"), "-p", f"port:={free_port()}") as h:
+        assert os.getpriority(os.PRIO_PROCESS, 0) == max(before, 10), h.logs()   # the node did lower it
+    assert os.getpriority(os.PRIO_PROCESS, 0) == before
