@@ -75,6 +75,7 @@ def reader():
         release_domain_id(domain)
 
 
+@pytest.mark.alone   # it counts the Twists of 1 s of wall clock (6 of 10 came in a run beside the graph tests)
 @pytest.mark.node
 def test_cmd_publishes_the_twist_for_the_duration_then_zero():
     """In this process, beside a controller that follows cmd_vel (motion on): the reader a peer of both."""
