@@ -4,10 +4,12 @@
 scripts/test.sh runs the tiers that start no ROS process at Linux's SCHED_IDLE beside the tests that keep
 real-time deadlines: they then take only the CPU that nothing else wants. Once the timed tests end, ``restore``
 puts every thread of the command and of its descendants back to SCHED_OTHER, so that on a machine loaded by other
-work the rest of the run gets its fair share instead of waiting for idle CPU.
+work the rest of the run gets its share instead of waiting for idle CPU; at a nice of its own if given (test.sh
+gives 10: the graph tests beside it, which wait on their processes, come first, and the in-process tests take what
+they leave, yet more than idle).
 
     python scripts/idle_priority.py run CMD [ARG ...]   exec CMD at SCHED_IDLE (its children inherit it)
-    python scripts/idle_priority.py restore PID         PID's process tree back to SCHED_OTHER
+    python scripts/idle_priority.py restore PID [NICE]  PID's process tree back to SCHED_OTHER (at nice NICE)
 
 Scheduling is per thread on Linux, so ``restore`` walks /proc/PID/task of every process in the tree, twice (a
 process forked by a thread that was still idle during the first walk is caught by the second). An unprivileged
@@ -30,8 +32,9 @@ def _children() -> dict:
     return kids
 
 
-def restore(root: int) -> int:
-    """Every thread of ``root`` and its descendants to SCHED_OTHER; how many threads were switched."""
+def restore(root: int, nice: int = 0) -> int:
+    """Every thread of ``root`` and its descendants from SCHED_IDLE to SCHED_OTHER, at ``nice`` at least (raising a
+    nice needs no privilege); how many threads were switched."""
     switched = 0
     for _ in range(2):
         kids, todo = _children(), [root]
@@ -46,6 +49,8 @@ def restore(root: int) -> int:
                 try:
                     if os.sched_getscheduler(tid) == os.SCHED_IDLE:
                         os.sched_setscheduler(tid, os.SCHED_OTHER, os.sched_param(0))
+                        if nice and os.getpriority(os.PRIO_PROCESS, tid) < nice:
+                            os.setpriority(os.PRIO_PROCESS, tid, nice)
                         switched += 1
                 except OSError:   # ended meanwhile, or not ours
                     pass
@@ -56,8 +61,8 @@ def main(argv) -> int:
     if len(argv) >= 2 and argv[0] == "run":
         os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
         os.execvp(argv[1], argv[1:])
-    if len(argv) == 2 and argv[0] == "restore" and argv[1].isdigit():
-        restore(int(argv[1]))
+    if len(argv) in (2, 3) and argv[0] == "restore" and all(a.isdigit() for a in argv[1:]):
+        restore(int(argv[1]), int(argv[2]) if len(argv) == 3 else 0)
         return 0
     print(__doc__.split("\n\n")[2], file=sys.stderr)
     return 0 if argv[:1] in (["-h"], ["--help"]) else 2

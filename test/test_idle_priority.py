@@ -16,8 +16,8 @@ import os, subprocess, sys, threading
 child = subprocess.Popen([sys.executable, "-c", "import sys; sys.stdin.read()"], stdin=subprocess.PIPE)
 threading.Thread(target=threading.Event().wait, daemon=True).start()
 def policies():
-    return sorted({os.sched_getscheduler(int(t)) for pid in (os.getpid(), child.pid)
-                   for t in os.listdir(f"/proc/{pid}/task")})
+    return sorted({(os.sched_getscheduler(int(t)), os.getpriority(os.PRIO_PROCESS, int(t)))
+                   for pid in (os.getpid(), child.pid) for t in os.listdir(f"/proc/{pid}/task")})
 print(policies(), flush=True)
 sys.stdin.readline()
 print(policies(), flush=True)
@@ -25,16 +25,19 @@ child.stdin.close(); child.wait()
 """
 
 
-def test_a_tree_runs_idle_and_restore_brings_every_thread_and_child_back():
+@pytest.mark.parametrize("nice", [[], ["10"]])
+def test_a_tree_runs_idle_and_restore_brings_every_thread_and_child_back(nice):
     p = subprocess.Popen([sys.executable, str(SCRIPT), "run", sys.executable, "-c", TREE], stdin=subprocess.PIPE,
                          stdout=subprocess.PIPE, text=True)
+    mine = os.getpriority(os.PRIO_PROCESS, 0)
     try:
-        assert p.stdout.readline().strip() == str([os.SCHED_IDLE])   # both threads and the child inherited it
-        r = subprocess.run([sys.executable, str(SCRIPT), "restore", str(p.pid)], timeout=30)
+        # both threads and the child inherited it
+        assert p.stdout.readline().strip() == str([(os.SCHED_IDLE, mine)])
+        r = subprocess.run([sys.executable, str(SCRIPT), "restore", str(p.pid), *nice], timeout=30)
         assert r.returncode == 0
         p.stdin.write("\n")
         p.stdin.flush()
-        assert p.stdout.readline().strip() == str([os.SCHED_OTHER])
+        assert p.stdout.readline().strip() == str([(os.SCHED_OTHER, max(mine, int(nice[0]) if nice else 0))])
     finally:
         p.stdin.close()
         assert p.wait(timeout=30) == 0
