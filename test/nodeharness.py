@@ -111,12 +111,10 @@ def _argv(name: str, ros_args, params, as_given: bool) -> List[str]:
 def _thread_nices() -> Dict[int, int]:
     """{thread id: nice} of this process's threads now."""
     import os
-    out = {}
-    for tid in os.listdir("/proc/self/task"):
-        try:
-            out[int(tid)] = os.getpriority(os.PRIO_PROCESS, int(tid))
-        except OSError:
-            pass
+
+    from mwip_ros.nodes.runtime.process import for_every_thread
+    out: Dict[int, int] = {}
+    for_every_thread(lambda tid: out.__setitem__(tid, os.getpriority(os.PRIO_PROCESS, tid)))
     return out
 
 

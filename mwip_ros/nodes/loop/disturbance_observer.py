@@ -49,8 +49,8 @@ class DisturbanceObserver(Node, GracefulNodeMixin):
         pub_qos, in_qos = qos_for(self.v["mode"])   # msgs.qos: lockstep loses nothing, realtime keeps the newest
         self.pub = self.create_publisher(WrenchStamped, "disturbance_estimate", pub_qos)
         sub = self.create_subscription(JointState, "joint_states", self._on_state, in_qos, raw=True)
-        if self.v["mode"] == "realtime":   # a flood of absurd or far-future states is dropped by DDS (issue 46)
-            self.get_logger().info(self.input.filter_readers({"joint_states": (sub, L.STATE_FILTER)}))
+        if self.v["mode"] == "realtime":   # a flood of absurd states is dropped by DDS (issue 46)
+            self.input.filter_readers({"joint_states": (sub, L.STATE_FILTER)})
         self.watch = PublisherWatch(self, ["joint_states"])
         self.get_logger().info(f"NDO ready: X = {self.v['X']}, h = {self.h * 1e3:.3f} ms")
 

@@ -60,7 +60,7 @@ from mwip_ros.msgs.qos import DRIVER_STATE_QOS, qos_for
 from mwip_ros.params.motion import motion as motion_config, wheel_limit_warning, yaw as yaw_config
 from mwip_ros.nodes.runtime.diagnostics import OK
 from mwip_ros.nodes.runtime.guards import REPEAT, RESTART, STAMP_WINDOW_PERIODS, PublisherWatch, Rejects
-from mwip_ros.nodes.runtime.content_filter import set_content_filter
+from mwip_ros.nodes.runtime.content_filter import filter_readers
 from mwip_ros.nodes.runtime.state_input import StateInput
 from mwip_ros.nodes.runtime.params import declare, plant_file_values
 from mwip_ros.nodes.runtime.rclpy_compat import IsolatedInput, PolledInput
@@ -115,10 +115,9 @@ class DscndoController(Node, GracefulNodeMixin):
                                                 raw=True)
         self.input = StateInput(self, self.rejects, STAMP_WINDOW_PERIODS * round(P.period(self.v) * 1e9),
                                 "controller")
-        if self.v["mode"] == "realtime":   # a flood of absurd or far-future inputs is dropped by DDS (issue 46)
-            self.get_logger().info(self.input.filter_readers({"joint_states": (state_sub, L.STATE_FILTER),
-                                                              "disturbance_estimate": (estimate_sub,
-                                                                                       L.ESTIMATE_FILTER)}))
+        if self.v["mode"] == "realtime":   # a flood of absurd inputs is dropped by DDS (issue 46)
+            self.input.filter_readers({"joint_states": (state_sub, L.STATE_FILTER),
+                                       "disturbance_estimate": (estimate_sub, L.ESTIMATE_FILTER)})
         self.watch = PublisherWatch(self, ["joint_states", "disturbance_estimate"])
         mc = motion_config(self.v)   # docs/theory.md 6.11: None while motion.enabled is false (nothing changes)
         self.motion = Shaper(mc, self.h, self.nominal) if mc is not None else None
@@ -215,14 +214,9 @@ class DscndoController(Node, GracefulNodeMixin):
         depth-1 history (issue 46 item 2): a flood of them cannot displace the operator's valid command, and Fast DDS
         filters at the writer when it can, so such a flood costs this process nothing.  What it drops is not counted
         (the log and /diagnostics' ``cmd_vel_filter`` say so); Shaper.command still judges what passes."""
-        why = set_content_filter(self.cmd_vel_sub, L.CMD_VEL_FILTER)
-        if why:
-            self.get_logger().warning(f"no content filter on cmd_vel ({why}): every Twist reaches the controller")
-            return False
-        self.get_logger().info(f"content filter on cmd_vel: a Twist whose linear.x is not finite or beyond "
-                               f"{ABSURD_SPEED:g} m/s, or angular.z beyond {ABSURD_YAW_RATE:g} rad/s, or that cannot "
-                               f"be deserialized, is dropped by DDS and not counted")
-        return True
+        return filter_readers(self.get_logger(), {"cmd_vel": (self.cmd_vel_sub, L.CMD_VEL_FILTER)},
+                              f"a Twist whose linear.x is not finite or beyond {ABSURD_SPEED:g} m/s, or angular.z "
+                              f"beyond {ABSURD_YAW_RATE:g} rad/s, or that cannot be deserialized,")
 
     @property
     def driving(self) -> bool:

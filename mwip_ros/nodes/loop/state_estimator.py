@@ -53,7 +53,7 @@ from mwip_ros.core.closed_loop.trajectory import ESTIMATE_COLUMNS, RAW_COLUMNS
 from mwip_ros.msgs import BadMessage
 from mwip_ros.msgs import layouts as L
 from mwip_ros.msgs.qos import qos_for
-from mwip_ros.nodes.runtime.content_filter import set_content_filter
+from mwip_ros.nodes.runtime.content_filter import filter_readers
 from mwip_ros.nodes.runtime.diagnostics import ERROR, OK
 from mwip_ros.nodes.runtime.guards import (NEW, REPEAT, RESTART, STAMP_WINDOW_PERIODS, PublisherWatch, Rejects,
                                            StampGuard,
@@ -120,14 +120,9 @@ class StateEstimatorNode(Node, GracefulNodeMixin):
         samples with a wrong frame, joint or value is dropped by the middleware, in C++, and cannot displace a
         genuine sample in the reader's queue (issue 30).  What it drops is not counted; the parsers still judge
         (and count) what passes.  Lockstep keeps every message for the parsers to count."""
-        why = [f"{t}: {w}" for t, w in ((t, set_content_filter(s, L.RAW_FILTERS[t])) for t, s in subs.items()) if w]
-        if why:
-            self.get_logger().warning(f"no content filter ({'; '.join(why)}): every raw message reaches the parser")
-            return False
-        self.get_logger().info("content filter on imu/data_raw and wheel_encoder: messages with a wrong frame_id or "
-                               "joint, or values outside RAW_LIMITS (NaN too), or that cannot be deserialized, are "
-                               "dropped by DDS and not counted")
-        return True
+        return filter_readers(self.get_logger(), {t: (s, L.RAW_FILTERS[t]) for t, s in subs.items()},
+                              "a message with a wrong frame_id or joint, or values outside RAW_LIMITS (NaN too), or "
+                              "that cannot be deserialized,")
 
     # --- inputs ---------------------------------------------------------------------------------------
     def _on_imu(self, data: bytes) -> None:

@@ -13,9 +13,9 @@ every message.
 from __future__ import annotations
 
 import ctypes
-from typing import Optional
+from typing import Dict, Optional, Tuple
 
-__all__ = ["set_content_filter"]
+__all__ = ["set_content_filter", "filter_readers"]
 
 _OPTIONS_BYTES = 256   # rcl_subscription_content_filter_options_t: 64 bytes on 64-bit Jazzy; zeroed, room to spare
 _rcl = None
@@ -59,3 +59,16 @@ def set_content_filter(subscription, expression: str) -> Optional[str]:
     except (OSError, AttributeError) as exc:
         return f"rcl's content filter is not reachable ({exc})"
     return None
+
+
+def filter_readers(log, readers: Dict[str, Tuple[object, str]], dropped: str) -> bool:
+    """A content filter on each reader ``{topic: (subscription, expression)}``, and the one line a node logs of it:
+    a warning naming why when the middleware does not filter one of them (then every message reaches the node's
+    parser), else ``content filter on TOPICS: DROPPED is dropped by DDS and not counted``. Whether all are filtered."""
+    why = [f"{t}: {w}" for t, (sub, expression) in readers.items() if (w := set_content_filter(sub, expression))]
+    topics = " and ".join(readers)
+    if why:
+        log.warning(f"no content filter ({'; '.join(why)}): every message on {topics} reaches the parser")
+        return False
+    log.info(f"content filter on {topics}: {dropped} is dropped by DDS and not counted")
+    return True

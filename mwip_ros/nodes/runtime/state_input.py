@@ -12,7 +12,7 @@ from typing import Dict, Tuple
 
 from mwip_ros.msgs import BadMessage
 from mwip_ros.msgs.layouts import parse_joint_state
-from mwip_ros.nodes.runtime.content_filter import set_content_filter
+from mwip_ros.nodes.runtime.content_filter import filter_readers
 from mwip_ros.nodes.runtime.guards import NEW, REPEAT, RESTART, StampGuard, sole_publisher
 from mwip_ros.nodes.runtime.rclpy_compat import use_ros_time_override
 
@@ -57,20 +57,13 @@ class StateInput:
             return None
         return verdict, stamp, x, u_prev, last
 
-    def filter_readers(self, readers: Dict[str, Tuple[object, str]]) -> str:
+    def filter_readers(self, readers: Dict[str, Tuple[object, str]]) -> None:
         """Realtime: a DDS content filter on each reader ``{topic: (subscription, expression)}`` (the expressions
         ``layouts.STATE_FILTER``, ``ESTIMATE_FILTER``), so that a flood of absurd or undecodable inputs is dropped by
-        the middleware, at the writer where it can, and costs the control loop nothing; the line the node logs. What
-        is dropped is not counted; the parsers and the StampGuard still judge what passes (stamps: not filtered)."""
-        tried = {t: set_content_filter(sub, expression) for t, (sub, expression) in readers.items()}
-        why = {t: w for t, w in tried.items() if w}
-        topics = " and ".join(readers)
-        self.filtered = not why
-        if why:
-            return "no content filter (" + "; ".join(f"{t}: {w}" for t, w in why.items()) + \
-                f"): every message on {topics} reaches the parser"
-        return (f"content filter on {topics}: a message with a value that is not finite or beyond the plausible "
-                f"limits, or that cannot be deserialized, is dropped by DDS and not counted")
+        the middleware, at the writer where it can, and costs the control loop nothing (logged). What is dropped is
+        not counted; the parsers and the StampGuard still judge what passes (stamps: not filtered)."""
+        self.filtered = filter_readers(self.node.get_logger(), readers, "a message with a value that is not finite "
+                                       "or beyond the plausible limits, or that cannot be deserialized,")
 
     def filter_status(self) -> str:
         """/diagnostics' ``input_filter``: whether DDS filters the stream's readers."""
