@@ -15,7 +15,9 @@ Variants (``--variants``; each is run in turns with the others, so a machine's l
 - ``default``: Fast DDS as it comes (participants announce themselves every 3 s);
 - ``product``: the profile mwip_ros ships (``mwip_ros.nodes.runtime.discovery``), as every node applies it;
 - ``lease=S``: a profile whose participants announce every S seconds (nothing else changed);
-- ``server``: a Fast DDS discovery server (``fastdds discovery``) on loopback, every participant its client.
+- ``server``: a Fast DDS discovery server (``fastdds discovery``) on loopback, every participant its client;
+- ``profile=FILE``: a Fast DDS XML profile of your own (the package's left off);
+- ``async``: the package's profile with ``RMW_FASTRTPS_PUBLICATION_MODE=ASYNCHRONOUS``.
 
 ``--busy N`` runs N busy-loop processes beside the trials (the issue's load: two). Prints one table: per variant
 the median, 90th percentile and largest time of each measure, and how many newcomers took over 1 s.
@@ -273,7 +275,8 @@ def main(argv: Optional[List[str]] = None) -> int:
     ap.add_argument("--stall", type=int, default=0, metavar="N",
                     help="a realtime graph per variant, N newcomers joining it stopped mid-start: the plant's stall")
     ap.add_argument("--variants", default="default,product,server",
-                    help="comma-separated: default, product, lease=S, server (default: default,product,server)")
+                    help="comma-separated: default, product, lease=S, server, profile=FILE, async "
+                         "(default: default,product,server)")
     args = ap.parse_args(argv)
     if args.role == "idle":
         return role_idle()
